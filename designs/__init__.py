@@ -1,0 +1,1 @@
+"""Classical and state-space designs, gain tuning and co-design."""

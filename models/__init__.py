@@ -1,0 +1,24 @@
+"""Plants declared once by their energies; linearizations, simulators, the controller block.
+
+>>> import models
+>>> arm = models.get("arm")
+>>> xe, ue = arm.equilibrium(theta=0.5)
+>>> lin = arm.linearize(xe, ue)
+"""
+
+from . import catalog as _catalog  # noqa: F401  (registers the case studies)
+from . import signals
+from .block import Block, Cascade, Controller, saturate
+from .checks import SimulationError
+from .closed_loop import ClosedLoopResult, closed_loop_function, monte_carlo, simulate_closed_loop
+from .linear import LinearModel
+from .plant import Param, Physics, Plant, declare, get, names
+from .simulate import Trajectory, simulate
+from .uncertainty import corner_params, perturbed, sample_params
+
+__all__ = [
+    "Block", "Cascade", "ClosedLoopResult", "Controller", "LinearModel", "Param", "Physics", "Plant",
+    "SimulationError", "Trajectory", "closed_loop_function", "corner_params", "declare", "get",
+    "monte_carlo", "names", "perturbed", "sample_params", "saturate", "signals", "simulate",
+    "simulate_closed_loop",
+]

@@ -1,0 +1,198 @@
+"""The controller-block interface: one discrete-time step for every controller.
+
+A controller has a state x_c and a step ``(x_c, y, r) -> (x_c_next, u)`` run
+every `sample_period` seconds. `Block` writes that step as CasADi
+expressions of symbolic gains, so a closed loop compiles into one Function
+and is differentiable with respect to the gains. Controllers that solve an
+optimization each step (MPC) implement the same `step` in Python; the
+closed-loop simulator runs both.
+"""
+
+from __future__ import annotations
+
+import abc
+import copy
+from functools import cached_property
+from typing import Mapping, Protocol, runtime_checkable
+
+import casadi as ca
+import numpy as np
+
+from .checks import as_vector, positive
+
+MEASURES = ("outputs", "state")
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """What the closed-loop simulator needs from any controller.
+
+    Attributes
+    ----------
+    sample_period : float, s
+    measures : "outputs" (the plant's outputs y) or "state" (the full state x)
+    n_reference : int, size of r
+    """
+
+    sample_period: float
+    measures: str
+    n_reference: int
+
+    def initial_state(self, y0: np.ndarray, r0: np.ndarray) -> np.ndarray: ...
+
+    def step(self, xc: np.ndarray, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def saturate(u, limit):
+    """Clip u to [-limit, limit] elementwise (CasADi or numpy)."""
+    return ca.fmin(ca.fmax(u, -limit), limit)
+
+
+class Block(abc.ABC):
+    """A controller whose step is a CasADi expression of its gains.
+
+    Subclasses set the sizes in `__init__` and write `expr`.
+
+    Parameters
+    ----------
+    sample_period : float, s
+    n_state, n_measured, n_reference, n_input : int
+        Sizes of x_c, y (what the block reads), r and u.
+    gains : mapping name -> float or array
+        Tunable values; `expr` receives them as symbols of the same shapes.
+    measures : "outputs" or "state"
+    name : str
+    """
+
+    def __init__(self, *, sample_period: float, n_state: int, n_measured: int, n_reference: int,
+                 n_input: int, gains: Mapping[str, float | np.ndarray], measures: str = "outputs",
+                 name: str = ""):
+        self.sample_period = positive(sample_period, "sample_period (s)")
+        if measures not in MEASURES:
+            raise ValueError(f"measures must be one of {MEASURES}, got {measures!r}")
+        self.n_state, self.n_measured = int(n_state), int(n_measured)
+        self.n_reference, self.n_input = int(n_reference), int(n_input)
+        self.measures = measures
+        self.name = name or type(self).__name__
+        self.gains = {k: self._checked_gain(k, v) for k, v in gains.items()}
+
+    # ------------------------------------------------------------- to write
+    @abc.abstractmethod
+    def expr(self, xc, y, r, gains: dict) -> tuple:
+        """Symbolic step: (x_c_next, u) from SX x_c (n_state,), y, r and gain symbols."""
+
+    def initial_state(self, y0, r0) -> np.ndarray:
+        """x_c at the first sample from the first measurement and reference (zeros by default)."""
+        return np.zeros(self.n_state)
+
+    # ------------------------------------------------------------- provided
+    def _checked_gain(self, name, value) -> np.ndarray:
+        arr = np.array(value, dtype=float)
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{self.name}: gain {name} is not finite: {value}")
+        return arr
+
+    @property
+    def gain_names(self) -> tuple:
+        return tuple(self.gains)
+
+    def gain_vector(self) -> np.ndarray:
+        """All gains flattened (column-major per gain) in `gain_names` order."""
+        if not self.gains:
+            return np.zeros(0)
+        return np.concatenate([g.ravel(order="F") for g in self.gains.values()])
+
+    def gains_from_vector(self, vector) -> dict:
+        """Inverse of `gain_vector`: dict name -> array with each gain's shape."""
+        vector = as_vector(vector, self.gain_vector().size, f"{self.name} gain vector")
+        out, i = {}, 0
+        for k, g in self.gains.items():
+            out[k] = vector[i:i + g.size].reshape(g.shape, order="F")
+            i += g.size
+        return out
+
+    def with_gains(self, **gains) -> "Block":
+        """A copy with some gains replaced (same shapes); shares the compiled step."""
+        unknown = set(gains) - set(self.gains)
+        if unknown:
+            raise ValueError(f"{self.name} has no gain {sorted(unknown)}; gains are {', '.join(self.gains)}")
+        new = copy.copy(self)
+        new.gains = dict(self.gains)
+        for k, v in gains.items():
+            arr = self._checked_gain(k, v)
+            if arr.shape != self.gains[k].shape:
+                raise ValueError(f"{self.name}: gain {k} must have shape {self.gains[k].shape}, got {arr.shape}")
+            new.gains[k] = arr
+        return new
+
+    def symbolic_gains(self, vector: ca.SX) -> dict:
+        """Split a symbolic gain vector into a dict of symbols shaped like the gains."""
+        out, i = {}, 0
+        for k, g in self.gains.items():
+            piece = vector[i:i + g.size]
+            out[k] = ca.reshape(piece, g.shape[0], g.shape[1]) if g.ndim == 2 else piece
+            i += g.size
+        return out
+
+    @cached_property
+    def casadi_step(self) -> ca.Function:
+        """Function (xc, y, r, gains) -> (xc_next, u), gains as in `gain_vector`."""
+        xc = ca.SX.sym("xc", self.n_state)
+        y = ca.SX.sym("y", self.n_measured)
+        r = ca.SX.sym("r", self.n_reference)
+        g = ca.SX.sym("gains", self.gain_vector().size)
+        xc_next, u = self.expr(xc, y, r, self.symbolic_gains(g))
+        xc_next = ca.vertcat(xc_next) if self.n_state else ca.SX(0, 1)
+        return ca.Function("step", [xc, y, r, g], [xc_next, ca.vertcat(u)],
+                           ["xc", "y", "r", "gains"], ["xc_next", "u"])
+
+    def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
+        """One numeric step with the current gains: (x_c_next (n_state,), u (n_input,))."""
+        xc = as_vector(xc, self.n_state, f"{self.name} state") if self.n_state else np.zeros(0)
+        y = as_vector(y, self.n_measured, f"{self.name} measurement")
+        r = as_vector(r, self.n_reference, f"{self.name} reference")
+        xn, u = self.casadi_step(xc, y, r, self.gain_vector())
+        return np.asarray(xn).ravel(), np.asarray(u).ravel()
+
+
+class Cascade(Block):
+    """Successive loop closure: the outer block's output is the inner block's reference.
+
+    Both blocks read the same measurement vector. Gains are prefixed
+    ``outer.`` and ``inner.``; the state is (x_outer, x_inner).
+    """
+
+    def __init__(self, outer: Block, inner: Block, name: str = "cascade"):
+        if outer.sample_period != inner.sample_period:
+            raise ValueError(f"outer and inner blocks need the same sample period, got "
+                             f"{outer.sample_period} and {inner.sample_period} s")
+        if outer.n_input != inner.n_reference:
+            raise ValueError(f"the outer block's output ({outer.n_input}) must match the inner "
+                             f"block's reference ({inner.n_reference})")
+        if (outer.n_measured, outer.measures) != (inner.n_measured, inner.measures):
+            raise ValueError("outer and inner blocks must read the same measurement vector")
+        self.outer, self.inner = outer, inner
+        gains = {f"outer.{k}": v for k, v in outer.gains.items()}
+        gains |= {f"inner.{k}": v for k, v in inner.gains.items()}
+        super().__init__(sample_period=inner.sample_period, n_state=outer.n_state + inner.n_state,
+                         n_measured=inner.n_measured, n_reference=outer.n_reference,
+                         n_input=inner.n_input, gains=gains, measures=inner.measures, name=name)
+
+    def expr(self, xc, y, r, gains):
+        no = self.outer.n_state
+        go = {k[6:]: v for k, v in gains.items() if k.startswith("outer.")}
+        gi = {k[6:]: v for k, v in gains.items() if k.startswith("inner.")}
+        xo_next, r_inner = self.outer.expr(xc[:no], y, r, go)
+        xi_next, u = self.inner.expr(xc[no:], y, r_inner, gi)
+        return ca.vertcat(xo_next, xi_next), u
+
+    def initial_state(self, y0, r0) -> np.ndarray:
+        xo = self.outer.initial_state(y0, r0)
+        _, r_inner = self.outer.step(xo, y0, r0)
+        return np.concatenate([xo, self.inner.initial_state(y0, r_inner)])
+
+    def with_gains(self, **gains) -> "Cascade":
+        new = super().with_gains(**gains)
+        new.outer = self.outer.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("outer.")})
+        new.inner = self.inner.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("inner.")})
+        return new

@@ -1,0 +1,1 @@
+"""Constrained linear and nonlinear model predictive control."""

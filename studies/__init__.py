@@ -1,0 +1,1 @@
+"""Case studies: each plant from its model to a comparison of controllers."""
