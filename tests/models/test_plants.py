@@ -214,3 +214,12 @@ def test_overrides_and_variants():
     heavy = models.get("arm", m=0.6)
     assert heavy.params["m"] == 0.6 and models.get("arm").params["m"] == 0.5
     assert heavy.with_params(ell=0.4).params == {"m": 0.6, "ell": 0.4, "g": 9.8, "b": 0.01}
+
+
+def test_every_plant_has_a_case_whose_tracked_coordinate_exists():
+    for name in models.names():
+        case = models.case(name)
+        assert case.tracked in models.get(name).coordinate_names
+        assert case.step > 0 and case.design_step > 0 and case.input_disturbance > 0
+    with pytest.raises(ValueError, match="no case study for 'x'"):
+        models.case("x")
