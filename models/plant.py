@@ -151,6 +151,16 @@ class _Symbolic:
         self.jacobians = ca.Function("jacobians", [x, u, p],
                                      [ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x)],
                                      ["x", "u", "p"], ["A", "B", "C"])
+        # Configuration from outputs, when the outputs are linear in q and determine it.
+        out_per_q = ca.jacobian(y, q)
+        self.configuration = None
+        if not ca.depends_on(out_per_q, ca.vertcat(q, p)) and y.numel() >= nq:
+            cq = np.array(ca.DM(out_per_q))
+            if np.linalg.matrix_rank(cq) == nq:
+                offset = ca.substitute(y, q, ca.DM.zeros(nq))
+                ys = ca.SX.sym("y", y.numel())
+                q_of_y = ca.DM(np.linalg.pinv(cq)) @ (ys - offset)
+                self.configuration = ca.Function("configuration", [ys, p], [q_of_y], ["y", "p"], ["q"])
         # Static balance at rest: accelerations as a function of (q, u), for equilibria.
         at_rest = ca.substitute(self.eom.accel, dq, ca.DM.zeros(nq))
         qu = ca.vertcat(q, u)
@@ -309,6 +319,18 @@ class Plant:
                              "use equilibrium() instead")
         q = as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
         return np.asarray(self._sym.static_input(q, self.param_vector(params))).ravel()
+
+    @property
+    def casadi_configuration(self) -> ca.Function:
+        """CasADi Function (y, p) -> q recovering the configuration from the outputs.
+
+        Exists when the outputs are linear in q and determine it (all the case
+        studies: the satellite measures phi - theta, so phi = y[0] + y[1]).
+        """
+        if self._sym.configuration is None:
+            raise ValueError(f"{self.name}: the outputs {self.output_names} do not determine the "
+                             "configuration linearly")
+        return self._sym.configuration
 
     @property
     def casadi_equilibrium_input(self) -> ca.Function:

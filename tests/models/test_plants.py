@@ -223,3 +223,12 @@ def test_every_plant_has_a_case_whose_tracked_coordinate_exists():
         assert case.step > 0 and case.design_step > 0 and case.input_disturbance > 0
     with pytest.raises(ValueError, match="no case study for 'x'"):
         models.case("x")
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_configuration_is_recovered_from_the_outputs(name):
+    plant = models.get(name)
+    q = np.random.default_rng(3).uniform(-1, 1, plant.nq)
+    y = plant.output(np.concatenate([q, np.zeros(plant.nq)]))
+    np.testing.assert_allclose(np.asarray(plant.casadi_configuration(y, plant.param_vector())).ravel(), q,
+                               atol=1e-14)
