@@ -243,3 +243,18 @@ def test_bad_requests_name_the_culprit(plants):
     lin = plants["pendulum"].linearize()
     with pytest.raises(ValueError, match="pendulum: a step of 0.5 rad .* cannot stabilize"):
         sc.pendulum_poles(lin, 5.0, angle_step=0.5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", PLANTS)
+def test_integral_designs_hold_zero_error_on_every_parameter_corner(plants, name):
+    # The nominal design on every actual plant at the corners of the ±5 % box, with the disturbance.
+    plant = plants[name]
+    blocks = sc.controllers(name, plant)
+    reference, case = _step(sc.design(name, plant))
+    corners = models.corner_params(plant)
+    for label in INTEGRAL_ACTION:
+        runs = models.monte_carlo(plant, blocks[label], reference, case.duration, corners, substeps=SUBSTEPS,
+                                  input_disturbance=case.input_disturbance, threads=1)
+        errors = [abs(run.r[-1, 0] - run.x[-1, blocks[label].model.tracked_state]) for run in runs]
+        assert max(errors) < 1e-3, (label, max(errors))
