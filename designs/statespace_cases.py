@@ -83,8 +83,8 @@ import models
 from designs import statespace as ss
 from designs.statespace_blocks import ObserverFeedback, StateFeedback, TrackingModel
 
-__all__ = ["StateSpaceDesign", "design", "answers", "controllers", "nominal_poles", "BRYSON_MAXIMA",
-           "LABELS"]
+__all__ = ["StateSpaceDesign", "design", "answers", "controllers", "nominal_poles", "default_integrator_pole",
+           "kalman_noise", "BRYSON_MAXIMA", "LABELS"]
 
 #: Controller labels of `controllers`, the same for every plant.
 LABELS = ("pole placement", "pole placement + integrator", "observer-based", "disturbance observer",
@@ -177,7 +177,7 @@ def nominal_poles(name: str, known: models.Plant | None = None) -> np.ndarray:
     return np.asarray(fixed[name], dtype=complex)
 
 
-def integrator_pole(name: str, poles) -> float:
+def default_integrator_pole(name: str, poles) -> float:
     """The .16 integrator pole: −min|pᵢ|, or −0.5 rad/s for the crane (−0.6 is already placed)."""
     if name in ("crane", "crane1"):
         return -0.5
@@ -223,13 +223,15 @@ class StateSpaceDesign:
     disturbance_observer_poles_z: np.ndarray
     L_disturbance_discrete: np.ndarray
     disturbance_controller_poles: np.ndarray
-    # LQR (integrator-augmented) and Kalman filter
+    # LQR (integrator-augmented; _plain: states only, with k_r) and Kalman filter
     Q: np.ndarray
     R: np.ndarray
     K_lqr: np.ndarray
     ki_lqr: float
     P_lqr: np.ndarray
     lqr_poles: np.ndarray
+    K_lqr_plain: np.ndarray
+    kr_lqr_plain: float
     K_dlqr: np.ndarray
     dlqr_poles_z: np.ndarray
     kalman_W: np.ndarray
@@ -268,14 +270,26 @@ def _discrete_observer(model, outputs, poles, Ts, disturbance: bool, what):
     return ss.discrete_observer_gain(A, C, poles_z, what), poles_z
 
 
-def design(name: str, known: models.Plant | None = None) -> StateSpaceDesign:
+def design(name: str, known: models.Plant | None = None, *, poles=None, integrator_pole: float | None = None,
+           observer_poles=None, disturbance_pole: float | None = None, Q=None, R=None) -> StateSpaceDesign:
     """All state-space designs of plant `name` made on `known` (default: the nominal plant).
+
+    Parameters
+    ----------
+    name : plant name (`models.names()`)
+    known : the plant the controller believes in (e.g. ``models.perturbed(plant, 0.05)``)
+    poles : nx state-feedback poles (rad/s); default `nominal_poles`
+    integrator_pole : rad/s; default `default_integrator_pole`
+    observer_poles : nx observer poles; default the speed-up rule times `poles`
+    disturbance_pole : pole of the disturbance estimate; default half the slowest observer pole
+    Q, R : LQR weights of the integrator-augmented state (nx + 1) and input;
+        default Bryson's rule (`BRYSON_MAXIMA`)
 
     Raises
     ------
     ValueError
         For an unknown plant, or a design check that fails (controllability,
-        observability, stability when sampled).
+        observability, pole requests, weights, stability when sampled).
     """
     plant = models.get(name)
     known = plant if known is None else known
@@ -291,24 +305,26 @@ def design(name: str, known: models.Plant | None = None) -> StateSpaceDesign:
     rank_c = ss.require_controllable(A, B, name)
     rank_o = ss.require_observable(A, C_used, f"{name} measuring {', '.join(outputs)}")
 
-    poles = nominal_poles(name, known)
+    poles = nominal_poles(name, known) if poles is None else np.asarray(poles, dtype=complex)
     K = ss.place(A, B, poles, name)
     kr = float(ss.reference_gain(A, B, K, model.C_r)[0])
     sampled = _sampled_poles(model, K, Ts, name)
 
-    p_int = integrator_pole(name, poles)
+    p_int = default_integrator_pole(name, poles) if integrator_pole is None else float(integrator_pole)
     A_I, B_I = ss.augment_integrator(A, B, model.C_r)
     K_int, ki = ss.split_integral_gain(ss.place(A_I, B_I, np.append(poles, p_int), name), nx)
     _sampled_poles(model, K_int, Ts, f"{name} (state feedback part of the integrator design)")
 
     uses_integrator = OBSERVER_HAS_INTEGRATOR.get(name, False)
-    obs_poles = OBSERVER_SPEEDUP.get(name, DEFAULT_OBSERVER_SPEEDUP) * poles
+    obs_poles = (OBSERVER_SPEEDUP.get(name, DEFAULT_OBSERVER_SPEEDUP) * poles if observer_poles is None
+                 else np.asarray(observer_poles, dtype=complex))
     L = ss.observer_gain(A, C_used, obs_poles, name)
     L_d, obs_z = _discrete_observer(model, outputs, obs_poles, Ts_obs, False, name)
     K_obs = K_int if uses_integrator else K
     controller_poles = np.linalg.eigvals(A - B @ K_obs - L @ C_used)
 
-    dob_poles = np.append(obs_poles, -0.5 * np.min(np.abs(obs_poles)))
+    p_dist = -0.5 * np.min(np.abs(obs_poles)) if disturbance_pole is None else float(disturbance_pole)
+    dob_poles = np.append(obs_poles, p_dist)
     A_d, B_d, C_d = ss.augment_disturbance(A, B, C_used)
     L_dob = ss.observer_gain(A_d, C_d, dob_poles, f"{name} with a disturbance state")
     L_dob_d, dob_z = _discrete_observer(model, outputs, dob_poles, Ts, True, name)
@@ -316,11 +332,15 @@ def design(name: str, known: models.Plant | None = None) -> StateSpaceDesign:
     dob_controller = np.linalg.eigvals(np.block([[A - B @ K, np.zeros((nx, 1))], [np.zeros((1, nx + 1))]])
                                        - L_dob @ C_d)
 
-    Q, R = _bryson(name, known, model, case)
-    K_aug, P = ss.lqr(A_I, B_I, Q, R, name)
+    Q_default, R_default = _bryson(name, known, model, case)
+    Q = Q_default if Q is None else np.asarray(Q, dtype=float)
+    R = R_default if R is None else np.atleast_2d(np.asarray(R, dtype=float))
+    K_aug, P = ss.lqr(A_I, B_I, Q, R, f"{name} (integrator-augmented)")
     K_lqr, ki_lqr = ss.split_integral_gain(K_aug, nx)
     lqr_poles = np.linalg.eigvals(A_I - B_I @ K_aug)
     _sampled_poles(model, K_lqr, Ts, f"{name} LQR")
+    K_lqr_plain, _ = ss.lqr(A, B, Q[:nx, :nx], R, name)
+    kr_lqr_plain = float(ss.reference_gain(A, B, K_lqr_plain, model.C_r)[0])
     disc = model.discrete(Ts)
     A_Id = np.block([[disc.A, np.zeros((nx, 1))], [-Ts * model.C_r, np.eye(1)]])
     B_Id = np.vstack([disc.B, np.zeros((1, 1))])
@@ -342,6 +362,7 @@ def design(name: str, known: models.Plant | None = None) -> StateSpaceDesign:
         disturbance_observer_poles=dob_poles, L_disturbance=L_dob, disturbance_observer_poles_z=dob_z,
         L_disturbance_discrete=L_dob_d, disturbance_controller_poles=dob_controller,
         Q=Q, R=R, K_lqr=K_lqr, ki_lqr=float(ki_lqr[0]), P_lqr=P, lqr_poles=lqr_poles,
+        K_lqr_plain=K_lqr_plain, kr_lqr_plain=kr_lqr_plain,
         K_dlqr=K_dlqr, dlqr_poles_z=dlqr_z, kalman_W=W, kalman_V=V, L_kalman=L_kf,
         kalman_poles_z=kalman_z,
     )
@@ -392,7 +413,7 @@ def _rule_values(name: str, known: models.Plant) -> dict:
     return out
 
 
-def answers(name: str, known: models.Plant | None = None) -> dict:
+def answers(name: str, known: models.Plant | None = None, **overrides) -> dict:
     """Homework item -> dict of named values (SI units, rad/s; lists; complex allowed).
 
     Items: I–III .15(c), .15(e), .15(f), .16, .17(b), .17(c), .17(e);
@@ -400,8 +421,10 @@ def answers(name: str, known: models.Plant | None = None) -> dict:
     crane1's single-load model, or on the full two-load crane for
     ``name="crane"``); plus "LQR" for every plant, and "integrator" and
     "disturbance observer" for IV–VI, where the text has no such item.
+    `overrides` go to `design` (poles, integrator_pole, observer_poles,
+    disturbance_pole, Q, R).
     """
-    d = design(name, known)
+    d = design(name, known, **overrides)
     N = models.case(name).numeral
     A, B = d.model.linear.A, d.model.linear.B
     A_I, B_I = ss.augment_integrator(A, B, d.model.C_r)
@@ -424,7 +447,8 @@ def answers(name: str, known: models.Plant | None = None) -> dict:
            "observer_poles_z": _plain(d.disturbance_observer_poles_z), "sample_period": d.sample_period,
            "K": _plain(d.K), "kr": d.kr, "input_disturbance": models.case(name).input_disturbance}
     lqr = {"K": _plain(d.K_lqr), "ki": d.ki_lqr, "Q": _plain(d.Q), "R": _plain(d.R),
-           "poles": _plain(d.lqr_poles), "K_discrete": _plain(d.K_dlqr), "poles_discrete_z": _plain(d.dlqr_poles_z),
+           "poles": _plain(d.lqr_poles), "K_without_integrator": _plain(d.K_lqr_plain),
+           "kr_without_integrator": d.kr_lqr_plain, "K_discrete": _plain(d.K_dlqr), "poles_discrete_z": _plain(d.dlqr_poles_z),
            "kalman_L": _plain(d.L_kalman), "kalman_poles_z": _plain(d.kalman_poles_z),
            "kalman_W": _plain(d.kalman_W), "kalman_V": _plain(d.kalman_V)}
     rule = _rule_values(name, d.model.plant) | {"poles": _plain(d.poles)}
@@ -444,15 +468,15 @@ def answers(name: str, known: models.Plant | None = None) -> dict:
             "VI.15(b)": observable, "VI.15(c)": observer} | extra
 
 
-def controllers(name: str, known: models.Plant | None = None) -> dict:
+def controllers(name: str, known: models.Plant | None = None, **overrides) -> dict:
     """Label -> `models.Block` designed on `known` (default nominal); labels in `LABELS`.
 
     Every block takes the absolute tracked coordinate as its reference and
     saturates its total command at the known plant's limit. Sample period:
     the case's (0.01 s); "observer-based" runs at the observer problem's
-    (0.001 s for V.15 and VI.15).
+    (0.001 s for V.15 and VI.15). `overrides` go to `design`.
     """
-    d = design(name, known)
+    d = design(name, known, **overrides)
     model, Ts = d.model, d.sample_period
 
     def current(L_predictor, Ts_, disturbance):

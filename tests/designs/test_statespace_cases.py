@@ -258,3 +258,30 @@ def test_integral_designs_hold_zero_error_on_every_parameter_corner(plants, name
                                   input_disturbance=case.input_disturbance, threads=1)
         errors = [abs(run.r[-1, 0] - run.x[-1, blocks[label].model.tracked_state]) for run in runs]
         assert max(errors) < 1e-3, (label, max(errors))
+
+
+def test_design_overrides_replace_the_default_poles_and_weights(plants):
+    arm = plants["arm"]
+    d = sc.design("arm", arm, poles=[-5.0, -6.0], integrator_pole=-7.0, observer_poles=[-20.0, -21.0],
+                  disturbance_pole=-9.0)
+    # theta'' = -a theta' + b0 u: s^2 + (a + b0 k2) s + b0 k1 = (s + 5)(s + 6).
+    a, b0 = -d.model.linear.A[1, 1], d.model.linear.B[1, 0]
+    np.testing.assert_allclose(d.K, [[30 / b0, (11 - a) / b0]], rtol=1e-10)
+    assert d.integrator_pole == -7.0 and d.disturbance_observer_poles[-1] == -9.0
+    assert ss.pole_mismatch(d.observer_poles, [-20, -21]) == 0
+    with pytest.raises(ValueError, match=r"arm \(integrator-augmented\): weight Q has non-finite"):
+        sc.design("arm", arm, Q=np.diag([1.0, np.nan, 1.0]))
+    with pytest.raises(ValueError, match="requested 2 times"):
+        sc.controllers("arm", arm, poles=[-5.0, -5.0])
+
+
+@pytest.mark.parametrize("name", ["arm", "satellite", "crane"])
+def test_lqr_without_integrator_has_unit_dc_gain_and_solves_its_riccati_equation(designs, name):
+    d = designs[name]
+    A, B, nx = d.model.linear.A, d.model.linear.B, d.model.nx
+    Q = d.Q[:nx, :nx]
+    K, P = ss.lqr(A, B, Q, d.R)  # the record's gain is this solve on the states' block of Q
+    np.testing.assert_allclose(d.K_lqr_plain, K, rtol=1e-12)
+    assert ss.riccati_residual(A, B, Q, d.R, P) < 1e-9
+    closed = control.ss(A - B @ d.K_lqr_plain, B * d.kr_lqr_plain, d.model.C_r, 0)
+    assert control.dcgain(closed) == pytest.approx(1.0, rel=1e-10)
