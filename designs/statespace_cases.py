@@ -74,7 +74,7 @@ reported too.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -190,8 +190,29 @@ class StateSpaceDesign:
     """Every state-space design of one plant, from the known plant's linearization.
 
     Gains follow u = u_e + u_nl(q) − K x̃ + k_r r̃ + k_i x_I − d̂ (see
-    `designs.statespace_blocks`); poles in rad/s (continuous) or the z-plane
-    (``_z`` and ``_discrete`` fields). Shapes: K (1, nx); L (nx, n_used).
+    `designs.statespace_blocks`), SI units; poles in rad/s, or in the z-plane
+    for fields ending in ``_z``.
+
+    Attributes
+    ----------
+    model : TrackingModel (known plant, linearization, tracked coordinate)
+    sample_period, observer_sample_period : s
+    controllability_rank, observability_rank : int (= nx); the latter for `observer_outputs`
+    poles, K (1, nx), kr : .15 state feedback with reference gain
+    poles_sampled_z : eig(A_d − B_d K) of K held over `sample_period`
+    integrator_pole, K_integral (1, nx), ki : .16, reference through the integrator only
+    observer_outputs : outputs the observers read (n_used of them)
+    observer_uses_integrator : the observer-based design is .17 (K_integral, ki) or IV–VI.15 (K, kr)
+    observer_poles, L (nx, n_used) : continuous observer; L_discrete, observer_poles_z its
+        ZOH predictor gain and poles at `observer_sample_period`
+    controller_poles : eig(A − B K − L C), the compensator's own poles (.17(c))
+    disturbance_observer_poles (nx + 1), L_disturbance (nx + 1, n_used), their discrete
+        counterparts at `sample_period`, disturbance_controller_poles
+    Q, R, K_lqr (1, nx), ki_lqr, P_lqr, lqr_poles : integrator-augmented LQR
+    K_lqr_plain, kr_lqr_plain : LQR on the states only, with its reference gain
+    K_dlqr (1, nx + 1), dlqr_poles_z : discrete LQR of the ZOH model at `sample_period`
+    kalman_W, kalman_V, L_kalman (nx, ny), kalman_poles_z : steady-state Kalman predictor
+        reading every output
     """
 
     plant: str
@@ -238,7 +259,6 @@ class StateSpaceDesign:
     kalman_V: np.ndarray
     L_kalman: np.ndarray
     kalman_poles_z: np.ndarray
-    notes: dict = field(default_factory=dict)
 
     @property
     def observer_rows(self) -> list[int]:
@@ -448,7 +468,8 @@ def answers(name: str, known: models.Plant | None = None, **overrides) -> dict:
            "K": _plain(d.K), "kr": d.kr, "input_disturbance": models.case(name).input_disturbance}
     lqr = {"K": _plain(d.K_lqr), "ki": d.ki_lqr, "Q": _plain(d.Q), "R": _plain(d.R),
            "poles": _plain(d.lqr_poles), "K_without_integrator": _plain(d.K_lqr_plain),
-           "kr_without_integrator": d.kr_lqr_plain, "K_discrete": _plain(d.K_dlqr), "poles_discrete_z": _plain(d.dlqr_poles_z),
+           "kr_without_integrator": d.kr_lqr_plain, "K_discrete": _plain(d.K_dlqr),
+           "poles_discrete_z": _plain(d.dlqr_poles_z),
            "kalman_L": _plain(d.L_kalman), "kalman_poles_z": _plain(d.kalman_poles_z),
            "kalman_W": _plain(d.kalman_W), "kalman_V": _plain(d.kalman_V)}
     rule = _rule_values(name, d.model.plant) | {"poles": _plain(d.poles)}
