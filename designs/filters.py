@@ -18,7 +18,6 @@ differentiable in them.
 
 from __future__ import annotations
 
-from math import comb
 
 import casadi as ca
 import control
