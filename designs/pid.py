@@ -178,13 +178,15 @@ def max_equilibrium_input(known: models.Plant, ranges: dict) -> tuple[float, dic
     ----------
     known : the plant the controller knows
     ranges : coordinate -> (low, high) in SI units; coordinates not named
-        stay at the standard operating point
+        stay at the standard operating point (empty: the operating point only)
 
     Returns
     -------
     (value, q) : the largest magnitude of the (first) input and the configuration where it occurs
     """
     q0 = dict(zip(known.coordinate_names, known.equilibrium()[0][:known.nq]))
+    if not ranges:
+        return float(abs(known.equilibrium_input(known.equilibrium()[0][:known.nq])[0])), {}
     for name in ranges:
         if name not in q0:
             raise ValueError(f"{known.name} has no coordinate {name!r}; coordinates are {known.coordinate_names}")

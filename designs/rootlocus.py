@@ -129,8 +129,11 @@ def integrator_gain(plant, kp: float, kd: float, zeta_min: float, overshoot_allo
         return step_info(loop.reference_to_output())["Overshoot"]
 
     os_pd = overshoot(0.0)
+    unit_dc = abs(dc_gain(Loop.pid(plant, kp, 0.0, kd, derivative_on=derivative_on).reference_to_output()) - 1) < 1e-9
     ki = ki_damping
-    if overshoot_allowance is not None and overshoot(ki) > os_pd + overshoot_allowance:
+    # Only a loop already at unit DC gain can compare overshoots: where the PD loop settles elsewhere
+    # (type 0), the integrator's job is to move the final value, which step_info counts as overshoot.
+    if overshoot_allowance is not None and unit_dc and overshoot(ki) > os_pd + overshoot_allowance:
         lo, hi = 0.0, 1.0  # fractions of ki_damping
         for _ in range(40):
             mid = 0.5 * (lo + hi)
