@@ -42,7 +42,7 @@ from . import analysis as an
 from .analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from .filters import TransferFunctionBlock, notch, proportional_integral
 from .loops import (SuccessiveLoopClosure, cascade_blocks, cascade_plants, cascade_poles, place_pair,
-                    successive_loop_closure)
+                    successive_loop_closure, zero_cancelling_design)
 from .loopshaping import (crossover_for_bandwidth, damping_for_phase_margin, flattening_prefilter,
                           improve_loop, lead_for_crossover, phase_at, prototype_phase_margin)
 from .pid import PID, SIGMA, linearized_input_bound, pd_design, pd_saturation
@@ -309,6 +309,12 @@ def _pendulum(known: models.Plant) -> PlantDesign:
     a = {}
     _cascade_common("II", slc, bound, a, dict(inner_tf="b", bound="c", kp_inner="d", wn_inner="e", poles_inner="f",
                                               outer_tf="g", kp_outer="h", wn_outer="i", poles_outer="j"))
+    # The controlbook's alternative to II.8(g)'s approximation: cancel the zero at −√(g/ℓ) and K_DC.
+    zc = zero_cancelling_design(slc, separation=SEPARATION, zeta_outer=ZETA)
+    a["II.8 zero-cancelling filter"] = _record(**_tf(zc.outer_filter, "filter_"), **_tf(zc.outer_model, "model_"),
+                                               kp=zc.outer.kp, kd=zc.outer.kd, wn=zc.outer.wn, zeta=zc.outer.zeta,
+                                               dc_gain=zc.outer_dc_gain, poles=_poles(zc.outer.poles),
+                                               full_poles=_poles(zc.full_poles))
     G_in, G_out = slc.plants.inner, slc.outer_model
     rl_in = _integrator(G_in, slc.inner.kp, slc.inner.kd, ZETA)
     rl_out = _integrator(G_out, slc.outer.kp, slc.outer.kd, ZETA)
@@ -349,12 +355,15 @@ def _pendulum(known: models.Plant) -> PlantDesign:
     outer_block = TransferFunctionBlock(known, "z", shaped.controller * C_pd, prefilter=pre["prefilter"],
                                         output_limit=slc.inner_limit, name="loopshaped outer (z)")
     blocks["loopshaped"] = models.Cascade(outer_block, blocks["PD"].inner, name="loopshaped (II.14)")
+    blocks["PD (zero-cancelling filter)"] = cascade_blocks(known, zc, name="PD (zero-cancelling filter)")
     loops = {"inner PD": in_pd, "inner PID": in_pid, "outer PD": out_pd,
              "outer loopshaped": Loop.unity(shaped.loop, 1.0, "outer loopshaped")}
     notes = [f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
              "outer PD designed on K_DC·g/s² (the outer plant (g − ℓ s²)/s² below √(g/ℓ)); II.8(g) assumes "
              f"K_DC = 1, the inner loop gives K_DC = {slc.inner_dc_gain:.4g}",
-             "integrator on the outer (z) loop only, integrating while |ż| is small (II.16 hint)"]
+             "integrator on the outer (z) loop only, integrating while |ż| is small (II.16 hint)",
+             "'PD (zero-cancelling filter)': the controlbook's outer loop, F(s) = (1/K_DC) √(g/ℓ)/(s + √(g/ℓ)) "
+             "after the outer PD, which then matches a second-order loop exactly (our text does not use it)"]
     return PlantDesign(a, blocks, loops, notes)
 
 
@@ -525,6 +534,11 @@ def _uuv(known: models.Plant) -> PlantDesign:
                             specs=_specs(an.check_step(T_ll, **spec_kw)))
     a["IV.11(d)"] = _record(ess=1 - dc_gain(T_ll), input_limit=p["input_limit"], specs=_specs(
         _step_specs_nonlinear(turbo, leadlag_block, case.design_step, **spec_kw)))
+    feedforward_block = TransferFunctionBlock(turbo, "phi", leadlag.transfer_function(),
+                                              output_limit=p["input_limit"], anti_windup="none",
+                                              feedforward="reference", name="lead-lag + feedforward (IV.11(e))")
+    a["IV.11(e)"] = _record(feedforward="m g L sin(phi_d) of the known plant", specs=_specs(
+        _step_specs_nonlinear(turbo, feedforward_block, case.design_step, **spec_kw)))
     # IV.13: PI, lead, notch, double lead at 2 rad/s.
     wc = 2.0
     integ = an.tf([1.0], [1.0, 0.0])
@@ -789,7 +803,8 @@ def answers(name: str, known: models.Plant | None = None) -> dict:
 
 
 def controllers(name: str, known: models.Plant | None = None) -> dict:
-    """Label -> models.Block: "PD", "PID", "PID (no anti-windup)", "loopshaped" (and the UUV's "lead-lag (IV.11)").
+    """Label -> models.Block: "PD", "PID", "PID (no anti-windup)", "loopshaped", plus the UUV's
+    "lead-lag (IV.11)" and the pendulum's "PD (zero-cancelling filter)".
 
     Each block reads the plant's outputs and takes the absolute tracked
     coordinate as its 1-vector reference; it saturates its command at the

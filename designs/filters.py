@@ -28,7 +28,7 @@ from models.checks import positive
 
 from .analysis import as_polynomials, tf
 from .discrete import saturate
-from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward
+from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
 
 __all__ = ["lead", "lag", "proportional_integral", "notch", "low_pass", "prefilter", "lead_ratio",
            "tustin_matrix", "tustin_coefficients", "TransferFunctionBlock"]
@@ -180,6 +180,8 @@ class TransferFunctionBlock(models.Block):
     output_limit : symmetric saturation of u (actuator limit, or the outer
         loop's bound on the inner reference); None for none
     feedforward : add the known plant's equilibrium input at the measured configuration
+        (True or "measurement"), or at the reference ("reference": the
+        controlled coordinate at r, the others at the operating point)
     anti_windup : "observer" feeds the saturation's excess back into C's state,
         x⁺ = F x + G e + K (u − u_unsat), with K placing every eigenvalue of
         F − K H at `tracking_pole` (the controller then tracks the applied
@@ -200,7 +202,7 @@ class TransferFunctionBlock(models.Block):
 
     def __init__(self, known: models.Plant, coordinate: str, controller, *, prefilter=None,
                  sample_period: float = SAMPLE_PERIOD, output_limit: float | None = None,
-                 feedforward: bool = False, anti_windup: str = "observer", tracking_pole: float = 0.9,
+                 feedforward: bool | str = False, anti_windup: str = "observer", tracking_pole: float = 0.9,
                  limit_about: str | None = None, name: str = "C(s)"):
         if anti_windup not in ("observer", "none"):
             raise ValueError(f"anti_windup must be 'observer' or 'none', got {anti_windup!r}")
@@ -223,7 +225,14 @@ class TransferFunctionBlock(models.Block):
             raise ValueError("limit_about needs an output_limit")
         self.limit_about = limit_about
         self._read_center = coordinate_reader(known, limit_about) if limit_about is not None else None
-        self._feedforward = equilibrium_feedforward(known) if feedforward else None
+        if feedforward not in (False, True, "measurement", "reference"):
+            raise ValueError(f"feedforward must be False, True/'measurement' or 'reference', got {feedforward!r}")
+        self._feedforward = None
+        self._feedforward_on_reference = feedforward == "reference"
+        if feedforward in (True, "measurement"):
+            self._feedforward = equilibrium_feedforward(known)
+        elif feedforward == "reference":
+            self._feedforward = reference_feedforward(known, coordinate)
         n_prefilter = self._prefilter.order if self._prefilter else 0
         self._n_prefilter = n_prefilter
         super().__init__(sample_period=sample_period, n_state=n_prefilter + self._controller.order,
@@ -244,7 +253,10 @@ class TransferFunctionBlock(models.Block):
         error = r_filtered - self._read(y)
         xk = xc[npf:]
         xk_next, u_feedback = self._controller.expr(xk, error, gains["num"], gains["den"])
-        u_unsat = u_feedback + (self._feedforward(y) if self._feedforward is not None else 0)
+        if self._feedforward is None:
+            u_unsat = u_feedback
+        else:
+            u_unsat = u_feedback + self._feedforward(r[0] if self._feedforward_on_reference else y)
         if self.output_limit is None:
             return ca.vertcat(xf_next, xk_next), u_unsat
         center = self._read_center(y) if self._read_center is not None else 0

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import casadi as ca
 import control
 import numpy as np
 import scipy.optimize
@@ -36,7 +37,8 @@ from .pid import PID, SAMPLE_PERIOD, SIGMA, PDDesign, pd_design, pd_saturation, 
 
 __all__ = ["CascadePlants", "cascade_plants", "coordinate_model", "low_frequency_model",
            "zero_cancelling_filter", "place_pair", "cascade_poles", "SuccessiveLoopClosure",
-           "separation_for", "successive_loop_closure", "cascade_blocks"]
+           "separation_for", "successive_loop_closure", "cascade_blocks", "FilteredBlock",
+           "zero_cancelling_design"]
 
 
 def coordinate_model(lin: LinearModel) -> LinearModel:
@@ -380,6 +382,9 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
     outer_limit : bound on the inner reference; "inner_step" uses the design's A_θ, None for no bound
     outer_limit_about : bound the inner reference about this measured coordinate instead of 0
     feedforward : add `known`'s equilibrium input in the inner block
+
+    A design with an `outer_filter` (`zero_cancelling_design`) filters the
+    outer block's output (after its saturation) before the inner loop.
     """
     inner_coordinate = inner_coordinate or slc.plants.inner_coordinate
     outer_coordinate = outer_coordinate or slc.plants.outer_coordinate
@@ -389,8 +394,65 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
                       rate_limit=rate_limit, output_limit=limit, limit_about=outer_limit_about,
                       sample_period=sample_period, sigma=sigma,
                       name=f"{name} outer ({outer_coordinate})")
+    if slc.outer_filter is not None:
+        outer_block = FilteredBlock(outer_block, slc.outer_filter, name=f"{name} outer ({outer_coordinate}), "
+                                                                         "zero-cancelling filter")
     inner_block = PID(known, inner_coordinate, kp=slc.inner.kp, kd=slc.inner.kd, ki=inner_ki,
                       anti_windup="none" if anti_windup == "none" else "back_calculation",
                       output_limit=float(known.input_limit[0]), feedforward=feedforward,
                       sample_period=sample_period, sigma=sigma, name=f"{name} inner ({inner_coordinate})")
     return models.Cascade(outer_block, inner_block, name=name)
+
+
+class FilteredBlock(models.Block):
+    """A block whose output passes through a Tustin-discretized filter F(s) (the zero-cancelling filter).
+
+    Gains are the block's own plus ``filter_num`` and ``filter_den`` (continuous
+    coefficients of F). The block saturates before the filter, as in the
+    controlbook's pendulum solution.
+    """
+
+    def __init__(self, block: models.Block, filter_tf, name: str | None = None):
+        from .filters import _padded, _Section
+
+        num, den = _padded(filter_tf, "filter F(s)")
+        self.block = block
+        self._section = _Section(den.size - 1, block.sample_period)
+        gains = dict(block.gains) | {"filter_num": num, "filter_den": den}
+        super().__init__(sample_period=block.sample_period, n_state=block.n_state + self._section.order,
+                         n_measured=block.n_measured, n_reference=block.n_reference, n_input=block.n_input,
+                         gains=gains, measures=block.measures, name=name or f"F(s)·{block.name}")
+
+    def expr(self, xc, y, r, gains):
+        nb = self.block.n_state
+        own = {k: v for k, v in gains.items() if not k.startswith("filter_")}
+        xb_next, v = self.block.expr(xc[:nb], y, r, own)
+        xf_next, out = self._section.expr(xc[nb:], v, gains["filter_num"], gains["filter_den"])
+        return ca.vertcat(xb_next, xf_next), out
+
+    def initial_state(self, y0, r0) -> np.ndarray:
+        xb = self.block.initial_state(y0, r0)
+        _, v = self.block.step(xb, y0, r0)
+        xf = self._section.steady_state(float(v[0]), self.gains["filter_num"], self.gains["filter_den"])
+        return np.concatenate([xb, xf])
+
+
+def zero_cancelling_design(slc: SuccessiveLoopClosure, *, separation: float = 10.0,
+                           zeta_outer: float = 0.707) -> SuccessiveLoopClosure:
+    """Redesign the outer loop of `slc` with the zero-cancelling filter (the controlbook's pendulum).
+
+    F(s) cancels the outer plant's stable zeros and K_DC; the PD then acts on
+    the reduced plant K_DC F G_outer, whose closed loop is exactly second
+    order with ω_n = ω_n,inner/`separation` and ζ = `zeta_outer` (up to the
+    non-minimum-phase zero it keeps). `full_poles` include the filter.
+    """
+    filt = zero_cancelling_filter(slc.plants.outer, slc.inner_dc_gain)
+    num, den = _reduce(*(as_polynomials(slc.inner_dc_gain * filt * slc.plants.outer)))
+    reduced = tf(num, den)
+    outer = pd_design(reduced, wn=slc.inner.wn / separation, zeta=zeta_outer)
+    poles = cascade_poles(slc.plants.linearization, slc.plants.inner_coordinate, slc.plants.outer_coordinate,
+                          (slc.inner.kp, slc.inner.kd), (outer.kp, outer.kd), outer_filter=filt)
+    return SuccessiveLoopClosure(plants=slc.plants, inner=slc.inner, inner_dc_gain=slc.inner_dc_gain,
+                                 outer_model=reduced, outer=outer, outer_dc_gain=outer.dc_gain,
+                                 separation=slc.inner.wn / outer.wn, inner_limit=slc.inner_limit,
+                                 full_poles=poles, outer_filter=filt)

@@ -30,7 +30,7 @@ from .analysis import as_polynomials, dc_gain, tf
 from .discrete import back_calculation, dirty_derivative, integrate_while_slow, saturate, trapezoid
 
 __all__ = ["PDDesign", "second_order_coefficients", "pd_design", "pd_saturation", "max_equilibrium_input",
-           "linearized_input_bound", "coordinate_reader", "equilibrium_feedforward", "PID",
+           "linearized_input_bound", "coordinate_reader", "equilibrium_feedforward", "reference_feedforward", "PID",
            "SIGMA", "SAMPLE_PERIOD"]
 
 #: The text's dirty-derivative time constant (".11: dirty derivative gain τ = 0.05"), s.
@@ -264,6 +264,25 @@ def equilibrium_feedforward(known: models.Plant):
     static = known.casadi_equilibrium_input
     p = ca.DM(known.param_vector())
     return lambda y: static(configuration(y, p), p)[0]
+
+
+def reference_feedforward(known: models.Plant, coordinate: str):
+    """r ↦ u_e(q_r): the equilibrium input with `coordinate` at the reference, the rest at the operating point.
+
+    IV.11(e): "a model-based feedforward term that predicts the torque
+    required to overcome the gravity-buoyancy torque based on the desired
+    roll angle".
+    """
+    if coordinate not in known.coordinate_names:
+        raise ValueError(f"{known.name} has no coordinate {coordinate!r}; coordinates are "
+                         f"{known.coordinate_names}")
+    index = known.coordinate_names.index(coordinate)
+    q0 = ca.DM(known.equilibrium()[0][:known.nq])
+    unit = ca.DM.zeros(known.nq)
+    unit[index] = 1
+    static = known.casadi_equilibrium_input
+    p = ca.DM(known.param_vector())
+    return lambda r: static(q0 + unit * (r - q0[index]), p)[0]
 
 
 ANTI_WINDUP = ("back_calculation", "integrate_while_slow", "none")

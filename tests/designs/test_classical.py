@@ -253,7 +253,8 @@ def test_two_load_crane_answers_are_the_single_load_ones():
 @pytest.mark.parametrize("name", ["arm", "pendulum", "satellite", "uuv", "ballbeam", "crane1", "crane"])
 def test_controllers_have_the_labels_and_rebuild_from_gains(name):
     blocks = classical.controllers(name)
-    expected = set(classical.LABELS) | ({"lead-lag (IV.11)"} if name == "uuv" else set())
+    extra = {"uuv": {"lead-lag (IV.11)"}, "pendulum": {"PD (zero-cancelling filter)"}}
+    expected = set(classical.LABELS) | extra.get(name, set())
     assert set(blocks) == expected
     plant = models.get(name)
     for label, block in blocks.items():

@@ -110,3 +110,14 @@ def test_bad_compensators_are_refused(arm):
         lag(1.0, 0.5)
     with pytest.raises(ValueError, match="zeta_zero < zeta_pole"):
         notch(1.0, 0.8, 0.7)
+
+
+def test_reference_feedforward_is_the_restoring_torque_at_the_reference():
+    uuv = models.get("uuv")
+    m, g, L = (uuv.params[k] for k in ("m", "g", "L"))
+    block = TransferFunctionBlock(uuv, "phi", lead(2, 40), feedforward="reference", output_limit=250.0)
+    phi_d = 0.4
+    _, u = block.step(block.initial_state([phi_d], [phi_d]), [phi_d], [phi_d])
+    assert u[0] == pytest.approx(m * g * L * np.sin(phi_d), rel=1e-12)
+    with pytest.raises(ValueError, match="feedforward must be"):
+        TransferFunctionBlock(uuv, "phi", lead(2, 40), feedforward="state")

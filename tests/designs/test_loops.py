@@ -7,8 +7,9 @@ import pytest
 
 import models
 from designs.analysis import as_polynomials, dc_gain, tf
-from designs.loops import (cascade_plants, cascade_poles, low_frequency_model, place_pair, successive_loop_closure,
-                           zero_cancelling_filter)
+from designs.loops import (FilteredBlock, cascade_blocks, cascade_plants, cascade_poles, low_frequency_model,
+                           place_pair, successive_loop_closure, zero_cancelling_design, zero_cancelling_filter)
+from designs.pid import PID
 from designs.pid import pd_design
 
 
@@ -114,3 +115,28 @@ def test_successive_loop_closure_meets_its_rules():
                                 outer_model="low_frequency")
     with pytest.raises(ValueError, match="no coordinate 'x'"):
         cascade_plants(p, "theta", "x")
+
+
+def test_zero_cancelling_design_tracks_on_the_nonlinear_pendulum():
+    p = models.get("pendulum")
+    slc = successive_loop_closure(p, "theta", "z", inner_bound=5.0, outer_step=2.0, outer_model="low_frequency")
+    zc = zero_cancelling_design(slc)
+    assert zc.outer_dc_gain == pytest.approx(1.0) and zc.separation == pytest.approx(10.0)
+    assert np.all(zc.full_poles.real < 0) and zc.full_poles.size == 5  # the filter adds one state
+    res = models.simulate_closed_loop(p, cascade_blocks(p, zc), models.signals.step(2.0, 0.5), 30.0)
+    assert res.state("z")[-1] == pytest.approx(2.0, abs=1e-4)
+    assert np.max(np.abs(res.u)) <= 5.0
+
+
+def test_filtered_block_equals_tustin_of_the_filter_after_the_block():
+    arm = models.get("arm")
+    inner = PID(arm, "theta", kp=2.0, kd=0.0, derivative_on="error")
+    F = tf([3.0], [1.0, 3.0])
+    block = FilteredBlock(inner, F)
+    n, xc, out = 200, np.zeros(block.n_state), []
+    for _ in range(n):
+        xc, u = block.step(xc, [0.0], [1.0])
+        out.append(u[0])
+    ref = control.forced_response(control.c2d(2.0 * F, 0.01, "tustin"), np.arange(n) * 0.01, np.ones(n)).outputs
+    np.testing.assert_allclose(out, ref, atol=1e-9)
+    assert set(block.gains) == {"kp", "kd", "filter_num", "filter_den"}
