@@ -674,7 +674,6 @@ CRANE_OUTER = {"wn": 0.45, "zeta": 0.35}
 
 
 def _crane(known: models.Plant) -> PlantDesign:
-    case = models.case(known.name)
     model = _crane1_model(known)
     plants = cascade_plants(model, "theta", "x")
     overshoot, rise_time = 0.5, 1.0  # VI.8(c)

@@ -219,7 +219,6 @@ def cascade_poles(lin: LinearModel, inner: str, outer: str, inner_gains: tuple, 
     else:
         fs = control.tf2ss(outer_filter)
         Af, Bf, Cf, Df = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (fs.A, fs.B, fs.C, fs.D))
-        nf = Af.shape[0]
         # θ_d = Cf xf + Df v, v = outer_row · x; xf' = Af xf + Bf v
         u_x = inner_row + kpi * Df[0, 0] * outer_row
         u_f = kpi * Cf[0]

@@ -270,3 +270,14 @@ def test_bad_requests_are_named():
         classical.answers("boat")
     with pytest.raises(ValueError, match="known plant is 'arm'"):
         classical.controllers("uuv", models.get("arm"))
+
+
+def test_frequency_responses_are_the_loops_behind_the_13_answers(arm_answers):
+    a = arm_answers
+    w = np.array([0.1, 1.0, 10.0])
+    data = classical.frequency_responses("arm", omega=w)
+    G = models.get("arm").linearize().tf("theta", "tau")
+    L = G * (a["I.8(c)"]["kp"] + a["I.10(d)"]["ki"] * control.tf([1], [1, 0])
+             + _pd_dirty(0.0, a["I.8(d)"]["kd"]))
+    np.testing.assert_allclose(data["PID (implemented)"]["loop"]["magnitude"], _mag(L, w), rtol=1e-9)
+    np.testing.assert_allclose(data["PID (implemented)"]["plant"]["magnitude"], _mag(G, w), rtol=1e-9)

@@ -141,3 +141,33 @@ def test_pid_block_rejects_bad_settings(arm):
         PID(arm, "theta", kp=1.0, ki=1.0, anti_windup="integrate_while_slow")
     with pytest.raises(ValueError, match="no coordinate 'phi'"):
         PID(arm, "phi", kp=1.0)
+
+
+def test_with_gains_equals_a_block_built_with_them(arm):
+    base = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, output_limit=1.0, feedforward=True)
+    fresh = PID(arm, "theta", kp=0.6, kd=0.05, ki=0.1, output_limit=1.0, feedforward=True)
+    changed = base.with_gains(kp=0.6, kd=0.05, ki=0.1)
+    xc = base.initial_state([0.1], [0.5])
+    for y in (0.1, 0.12, 0.2):
+        (xa, ua), (xb, ub) = changed.step(xc, [y], [0.5]), fresh.step(xc, [y], [0.5])
+        np.testing.assert_allclose(ua, ub, rtol=1e-14)
+        xc = xa
+
+
+def test_closed_loop_cost_gradient_in_the_classical_gains(arm):
+    import casadi as ca
+    from designs import classical
+
+    block = classical.controllers("arm")["PID"]
+    n = 150
+    run = models.closed_loop_function(arm, block, n)
+    gains = ca.MX.sym("g", block.gain_vector().size)
+    x0 = np.zeros(2)
+    X = run(x0, block.initial_state(arm.output(x0), [0.3]), 0.3 * np.ones((1, n)), np.zeros((1, n)),
+            np.zeros((1, n)), arm.param_vector(), gains)[0]
+    cost = ca.Function("cost", [gains], [ca.sumsqr(X[0, :] - 0.3) * TS])
+    grad = ca.Function("grad", [gains], [ca.gradient(cost(gains), gains)])
+    g0 = block.gain_vector()
+    h = 1e-6
+    fd = [(float(cost(g0 + h * e)) - float(cost(g0 - h * e))) / (2 * h) for e in np.eye(g0.size)]
+    np.testing.assert_allclose(np.asarray(grad(g0)).ravel(), fd, rtol=1e-4)
