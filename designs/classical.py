@@ -13,17 +13,23 @@ Choices the text leaves to the student, made once here:
 - Bandwidth separation M = 10 between inner and outer loops; the free
   inner step A_θ of II.8, III.8 and V.8 is the one that gives it.
 - k_i (.10) along its root locus: the largest gain keeping every closed-loop
-  pole's damping at least 0.9 ζ and adding at most 10 percentage points of
-  step overshoot to the PD loop's ("without significantly degrading the
-  transient response", IV.10(d)).
-- Anti-windup: back-calculation, except where the text asks for
-  integrating only while |ẏ| is small (II.16 and V.12(f): negative
-  integrator gains); the rate limit is 10 % of (design step × outer ω_n).
+  pole's damping at least 0.9 ζ and, when the PD loop already has unit DC
+  gain, adding at most 10 percentage points of step overshoot to it
+  ("without significantly degrading the transient response", IV.10(d)).
+- PID anti-windup: back-calculation, except where the text asks for
+  integrating only while |ẏ| is small (pendulum II.16, ball on beam
+  V.12(f): negative integrator gains); the rate limit is 10 % of (design
+  step × outer ω_n). Transfer-function blocks use the observer form of
+  back-calculation (see `filters.TransferFunctionBlock`).
 - The .13 answers use the implemented controllers, with the dirty
   derivative s/(σ s + 1), σ = 0.05 s; .8 and .10 use the ideal PD/PID.
-- Each loop of a cascade gets an integrator analysis (.10), but the
-  controllers integrate only in the loop that sets the tracked coordinate
-  (the outer loop of a cascade): an inner integrator would fight the outer one.
+- Each loop of a cascade gets an integrator analysis (.10); the controllers
+  integrate in the outer loop, and for the ball on beam in both (see its notes).
+
+Each record's "notes" entry says what was chosen for that plant and what in
+the text did not hold. Labels of `controllers`: `LABELS` for every plant,
+plus "lead-lag (IV.11)" (UUV, for the 250 N m thrusters) and
+"PD (zero-cancelling filter)" (pendulum).
 """
 
 from __future__ import annotations
