@@ -29,7 +29,7 @@ __all__ = ["Loop", "UnstableLoopError", "SpecCheck", "as_polynomials", "tf", "pi
            "dc_gain", "steady_state_errors", "band_max", "percent_tracking_error_below",
            "percent_input_disturbance_below", "percent_output_disturbance_below", "percent_noise_above",
            "margins", "bode_data", "step_info", "step_response", "check_band_ratio", "check_phase_margin", "check_crossover",
-           "check_step", "check_stable"]
+           "check_step", "check_stable", "check_damping", "check_bandwidth"]
 
 #: Coefficients below this fraction of their polynomial's largest count as exact zeros.
 ZERO_TOL = 1e-12
@@ -451,6 +451,20 @@ def check_crossover(L, omega: float, rel_tol: float = 0.05) -> SpecCheck:
     w = margins(L)["gain_crossover"]
     return SpecCheck(f"crossover at {omega:g} rad/s (±{100 * rel_tol:g} %)",
                      bool(np.isfinite(w) and abs(w - omega) <= rel_tol * omega), w, omega, w)
+
+
+def check_damping(loop: Loop, zeta_min: float) -> SpecCheck:
+    """Every closed-loop pole damped at least `zeta_min` (value: the least damped pole's ζ)."""
+    poles = loop.poles()
+    zeta = float(np.min(-poles.real / np.abs(poles)))
+    return SpecCheck(f"every closed-loop pole damped (zeta >= {zeta_min:g})", zeta >= zeta_min, zeta, zeta_min)
+
+
+def check_bandwidth(T, bandwidth: float, rel_tol: float = 0.2) -> SpecCheck:
+    """Closed-loop −3 dB bandwidth of T (1/√2 of its DC gain) within `rel_tol` of `bandwidth` rad/s."""
+    value = float(control.bandwidth(T, 20 * np.log10(1 / np.sqrt(2))))
+    return SpecCheck(f"closed-loop bandwidth about {bandwidth:g} rad/s (±{100 * rel_tol:g} %)",
+                     bool(abs(value - bandwidth) <= rel_tol * bandwidth), value, bandwidth)
 
 
 def check_stable(loop: Loop) -> SpecCheck:

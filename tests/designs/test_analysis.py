@@ -4,7 +4,8 @@ import control
 import numpy as np
 import pytest
 
-from designs.analysis import (Loop, UnstableLoopError, band_max, check_band_ratio, dc_gain, limit_at_zero, margins,
+from designs.analysis import (Loop, UnstableLoopError, band_max, check_band_ratio, check_bandwidth, check_damping,
+                              dc_gain, limit_at_zero, margins,
                               percent_input_disturbance_below, percent_noise_above, percent_output_disturbance_below,
                               percent_tracking_error_below, pid_tf, step_info, step_response, steady_state_errors, tf)
 
@@ -125,3 +126,14 @@ def test_bad_transfer_functions_are_named():
         Loop.unity(control.tf([[[1], [1]]], [[[1, 1], [1, 2]]]), 1.0)
     with pytest.raises(ValueError, match="sigma must be > 0"):
         pid_tf(1.0, 0.0, 1.0, sigma=-0.05)
+
+
+def test_damping_and_bandwidth_checks_of_a_second_order_loop():
+    # L = ω_n²/(s (s + 2ζω_n)): closed loop ω_n²/(s² + 2ζω_n s + ω_n²), bandwidth ω_n √(1 − 2ζ² + √(2 − 4ζ² + 4ζ⁴)).
+    zeta, wn = 0.3, 2.0
+    loop = Loop.unity(tf([wn**2], [1, 2 * zeta * wn, 0]), 1.0)
+    assert check_damping(loop, 0.2).met and check_damping(loop, 0.2).value == pytest.approx(zeta)
+    assert not check_damping(loop, 0.5).met
+    bw = wn * np.sqrt(1 - 2 * zeta**2 + np.sqrt(2 - 4 * zeta**2 + 4 * zeta**4))
+    check = check_bandwidth(loop.reference_to_output(), bw)
+    assert check.met and check.value == pytest.approx(bw, rel=1e-6)
