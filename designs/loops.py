@@ -253,7 +253,7 @@ class SuccessiveLoopClosure:
     inner : PDDesign of the inner loop
     inner_dc_gain : K_DC of the inner closed loop
     outer_model : the plant the outer loop was designed on
-    outer : PDDesign (or dict from `place_pair`) of the outer loop
+    outer : PDDesign of the outer loop (for a root-locus placement, any record with kp and kd)
     outer_dc_gain : DC gain of the outer closed loop on its design model
     separation : ω_n,inner / ω_n,outer
     inner_limit : bound on the inner reference (the outer block's saturation), rad
