@@ -77,7 +77,7 @@ class NonlinearMPCProblem:
 
     def __init__(self, plant: Plant, sample_period: float, horizon: int, state_weight, input_weight, *,
                  soft_bounds=(), rate_limit=None, substeps: int = 1, max_iterations: int = 20,
-                 qp_solver: str = "hpipm"):
+                 qp_solver: str = "hpipm", jit: bool = False):
         if int(horizon) != horizon or horizon < 1:
             raise ValueError(f"horizon must be an integer >= 1, got {horizon}")
         if int(max_iterations) < 1:
@@ -157,6 +157,9 @@ class NonlinearMPCProblem:
             "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
             "error_on_fail": False,
         }
+        if jit:
+            options |= {"jit": True, "compiler": "shell", "jit_cleanup": True,
+                        "jit_options": {"flags": ["-O1"], "verbose": False}}
         if qp_solver == "hpipm":
             options["qpsol_options"] = {"N": N, "nx": [nx] * (N + 1), "nu": [nu + ns] * N + [0],
                                         "ng": [stage_rows.size1() - nx] * N + [0], "error_on_fail": False}

@@ -36,7 +36,9 @@ def mpc_problem(problem: MPCProblem, x0, disturbance, x_target, u_target, u_prev
     N, nx, nu, ns = problem.horizon, problem.nx, problem.nu, problem.n_soft
     A, B, G = problem.A, problem.B, problem.soft_rows
     x = cp.Variable((N + 1, nx), name="x")
-    u = cp.Variable((N, nu), name="u")
+    # The inputs relative to their bounds: kilonewtons and newton-metres alike for the solver.
+    input_scale = np.maximum(np.abs(problem.input_lower), np.abs(problem.input_upper))
+    u = cp.Variable((N, nu), name="u_relative") @ np.diag(input_scale)
     s = cp.Variable((N, max(ns, 1)), nonneg=True, name="s")
     Q_root, R_root, P_root = (_square_root(W) for W in (problem.Q, problem.R, problem.P))
 
@@ -88,8 +90,11 @@ class CvxpySolver:
         self.problem = problem
         self.parametrized = parametrized
         self.solver = solver
-        tight = dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, tol_ktratio=1e-8)
+        tight = dict(tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12, tol_ktratio=1e-10, max_iter=500)
         self.solver_options = (tight if solver == "CLARABEL" else {}) | dict(solver_options or {})
+        # cvxpy's C++ canonicalization does not take every expression here; choose the
+        # SciPy one up front instead of a warning on each solve.
+        self.solver_options.setdefault("canon_backend", cp.SCIPY_CANON_BACKEND)
         if parametrized:
             nx, nu = problem.nx, problem.nu
             self.parameters = QPParameters(cp.Parameter(nx, name="x0"), cp.Parameter(nu, name="d"),
