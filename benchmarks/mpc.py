@@ -17,15 +17,17 @@ each timed around its own call (vector update + solve + reading the plan),
 interleaved so all four see the same machine load. The first inputs are
 compared with the cvxpy reference (a) at every step.
 
-The nonlinear MPC's solve time is measured the same way on its own closed
-loop (arm and pendulum by default, every plant with --all).
+The nonlinear MPC's solve time is measured on its own closed loop (arm and
+pendulum by default, every plant with --all). --settling runs every plant's
+step with both MPCs on the ±5 % models with the input disturbance (the slow
+tests' scenario) and prints settling times, peak commands and soft-bound margins.
 
 With --soft, OSQP meets instances where theta rides on its bound with zero
 slack (the exact penalty's degenerate vertex); there it stops at its
 iteration limit or reports "solved inaccurate" with first inputs off by up to
 0.1-1 N, so its failures are counted in the table.
 
-Usage: python benchmarks/mpc.py [--steps 500] [--soft] [--all] [--json PATH]
+Usage: python benchmarks/mpc.py [--steps 500] [--soft] [--all] [--settling] [--json PATH]
 """
 
 from __future__ import annotations
@@ -104,6 +106,9 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
     result = models.simulate_closed_loop(plant, controller, case.step, duration,
                                          input_disturbance=case.input_disturbance)
     solver = interleaved["solver"]
+    # The whole controller step (estimator, target, QP, clipping) with path (d) alone.
+    alone = models.simulate_closed_loop(plant, mpc.linear_mpc(name, known, **overrides), case.step, duration,
+                                        input_disturbance=case.input_disturbance)
     medians = {key: 1e3 * float(np.median(solver.times[key])) for key in PATHS}
     reference = np.array(solver.first_moves["a"])
     diffs = {key: float(np.max(np.abs(np.array(solver.first_moves[key]) - reference))) for key in "bcd"}
@@ -115,7 +120,7 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
         "max_first_move_diff": max(diffs.values()),
         **{f"max_first_move_diff_{key}": diffs[key] for key in "bcd"},
         "failures": {key: int(np.sum(~np.array(solver.status[key]))) for key in PATHS},
-        "controller_step_median_ms": 1e3 * float(np.median(result.step_time)),
+        "controller_step_median_ms": 1e3 * float(np.median(alone.step_time)),
         "saturated_steps": int(np.sum(np.abs(result.u) >= plant.input_limit)),
         "max_abs_u": float(np.max(np.abs(result.u))),
     }
@@ -141,11 +146,44 @@ def nonlinear_benchmark(name: str, steps: int) -> dict:
     }
 
 
+def settling_table() -> dict:
+    """Both MPCs on every plant's step, known parameters ±5 %, with the input disturbance."""
+    from mpc.defaults import physical_soft_bounds
+
+    rows = {}
+    for name in models.names():
+        plant, case = models.get(name), models.case(name)
+        index = plant.state_names.index(case.tracked)
+        reference = plant.equilibrium()[0][index] + case.step
+        for kind, build in (("linear", mpc.linear_mpc), ("nonlinear", mpc.nonlinear_mpc)):
+            for sign in (1, -1):
+                controller = build(name, models.perturbed(plant, 0.05, sign))
+                result = models.simulate_closed_loop(plant, controller, reference, case.duration,
+                                                     input_disturbance=case.input_disturbance)
+                error = np.abs(result.x[:, index] - reference)
+                outside = np.flatnonzero(error >= 1e-3)
+                settle = float(result.t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(result.t) \
+                    else (0.0 if not outside.size else float("inf"))
+                margins = [min(value.min() - lower, upper - value.max()) for _, row, lower, upper
+                           in physical_soft_bounds(name, plant) for value in [result.x @ row]]
+                solve = np.array([s["solve_time"] for s in result.status])
+                rows[f"{name} {kind} {sign:+d}"] = {
+                    "settling_time_s": settle, "duration_s": case.duration,
+                    "final_error": float(error[-1]), "peak_command_over_limit": float(np.max(np.abs(result.u)) /
+                                                                                       plant.input_limit[0]),
+                    "soft_bound_margin": min(margins) if margins else None,
+                    "median_solve_ms": 1e3 * float(np.median(solve)), "max_solve_ms": 1e3 * float(np.max(solve)),
+                    "failed_steps": int(sum(not s["success"] for s in result.status)),
+                }
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=500)
     parser.add_argument("--soft", action="store_true", help="keep the soft |theta| bound in the linear MPC")
     parser.add_argument("--all", action="store_true", help="time the nonlinear MPC on every plant")
+    parser.add_argument("--settling", action="store_true", help="settling table of both MPCs on every plant")
     parser.add_argument("--json", metavar="PATH", help="write the figures as one JSON object")
     args = parser.parse_args(argv)
 
@@ -172,11 +210,24 @@ def main(argv=None):
         print(f"{name:10s} {row['horizon']:4d} {row['sample_period']:6.2f} {row['median_ms']:10.3f} "
               f"{row['p90_ms']:8.3f} {row['max_ms']:8.1f} {row['median_iterations']:7.1f} {row['failures']:6d}")
 
+    settling = settling_table() if args.settling else None
+    if settling:
+        print("\nStep with known parameters ±5 % and the input disturbance (settled: |e| < 1e-3 from then on)")
+        print(f"{'run':24s} {'settles s':>10s} {'of s':>5s} {'|u|max/limit':>13s} {'soft margin':>12s} "
+              f"{'solve ms':>9s} {'max ms':>8s} {'failed':>7s}")
+        for run, row in settling.items():
+            margin = "-" if row["soft_bound_margin"] is None else f"{row['soft_bound_margin']:.4f}"
+            print(f"{run:24s} {row['settling_time_s']:10.2f} {row['duration_s']:5.0f} "
+                  f"{row['peak_command_over_limit']:13.4f} {margin:>12s} {row['median_solve_ms']:9.3f} "
+                  f"{row['max_solve_ms']:8.1f} {row['failed_steps']:7d}")
+
     if args.json:
         figures = dict(linear)
         figures["nonlinear"] = nonlinear
         for name, row in nonlinear.items():
             figures[f"nmpc_median_ms_{name}"] = row["median_ms"]
+        if settling:
+            figures["settling"] = settling
         with open(args.json, "w") as handle:
             json.dump(figures, handle, indent=2)
 

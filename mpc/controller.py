@@ -25,7 +25,7 @@ import numpy as np
 from models import Plant, case
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
-from .linear import MPCProblem, QPParameters, SoftBound, problem_from_model, riccati_terminal_cost
+from .linear import MPCProblem, QPParameters, problem_from_model, riccati_terminal_cost
 from .nonlinear import NonlinearMPCProblem
 from .qp_fast import CondensedDaqpSolver
 from .qp_osqp import OsqpSolver
@@ -42,10 +42,11 @@ def _finite_vector(value, size: int, what: str) -> np.ndarray:
 
 
 class _PlanFollower:
-    """What both MPCs share: the controller-state layout, estimation, fallback and clipping.
+    """What both MPCs share: settings checks, the controller-state layout, the start from the
+    first measurement, the fallback to the shifted plan, exact clipping and `step_info`.
 
-    Subclasses set: plant, sample_period, horizon, input_limit, observer, the
-    output model (`_output_deviation`), `_predict`, `_target` and `_optimize`.
+    Subclasses call `_setup_common`, set `_rate_per_sample` (or None) and write
+    `initial_state` and `step`.
     """
 
     measures = "outputs"
@@ -86,12 +87,20 @@ class _PlanFollower:
         return x0, u0
 
     def _follow(self, solution_inputs, success: bool, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, float]:
-        """The plan to follow (clipped), the command, whether the fallback was used, the clipped excess."""
-        fallback = not (success and np.all(np.isfinite(solution_inputs)))
+        """The plan to follow (clipped), the command, whether the fallback was used, the clipped excess.
+
+        The solver's plan when it succeeded, else the previous plan shifted by one sample.
+        Clipping happens here, after solving, so the command is within ±input_limit exactly
+        (and within the rate limit of the previous command, which is itself within the limit).
+        """
+        fallback = not (success and bool(np.isfinite(solution_inputs).all()))
         candidate = np.vstack([plan[1:], plan[-1:]]) if fallback else solution_inputs
-        excess = float(np.max(np.abs(candidate[0]) - self.input_limit))
+        excess = max(0.0, float(np.max(np.abs(candidate[0]) - self.input_limit)))
         new_plan = np.clip(candidate, -self.input_limit, self.input_limit)
-        return new_plan, new_plan[0].copy(), fallback, max(excess, 0.0)
+        if self._rate_per_sample is not None:
+            new_plan[0] = np.clip(new_plan[0], plan[0] - self._rate_per_sample, plan[0] + self._rate_per_sample)
+            new_plan[0] = np.clip(new_plan[0], -self.input_limit, self.input_limit)
+        return new_plan, new_plan[0].copy(), fallback, excess
 
     def step_info(self) -> dict:
         """The last step's record: solver, status, success, iterations, solve_time (s), fallback,
@@ -130,6 +139,7 @@ class LinearMPC(_PlanFollower):
         xe, ue = known.equilibrium() if operating_point is None else operating_point
         self.model = known.linearize(xe, ue).discretize(self.sample_period)
         per_sample_rate = None if rate_limit is None else np.asarray(rate_limit, dtype=float) * self.sample_period
+        self._rate_per_sample = per_sample_rate
         self.soft_bounds = tuple(soft_bounds)
         self.problem: MPCProblem = problem_from_model(
             self.model, state_weight, input_weight, self.horizon, self.input_limit,
@@ -210,7 +220,8 @@ class NonlinearMPC(_PlanFollower):
     rate_limit : (nu,) input units per second, or None
     substeps : RK4 steps per sample in the prediction model
     max_iterations : SQP iterations per sample
-    qp_solver : CasADi conic plugin for the SQP's QPs ("ipqp", "hpipm", "qrqp", "osqp")
+    qp_solver : CasADi conic plugin for the SQP's QPs: "hpipm" (structure-exploiting interior
+        point, the default; "qrqp" when a rate limit couples the stages) or "qrqp"
     input_noise_std, disturbance_step_std, measurement_std : estimator tuning, as `LinearMPC`
     """
 
@@ -223,6 +234,7 @@ class NonlinearMPC(_PlanFollower):
         self.Q = np.diag(state_weight) if np.ndim(state_weight) == 1 else np.asarray(state_weight, dtype=float)
         self.R = np.diag(input_weight) if np.ndim(input_weight) == 1 else np.atleast_2d(input_weight).astype(float)
         per_sample_rate = None if rate_limit is None else np.asarray(rate_limit, dtype=float) * self.sample_period
+        self._rate_per_sample = per_sample_rate
         self.soft_bounds = tuple(soft_bounds)
         self.nlp = NonlinearMPCProblem(known, self.sample_period, self.horizon, self.Q, self.R,
                                        soft_bounds=self.soft_bounds, rate_limit=per_sample_rate,

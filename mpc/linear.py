@@ -106,10 +106,6 @@ class QPParameters(NamedTuple):
     u_target: np.ndarray
     u_previous: np.ndarray
 
-    def vector(self) -> np.ndarray:
-        """(x0, d, x_s, u_s) stacked, (2 nx + 2 nu,): what the cost and bounds are affine in."""
-        return np.concatenate([self.x0, self.disturbance, self.x_target, self.u_target])
-
 
 @dataclass
 class QPSolution:
@@ -323,17 +319,6 @@ class MPCProblem:
         x = self.simulate(params.x0, inputs, params.disturbance)[1:]
         g = x @ self.soft_rows.T
         return np.maximum(0.0, np.maximum(self.soft_lower - g, g - self.soft_upper))
-
-    def check_parameters(self, params: QPParameters) -> QPParameters:
-        """The parameters as finite float vectors of the right sizes (ValueError naming the culprit)."""
-        sizes = dict(x0=self.nx, disturbance=self.nu, x_target=self.nx, u_target=self.nu, u_previous=self.nu)
-        out = {}
-        for key, n in sizes.items():
-            arr = np.asarray(getattr(params, key), dtype=float).reshape(-1)
-            if arr.size != n or not np.all(np.isfinite(arr)):
-                raise ValueError(f"QP parameter {key} must be {n} finite values, got {getattr(params, key)}")
-            out[key] = arr
-        return QPParameters(**out)
 
 
 def problem_from_model(model: LinearModel, state_weight, input_weight, horizon: int, input_limit, *,

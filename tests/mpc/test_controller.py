@@ -69,6 +69,17 @@ def test_nonlinear_mpc_command_never_exceeds_the_limit_and_does_saturate():
     assert all(s["success"] for s in result.status)
 
 
+@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
+def test_rate_limit_holds_on_the_command(kind):
+    plant = models.get("pendulum")
+    controller = (mpc.linear_mpc if kind == "linear" else mpc.nonlinear_mpc)("pendulum", rate_limit=[50.0])
+    result = models.simulate_closed_loop(plant, controller, 1.0, 0.6)
+    steps = np.abs(np.diff(np.concatenate([[0.0], result.u[:, 0]])))
+    assert np.max(steps) <= 50.0 * 0.01 * (1 + 1e-12)
+    assert np.max(steps) == pytest.approx(0.5, rel=1e-9)  # the limit is reached
+    assert all(s["success"] for s in result.status)
+
+
 def test_solver_answer_beyond_the_limit_is_clipped_exactly_and_the_excess_reported():
     plant = models.get("arm")
     controller = mpc.linear_mpc("arm", solver=OvershootingSolver)
