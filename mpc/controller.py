@@ -25,7 +25,7 @@ import numpy as np
 from models import Plant, case
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
-from .linear import MPCProblem, QPParameters, problem_from_model, riccati_terminal_cost
+from .linear import MPCProblem, QPParameters, QPSolution, problem_from_model, riccati_terminal_cost
 from .nonlinear import NonlinearMPCProblem
 from .qp_fast import CondensedDaqpSolver
 from .qp_osqp import OsqpSolver
@@ -177,7 +177,11 @@ class LinearMPC(_PlanFollower):
         x_hat, d_hat = self.observer.correct(xc[sx], xc[sd], y - self._ye - model.C @ xc[sx])
         x_target, u_target = self.target(r - self._reference_offset, d_hat)
         params = QPParameters(x_hat, d_hat, x_target, u_target, plan[0] - self._ue)
-        solution = self.solver.solve(params)
+        try:
+            solution = self.solver.solve(params)
+        except Exception as err:  # a crashing solver is a failed solve: reported, never raised mid-run
+            solution = QPSolution(np.full_like(plan, np.nan), np.zeros((self.horizon, self.problem.n_soft)), False,
+                                  f"solver raised {type(err).__name__}: {err}")
         new_plan, u, fallback, excess = self._follow(solution.inputs + self._ue, solution.success, plan)
         x_next = model.A @ x_hat + model.B @ (u - self._ue + d_hat)
         ns = self.problem.n_soft

@@ -16,7 +16,7 @@ still 50-150 samples per period of their fastest mode.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,6 +67,8 @@ class MPCDefaults:
     input_noise_std : estimator's input-noise std, fraction of the input limit
     measurement_std : estimator's measurement-noise std (output units)
     soft_linear_weight, soft_quadratic_weight : penalty per half-width of violation (see SoftBound.on)
+    substeps : RK4 steps per sample in the nonlinear MPC's prediction model
+    notes : why the horizon and bounds are what they are
     """
 
     sample_period: float
@@ -81,7 +83,6 @@ class MPCDefaults:
     soft_quadratic_weight: float = 1e2
     substeps: int = 1
     notes: str = ""
-    extra: dict = field(default_factory=dict)
 
 
 DEFAULTS: dict[str, MPCDefaults] = {
@@ -89,7 +90,9 @@ DEFAULTS: dict[str, MPCDefaults] = {
     "pendulum": MPCDefaults(
         0.01, 50, (1.0, 10.0, 0.1, 0.1), 1e-2,
         soft=(SoftSpec("theta", {"theta": 1.0}, -0.2, 0.2, backoff=0.1),),
-        notes="|theta| <= 20 deg; N = 50 at 0.01 s covers the 0.2 s unstable time constant 2.5 times"),
+        notes="|theta| <= 0.2 rad (11.5 deg): from about 0.3 rad on, 5 N no longer catches the pendulum "
+              "once the 0.5 N disturbance acts; N = 50 at 0.01 s covers the 0.2 s unstable time constant "
+              "2.5 times"),
     "satellite": MPCDefaults(
         0.1, 60, (1.0, 10.0, 0.1, 0.1), 1 / 25,
         soft=(SoftSpec("panel deflection", {"phi": 1.0, "theta": -1.0}, -0.2, 0.2, backoff=0.1),),

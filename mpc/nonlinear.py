@@ -247,7 +247,7 @@ class NonlinearMPCProblem:
             status, success = str(stats.get("return_status", "")), bool(stats.get("success", False))
             iterations = int(stats.get("iter_count", 0))
             decision = np.asarray(result["x"], dtype=float).ravel()
-        except RuntimeError as err:  # CasADi raises on NaN in a function evaluation, for example
+        except Exception as err:  # CasADi raises on NaN in a function evaluation, for example
             status, success, iterations = f"solver error: {err}".splitlines()[0], False, 0
             decision = np.full(self.lbx.size, np.nan)
         success = success and bool(np.all(np.isfinite(decision)))

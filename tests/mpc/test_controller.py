@@ -255,3 +255,17 @@ def test_bad_problem_and_runtime_input_name_the_culprit():
         controller.step(xc, np.zeros(3), np.zeros(1))
     with pytest.raises(ValueError, match="reference"):
         controller.step(xc, np.zeros(2), np.array([np.inf]))
+
+
+class CrashingSolver(mpc.CondensedDaqpSolver):
+    def solve(self, params):
+        raise RuntimeError("licence server unreachable")
+
+
+def test_a_solver_that_raises_is_a_reported_failure_not_an_exception():
+    plant = models.get("arm")
+    controller = mpc.linear_mpc("arm", solver=CrashingSolver)
+    result = models.simulate_closed_loop(plant, controller, 0.3, 0.05)
+    assert all(s["fallback"] and "licence server unreachable" in s["status"] for s in result.status)
+    # The first plan holds the equilibrium input of the measured configuration.
+    np.testing.assert_allclose(result.u[:, 0], plant.equilibrium_input([0.0])[0], atol=1e-12)
