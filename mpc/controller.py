@@ -57,6 +57,9 @@ class _PlanFollower:
             raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
         if int(horizon) != horizon or horizon < 1:
             raise ValueError(f"horizon must be an integer >= 1, got {horizon}")
+        if known.nu != 1:
+            raise ValueError(f"{known.name} has {known.nu} inputs; these controllers track one coordinate "
+                             "with one input")
         self.plant = known
         self.sample_period = float(sample_period)
         self.horizon = int(horizon)
@@ -195,17 +198,11 @@ class LinearMPC(_PlanFollower):
         return np.concatenate([x_next, d_hat, new_plan.ravel()]), u
 
     def _violation_now(self, x_hat) -> float:
+        """Violation of the MPC's (backed-off) soft bounds by the current estimate."""
         if not self.problem.n_soft:
             return 0.0
         g = self.problem.soft_rows @ x_hat
         return float(np.max(np.maximum(0.0, np.maximum(self.problem.soft_lower - g, g - self.problem.soft_upper))))
-
-    def qp_parameters(self, xc, y, r) -> QPParameters:
-        """The QP parameters `step` would solve for (benchmarks replay them through other solvers)."""
-        sx, sd, sp = self._slices
-        x_hat, d_hat = self.observer.correct(xc[sx], xc[sd], np.asarray(y) - self._ye - self.model.C @ xc[sx])
-        x_target, u_target = self.target(np.asarray(r, dtype=float) - self._reference_offset, d_hat)
-        return QPParameters(x_hat, d_hat, x_target, u_target, xc[sp][:self.plant.nu] - self._ue)
 
 
 class NonlinearMPC(_PlanFollower):

@@ -33,7 +33,6 @@ DAQP_STATUS = {1: "optimal", 2: "soft optimal", -1: "primal infeasible", -2: "cy
                -3: "unbounded", -4: "iteration limit", -5: "nonconvex problem", -6: "overdetermined initial active set",
                -7: "time limit"}
 
-
 #: Constraint violation DAQP accepts, in the scaled variables.
 PRIMAL_TOLERANCE = 1e-10
 
@@ -67,7 +66,7 @@ class CondensedDaqpSolver:
         self.F_theta = 2 * np.hstack([GtQ @ Phi, GtQ @ Gamma @ stack_u, -GtQ @ stack_x, -R_bar @ stack_u])
         self.f_slacks = np.tile(problem.soft_linear_weight, N)
 
-        rows, self._row_kind = [], []
+        rows = []
         G_bar = np.kron(np.eye(N), problem.soft_rows)
         G_Gamma = G_bar @ Gamma
         # Soft-row bounds are g_bound − (Ḡ Φ x0 + Ḡ Γ 1⊗d): affine in (x0, d).
