@@ -231,7 +231,7 @@ class NonlinearMPC(_PlanFollower):
                  max_iterations: int = 20, qp_solver: str = "hpipm", input_noise_std=None,
                  disturbance_step_std=None, measurement_std=1e-3, name: str = "nonlinear MPC"):
         self._setup_common(known, sample_period, horizon, tracked, name)
-        nx, nu = known.nx, known.nu
+        nx = known.nx
         self.Q = np.diag(state_weight) if np.ndim(state_weight) == 1 else np.asarray(state_weight, dtype=float)
         self.R = np.diag(input_weight) if np.ndim(input_weight) == 1 else np.atleast_2d(input_weight).astype(float)
         per_sample_rate = None if rate_limit is None else np.asarray(rate_limit, dtype=float) * self.sample_period

@@ -22,16 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-
-def _unstable_or_marginal_modes_observable(A, C, tol=1e-9) -> tuple[bool, complex | None]:
-    """PBH test: rank [λI − A; C] = n for every eigenvalue |λ| >= 1."""
-    n = A.shape[0]
-    for lam in np.linalg.eigvals(A):
-        if abs(lam) >= 1 - 1e-9:
-            pbh = np.vstack([lam * np.eye(n) - A, C])
-            if np.linalg.matrix_rank(pbh, tol=tol * max(1.0, np.linalg.norm(pbh))) < n:
-                return False, lam
-    return True, None
+from models.lqr import dkalman, unobservable_modes
 
 
 class DisturbanceObserver:
@@ -70,16 +61,16 @@ class DisturbanceObserver:
         self.A_aug = np.block([[A, B], [np.zeros((nu, nx)), np.eye(nu)]])
         self.B_aug = np.vstack([B, np.zeros((nu, nu))])
         self.C_aug = np.hstack([C, np.zeros((ny, nu))])
-        ok, mode = _unstable_or_marginal_modes_observable(self.A_aug, self.C_aug)
-        if not ok:
-            raise ValueError(f"the input disturbance (or a mode at z = {mode:.4g}) is not observable from the "
+        hidden = [z for z in unobservable_modes(self.A_aug, self.C_aug) if abs(z) >= 1 - 1e-9]
+        if hidden:
+            raise ValueError(f"the input disturbance (or a mode at z = {hidden[0]:.4g}) is not observable from the "
                              "outputs; offset-free estimation needs rank [[A − I, B], [C, 0]] = nx + nu")
         Bw = B * stds["input_noise_std"]
         process = scipy.linalg.block_diag(Bw @ Bw.T, np.diag(stds["disturbance_step_std"] ** 2))
         # A floor on every state keeps the Riccati equation's solution unique and stabilizing.
         process += 1e-12 * max(1.0, np.max(np.abs(process))) * np.eye(nx + nu)
         measurement = np.diag(stds["measurement_std"] ** 2)
-        covariance = scipy.linalg.solve_discrete_are(self.A_aug.T, self.C_aug.T, process, measurement)
+        _, covariance = dkalman(self.A_aug, self.C_aug, process, measurement, "offset-free estimator")
         innovation = self.C_aug @ covariance @ self.C_aug.T + measurement
         self.gain = np.linalg.solve(innovation, self.C_aug @ covariance).T
         self.nx, self.nu, self.ny = nx, nu, ny

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 
 from models import LinearModel, Plant
+from models.lqr import dlqr
 
 #: Stand-in for an infinite bound in solvers that want finite numbers.
 INFINITY = 1e30
@@ -133,6 +133,8 @@ class QPSolution:
 def riccati_terminal_cost(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
     """Discrete algebraic Riccati solution P and the LQR gain K = (R + BᵀPB)⁻¹ BᵀPA.
 
+    `models.lqr.dlqr`, returned in the order the terminal cost uses them.
+
     Returns
     -------
     P : (nx, nx), K : (nu, nx)
@@ -143,12 +145,7 @@ def riccati_terminal_cost(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
         When (A, B) is not stabilizable or (A, Q) has unobservable modes on the
         unit circle, so no stabilizing solution exists.
     """
-    try:
-        P = scipy.linalg.solve_discrete_are(A, B, Q, R)
-    except (np.linalg.LinAlgError, ValueError) as err:
-        raise ValueError(f"no stabilizing Riccati solution for this (A, B, Q, R): {err}") from err
-    P = (P + P.T) / 2
-    K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+    K, P = dlqr(A, B, Q, R, "MPC terminal cost")
     return P, K
 
 
