@@ -1,0 +1,188 @@
+"""Linear loop analysis of any controller block: loop gains, margins, closed-loop poles.
+
+A `models.Block` is a CasADi expression, so its exact Jacobians about an
+operating point give its discrete-time linearization
+
+    x_c,k+1 = A_c x_c,k + B_y y_k + B_r r_k,    u_k = C_c x_c,k + D_y y_k + D_r r_k.
+
+With the plant linearized about the same point and discretized with a zero-order
+hold at the controller's sample period (exact), the loop broken at the plant
+input (or, for a `models.Cascade`, at the inner loop's reference) is a discrete
+state-space system L(z) with the convention that the closed loop is
+1 + L(z) = 0 (negative feedback), as `control.stability_margins` assumes.
+
+This is for plots and margins only: the study tables come from the nonlinear
+simulation. The operating point is where the closed loop comes to rest under
+a constant command at the equilibrium value (found by simulating it).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import casadi as ca
+import control
+import numpy as np
+
+import models
+from models import Block, Cascade
+
+LOOPS = ("input", "inner", "outer")
+
+
+@dataclass(frozen=True)
+class BlockLinearization:
+    """Discrete linearization of a block about (x_c, y, r); matrices as in the module docstring."""
+
+    Ac: np.ndarray
+    By: np.ndarray
+    Br: np.ndarray
+    Cc: np.ndarray
+    Dy: np.ndarray
+    Dr: np.ndarray
+    u: np.ndarray
+
+
+def linearize_block(block: Block, xc, y, r) -> BlockLinearization:
+    """Exact Jacobians of the block's step at (x_c, y, r) with its current gains."""
+    xs = ca.SX.sym("xc", block.n_state)
+    ys = ca.SX.sym("y", block.n_measured)
+    rs = ca.SX.sym("r", block.n_reference)
+    xn, u = block.casadi_step(xs, ys, rs, block.gain_vector())
+    jac = ca.Function("block_jacobians", [xs, ys, rs],
+                      [ca.jacobian(xn, xs), ca.jacobian(xn, ys), ca.jacobian(xn, rs), ca.jacobian(u, xs),
+                       ca.jacobian(u, ys), ca.jacobian(u, rs), u])
+    values = [np.asarray(v, dtype=float) for v in jac(np.asarray(xc, dtype=float).reshape(-1), y, r)]
+    shapes = [(block.n_state, block.n_state), (block.n_state, block.n_measured),
+              (block.n_state, block.n_reference), (block.n_input, block.n_state),
+              (block.n_input, block.n_measured), (block.n_input, block.n_reference), (block.n_input,)]
+    values = [v.reshape(s) for v, s in zip(values, shapes)]
+    return BlockLinearization(*values)
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """Where the closed loop rests: plant state x (nx,), input u (nu,), controller state xc, reference r."""
+
+    x: np.ndarray
+    u: np.ndarray
+    xc: np.ndarray
+    r: np.ndarray
+    residual: float
+
+
+def rest_point(plant: models.Plant, block: Block, reference_value: float, duration: float) -> OperatingPoint:
+    """Simulate the loop from the equilibrium under a constant command and return its final rest point.
+
+    `residual` is max |f(x, u)| there: near zero when the loop came to rest.
+    """
+    run = models.simulate_closed_loop(plant, block, reference_value, duration, allow_divergence=True)
+    if run.diverged_at is not None:
+        raise models.SimulationError(f"{block.name} does not hold {plant.name} at rest: the loop diverged at "
+                                     f"t = {run.diverged_at:.3g} s")
+    x = run.x[-1]
+    u = np.clip(run.u[-1], -plant.input_limit, plant.input_limit)
+    residual = float(np.max(np.abs(plant.f(x, u))))
+    return OperatingPoint(x, u, run.xc[-1], run.r[-1], residual)
+
+
+@dataclass(frozen=True)
+class Loop:
+    """A loop transfer L(z) as discrete state space (closed loop: 1 + L = 0).
+
+    Attributes
+    ----------
+    label : controller label;  which : "input", "inner" or "outer"
+    A, B, C : state-space matrices of L (D = 0: the plant has no feedthrough)
+    sample_period : s
+    """
+
+    label: str
+    which: str
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    sample_period: float
+
+    def system(self) -> control.StateSpace:
+        return control.ss(self.A, self.B, self.C, np.zeros((1, 1)), self.sample_period)
+
+    def frequency_response(self, omega) -> np.ndarray:
+        """L(e^{jωTs}) at the frequencies `omega` (rad/s), complex (len(omega),)."""
+        omega = np.asarray(omega, dtype=float)
+        z = np.exp(1j * omega * self.sample_period)
+        eye = np.eye(self.A.shape[0])
+        return np.array([(self.C @ np.linalg.solve(zk * eye - self.A, self.B))[0, 0] for zk in z])
+
+    def margins(self) -> dict:
+        """Gain margin (dB), phase margin (deg) and their crossover frequencies (rad/s), via python-control."""
+        with warnings.catch_warnings():  # python-control notes when it falls back to its 'frd' method
+            warnings.simplefilter("ignore", UserWarning)
+            gm, pm, _, wcg, wcp, _ = control.stability_margins(self.system())
+        return {"gain_margin_db": 20 * np.log10(gm) if np.isfinite(gm) and gm > 0 else float(gm),
+                "phase_margin_deg": float(pm), "phase_crossover_rad_s": float(wcg),
+                "gain_crossover_rad_s": float(wcp)}
+
+    def closed_loop_poles(self, gain: float = 1.0) -> np.ndarray:
+        """Eigenvalues z of the loop closed with gain k: eig(A − k B C)."""
+        return np.linalg.eigvals(self.A - gain * self.B @ self.C)
+
+    def s_plane(self, z) -> np.ndarray:
+        """Continuous-time equivalents s = ln(z) / Ts of discrete poles (z = 0 dropped)."""
+        z = np.asarray(z, dtype=complex)
+        z = z[np.abs(z) > 1e-12]
+        return np.log(z) / self.sample_period
+
+
+def _measurement_matrix(plant_lin: models.LinearModel, block: Block) -> np.ndarray:
+    return plant_lin.C if block.measures == "outputs" else np.eye(plant_lin.nx)
+
+
+def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = "input",
+         label: str = "") -> Loop:
+    """The loop gain of `block` on `plant` about `point`, broken where `which` says.
+
+    Parameters
+    ----------
+    which : "input" (at the plant input, any block), "inner" (the inner block of a Cascade
+        alone, the outer one frozen), "outer" (a Cascade broken at the inner loop's reference)
+    """
+    if which not in LOOPS:
+        raise ValueError(f"which must be one of {LOOPS}, got {which!r}")
+    if which != "input" and not isinstance(block, Cascade):
+        raise ValueError(f"the {which} loop needs a models.Cascade; {block.name} is a {type(block).__name__}")
+    lin = plant.linearize(point.x, point.u, check=False).discretize(block.sample_period)
+    Ad, Bd = lin.A, lin.B
+    Cm = _measurement_matrix(lin, block)
+    meas = plant.output(point.x) if block.measures == "outputs" else point.x
+    nx = Ad.shape[0]
+    if which == "input":
+        k = linearize_block(block, point.xc, meas, point.r)
+        nc = k.Ac.shape[0]
+        A = np.block([[Ad, np.zeros((nx, nc))], [k.By @ Cm, k.Ac]])
+        B = np.vstack([Bd, np.zeros((nc, Bd.shape[1]))])
+        C = -np.hstack([k.Dy @ Cm, k.Cc])
+        return Loop(label or block.name, which, A, B, C, block.sample_period)
+    no = block.outer.n_state
+    xo, xi = point.xc[:no], point.xc[no:]
+    outer = linearize_block(block.outer, xo, meas, point.r)
+    inner_reference = np.asarray(block.outer.step(xo, meas, point.r)[1])
+    inner = linearize_block(block.inner, xi, meas, inner_reference)
+    if which == "inner":
+        ni = inner.Ac.shape[0]
+        A = np.block([[Ad, np.zeros((nx, ni))], [inner.By @ Cm, inner.Ac]])
+        B = np.vstack([Bd, np.zeros((ni, Bd.shape[1]))])
+        C = -np.hstack([inner.Dy @ Cm, inner.Cc])
+        return Loop(label or block.name, which, A, B, C, block.sample_period)
+    ni, n_o = inner.Ac.shape[0], outer.Ac.shape[0]
+    A = np.block([
+        [Ad + Bd @ inner.Dy @ Cm, Bd @ inner.Cc, np.zeros((nx, n_o))],
+        [inner.By @ Cm, inner.Ac, np.zeros((ni, n_o))],
+        [outer.By @ Cm, np.zeros((n_o, ni)), outer.Ac],
+    ])
+    B = np.vstack([Bd @ inner.Dr, inner.Br, np.zeros((n_o, inner.Dr.shape[1]))])
+    C = -np.hstack([outer.Dy @ Cm, np.zeros((outer.Dy.shape[0], ni)), outer.Cc])
+    if B.shape[1] != 1 or C.shape[0] != 1:
+        raise ValueError(f"{block.name}: the outer loop of a cascade with {B.shape[1]} inner references is not SISO")
+    return Loop(label or block.name, which, A, B, C, block.sample_period)
