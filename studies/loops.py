@@ -186,3 +186,69 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
     if B.shape[1] != 1 or C.shape[0] != 1:
         raise ValueError(f"{block.name}: the outer loop of a cascade with {B.shape[1]} inner references is not SISO")
     return Loop(label or block.name, which, A, B, C, block.sample_period)
+
+
+def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference_value: float) -> tuple[dict, list]:
+    """Every loop of every block controller about the point where it holds the plant at rest.
+
+    Returns
+    -------
+    loops : label -> {"input": Loop, and for a Cascade also "inner" and "outer"}
+    notes : controllers left out and why
+    """
+    out, notes = {}, []
+    for label, controller in controllers.items():
+        if not isinstance(controller, Block):
+            notes.append(f"{label}: not a Block (it optimizes each step), no linear loop analysis")
+            continue
+        try:
+            point = rest_point(plant, controller, reference_value, 4 * case.duration)
+            found = {"input": loop(plant, controller, point, "input", label)}
+            if isinstance(controller, Cascade):
+                found["inner"] = loop(plant, controller, point, "inner", label)
+                found["outer"] = loop(plant, controller, point, "outer", label)
+        except Exception as err:  # the linear analysis is a plot; the table still has the controller
+            notes.append(f"{label}: no loop analysis ({type(err).__name__}: {err})")
+            continue
+        if point.residual > 1e-6:
+            notes.append(f"{label}: the loop does not come to rest under a constant command (|f| = "
+                         f"{point.residual:.2g}); linearized about its final state")
+        out[label] = found
+    return out, notes
+
+
+def spec_check(design: Loop, spec, baseline: Loop | None = None, points: int = 400) -> dict:
+    """Whether `design` meets the loopshaping `spec` (a `studies.runner.LoopSpec`).
+
+    Relative specs are checked on a log grid: below `spec.low_frequency`
+    |L| >= factor |L_baseline|; above `spec.high_frequency` (up to the Nyquist
+    frequency) |L| <= |L_baseline| / factor. The crossover is met within a
+    factor of 1.5 (about 3.5 dB), the phase margin when at least the value asked.
+
+    Returns
+    -------
+    dict name -> bool or None (None: the spec cannot be checked, e.g. no baseline)
+    """
+    nyquist = np.pi / design.sample_period
+    result = {}
+    if spec.low_frequency is not None:
+        if baseline is None:
+            result["low_frequency"] = None
+        else:
+            omega = np.logspace(np.log10(spec.low_frequency) - 3, np.log10(spec.low_frequency), points)
+            result["low_frequency"] = bool(np.all(np.abs(design.frequency_response(omega)) >=
+                                                  spec.factor * np.abs(baseline.frequency_response(omega))))
+    if spec.high_frequency is not None:
+        if baseline is None or spec.high_frequency >= nyquist:
+            result["high_frequency"] = None
+        else:
+            omega = np.logspace(np.log10(spec.high_frequency), np.log10(0.999 * nyquist), points)
+            result["high_frequency"] = bool(np.all(np.abs(design.frequency_response(omega)) <=
+                                                   np.abs(baseline.frequency_response(omega)) / spec.factor))
+    margins = design.margins() if (spec.crossover or spec.phase_margin) else {}
+    if spec.crossover is not None:
+        wc = margins["gain_crossover_rad_s"]
+        result["crossover"] = bool(np.isfinite(wc) and spec.crossover / 1.5 <= wc <= spec.crossover * 1.5)
+    if spec.phase_margin is not None:
+        result["phase_margin"] = bool(margins["phase_margin_deg"] >= spec.phase_margin)
+    return result

@@ -161,7 +161,7 @@ class Study:
     providers : ``module:function`` returning {label: controller}, called with (plant, known=Plant)
     answer_providers : ``module:function`` returning {item: {name: value}}, called with (plant)
     bounds : params dict -> {state name: (low, high)}, counted as constraint violation
-    loop : the loopshaping specs drawn on the Bode plot
+    loops : the loopshaping specs, one Bode plot each
     cascade : (inner output, outer output) of the .6 transfer-function cascade
     cascade_model : (plant name, parameter overrides) of the .6 model when it is not the plant itself
     known_rel : controllers are designed from the plant with its uncertain parameters scaled by 1 + known_rel
@@ -175,7 +175,7 @@ class Study:
     providers: tuple = PROVIDERS
     answer_providers: tuple = ANSWER_PROVIDERS
     bounds: Callable[[dict], dict] | None = None
-    loop: LoopSpec | None = None
+    loops: tuple = ()
     cascade: tuple | None = None
     cascade_model: tuple | None = None
     known_rel: float = 0.05
@@ -264,6 +264,7 @@ class StudyResult:
     controllers : label -> controller object
     notes : skipped providers, failures and other remarks, in order
     timing : seconds spent per phase
+    answers : homework item -> answers (see `studies.answers`), with "errata"
     """
 
     study: Study
@@ -277,6 +278,7 @@ class StudyResult:
     controllers: dict
     notes: list
     timing: dict
+    answers: dict = field(default_factory=dict)
 
     def best(self, scenario: str = "step") -> str | None:
         """The controller with the lowest ITAE in `scenario` among runs that did not diverge or fail."""
@@ -509,7 +511,12 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
     table = _frame(rows, study, case)
     timing |= {"simulate_s": sim_time, "monte_carlo_s": mc_time, "total_s": time.perf_counter() - started}
     samples = pd.DataFrame(sample_rows)
-    return StudyResult(study, options, plant, known, table, runs, envelopes, samples, designed, notes, timing)
+    from .answers import collect
+
+    answers, answer_notes = collect(study, options.strict)
+    notes += answer_notes
+    return StudyResult(study, options, plant, known, table, runs, envelopes, samples, designed, notes, timing,
+                       answers)
 
 
 def _simulate(plant, controller, scenario: Scenario, case, options: Options, base: float, params=None):

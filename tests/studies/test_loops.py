@@ -118,3 +118,22 @@ def test_margins_of_a_proportional_loop_on_the_uuv():
     value = 100.0 * np.squeeze(G(np.exp(1j * wc * TS)))
     assert abs(value) == pytest.approx(1.0, rel=1e-4)
     assert m["phase_margin_deg"] == pytest.approx(180 + np.degrees(np.angle(value)), abs=1e-3)
+
+
+def test_spec_check_on_a_gain_change():
+    """A loop 20x the baseline meets "10x better below ω_low" and fails "10x lower above ω_high"."""
+    from studies.runner import LoopSpec
+
+    uuv = models.get("uuv")
+    xe, ue = uuv.equilibrium()
+    point = loops.OperatingPoint(xe, ue, np.zeros(0), np.zeros(1), 0.0)
+    base = loops.loop(uuv, Proportional(10.0), point)
+    higher = loops.loop(uuv, Proportional(200.0), point)
+    lower = loops.loop(uuv, Proportional(0.5), point)
+    spec = LoopSpec("test", low_frequency=0.01, high_frequency=100.0, factor=10.0)
+    assert loops.spec_check(higher, spec, base) == {"low_frequency": True, "high_frequency": False}
+    assert loops.spec_check(lower, spec, base) == {"low_frequency": False, "high_frequency": True}
+    assert loops.spec_check(higher, spec, None) == {"low_frequency": None, "high_frequency": None}
+    wc = higher.margins()["gain_crossover_rad_s"]
+    assert loops.spec_check(higher, LoopSpec("test", crossover=wc * 1.4), base) == {"crossover": True}
+    assert loops.spec_check(higher, LoopSpec("test", crossover=wc * 1.6), base) == {"crossover": False}
