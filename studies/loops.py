@@ -78,6 +78,11 @@ def rest_point(plant: models.Plant, block: Block, reference_value: float, durati
     `residual` is max |f(x, u)| there: near zero when the loop came to rest.
     """
     run = models.simulate_closed_loop(plant, block, reference_value, duration, allow_divergence=True)
+    return final_point(plant, block, run)
+
+
+def final_point(plant: models.Plant, block: Block, run) -> OperatingPoint:
+    """The last sample of a closed-loop run (a `models.ClosedLoopResult`) as an operating point."""
     if run.diverged_at is not None:
         raise models.SimulationError(f"{block.name} does not hold {plant.name} at rest: the loop diverged at "
                                      f"t = {run.diverged_at:.3g} s")
@@ -188,8 +193,14 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
     return Loop(label or block.name, which, A, B, C, block.sample_period)
 
 
-def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference_value: float) -> tuple[dict, list]:
+def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference_value: float,
+            runs: dict | None = None) -> tuple[dict, list]:
     """Every loop of every block controller about the point where it holds the plant at rest.
+
+    The point is the end of the controller's run in `runs` ((label, scenario)
+    -> ClosedLoopResult) when one without input disturbance ends at
+    `reference_value` (the series of steps returns there), else the end of a
+    run under that constant command from the equilibrium.
 
     Returns
     -------
@@ -202,7 +213,11 @@ def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference
             notes.append(f"{label}: not a Block (it optimizes each step), no linear loop analysis")
             continue
         try:
-            point = rest_point(plant, controller, reference_value, 4 * case.duration)
+            finished = [run for (owner, _), run in (runs or {}).items() if owner == label
+                        and run.diverged_at is None and not np.any(run.d)
+                        and abs(run.r[-1, 0] - reference_value) < 1e-12]
+            point = (final_point(plant, controller, finished[0]) if finished
+                     else rest_point(plant, controller, reference_value, 2 * case.duration))
             found = {"input": loop(plant, controller, point, "input", label)}
             if isinstance(controller, Cascade):
                 found["inner"] = loop(plant, controller, point, "inner", label)

@@ -31,9 +31,18 @@ def _color(i: int):
 
 
 def _figure(width: float, height: float) -> Figure:
-    fig = Figure(figsize=(width, height), layout="constrained")
+    fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig
+
+
+def _legend_below(fig: Figure, handles, labels, ncol: int, top: float = 0.9, hspace: float = 0.25) -> None:
+    """A figure legend under the axes, with room made for it (no layout engine: it is slow)."""
+    rows = -(-len(labels) // ncol)
+    height = fig.get_figheight()
+    bottom = (0.45 + 0.2 * rows) / height + 0.06
+    fig.subplots_adjust(left=0.09, right=0.98, top=top, bottom=bottom, hspace=hspace, wspace=0.3)
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
 
 
 def save(fig: Figure, path: Path, dpi: int) -> Path:
@@ -89,7 +98,7 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
     bottom.legend(loc="upper right", fontsize=7)
-    fig.legend(*top.get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=7)
+    _legend_below(fig, *top.get_legend_handles_labels(), ncol=4, hspace=0.12 if not clipped else 0.2)
     return save(fig, path, dpi)
 
 
@@ -124,6 +133,8 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     rel = next((s.rel for s in study.scenarios if s.monte_carlo), 0.05)
     fig.suptitle(f"{result.plant.title}: step on ±{100 * rel:g} % parameter samples (nonlinear plant)",
                  fontsize=10)
+    fig.subplots_adjust(left=0.07, right=0.98, top=1 - 0.7 / fig.get_figheight(), bottom=0.5 / fig.get_figheight(),
+                        hspace=0.45, wspace=0.3)
     return save(fig, path, dpi)
 
 
@@ -197,7 +208,7 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
     phase.set_xlabel("ω (rad/s)")
     for ax in (mag, phase):
         ax.grid(True, which="both", alpha=0.3)
-    fig.legend(*mag.get_legend_handles_labels(), loc="outside lower center", ncol=2, fontsize=7)
+    _legend_below(fig, *mag.get_legend_handles_labels(), ncol=2, top=0.94, hspace=0.12)
     return save(fig, path, dpi)
 
 
@@ -242,6 +253,8 @@ def root_loci(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
         ax.set_visible(False)
     fig.suptitle(f"{result.plant.title}: root locus of k·L at the plant input (k = 0.01…100; × design k = 1, "
                  "○ open loop), s = ln(z)/Ts", fontsize=10)
+    fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.7 / fig.get_figheight(), bottom=0.6 / fig.get_figheight(),
+                        hspace=0.5, wspace=0.35)
     return save(fig, path, dpi)
 
 
@@ -269,5 +282,5 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     ax.set_ylabel("Im s (rad/s)")
     ax.set_title(f"{result.plant.title}: closed-loop poles, exact linearization at rest, s = ln(z)/Ts",
                  fontsize=10)
-    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncol=4, fontsize=7)
+    _legend_below(fig, *ax.get_legend_handles_labels(), ncol=4, top=0.94)
     return save(fig, path, dpi)

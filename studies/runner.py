@@ -30,7 +30,7 @@ import pandas as pd
 import models
 from models import Block, signals
 
-from . import metrics
+from . import SCENARIO_NAMES, metrics
 
 #: Controller labels in table order; a provider's other labels follow these.
 CONTROLLERS = ("PD", "PID", "PID (no anti-windup)", "loopshaped", "lead-lag (IV.11)", "pole placement",
@@ -47,10 +47,11 @@ ANSWER_PROVIDERS = ("designs.classical:answers", "designs.statespace_cases:answe
 #: Time constant of the textbook's dirty derivative (s); sizes the velocity noise of full-state controllers.
 DIRTY_DERIVATIVE_SIGMA = 0.05
 
-#: Closed-loop steps (samples x steps) from which a Monte Carlo map is JIT-compiled with jit="auto".
-JIT_THRESHOLD = 300_000
+#: Work (samples x steps x instructions of the plant's RK4 step and the controller's step) from which
+#: a Monte Carlo map is JIT-compiled with jit="auto": compiling costs 0.5-2 s per controller, CasADi's
+#: virtual machine about 35 ns per instruction; measured break-even about 1e8 (pendulum, 20 samples).
+JIT_THRESHOLD = 1.5e8
 
-SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
 
 # ---------------------------------------------------------------------------- declarations
@@ -196,7 +197,11 @@ class Options:
     ----------
     scenarios : names of the scenarios to run (default: all of the study's)
     mc : Monte Carlo samples for Block controllers (one batched map); 0 skips the Monte Carlo
-    mc_python : samples for controllers that are not Blocks (MPC), simulated one by one
+    mc_python : most samples for controllers that are not Blocks (MPC), simulated one by one
+    mc_python_steps : and at most this many simulated samples in all, so the Monte Carlo of an
+        optimizing controller costs about as much on every plant (at least one sample)
+    python_scenarios : scenarios run for controllers that are not Blocks (default all); the others
+        get a row saying they were skipped
     seed : seed of the parameter samples and of the measurement noise
     threads : threads of the batched Monte Carlo map
     jit : True, False or "auto" (compile the Monte Carlo map when it has >= JIT_THRESHOLD steps)
@@ -207,6 +212,8 @@ class Options:
     scenarios: tuple | None = None
     mc: int = 200
     mc_python: int = 10
+    mc_python_steps: int = 20_000
+    python_scenarios: tuple | None = None
     seed: int = 0
     threads: int = 2
     jit: bool | str = "auto"
@@ -214,12 +221,12 @@ class Options:
     quick: bool = False
 
     def __post_init__(self):
-        for name in ("mc", "mc_python"):
+        for name in ("mc", "mc_python", "mc_python_steps"):
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise ValueError(f"{name} (Monte Carlo samples) must be an integer >= 0, got {value}")
-        if self.scenarios is not None:
-            unknown = [s for s in self.scenarios if s not in SCENARIO_NAMES]
+        for chosen in (self.scenarios, self.python_scenarios):
+            unknown = [s for s in chosen or () if s not in SCENARIO_NAMES]
             if unknown:
                 raise ValueError(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
         if self.jit not in (True, False, "auto"):
@@ -415,10 +422,22 @@ def _solver_issues(result) -> float:
     return float(bad)
 
 
-def _use_jit(options: Options, samples: int, steps: int) -> bool:
-    if options.jit == "auto":
-        return samples * steps >= JIT_THRESHOLD and (shutil.which("cc") or shutil.which("gcc")) is not None
-    return bool(options.jit)
+def python_samples(options: Options, steps_per_run: int) -> int:
+    """Monte Carlo samples of a controller simulated step by step: at most `mc_python`, at most
+    `mc_python_steps` simulated steps in all, at least one (none when mc or mc_python is 0)."""
+    if options.mc == 0 or options.mc_python == 0:
+        return 0
+    return max(1, min(options.mc, options.mc_python, options.mc_python_steps // max(steps_per_run, 1)))
+
+
+def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
+             substeps: int = 10) -> bool:
+    if options.jit != "auto":
+        return bool(options.jit)
+    instructions = (plant.step_function(controller.sample_period, substeps).n_instructions()
+                    + controller.casadi_step.n_instructions())
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    return samples * steps * instructions >= JIT_THRESHOLD and compiler is not None
 
 
 def _envelope(results, tracked_index: int) -> Envelope:
@@ -483,7 +502,12 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
             row = {"controller": label, "scenario": scenario.name, "kind": "block" if isinstance(controller, Block)
                    else "python"}
             try:
-                if scenario.monte_carlo:
+                if (not isinstance(controller, Block) and options.python_scenarios is not None
+                        and scenario.name not in options.python_scenarios):
+                    row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
+                    row |= {"status": "skipped: controllers that optimize each step run only "
+                                      + ", ".join(options.python_scenarios) + " here", "samples": 0}
+                elif scenario.monte_carlo:
                     row |= _monte_carlo(study, plant, controller, scenario, options, base, tracked_index,
                                         sample_rows, envelopes, label)
                 else:
@@ -531,17 +555,17 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
                  label) -> dict:
     case = study.case
     batched = isinstance(controller, Block)
-    count = options.mc if batched else min(options.mc, options.mc_python)
+    duration = scenario.duration(case)
+    steps = int(round(duration / controller.sample_period))
+    count = options.mc if batched else python_samples(options, steps)
     if count == 0:
         raise ValueError("no Monte Carlo samples for a controller that is not a Block (mc_python = 0)")
     # The same seeded samples for every controller; a Python controller gets their first `count`.
     samples = models.sample_params(plant, options.mc, rel=scenario.rel, seed=options.seed)[:count]
-    duration = scenario.duration(case)
     if batched:
-        steps = int(round(duration / controller.sample_period))
         results = models.monte_carlo(plant, controller, scenario.reference(case, base), duration, samples,
                                      seed=options.seed, threads=options.threads,
-                                     jit=_use_jit(options, count, steps))
+                                     jit=_use_jit(options, plant, controller, count, steps))
     else:
         results = [_simulate(plant, controller, scenario, case, options, base, params=row) for row in samples]
     per_sample = []

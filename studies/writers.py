@@ -21,6 +21,7 @@ import json
 import math
 import os
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
@@ -238,7 +239,8 @@ def caption(result) -> str:
         text += (f" Monte Carlo rows (scenario `mc`): worst case over the samples (uniform ±{100 * mc.rel:g} % on "
                  f"{uncertain}, seed {options.seed}); block controllers run as one batched CasADi map on "
                  f"{options.mc} samples, controllers that optimize each step (MPC) one by one on the first "
-                 f"{min(options.mc, options.mc_python)} (the `runs` column); spreads are in table.csv (`*_std`).")
+                 f"{min(options.mc, options.mc_python)} at most, and at most {options.mc_python_steps} simulated "
+                 "steps in all (the `runs` column gives the count); spreads are in table.csv (`*_std`).")
     return text
 
 
@@ -279,10 +281,11 @@ def write_study(result, out: str | os.PathLike) -> dict:
 
     from . import animation, answers as answers_module, loops as loops_module, plots
 
+    started = time.perf_counter()
     folder = Path(out) / result.study.plant
     folder.mkdir(parents=True, exist_ok=True)
     study, plant, quick = result.study, result.plant, result.options.quick
-    dpi = 80 if quick else 110
+    dpi = 72 if quick else 100
     files: dict = {}
     notes = list(result.notes)
 
@@ -302,7 +305,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
         files["monte_carlo.png"] = "monte_carlo.png"
 
     _, base = _tracked_value(result)
-    found, loop_notes = loops_module.analyse(plant, study.case, result.controllers, base)
+    found, loop_notes = loops_module.analyse(plant, study.case, result.controllers, base, result.runs)
     notes += loop_notes
     checks = {}
     for spec in study.loops:
@@ -328,17 +331,21 @@ def write_study(result, out: str | os.PathLike) -> dict:
         run = result.runs[(best, "step")]
         text = (f"{best}, the lowest ITAE in the step scenario; nonlinear simulation of the text's step "
                 f"({study.case.source}).")
-        animation.write_gif(folder / "animation.gif", plant, run, best, max_frames=50 if quick else 100)
+        animation.write_gif(folder / "animation.gif", plant, run, best, max_frames=40 if quick else 100,
+                            dpi=64 if quick else 80)
         animation.write_html(folder / "animation.html", plant, run, best, text, max_frames=400 if quick else 800)
         files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
     else:
         notes.append("no animation: no controller completed the step scenario")
 
+    result.timing["files_s"] = time.perf_counter() - started
     write_text(folder / "table.md", _study_markdown(result, notes, loop_rows))
     files["table.md"] = "table.md"
     write_json(folder / "run.json", {
         "plant": plant.name, "title": plant.title, "numeral": study.case.numeral, "best": best,
-        "settings": {"mc": result.options.mc, "mc_python": result.options.mc_python, "seed": result.options.seed,
+        "settings": {"mc": result.options.mc, "mc_python": result.options.mc_python,
+                     "mc_python_steps": result.options.mc_python_steps,
+                     "python_scenarios": result.options.python_scenarios, "seed": result.options.seed,
                      "quick": quick, "scenarios": [s.name for s in study.scenarios
                                                    if result.options.scenarios is None
                                                    or s.name in result.options.scenarios]},
@@ -385,6 +392,7 @@ def _study_markdown(result, notes: list, loop_rows: list) -> str:
                   "Margins from `control.stability_margins` of the discrete loop L(z) (closed loop 1 + L = 0); "
                   "slowest pole: largest real part of s = ln(z)/Ts of the closed loop.", ""]
     timing = ", ".join(f"{k[:-2].replace('_', ' ')} {v:.1f} s" for k, v in result.timing.items())
+    timing = timing.replace("total", "simulations in all").replace("files", "plots, animations and files")
     parts += ["## Notes", ""] + [f"- {n}" for n in notes or ["none"]] + ["", f"Run time: {timing}.", ""]
     return "\n".join(parts)
 
@@ -431,7 +439,7 @@ def write_summary(out: str | os.PathLike, names) -> Path:
     per = [{"plant": n, "best": info.get("best") or "—", "controllers": int(t.controller.nunique()),
             "diverged": int((t.status.astype(str).str.contains("diverged")).sum()),
             "failed": int((t.status.astype(str).str.startswith("failed")).sum()),
-            "time": f"{info['timing'].get('total_s', math.nan):.1f} s",
+            "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
             "settings": f"mc {info['settings']['mc']}, seed {info['settings']['seed']}"
                         + (", quick" if info["settings"]["quick"] else "")} for n, info, t in studies]
     lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
