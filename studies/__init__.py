@@ -47,7 +47,7 @@ def get(name: str) -> "Study":
 
 
 def run_study(name: "str | Study", *, scenarios: Sequence[str] | None = None, mc: int = 200, mc_python: int = 10,
-              mc_python_steps: int = 20_000, python_scenarios: Sequence[str] | None = None,
+              mc_python_steps: int = 12_000, python_scenarios: Sequence[str] | None = None,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
               providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
               threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None) -> "StudyResult":

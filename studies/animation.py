@@ -225,21 +225,22 @@ def write_gif(path: Path, plant, run, label: str, max_frames: int = 100, dpi: in
     speed = 1000 * step / frame_ms
     xmin, xmax, ymin, ymax = view(shapes)
     aspect = (ymax - ymin) / (xmax - xmin)
-    fig = Figure(figsize=(5.0, min(5.0, max(2.2, 5.0 * aspect)) + 0.5))
+    height = min(5.0, max(2.2, 5.0 * aspect)) + 0.7
+    fig = Figure(figsize=(5.0, height))
     canvas = FigureCanvasAgg(fig)
-    ax = fig.add_axes([0.02, 0.02, 0.96, 0.84])
+    ax = fig.add_axes([0.02, 0.02, 0.96, 1 - 0.75 / height])
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal", adjustable="box")
     ax.axis("off")
-    title = fig.text(0.5, 0.97, "", ha="center", va="top", fontsize=9)
+    title = fig.text(0.5, 1 - 0.08 / height, "", ha="center", va="top", fontsize=8)
     artists = [_artist(ax, prim, dpi) for prim in shapes[0]]
     images = []
     for t, frame, readout in zip(times, shapes, readouts):
         for artist, prim in zip(artists, frame):
             _update(artist, prim)
         pace = "" if abs(speed - 1) < 0.05 else f", {speed:.3g}x speed"
-        title.set_text(f"{plant.title}\n{label}: t = {t:.2f} s{pace}  ({readout})")
+        title.set_text(f"{plant.title}\n{label}: t = {t:.2f} s{pace}\n{readout}")
         canvas.draw()
         images.append(Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba()).convert("RGB"))
     palette = images[len(images) // 2].quantize(colors=64)

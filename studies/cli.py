@@ -18,7 +18,7 @@ from . import NAMES, SCENARIO_NAMES, get
 #: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
 #: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, and their scenarios.
 FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 20_000, "python_scenarios": None}
-QUICK = {"mc": 20, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",)}
+QUICK = {"mc": 10, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",)}
 
 
 def _count(text: str) -> int:
@@ -50,8 +50,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true",
                    help=f"{QUICK['mc']} Monte Carlo samples, only the step for controllers that optimize each step "
                         "(MPC), lighter plots and animations")
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
-                   help="run N plants at once in separate processes (default 1)")
+    p.add_argument("--jobs", type=int, default=2, metavar="N",
+                   help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
+                        "everything in this process)")
     p.add_argument("--list", action="store_true", help="list plants, scenarios and controllers, run nothing")
     p.add_argument("--provider", action="append", default=[], metavar="MODULE:FUNCTION",
                    help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}")
@@ -62,28 +63,39 @@ def parser() -> argparse.ArgumentParser:
 
 
 class Progress:
-    """A progress bar on a terminal; occasional plain lines otherwise (logs, CI)."""
+    """One progress bar over every plant's simulations on a terminal; occasional lines otherwise (logs, CI).
 
-    def __init__(self, stream=sys.stderr, width: int = 28, every: float = 10.0):
-        self.stream, self.width, self.every = stream, width, every
+    `update(plant, done, total, text)` is called after each simulation of a plant;
+    the bar counts the simulations of the plants started so far.
+    """
+
+    def __init__(self, plants, stream=sys.stderr, width: int = 28, every: float = 10.0):
+        self.plants, self.stream, self.width, self.every = list(plants), stream, width, every
         self.tty = stream.isatty()
         self.started = time.perf_counter()
         self.last = -float("inf")
-        self.prefix = ""
+        self.counts: dict = {}
 
-    def __call__(self, done: int, total: int, text: str) -> None:
+    def update(self, plant: str, done: int, total: int, text: str) -> None:
+        self.counts[plant] = (done, total)
+        done_all = sum(d for d, _ in self.counts.values())
+        total_all = sum(t for _, t in self.counts.values())
+        finished = sum(d == t for d, t in self.counts.values())
         elapsed = time.perf_counter() - self.started
+        head = f"{finished}/{len(self.plants)} plants, {done_all}/{total_all} runs, {elapsed:6.1f} s"
         if self.tty:
-            filled = int(self.width * done / max(total, 1))
-            bar = "#" * filled + "-" * (self.width - filled)
-            line = f"\r{self.prefix}[{bar}] {done}/{total} {elapsed:6.1f} s  {text}"
-            self.stream.write(line[:160].ljust(100))
-            if done == total:
-                self.stream.write("\n")
+            filled = int(self.width * done_all / max(total_all, 1))
+            line = f"\r[{'#' * filled}{'-' * (self.width - filled)}] {head}  {text}"
+            self.stream.write(line[:150].ljust(110))
             self.stream.flush()
-        elif done == total or elapsed - self.last >= self.every:
+        elif elapsed - self.last >= self.every or done == total:
             self.last = elapsed
-            self.stream.write(f"{self.prefix}{done}/{total} after {elapsed:.1f} s: {text}\n")
+            self.stream.write(f"{head}: {text}\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
             self.stream.flush()
 
 
@@ -114,12 +126,17 @@ def _list(plants, providers) -> str:
     return "\n".join(lines)
 
 
-def _run_plant(name: str, settings: dict, out: str, quiet: bool, progress=None) -> dict:
+#: Plants in decreasing cost, so that parallel jobs finish together.
+COST_ORDER = ("crane", "satellite", "pendulum", "ballbeam", "uuv", "arm")
+
+
+def _run_plant(name: str, settings: dict, out: str, quiet: bool, queue=None) -> dict:
     """Run and write one study; returns what the command prints (picklable, for --jobs)."""
     from . import run_study
     from .answers import format_answers
 
     study = get(name)
+    progress = None if queue is None else (lambda done, total, text: queue.put((name, done, total, text)))
     result = run_study(study, out=out, progress=progress, **settings)
     return {"name": name, "answers": None if quiet else format_answers(study, result.answers, result.plant.title),
             "controllers": len(result.controllers), "rows": len(result.table), "timing": result.timing,
@@ -127,8 +144,6 @@ def _run_plant(name: str, settings: dict, out: str, quiet: bool, progress=None) 
 
 
 def _report(done: dict, out: str) -> None:
-    if done["answers"]:
-        print(done["answers"], flush=True)
     timing = done["timing"]
     print(f"{done['name']}: {done['controllers']} controllers, {done['rows']} rows; simulations "
           f"{timing['total_s']:.1f} s, files {timing.get('files_s', float('nan')):.1f} s "
@@ -138,6 +153,51 @@ def _report(done: dict, out: str) -> None:
             print(f"  note: {note}", file=sys.stderr)
 
 
+class _Inline:
+    """A queue stand-in for running plants in this process: puts go straight to the progress bar."""
+
+    def __init__(self, progress: Progress):
+        self.progress = progress
+
+    def put(self, item) -> None:
+        self.progress.update(*item)
+
+
+def _run_all(plants, settings: dict, providers: list, out: str, quiet: bool, jobs: int) -> list:
+    progress = Progress(plants)
+    order = [p for p in COST_ORDER if p in plants]
+    per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in order}
+    finished = []
+    try:
+        if jobs == 1:
+            for name in plants:
+                finished.append(_run_plant(name, per_plant[name], out, quiet, _Inline(progress)))
+            return finished
+        import concurrent.futures
+        import multiprocessing
+        import queue as queue_module
+
+        context = multiprocessing.get_context("spawn")
+        with context.Manager() as manager, \
+                concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
+            messages = manager.Queue()
+            pending = {pool.submit(_run_plant, name, per_plant[name], out, quiet, messages) for name in order}
+            while pending:
+                try:
+                    progress.update(*messages.get(timeout=0.2))
+                except queue_module.Empty:
+                    pass
+                done = {f for f in pending if f.done()}
+                for future in done:
+                    finished.append(future.result())
+                pending -= done
+            while not messages.empty():
+                progress.update(*messages.get())
+        return finished
+    finally:
+        progress.close()
+
+
 def main(argv=None) -> int:
     p = parser()
     args = p.parse_args(argv)
@@ -145,6 +205,7 @@ def main(argv=None) -> int:
     unknown = [name for name in plants if name not in NAMES]
     if unknown:
         p.error(f"unknown plant {unknown[0]!r}; valid plants: {', '.join(NAMES)}")
+    plants = list(dict.fromkeys(plants))
     scenarios = _scenarios(args.scenario, p)
     for spec in args.provider:
         if spec.count(":") != 1 or not all(spec.split(":")):
@@ -155,11 +216,11 @@ def main(argv=None) -> int:
         print(_list(plants, args.provider))
         return 0
     defaults = dict(QUICK if args.quick else FULL)
+    jobs = min(args.jobs, len(plants))
     settings = {"scenarios": scenarios, "mc": defaults["mc"] if args.mc is None else args.mc,
                 "mc_python": defaults["mc_python"] if args.mc_python is None else args.mc_python,
                 "mc_python_steps": defaults["mc_python_steps"], "python_scenarios": defaults["python_scenarios"],
-                "seed": args.seed, "quick": args.quick, "strict": args.strict,
-                "threads": max(1, 2 // args.jobs)}
+                "seed": args.seed, "quick": args.quick, "strict": args.strict, "threads": max(1, 2 // jobs)}
     if args.mc_python is not None:
         settings["mc_python_steps"] = 10**9  # an explicit --mc-python is not capped by simulated steps
 
@@ -170,34 +231,18 @@ def main(argv=None) -> int:
     except OSError as err:
         p.error(str(err))
     started = time.perf_counter()
-    jobs = min(args.jobs, len(plants))
     try:
-        if jobs == 1:
-            progress = Progress()
-            for i, name in enumerate(plants, 1):
-                progress.prefix = f"[{i}/{len(plants)} {name}] "
-                settings_i = settings | {"providers": list(get(name).providers) + args.provider}
-                _report(_run_plant(name, settings_i, args.out, args.quiet, progress), args.out)
-        else:
-            import concurrent.futures
-            import multiprocessing
-
-            context = multiprocessing.get_context("spawn")
-            with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
-                futures = [pool.submit(_run_plant, name, settings | {"providers": list(get(name).providers)
-                                                                       + args.provider}, args.out, args.quiet)
-                           for name in plants]
-                for i, future in enumerate(concurrent.futures.as_completed(futures), 1):
-                    done = future.result()
-                    print(f"[{i}/{len(plants)}] {done['name']} done after {time.perf_counter() - started:.1f} s",
-                          file=sys.stderr)
-                    _report(done, args.out)
+        finished = _run_all(plants, settings, args.provider, args.out, args.quiet, jobs)
     except Exception as err:
         print(f"python -m studies: failed: {type(err).__name__}: {err}", file=sys.stderr)
         return 1
+    for done in sorted(finished, key=lambda d: NAMES.index(d["name"])):
+        if done["answers"]:
+            print(done["answers"], flush=True)
+        _report(done, args.out)
     writers.write_summary(args.out, NAMES)
     writers.write_index(args.out, NAMES)
     elapsed = time.perf_counter() - started
     print(f"wrote {os.path.join(args.out, 'index.html')} and {os.path.join(args.out, 'summary.md')}; "
-          f"total {elapsed:.1f} s", file=sys.stderr)
+          f"total {elapsed:.1f} s with {jobs} job{'s' if jobs > 1 else ''}", file=sys.stderr)
     return 0

@@ -119,3 +119,8 @@ def diverging(name: str, known: models.Plant | None = None) -> dict:
     K, Nx, Nu, xe, ue, re = _tracking_gains(plant, name, 1.0)
     return {"broken": PythonStateFeedback(StateFeedback(K, Nx, Nu, xe, ue, re), float(plant.input_limit[0]),
                                           fail_after=100)}
+
+
+def lqr_only(name: str, known: models.Plant | None = None) -> dict:
+    """Just the LQR state feedback of `controllers`."""
+    return {"LQR": controllers(name, known)["LQR"]}
