@@ -317,6 +317,12 @@ def write_study(result, out: str | os.PathLike) -> dict:
         name = f"bode_{spec.loop}.png"
         if plots.bode(result, found, spec, folder / name, verdicts, dpi):
             files[name] = name
+    if not any(spec.loop == "input" for spec in study.loops):
+        from .runner import LoopSpec
+
+        plain = LoopSpec("", "input", design="", baseline=None)
+        if plots.bode(result, found, plain, folder / "bode_input.png", None, dpi):
+            files["bode_input.png"] = "bode_input.png"
     loop_rows = _loop_rows(found, study.loops, checks)
     if loop_rows:
         write_csv(folder / "loops.csv", pd.DataFrame(loop_rows))
