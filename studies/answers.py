@@ -150,23 +150,34 @@ def _item_key(item: str):
     return (int(match.group(2)), match.group(3)) if match else (10**6, item)
 
 
+def _number(v) -> str:
+    if isinstance(v, (complex, np.complexfloating)):
+        return f"{v.real + 0.0:.4g}{v.imag + 0.0:+.4g}j"
+    return f"{float(v) + 0.0:.4g}"
+
+
 def format_value(value, indent: str = "    ") -> str:
     """Readable text of one answer value (numbers to 4 significant digits, complex as a±bj)."""
     if isinstance(value, control.TransferFunction):
         return tf_string(value)
     if isinstance(value, Mapping):
-        return "\n" + "\n".join(f"{indent}{k} = {format_value(v, indent + '    ')}" for k, v in value.items())
+        if value and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in value.values()):
+            return ", ".join(f"{k} = {format_value(v)}" for k, v in value.items())
+        lines = []
+        for k, v in value.items():
+            text = format_value(v, indent + "    ")
+            lines.append(f"{indent}{k}:{text}" if text.startswith("\n") else f"{indent}{k}: {text}")
+        return "\n" + "\n".join(lines)
     if isinstance(value, (list, tuple, np.ndarray)):
         arr = np.asarray(value)
-        if arr.dtype.kind in "fciu" and arr.ndim >= 1:
-            text = np.array2string(arr, max_line_width=100, formatter={
-                "float_kind": lambda v: f"{v:.4g}", "complex_kind": lambda v: f"{v.real:.4g}{v.imag:+.4g}j"})
-            return text.replace("\n", "\n" + indent)
+        if arr.dtype.kind in "fciu" and arr.ndim == 2:
+            rows = ["[" + ", ".join(_number(v) for v in row) + "]" for row in arr]
+            return "\n" + "\n".join(f"{indent}  {row}" for row in rows)
+        if arr.dtype.kind in "fciu" and arr.ndim == 1:
+            return "[" + ", ".join(_number(v) for v in arr) + "]"
         return ", ".join(str(v) for v in value)
-    if isinstance(value, (float, np.floating)):
-        return f"{float(value):.6g}"
-    if isinstance(value, (complex, np.complexfloating)):
-        return f"{value.real:.4g}{value.imag:+.4g}j"
+    if isinstance(value, (float, np.floating, complex, np.complexfloating)):
+        return _number(value)
     return str(value)
 
 

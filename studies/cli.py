@@ -17,7 +17,7 @@ from . import NAMES, SCENARIO_NAMES, get
 
 #: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
 #: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, and their scenarios.
-FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 20_000, "python_scenarios": None}
+FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 12_000, "python_scenarios": None}
 QUICK = {"mc": 10, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",)}
 
 

@@ -451,9 +451,14 @@ def write_summary(out: str | os.PathLike, names) -> Path:
     lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
                                    for k in ("plant", "best", "controllers", "diverged", "failed", "time",
                                              "settings")])]
+    common = set.intersection(*(set(info["notes"]) for _, info, _ in studies)) if len(studies) > 1 else set()
+    if common:
+        first = studies[0][1]["notes"]
+        lines += ["", "Notes on every plant:", ""] + [f"- {note}" for note in first if note in common]
     for n, info, _ in studies:
-        if info["notes"]:
-            lines += ["", f"Notes on {n}:", ""] + [f"- {note}" for note in info["notes"]]
+        own = [note for note in info["notes"] if note not in common]
+        if own:
+            lines += ["", f"Notes on {n}:", ""] + [f"- {note}" for note in own]
     return write_text(out / "summary.md", "\n".join(lines) + "\n")
 
 
