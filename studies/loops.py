@@ -220,13 +220,14 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
 
 
 def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference_value: float,
-            runs: dict | None = None) -> tuple[dict, list]:
+            runs: dict | None = None, truths: dict | None = None) -> tuple[dict, list]:
     """Every loop of every block controller about the point where it holds the plant at rest.
 
     The point is the end of the controller's run in `runs` ((label, scenario)
     -> ClosedLoopResult) when one without input disturbance ends at
     `reference_value` (the series of steps returns there), else the end of a
-    run under that constant command from the equilibrium.
+    run under that constant command from the equilibrium. `truths` gives a
+    controller its own plant (label -> Plant), as the runner did.
 
     Returns
     -------
@@ -238,16 +239,17 @@ def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference
         if not isinstance(controller, Block):
             notes.append(f"{label}: not a Block (it optimizes each step), no linear loop analysis")
             continue
+        plant_of = (truths or {}).get(label, plant)
         try:
             finished = [run for (owner, _), run in (runs or {}).items() if owner == label
                         and run.diverged_at is None and not np.any(run.d)
                         and abs(run.r[-1, 0] - reference_value) < 1e-12]
-            point = (final_point(plant, controller, finished[0]) if finished
-                     else rest_point(plant, controller, reference_value, 2 * case.duration))
-            found = {"input": loop(plant, controller, point, "input", label)}
+            point = (final_point(plant_of, controller, finished[0]) if finished
+                     else rest_point(plant_of, controller, reference_value, 2 * case.duration))
+            found = {"input": loop(plant_of, controller, point, "input", label)}
             if isinstance(controller, Cascade):
-                found["inner"] = loop(plant, controller, point, "inner", label)
-                found["outer"] = loop(plant, controller, point, "outer", label)
+                found["inner"] = loop(plant_of, controller, point, "inner", label)
+                found["outer"] = loop(plant_of, controller, point, "outer", label)
         except Exception as err:  # the linear analysis is a plot; the table still has the controller
             notes.append(f"{label}: no loop analysis ({type(err).__name__}: {err})")
             continue

@@ -71,7 +71,8 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     scale, unit = tracked_scale(study.tracked_unit)
     fig = _figure(9, 6.5)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
-    limit = float(np.max(runs[0][1].input_limit))
+    limit = float(np.max(result.plant.input_limit))
+    widest = INPUT_PLOT_RANGE * max(float(np.max(run.input_limit)) for _, run in runs)
     clipped = False
     for i, (label, run) in enumerate(runs):
         style = dict(color=_color(i), linestyle=_STYLES[(i // 10) % len(_STYLES)], linewidth=1.3)
@@ -79,8 +80,8 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
         y = run.x[:, run.state_names.index(case.tracked)] * scale
         top.plot(run.t, y, label=tag, **style)
         u = run.u[:, 0]
-        clipped |= bool(np.any(np.abs(u) > INPUT_PLOT_RANGE * limit))
-        bottom.step(run.t[:-1], np.clip(u, -INPUT_PLOT_RANGE * limit, INPUT_PLOT_RANGE * limit), where="post",
+        clipped |= bool(np.any(np.abs(u) > widest))
+        bottom.step(run.t[:-1], np.clip(u, -widest, widest), where="post",
                     **style)
     reference = runs[0][1]
     top.plot(reference.t, reference.r[:, 0] * scale, color="black", linestyle=(0, (4, 3)), linewidth=1,
@@ -88,6 +89,12 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     for sign in (1, -1):
         bottom.axhline(sign * limit, color="red", linestyle="--", linewidth=1,
                        label=f"actuator limit ±{limit:g} {study.input_unit}" if sign > 0 else None)
+    for i, (label, run) in enumerate(runs):
+        own = float(np.max(run.input_limit))
+        if own != limit:  # a design the text gives its own actuator
+            for sign in (1, -1):
+                bottom.axhline(sign * own, color=_color(i), linestyle=":", linewidth=1,
+                               label=f"{label}: its limit ±{own:g} {study.input_unit}" if sign > 0 else None)
     top.set_ylabel(f"{case.tracked} ({unit})")
     bottom.set_ylabel(f"commanded {result.plant.input_names[0]} ({study.input_unit})")
     bottom.set_xlabel("t (s)")

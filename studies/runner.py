@@ -166,6 +166,8 @@ class Study:
     cascade : (inner output, outer output) of the .6 transfer-function cascade
     cascade_model : (plant name, parameter overrides) of the .6 model when it is not the plant itself
     known_rel : controllers are designed from the plant with its uncertain parameters scaled by 1 + known_rel
+    input_limits : controller label -> actuator limit of the plant that controller runs on, where the
+        text gives that design its own actuator (IV.11: 250 N m thrusters)
     substeps : RK4 sub-steps of the plant per controller sample. Two (5 ms at Ts = 10 ms) resolve every
         case's open-loop dynamics (at most a few rad/s) to about 1e-7 relative in the table's metrics,
         checked against 10 by tests/studies/test_runner.py, at a third of the cost.
@@ -183,11 +185,16 @@ class Study:
     cascade: tuple | None = None
     cascade_model: tuple | None = None
     known_rel: float = 0.05
+    input_limits: Mapping[str, float] = field(default_factory=dict)
     substeps: int = 2
 
     @property
     def case(self) -> models.Case:
         return models.case(self.plant)
+
+    def truth(self, plant: models.Plant, label: str) -> models.Plant:
+        """The simulated plant of controller `label`: `plant`, with its own actuator if the text gives one."""
+        return plant.with_input_limit(self.input_limits[label]) if label in self.input_limits else plant
 
     def state_bounds(self, params: Mapping[str, float]) -> dict:
         return dict(self.bounds(dict(params))) if self.bounds else {}
@@ -268,6 +275,7 @@ class StudyResult:
     ----------
     study : Study;  options : Options
     plant : the truth (nominal parameters);  known : the model the controllers were designed from
+    truths : controller label -> its simulated plant (`plant` unless the study gives it its own actuator)
     table : DataFrame, one row per (controller, scenario)
     runs : (controller, scenario) -> ClosedLoopResult of the non-Monte-Carlo scenarios
     envelopes : controller -> Envelope of its Monte Carlo
@@ -290,6 +298,7 @@ class StudyResult:
     notes: list
     timing: dict
     answers: dict = field(default_factory=dict)
+    truths: dict = field(default_factory=dict)
 
     def best(self, scenario: str = "step") -> str | None:
         """The controller with the lowest ITAE in `scenario` among runs that did not diverge or fail."""
@@ -500,7 +509,9 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
     rows, sample_rows, runs, envelopes = [], [], {}, {}
     total, done = len(designed) * len(scenarios), 0
     sim_time = mc_time = 0.0
+    truths = {}
     for label, controller in designed.items():
+        truth = truths[label] = study.truth(plant, label)
         for scenario in scenarios:
             tick = time.perf_counter()
             row = {"controller": label, "scenario": scenario.name, "kind": "block" if isinstance(controller, Block)
@@ -512,10 +523,10 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
                     row |= {"status": "skipped: controllers that optimize each step run only "
                                       + ", ".join(options.python_scenarios) + " here", "samples": 0}
                 elif scenario.monte_carlo:
-                    row |= _monte_carlo(study, plant, controller, scenario, options, base, tracked_index,
+                    row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
                                         sample_rows, envelopes, label)
                 else:
-                    result = _simulate(plant, controller, scenario, case, options, base, study.substeps)
+                    result = _simulate(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
                     row |= metrics.run_metrics(result, case.tracked, bounds)
                     row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
@@ -544,7 +555,7 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
     answers, answer_notes = collect(study, options.strict)
     notes += answer_notes
     return StudyResult(study, options, plant, known, table, runs, envelopes, samples, designed, notes, timing,
-                       answers)
+                       answers, truths)
 
 
 def _simulate(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,

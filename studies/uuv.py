@@ -16,4 +16,6 @@ STUDY = Study(
     ),
     # IV.13: crossover about 2 rad/s (rise time about 1 s), phase margin at least 60 deg.
     loops=(LoopSpec("IV.13", "input", baseline=None, crossover=2.0, phase_margin=60.0),),
+    # IV.11: "assume that we have turbo charged our thrusters so that we can produce a peak torque of 250 N-m".
+    input_limits={"lead-lag (IV.11)": 250.0},
 )

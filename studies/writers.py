@@ -305,7 +305,8 @@ def write_study(result, out: str | os.PathLike) -> dict:
         files["monte_carlo.png"] = "monte_carlo.png"
 
     _, base = _tracked_value(result)
-    found, loop_notes = loops_module.analyse(plant, study.case, result.controllers, base, result.runs)
+    found, loop_notes = loops_module.analyse(plant, study.case, result.controllers, base, result.runs,
+                                             result.truths)
     notes += loop_notes
     checks = {}
     for spec in study.loops:

@@ -124,3 +124,9 @@ def diverging(name: str, known: models.Plant | None = None) -> dict:
 def lqr_only(name: str, known: models.Plant | None = None) -> dict:
     """Just the LQR state feedback of `controllers`."""
     return {"LQR": controllers(name, known)["LQR"]}
+
+
+def with_own_actuator(name: str, known: models.Plant | None = None) -> dict:
+    """The LQR twice, once under the label the UUV study gives its own 250 N m actuator."""
+    lqr = controllers(name, known)["LQR"]
+    return {"LQR": lqr, "lead-lag (IV.11)": lqr}

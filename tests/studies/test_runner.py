@@ -163,3 +163,16 @@ def test_two_rk4_substeps_give_the_tables_of_ten(plant):
     rows = [runner.run_study(runner.Study(**(fields | {"substeps": n})), STEP_ONLY).table.iloc[0] for n in (2, 10)]
     for key in ("rise_time_s", "settling_time_s", "overshoot_pct", "iae", "itae", "peak_u", "energy"):
         assert rows[0][key] == pytest.approx(rows[1][key], rel=1e-5, abs=1e-9), key
+
+
+def test_a_design_with_its_own_actuator_runs_on_it():
+    """IV.11 assumes 250 N m thrusters: that row's plant has them, the others keep 50 N m."""
+    base = studies.get("uuv")
+    fields = {k: getattr(base, k) for k in base.__dataclass_fields__}
+    study = runner.Study(**(fields | {"providers": ("example_providers:with_own_actuator",)}))
+    result = runner.run_study(study, STEP_ONLY)
+    table = result.table.set_index("controller")
+    assert table.loc["LQR", "u_limit"] == 50.0 and table.loc["lead-lag (IV.11)", "u_limit"] == 250.0
+    fast, slow = (result.runs[(label, "step")] for label in ("lead-lag (IV.11)", "LQR"))
+    assert np.max(np.abs(fast.u)) > 50.0  # the same law asks for more than 50 N m ...
+    assert table.loc["lead-lag (IV.11)", "rise_time_s"] < table.loc["LQR", "rise_time_s"]  # ... and gets it
