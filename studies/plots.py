@@ -227,7 +227,7 @@ def _focus(points: np.ndarray, sample_period: float) -> float:
     return 1.3 * max(reach, 1e-3)
 
 
-def root_loci(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
+def root_loci(result, loops: dict, path: Path, dpi: int = 110, gains: int = 300) -> Path | None:
     """Root locus of k·L(z) at the plant input for every block, k from 0.01 to 100, in the s-plane.
 
     Discrete poles z are shown as s = ln(z)/Ts; × marks the design (k = 1), ○ the
@@ -240,14 +240,13 @@ def root_loci(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     rows = -(-len(chosen) // cols)
     fig = _figure(4 * cols, 3.4 * rows + 0.5)
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
-    gains = np.logspace(-2, 2, 300)
     for ax, (label, lp) in zip(axes, chosen):
-        locus = np.concatenate([lp.s_plane(lp.closed_loop_poles(k)) for k in gains])
+        locus = np.concatenate([lp.s_plane(lp.closed_loop_poles(k)) for k in np.logspace(-2, 2, gains)])
         design = lp.s_plane(lp.closed_loop_poles(1.0))
         open_loop = lp.s_plane(np.linalg.eigvals(lp.A))
-        ax.scatter(locus.real, locus.imag, s=1, color="tab:blue", alpha=0.5)
-        ax.scatter(open_loop.real, open_loop.imag, marker="o", facecolors="none", edgecolors="black", s=30)
-        ax.scatter(design.real, design.imag, marker="x", color="red", s=40)
+        ax.plot(locus.real, locus.imag, ".", markersize=1.5, color="tab:blue", alpha=0.5)
+        ax.plot(open_loop.real, open_loop.imag, "o", markerfacecolor="none", markeredgecolor="black", markersize=6)
+        ax.plot(design.real, design.imag, "x", color="red", markersize=7)
         half = _focus(design, lp.sample_period)
         ax.set_xlim(-half, 0.3 * half)
         ax.set_ylim(-half, half)

@@ -213,6 +213,8 @@ class Options:
         optimizing controller costs about as much on every plant (at least one sample)
     python_scenarios : scenarios run for controllers that are not Blocks (default all); the others
         get a row saying they were skipped
+    python_budget : seconds of its own compute time a controller that is not a Block may spend on
+        one plant (default unlimited); past it, its remaining rows say so instead of holding numbers
     seed : seed of the parameter samples and of the measurement noise
     threads : threads of the batched Monte Carlo map
     jit : True, False or "auto" (compile the Monte Carlo map when it has >= JIT_THRESHOLD steps)
@@ -225,6 +227,7 @@ class Options:
     mc_python: int = 10
     mc_python_steps: int = 12_000
     python_scenarios: tuple | None = None
+    python_budget: float | None = None
     seed: int = 0
     threads: int = 2
     jit: bool | str = "auto"
@@ -376,6 +379,44 @@ def design_controllers(study: Study, known: models.Plant, providers: Sequence[st
     return ordered, notes
 
 
+# ---------------------------------------------------------------------------- time budget
+class BudgetExceeded(RuntimeError):
+    """A controller simulated step by step used up its time budget."""
+
+
+class Budgeted:
+    """A controller (not a Block) that raises `BudgetExceeded` once its steps took `seconds` in all.
+
+    Everything else is the wrapped controller's: sample period, measurement,
+    initial state, solver records (`step_info`), name.
+    """
+
+    def __init__(self, controller, seconds: float):
+        self.controller, self.seconds, self.spent, self.steps = controller, float(seconds), 0.0, 0
+        self.sample_period = controller.sample_period
+        self.measures = controller.measures
+        self.n_reference = controller.n_reference
+
+    def initial_state(self, y0, r0):
+        self.steps = 0
+        return self.controller.initial_state(y0, r0)
+
+    def step(self, xc, y, r):
+        if self.spent > self.seconds:
+            raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time")
+        start = time.perf_counter()
+        out = self.controller.step(xc, y, r)
+        self.spent += time.perf_counter() - start
+        self.steps += 1
+        if self.spent > self.seconds:
+            raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time at t = "
+                                 f"{self.steps * self.sample_period:.3g} s")
+        return out
+
+    def __getattr__(self, name):
+        return getattr(self.controller, name)
+
+
 # ---------------------------------------------------------------------------- noise
 def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, float]) -> np.ndarray:
     """Noise standard deviation of each measurement the controller reads.
@@ -512,6 +553,8 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
     truths = {}
     for label, controller in designed.items():
         truth = truths[label] = study.truth(plant, label)
+        if options.python_budget is not None and not isinstance(controller, Block):
+            controller = Budgeted(controller, options.python_budget)
         for scenario in scenarios:
             tick = time.perf_counter()
             row = {"controller": label, "scenario": scenario.name, "kind": "block" if isinstance(controller, Block)
@@ -531,6 +574,9 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
                     row |= metrics.run_metrics(result, case.tracked, bounds)
                     row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
                             "solver_issues": _solver_issues(result)}
+            except BudgetExceeded as err:
+                row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
+                row |= {"status": f"skipped: {err}", "samples": 0}
             except Exception as err:
                 if options.strict:
                     raise

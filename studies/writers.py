@@ -328,7 +328,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
     if loop_rows:
         write_csv(folder / "loops.csv", pd.DataFrame(loop_rows))
         files["loops.csv"] = "loops.csv"
-    if plots.root_loci(result, found, folder / "root_locus.png", dpi):
+    if plots.root_loci(result, found, folder / "root_locus.png", dpi, gains=100 if quick else 300):
         files["root_locus.png"] = "root_locus.png"
     if plots.pole_map(result, found, folder / "poles.png", dpi):
         files["poles.png"] = "poles.png"
@@ -338,7 +338,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
         run = result.runs[(best, "step")]
         text = (f"{best}, the lowest ITAE in the step scenario; nonlinear simulation of the text's step "
                 f"({study.case.source}).")
-        animation.write_gif(folder / "animation.gif", plant, run, best, max_frames=40 if quick else 100,
+        animation.write_gif(folder / "animation.gif", plant, run, best, max_frames=30 if quick else 100,
                             dpi=64 if quick else 80)
         animation.write_html(folder / "animation.html", plant, run, best, text, max_frames=400 if quick else 800)
         files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}

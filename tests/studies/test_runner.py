@@ -176,3 +176,15 @@ def test_a_design_with_its_own_actuator_runs_on_it():
     fast, slow = (result.runs[(label, "step")] for label in ("lead-lag (IV.11)", "LQR"))
     assert np.max(np.abs(fast.u)) > 50.0  # the same law asks for more than 50 N m ...
     assert table.loc["lead-lag (IV.11)", "rise_time_s"] < table.loc["LQR", "rise_time_s"]  # ... and gets it
+
+
+def test_a_python_controller_over_its_budget_is_reported_not_measured():
+    study = arm_study(providers=(EXAMPLE,))
+    result = runner.run_study(study, runner.Options(scenarios=("step", "noise"), mc=0, python_budget=1e-9))
+    table = result.table.set_index(["controller", "scenario"])
+    for scenario in ("step", "noise"):
+        row = table.loc[("linear MPC", scenario)]
+        assert row.status.startswith("skipped: over its budget of 1e-09 s") and math.isnan(row.iae)
+    assert table.loc[("LQR", "step"), "status"] == "ok"  # blocks have no budget
+    generous = runner.run_study(study, runner.Options(scenarios=("step",), mc=0, python_budget=1e6))
+    assert generous.table.set_index("controller").loc["linear MPC", "status"] == "ok"
