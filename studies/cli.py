@@ -17,7 +17,7 @@ from . import NAMES, SCENARIO_NAMES, get
 
 #: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
 #: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, and their scenarios.
-FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 12_000, "python_scenarios": None, "python_budget": None}
+FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 12_000, "python_scenarios": None, "python_budget": 30.0}
 QUICK = {"mc": 10, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",), "python_budget": 5.0}
 
 
@@ -47,7 +47,7 @@ def parser() -> argparse.ArgumentParser:
                         f"{FULL['mc_python']}, --quick {QUICK['mc_python']})")
     p.add_argument("--mpc-budget", type=float, metavar="SECONDS",
                    help="compute time each controller that optimizes every step may spend per plant; past it "
-                        "its rows say so (default unlimited, --quick "
+                        f"its remaining rows say so (default {FULL['python_budget']:g}, --quick "
                         f"{QUICK['python_budget']:g})")
     p.add_argument("--seed", type=int, default=0, help="seed of the parameter samples and the noise (default 0)")
     p.add_argument("--out", default="results", metavar="DIR", help="output folder (default results/)")
