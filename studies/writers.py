@@ -165,7 +165,7 @@ Column = tuple  # (source column, header, converter value -> cell text)
 
 def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
     """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str."""
-    header = "| " + " | ".join(h for _, h, _ in columns) + " |"
+    header = "| " + " | ".join(_escape_md(h) for _, h, _ in columns) + " |"
     rule = "|" + "|".join("---" for _ in columns) + "|"
     body = ["| " + " | ".join(_escape_md(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
     return "\n".join([header, rule, *body]) + "\n"
@@ -214,7 +214,7 @@ def _unit_columns(tracked_unit: str, input_unit: str) -> list:
         ("ss_error", f"ss error ({unit})", scaled(scale)),
         ("iae", f"IAE ({unit} s)", scaled(scale)),
         ("itae", f"ITAE ({unit} s²)", scaled(scale)),
-        ("peak_u", f"peak \\|u\\| ({input_unit})", scaled()),
+        ("peak_u", f"peak |u| ({input_unit})", scaled()),
         ("u_limit", f"limit ({input_unit})", scaled()),
         ("saturated_frac", "time at limit (%)", percent),
         ("energy", f"energy (({input_unit})² s)", scaled()),
@@ -387,7 +387,7 @@ def _study_markdown(result, notes: list, loop_rows: list) -> str:
                       ("overshoot_pct_std", "overshoot std (%)", scaled()),
                       ("iae", f"IAE worst ({unit} s)", scaled(scale)),
                       ("iae_std", f"IAE std ({unit} s)", scaled(scale)),
-                      ("peak_u", f"peak \\|u\\| worst ({study.input_unit})", scaled()),
+                      ("peak_u", f"peak |u| worst ({study.input_unit})", scaled()),
                       ("step_ms", "step (ms)", scaled())])]
     if loop_rows:
         keys = [k for k in loop_rows[0] if k not in ("controller", "loop")]
