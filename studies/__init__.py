@@ -6,7 +6,7 @@
 
 Each study (``studies/arm.py`` ... ``studies/crane.py``) declares its
 controllers, where they come from and its scenarios; `studies.runner` runs
-them on the nonlinear plant, `studies.metrics` computes every column and
+them on the nonlinear plant, `models.metrics` computes every column and
 `studies.writers` writes the tables. ``python -m studies`` runs all six.
 """
 

@@ -8,7 +8,7 @@ runner designs the controllers from the model known to them (the text's
 (every row comes from the nonlinear plant, never from a linear model), runs
 the parameter Monte Carlo of a `models.Block` as one batched CasADi map
 (`models.monte_carlo`) and of any other controller (MPC) as a loop over
-fewer samples, and computes every column with `studies.metrics`.
+fewer samples, and computes every column with `models.metrics`.
 
 A provider that is not importable yet, or has no such function yet, is
 skipped with a note; the notes travel with the results into the tables.
@@ -28,18 +28,18 @@ import numpy as np
 import pandas as pd
 
 import models
-from models import Block, signals
+from models import Block, metrics, signals
 
-from . import SCENARIO_NAMES, metrics
+from . import SCENARIO_NAMES
 
 #: Controller labels in table order; a provider's other labels follow these.
-CONTROLLERS = ("PD", "PID", "PID (no anti-windup)", "loopshaped", "lead-lag (IV.11)", "pole placement",
+CONTROLLERS = ("PD", "PID", "PID (no anti-windup)", "loopshaped", "pole placement",
                "pole placement + integrator", "observer-based", "disturbance observer", "LQR", "LQR + Kalman",
                "linear MPC", "nonlinear MPC", "tuned")
 
 #: Where controllers come from: ``module:function``, called as ``function(plant_name, known=Plant)``.
 PROVIDERS = ("designs.classical:controllers", "designs.statespace_cases:controllers", "mpc:controllers",
-             "designs.tuning:controllers")
+             "designs.tuning_cases:controllers")
 
 #: Where homework answers come from: ``module:function``, called as ``function(plant_name)``.
 ANSWER_PROVIDERS = ("designs.classical:answers", "designs.statespace_cases:answers")

@@ -1,10 +1,12 @@
 """Case study IV: UUV roll φ, thruster torque limited to 50 N m."""
 
-from .runner import LoopSpec, Study, input_disturbance, measurement_noise, parameter_monte_carlo, \
+from .runner import CONTROLLERS, LoopSpec, Study, input_disturbance, measurement_noise, parameter_monte_carlo, \
     series_of_steps, step
 
 STUDY = Study(
     plant="uuv",
+    # IV.11's root-locus lead-lag is the UUV's own homework, listed after the loopshaped design.
+    controllers=CONTROLLERS[:4] + ("lead-lag (IV.11)",) + CONTROLLERS[4:],
     tracked_unit="rad",
     input_unit="N m",
     scenarios=(

@@ -245,7 +245,7 @@ def caption(result) -> str:
 
 
 DEFINITIONS = (
-    "Definitions (`studies.metrics`): rise 10→90 % of the commanded step; settling: time after which the tracked "
+    "Definitions (`models.metrics`): rise 10→90 % of the commanded step; settling: time after which the tracked "
     "coordinate stays within 2 % of the step around the command (∞: not settled by the end); overshoot in % of "
     "the step; ss error: |command − mean over the last 5 %|; IAE = ∫|e| dt, ITAE = ∫(t − t_step)|e| dt; a series "
     "of steps reports its worst step; peak |u| of the command, time at limit: commands within 0.1 % of or beyond "

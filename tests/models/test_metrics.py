@@ -10,7 +10,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq
 
 import models
-from studies import metrics
+from models import metrics
 
 DT = 1e-3
 

@@ -13,7 +13,7 @@ value (the reference), not against wherever the response ends up:
 A response that never reaches 90 % or never settles gets ``inf`` (it takes
 longer than the run), not a number that looks like a result. python-control's
 `control.step_info` uses the same definitions with the final value as target
-and sample (not interpolated) times; `tests/studies/test_metrics.py` checks the
+and sample (not interpolated) times; `tests/models/test_metrics.py` checks the
 two agree to one sample on linear responses.
 
 Integral metrics: IAE = ∫|e| dt and ITAE = ∫(t − t_step)|e| dt with e = r − y,
