@@ -53,6 +53,8 @@ class Specs:
     max_spectral_abscissa : 1/s, bound on the closed-loop linearization's slowest mode
         at the final state, log(spectral radius) / Ts; checked at the solution, not
         enforced during the search (eigenvalues are not smooth)
+    state_bounds : dict state name -> bound, |x_i| <= bound at every sample (for example
+        a crane's swing angle)
     """
 
     max_overshoot: float | None = None
@@ -60,6 +62,7 @@ class Specs:
     settling_band: float = 0.02
     rise_time: float | None = None
     max_spectral_abscissa: float | None = None
+    state_bounds: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -268,6 +271,11 @@ class TuningProblem:
                 if late.size:
                     add(f"90 % of the step by {sp.rise_time:g} s{tag}", sign * (y[:, late] - x0[k]),
                         0.9 * amp, np.inf)
+            for name, bound in sp.state_bounds.items():
+                if name not in plant.state_names:
+                    raise ValueError(f"state_bounds: {plant.name} has no state {name!r}; states are "
+                                     f"{plant.state_names}")
+                add(f"|{name}| <= {bound:g}{tag}", X[plant.state_names.index(name), :], -bound, bound)
             limit = plant.input_limit[:, None]
             add(f"|u| <= {', '.join(f'{v:g}' for v in plant.input_limit)}{tag}", ca.vec(U),
                 -np.repeat(limit, n, axis=1).ravel(order="F"), np.repeat(limit, n, axis=1).ravel(order="F"))
