@@ -107,6 +107,7 @@ class TuningResult:
     status : IPOPT's return status
     message : one line saying what happened, including any fallback
     violations : the specs violated at the returned gains, by name
+    history : [(seconds since the call began, IPOPT's objective)] per iteration
     """
 
     block: Block
@@ -123,6 +124,7 @@ class TuningResult:
     iterations: int = 0
     wall_time: float = 0.0
     decision: np.ndarray | None = None
+    history: list = field(default_factory=list)
 
 
 class _Recorder(ca.Callback):
@@ -131,7 +133,7 @@ class _Recorder(ca.Callback):
     def __init__(self, nx: int, ng: int, n_p: int):
         ca.Callback.__init__(self)
         self.sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "p": n_p, "lam_p": n_p, "f": 1}
-        self.iterates: list[tuple[np.ndarray, float]] = []
+        self.iterates: list[tuple[np.ndarray, float, float]] = []  # (x, f, perf_counter)
         self.construct("recorder", {})
 
     def get_n_in(self):
@@ -150,7 +152,7 @@ class _Recorder(ca.Callback):
         return ca.Sparsity.dense(self.sizes[ca.nlpsol_out(i)], 1)
 
     def eval(self, arg):
-        self.iterates.append((np.asarray(arg[0]).ravel().copy(), float(arg[1])))
+        self.iterates.append((np.asarray(arg[0]).ravel().copy(), float(arg[1]), time.perf_counter()))
         return [0]
 
 
@@ -233,7 +235,7 @@ class TuningProblem:
         param_index = [list(plant.params).index(name) for name in self.extra_params]
         run = models.closed_loop_function(plant, block, n, substeps)
         m = self.samples.shape[0]
-        costs, constraints, lower, upper = [], [], [], []
+        costs, constraints, lower, upper, u_runs = [], [], [], [], []
         self.constraint_names: list[tuple[str, slice]] = []
 
         def add(name, expr, lo, hi):
@@ -276,15 +278,13 @@ class TuningProblem:
                     raise ValueError(f"state_bounds: {plant.name} has no state {name!r}; states are "
                                      f"{plant.state_names}")
                 add(f"|{name}| <= {bound:g}{tag}", X[plant.state_names.index(name), :], -bound, bound)
-            limit = plant.input_limit[:, None]
-            add(f"|u| <= {', '.join(f'{v:g}' for v in plant.input_limit)}{tag}", ca.vec(U),
-                -np.repeat(limit, n, axis=1).ravel(order="F"), np.repeat(limit, n, axis=1).ravel(order="F"))
+            u_runs.append(U)
         self.decision = decision
         self.costs = ca.vertcat(*costs)
         self.g = ca.vertcat(*constraints) if constraints else ca.MX(0, 1)
         self.lbg = np.concatenate(lower) if lower else np.zeros(0)
         self.ubg = np.concatenate(upper) if upper else np.zeros(0)
-        self.evaluate = ca.Function("tuning_problem", [decision], [self.costs, self.g])
+        self.evaluate = ca.Function("tuning_problem", [decision], [self.costs, self.g, ca.horzcat(*u_runs)])
         self.objective = (ca.sum1(self.costs) / m) if self.robust == "mean" else ca.mmax(self.costs)
 
     # ------------------------------------------------------------ numbers
@@ -294,10 +294,20 @@ class TuningProblem:
         return np.concatenate([self.block.gain_vector()[self.free_index], extra])
 
     def values(self, decision) -> tuple[float, np.ndarray, list[str]]:
-        """(objective, per-sample costs, violated spec names) at a decision vector."""
-        costs, g = (np.asarray(v).ravel() for v in self.evaluate(decision))
+        """(objective, per-sample costs, violated spec names) at a decision vector.
+
+        The actuator limit is checked here rather than constrained in the NLP:
+        blocks saturate their own command, so it never binds during the search.
+        """
+        costs, g, u = (np.asarray(v) for v in self.evaluate(decision))
+        costs = costs.ravel()
         obj = float(np.mean(costs)) if self.robust == "mean" else float(np.max(costs))
-        return obj, costs, self.violated(g)
+        violations = self.violated(g.ravel())
+        limit = self.plant.input_limit[:, None]
+        if not np.all(np.abs(u) <= limit):
+            violations.append(f"|u| <= {', '.join(f'{v:g}' for v in self.plant.input_limit)} "
+                              f"(commanded up to {np.max(np.abs(u)):.4g})")
+        return obj, costs, violations
 
     def violated(self, g: np.ndarray, tol: float = 1e-6) -> list[str]:
         names = []
@@ -319,7 +329,7 @@ class TuningProblem:
 def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None = None,
          cost: Cost | None = None, samples=None, robust: str = "mean", free=None, bounds=None,
          tracked: str | None = None, substeps: int = 10, max_iter: int = 200, tol: float = 1e-8,
-         jit: bool = False) -> TuningResult:
+         hessian: str = "limited-memory", jit: bool = False) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
     Parameters
@@ -330,6 +340,8 @@ def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None 
         (scalars or arrays shaped like the gain)
     max_iter : IPOPT iteration limit
     tol : IPOPT's convergence tolerance (it also stops at 100 tol held for 10 iterations)
+    hessian : "limited-memory" (L-BFGS, one gradient per iteration) or "exact"
+        (CasADi's second derivatives; fewer iterations, each costlier)
     jit : compile the NLP's functions to machine code (pays off for long runs)
 
     Returns
@@ -343,7 +355,9 @@ def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None 
     problem = TuningProblem(plant, block, scenario, specs=specs, cost=cost, samples=samples,
                             robust=robust, free=free, tracked=tracked, substeps=substeps)
     lbx, ubx = _gain_bounds(problem, bounds)
-    return _solve(problem, lbx, ubx, max_iter, jit, tol=tol)
+    if hessian not in ("limited-memory", "exact"):
+        raise ValueError(f"hessian must be 'limited-memory' or 'exact', got {hessian!r}")
+    return _solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian)
 
 
 def _gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
@@ -366,21 +380,28 @@ def _gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray
 
 
 def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost=None,
-           tol: float = 1e-8) -> TuningResult:
+           tol: float = 1e-8, hessian: str = "limited-memory") -> TuningResult:
     """IPOPT on the problem's objective (+ plant_cost(decision)), with the fallback logic."""
     start_time = time.perf_counter()
     x = problem.decision
     objective = problem.objective if plant_cost is None else problem.objective + plant_cost(x)
     start = np.clip(problem.start(), lbx, ubx)
+    # IPOPT works on z = x / scale, so gains of different magnitudes (K entries
+    # from 5 to 50, a crane's thousands) all move on the order of one.
+    scale = np.maximum(np.abs(start), 1e-3 * max(np.max(np.abs(start)), 1e-12))
+    scale = np.where(scale > 0, scale, 1.0)
+    z = ca.MX.sym("z", x.numel())
+    f_of_x = ca.Function("objective", [x], [objective])
+    g_of_x = ca.Function("constraints", [x], [problem.g])
     recorder = _Recorder(x.numel(), problem.g.numel(), 0)
     opts = {"ipopt": {"max_iter": int(max_iter), "print_level": 0, "tol": tol, "acceptable_tol": 100 * tol,
-                      "acceptable_iter": 10, "hessian_approximation": "limited-memory", "sb": "yes"},
+                      "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
     if jit:
         opts |= {"jit": True, "compiler": "shell",
                  "jit_options": {"flags": models.compile.FLAGS, "verbose": False}}
-    solver = ca.nlpsol("tuning", "ipopt", {"x": x, "f": objective, "g": problem.g}, opts)
-    sol = solver(x0=start, lbx=lbx, ubx=ubx, lbg=problem.lbg, ubg=problem.ubg)
+    solver = ca.nlpsol("tuning", "ipopt", {"x": z, "f": f_of_x(scale * z), "g": g_of_x(scale * z)}, opts)
+    sol = solver(x0=start / scale, lbx=lbx / scale, ubx=ubx / scale, lbg=problem.lbg, ubg=problem.ubg)
     stats = solver.stats()
     status = stats["return_status"]
     total = ca.Function("total", [x], [objective])
@@ -390,10 +411,10 @@ def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cos
         violations = problem.values(decision)[2] + _spectral_violation(problem, decision)
         return value, violations
 
-    final = np.clip(np.asarray(sol["x"]).ravel(), lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
+    final = np.clip(scale * np.asarray(sol["x"]).ravel(), lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
     initial_cost, _ = judge(start)
     evaluated = []  # (value, violations, decision, label), IPOPT's answer first
-    labelled = [(final, "final")] + [(it[0], "iterate") for it in recorder.iterates] + [(start, "start")]
+    labelled = [(final, "final")] + [(scale * it[0], "iterate") for it in recorder.iterates] + [(start, "start")]
     for cand, label in labelled:
         cand = np.clip(cand, lbx, ubx)
         if np.all(np.isfinite(cand)):
@@ -426,7 +447,8 @@ def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cos
         feasible=not violations, success=bool(stats["success"]) and label == "final" and not violations,
         status=status, message=message, violations=list(violations),
         iterations=int(stats.get("iter_count", 0)), wall_time=time.perf_counter() - start_time,
-        decision=np.array(decision))
+        decision=np.array(decision),
+        history=[(stamp - start_time, value) for _, value, stamp in recorder.iterates])
 
 
 def closed_loop_spectral_abscissa(plant: Plant, block: Block, x, xc, r, params=None, substeps: int = 10) -> float:
