@@ -1,0 +1,539 @@
+"""Loop algebra and the frequency- and steady-state answers of the .10 and .13 homework.
+
+Every closed loop here is the two-degree-of-freedom loop
+
+    u = C_r(s) r − C_y(s) (y + n) + d_i,    y = P(s) u + d_o,
+
+which covers PD/PID with the derivative on the error (C_r = C_y) or on the
+measurement (C_r = k_p + k_i/s, C_y = k_p + k_i/s + k_d s), prefilters
+(C_r = F C) and any C(s). Transfer functions are built from polynomial
+products, never by subtracting rational functions, so a zero at s = 0 that
+the algebra produces (an integrator, a derivative on the measurement) is an
+exact zero and the system type and the steady-state limits come out exact:
+an infinite error stays ``inf``.
+
+Angles are in rad, frequencies in rad/s; "percent" values are 100·|G(jω)|
+of the named transfer function (for a disturbance in N or N m reaching an
+angle, that is rad per 100 N m, as the text's questions count it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import control
+import numpy as np
+import scipy.optimize
+
+__all__ = ["Loop", "UnstableLoopError", "SpecCheck", "as_polynomials", "tf", "pid_tf", "limit_at_zero",
+           "dc_gain", "steady_state_errors", "band_max", "percent_tracking_error_below",
+           "percent_input_disturbance_below", "percent_output_disturbance_below", "percent_noise_above",
+           "margins", "bode_data", "step_info", "step_response", "check_band_ratio", "check_phase_margin", "check_crossover",
+           "check_step", "check_stable", "check_damping", "check_bandwidth"]
+
+#: Coefficients below this fraction of their polynomial's largest count as exact zeros.
+ZERO_TOL = 1e-12
+
+
+class UnstableLoopError(ValueError):
+    """A steady-state or frequency answer was asked of a closed loop that is not stable."""
+
+
+# ----------------------------------------------------------------- polynomials
+def _poly(coeffs) -> np.ndarray:
+    """Descending coefficients as a float array with leading zeros removed (at least [0])."""
+    arr = np.atleast_1d(np.asarray(coeffs, dtype=float)).ravel()
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"polynomial coefficients must be finite, got {arr}")
+    nonzero = np.flatnonzero(arr)
+    return arr[nonzero[0]:] if nonzero.size else np.zeros(1)
+
+
+def _padd(a, b) -> np.ndarray:
+    a, b = _poly(a), _poly(b)
+    n = max(a.size, b.size)
+    return _poly(np.pad(a, (n - a.size, 0)) + np.pad(b, (n - b.size, 0)))
+
+
+def _psub(a, b) -> np.ndarray:
+    return _padd(a, -_poly(b))
+
+
+def _pmul(*polys) -> np.ndarray:
+    out = np.ones(1)
+    for p in polys:
+        out = np.polymul(out, _poly(p))
+    return _poly(out)
+
+
+def _trailing_zeros(p, tol: float = ZERO_TOL) -> int:
+    """Number of roots at s = 0: trailing coefficients that are zero (relative to the largest)."""
+    p = _poly(p)
+    scale = np.max(np.abs(p))
+    if scale == 0:
+        return p.size
+    count = 0
+    for c in p[::-1]:
+        if abs(c) > tol * scale:
+            break
+        count += 1
+    return count
+
+
+def as_polynomials(G) -> tuple[np.ndarray, np.ndarray]:
+    """(num, den) descending coefficients of a SISO continuous-time transfer function or a number."""
+    if np.isscalar(G) or (isinstance(G, np.ndarray) and G.size == 1):
+        return _poly([float(np.asarray(G).ravel()[0])]), np.ones(1)
+    if not isinstance(G, control.TransferFunction):
+        raise TypeError(f"expected a control.TransferFunction or a number, got {type(G).__name__}")
+    if G.ninputs != 1 or G.noutputs != 1:
+        raise ValueError(f"expected a SISO transfer function, got {G.noutputs}x{G.ninputs}")
+    if G.dt not in (0, None):
+        raise ValueError(f"expected a continuous-time transfer function, got dt = {G.dt}")
+    den = _poly(G.den[0][0])
+    if not np.any(den):
+        raise ValueError("transfer function has a zero denominator")
+    return _poly(G.num[0][0]), den
+
+
+def tf(num, den) -> control.TransferFunction:
+    """Continuous-time SISO transfer function from descending coefficients (validated)."""
+    num, den = _poly(num), _poly(den)
+    if not np.any(den):
+        raise ValueError("denominator polynomial is zero")
+    return control.tf(num, den)
+
+
+def _pid_polynomials(kp, ki, kd, sigma, integrator: bool, rolloff: bool):
+    """Numerator and denominator of k_p + k_i/s + k_d s/(σ s + 1) over s^[integrator] (σ s + 1)^[rolloff]."""
+    den = np.ones(1)
+    if integrator:
+        den = _pmul(den, [1.0, 0.0])
+    if rolloff:
+        den = _pmul(den, [sigma, 1.0])
+    num = _pmul([kp], den)
+    if integrator:
+        num = _padd(num, _pmul([ki], [sigma, 1.0] if rolloff else [1.0]))
+    derivative = _pmul([kd, 0.0], [1.0, 0.0] if integrator else [1.0])
+    num = _padd(num, derivative)
+    return num, den
+
+
+def pid_tf(kp: float, ki: float = 0.0, kd: float = 0.0, sigma: float | None = None) -> control.TransferFunction:
+    """k_p + k_i/s + k_d s/(σ s + 1) (ideal derivative when `sigma` is None), continuous time."""
+    if sigma is not None and not sigma > 0:
+        raise ValueError(f"sigma must be > 0 s, got {sigma}")
+    return tf(*_pid_polynomials(kp, ki, kd, sigma, ki != 0, sigma is not None and kd != 0))
+
+
+def _cancel_origin(num, den) -> control.TransferFunction:
+    """num/den with common factors of s removed exactly."""
+    num, den = _poly(num), _poly(den)
+    common = min(_trailing_zeros(num), _trailing_zeros(den))
+    if common:
+        num, den = _poly(num[:-common]), _poly(den[:-common])
+    return tf(num, den)
+
+
+# ----------------------------------------------------------------- the loop
+@dataclass(frozen=True)
+class Loop:
+    """The two-degree-of-freedom loop u = C_r r − C_y (y + n) + d_i, y = P u + d_o.
+
+    Attributes
+    ----------
+    plant : P(s), from the plant input to the measured (controlled) output
+    feedback : C_y(s), acting on the measurement
+    reference : C_r(s), acting on the reference
+    name : str
+    """
+
+    plant: control.TransferFunction
+    feedback: control.TransferFunction
+    reference: control.TransferFunction
+    name: str = ""
+
+    @classmethod
+    def unity(cls, plant, controller, name: str = "") -> "Loop":
+        """Error feedback u = C (r − y): C_r = C_y = C."""
+        return cls(_as_tf(plant), _as_tf(controller), _as_tf(controller), name)
+
+    @classmethod
+    def pid(cls, plant, kp: float, ki: float = 0.0, kd: float = 0.0, *, sigma: float | None = None,
+            derivative_on: str = "measurement", prefilter=None, name: str = "") -> "Loop":
+        """PID with the derivative on the measurement (the text's choice) or on the error.
+
+        With `prefilter` F(s), the reference path is F·C_r.
+        """
+        if derivative_on not in ("measurement", "error"):
+            raise ValueError(f"derivative_on must be 'measurement' or 'error', got {derivative_on!r}")
+        if sigma is not None and not sigma > 0:
+            raise ValueError(f"sigma must be > 0 s, got {sigma}")
+        flags = (ki != 0, sigma is not None and kd != 0)
+        feedback = tf(*_pid_polynomials(kp, ki, kd, sigma, *flags))
+        kd_reference = kd if derivative_on == "error" else 0.0
+        # Same denominator on both paths, so N_Cy - N_Cr cancels exactly.
+        reference = tf(*_pid_polynomials(kp, ki, kd_reference, sigma, *flags))
+        if prefilter is not None:
+            reference = _as_tf(prefilter) * reference
+        return cls(_as_tf(plant), feedback, reference, name)
+
+    # polynomial parts over one controller denominator
+    def _parts(self):
+        n_p, d_p = as_polynomials(self.plant)
+        n_y, d_y = as_polynomials(self.feedback)
+        n_r, d_r = as_polynomials(self.reference)
+        if d_y.size == d_r.size and np.array_equal(d_y / d_y[0], d_r / d_r[0]):
+            d_c = d_y
+            n_r = n_r * (d_y[0] / d_r[0])
+        else:
+            d_c = _pmul(d_y, d_r)
+            n_y, n_r = _pmul(n_y, d_r), _pmul(n_r, d_y)
+        return n_p, d_p, n_y, n_r, d_c
+
+    def characteristic(self) -> np.ndarray:
+        """Closed-loop characteristic polynomial D_P D_C + N_P N_Cy (descending)."""
+        n_p, d_p, n_y, _, d_c = self._parts()
+        return _padd(_pmul(d_p, d_c), _pmul(n_p, n_y))
+
+    def poles(self) -> np.ndarray:
+        """Closed-loop poles (complex), sorted by real part."""
+        roots = np.roots(self.characteristic())
+        return roots[np.argsort(roots.real)]
+
+    def is_stable(self) -> bool:
+        """All closed-loop poles strictly in the left half plane."""
+        return bool(np.all(self.poles().real < 0))
+
+    def loop_gain(self) -> control.TransferFunction:
+        """L(s) = P(s) C_y(s), the loop broken at the plant input."""
+        n_p, d_p = as_polynomials(self.plant)
+        n_y, d_y = as_polynomials(self.feedback)
+        return _cancel_origin(_pmul(n_p, n_y), _pmul(d_p, d_y))
+
+    def _closed(self, num) -> control.TransferFunction:
+        return tf(num, self.characteristic())
+
+    def reference_to_output(self) -> control.TransferFunction:
+        """T_r = P C_r / (1 + P C_y)."""
+        n_p, _, _, n_r, _ = self._parts()
+        return self._closed(_pmul(n_p, n_r))
+
+    def reference_to_error(self) -> control.TransferFunction:
+        """E/R = 1 − T_r = (D_P D_C + N_P (N_Cy − N_Cr)) / Δ, e = r − y."""
+        n_p, d_p, n_y, n_r, d_c = self._parts()
+        return self._closed(_padd(_pmul(d_p, d_c), _pmul(n_p, _psub(n_y, n_r))))
+
+    def input_disturbance_to_output(self) -> control.TransferFunction:
+        """Y/D_i = P / (1 + P C_y)."""
+        n_p, _, _, _, d_c = self._parts()
+        return self._closed(_pmul(n_p, d_c))
+
+    def output_disturbance_to_output(self) -> control.TransferFunction:
+        """Y/D_o = 1 / (1 + P C_y), the sensitivity S."""
+        _, d_p, _, _, d_c = self._parts()
+        return self._closed(_pmul(d_p, d_c))
+
+    def noise_to_output(self) -> control.TransferFunction:
+        """Y/N = −P C_y / (1 + P C_y) = −T."""
+        n_p, _, n_y, _, _ = self._parts()
+        return self._closed(-_pmul(n_p, n_y))
+
+    def reference_to_input(self) -> control.TransferFunction:
+        """U/R = C_r D_P / ... : the command a reference asks of the actuator."""
+        _, d_p, _, n_r, _ = self._parts()
+        return self._closed(_pmul(d_p, n_r))
+
+    def require_stable(self, what: str = "this answer") -> None:
+        """Raise UnstableLoopError naming the right-half-plane poles unless the loop is stable."""
+        poles = self.poles()
+        bad = poles[poles.real >= 0]
+        if bad.size:
+            raise UnstableLoopError(f"{self.name or 'closed loop'} is not stable (poles "
+                                    f"{np.array2string(bad, precision=4)} in the closed right half plane): "
+                                    f"{what} does not exist")
+
+
+def _as_tf(G) -> control.TransferFunction:
+    num, den = as_polynomials(G)
+    return tf(num, den)
+
+
+# ----------------------------------------------------------------- steady state
+def limit_at_zero(num, den, power: int = 0) -> float:
+    """lim_{s→0} N(s) / (D(s) s^power), exact: 0, a finite ratio, or ±inf.
+
+    The sign of an infinite limit is the sign approached from s → 0⁺.
+    """
+    num, den = _poly(num), _poly(den)
+    if not np.any(den):
+        raise ValueError("denominator is zero")
+    if not np.any(num):
+        return 0.0
+    zn, zd = _trailing_zeros(num), _trailing_zeros(den) + power
+    ratio = num[num.size - 1 - zn] / den[den.size - 1 - _trailing_zeros(den)]
+    if zn > zd:
+        return 0.0
+    if zn == zd:
+        return float(ratio)
+    return float(np.sign(ratio) * np.inf)
+
+
+def dc_gain(G) -> float:
+    """G(0), exact; ±inf for a pole at the origin."""
+    return limit_at_zero(*as_polynomials(G))
+
+
+def steady_state_errors(loop: Loop) -> dict:
+    """System type and steady-state error e = r − y to unit step, ramp and parabola.
+
+    The type is the number of zeros at s = 0 of E/R; the errors are
+    lim s→0 of E/R · s / s^(k+1). Exact (``inf`` for an unbounded error).
+
+    Raises
+    ------
+    UnstableLoopError
+        If the closed loop is not stable (no steady state exists).
+    """
+    loop.require_stable("a steady-state error")
+    num, den = as_polynomials(loop.reference_to_error())
+    return {"type": _trailing_zeros(num),
+            "ess_step": limit_at_zero(num, den, 0),
+            "ess_ramp": limit_at_zero(num, den, 1),
+            "ess_parabola": limit_at_zero(num, den, 2)}
+
+
+# ----------------------------------------------------------------- frequency
+def _magnitude(G, omega) -> np.ndarray:
+    num, den = as_polynomials(G)
+    s = 1j * np.asarray(omega, dtype=float)
+    return np.abs(np.polyval(num, s) / np.polyval(den, s))
+
+
+def band_max(G, low: float, high: float, points_per_decade: int = 400) -> tuple[float, float]:
+    """Largest |G(jω)| for low ≤ ω ≤ high and the frequency where it occurs.
+
+    `low` may be 0 (the DC limit is included) and `high` may be inf (the
+    limit at infinity is included). Between, a logarithmic grid of
+    `points_per_decade` points per decade, an interior peak refined by a
+    bounded scalar search; an open end extends six decades beyond the
+    slowest (fastest) pole or zero.
+    """
+    if not (0 <= low < high):
+        raise ValueError(f"need 0 <= low < high, got low = {low}, high = {high}")
+    num, den = as_polynomials(G)
+    corners = np.abs(np.concatenate([np.roots(num), np.roots(den)]))
+    corners = corners[corners > 0]
+    slowest = corners.min() if corners.size else 1.0
+    fastest = corners.max() if corners.size else 1.0
+    lo = low if low > 0 else min(slowest, high) * 1e-6
+    hi = high if np.isfinite(high) else max(fastest, lo) * 1e6
+    decades = max(np.log10(hi / lo), 1e-3)
+    grid = np.logspace(np.log10(lo), np.log10(hi), int(np.ceil(decades * points_per_decade)) + 1)
+    mags = _magnitude(G, grid)
+    best = int(np.argmax(mags))
+    value, where = float(mags[best]), float(grid[best])
+    if 0 < best < grid.size - 1:
+        # Refine an interior peak between its grid neighbours.
+        res = scipy.optimize.minimize_scalar(lambda lw: -_magnitude(G, 10.0**lw), method="bounded",
+                                             bounds=(np.log10(grid[best - 1]), np.log10(grid[best + 1])),
+                                             options={"xatol": 1e-12})
+        if -res.fun > value:
+            value, where = float(-res.fun), float(10.0**res.x)
+    if low == 0:
+        at_zero = abs(limit_at_zero(num, den))
+        if at_zero > value:
+            value, where = at_zero, 0.0
+    if not np.isfinite(high):
+        at_inf = 0.0 if num.size < den.size else (np.inf if num.size > den.size else abs(num[0] / den[0]))
+        if at_inf > value:
+            value, where = float(at_inf), float(np.inf)
+    return value, where
+
+
+def percent_tracking_error_below(loop: Loop, omega: float) -> float:
+    """100·max |E/R(jw)| for references with all frequency content below `omega` rad/s."""
+    loop.require_stable("a tracking error")
+    return 100.0 * band_max(loop.reference_to_error(), 0.0, omega)[0]
+
+
+def percent_input_disturbance_below(loop: Loop, omega: float) -> float:
+    """100·max |Y/D_i(jw)| below `omega`: the part of an input disturbance seen at the output."""
+    loop.require_stable("a disturbance response")
+    return 100.0 * band_max(loop.input_disturbance_to_output(), 0.0, omega)[0]
+
+
+def percent_output_disturbance_below(loop: Loop, omega: float) -> float:
+    """100·max |S(jw)| below `omega`: the part of an output disturbance left in the output."""
+    loop.require_stable("a disturbance response")
+    return 100.0 * band_max(loop.output_disturbance_to_output(), 0.0, omega)[0]
+
+
+def percent_noise_above(loop: Loop, omega: float) -> float:
+    """100·max |T(jw)| above `omega`: the part of measurement noise that reaches the output."""
+    loop.require_stable("a noise response")
+    return 100.0 * band_max(loop.noise_to_output(), omega, np.inf)[0]
+
+
+def margins(L) -> dict:
+    """Gain and phase margins of the loop gain L(s) (python-control's stability_margins).
+
+    Returns
+    -------
+    dict with gm (ratio, inf when the phase never crosses −180°), gm_db,
+    pm_deg, phase_crossover and gain_crossover (rad/s; nan when absent).
+    """
+    gm, pm, _, w_pc, w_gc, _ = control.stability_margins(L)
+    gm = float(gm)
+    return {"gm": gm, "gm_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float(np.inf),
+            "pm_deg": float(pm), "phase_crossover": float(w_pc), "gain_crossover": float(w_gc)}
+
+
+def bode_data(G, omega) -> dict:
+    """Magnitude (absolute) and unwrapped phase (deg) of G at the frequencies `omega` (rad/s)."""
+    omega = np.asarray(omega, dtype=float)
+    num, den = as_polynomials(G)
+    resp = np.polyval(num, 1j * omega) / np.polyval(den, 1j * omega)
+    return {"omega": omega, "magnitude": np.abs(resp), "phase_deg": np.degrees(np.unwrap(np.angle(resp)))}
+
+
+# ----------------------------------------------------------------- spec checks
+@dataclass(frozen=True)
+class SpecCheck:
+    """One requirement and whether the design meets it.
+
+    Attributes
+    ----------
+    spec : what is required, in words
+    met : bool
+    value : what the design achieves (SI; degrees only where the name says deg)
+    required : the bound it is compared with
+    frequency : rad/s where the value was found (None for time-domain specs)
+    """
+
+    spec: str
+    met: bool
+    value: float
+    required: float
+    frequency: float | None = None
+    detail: str = field(default="")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def check_band_ratio(new, old, low: float, high: float, factor: float, what: str) -> SpecCheck:
+    """|new(jω)| ≤ |old(jω)| / factor for all ω in [low, high] (grid as in `band_max`)."""
+    num_n, den_n = as_polynomials(new)
+    num_o, den_o = as_polynomials(old)
+    ratio = tf(_pmul(num_n, den_o), _pmul(den_n, num_o))
+    worst, where = band_max(ratio, low, high)
+    band = f"below {high:g} rad/s" if low == 0 else f"above {low:g} rad/s"
+    return SpecCheck(f"{what} {band} improved {factor:g}x", bool(worst <= 1.0 / factor + 1e-12),
+                     float(1.0 / worst) if worst > 0 else float(np.inf), float(factor), where,
+                     "value: smallest improvement factor old/new in the band")
+
+
+def check_phase_margin(L, minimum_deg: float | None = None, target_deg: float | None = None,
+                       tolerance_deg: float = 5.0) -> SpecCheck:
+    """PM ≥ `minimum_deg`, or |PM − target| ≤ tolerance when `target_deg` is given."""
+    m = margins(L)
+    if target_deg is not None:
+        return SpecCheck(f"phase margin about {target_deg:g} deg (±{tolerance_deg:g})",
+                         bool(abs(m["pm_deg"] - target_deg) <= tolerance_deg), m["pm_deg"], target_deg,
+                         m["gain_crossover"])
+    return SpecCheck(f"phase margin >= {minimum_deg:g} deg", bool(m["pm_deg"] >= minimum_deg), m["pm_deg"],
+                     minimum_deg, m["gain_crossover"])
+
+
+def check_crossover(L, omega: float, rel_tol: float = 0.05) -> SpecCheck:
+    """Gain crossover within `rel_tol` of `omega` rad/s."""
+    w = margins(L)["gain_crossover"]
+    return SpecCheck(f"crossover at {omega:g} rad/s (±{100 * rel_tol:g} %)",
+                     bool(np.isfinite(w) and abs(w - omega) <= rel_tol * omega), w, omega, w)
+
+
+def check_damping(loop: Loop, zeta_min: float) -> SpecCheck:
+    """Every closed-loop pole damped at least `zeta_min` (value: the least damped pole's ζ)."""
+    poles = loop.poles()
+    zeta = float(np.min(-poles.real / np.abs(poles)))
+    return SpecCheck(f"every closed-loop pole damped (zeta >= {zeta_min:g})", zeta >= zeta_min, zeta, zeta_min)
+
+
+def check_bandwidth(T, bandwidth: float, rel_tol: float = 0.2) -> SpecCheck:
+    """Closed-loop −3 dB bandwidth of T (1/√2 of its DC gain) within `rel_tol` of `bandwidth` rad/s."""
+    value = float(control.bandwidth(T, 20 * np.log10(1 / np.sqrt(2))))
+    return SpecCheck(f"closed-loop bandwidth about {bandwidth:g} rad/s (±{100 * rel_tol:g} %)",
+                     bool(abs(value - bandwidth) <= rel_tol * bandwidth), value, bandwidth)
+
+
+def check_stable(loop: Loop) -> SpecCheck:
+    """All closed-loop poles in the open left half plane (value: largest real part)."""
+    worst = float(np.max(loop.poles().real))
+    return SpecCheck("closed loop stable", worst < 0, worst, 0.0)
+
+
+def step_response(T, times) -> np.ndarray:
+    """Unit-step response of a stable SISO T at `times` (s), exact by modal decomposition.
+
+    y(t) = D + C V diag((e^{λt} − 1)/λ) V⁻¹ B; falls back to python-control's
+    forced_response when the state matrix is not safely diagonalizable.
+    """
+    times = np.asarray(times, dtype=float)
+    sys = control.tf2ss(T)
+    A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (sys.A, sys.B, sys.C, sys.D))
+    if A.size == 0:
+        return np.full(times.shape, float(D[0, 0]))
+    lam, V = np.linalg.eig(A)
+    if np.linalg.cond(V) > 1e8 or np.any(np.abs(lam) < 1e-14):
+        return np.asarray(control.step_response(T, times).outputs, dtype=float).ravel()
+    left = (C @ V).ravel()
+    right = np.linalg.solve(V, B).ravel()
+    modes = np.expm1(np.outer(times, lam)) / lam
+    return (modes @ (left * right)).real + D[0, 0]
+
+
+def step_info(T, settling_threshold: float = 0.02) -> dict:
+    """python-control's step_info on a time grid long enough for the slowest pole to settle.
+
+    The grid runs to 10 time constants of the slowest pole (at most 10⁵ s)
+    with 20 000 points, the response computed exactly (`step_response`).
+    """
+    poles = np.roots(as_polynomials(T)[1])
+    if poles.size == 0:
+        return control.step_info(T, SettlingTimeThreshold=settling_threshold)
+    if np.any(poles.real >= 0):
+        raise UnstableLoopError(f"step response of an unstable system (poles {poles})")
+    end = min(10.0 / np.min(-poles.real), 1e5)
+    times = np.linspace(0.0, end, 20001)
+    return control.step_info(step_response(T, times), T=times, yfinal=dc_gain(T),
+                             SettlingTimeThreshold=settling_threshold)
+
+
+def check_step(T, *, amplitude: float = 1.0, rise_time: float | None = None,
+               settling_time: float | None = None, overshoot_percent: float | None = None,
+               steady_state_error_percent: float | None = None, reference_dc: float = 1.0,
+               settling_threshold: float = 0.02) -> list[SpecCheck]:
+    """Step-response specs of a closed loop T (reference → output), python-control's step_info.
+
+    Rise time 10–90 %, settling to `settling_threshold` of the final value,
+    overshoot relative to the final value, steady-state error relative to
+    the commanded value (`reference_dc` = 1 for a unit-gain goal).
+    """
+    info = step_info(T, settling_threshold)
+    final = dc_gain(T)
+    out = []
+    if rise_time is not None:
+        out.append(SpecCheck(f"rise time < {rise_time:g} s", info["RiseTime"] < rise_time, info["RiseTime"],
+                             rise_time))
+    if settling_time is not None:
+        out.append(SpecCheck(f"settling time ({100 * settling_threshold:g} %) < {settling_time:g} s",
+                             info["SettlingTime"] < settling_time, info["SettlingTime"], settling_time))
+    if overshoot_percent is not None:
+        out.append(SpecCheck(f"overshoot < {overshoot_percent:g} %", info["Overshoot"] < overshoot_percent,
+                             info["Overshoot"], overshoot_percent))
+    if steady_state_error_percent is not None:
+        err = 100 * abs(reference_dc - final) / abs(reference_dc)
+        out.append(SpecCheck(f"steady-state error < {steady_state_error_percent:g} %",
+                             err < steady_state_error_percent, err, steady_state_error_percent))
+    return out

@@ -1,0 +1,139 @@
+"""Loop algebra, steady-state errors and frequency answers against closed forms derived by hand."""
+
+import control
+import numpy as np
+import pytest
+
+from designs.analysis import (Loop, UnstableLoopError, band_max, check_band_ratio, check_bandwidth, check_damping,
+                              dc_gain, limit_at_zero, margins,
+                              percent_input_disturbance_below, percent_noise_above, percent_output_disturbance_below,
+                              percent_tracking_error_below, pid_tf, step_info, step_response, steady_state_errors, tf)
+
+# The arm about θ = 0: θ/τ = b0/(s² + a1 s), b0 = 3/(m ℓ²), a1 = 3 b/(m ℓ²).
+B0, A1 = 3 / (0.5 * 0.3**2), 3 * 0.01 / (0.5 * 0.3**2)
+ARM = control.tf([B0], [1, A1, 0])
+KP, KD, KI = 0.3, 0.085, 0.2
+
+
+def test_pd_with_derivative_on_the_measurement():
+    # E/R = (s² + (a1 + b0 kd) s)/(s² + (a1 + b0 kd) s + b0 kp): type 1.
+    out = steady_state_errors(Loop.pid(ARM, KP, 0.0, KD))
+    assert out["type"] == 1 and out["ess_step"] == 0.0 and out["ess_parabola"] == np.inf
+    assert out["ess_ramp"] == pytest.approx((A1 + B0 * KD) / (B0 * KP), rel=1e-12)
+
+
+def test_pd_with_derivative_on_the_error():
+    # Unity feedback: E/R = s(s + a1)/(s² + (a1 + b0 kd) s + b0 kp): ramp error a1/(b0 kp) = 1/K_v.
+    out = steady_state_errors(Loop.pid(ARM, KP, 0.0, KD, derivative_on="error"))
+    assert out["type"] == 1 and out["ess_ramp"] == pytest.approx(A1 / (B0 * KP), rel=1e-12)
+
+
+@pytest.mark.parametrize("derivative_on,numerator", [("measurement", A1 + B0 * KD), ("error", A1)])
+def test_pid_is_type_two(derivative_on, numerator):
+    # E/R = s² (s + a1 [+ b0 kd]) / (s³ + (a1 + b0 kd) s² + b0 kp s + b0 ki): parabola error numerator/(b0 ki).
+    out = steady_state_errors(Loop.pid(ARM, KP, KI, KD, derivative_on=derivative_on))
+    assert out["type"] == 2 and out["ess_step"] == 0.0 and out["ess_ramp"] == 0.0
+    assert out["ess_parabola"] == pytest.approx(numerator / (B0 * KI), rel=1e-12)
+
+
+def test_type_zero_plant_and_disturbances():
+    k, a = 3.0, 2.0
+    loop = Loop.unity(control.tf([k], [1, a]), 1.0)
+    out = steady_state_errors(loop)
+    assert out["type"] == 0 and out["ess_step"] == pytest.approx(1 / (1 + k / a)) and out["ess_ramp"] == np.inf
+    # Arm under PD: θ/d_i at DC = b0/(b0 kp) = 1/kp; an integrator removes it exactly.
+    assert dc_gain(Loop.pid(ARM, KP, 0, KD).input_disturbance_to_output()) == pytest.approx(1 / KP)
+    assert dc_gain(Loop.pid(ARM, KP, KI, KD).input_disturbance_to_output()) == 0.0
+
+
+def test_dirty_derivative_keeps_the_exact_type():
+    out = steady_state_errors(Loop.pid(ARM, KP, KI, KD, sigma=0.05))
+    assert out["type"] == 2 and out["ess_ramp"] == 0.0
+
+
+def test_pid_tf_evaluates_to_its_formula():
+    s, sigma = 2.0j, 0.05
+    num, den = (np.ravel(v) for v in (pid_tf(KP, KI, KD, sigma).num[0][0], pid_tf(KP, KI, KD, sigma).den[0][0]))
+    assert np.polyval(num, s) / np.polyval(den, s) == pytest.approx(KP + KI / s + KD * s / (sigma * s + 1))
+
+
+def test_limits_keep_their_sign_and_infinity():
+    assert limit_at_zero([1.0], [1.0, 0.0]) == np.inf
+    assert limit_at_zero([-2.0], [1.0, 0.0]) == -np.inf
+    assert limit_at_zero([1.0, 0.0], [1.0, 1.0]) == 0.0
+    assert limit_at_zero([3.0, 0.0], [1.0, 2.0, 0.0]) == pytest.approx(1.5)
+    assert dc_gain(tf([1.0], [1.0, 0.0])) == np.inf
+
+
+def test_unstable_loop_has_no_steady_state():
+    loop = Loop.unity(control.tf([1.0], [1.0, -1.0]), 0.5, name="unstable")
+    assert not loop.is_stable()
+    with pytest.raises(UnstableLoopError, match="unstable is not stable.*steady-state error"):
+        steady_state_errors(loop)
+    with pytest.raises(UnstableLoopError, match="tracking error"):
+        percent_tracking_error_below(loop, 1.0)
+
+
+def test_band_answers_of_an_integrator_loop():
+    # L = k/s: T = k/(s + k), S = s/(s + k); both monotone, so the band maxima sit at ω.
+    k, w = 4.0, 1.5
+    loop = Loop.unity(control.tf([1.0], [1.0, 0.0]), k)
+    assert percent_noise_above(loop, w) == pytest.approx(100 * k / np.hypot(w, k), rel=1e-9)
+    assert percent_tracking_error_below(loop, w) == pytest.approx(100 * w / np.hypot(w, k), rel=1e-9)
+    assert percent_output_disturbance_below(loop, w) == pytest.approx(100 * w / np.hypot(w, k), rel=1e-9)
+    # Y/D_i = 1/(s + k): largest at DC.
+    assert percent_input_disturbance_below(loop, w) == pytest.approx(100 / k, rel=1e-9)
+
+
+def test_band_max_finds_a_resonance_peak():
+    zeta, wn = 0.1, 2.0
+    G = tf([wn**2], [1.0, 2 * zeta * wn, wn**2])
+    peak, where = band_max(G, 0.0, np.inf)
+    assert peak == pytest.approx(1 / (2 * zeta * np.sqrt(1 - zeta**2)), rel=1e-5)
+    assert where == pytest.approx(wn * np.sqrt(1 - 2 * zeta**2), rel=1e-2)
+
+
+def test_margins_of_a_type_one_loop():
+    # L = k/(s (s + a)): ω_c² = (−a² + √(a⁴ + 4k²))/2, PM = 90° − atan(ω_c/a), GM infinite.
+    k, a = 10.0, 2.0
+    m = margins(tf([k], [1.0, a, 0.0]))
+    wc = np.sqrt((-a**2 + np.sqrt(a**4 + 4 * k**2)) / 2)
+    assert m["gain_crossover"] == pytest.approx(wc, rel=1e-6)
+    assert m["pm_deg"] == pytest.approx(90 - np.degrees(np.arctan(wc / a)), rel=1e-6)
+    assert m["gm"] == np.inf
+
+
+def test_step_response_and_overshoot_of_a_second_order_loop():
+    zeta, wn = 0.4, 3.0
+    T = tf([wn**2], [1.0, 2 * zeta * wn, wn**2])
+    times = np.linspace(0, 8, 801)
+    np.testing.assert_allclose(step_response(T, times), control.step_response(T, times).outputs, atol=1e-10)
+    overshoot = 100 * np.exp(-zeta * np.pi / np.sqrt(1 - zeta**2))
+    assert step_info(T)["Overshoot"] == pytest.approx(overshoot, rel=1e-3)
+
+
+def test_band_ratio_check_says_met_or_not():
+    old = tf([1.0], [1.0, 1.0])
+    assert check_band_ratio(old * 0.05, old, 0.0, 1.0, 10.0, "tracking").met
+    check = check_band_ratio(old * 0.2, old, 0.0, 1.0, 10.0, "tracking")
+    assert not check.met and check.value == pytest.approx(5.0) and "below 1 rad/s" in check.spec
+
+
+def test_bad_transfer_functions_are_named():
+    with pytest.raises(ValueError, match="continuous-time"):
+        steady_state_errors(Loop.unity(control.tf([1], [1, 1], 0.1), 1.0))
+    with pytest.raises(ValueError, match="SISO"):
+        Loop.unity(control.tf([[[1], [1]]], [[[1, 1], [1, 2]]]), 1.0)
+    with pytest.raises(ValueError, match="sigma must be > 0"):
+        pid_tf(1.0, 0.0, 1.0, sigma=-0.05)
+
+
+def test_damping_and_bandwidth_checks_of_a_second_order_loop():
+    # L = ω_n²/(s (s + 2ζω_n)): closed loop ω_n²/(s² + 2ζω_n s + ω_n²), bandwidth ω_n √(1 − 2ζ² + √(2 − 4ζ² + 4ζ⁴)).
+    zeta, wn = 0.3, 2.0
+    loop = Loop.unity(tf([wn**2], [1, 2 * zeta * wn, 0]), 1.0)
+    assert check_damping(loop, 0.2).met and check_damping(loop, 0.2).value == pytest.approx(zeta)
+    assert not check_damping(loop, 0.5).met
+    bw = wn * np.sqrt(1 - 2 * zeta**2 + np.sqrt(2 - 4 * zeta**2 + 4 * zeta**4))
+    check = check_bandwidth(loop.reference_to_output(), bw)
+    assert check.met and check.value == pytest.approx(bw, rel=1e-6)
