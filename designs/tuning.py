@@ -413,30 +413,30 @@ def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cos
 
     final = np.clip(scale * np.asarray(sol["x"]).ravel(), lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
     initial_cost, _ = judge(start)
-    evaluated = []  # (value, violations, decision, label), IPOPT's answer first
-    labelled = [(final, "final")] + [(scale * it[0], "iterate") for it in recorder.iterates] + [(start, "start")]
-    for cand, label in labelled:
-        cand = np.clip(cand, lbx, ubx)
-        if np.all(np.isfinite(cand)):
-            value, violations = judge(cand)
-            if np.isfinite(value):
-                evaluated.append((value, violations, cand, label))
     message = f"IPOPT: {status}"
-    feasible = [e for e in evaluated if not e[1]]
-    if feasible:
-        chosen = min(feasible, key=lambda e: e[0])
-        # Keep IPOPT's answer unless an iterate is clearly better (not just within
-        # the constraint tolerance that lets intermediate iterates undercut it).
-        if evaluated[0][3] == "final" and not evaluated[0][1] and evaluated[0][0] <= chosen[0] + 1e-6 * abs(chosen[0]):
-            chosen = evaluated[0]
-        if chosen[3] != "final":
-            message += f"; returning the best feasible point found (the {chosen[3]})"
-    elif evaluated:
-        chosen = evaluated[0]
-        message += "; infeasible: " + "; ".join(chosen[1])
-    else:
+    chosen = None
+    value, violations = judge(final)
+    if np.isfinite(value):
+        chosen = (value, violations, final, "final")
+    # Other iterates matter only when clearly better than IPOPT's answer, or when
+    # that answer is infeasible: judge them lazily, lowest recorded objective first.
+    threshold = value - 1e-6 * abs(value) if chosen and not violations else np.inf
+    others = sorted(((f, scale * z, "iterate") for z, f, _ in recorder.iterates
+                     if np.isfinite(f) and f < threshold), key=lambda item: item[0])
+    others.append((initial_cost, start, "start"))
+    for _, cand, label in others:
+        cand = np.clip(cand, lbx, ubx)
+        cand_value, cand_violations = judge(cand)
+        if np.isfinite(cand_value) and not cand_violations and cand_value < threshold:
+            chosen = (cand_value, cand_violations, cand, label)
+            break
+    if chosen is None:
         chosen = (np.inf, ["no finite closed-loop run"], start, "start")
         message += "; no iterate gave a finite closed-loop run"
+    elif chosen[1]:
+        message += "; infeasible: " + "; ".join(chosen[1])
+    elif chosen[3] != "final":
+        message += f"; returning the best feasible point found (the {chosen[3]})"
     value, violations, decision, label = chosen
     block = problem.block_at(decision)
     return TuningResult(
