@@ -38,7 +38,6 @@ import copy
 import functools
 from dataclasses import dataclass, field
 
-import casadi as ca
 import control
 import numpy as np
 
@@ -278,13 +277,6 @@ def _loopshaping_record(shaped, pre, T_new) -> dict:
 
 
 # ----------------------------------------------------------------- cascades
-def _ff_gradient(known: models.Plant) -> np.ndarray:
-    """∂u_e/∂q of the equilibrium-input feedforward at the operating point (ball on beam: m1 g/ℓ on z)."""
-    q = ca.SX.sym("q", known.nq)
-    jac = ca.Function("feedforward_jacobian", [q], [ca.jacobian(known.casadi_equilibrium_input(q, known.param_vector()), q)])
-    return np.asarray(jac(known.equilibrium()[0][:known.nq])).ravel()
-
-
 def _cascade_common(prefix: str, slc: SuccessiveLoopClosure, bound: dict, a: dict, letters: dict) -> None:
     """The .8 records shared by the pendulum and ball on beam (letters map item -> homework letter)."""
     plants = slc.plants
@@ -603,7 +595,7 @@ def _uuv(known: models.Plant) -> PlantDesign:
 def _ballbeam(known: models.Plant) -> PlantDesign:
     case = models.case("ballbeam")
     bound = linearized_input_bound(known, {"z": (0.0, known.params["ell"])})
-    ff = _ff_gradient(known)
+    ff = known.equilibrium_input_jacobian().ravel()
     slc = successive_loop_closure(known, "theta", "z", inner_bound=bound["bound"], outer_step=case.design_step,
                                   separation=SEPARATION, zeta_inner=ZETA, zeta_outer=ZETA, feedforward_gradient=ff)
     a = {}

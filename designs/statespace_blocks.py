@@ -97,9 +97,7 @@ class TrackingModel:
         C_r = np.zeros((1, plant.nx))
         C_r[0, index] = 1.0
         N_x, N_u = reference_steady_state(linear.A, linear.B, C_r)
-        q = ca.SX.sym("q", plant.nq)
-        jac = ca.Function("G", [q], [ca.jacobian(plant.casadi_equilibrium_input(q, plant.param_vector()), q)])
-        G = np.asarray(jac(linear.xe[:plant.nq]), dtype=float).reshape(plant.nu, plant.nq)
+        G = plant.equilibrium_input_jacobian(linear.xe[:plant.nq])
         return cls(plant, linear, tracked, index, C_r, N_x, N_u, G)
 
     @property

@@ -311,7 +311,7 @@ def monte_carlo(plant: Plant, controller: Block, reference, duration: float, par
                                                   np.zeros((0, m)), setup.r[:-1].T, noise_cols,
                                                   setup.d.T, samples.T, controller.gain_vector()))
     results = []
-    nx, nc = plant.nx, controller.n_state
+    nc = controller.n_state
     for i in range(m):
         x = np.vstack([setup.x0, X[:, i * n:(i + 1) * n].T])
         xc = np.vstack([xc0[i], XC[:, i * n:(i + 1) * n].T]) if nc else np.zeros((n + 1, 0))

@@ -332,6 +332,18 @@ class Plant:
                              "configuration linearly")
         return self._sym.configuration
 
+    def equilibrium_input_jacobian(self, q=None, params=None) -> np.ndarray:
+        """∂u_e/∂q of `equilibrium_input`, (nu, nq), at q (default the standard operating point).
+
+        The ball on beam's m1 g / ell on z; zero where gravity does not load the input.
+        """
+        q = self.equilibrium(params=params)[0][:self.nq] if q is None else \
+            as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
+        qs = ca.SX.sym("q", self.nq)
+        p = self.param_vector(params)
+        jac = ca.Function("equilibrium_input_jacobian", [qs], [ca.jacobian(self.casadi_equilibrium_input(qs, p), qs)])
+        return np.asarray(jac(q), dtype=float).reshape(self.nu, self.nq)
+
     @property
     def casadi_equilibrium_input(self) -> ca.Function:
         """CasADi Function (q, p) -> u of `equilibrium_input`, for controller blocks."""

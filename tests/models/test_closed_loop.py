@@ -117,7 +117,6 @@ def test_sample_params_are_reproducible_and_within_five_percent():
 
 
 def test_cascade_composes_outer_and_inner():
-    pend = models.get("pendulum")
     outer = Proportional(0.2, index=0, n_measured=2)
     inner = Proportional(-30.0, index=1, n_measured=2)
     both = models.Cascade(outer, inner)

@@ -45,7 +45,7 @@ def test_power_balance(name):
     p = plant.params
     rng = np.random.default_rng(2)
     for x, u in _random_points(plant, rng):
-        q, dq = x[:plant.nq], x[plant.nq:]
+        dq = x[plant.nq:]
         power = {
             "arm": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
             "pendulum": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
@@ -232,3 +232,14 @@ def test_configuration_is_recovered_from_the_outputs(name):
     y = plant.output(np.concatenate([q, np.zeros(plant.nq)]))
     np.testing.assert_allclose(np.asarray(plant.casadi_configuration(y, plant.param_vector())).ravel(), q,
                                atol=1e-14)
+
+
+def test_equilibrium_input_jacobian_of_the_ball_on_beam_and_the_arm():
+    beam = models.get("ballbeam")
+    p = beam.params
+    # F_e ell = (m1 z + m2 ell / 2) g cos(theta): ∂/∂z = m1 g / ell, ∂/∂theta = 0 at theta = 0.
+    np.testing.assert_allclose(beam.equilibrium_input_jacobian(), [[p["m1"] * p["g"] / p["ell"], 0.0]], atol=1e-14)
+    arm = models.get("arm")
+    a = arm.params
+    np.testing.assert_allclose(arm.equilibrium_input_jacobian([0.4]),
+                               [[-a["m"] * a["g"] * a["ell"] / 2 * np.sin(0.4)]], rtol=1e-12)

@@ -1,0 +1,236 @@
+"""Linear MPC solve time: cvxpy (rebuilt, parametrized), OSQP directly, and the condensed DAQP path.
+
+The pendulum on a cart (4 states, N = 50, Ts = 0.01 s, |F| <= 5 N; the
+input bounds are the only constraints, the common case, unless --soft adds
+the default soft |theta| bound) runs 500 closed-loop steps on the nonlinear
+plant: the 2 m step of the case study with its 0.5 N input disturbance, the
+controller designed on the +5 % parameters. The loop is driven by our path
+(d); at every step the same QP — same estimate, target and previous input —
+is also handed to
+
+    (a) cvxpy, rebuilding the problem from numbers (Clarabel),
+    (b) cvxpy with Parameters, built once (Clarabel),
+    (c) OSQP on the sparse problem, vectors updated, warm-started,
+    (d) DAQP on the condensed problem, vectors updated, warm-started,
+
+each timed around its own call (vector update + solve + reading the plan),
+interleaved so all four see the same machine load. The first inputs are
+compared with the cvxpy reference (a) at every step.
+
+The nonlinear MPC's solve time is measured on its own closed loop (arm and
+pendulum by default, every plant with --all). --settling runs every plant's
+step with both MPCs on the ±5 % models with the input disturbance (the slow
+tests' scenario) and prints settling times, peak commands and soft-bound margins.
+
+With --soft, OSQP meets instances where theta rides on its bound with zero
+slack (the exact penalty's degenerate vertex); there it stops at its
+iteration limit or reports "solved inaccurate" with first inputs off by up to
+0.1-1 N, so its failures are counted in the table.
+
+Usage: python benchmarks/mpc.py [--steps 500] [--soft] [--all] [--settling] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+# Run as a script, this file's folder is sys.path[0] and "import mpc" would find this
+# file instead of the package; drop the folder so the package is imported.
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
+
+import numpy as np  # noqa: E402
+
+import models  # noqa: E402
+import mpc  # noqa: E402
+from mpc.reference_cvxpy import CvxpySolver  # noqa: E402
+
+PATHS = {
+    "a": "cvxpy, rebuilt every step",
+    "b": "cvxpy, Parameters reused",
+    "c": "OSQP, warm-started",
+    "d": "condensed DAQP (ours)",
+}
+
+
+class Interleaved:
+    """Hands every QP to all four paths, timing each call; returns path (d)'s answer."""
+
+    name = "daqp"
+
+    def __init__(self, problem):
+        self.paths = {
+            "a": CvxpySolver(problem, parametrized=False),
+            "b": CvxpySolver(problem, parametrized=True),
+            "c": mpc.OsqpSolver(problem),
+            "d": mpc.CondensedDaqpSolver(problem),
+        }
+        self.times = {key: [] for key in self.paths}
+        self.first_moves = {key: [] for key in self.paths}
+        self.status = {key: [] for key in self.paths}
+
+    def reset(self):
+        for solver in self.paths.values():
+            solver.reset()
+
+    def solve(self, params):
+        answers = {}
+        for key in ("a", "b", "c", "d"):
+            start = time.perf_counter()
+            answers[key] = self.paths[key].solve(params)
+            self.times[key].append(time.perf_counter() - start)
+            self.first_moves[key].append(answers[key].inputs[0].copy())
+            self.status[key].append(answers[key].success)
+        return answers["d"]
+
+
+def linear_benchmark(steps: int, soft: bool) -> dict:
+    name = "pendulum"
+    plant = models.get(name)
+    known = models.perturbed(plant, 0.05)
+    case = models.case(name)
+    interleaved = {}
+
+    def factory(problem):
+        interleaved["solver"] = Interleaved(problem)
+        return interleaved["solver"]
+
+    overrides = {} if soft else {"soft_bounds": ()}
+    controller = mpc.linear_mpc(name, known, solver=factory, **overrides)
+    assert controller.horizon == 50 and controller.sample_period == 0.01
+    duration = steps * controller.sample_period
+    result = models.simulate_closed_loop(plant, controller, case.step, duration,
+                                         input_disturbance=case.input_disturbance)
+    solver = interleaved["solver"]
+    # The whole controller step (estimator, target, QP, clipping) with path (d) alone.
+    alone = models.simulate_closed_loop(plant, mpc.linear_mpc(name, known, **overrides), case.step, duration,
+                                        input_disturbance=case.input_disturbance)
+    medians = {key: 1e3 * float(np.median(solver.times[key])) for key in PATHS}
+    reference = np.array(solver.first_moves["a"])
+    diffs = {key: float(np.max(np.abs(np.array(solver.first_moves[key]) - reference))) for key in "bcd"}
+    return {
+        "plant": name, "steps": steps, "soft_bounds": soft, "horizon": controller.horizon, "sample_period": controller.sample_period,
+        **{f"median_ms_{key}": medians[key] for key in PATHS},
+        "ratio_b_over_d": medians["b"] / medians["d"], "ratio_c_over_d": medians["c"] / medians["d"],
+        "ratio_a_over_d": medians["a"] / medians["d"],
+        "max_first_move_diff": max(diffs.values()),
+        **{f"max_first_move_diff_{key}": diffs[key] for key in "bcd"},
+        "failures": {key: int(np.sum(~np.array(solver.status[key]))) for key in PATHS},
+        "controller_step_median_ms": 1e3 * float(np.median(alone.step_time)),
+        "saturated_steps": int(np.sum(np.abs(result.u) >= plant.input_limit)),
+        "max_abs_u": float(np.max(np.abs(result.u))),
+    }
+
+
+def nonlinear_benchmark(name: str, steps: int) -> dict:
+    plant = models.get(name)
+    case = models.case(name)
+    controller = mpc.nonlinear_mpc(name, models.perturbed(plant, 0.05))
+    xe = plant.equilibrium()[0]
+    reference = xe[plant.state_names.index(case.tracked)] + case.step
+    duration = min(steps * controller.sample_period, case.duration)
+    result = models.simulate_closed_loop(plant, controller, reference, duration,
+                                         input_disturbance=case.input_disturbance)
+    solve = np.array([s["solve_time"] for s in result.status])
+    iterations = np.array([s["iterations"] for s in result.status])
+    return {
+        "plant": name, "steps": len(solve), "horizon": controller.horizon, "sample_period": controller.sample_period,
+        "median_ms": 1e3 * float(np.median(solve)), "p90_ms": 1e3 * float(np.percentile(solve, 90)),
+        "max_ms": 1e3 * float(np.max(solve)), "median_iterations": float(np.median(iterations)),
+        "failures": int(sum(not s["success"] for s in result.status)),
+        "controller_step_median_ms": 1e3 * float(np.median(result.step_time)),
+    }
+
+
+def settling_table() -> dict:
+    """Both MPCs on every plant's step, known parameters ±5 %, with the input disturbance."""
+    from mpc.defaults import physical_soft_bounds
+
+    rows = {}
+    for name in models.names():
+        plant, case = models.get(name), models.case(name)
+        index = plant.state_names.index(case.tracked)
+        reference = plant.equilibrium()[0][index] + case.step
+        for kind, build in (("linear", mpc.linear_mpc), ("nonlinear", mpc.nonlinear_mpc)):
+            for sign in (1, -1):
+                controller = build(name, models.perturbed(plant, 0.05, sign))
+                result = models.simulate_closed_loop(plant, controller, reference, case.duration,
+                                                     input_disturbance=case.input_disturbance)
+                error = np.abs(result.x[:, index] - reference)
+                outside = np.flatnonzero(error >= 1e-3)
+                settle = float(result.t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(result.t) \
+                    else (0.0 if not outside.size else float("inf"))
+                margins = [min(value.min() - lower, upper - value.max()) for _, row, lower, upper
+                           in physical_soft_bounds(name, plant) for value in [result.x @ row]]
+                solve = np.array([s["solve_time"] for s in result.status])
+                rows[f"{name} {kind} {sign:+d}"] = {
+                    "settling_time_s": settle, "duration_s": case.duration,
+                    "final_error": float(error[-1]), "peak_command_over_limit": float(np.max(np.abs(result.u)) /
+                                                                                       plant.input_limit[0]),
+                    "soft_bound_margin": min(margins) if margins else None,
+                    "median_solve_ms": 1e3 * float(np.median(solve)), "max_solve_ms": 1e3 * float(np.max(solve)),
+                    "failed_steps": int(sum(not s["success"] for s in result.status)),
+                }
+    return rows
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=500)
+    parser.add_argument("--soft", action="store_true", help="keep the soft |theta| bound in the linear MPC")
+    parser.add_argument("--all", action="store_true", help="time the nonlinear MPC on every plant")
+    parser.add_argument("--settling", action="store_true", help="settling table of both MPCs on every plant")
+    parser.add_argument("--json", metavar="PATH", help="write the figures as one JSON object")
+    args = parser.parse_args(argv)
+
+    linear = linear_benchmark(args.steps, args.soft)
+    print(f"Linear MPC, pendulum: N = {linear['horizon']}, Ts = {linear['sample_period']} s, "
+          f"{linear['steps']} closed-loop steps ({linear['saturated_steps']} saturated), "
+          f"{'soft |theta| bound' if args.soft else 'input bounds only'}")
+    print(f"{'path':32s} {'median ms':>10s} {'x slower than (d)':>18s} {'max |u0 - u0(a)|':>18s} {'failed':>7s}")
+    for key, label in PATHS.items():
+        ms = linear[f"median_ms_{key}"]
+        diff = "reference" if key == "a" else f"{linear[f'max_first_move_diff_{key}']:.2e}"
+        print(f"({key}) {label:28s} {ms:10.4f} {ms / linear['median_ms_d']:18.1f} {diff:>18s} "
+              f"{linear['failures'][key]:7d}")
+    print(f"ratio (b)/(d) = {linear['ratio_b_over_d']:.1f}, (c)/(d) = {linear['ratio_c_over_d']:.1f}; "
+          f"whole controller step with (d): median {linear['controller_step_median_ms']:.3f} ms")
+
+    names = models.names() if args.all else ["arm", "pendulum"]
+    nonlinear = {}
+    print("\nNonlinear MPC (SQP, Gauss-Newton Hessian, HPIPM QPs), solve time per sample")
+    print(f"{'plant':10s} {'N':>4s} {'Ts s':>6s} {'median ms':>10s} {'p90 ms':>8s} {'max ms':>8s} {'SQP it':>7s} {'fails':>6s}")
+    for name in names:
+        row = nonlinear_benchmark(name, args.steps)
+        nonlinear[name] = row
+        print(f"{name:10s} {row['horizon']:4d} {row['sample_period']:6.2f} {row['median_ms']:10.3f} "
+              f"{row['p90_ms']:8.3f} {row['max_ms']:8.1f} {row['median_iterations']:7.1f} {row['failures']:6d}")
+
+    settling = settling_table() if args.settling else None
+    if settling:
+        print("\nStep with known parameters ±5 % and the input disturbance (settled: |e| < 1e-3 from then on)")
+        print(f"{'run':24s} {'settles s':>10s} {'of s':>5s} {'|u|max/limit':>13s} {'soft margin':>12s} "
+              f"{'solve ms':>9s} {'max ms':>8s} {'failed':>7s}")
+        for run, row in settling.items():
+            margin = "-" if row["soft_bound_margin"] is None else f"{row['soft_bound_margin']:.4f}"
+            print(f"{run:24s} {row['settling_time_s']:10.2f} {row['duration_s']:5.0f} "
+                  f"{row['peak_command_over_limit']:13.4f} {margin:>12s} {row['median_solve_ms']:9.3f} "
+                  f"{row['max_solve_ms']:8.1f} {row['failed_steps']:7d}")
+
+    if args.json:
+        figures = dict(linear)
+        figures["nonlinear"] = nonlinear
+        for name, row in nonlinear.items():
+            figures[f"nmpc_median_ms_{name}"] = row["median_ms"]
+        if settling:
+            figures["settling"] = settling
+        with open(args.json, "w") as handle:
+            json.dump(figures, handle, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,346 @@
+"""Linear-system checks and Riccati gains: controllability, observability, LQR and Kalman.
+
+The linear algebra both the state-space designs and MPC stand on, with
+errors that name the uncontrollable or unobservable modes. Stabilizability
+and detectability are checked before every Riccati solve, and the residual
+and closed-loop stability after it: a solver asked for an unstabilizable
+pair can otherwise return a gain that leaves a mode at s = 0 without saying so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+__all__ = [
+    "controllability_matrix", "observability_matrix", "uncontrollable_modes", "unobservable_modes",
+    "require_controllable", "require_observable", "require_stabilizable", "require_detectable",
+    "bryson_weights", "riccati_residual", "lqr", "dlqr", "kalman", "dkalman",
+]
+
+
+# ------------------------------------------------------------------ checks
+def _matrix(value, what: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.size == 0:
+        raise ValueError(f"{what} must be a non-empty 2-D matrix, got shape {np.shape(value)}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what} has non-finite entries")
+    return arr
+
+
+def _square(A, what: str = "A") -> np.ndarray:
+    A = _matrix(A, what)
+    if A.shape[0] != A.shape[1]:
+        raise ValueError(f"{what} must be square, got shape {A.shape}")
+    return A
+
+
+def _pair_AB(A, B) -> tuple[np.ndarray, np.ndarray]:
+    A = _square(A)
+    B = np.asarray(B, dtype=float)
+    if B.ndim == 1:
+        B = B[:, None]
+    B = _matrix(B, "B")
+    if B.shape[0] != A.shape[0]:
+        raise ValueError(f"B must have {A.shape[0]} rows (one per state), got shape {B.shape}")
+    return A, B
+
+
+def _pair_AC(A, C) -> tuple[np.ndarray, np.ndarray]:
+    A = _square(A)
+    C = _matrix(C, "C")
+    if C.shape[1] != A.shape[0]:
+        raise ValueError(f"C must have {A.shape[0]} columns (one per state), got shape {C.shape}")
+    return A, C
+
+
+def _prefix(what: str) -> str:
+    return f"{what}: " if what else ""
+
+
+def _fmt(values) -> str:
+    """Poles for messages; parts below 1e-7 (roundoff about a repeated root) print as 0."""
+    out = []
+    for v in np.atleast_1d(np.asarray(values, dtype=complex)):
+        re = 0.0 if abs(v.real) < 1e-7 else v.real
+        out.append(f"{re:.4g}" if abs(v.imag) < 1e-7 else f"{re:.4g}{v.imag:+.4g}j")
+    return ", ".join(out)
+
+
+# ------------------------------------------------------ controllability
+def controllability_matrix(A, B) -> np.ndarray:
+    """[B, A B, ..., A^(n−1) B], shape (nx, nx·nu)."""
+    A, B = _pair_AB(A, B)
+    blocks = [B]
+    for _ in range(A.shape[0] - 1):
+        blocks.append(A @ blocks[-1])
+    return np.hstack(blocks)
+
+
+def observability_matrix(A, C) -> np.ndarray:
+    """[C; C A; ...; C A^(n−1)], shape (nx·ny, nx)."""
+    A, C = _pair_AC(A, C)
+    return controllability_matrix(A.T, C.T).T
+
+
+def _pbh_rank_deficient(A, B, tol: float) -> np.ndarray:
+    """Eigenvalues λ of A with rank [A − λI, B] < n (Popov–Belevitch–Hautus test)."""
+    n = A.shape[0]
+    scale = max(np.linalg.norm(A, 2), np.linalg.norm(B, 2), 1e-300)
+    bad = []
+    for lam in np.linalg.eigvals(A):
+        pencil = np.hstack([A - lam * np.eye(n), B]) / scale
+        sv = np.linalg.svd(pencil, compute_uv=False)
+        if sv[n - 1] < tol:
+            bad.append(lam)
+    return np.array(bad, dtype=complex)
+
+
+def uncontrollable_modes(A, B, tol: float = 1e-9) -> np.ndarray:
+    """Eigenvalues of A that the input cannot move (PBH test), complex array (may be empty).
+
+    `tol` is relative to the larger of ‖A‖ and ‖B‖: a mode counts as
+    uncontrollable when the smallest singular value of [A − λI, B] is below it.
+    """
+    A, B = _pair_AB(A, B)
+    return _pbh_rank_deficient(A, B, tol)
+
+
+def unobservable_modes(A, C, tol: float = 1e-9) -> np.ndarray:
+    """Eigenvalues of A invisible in the output C x (PBH test on the dual), complex array."""
+    A, C = _pair_AC(A, C)
+    return _pbh_rank_deficient(A.T, C.T, tol)
+
+
+def require_controllable(A, B, what: str = "") -> int:
+    """Raise ValueError naming `what` and the uncontrollable modes unless (A, B) is controllable.
+
+    Returns
+    -------
+    int : rank of the controllability matrix (= nx).
+    """
+    A, B = _pair_AB(A, B)
+    modes = uncontrollable_modes(A, B)
+    rank = int(np.linalg.matrix_rank(controllability_matrix(A, B)))
+    if modes.size:
+        raise ValueError(f"{_prefix(what)}(A, B) is not controllable: the input cannot move the "
+                         f"mode(s) at s = {_fmt(modes)} (controllability matrix rank {rank} < {A.shape[0]})")
+    return A.shape[0]
+
+
+def require_observable(A, C, what: str = "") -> int:
+    """Raise ValueError naming `what` and the unobservable modes unless (A, C) is observable.
+
+    Returns
+    -------
+    int : rank of the observability matrix (= nx).
+    """
+    A, C = _pair_AC(A, C)
+    modes = unobservable_modes(A, C)
+    rank = int(np.linalg.matrix_rank(observability_matrix(A, C)))
+    if modes.size:
+        raise ValueError(f"{_prefix(what)}(A, C) is not observable: the output does not see the "
+                         f"mode(s) at s = {_fmt(modes)} (observability matrix rank {rank} < {A.shape[0]})")
+    return A.shape[0]
+
+
+def _unstable(modes, discrete: bool, margin: float = 1e-9) -> np.ndarray:
+    modes = np.asarray(modes, dtype=complex)
+    return modes[np.abs(modes) >= 1 - margin] if discrete else modes[modes.real >= -margin]
+
+
+def require_stabilizable(A, B, what: str = "", discrete: bool = False) -> None:
+    """Raise ValueError unless every uncontrollable mode of (A, B) is stable.
+
+    Checked before any Riccati solve: a solver asked for an unstabilizable
+    pair can return a gain that leaves a mode at s = 0 without saying so.
+    """
+    A, B = _pair_AB(A, B)
+    bad = _unstable(uncontrollable_modes(A, B), discrete)
+    if bad.size:
+        where = "|z| >= 1" if discrete else "Re s >= 0"
+        raise ValueError(f"{_prefix(what)}(A, B) is not stabilizable: uncontrollable mode(s) with "
+                         f"{where} at {_fmt(bad)}")
+
+
+def require_detectable(A, C, what: str = "", discrete: bool = False) -> None:
+    """Raise ValueError unless every unobservable mode of (A, C) is stable."""
+    A, C = _pair_AC(A, C)
+    bad = _unstable(unobservable_modes(A, C), discrete)
+    if bad.size:
+        where = "|z| >= 1" if discrete else "Re s >= 0"
+        raise ValueError(f"{_prefix(what)}(A, C) is not detectable: unobservable mode(s) with "
+                         f"{where} at {_fmt(bad)}")
+
+
+# ------------------------------------------------------------------- LQR
+def bryson_weights(state_max, input_max) -> tuple[np.ndarray, np.ndarray]:
+    """Bryson's rule: Q = diag(1 / x_max²), R = diag(1 / u_max²).
+
+    Parameters
+    ----------
+    state_max : (nx,), largest acceptable |x_i| in the state's units; np.inf
+        leaves a state unweighted.
+    input_max : (nu,), largest acceptable |u_j|.
+    """
+    xmax = np.atleast_1d(np.asarray(state_max, dtype=float))
+    umax = np.atleast_1d(np.asarray(input_max, dtype=float))
+    for name, v in (("state_max", xmax), ("input_max", umax)):
+        if np.any(np.isnan(v)) or np.any(v <= 0):
+            raise ValueError(f"{name} entries must be > 0 (np.inf to leave a state unweighted), got {v}")
+    if not np.all(np.isfinite(umax)):
+        raise ValueError(f"input_max must be finite, got {umax}")
+    return np.diag(1.0 / xmax**2), np.diag(1.0 / umax**2)
+
+
+def _weights(A, B, Q, R, what: str) -> tuple[np.ndarray, np.ndarray]:
+    n, m = B.shape
+    Q = np.eye(n) if Q is None else np.asarray(Q, dtype=float)
+    R = np.eye(m) if R is None else np.asarray(R, dtype=float)
+    R = R.reshape(1, 1) if R.size == 1 and m == 1 else R
+    for name, W, size in (("Q", Q, n), ("R", R, m)):
+        if W.shape != (size, size):
+            raise ValueError(f"{_prefix(what)}{name} must have shape ({size}, {size}), got {W.shape}")
+        if not np.all(np.isfinite(W)):
+            raise ValueError(f"{_prefix(what)}weight {name} has non-finite entries")
+        if not np.allclose(W, W.T, rtol=1e-10, atol=1e-14 * np.abs(W).max(initial=0)):
+            raise ValueError(f"{_prefix(what)}weight {name} must be symmetric")
+    if np.min(np.linalg.eigvalsh(Q)) < -1e-12 * max(1.0, np.abs(Q).max()):
+        raise ValueError(f"{_prefix(what)}Q must be positive semidefinite")
+    if np.min(np.linalg.eigvalsh(R)) <= 0:
+        raise ValueError(f"{_prefix(what)}R must be positive definite")
+    return Q, R
+
+
+def _weight_root(Q) -> np.ndarray:
+    vals, vecs = np.linalg.eigh(Q)
+    return (vecs * np.sqrt(np.clip(vals, 0, None))).T
+
+
+def riccati_residual(A, B, Q, R, P, discrete: bool = False) -> float:
+    """Relative residual of the algebraic Riccati equation at P.
+
+    Continuous: Aᵀ P + P A − P B R⁻¹ Bᵀ P + Q; discrete:
+    Aᵀ P A − P − Aᵀ P B (R + Bᵀ P B)⁻¹ Bᵀ P A + Q. The Frobenius norm is
+    divided by the sum of the norms of the terms.
+    """
+    A, B = _pair_AB(A, B)
+    if discrete:
+        gain_term = A.T @ P @ B @ np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+        terms = [A.T @ P @ A, -P, -gain_term, Q]
+    else:
+        terms = [A.T @ P, P @ A, -P @ B @ np.linalg.solve(R, B.T @ P), Q]
+    scale = sum(np.linalg.norm(t) for t in terms)
+    return float(np.linalg.norm(sum(terms)) / max(scale, 1e-300))
+
+
+def _riccati_checked(A, B, Q, R, P, K, discrete: bool, what: str) -> None:
+    res = riccati_residual(A, B, Q, R, P, discrete)
+    closed = np.linalg.eigvals(A - B @ K)
+    stable = np.all(np.abs(closed) < 1) if discrete else np.all(closed.real < 0)
+    if not (np.all(np.isfinite(P)) and res < 1e-8 and stable):
+        raise ValueError(f"{_prefix(what)}the Riccati solve failed: relative residual {res:.3g}, "
+                         f"closed-loop poles {_fmt(closed)}")
+
+
+def lqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Continuous LQR: K minimizing ∫ xᵀ Q x + uᵀ R u dt under u = −K x.
+
+    Parameters
+    ----------
+    A (nx, nx), B (nx, nu)
+    Q : (nx, nx) symmetric ≥ 0; default identity (Bryson's rule with unit
+        maxima; use `bryson_weights` for physical maxima)
+    R : (nu, nu) symmetric > 0; default identity
+
+    Returns
+    -------
+    K : (nu, nx) = R⁻¹ Bᵀ P
+    P : (nx, nx), the stabilizing solution of Aᵀ P + P A − P B R⁻¹ Bᵀ P + Q = 0
+
+    Raises
+    ------
+    ValueError
+        Non-finite or indefinite weights, (A, B) not stabilizable, (A, Q^½)
+        not detectable, or a solve whose residual or closed loop is wrong.
+    """
+    A, B = _pair_AB(A, B)
+    Q, R = _weights(A, B, Q, R, what)
+    require_stabilizable(A, B, what)
+    require_detectable(A, _weight_root(Q), f"{what} with the weight Q" if what else "weight Q")
+    P = scipy.linalg.solve_continuous_are(A, B, Q, R)
+    P = (P + P.T) / 2
+    K = np.linalg.solve(R, B.T @ P)
+    _riccati_checked(A, B, Q, R, P, K, False, what)
+    return K, P
+
+
+def dlqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Discrete LQR: K minimizing Σ x_kᵀ Q x_k + u_kᵀ R u_k under u_k = −K x_k, x_{k+1} = A x_k + B u_k.
+
+    Parameters
+    ----------
+    A (nx, nx), B (nx, nu): a discrete model, e.g. the ZOH
+        `LinearModel.discretize(Ts)`.
+    Q, R : weights as in `lqr` (defaults identity).
+
+    Returns
+    -------
+    K : (nu, nx) = (R + Bᵀ P B)⁻¹ Bᵀ P A
+    P : (nx, nx), the stabilizing solution of the discrete Riccati equation;
+        xᵀ P x is the optimal cost-to-go (an MPC terminal cost).
+
+    Raises
+    ------
+    ValueError
+        As `lqr`, with stability meaning |z| < 1.
+    """
+    A, B = _pair_AB(A, B)
+    Q, R = _weights(A, B, Q, R, what)
+    require_stabilizable(A, B, what, discrete=True)
+    require_detectable(A, _weight_root(Q), f"{what} with the weight Q" if what else "weight Q",
+                       discrete=True)
+    P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+    P = (P + P.T) / 2
+    K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+    _riccati_checked(A, B, Q, R, P, K, True, what)
+    return K, P
+
+
+def kalman(A, C, W, V, what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state Kalman–Bucy gain for x' = A x + w, y = C x + v (dual of `lqr`).
+
+    Parameters
+    ----------
+    W : (nx, nx) process-noise intensity ≥ 0;  V : (ny, ny) measurement-noise intensity > 0
+
+    Returns
+    -------
+    L : (nx, ny) = P Cᵀ V⁻¹, error dynamics A − L C
+    P : (nx, nx) steady-state error covariance
+    """
+    A, C = _pair_AC(A, C)
+    K, P = lqr(A.T, C.T, W, V, what)
+    return K.T, P
+
+
+def dkalman(A, C, W, V, what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state discrete Kalman predictor gain for x_{k+1} = A x_k + w_k, y_k = C x_k + v_k.
+
+    Parameters
+    ----------
+    W : (nx, nx) covariance of w_k ≥ 0;  V : (ny, ny) covariance of v_k > 0
+
+    Returns
+    -------
+    L : (nx, ny) = A P Cᵀ (C P Cᵀ + V)⁻¹, predictor error dynamics A − L C;
+        `current_estimator_gain(A, L)` = P Cᵀ (C P Cᵀ + V)⁻¹ is the filter's
+        measurement-update gain.
+    P : (nx, nx) steady-state prior (one-step prediction) error covariance
+    """
+    A, C = _pair_AC(A, C)
+    K, P = dlqr(A.T, C.T, W, V, what)
+    return K.T, P
