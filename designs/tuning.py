@@ -316,7 +316,7 @@ class TuningProblem:
             scale = np.where(np.isfinite(scale), scale, 1.0)
             excess = np.maximum(self.lbg[sl] - g[sl], g[sl] - self.ubg[sl]) / scale
             if not np.all(np.isfinite(g[sl])) or np.any(excess > tol):
-                worst = np.nanmax(np.abs(excess)) if np.any(np.isfinite(excess)) else np.inf
+                worst = np.nanmax(excess) if np.all(np.isfinite(g[sl])) else np.inf
                 names.append(f"{name} (violated by {worst:.3g} relative)")
         return names
 

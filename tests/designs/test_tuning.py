@@ -154,3 +154,18 @@ def test_bad_tuning_input(arm, kwargs, message):
         return
     with pytest.raises(ValueError, match=message):
         TuningProblem(arm, ArmPD(arm), Scenario(reference=0.5, duration=1.0), **kwargs)
+
+
+def test_a_violated_spec_reports_its_excess_from_a_fresh_simulation(arm):
+    """The overshoot excess named in a violation is the simulated peak past the bound (unbounded below)."""
+    block, reference = ArmPD(arm), np.deg2rad(50)
+    scenario = Scenario(reference=reference, duration=3.0)
+    run = models.simulate_closed_loop(arm, block, reference, 3.0, x0=arm.equilibrium()[0], substeps=10)
+    overshoot = (np.max(run.x[:, 0]) - reference) / reference
+    assert overshoot > 0.01
+    bound = overshoot / 2
+    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot=bound))
+    (violation,) = problem.values(problem.start())[2]
+    reported = float(violation.split("violated by ")[1].split(" ")[0])
+    # g = peak − r against bound·step; unbounded below, so the relative scale is 1.
+    assert reported == pytest.approx((overshoot - bound) * reference, rel=1e-3)
