@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import models
-from designs.analysis import as_polynomials, dc_gain, tf
+from designs.analysis import as_polynomials, tf
 from designs.loops import (FilteredBlock, cascade_blocks, cascade_plants, cascade_poles, low_frequency_model,
                            place_pair, successive_loop_closure, zero_cancelling_design, zero_cancelling_filter)
 from designs.pid import PID

@@ -151,6 +151,7 @@ def test_with_gains_equals_a_block_built_with_them(arm):
     for y in (0.1, 0.12, 0.2):
         (xa, ua), (xb, ub) = changed.step(xc, [y], [0.5]), fresh.step(xc, [y], [0.5])
         np.testing.assert_allclose(ua, ub, rtol=1e-14)
+        np.testing.assert_allclose(xa, xb, rtol=1e-14)
         xc = xa
 
 

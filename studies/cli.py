@@ -1,0 +1,255 @@
+"""python -m studies: every controller on every plant, in tables, plots and animations.
+
+Runs the six case studies (or the plants named), prints each study's homework
+answers and errata, and writes OUT/<plant>/ (tables, answers, plots,
+animations), OUT/summary.md and OUT/index.html. Exit status 2 on bad
+arguments, 1 when a run fails, 0 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from . import NAMES, SCENARIO_NAMES, get
+
+#: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
+#: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, and their scenarios.
+FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 12_000, "python_scenarios": None, "python_budget": 30.0}
+QUICK = {"mc": 10, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",), "python_budget": 5.0}
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of samples, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"the number of samples must be >= 0, got {value}")
+    return value
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m studies", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  python -m studies --quick\n  python -m studies arm --scenario step --mc 500 --out DIR\n"
+               "  python -m studies --list")
+    p.add_argument("plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(NAMES)})")
+    p.add_argument("--scenario", action="append", metavar="NAME",
+                   help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}")
+    p.add_argument("--mc", type=_count, metavar="N",
+                   help=f"Monte Carlo samples for block controllers, one batched map (default {FULL['mc']}, "
+                        f"--quick {QUICK['mc']}; 0 skips the Monte Carlo)")
+    p.add_argument("--mc-python", type=_count, metavar="N",
+                   help=f"Monte Carlo samples for controllers simulated step by step, such as MPC (default "
+                        f"{FULL['mc_python']}, --quick {QUICK['mc_python']})")
+    p.add_argument("--mpc-budget", type=float, metavar="SECONDS",
+                   help="compute time each controller that optimizes every step may spend per plant; past it "
+                        f"its remaining rows say so (default {FULL['python_budget']:g}, --quick "
+                        f"{QUICK['python_budget']:g})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the parameter samples and the noise (default 0)")
+    p.add_argument("--out", default="results", metavar="DIR", help="output folder (default results/)")
+    p.add_argument("--quick", action="store_true",
+                   help=f"{QUICK['mc']} Monte Carlo samples, only the step for controllers that optimize each step "
+                        "(MPC), lighter plots and animations")
+    p.add_argument("--jobs", type=int, default=2, metavar="N",
+                   help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
+                        "everything in this process)")
+    p.add_argument("--list", action="store_true", help="list plants, scenarios and controllers, run nothing")
+    p.add_argument("--provider", action="append", default=[], metavar="MODULE:FUNCTION",
+                   help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}")
+    p.add_argument("--strict", action="store_true", help="fail on a provider or controller error instead of "
+                                                         "noting it in the tables")
+    p.add_argument("--quiet", action="store_true", help="do not print the homework answers (still written)")
+    return p
+
+
+class Progress:
+    """One progress bar over every plant's simulations on a terminal; occasional lines otherwise (logs, CI).
+
+    `update(plant, done, total, text)` is called after each simulation of a plant;
+    the bar counts the simulations of the plants started so far.
+    """
+
+    def __init__(self, plants, stream=sys.stderr, width: int = 28, every: float = 10.0):
+        self.plants, self.stream, self.width, self.every = list(plants), stream, width, every
+        self.tty = stream.isatty()
+        self.started = time.perf_counter()
+        self.last = -float("inf")
+        self.counts: dict = {}
+
+    def update(self, plant: str, done: int, total: int, text: str) -> None:
+        self.counts[plant] = (done, total)
+        done_all = sum(d for d, _ in self.counts.values())
+        total_all = sum(t for _, t in self.counts.values())
+        finished = sum(d == t for d, t in self.counts.values())
+        elapsed = time.perf_counter() - self.started
+        head = f"{finished}/{len(self.plants)} plants, {done_all}/{total_all} runs, {elapsed:6.1f} s"
+        if self.tty:
+            filled = int(self.width * done_all / max(total_all, 1))
+            line = f"\r[{'#' * filled}{'-' * (self.width - filled)}] {head}  {text}"
+            self.stream.write(line[:150].ljust(110))
+            self.stream.flush()
+        elif elapsed - self.last >= self.every or done == total:
+            self.last = elapsed
+            self.stream.write(f"{head}: {text}\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _scenarios(values, p: argparse.ArgumentParser):
+    if not values:
+        return None
+    names = [n.strip() for v in values for n in v.split(",") if n.strip()]
+    unknown = [n for n in names if n not in SCENARIO_NAMES]
+    if unknown:
+        p.error(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
+    return names
+
+
+def _list(plants, providers) -> str:
+    import models
+
+    from .runner import design_controllers
+
+    lines = ["plants: " + ", ".join(NAMES), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
+    for name in plants:
+        study = get(name)
+        known = models.perturbed(models.get(name), study.known_rel, 1.0)
+        found, notes = design_controllers(study, known, list(study.providers) + providers)
+        lines.append(f"{name}: {study.case.source}")
+        lines.append("  scenarios: " + ", ".join(f"{s.name} ({s.title})" for s in study.scenarios))
+        lines.append("  controllers: " + (", ".join(found) if found else "none available yet"))
+        lines += [f"  note: {n}" for n in notes]
+    return "\n".join(lines)
+
+
+#: Plants in decreasing cost, so that parallel jobs finish together.
+COST_ORDER = ("crane", "satellite", "pendulum", "ballbeam", "uuv", "arm")
+
+
+def _run_plant(name: str, settings: dict, out: str, quiet: bool, queue=None) -> dict:
+    """Run and write one study; returns what the command prints (picklable, for --jobs)."""
+    from . import run_study
+    from .answers import format_answers
+
+    study = get(name)
+    progress = None if queue is None else (lambda done, total, text: queue.put((name, done, total, text)))
+    result = run_study(study, out=out, progress=progress, **settings)
+    return {"name": name, "answers": None if quiet else format_answers(study, result.answers, result.plant.title),
+            "controllers": len(result.controllers), "rows": len(result.table), "timing": result.timing,
+            "notes": list(result.notes)}
+
+
+def _report(done: dict, out: str) -> None:
+    timing = done["timing"]
+    print(f"{done['name']}: {done['controllers']} controllers, {done['rows']} rows; simulations "
+          f"{timing['total_s']:.1f} s, files {timing.get('files_s', float('nan')):.1f} s "
+          f"-> {os.path.join(out, done['name'], 'table.md')}", file=sys.stderr)
+    for note in done["notes"]:
+        if not ("not importable yet" in note or "() yet" in note):
+            print(f"  note: {note}", file=sys.stderr)
+
+
+class _Inline:
+    """A queue stand-in for running plants in this process: puts go straight to the progress bar."""
+
+    def __init__(self, progress: Progress):
+        self.progress = progress
+
+    def put(self, item) -> None:
+        self.progress.update(*item)
+
+
+def _run_all(plants, settings: dict, providers: list, out: str, quiet: bool, jobs: int) -> list:
+    progress = Progress(plants)
+    order = [p for p in COST_ORDER if p in plants]
+    per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in order}
+    finished = []
+    try:
+        if jobs == 1:
+            for name in plants:
+                finished.append(_run_plant(name, per_plant[name], out, quiet, _Inline(progress)))
+            return finished
+        import concurrent.futures
+        import multiprocessing
+        import queue as queue_module
+
+        context = multiprocessing.get_context("spawn")
+        with context.Manager() as manager, \
+                concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
+            messages = manager.Queue()
+            pending = {pool.submit(_run_plant, name, per_plant[name], out, quiet, messages) for name in order}
+            while pending:
+                try:
+                    progress.update(*messages.get(timeout=0.2))
+                except queue_module.Empty:
+                    pass
+                done = {f for f in pending if f.done()}
+                for future in done:
+                    finished.append(future.result())
+                pending -= done
+            while not messages.empty():
+                progress.update(*messages.get())
+        return finished
+    finally:
+        progress.close()
+
+
+def main(argv=None) -> int:
+    p = parser()
+    args = p.parse_args(argv)
+    plants = args.plants or list(NAMES)
+    unknown = [name for name in plants if name not in NAMES]
+    if unknown:
+        p.error(f"unknown plant {unknown[0]!r}; valid plants: {', '.join(NAMES)}")
+    plants = list(dict.fromkeys(plants))
+    scenarios = _scenarios(args.scenario, p)
+    for spec in args.provider:
+        if spec.count(":") != 1 or not all(spec.split(":")):
+            p.error(f"--provider needs MODULE:FUNCTION, got {spec!r}")
+    if args.jobs < 1:
+        p.error(f"--jobs must be >= 1, got {args.jobs}")
+    if args.mpc_budget is not None and not args.mpc_budget > 0:
+        p.error(f"--mpc-budget must be > 0 seconds, got {args.mpc_budget}")
+    if args.list:
+        print(_list(plants, args.provider))
+        return 0
+    defaults = dict(QUICK if args.quick else FULL)
+    jobs = min(args.jobs, len(plants))
+    settings = {"scenarios": scenarios, "mc": defaults["mc"] if args.mc is None else args.mc,
+                "mc_python": defaults["mc_python"] if args.mc_python is None else args.mc_python,
+                "mc_python_steps": defaults["mc_python_steps"], "python_scenarios": defaults["python_scenarios"],
+                "python_budget": defaults["python_budget"] if args.mpc_budget is None else args.mpc_budget,
+                "seed": args.seed, "quick": args.quick, "strict": args.strict, "threads": max(1, 2 // jobs)}
+    if args.mc_python is not None:
+        settings["mc_python_steps"] = 10**9  # an explicit --mc-python is not capped by simulated steps
+
+    from . import writers
+
+    try:
+        writers.check_writable(args.out)
+    except OSError as err:
+        p.error(str(err))
+    started = time.perf_counter()
+    try:
+        finished = _run_all(plants, settings, args.provider, args.out, args.quiet, jobs)
+    except Exception as err:
+        print(f"python -m studies: failed: {type(err).__name__}: {err}", file=sys.stderr)
+        return 1
+    for done in sorted(finished, key=lambda d: NAMES.index(d["name"])):
+        if done["answers"]:
+            print(done["answers"], flush=True)
+        _report(done, args.out)
+    writers.write_summary(args.out, NAMES)
+    writers.write_index(args.out, NAMES)
+    elapsed = time.perf_counter() - started
+    print(f"wrote {os.path.join(args.out, 'index.html')} and {os.path.join(args.out, 'summary.md')}; "
+          f"total {elapsed:.1f} s with {jobs} job{'s' if jobs > 1 else ''}", file=sys.stderr)
+    return 0

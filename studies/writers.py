@@ -1,0 +1,498 @@
+"""The one writer: tables (CSV, Markdown, HTML), JSON and every file a study leaves.
+
+Every file is written atomically: into a temporary file in the destination
+folder, flushed, then renamed over the destination (`os.replace`), so an
+interrupted run leaves either the previous file or the new one, never half
+of one.
+
+JSON conventions (answers.json): SI units, angles in rad; a complex number is
+the pair ``[re, im]``; non-finite numbers are the strings ``"inf"``,
+``"-inf"`` and ``"nan"`` (JSON has no infinity, and ``null`` would lose the
+sign); numpy scalars and arrays become numbers and nested lists; a SISO
+transfer function becomes ``{"num": [...], "den": [...]}`` in descending powers
+of s (or z) and a state-space model ``{"A": ..., "B": ..., "C": ..., "D": ...}``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import html
+import json
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+JSON_CONVENTIONS = ("SI units, angles in rad; complex numbers as [re, im]; non-finite numbers as the strings "
+                    "'inf', '-inf', 'nan'; transfer functions as {num, den} in descending powers")
+
+
+# ---------------------------------------------------------------------------- atomic files
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; rename it onto `path` when the block succeeds.
+
+    For writers that want a file name (matplotlib's savefig, Pillow). The
+    temporary file keeps the destination's suffix so format detection works.
+    On an exception the temporary file is removed and `path` is untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}",
+                                   dir=path.parent)
+    os.close(handle)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with open(tmp_path, "rb+") as f:
+            os.fsync(f.fileno())
+        os.chmod(tmp_path, 0o644)
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write `text` (UTF-8) to `path` atomically; returns the path."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write `data` to `path` atomically; returns the path."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def check_writable(folder: str | os.PathLike) -> Path:
+    """Create `folder` if needed and prove a file can be written in it.
+
+    Raises
+    ------
+    OSError
+        With the folder named, when it cannot be created or written.
+    """
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle, probe = tempfile.mkstemp(prefix=".write-test.", dir=folder)
+        os.close(handle)
+        os.unlink(probe)
+    except OSError as err:
+        raise OSError(f"cannot write to the output folder {str(folder)!r}: {err.strerror or err}") from err
+    return folder
+
+
+# ---------------------------------------------------------------------------- JSON
+def to_jsonable(value: Any) -> Any:
+    """`value` as plain JSON types following the module's conventions."""
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (str, bool)) or value is None:
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return value
+    if isinstance(value, (complex, np.complexfloating)):
+        return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
+    if isinstance(value, np.ndarray):
+        return [to_jsonable(v) for v in value.tolist()] if value.ndim else to_jsonable(value.item())
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    model = _lti_as_dict(value)
+    if model is not None:
+        return to_jsonable(model)
+    raise TypeError(f"cannot write {type(value).__name__} to JSON: {value!r}")
+
+
+def _lti_as_dict(value) -> dict | None:
+    import control
+
+    if isinstance(value, control.TransferFunction) and value.issiso():
+        return {"num": np.ravel(value.num[0][0]), "den": np.ravel(value.den[0][0]),
+                **({"dt": value.dt} if value.dt else {})}
+    if isinstance(value, control.StateSpace):
+        return {"A": value.A, "B": value.B, "C": value.C, "D": value.D, **({"dt": value.dt} if value.dt else {})}
+    return None
+
+
+def dumps(value: Any) -> str:
+    """JSON text of `value` (see `to_jsonable`), indented, keys in insertion order."""
+    return json.dumps(to_jsonable(value), indent=2, allow_nan=False) + "\n"
+
+
+def write_json(path: str | os.PathLike, value: Any) -> Path:
+    return write_text(path, dumps(value))
+
+
+# ---------------------------------------------------------------------------- tables
+def format_number(value: Any, digits: int = 4) -> str:
+    """A table cell: 4 significant digits, '—' for NaN, '∞' for infinity, text as is."""
+    if value is None:
+        return "—"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    value = float(value)
+    if math.isnan(value):
+        return "—"
+    if math.isinf(value):
+        return "∞" if value > 0 else "−∞"
+    if value == 0:
+        return "0"
+    text = f"{value:.{digits}g}"
+    return text.replace("e-0", "e-").replace("e+0", "e")
+
+
+Column = tuple  # (source column, header, converter value -> cell text)
+
+
+def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
+    """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str."""
+    header = "| " + " | ".join(_escape_md(h) for _, h, _ in columns) + " |"
+    rule = "|" + "|".join("---" for _ in columns) + "|"
+    body = ["| " + " | ".join(_escape_md(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
+    return "\n".join([header, rule, *body]) + "\n"
+
+
+def html_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
+    """The same table as HTML."""
+    head = "".join(f"<th>{html.escape(h)}</th>" for _, h, _ in columns)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(fmt(row.get(key)))}</td>" for key, _, fmt in columns)
+                   + "</tr>" for row in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _escape_md(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def scaled(scale: float = 1.0, digits: int = 4) -> Callable[[Any], str]:
+    """A cell formatter multiplying numbers by `scale` (for example rad -> deg) first."""
+    def fmt(value):
+        if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+            return format_number(float(value) * scale, digits)
+        return format_number(value, digits)
+    return fmt
+
+
+def write_csv(path: str | os.PathLike, frame) -> Path:
+    """Write a pandas DataFrame as CSV (full precision, 'inf' for infinity, empty for NaN)."""
+    return write_text(path, frame.to_csv(index=False, float_format="%.10g"))
+
+
+# ---------------------------------------------------------------------------- a study's files
+def _unit_columns(tracked_unit: str, input_unit: str) -> list:
+    """(column, header, formatter) of the Markdown study table; angles shown in degrees."""
+    angle = tracked_unit == "rad"
+    scale = 180 / math.pi if angle else 1.0
+    unit = "deg" if angle else tracked_unit
+    percent = scaled(100.0)
+    return [
+        ("controller", "controller", format_number),
+        ("scenario", "scenario", format_number),
+        ("status", "status", format_number),
+        ("rise_time_s", "rise (s)", scaled()),
+        ("settling_time_s", "settling 2 % (s)", scaled()),
+        ("overshoot_pct", "overshoot (%)", scaled()),
+        ("ss_error", f"ss error ({unit})", scaled(scale)),
+        ("iae", f"IAE ({unit} s)", scaled(scale)),
+        ("itae", f"ITAE ({unit} s²)", scaled(scale)),
+        ("peak_u", f"peak |u| ({input_unit})", scaled()),
+        ("u_limit", f"limit ({input_unit})", scaled()),
+        ("saturated_frac", "time at limit (%)", percent),
+        ("energy", f"energy (({input_unit})² s)", scaled()),
+        ("violation", "violation (%)", percent),
+        ("step_ms", "step (ms)", scaled()),
+        ("samples", "runs", format_number),
+    ]
+
+
+def caption(result) -> str:
+    """What every row of a study table is, in words (the honesty statement of the table)."""
+    study, plant, options = result.study, result.plant, result.options
+    uncertain = ", ".join(plant.uncertain_params)
+    mc = next((s for s in study.scenarios if s.monte_carlo), None)
+    text = (f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
+            "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
+            f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
+            "period, the actuator clipped at its limit), never a linear model alone. The simulated plant has the text's nominal parameters; "
+            f"the controllers are designed from the model known to them, with {uncertain} "
+            f"{100 * study.known_rel:+g} %.")
+    if mc is not None:
+        text += (f" Monte Carlo rows (scenario `mc`): worst case over the samples (uniform ±{100 * mc.rel:g} % on "
+                 f"{uncertain}, seed {options.seed}); block controllers run as one batched CasADi map on "
+                 f"{options.mc} samples, controllers that optimize each step (MPC) one by one on the first "
+                 f"{min(options.mc, options.mc_python)} at most, and at most {options.mc_python_steps} simulated "
+                 "steps in all (the `runs` column gives the count); spreads are in table.csv (`*_std`).")
+    return text
+
+
+DEFINITIONS = (
+    "Definitions (`models.metrics`): rise 10→90 % of the commanded step; settling: time after which the tracked "
+    "coordinate stays within 2 % of the step around the command (∞: not settled by the end); overshoot in % of "
+    "the step; ss error: |command − mean over the last 5 %|; IAE = ∫|e| dt, ITAE = ∫(t − t_step)|e| dt; a series "
+    "of steps reports its worst step; peak |u| of the command, time at limit: commands within 0.1 % of or beyond "
+    "the limit; energy ∫u² dt of the delivered input; violation: largest excess of the command over the limit or "
+    "of a state bound, in % of the limit or bound range; step: controller compute time per sample. CSV columns "
+    "are in SI units (rad, m, N, N m); this Markdown shows angles in degrees.")
+
+
+def _loop_rows(loops_found: dict, specs, checks: dict) -> list:
+    rows = []
+    for label, found in loops_found.items():
+        for which, lp in found.items():
+            poles = lp.s_plane(lp.closed_loop_poles(1.0))
+            row = {"controller": label, "loop": which, **lp.margins(),
+                   "slowest_pole_real": float(np.max(poles.real)) if poles.size else math.nan,
+                   "stable": bool(np.all(np.abs(lp.closed_loop_poles(1.0)) < 1))}
+            for spec in specs:
+                if spec.loop == which:
+                    for name, verdict in checks.get((label, spec.item), {}).items():
+                        row[f"{spec.item} {name}"] = verdict
+            rows.append(row)
+    return rows
+
+
+def write_study(result, out: str | os.PathLike) -> dict:
+    """Write everything a study produced into ``out/<plant>/``; returns {kind: file name}.
+
+    Files: table.csv, table.md, answers.json, answers.md, monte_carlo.csv,
+    loops.csv, <scenario>.png, monte_carlo.png, bode_<loop>.png,
+    root_locus.png, poles.png, animation.gif, animation.html, run.json.
+    """
+    import pandas as pd
+
+    from . import animation, answers as answers_module, loops as loops_module, plots
+
+    started = time.perf_counter()
+    folder = Path(out) / result.study.plant
+    folder.mkdir(parents=True, exist_ok=True)
+    study, plant, quick = result.study, result.plant, result.options.quick
+    dpi = 72 if quick else 100
+    files: dict = {}
+    notes = list(result.notes)
+
+    write_csv(folder / "table.csv", result.table)
+    files["table.csv"] = "table.csv"
+    if len(result.samples):
+        write_csv(folder / "monte_carlo.csv", result.samples)
+        files["monte_carlo.csv"] = "monte_carlo.csv"
+    write_json(folder / "answers.json", {"_conventions": JSON_CONVENTIONS, **result.answers})
+    write_text(folder / "answers.md", answers_module.format_answers(study, result.answers, plant.title))
+    files |= {"answers.json": "answers.json", "answers.md": "answers.md"}
+
+    for scenario in study.scenarios:
+        if not scenario.monte_carlo and plots.responses(result, scenario.name, folder / f"{scenario.name}.png", dpi):
+            files[f"{scenario.name}.png"] = f"{scenario.name}.png"
+    if plots.envelopes(result, folder / "monte_carlo.png", dpi):
+        files["monte_carlo.png"] = "monte_carlo.png"
+
+    _, base = _tracked_value(result)
+    found, loop_notes = loops_module.analyse(plant, study.case, result.controllers, base, result.runs,
+                                             result.truths)
+    notes += loop_notes
+    checks = {}
+    for spec in study.loops:
+        baseline = found.get(spec.baseline, {}).get(spec.loop) if spec.baseline else None
+        for label, loops_of in found.items():
+            if spec.loop in loops_of:
+                checks[(label, spec.item)] = loops_module.spec_check(loops_of[spec.loop], spec, baseline)
+        verdicts = {label: checks[(label, spec.item)] for label in found if (label, spec.item) in checks}
+        name = f"bode_{spec.loop}.png"
+        if plots.bode(result, found, spec, folder / name, verdicts, dpi):
+            files[name] = name
+    if not any(spec.loop == "input" for spec in study.loops):
+        from .runner import LoopSpec
+
+        plain = LoopSpec("", "input", design="", baseline=None)
+        if plots.bode(result, found, plain, folder / "bode_input.png", None, dpi):
+            files["bode_input.png"] = "bode_input.png"
+    loop_rows = _loop_rows(found, study.loops, checks)
+    if loop_rows:
+        write_csv(folder / "loops.csv", pd.DataFrame(loop_rows))
+        files["loops.csv"] = "loops.csv"
+    if plots.root_loci(result, found, folder / "root_locus.png", dpi, gains=100 if quick else 300):
+        files["root_locus.png"] = "root_locus.png"
+    if plots.pole_map(result, found, folder / "poles.png", dpi):
+        files["poles.png"] = "poles.png"
+
+    best = result.best("step")
+    if best is not None and (best, "step") in result.runs:
+        run = result.runs[(best, "step")]
+        text = (f"{best}, the lowest ITAE in the step scenario; nonlinear simulation of the text's step "
+                f"({study.case.source}).")
+        animation.write_gif(folder / "animation.gif", plant, run, best, max_frames=30 if quick else 100,
+                            dpi=64 if quick else 80)
+        animation.write_html(folder / "animation.html", plant, run, best, text, max_frames=400 if quick else 800)
+        files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
+    else:
+        notes.append("no animation: no controller completed the step scenario")
+
+    result.timing["files_s"] = time.perf_counter() - started
+    write_text(folder / "table.md", _study_markdown(result, notes, loop_rows))
+    files["table.md"] = "table.md"
+    write_json(folder / "run.json", {
+        "plant": plant.name, "title": plant.title, "numeral": study.case.numeral, "best": best,
+        "settings": {"mc": result.options.mc, "mc_python": result.options.mc_python,
+                     "mc_python_steps": result.options.mc_python_steps,
+                     "python_scenarios": result.options.python_scenarios, "seed": result.options.seed,
+                     "quick": quick, "scenarios": [s.name for s in study.scenarios
+                                                   if result.options.scenarios is None
+                                                   or s.name in result.options.scenarios]},
+        "timing": result.timing, "notes": notes, "files": files, "tracked": study.case.tracked,
+        "tracked_unit": study.tracked_unit, "input_unit": study.input_unit})
+    return files
+
+
+def _tracked_value(result):
+    from .runner import tracked_equilibrium
+
+    return tracked_equilibrium(result.plant, result.study.case)
+
+
+def _study_markdown(result, notes: list, loop_rows: list) -> str:
+    study, plant = result.study, result.plant
+    columns = _unit_columns(study.tracked_unit, study.input_unit)
+    rows = result.table.to_dict("records")
+    parts = [f"# {plant.title}: controllers compared", "", caption(result), "",
+             markdown_table(rows, columns), DEFINITIONS, ""]
+    mc_rows = [r for r in rows if r["scenario"] == "mc"]
+    if mc_rows:
+        angle = study.tracked_unit == "rad"
+        scale, unit = (180 / math.pi, "deg") if angle else (1.0, study.tracked_unit)
+        parts += ["## Monte Carlo: worst case and spread (sample standard deviation)", "",
+                  markdown_table(mc_rows, [
+                      ("controller", "controller", format_number), ("samples", "samples", format_number),
+                      ("diverged_samples", "diverged", format_number),
+                      ("settling_time_s", "settling worst (s)", scaled()),
+                      ("settling_time_s_std", "settling std (s)", scaled()),
+                      ("overshoot_pct", "overshoot worst (%)", scaled()),
+                      ("overshoot_pct_std", "overshoot std (%)", scaled()),
+                      ("iae", f"IAE worst ({unit} s)", scaled(scale)),
+                      ("iae_std", f"IAE std ({unit} s)", scaled(scale)),
+                      ("peak_u", f"peak |u| worst ({study.input_unit})", scaled()),
+                      ("step_ms", "step (ms)", scaled())])]
+    if loop_rows:
+        keys = [k for k in loop_rows[0] if k not in ("controller", "loop")]
+        extra = sorted({k for r in loop_rows for k in r} - set(loop_rows[0]))
+        parts += ["## Linear loop analysis (exact linearization where each block holds the plant at rest)", "",
+                  markdown_table(loop_rows, [("controller", "controller", format_number),
+                                             ("loop", "loop", format_number)]
+                                 + [(k, k.replace("_", " "), format_number) for k in keys + extra]),
+                  "Margins from `control.stability_margins` of the discrete loop L(z) (closed loop 1 + L = 0); "
+                  "slowest pole: largest real part of s = ln(z)/Ts of the closed loop.", ""]
+    timing = ", ".join(f"{k[:-2].replace('_', ' ')} {v:.1f} s" for k, v in result.timing.items())
+    timing = timing.replace("total", "simulations in all").replace("files", "plots, animations and files")
+    parts += ["## Notes", ""] + [f"- {n}" for n in notes or ["none"]] + ["", f"Run time: {timing}.", ""]
+    return "\n".join(parts)
+
+
+# ---------------------------------------------------------------------------- across studies
+def _read_studies(out: Path, names) -> list:
+    import pandas as pd
+
+    found = []
+    for name in names:
+        folder = out / name
+        if (folder / "run.json").exists() and (folder / "table.csv").exists():
+            info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
+            table = pd.read_csv(folder / "table.csv", keep_default_na=True)
+            found.append((name, info, table))
+    return found
+
+
+def _cell(table, controller: str, scenario: str = "step") -> str:
+    rows = table[(table.controller == controller) & (table.scenario == scenario)]
+    if rows.empty:
+        return "—"
+    row = rows.iloc[0]
+    if row.status != "ok":
+        return str(row.status)
+    return f"{format_number(row.settling_time_s, 3)} s / {format_number(row.overshoot_pct, 2)} %"
+
+
+def write_summary(out: str | os.PathLike, names) -> Path:
+    """OUT/summary.md across the studies found in `out` (read back from their table.csv and run.json)."""
+    out = Path(out)
+    studies = _read_studies(out, names)
+    labels = []
+    for _, _, table in studies:
+        labels += [c for c in table.controller.unique() if c not in labels]
+    lines = ["# Summary: every controller on every plant", "",
+             "Each cell: 2 % settling time / overshoot of the text's step on the nonlinear plant (from "
+             "OUT/<plant>/table.csv; ∞: not settled by the end of the run; — : controller not provided "
+             "for that plant).", ""]
+    columns = [("controller", "controller", format_number)] + [(n, n, format_number) for n, _, _ in studies]
+    rows = [{"controller": label, **{n: _cell(t, label) for n, _, t in studies}} for label in labels]
+    lines += [markdown_table(rows, columns)]
+    lines += ["## Per plant", ""]
+    per = [{"plant": n, "best": info.get("best") or "—", "controllers": int(t.controller.nunique()),
+            "diverged": int((t.status.astype(str).str.contains("diverged")).sum()),
+            "failed": int((t.status.astype(str).str.startswith("failed")).sum()),
+            "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
+            "settings": f"mc {info['settings']['mc']}, seed {info['settings']['seed']}"
+                        + (", quick" if info["settings"]["quick"] else "")} for n, info, t in studies]
+    lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
+                                   for k in ("plant", "best", "controllers", "diverged", "failed", "time",
+                                             "settings")])]
+    common = set.intersection(*(set(info["notes"]) for _, info, _ in studies)) if len(studies) > 1 else set()
+    if common:
+        first = studies[0][1]["notes"]
+        lines += ["", "Notes on every plant:", ""] + [f"- {note}" for note in first if note in common]
+    for n, info, _ in studies:
+        own = [note for note in info["notes"] if note not in common]
+        if own:
+            lines += ["", f"Notes on {n}:", ""] + [f"- {note}" for note in own]
+    return write_text(out / "summary.md", "\n".join(lines) + "\n")
+
+
+def write_index(out: str | os.PathLike, names) -> Path:
+    """OUT/index.html linking every table, answer file, plot and animation found in `out`."""
+    out = Path(out)
+    studies = _read_studies(out, names)
+    body = ["<h1>Case studies: every controller on every plant</h1>",
+            '<p>Tables, plots and animations from nonlinear closed-loop simulations. '
+            '<a href="summary.md">summary.md</a></p>', "<ul>"]
+    body += [f'<li><a href="#{n}">{html.escape(info["title"])}</a></li>' for n, info, _ in studies]
+    body.append("</ul>")
+    for n, info, table in studies:
+        files = info["files"]
+        links = " · ".join(f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
+                           for f in files.values() if not f.endswith(".png") and not f.endswith(".gif"))
+        body += [f'<h2 id="{n}">{html.escape(info["title"])}</h2>', f"<p>{links}</p>"]
+        if info.get("best"):
+            body.append(f'<p>Best in the step scenario (lowest ITAE): {html.escape(info["best"])}</p>')
+        if "animation.gif" in files:
+            body.append(f'<p><a href="{n}/animation.html"><img src="{n}/animation.gif" '
+                        f'alt="{html.escape(info["title"])} animation"></a></p>')
+        step_rows = table[table.scenario == "step"].to_dict("records")
+        if step_rows:
+            columns = _unit_columns(info["tracked_unit"], info["input_unit"])
+            body.append(html_table(step_rows, [c for c in columns if c[0] != "scenario"]))
+        for f in files.values():
+            if f.endswith(".png"):
+                body.append(f'<figure><img src="{n}/{html.escape(f)}" alt="{html.escape(f)}" loading="lazy">'
+                            f"<figcaption>{html.escape(f)}</figcaption></figure>")
+    page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Case studies</title><style>"
+            "body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1100px}"
+            "table{border-collapse:collapse;font-size:0.8em}td,th{border:1px solid #ccc;padding:2px 6px}"
+            "img{max-width:100%}figure{margin:1em 0}</style></head><body>\n"
+            + "\n".join(body) + "\n</body></html>\n")
+    return write_text(out / "index.html", page)

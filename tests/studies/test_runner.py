@@ -1,0 +1,191 @@
+"""The runner: providers plugged in or skipped, rows from the nonlinear plant, seeded Monte Carlo,
+divergence reported as such, noise levels of full-state controllers."""
+
+import math
+
+import numpy as np
+import pytest
+
+import models
+import studies
+from designs.discrete import dirty_derivative
+from models import metrics
+from studies import runner
+
+EXAMPLE = "example_providers:controllers"
+STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
+
+
+def arm_study(**changes):
+    base = studies.get("arm")
+    fields = {k: getattr(base, k) for k in base.__dataclass_fields__}
+    return runner.Study(**(fields | changes))
+
+
+def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
+    study = arm_study(providers=("no_such_package_for_studies.designs:controllers", "json:controllers",
+                                 "example_providers:failing", EXAMPLE))
+    result = runner.run_study(study, STEP_ONLY)
+    notes = "\n".join(result.notes)
+    assert "no_such_package_for_studies.designs:controllers: skipped, module" in notes
+    assert "not importable yet" in notes
+    assert "json:controllers: skipped, json has no controllers() yet" in notes
+    assert "example_providers:failing: failed (RuntimeError: no design for arm" in notes
+    # The declared order first (PD, LQR, linear MPC), then the provider's other labels.
+    assert list(result.table.controller) == ["PD", "LQR", "linear MPC", "LQR fast", "LQR slow"]
+    assert set(result.table.status) == {"ok"}
+    with pytest.raises(RuntimeError, match="no design for arm"):
+        runner.run_study(study, runner.Options(scenarios=("step",), mc=0, strict=True))
+
+
+def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
+    """Each recorded sample, integrated through CVODES (a different integrator) from the recorded state
+    under the recorded, clipped command, lands on the next recorded state; a linear model does not."""
+    study = arm_study(providers=(EXAMPLE,))
+    result = runner.run_study(study, STEP_ONLY)
+    run = result.runs[("LQR", "step")]
+    plant = result.plant
+    applied = np.clip(run.u, -plant.input_limit, plant.input_limit)
+    for k in range(0, len(applied), 7):
+        one = models.simulate(plant, run.x[k], applied[k:k + 1], run.t[1] - run.t[0], method="adaptive")
+        # RK4 with 2 sub-steps of 5 ms against CVODES at 1e-12: a local error of a few 1e-9.
+        np.testing.assert_allclose(one.x[-1], run.x[k + 1], rtol=1e-7, atol=1e-9)
+    lin = plant.linearize().discretize(run.t[1])
+    x = run.x[0] - lin.xe
+    linear = [x]
+    for u in applied:
+        x = lin.A @ x + lin.B @ (u - lin.ue)
+        linear.append(x)
+    assert np.max(np.abs(np.array(linear) + lin.xe - run.x)) > 0.05  # gravity at 50 deg is not linear
+    row = result.table[(result.table.controller == "LQR") & (result.table.scenario == "step")].iloc[0]
+    expected = metrics.run_metrics(run, "theta")
+    assert row.iae == expected["iae"] and row.peak_u == expected["peak_u"]
+
+
+def test_monte_carlo_is_reproducible_from_its_seed():
+    study = arm_study(providers=(EXAMPLE,))
+    options = runner.Options(scenarios=("mc",), mc=6, mc_python=3, seed=3)
+    first = runner.run_study(study, options)
+    again = runner.run_study(study, options)
+    other = runner.run_study(study, runner.Options(scenarios=("mc",), mc=6, mc_python=3, seed=4))
+    columns = [c for c in first.samples.columns if c not in ("step_ms", "step_ms_max")]
+    assert first.samples[columns].equals(again.samples[columns])
+    assert not np.allclose(first.samples.iae, other.samples.iae)
+    # The samples are the seeded ±5 % draws of models.sample_params, the same for every controller;
+    # the controller simulated step by step gets the first mc_python of them.
+    names = list(first.plant.params)
+    drawn = models.sample_params(first.plant, 6, seed=3)
+    for label, count in (("LQR", 6), ("linear MPC", 3)):
+        mine = first.samples[first.samples.controller == label]
+        np.testing.assert_array_equal(mine[names].to_numpy(), drawn[:count])
+    row = first.table[first.table.controller == "LQR"].iloc[0]
+    assert row.samples == 6 and row.iae == first.samples[first.samples.controller == "LQR"].iae.max()
+
+
+def test_python_controllers_get_fewer_samples_and_report_solver_status():
+    study = arm_study(providers=(EXAMPLE,))
+    steps = int(round(study.case.duration / 0.01))
+    options = runner.Options(scenarios=("step", "mc"), mc=50, mc_python=10, mc_python_steps=3 * steps)
+    result = runner.run_study(study, options)
+    table = result.table.set_index(["controller", "scenario"])
+    assert table.loc[("linear MPC", "mc"), "samples"] == 3  # capped by simulated steps
+    assert table.loc[("LQR", "mc"), "samples"] == 50
+    # The example controller reports "max_iter_reached" on every 50th step: 10 of 500.
+    assert table.loc[("linear MPC", "step"), "solver_issues"] == 10
+    assert math.isnan(table.loc[("LQR", "step"), "solver_issues"])
+    skipped = runner.run_study(study, runner.Options(scenarios=("step", "noise"), mc=0,
+                                                     python_scenarios=("step",)))
+    row = skipped.table.set_index(["controller", "scenario"]).loc[("linear MPC", "noise")]
+    assert row.status.startswith("skipped") and math.isnan(row.iae)
+
+
+def test_a_diverged_run_is_reported_as_diverged_with_its_time():
+    result = runner.run_study(arm_study(providers=("example_providers:diverging",)), STEP_ONLY)
+    row = result.table.iloc[0]
+    # The example controller commands NaN from its 100th step: the state is lost at t = 1.01 s.
+    assert row.status == "diverged at t = 1.01 s"
+    assert row.diverged_at_s == pytest.approx(1.01)
+    assert all(math.isnan(row[k]) for k in metrics.METRIC_COLUMNS if k != "u_limit")
+    assert result.best() is None
+
+
+class _Reader:
+    def __init__(self, measures):
+        self.measures, self.sample_period = measures, 0.01
+
+
+def test_noise_on_a_full_state_measurement_follows_the_outputs_and_a_dirty_derivative():
+    sat = models.get("satellite")
+    noise = {"theta": 1e-3, "phi_minus_theta": 2e-3}
+    np.testing.assert_array_equal(runner.measurement_noise_std(sat, _Reader("outputs"), noise), [1e-3, 2e-3])
+    std = runner.measurement_noise_std(sat, _Reader("state"), noise)
+    # phi = theta + (phi − theta): independent noises add in variance.
+    assert std[:2] == pytest.approx([1e-3, math.hypot(1e-3, 2e-3)])
+    # Velocities: the spread a dirty derivative (σ = 0.05 s) makes of white position noise, measured.
+    rng = np.random.default_rng(1)
+    samples = rng.standard_normal(200_000) * 1e-3
+    rate, rates = 0.0, []
+    for prev, now in zip(samples[:-1], samples[1:]):
+        rate = dirty_derivative(rate, prev, now, 0.05, 0.01)
+        rates.append(rate)
+    assert std[2] == pytest.approx(np.std(rates[1000:]), rel=0.02)
+    with pytest.raises(ValueError, match="has no output"):
+        runner.measurement_noise_std(sat, _Reader("outputs"), {"phi": 1e-3})
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"mc": -1}, "mc .* must be an integer >= 0"),
+    ({"scenarios": ("step", "ramp")}, "unknown scenario 'ramp'"),
+    ({"jit": "sometimes"}, "jit must be"),
+])
+def test_bad_options_say_what_is_wrong(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        runner.Options(**kwargs)
+
+
+def test_run_returns_the_table_as_a_dataframe_with_the_documented_columns():
+    table = studies.run("uuv", scenarios=["step", "disturbance"], mc=0, providers=[EXAMPLE])
+    required = ["controller", "scenario", "rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae",
+                "itae", "peak_u", "u_limit", "saturated_frac", "energy", "violation", "step_ms"]
+    assert set(required) <= set(table.columns)
+    assert set(table.scenario) == {"step", "disturbance"} and (table.u_limit == 50.0).all()
+    # The example provider gives a few of the study's labels; the notes name the others.
+    assert any(note.startswith("not provided yet: PID,") for note in table.attrs["notes"])
+    with pytest.raises(ValueError, match="unknown plant 'crane1'"):
+        studies.run("crane1")
+
+
+@pytest.mark.parametrize("plant", studies.NAMES)
+def test_two_rk4_substeps_give_the_tables_of_ten(plant):
+    """The studies integrate with 2 RK4 sub-steps per sample; 10 (the simulator's default) change
+    no metric of the step by more than 1e-5 relative."""
+    base = studies.get(plant)
+    fields = {k: getattr(base, k) for k in base.__dataclass_fields__} | {"providers": ("example_providers:lqr_only",)}
+    rows = [runner.run_study(runner.Study(**(fields | {"substeps": n})), STEP_ONLY).table.iloc[0] for n in (2, 10)]
+    for key in ("rise_time_s", "settling_time_s", "overshoot_pct", "iae", "itae", "peak_u", "energy"):
+        assert rows[0][key] == pytest.approx(rows[1][key], rel=1e-5, abs=1e-9), key
+
+
+def test_a_design_with_its_own_actuator_runs_on_it():
+    """IV.11 assumes 250 N m thrusters: that row's plant has them, the others keep 50 N m."""
+    base = studies.get("uuv")
+    fields = {k: getattr(base, k) for k in base.__dataclass_fields__}
+    study = runner.Study(**(fields | {"providers": ("example_providers:with_own_actuator",)}))
+    result = runner.run_study(study, STEP_ONLY)
+    table = result.table.set_index("controller")
+    assert table.loc["LQR", "u_limit"] == 50.0 and table.loc["lead-lag (IV.11)", "u_limit"] == 250.0
+    fast, slow = (result.runs[(label, "step")] for label in ("lead-lag (IV.11)", "LQR"))
+    assert np.max(np.abs(fast.u)) > 50.0  # the same law asks for more than 50 N m ...
+    assert table.loc["lead-lag (IV.11)", "rise_time_s"] < table.loc["LQR", "rise_time_s"]  # ... and gets it
+
+
+def test_a_python_controller_over_its_budget_is_reported_not_measured():
+    study = arm_study(providers=(EXAMPLE,))
+    result = runner.run_study(study, runner.Options(scenarios=("step", "noise"), mc=0, python_budget=1e-9))
+    table = result.table.set_index(["controller", "scenario"])
+    for scenario in ("step", "noise"):
+        row = table.loc[("linear MPC", scenario)]
+        assert row.status.startswith("skipped: over its budget of 1e-09 s") and math.isnan(row.iae)
+    assert table.loc[("LQR", "step"), "status"] == "ok"  # blocks have no budget
+    generous = runner.run_study(study, runner.Options(scenarios=("step",), mc=0, python_budget=1e6))
+    assert generous.table.set_index("controller").loc["linear MPC", "status"] == "ok"

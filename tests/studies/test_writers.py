@@ -1,0 +1,99 @@
+"""The writer: JSON conventions, atomic files, and the files a study leaves."""
+
+import json
+import math
+
+import control
+import numpy as np
+import pandas as pd
+import pytest
+
+from studies import writers
+
+REQUIRED_COLUMNS = ["controller", "scenario", "rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae",
+                    "itae", "peak_u", "u_limit", "saturated_frac", "energy", "violation", "step_ms"]
+
+
+def test_json_conventions():
+    value = {"kp": np.float64(0.3), "n": np.int64(3), "ok": np.bool_(True), "poles": np.array([-1 + 2j, -1 - 2j]),
+             "inf": math.inf, "minus": -np.inf, "nan": float("nan"), "K": np.array([[1.5, 2.0]]),
+             "G": control.tf([2.0], [1.0, 3.0]), 4: (1, 2.5)}
+    decoded = json.loads(writers.dumps(value))
+    assert decoded == {"kp": 0.3, "n": 3, "ok": True, "poles": [[-1.0, 2.0], [-1.0, -2.0]], "inf": "inf",
+                       "minus": "-inf", "nan": "nan", "K": [[1.5, 2.0]], "G": {"num": [2.0], "den": [1.0, 3.0]},
+                       "4": [1, 2.5]}
+    with pytest.raises(TypeError, match="cannot write object"):
+        writers.dumps({"x": object()})
+
+
+def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    target = tmp_path / "table.csv"
+    writers.write_text(target, "old\n")
+    with pytest.raises(RuntimeError, match="interrupted"):
+        with writers.atomic_path(target) as tmp:
+            tmp.write_text("half a ta")
+            raise RuntimeError("interrupted")
+    assert target.read_text() == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
+    writers.write_text(target, "new\n")
+    assert target.read_text() == "new\n"
+
+
+def test_check_writable_names_the_folder(tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    with pytest.raises(OSError, match="cannot write to the output folder .*a-file/out"):
+        writers.check_writable(blocker / "out")
+    assert writers.check_writable(tmp_path / "new" / "folder").is_dir()
+
+
+def test_format_number():
+    assert [writers.format_number(v) for v in (math.nan, math.inf, 0.0, 1234567.0, 0.000123456, 3, "x")] == \
+        ["—", "∞", "0", "1.235e6", "0.0001235", "3", "x"]
+
+
+def test_a_study_writes_every_file(arm_study):
+    result, out = arm_study
+    folder = out / "arm"
+    for name in ("table.csv", "table.md", "answers.json", "answers.md", "monte_carlo.csv", "loops.csv", "step.png",
+                 "steps.png", "disturbance.png", "noise.png", "monte_carlo.png", "bode_input.png", "root_locus.png",
+                 "poles.png", "animation.gif", "animation.html", "run.json"):
+        assert (folder / name).stat().st_size > 0, name
+    for name in ("summary.md", "index.html"):
+        assert (out / name).stat().st_size > 0
+    assert not list(out.rglob("*.tmp*"))
+    table = pd.read_csv(folder / "table.csv")
+    assert set(REQUIRED_COLUMNS) <= set(table.columns)
+    assert len(table) == len(result.table) == 5 * len(result.controllers)
+    np.testing.assert_allclose(table.iae, result.table.iae)
+    markdown = (folder / "table.md").read_text()
+    assert "Every row is a closed-loop simulation of the nonlinear" in markdown and "never a linear model" in markdown
+    assert "ss error (deg)" in markdown  # angles in degrees, labelled
+    lqr = result.table[(result.table.controller == "LQR") & (result.table.scenario == "step")].iloc[0]
+    assert f"| LQR | step | ok | {writers.format_number(lqr.rise_time_s)} |" in markdown
+    assert writers.format_number(math.degrees(lqr.ss_error)) in markdown
+
+
+def test_answers_json_keys_items_and_holds_hand_derived_values(arm_study):
+    _, out = arm_study
+    answers = json.loads((out / "arm" / "answers.json").read_text())
+    m, ell, g, b = 0.5, 0.3, 9.8, 0.01
+    # I.5: level arm at rest needs τe = m g ℓ / 2; I.6: θ/τ = (3/(m ℓ²)) / (s² + 3b/(m ℓ²) s).
+    assert answers["I.5"]["u_e"]["tau"] == pytest.approx(m * g * ell / 2)
+    tf = answers["I.6"]["theta/tau"]
+    assert tf["num"] == pytest.approx([3 / (m * ell**2)])
+    assert tf["den"] == pytest.approx([1.0, 3 * b / (m * ell**2), 0.0])
+    assert np.ravel(answers["I.7"]["B"]) == pytest.approx([0.0, 3 / (m * ell**2)])
+    assert any(row["item"].startswith("I.15") for row in answers["errata"])
+    assert "_conventions" in answers
+
+
+def test_summary_and_index_link_what_exists(arm_study):
+    _, out = arm_study
+    summary = (out / "summary.md").read_text()
+    assert "| controller | arm |" in summary and "| LQR |" in summary
+    index = (out / "index.html").read_text()
+    import re
+
+    for link in re.findall(r'(?:href|src)="([^"#]+)"', index):
+        assert (out / link).exists(), link
