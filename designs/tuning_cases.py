@@ -15,6 +15,9 @@ text's step with the case's input disturbance from t = 0):
   locally stable loop at the end of the run; tuning enforces them with a
   margin (`MARGIN` times the bounds) on every tuning sample, so that the
   validation samples meet the bounds themselves;
+* each gain stays within a factor `GAIN_RANGE` of the hand design's, with
+  its sign (a sign flip is a different design, and far outside the box the
+  loop diverges, where IPOPT's derivatives are NaN);
 * the actuator stays clipped at its limit inside the loop.
 
 Tuning takes from seconds (arm) to minutes (crane), so it runs offline:
@@ -46,11 +49,12 @@ from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
 START = "PID"
 LABEL = "tuned"
 REL = 0.05
-N_TUNING, TUNING_SEED = 4, 1
+N_TUNING, TUNING_SEED = 8, 1
 N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
 MIN_OVERSHOOT = 0.02
-MARGIN = 0.8
+MARGIN = 0.75
+GAIN_RANGE = 100.0
 SUBSTEPS = 2
 PLANTS = ("arm", "pendulum", "satellite", "uuv", "ballbeam", "crane")
 STORE = Path(__file__).with_name("tuned_gains.json")
@@ -89,8 +93,8 @@ def _start_cost(name, block, cost, params) -> float:
     return problem.values(problem.start())[0]
 
 
-def _measured_specs(name: str, block, params) -> tuple[Specs, dict]:
-    """Specs the tuned design must meet: the hand design's own worst response on `params`."""
+def worst_step(name: str, block, params) -> dict:
+    """Worst overshoot (fraction) and 2 % settling time (s) of `block` on the scenario over `params` rows."""
     plant, sc = models.get(name), scenario(name)
     k = plant.state_names.index(models.case(name).tracked)
     worst = {"overshoot": 0.0, "settling_time_s": 0.0}
@@ -100,10 +104,27 @@ def _measured_specs(name: str, block, params) -> tuple[Specs, dict]:
         m = metrics.step_metrics(run.t, run.x[:, k], initial=sc.x0[k], target=sc.reference)
         worst["overshoot"] = max(worst["overshoot"], m["overshoot_pct"] / 100)
         worst["settling_time_s"] = max(worst["settling_time_s"], m["settling_time_s"])
+    return worst
+
+
+def _measured_specs(name: str, block, params) -> tuple[Specs, dict]:
+    """Specs the tuned design must meet: the hand design's own worst response on `params`."""
+    worst = worst_step(name, block, params)
     settling = worst["settling_time_s"]
     specs = Specs(max_overshoot=max(worst["overshoot"], MIN_OVERSHOOT),
                   settling_time=settling if np.isfinite(settling) else None, max_spectral_abscissa=0.0)
     return specs, worst
+
+
+def gain_bounds(block) -> dict:
+    """Each gain within a factor `GAIN_RANGE` of the hand design's, keeping its sign (zero gains: ±1)."""
+    bounds = {}
+    for key, g in block.gains.items():
+        g = np.asarray(g, dtype=float)
+        low = np.where(g > 0, g / GAIN_RANGE, g * GAIN_RANGE)
+        high = np.where(g > 0, g * GAIN_RANGE, g / GAIN_RANGE)
+        bounds[key] = (np.where(g == 0, -1.0, low), np.where(g == 0, 1.0, high))
+    return bounds
 
 
 def _with_margin(specs: Specs) -> Specs:
@@ -123,17 +144,13 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True) -> dict:
     weight = ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
     cost = Cost("itae", energy_weight=weight)
     result = tune(models.get(name), block, scenario(name), specs=_with_margin(specs), cost=cost, samples=train,
-                  substeps=SUBSTEPS, max_iter=max_iter, jit=jit)
-    fresh = samples(name, N_VALIDATION, VALIDATION_SEED)
-    check = _problem(name, block, specs, cost, fresh)
-    _, hand_costs, hand_violations = check.values(check.start())
-    _, tuned_costs, tuned_violations = check.values(result.block.gain_vector()[check.free_index])
-    return {
+                  bounds=gain_bounds(block), substeps=SUBSTEPS, max_iter=max_iter, jit=jit)
+    record = {
         "plant": name, "start": START, "start_gains": _listed(block.gains), "gains": _listed(result.gains),
         "known": f"uncertain parameters +{100 * REL:g} % (models.perturbed)",
         "scenario": "the text's step with the case's input disturbance from t = 0",
         "cost": {"kind": "itae", "energy_weight": weight, "energy_share_at_start": ENERGY_SHARE},
-        "tuning_margin": MARGIN,
+        "tuning_margin": MARGIN, "gain_range": GAIN_RANGE,
         "specs": {"max_overshoot": specs.max_overshoot, "settling_time_s": specs.settling_time,
                   "settling_band": specs.settling_band, "max_spectral_abscissa": 0.0},
         "hand_measured": hand_measured,
@@ -141,13 +158,28 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True) -> dict:
                    "cost": result.cost, "improvement": result.improvement, "feasible": result.feasible,
                    "message": result.message, "iterations": result.iterations,
                    "wall_time_s": time.perf_counter() - started},
-        "validation": {"samples": N_VALIDATION, "seed": VALIDATION_SEED,
-                       "hand_mean": float(np.mean(hand_costs)), "tuned_mean": float(np.mean(tuned_costs)),
-                       "hand_worst": float(np.max(hand_costs)), "tuned_worst": float(np.max(tuned_costs)),
-                       "improvement_mean": float(1 - np.mean(tuned_costs) / np.mean(hand_costs)),
-                       "tuned_better_on": int(np.sum(tuned_costs < hand_costs)),
-                       "tuned_violations": tuned_violations, "hand_violations": hand_violations},
     }
+    return record | {"validation": validate(name, record)}
+
+
+def validate(name: str, record: dict) -> dict:
+    """Hand and tuned designs of `record` on `N_VALIDATION` fresh samples: costs, worst steps, violations."""
+    block = hand_design(name)
+    tuned = block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})
+    spec = record["specs"]
+    specs = Specs(max_overshoot=spec["max_overshoot"], settling_time=spec["settling_time_s"],
+                  settling_band=spec["settling_band"])
+    fresh = samples(name, N_VALIDATION, VALIDATION_SEED)
+    check = _problem(name, block, specs, Cost("itae", energy_weight=record["cost"]["energy_weight"]), fresh)
+    _, hand_costs, hand_violations = check.values(check.start())
+    _, tuned_costs, tuned_violations = check.values(tuned.gain_vector()[check.free_index])
+    return {"samples": N_VALIDATION, "seed": VALIDATION_SEED,
+            "hand_mean": float(np.mean(hand_costs)), "tuned_mean": float(np.mean(tuned_costs)),
+            "hand_worst": float(np.max(hand_costs)), "tuned_worst": float(np.max(tuned_costs)),
+            "improvement_mean": float(1 - np.mean(tuned_costs) / np.mean(hand_costs)),
+            "tuned_better_on": int(np.sum(tuned_costs < hand_costs)),
+            "hand_step": worst_step(name, block, fresh), "tuned_step": worst_step(name, tuned, fresh),
+            "tuned_violations": tuned_violations, "hand_violations": hand_violations}
 
 
 def _listed(gains: dict) -> dict:
@@ -194,6 +226,8 @@ def main(argv=None) -> int:
     parser.add_argument("plants", nargs="*", default=list(PLANTS),
                         help="plants to tune (default all six)")
     parser.add_argument("--max-iter", type=int, default=100, help="IPOPT iterations (default 100)")
+    parser.add_argument("--validate", action="store_true",
+                        help="re-validate the stored gains on the fresh samples, without tuning")
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in PLANTS]
@@ -201,8 +235,14 @@ def main(argv=None) -> int:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(PLANTS)}")
     records = stored()
     for name in args.plants:
-        print(f"tuning {name} ...", flush=True)
-        record = tune_case(name, args.max_iter, not args.no_jit)
+        if args.validate:
+            if name not in records:
+                parser.error(f"no tuned gains stored for {name!r} to validate")
+            print(f"validating {name} ...", flush=True)
+            record = records[name] | {"validation": validate(name, records[name])}
+        else:
+            print(f"tuning {name} ...", flush=True)
+            record = tune_case(name, args.max_iter, not args.no_jit)
         records[name] = record
         _write(records)
         t, v = record["tuning"], record["validation"]
@@ -210,7 +250,10 @@ def main(argv=None) -> int:
               f"cost {t['initial_cost']:.4g} -> {t['cost']:.4g} ({100 * t['improvement']:.1f} % better); "
               f"fresh samples: mean {v['hand_mean']:.4g} -> {v['tuned_mean']:.4g} "
               f"({100 * v['improvement_mean']:.1f} %), better on {v['tuned_better_on']}/{v['samples']}, "
-              f"violations {v['tuned_violations'] or 'none'}", flush=True)
+              f"violations {v['tuned_violations'] or 'none'}; worst overshoot "
+              f"{100 * v['hand_step']['overshoot']:.2f} -> {100 * v['tuned_step']['overshoot']:.2f} %, "
+              f"worst settling {v['hand_step']['settling_time_s']:.3g} -> {v['tuned_step']['settling_time_s']:.3g} s",
+              flush=True)
     return 0
 
 
