@@ -398,7 +398,7 @@ def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cos
                       "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
     if jit:
-        opts |= {"jit": True, "compiler": "shell",
+        opts |= {"jit": True, "compiler": "shell", "jit_cleanup": True,
                  "jit_options": {"flags": models.compile.FLAGS, "verbose": False}}
     solver = ca.nlpsol("tuning", "ipopt", {"x": z, "f": f_of_x(scale * z), "g": g_of_x(scale * z)}, opts)
     sol = solver(x0=start / scale, lbx=lbx / scale, ubx=ubx / scale, lbg=problem.lbg, ubg=problem.ubg)
