@@ -130,8 +130,9 @@ class TuningResult:
 class _Recorder(ca.Callback):
     """IPOPT iteration callback keeping every iterate, for the best-feasible fallback."""
 
-    def __init__(self, nx: int, ng: int, n_p: int):
+    def __init__(self, nx: int, ng: int, n_p: int, progress=None):
         ca.Callback.__init__(self)
+        self.progress, self.started = progress, time.perf_counter()
         self.sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "p": n_p, "lam_p": n_p, "f": 1}
         self.iterates: list[tuple[np.ndarray, float, float]] = []  # (x, f, perf_counter)
         self.construct("recorder", {})
@@ -153,6 +154,8 @@ class _Recorder(ca.Callback):
 
     def eval(self, arg):
         self.iterates.append((np.asarray(arg[0]).ravel().copy(), float(arg[1]), time.perf_counter()))
+        if self.progress is not None:
+            self.progress(len(self.iterates) - 1, float(arg[1]), self.iterates[-1][2] - self.started)
         return [0]
 
 
@@ -329,7 +332,7 @@ class TuningProblem:
 def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None = None,
          cost: Cost | None = None, samples=None, robust: str = "mean", free=None, bounds=None,
          tracked: str | None = None, substeps: int = 10, max_iter: int = 200, tol: float = 1e-8,
-         hessian: str = "limited-memory", jit: bool = False) -> TuningResult:
+         hessian: str = "limited-memory", jit: bool = False, progress=None) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
     Parameters
@@ -343,6 +346,7 @@ def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None 
     hessian : "limited-memory" (L-BFGS, one gradient per iteration) or "exact"
         (CasADi's second derivatives; fewer iterations, each costlier)
     jit : compile the NLP's functions to machine code (pays off for long runs)
+    progress : optional callable(iteration, objective, seconds) after each IPOPT iteration
 
     Returns
     -------
@@ -357,7 +361,7 @@ def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None 
     lbx, ubx = _gain_bounds(problem, bounds)
     if hessian not in ("limited-memory", "exact"):
         raise ValueError(f"hessian must be 'limited-memory' or 'exact', got {hessian!r}")
-    return _solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian)
+    return _solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress)
 
 
 def _gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
@@ -380,7 +384,7 @@ def _gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray
 
 
 def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost=None,
-           tol: float = 1e-8, hessian: str = "limited-memory") -> TuningResult:
+           tol: float = 1e-8, hessian: str = "limited-memory", progress=None) -> TuningResult:
     """IPOPT on the problem's objective (+ plant_cost(decision)), with the fallback logic."""
     start_time = time.perf_counter()
     x = problem.decision
@@ -393,7 +397,7 @@ def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cos
     z = ca.MX.sym("z", x.numel())
     f_of_x = ca.Function("objective", [x], [objective])
     g_of_x = ca.Function("constraints", [x], [problem.g])
-    recorder = _Recorder(x.numel(), problem.g.numel(), 0)
+    recorder = _Recorder(x.numel(), problem.g.numel(), 0, progress)
     opts = {"ipopt": {"max_iter": int(max_iter), "print_level": 0, "tol": tol, "acceptable_tol": 100 * tol,
                       "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}

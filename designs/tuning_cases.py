@@ -133,7 +133,7 @@ def _with_margin(specs: Specs) -> Specs:
                    settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time)
 
 
-def tune_case(name: str, max_iter: int = 100, jit: bool = True) -> dict:
+def tune_case(name: str, max_iter: int = 100, jit: bool = True, progress=None) -> dict:
     """Tune plant `name`'s hand design, validate on fresh samples; the record `tuned_gains.json` keeps."""
     started = time.perf_counter()
     block = hand_design(name)
@@ -144,7 +144,7 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True) -> dict:
     weight = ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
     cost = Cost("itae", energy_weight=weight)
     result = tune(models.get(name), block, scenario(name), specs=_with_margin(specs), cost=cost, samples=train,
-                  bounds=gain_bounds(block), substeps=SUBSTEPS, max_iter=max_iter, jit=jit)
+                  bounds=gain_bounds(block), substeps=SUBSTEPS, max_iter=max_iter, jit=jit, progress=progress)
     record = {
         "plant": name, "start": START, "start_gains": _listed(block.gains), "gains": _listed(result.gains),
         "known": f"uncertain parameters +{100 * REL:g} % (models.perturbed)",
@@ -213,6 +213,13 @@ def controllers(name: str, known: models.Plant | None = None) -> dict:
     return {LABEL: block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})}
 
 
+def _report_every(n: int):
+    def report(iteration, objective, seconds):
+        if iteration % n == 0:
+            print(f"    iteration {iteration:3d}: cost {objective:.6g} ({seconds:.0f} s)", flush=True)
+    return report
+
+
 def _write(records: dict) -> None:
     fd, tmp = tempfile.mkstemp(dir=STORE.parent, suffix=".json")
     with os.fdopen(fd, "w") as fh:
@@ -242,7 +249,7 @@ def main(argv=None) -> int:
             record = records[name] | {"validation": validate(name, records[name])}
         else:
             print(f"tuning {name} ...", flush=True)
-            record = tune_case(name, args.max_iter, not args.no_jit)
+            record = tune_case(name, args.max_iter, not args.no_jit, progress=_report_every(10))
         records[name] = record
         _write(records)
         t, v = record["tuning"], record["validation"]

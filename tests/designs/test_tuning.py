@@ -110,9 +110,12 @@ def test_infeasible_specs_are_named(arm):
 
 
 def test_iteration_limit_returns_the_best_feasible_point(arm):
+    calls = []
     result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0),
-                  specs=Specs(max_overshoot=0.05), max_iter=2)
+                  specs=Specs(max_overshoot=0.05), max_iter=2, progress=lambda *a: calls.append(a))
     assert result.status == "Maximum_Iterations_Exceeded"
+    assert [c[0] for c in calls] == list(range(len(result.history))) == [0, 1, 2]
+    assert [c[1] for c in calls] == [value for _, value in result.history]
     assert result.feasible and not result.success
     assert result.cost <= result.initial_cost
 
