@@ -390,10 +390,12 @@ def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cos
     x = problem.decision
     objective = problem.objective if plant_cost is None else problem.objective + plant_cost(x)
     start = np.clip(problem.start(), lbx, ubx)
-    # IPOPT works on z = x / scale, so gains of different magnitudes (K entries
-    # from 5 to 50, a crane's thousands) all move on the order of one.
-    scale = np.maximum(np.abs(start), 1e-3 * max(np.max(np.abs(start)), 1e-12))
-    scale = np.where(scale > 0, scale, 1.0)
+    # IPOPT works on z = x / scale with each decision scaled by its own start, so
+    # gains of different magnitudes (a crane cascade's 0.2 outer and 8000 inner)
+    # all move on the order of one; a zero start takes 1e-3 of the largest.
+    magnitude = np.abs(start)
+    floor = 1e-3 * np.max(magnitude) if np.any(magnitude > 0) else 1.0
+    scale = np.where(magnitude > 0, magnitude, floor)
     z = ca.MX.sym("z", x.numel())
     f_of_x = ca.Function("objective", [x], [objective])
     g_of_x = ca.Function("constraints", [x], [problem.g])

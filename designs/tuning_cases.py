@@ -156,7 +156,7 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True, progress=None) -
         "hand_measured": hand_measured,
         "tuning": {"samples": N_TUNING, "seed": TUNING_SEED, "rel": REL, "initial_cost": result.initial_cost,
                    "cost": result.cost, "improvement": result.improvement, "feasible": result.feasible,
-                   "message": result.message, "iterations": result.iterations,
+                   "message": result.message, "iterations": result.iterations, "jit": jit,
                    "wall_time_s": time.perf_counter() - started},
     }
     return record | {"validation": validate(name, record)}
