@@ -162,7 +162,7 @@ def test_table_and_cli_write_the_document_atomically(tmp_path, monkeypatch, caps
     text = cc.table([result])
     lines = text.strip().splitlines()
     assert len(lines) == 3 and all(line.count("|") == len(cc.COLUMNS) + 1 for line in lines)
-    assert "| problem fake | torque limit (N m) | 1 | 1 | 1 | 0.8 | 0.8 (infeasible) | 20.0 % | — |" in text
+    assert "| problem fake | torque limit (N m) | 1 | 1 | 1 | 0.8 | 0.8 (infeasible) | 20.0 % | — | — | 0.5 / 0.5 |" in text
     monkeypatch.setattr(cc, "PROBLEMS", {"fake": lambda: result})
     out = tmp_path / "sub" / "codesign.md"
     assert cc.main(["--out", str(out)]) == 0
