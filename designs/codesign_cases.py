@@ -250,8 +250,13 @@ def sizing_specs(name: str) -> tuple[Specs, str]:
     scenario = sizing_scenario(name)
     got = measure(plant, hand_design(name, plant), scenario, Specs())
     specs = Specs(rise_time=got["rise_time_s"], max_overshoot=max(SIZING_OVERSHOOT, got["overshoot"]))
-    return specs, (f"the hand PD at the text's {TEXT_LIMIT[name]:g}: rise time {got['rise_time_s']:.3g} s, "
-                   f"overshoot {100 * got['overshoot']:.2g} % (allowed {100 * specs.max_overshoot:g} %)")
+    return specs, (f"the hand PD at the text's {TEXT_LIMIT[name]:g} {_unit(name)}: "
+                   f"rise time {got['rise_time_s']:.3g} s, overshoot {100 * got['overshoot']:.2g} % "
+                   f"(allowed {100 * specs.max_overshoot:g} %)")
+
+
+def _unit(name: str) -> str:
+    return "N" if name == "ballbeam" else "N m"
 
 
 def sizing_scenario(name: str) -> Scenario:
@@ -296,7 +301,7 @@ def actuator_sizing(name: str, *, max_iter: int = SIZING_MAX_ITER, rel_tol: floa
     plant = models.get(name)
     scenario = sizing_scenario(name)
     specs, origin = sizing_specs(name)
-    unit = "N" if name == "ballbeam" else "N m"
+    unit = _unit(name)
     free = ("num",) if name == "uuv" else None
     result = CaseResult(
         key=name, problem=f"actuator sizing: {name}", plant=name,
@@ -527,7 +532,7 @@ def table(results: list[CaseResult]) -> str:
 
 def report(results: list[CaseResult], command: str) -> str:
     """The whole Markdown document: header, table, and each problem's notes and specs."""
-    parts = [HEADER.format(command=command), table(results), "\n## Notes\n"]
+    parts = [HEADER.format(command=command), "\n", table(results), "\n## Notes\n"]
     for r in results:
         parts.append(f"\n**{r.problem}** ({r.objective}):\n")
         for note in r.notes:
@@ -538,7 +543,8 @@ def report(results: list[CaseResult], command: str) -> str:
             m = d.measured
             extra = "".join(f", {k} {v:.3g}" for k, v in m.items() if k.startswith("max_abs_"))
             parts.append(f"- {d.method}: {r.parameter} = {_number(d.value)} {r.unit}, "
-                         f"ITAE {_number(d.closed_loop_cost)}, rise time {m['rise_time_s']:.3g} s, overshoot {100 * m['overshoot']:.2g} %, "
+                         f"ITAE {_number(d.closed_loop_cost)}, rise time {m['rise_time_s']:.3g} s, "
+                         f"overshoot {100 * m['overshoot']:.2g} %, "
                          f"peak |u| {_number(m['peak_input'])}{extra}; {d.message}\n")
     return "".join(parts)
 
