@@ -19,8 +19,9 @@ Problems (`PROBLEMS`, one function each, each returning a `CaseResult`):
 * `satellite_stiffness()`: the panel stiffness k with the satellite's state
   feedback.
 
-``python -m designs.codesign_cases [--out FILE]`` runs them all (a few
-minutes on one core) and writes the Markdown table of docs/codesign.md.
+``python -m designs.codesign_cases [--out FILE] [--only KEY ...]`` runs them
+(5–7 minutes on one shared core, two thirds of it the crane and the satellite)
+and writes the Markdown report docs/codesign.md.
 """
 
 from __future__ import annotations
