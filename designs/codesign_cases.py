@@ -27,9 +27,7 @@ and writes the Markdown report docs/codesign.md.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +37,7 @@ import control
 import numpy as np
 
 import models
+from models import files
 from designs import classical, statespace_cases
 from designs.codesign import codesign, size_actuator
 from designs.filters import TransferFunctionBlock
@@ -520,15 +519,15 @@ def _objective(design: Design | None) -> str:
 
 def table(results: list[CaseResult]) -> str:
     """The Markdown table of `COLUMNS`, one row per result."""
-    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    rows = []
     for r in results:
         seq, sim = r.sequential, r.simultaneous
         over = r.improvement_over_retuned
-        row = [r.problem, f"{r.parameter} ({r.unit})", _number(r.text_value), _number(seq.value), _objective(seq),
-               _number(sim.value), _objective(sim), f"{100 * r.improvement:.1f} %", _objective(r.sequential_retuned),
-               "—" if over is None else f"{100 * over:.1f} %", f"{seq.wall_time:.1f} / {sim.wall_time:.1f}"]
-        lines.append("| " + " | ".join(row) + " |")
-    return "\n".join(lines) + "\n"
+        cells = [r.problem, f"{r.parameter} ({r.unit})", _number(r.text_value), _number(seq.value), _objective(seq),
+                 _number(sim.value), _objective(sim), f"{100 * r.improvement:.1f} %", _objective(r.sequential_retuned),
+                 "—" if over is None else f"{100 * over:.1f} %", f"{seq.wall_time:.1f} / {sim.wall_time:.1f}"]
+        rows.append(dict(zip(COLUMNS, cells)))
+    return files.markdown_table(rows, [(c, c, str) for c in COLUMNS])
 
 
 def report(results: list[CaseResult], command: str) -> str:
@@ -550,21 +549,6 @@ def report(results: list[CaseResult], command: str) -> str:
     return "".join(parts)
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write `text` to `path` through a temporary file in the same folder and os.replace."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m designs.codesign_cases", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DOC, help=f"Markdown file to write (default {DOC})")
@@ -582,7 +566,7 @@ def main(argv=None) -> int:
     command = "python -m designs.codesign_cases" + ("" if args.only is None else " --only " + " ".join(keys))
     text = report(results, command)
     print(table(results))
-    write_atomic(args.out, text)
+    files.write_text(args.out, text)
     print(f"wrote {args.out}")
     return 0
 

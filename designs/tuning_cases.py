@@ -32,9 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -42,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 import models
-from models import metrics
+from models import files, metrics
 from designs import classical
 from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
 
@@ -221,11 +219,7 @@ def _report_every(n: int):
 
 
 def _write(records: dict) -> None:
-    fd, tmp = tempfile.mkstemp(dir=STORE.parent, suffix=".json")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(records, fh, indent=1)
-        fh.write("\n")
-    os.replace(tmp, STORE)
+    files.write_json(STORE, records)
 
 
 def main(argv=None) -> int:

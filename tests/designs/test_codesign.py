@@ -1,6 +1,5 @@
 """Co-design: simultaneous never worse than sequential; actuator sizing checked by simulation."""
 
-import casadi as ca
 import numpy as np
 import pytest
 
