@@ -7,9 +7,9 @@ gains are tuned by `designs.tuning.tune` on the study's "disturbance" run (the
 text's step with the case's input disturbance from t = 0):
 
 * cost: ITAE of the tracked coordinate plus control energy, weighted so that
-  energy makes `ENERGY_SHARE` of the hand design's cost, mean over
-  `N_TUNING` parameter samples (±5 % on the uncertain parameters, seed
-  `TUNING_SEED`);
+  energy makes `ENERGY_SHARE` of the hand design's cost, mean over the
+  parameter rows of `tuning_samples` (the corners of the ±5 % box on the
+  uncertain parameters, or random samples where there are too many corners);
 * specs: overshoot no larger than the hand design's worst (at least 2 %),
   2 % settling no later than the hand design's worst when it settles, and a
   locally stable loop at the end of the run; tuning enforces them with a
@@ -47,7 +47,7 @@ from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
 START = "PID"
 LABEL = "tuned"
 REL = 0.05
-N_TUNING, TUNING_SEED = 8, 1
+MAX_CORNERS, N_TUNING, TUNING_SEED = 16, 8, 1
 N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
 MIN_OVERSHOOT = 0.02
@@ -79,6 +79,19 @@ def hand_design(name: str, known: models.Plant | None = None):
 def samples(name: str, n: int, seed: int) -> np.ndarray:
     """(n, n_params) actual plants, uniform ±5 % on the case's uncertain parameters."""
     return models.sample_params(models.get(name), n, REL, seed)
+
+
+def tuning_samples(name: str) -> tuple[np.ndarray, str]:
+    """The parameter rows tuning sees, and how they were chosen.
+
+    The 2^k corners of the ±5 % box where there are at most `MAX_CORNERS` (the
+    extremes of a response that is monotone in each parameter); otherwise
+    `N_TUNING` uniform samples (seed `TUNING_SEED`).
+    """
+    corners = models.corner_params(models.get(name), REL)
+    if len(corners) <= MAX_CORNERS:
+        return corners, f"the {len(corners)} corners of the ±{100 * REL:g} % box"
+    return samples(name, N_TUNING, TUNING_SEED), f"{N_TUNING} uniform samples (seed {TUNING_SEED})"
 
 
 def _problem(name, block, specs, cost, params) -> TuningProblem:
@@ -135,7 +148,7 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True, progress=None) -
     """Tune plant `name`'s hand design, validate on fresh samples; the record `tuned_gains.json` keeps."""
     started = time.perf_counter()
     block = hand_design(name)
-    train = samples(name, N_TUNING, TUNING_SEED)
+    train, chosen = tuning_samples(name)
     specs, hand_measured = _measured_specs(name, block, train)
     itae = _start_cost(name, block, Cost("itae"), train)
     energy = _start_cost(name, block, Cost("itae", energy_weight=1.0), train) - itae
@@ -152,7 +165,7 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True, progress=None) -
         "specs": {"max_overshoot": specs.max_overshoot, "settling_time_s": specs.settling_time,
                   "settling_band": specs.settling_band, "max_spectral_abscissa": 0.0},
         "hand_measured": hand_measured,
-        "tuning": {"samples": N_TUNING, "seed": TUNING_SEED, "rel": REL, "initial_cost": result.initial_cost,
+        "tuning": {"samples": len(train), "chosen": chosen, "seed": TUNING_SEED, "rel": REL, "initial_cost": result.initial_cost,
                    "cost": result.cost, "improvement": result.improvement, "feasible": result.feasible,
                    "message": result.message, "iterations": result.iterations, "jit": jit,
                    "wall_time_s": time.perf_counter() - started},
@@ -218,8 +231,9 @@ def _report_every(n: int):
     return report
 
 
-def _write(records: dict) -> None:
-    files.write_json(STORE, records)
+def _write(name: str, record: dict) -> None:
+    """Store `record` under `name`, keeping the other plants' records as they are on disk now."""
+    files.write_json(STORE, stored() | {name: record})
 
 
 def main(argv=None) -> int:
@@ -245,7 +259,7 @@ def main(argv=None) -> int:
             print(f"tuning {name} ...", flush=True)
             record = tune_case(name, args.max_iter, not args.no_jit, progress=_report_every(10))
         records[name] = record
-        _write(records)
+        _write(name, record)
         t, v = record["tuning"], record["validation"]
         print(f"  {t['message']}; {t['iterations']} iterations, {t['wall_time_s']:.1f} s; "
               f"cost {t['initial_cost']:.4g} -> {t['cost']:.4g} ({100 * t['improvement']:.1f} % better); "

@@ -61,8 +61,10 @@ def test_stored_record_is_consistent(name, records):
     tuning, validation = record["tuning"], record["validation"]
     assert tuning["feasible"] and tuning["cost"] < tuning["initial_cost"]
     assert validation["tuned_mean"] < validation["hand_mean"] and not validation["tuned_violations"]
-    assert (validation["seed"], tuning["seed"]) == (tuning_cases.VALIDATION_SEED, tuning_cases.TUNING_SEED)
-    assert CHECK_SEED not in (tuning["seed"], validation["seed"])
+    assert validation["seed"] == tuning_cases.VALIDATION_SEED != tuning_cases.TUNING_SEED
+    assert CHECK_SEED not in (tuning_cases.TUNING_SEED, validation["seed"])
+    rows, chosen = tuning_cases.tuning_samples(name)
+    assert (tuning["samples"], tuning["chosen"]) == (len(rows), chosen)
 
 
 def test_a_changed_hand_design_refuses_the_stored_gains():
