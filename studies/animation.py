@@ -28,7 +28,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, Polygon  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from . import writers  # noqa: E402
+from models import files  # noqa: E402
 
 BODY, ACCENT, REFERENCE, GROUND = "#1f4e79", "#e07b00", "#c00000", "#555555"
 
@@ -245,7 +245,7 @@ def write_gif(path: Path, plant, run, label: str, max_frames: int = 100, dpi: in
         images.append(Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba()).convert("RGB"))
     palette = images[len(images) // 2].quantize(colors=64)
     frames_p = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
-    with writers.atomic_path(path) as tmp:
+    with files.atomic_path(path) as tmp:
         frames_p[0].save(tmp, format="GIF", save_all=True, append_images=frames_p[1:], duration=frame_ms, loop=0,
                          optimize=False)
     return path
@@ -300,7 +300,7 @@ def write_html(path: Path, plant, run, label: str, caption: str = "", max_frames
     page = page.replace("__CAPTION__", html.escape(caption))
     # </script> cannot occur in JSON of numbers and plain labels; escape '<' anyway.
     page = page.replace("__DATA__", json.dumps(data, separators=(",", ":")).replace("<", "\\u003c"))
-    return writers.write_text(path, page)
+    return files.write_text(path, page)
 
 
 _TEMPLATE = """<!DOCTYPE html>

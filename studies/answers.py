@@ -190,7 +190,7 @@ def format_answers(study: Study, answers: Mapping, title: str) -> str:
         if item == "errata":
             continue
         lines.append(f"- **{item}**" + format_value(values).replace("\n", "\n  "))
-    lines += ["", f"## Errata found (from docs/errata.md)", ""]
+    lines += ["", "## Errata found (from docs/errata.md)", ""]
     found = answers.get("errata") or []
     if not found:
         lines.append("none for this case study")

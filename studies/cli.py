@@ -231,10 +231,12 @@ def main(argv=None) -> int:
     if args.mc_python is not None:
         settings["mc_python_steps"] = 10**9  # an explicit --mc-python is not capped by simulated steps
 
+    from models import files
+
     from . import writers
 
     try:
-        writers.check_writable(args.out)
+        files.check_writable(args.out)
     except OSError as err:
         p.error(str(err))
     started = time.perf_counter()

@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from . import writers  # noqa: E402
+from models import files  # noqa: E402
 
 #: Commands beyond this multiple of the actuator limit are cut off in input plots (and the plot says so).
 INPUT_PLOT_RANGE = 3.0
@@ -47,7 +47,7 @@ def _legend_below(fig: Figure, handles, labels, ncol: int, top: float = 0.9, hsp
 
 def save(fig: Figure, path: Path, dpi: int) -> Path:
     """Save a figure as PNG atomically."""
-    with writers.atomic_path(path) as tmp:
+    with files.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     return path
 

@@ -1,200 +1,22 @@
-"""The one writer: tables (CSV, Markdown, HTML), JSON and every file a study leaves.
+"""Every file a study leaves: its tables, answers, plots, animation, summary and index.
 
-Every file is written atomically: into a temporary file in the destination
-folder, flushed, then renamed over the destination (`os.replace`), so an
-interrupted run leaves either the previous file or the new one, never half
-of one.
-
-JSON conventions (answers.json): SI units, angles in rad; a complex number is
-the pair ``[re, im]``; non-finite numbers are the strings ``"inf"``,
-``"-inf"`` and ``"nan"`` (JSON has no infinity, and ``null`` would lose the
-sign); numpy scalars and arrays become numbers and nested lists; a SISO
-transfer function becomes ``{"num": [...], "den": [...]}`` in descending powers
-of s (or z) and a state-space model ``{"A": ..., "B": ..., "C": ..., "D": ...}``.
+Files, JSON and tables go through `models.files` (atomic writes, the JSON
+conventions, Markdown/HTML tables); this module decides what each study writes.
 """
 
 from __future__ import annotations
 
-import contextlib
 import html
 import json
 import math
 import os
-import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-JSON_CONVENTIONS = ("SI units, angles in rad; complex numbers as [re, im]; non-finite numbers as the strings "
-                    "'inf', '-inf', 'nan'; transfer functions as {num, den} in descending powers")
-
-
-# ---------------------------------------------------------------------------- atomic files
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside `path`; rename it onto `path` when the block succeeds.
-
-    For writers that want a file name (matplotlib's savefig, Pillow). The
-    temporary file keeps the destination's suffix so format detection works.
-    On an exception the temporary file is removed and `path` is untouched.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}",
-                                   dir=path.parent)
-    os.close(handle)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        with open(tmp_path, "rb+") as f:
-            os.fsync(f.fileno())
-        os.chmod(tmp_path, 0o644)
-        os.replace(tmp_path, path)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
-
-
-def write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write `text` (UTF-8) to `path` atomically; returns the path."""
-    return write_bytes(path, text.encode("utf-8"))
-
-
-def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write `data` to `path` atomically; returns the path."""
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-    return Path(path)
-
-
-def check_writable(folder: str | os.PathLike) -> Path:
-    """Create `folder` if needed and prove a file can be written in it.
-
-    Raises
-    ------
-    OSError
-        With the folder named, when it cannot be created or written.
-    """
-    folder = Path(folder)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        handle, probe = tempfile.mkstemp(prefix=".write-test.", dir=folder)
-        os.close(handle)
-        os.unlink(probe)
-    except OSError as err:
-        raise OSError(f"cannot write to the output folder {str(folder)!r}: {err.strerror or err}") from err
-    return folder
-
-
-# ---------------------------------------------------------------------------- JSON
-def to_jsonable(value: Any) -> Any:
-    """`value` as plain JSON types following the module's conventions."""
-    if isinstance(value, Mapping):
-        return {str(k): to_jsonable(v) for k, v in value.items()}
-    if isinstance(value, (str, bool)) or value is None:
-        return value
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return value
-    if isinstance(value, (complex, np.complexfloating)):
-        return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
-    if isinstance(value, np.ndarray):
-        return [to_jsonable(v) for v in value.tolist()] if value.ndim else to_jsonable(value.item())
-    if isinstance(value, (list, tuple)):
-        return [to_jsonable(v) for v in value]
-    model = _lti_as_dict(value)
-    if model is not None:
-        return to_jsonable(model)
-    raise TypeError(f"cannot write {type(value).__name__} to JSON: {value!r}")
-
-
-def _lti_as_dict(value) -> dict | None:
-    import control
-
-    if isinstance(value, control.TransferFunction) and value.issiso():
-        return {"num": np.ravel(value.num[0][0]), "den": np.ravel(value.den[0][0]),
-                **({"dt": value.dt} if value.dt else {})}
-    if isinstance(value, control.StateSpace):
-        return {"A": value.A, "B": value.B, "C": value.C, "D": value.D, **({"dt": value.dt} if value.dt else {})}
-    return None
-
-
-def dumps(value: Any) -> str:
-    """JSON text of `value` (see `to_jsonable`), indented, keys in insertion order."""
-    return json.dumps(to_jsonable(value), indent=2, allow_nan=False) + "\n"
-
-
-def write_json(path: str | os.PathLike, value: Any) -> Path:
-    return write_text(path, dumps(value))
-
-
-# ---------------------------------------------------------------------------- tables
-def format_number(value: Any, digits: int = 4) -> str:
-    """A table cell: 4 significant digits, '—' for NaN, '∞' for infinity, text as is."""
-    if value is None:
-        return "—"
-    if isinstance(value, str):
-        return value
-    if isinstance(value, (bool, np.bool_)):
-        return "yes" if value else "no"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    value = float(value)
-    if math.isnan(value):
-        return "—"
-    if math.isinf(value):
-        return "∞" if value > 0 else "−∞"
-    if value == 0:
-        return "0"
-    text = f"{value:.{digits}g}"
-    return text.replace("e-0", "e-").replace("e+0", "e")
-
-
-Column = tuple  # (source column, header, converter value -> cell text)
-
-
-def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
-    """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str."""
-    header = "| " + " | ".join(_escape_md(h) for _, h, _ in columns) + " |"
-    rule = "|" + "|".join("---" for _ in columns) + "|"
-    body = ["| " + " | ".join(_escape_md(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
-    return "\n".join([header, rule, *body]) + "\n"
-
-
-def html_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
-    """The same table as HTML."""
-    head = "".join(f"<th>{html.escape(h)}</th>" for _, h, _ in columns)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(fmt(row.get(key)))}</td>" for key, _, fmt in columns)
-                   + "</tr>" for row in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
-def _escape_md(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
-
-
-def scaled(scale: float = 1.0, digits: int = 4) -> Callable[[Any], str]:
-    """A cell formatter multiplying numbers by `scale` (for example rad -> deg) first."""
-    def fmt(value):
-        if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
-            return format_number(float(value) * scale, digits)
-        return format_number(value, digits)
-    return fmt
-
-
-def write_csv(path: str | os.PathLike, frame) -> Path:
-    """Write a pandas DataFrame as CSV (full precision, 'inf' for infinity, empty for NaN)."""
-    return write_text(path, frame.to_csv(index=False, float_format="%.10g"))
+from models.files import (JSON_CONVENTIONS, format_number, html_table, markdown_table, scaled, write_csv,
+                          write_json, write_text)
 
 
 # ---------------------------------------------------------------------------- a study's files

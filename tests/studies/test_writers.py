@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from studies import writers
+from models import files
 
 REQUIRED_COLUMNS = ["controller", "scenario", "rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae",
                     "itae", "peak_u", "u_limit", "saturated_frac", "energy", "violation", "step_ms"]
@@ -18,24 +18,24 @@ def test_json_conventions():
     value = {"kp": np.float64(0.3), "n": np.int64(3), "ok": np.bool_(True), "poles": np.array([-1 + 2j, -1 - 2j]),
              "inf": math.inf, "minus": -np.inf, "nan": float("nan"), "K": np.array([[1.5, 2.0]]),
              "G": control.tf([2.0], [1.0, 3.0]), 4: (1, 2.5)}
-    decoded = json.loads(writers.dumps(value))
+    decoded = json.loads(files.dumps(value))
     assert decoded == {"kp": 0.3, "n": 3, "ok": True, "poles": [[-1.0, 2.0], [-1.0, -2.0]], "inf": "inf",
                        "minus": "-inf", "nan": "nan", "K": [[1.5, 2.0]], "G": {"num": [2.0], "den": [1.0, 3.0]},
                        "4": [1, 2.5]}
     with pytest.raises(TypeError, match="cannot write object"):
-        writers.dumps({"x": object()})
+        files.dumps({"x": object()})
 
 
 def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
     target = tmp_path / "table.csv"
-    writers.write_text(target, "old\n")
+    files.write_text(target, "old\n")
     with pytest.raises(RuntimeError, match="interrupted"):
-        with writers.atomic_path(target) as tmp:
+        with files.atomic_path(target) as tmp:
             tmp.write_text("half a ta")
             raise RuntimeError("interrupted")
     assert target.read_text() == "old\n"
     assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
-    writers.write_text(target, "new\n")
+    files.write_text(target, "new\n")
     assert target.read_text() == "new\n"
 
 
@@ -43,12 +43,12 @@ def test_check_writable_names_the_folder(tmp_path):
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     with pytest.raises(OSError, match="cannot write to the output folder .*a-file/out"):
-        writers.check_writable(blocker / "out")
-    assert writers.check_writable(tmp_path / "new" / "folder").is_dir()
+        files.check_writable(blocker / "out")
+    assert files.check_writable(tmp_path / "new" / "folder").is_dir()
 
 
 def test_format_number():
-    assert [writers.format_number(v) for v in (math.nan, math.inf, 0.0, 1234567.0, 0.000123456, 3, "x")] == \
+    assert [files.format_number(v) for v in (math.nan, math.inf, 0.0, 1234567.0, 0.000123456, 3, "x")] == \
         ["—", "∞", "0", "1.235e6", "0.0001235", "3", "x"]
 
 
@@ -70,8 +70,8 @@ def test_a_study_writes_every_file(arm_study):
     assert "Every row is a closed-loop simulation of the nonlinear" in markdown and "never a linear model" in markdown
     assert "ss error (deg)" in markdown  # angles in degrees, labelled
     lqr = result.table[(result.table.controller == "LQR") & (result.table.scenario == "step")].iloc[0]
-    assert f"| LQR | step | ok | {writers.format_number(lqr.rise_time_s)} |" in markdown
-    assert writers.format_number(math.degrees(lqr.ss_error)) in markdown
+    assert f"| LQR | step | ok | {files.format_number(lqr.rise_time_s)} |" in markdown
+    assert files.format_number(math.degrees(lqr.ss_error)) in markdown
 
 
 def test_answers_json_keys_items_and_holds_hand_derived_values(arm_study):
