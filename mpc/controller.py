@@ -89,6 +89,15 @@ class _PlanFollower:
         u0 = np.clip(self.plant.equilibrium_input(q0, self._known_params), -self.input_limit, self.input_limit)
         return x0, u0
 
+    def _read(self, xc, y, r) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Checked (x_c, y, r) of one step and the stored input plan, (horizon, nu)."""
+        xc = np.asarray(xc, dtype=float)
+        y = _finite_vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
+        r = _finite_vector(r, 1, f"{self.name}: reference")
+        if xc.shape != (self.n_state,):
+            raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
+        return xc, y, r, xc[self._slices[2]].reshape(self.horizon, self.plant.nu)
+
     def _follow(self, solution_inputs, success: bool, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, float]:
         """The plan to follow (clipped), the command, whether the fallback was used, the clipped excess.
 
@@ -169,13 +178,8 @@ class LinearMPC(_PlanFollower):
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
         """One sample: correct the estimate with y, solve the QP for reference r, command the first input."""
-        sx, sd, sp = self._slices
-        xc = np.asarray(xc, dtype=float)
-        y = _finite_vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
-        r = _finite_vector(r, 1, f"{self.name}: reference")
-        if xc.shape != (self.n_state,):
-            raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
-        plan = xc[sp].reshape(self.horizon, self.plant.nu)
+        sx, sd, _ = self._slices
+        xc, y, r, plan = self._read(xc, y, r)
         model = self.model
         x_hat, d_hat = self.observer.correct(xc[sx], xc[sd], y - self._ye - model.C @ xc[sx])
         x_target, u_target = self.target(r - self._reference_offset, d_hat)
@@ -273,13 +277,8 @@ class NonlinearMPC(_PlanFollower):
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
         """One sample: correct the estimate with y, solve the NLP for reference r, command the first input."""
-        sx, sd, sp = self._slices
-        xc = np.asarray(xc, dtype=float)
-        y = _finite_vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
-        r = _finite_vector(r, 1, f"{self.name}: reference")
-        if xc.shape != (self.n_state,):
-            raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
-        plan = xc[sp].reshape(self.horizon, self.plant.nu)
+        sx, sd, _ = self._slices
+        xc, y, r, plan = self._read(xc, y, r)
         p = self._known_params
         innovation = y - np.asarray(self.plant.casadi_h(xc[sx], p)).ravel()
         x_hat, d_hat = self.observer.correct(xc[sx], xc[sd], innovation)

@@ -168,20 +168,10 @@ def test_infeasible_state_constraint_still_gives_an_input_within_limits_and_repo
     assert info["soft_violation"] > 0.01 and info["soft_violation_now"] > 0.01
 
 
-def test_soft_bound_equals_the_hard_one_when_that_is_feasible():
+def test_soft_bound_equals_the_hard_one_when_that_is_feasible(pendulum_qp_records):
     """The exact penalty: where theta rides on its bound with zero slack along a closed loop,
     the hard-constrained problem is feasible and has the same first input."""
-    plant = models.get("pendulum")
-    recorded = []
-
-    class Recorder(mpc.CondensedDaqpSolver):
-        def solve(self, params):
-            solution = super().solve(params)
-            recorded.append((params, solution))
-            return solution
-
-    controller = mpc.linear_mpc("pendulum", models.perturbed(plant, 0.05), solver=Recorder)
-    models.simulate_closed_loop(plant, controller, 2.0, 0.6, input_disturbance=0.5)
+    controller, recorded = pendulum_qp_records
     problem = controller.problem
     bound = problem.soft_upper[0]
     compared = 0

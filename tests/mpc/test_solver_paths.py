@@ -122,20 +122,10 @@ def test_first_input_of_every_path_matches_the_cvxpy_reference(case):
         assert rate_bound >= 1
 
 
-def test_daqp_matches_reference_along_a_closed_loop_with_the_soft_bound_riding():
+def test_daqp_matches_reference_along_a_closed_loop_with_the_soft_bound_riding(pendulum_qp_records):
     """Closed-loop instances where |theta| rides on its bound with zero slack (degenerate
     for first-order methods: OSQP does not reach 1e-5 there within 20000 iterations)."""
-    plant = models.get("pendulum")
-    recorded = []
-
-    class Recorder(mpc.CondensedDaqpSolver):
-        def solve(self, params):
-            solution = super().solve(params)
-            recorded.append((params, solution))
-            return solution
-
-    controller = mpc.linear_mpc("pendulum", models.perturbed(plant, 0.05), solver=Recorder)
-    models.simulate_closed_loop(plant, controller, 2.0, 0.6, input_disturbance=0.5)
+    controller, recorded = pendulum_qp_records
     reference = CvxpySolver(controller.problem)
     bound = controller.problem.soft_upper[0]
     riding = 0
