@@ -99,9 +99,11 @@ def _problem(name, block, specs, cost, params) -> TuningProblem:
                          substeps=SUBSTEPS)
 
 
-def _start_cost(name, block, cost, params) -> float:
-    problem = _problem(name, block, None, cost, params)
-    return problem.values(problem.start())[0]
+def _start_itae_and_energy(name, block, params) -> tuple[float, float]:
+    """Mean ITAE and mean control energy Σ u² Ts of `block` over `params` rows, one simulation each."""
+    problem = _problem(name, block, None, Cost("itae"), params)
+    costs, _, u = (np.asarray(v) for v in problem.evaluate(problem.start()))
+    return float(np.mean(costs)), float(block.sample_period * np.sum(u**2) / len(params))
 
 
 def worst_step(name: str, block, params) -> dict:
@@ -150,8 +152,7 @@ def tune_case(name: str, max_iter: int = 100, jit: bool = True, progress=None) -
     block = hand_design(name)
     train, chosen = tuning_samples(name)
     specs, hand_measured = _measured_specs(name, block, train)
-    itae = _start_cost(name, block, Cost("itae"), train)
-    energy = _start_cost(name, block, Cost("itae", energy_weight=1.0), train) - itae
+    itae, energy = _start_itae_and_energy(name, block, train)
     weight = ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
     cost = Cost("itae", energy_weight=weight)
     result = tune(models.get(name), block, scenario(name), specs=_with_margin(specs), cost=cost, samples=train,
