@@ -7,6 +7,7 @@ from .linear import MPCProblem, QPParameters, QPSolution, SoftBound, problem_fro
 from .mesh_refinement import collocation_defects
 from .nonlinear import NonlinearMPCProblem
 from .ocp import FreeTime, OptimalControlProblem, UnknownNameError
+from .ocp_codesign import NestedCodesignResult, solve_nested
 from .ocp_solution import OCPSolution, Verification, resimulate
 from .ocp_solver import OCPSolver, WarmStart
 from .qp_fast import CondensedDaqpSolver
@@ -20,7 +21,7 @@ __all__ = [
     "SteadyStateTarget", "controllers", "defaults", "linear_mpc", "nonlinear_mpc", "problem_from_model",
     "riccati_terminal_cost",
     # optimal control problems
-    "Collocation", "FreeTime", "MultipleShooting", "OCPSolution", "OCPSolver",
+    "Collocation", "FreeTime", "MultipleShooting", "NestedCodesignResult", "OCPSolution", "OCPSolver",
     "OptimalControlProblem", "Transcription", "UnknownNameError", "Verification", "WarmStart",
-    "collocation_defects", "resimulate",
+    "collocation_defects", "resimulate", "solve_nested",
 ]
