@@ -8,7 +8,7 @@ from .mesh_refinement import collocation_defects
 from .nonlinear import NonlinearMPCProblem
 from .ocp import FreeTime, OptimalControlProblem, UnknownNameError
 from .ocp_codesign import NestedCodesignResult, solve_nested
-from .ocp_solution import OCPSolution, Verification, resimulate
+from .ocp_solution import OCPSolution, Verification, resimulate, verify_trajectory
 from .ocp_solver import OCPSolver, WarmStart
 from .qp_fast import CondensedDaqpSolver
 from .qp_osqp import OsqpSolver
@@ -23,5 +23,5 @@ __all__ = [
     # optimal control problems
     "Collocation", "FreeTime", "MultipleShooting", "NestedCodesignResult", "OCPSolution", "OCPSolver",
     "OptimalControlProblem", "Transcription", "UnknownNameError", "Verification", "WarmStart",
-    "collocation_defects", "resimulate", "solve_nested",
+    "collocation_defects", "resimulate", "solve_nested", "verify_trajectory",
 ]

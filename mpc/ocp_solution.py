@@ -175,21 +175,34 @@ class OCPSolution:
     # ------------------------------------------------------------------ check
     def verify(self, rtol: float = 1e-10, atol: float = 1e-10) -> Verification:
         """Re-simulate the optimal input on the nonlinear plant (CVODES) and report the state defects."""
-        plant, p = self.plant, self.param_values()
-        simulated = resimulate(plant, self.t, self.states[0], self.inputs, p, rtol=rtol, atol=atol)
-        errors = np.abs(simulated - self.states)
-        k, i = np.unravel_index(int(np.argmax(errors)), errors.shape)
-        restarted = np.empty_like(self.states)
-        restarted[0] = self.states[0]
-        for j in range(len(self.t) - 1):
-            run = models.simulate(plant, self.states[j], self.inputs[j:j + 1], self.t[j + 1] - self.t[j],
-                                  method="adaptive", params=p, rtol=rtol, atol=atol)
-            restarted[j + 1] = run.x[-1]
-        local = np.abs(restarted - self.states)
-        kl, il = np.unravel_index(int(np.argmax(local)), local.shape)
-        return Verification(float(errors[k, i]), plant.state_names[i], float(self.t[k]), float(local[kl, il]),
-                            plant.state_names[il], float(self.t[kl]),
-                            dict(zip(plant.state_names, errors.max(axis=0).tolist())), simulated)
+        return verify_trajectory(self.plant, self.t, self.states, self.inputs, self.param_values(), rtol=rtol,
+                                 atol=atol)
+
+
+def verify_trajectory(plant: Plant, t, states, inputs, params=None, *, rtol: float = 1e-10,
+                      atol: float = 1e-10) -> Verification:
+    """The `Verification` of states (N+1, nx) at times t (N+1,) under inputs (N, nu) held in between.
+
+    For a trajectory from any source (another optimizer, a hand-written transcription).
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    states = np.asarray(states, dtype=float).reshape(t.size, plant.nx)
+    inputs = np.asarray(inputs, dtype=float).reshape(t.size - 1, plant.nu)
+    p = plant.param_vector(params)
+    simulated = resimulate(plant, t, states[0], inputs, p, rtol=rtol, atol=atol)
+    errors = np.abs(simulated - states)
+    k, i = np.unravel_index(int(np.argmax(errors)), errors.shape)
+    restarted = np.empty_like(states)
+    restarted[0] = states[0]
+    for j in range(t.size - 1):
+        run = models.simulate(plant, states[j], inputs[j:j + 1], t[j + 1] - t[j], method="adaptive", params=p,
+                              rtol=rtol, atol=atol)
+        restarted[j + 1] = run.x[-1]
+    local = np.abs(restarted - states)
+    kl, il = np.unravel_index(int(np.argmax(local)), local.shape)
+    return Verification(float(errors[k, i]), plant.state_names[i], float(t[k]), float(local[kl, il]),
+                        plant.state_names[il], float(t[kl]), dict(zip(plant.state_names, errors.max(axis=0).tolist())),
+                        simulated)
 
 
 def _index(names, name, kind, owner) -> int:

@@ -89,6 +89,58 @@ def test_minimum_energy_rest_to_rest_matches_closed_form(transcription):
     np.testing.assert_allclose(solution.inputs[:, 0], slope_line * N**2 / (N**2 - 1), atol=1e-7)
 
 
+def test_a_sum_is_the_discrete_stage_cost():
+    """Σ u_k² (no interval length) has the same minimizer as ∫ u² dt and the value J_N / h."""
+    plant, distance, final_time, N = point_mass(mass=1.0, limit=100.0), 1.5, 2.0, 20
+    ocp = rest_to_rest(plant, final_time, distance)
+    ocp.minimize(ocp.sum(ocp.u.f**2))
+    solution = ocp.solve(mpc.MultipleShooting(intervals=N))
+    assert solution.success, solution.status
+    h = final_time / N
+    assert solution.objective == pytest.approx(12 * distance**2 / final_time**3 * N**2 / (N**2 - 1) / h, rel=1e-8)
+
+
+def test_an_extra_control_softens_a_terminal_constraint():
+    """min ∫u² + w e² with s(T) = d - e: J(e) = c (d - e)² + w e², c = 12/T³ · N²/(N² - 1),
+    so e* = c d / (c + w)."""
+    plant, distance, final_time, N, weight = point_mass(mass=1.0, limit=100.0), 1.5, 2.0, 10, 3.0
+    ocp = mpc.OptimalControlProblem(plant, final_time)
+    shortfall = ocp.control("e")
+    ocp.minimize(ocp.integral(ocp.u.f**2) + weight * ocp.at_end(shortfall) ** 2)
+    ocp.subject_to(ocp.at_start(ocp.state) == 0)
+    ocp.subject_to(ocp.at_end(ocp.x.s + shortfall) == distance)
+    ocp.subject_to(ocp.at_end(ocp.x.ds) == 0)
+    solution = ocp.solve(mpc.Collocation(intervals=N))
+    assert solution.success, solution.status
+    c = 12 / final_time**3 * N**2 / (N**2 - 1)
+    assert solution.controls[-1, 0] == pytest.approx(c * distance / (c + weight), rel=1e-7)
+
+
+def test_a_path_constraint_on_an_output_holds_at_every_collocation_point():
+    """The satellite's measured twist y = phi - theta kept within 0.02 rad while it turns 1 rad
+    rest to rest in 40 s; checked at the collocation nodes. The spring carries the panel, so
+    its acceleration is at most k 0.02 / Jp = 0.003 rad/s²: feasible in 2 sqrt(1 / 0.003) = 36.5 s;
+    the least-effort turn without the bound peaks near 6/40² rad/s², a twist of 0.025 rad."""
+    ocp = mpc.OptimalControlProblem(models.get("satellite"), 40.0)
+    ocp.minimize(ocp.integral(ocp.u.tau**2))
+    ocp.subject_to(ocp.at_start(ocp.state) == 0)
+    ocp.subject_to(ocp.at_end(ocp.state) == [1.0, 1.0, 0, 0])
+    ocp.subject_to(ocp.bounded(-0.02, ocp.y.phi_minus_theta, 0.02))
+    solution = ocp.solve(mpc.Collocation(intervals=40, degree=2, points="legendre"))
+    assert solution.success, solution.status
+    twist = np.concatenate([solution.states[:, 1] - solution.states[:, 0],
+                            (solution.collocation_states[:, :, 1] - solution.collocation_states[:, :, 0]).ravel()])
+    assert np.max(np.abs(twist)) <= 0.02 + 1e-7
+    assert np.max(np.abs(twist)) >= 0.02 - 1e-6  # active: without it the twist is larger
+    free = mpc.OptimalControlProblem(models.get("satellite"), 40.0)
+    free.minimize(free.integral(free.u.tau**2))
+    free.subject_to(free.at_start(free.state) == 0)
+    free.subject_to(free.at_end(free.state) == [1.0, 1.0, 0, 0])
+    unconstrained = free.solve(mpc.Collocation(intervals=40, degree=2, points="legendre"))
+    assert np.max(np.abs(unconstrained.states[:, 1] - unconstrained.states[:, 0])) > 0.02
+    assert solution.objective > unconstrained.objective
+
+
 def riccati_cost(A, B, Q, R, S, final_time, x0):
     """x0ᵀ P(0) x0 with -P' = AᵀP + PA - PBR⁻¹BᵀP + Q, P(T) = S, integrated backwards by scipy."""
     n = A.shape[0]
