@@ -27,7 +27,7 @@ from .transcription import Collocation, lagrange_basis
 def collocation_defects(solution: OCPSolution) -> np.ndarray:
     """The defect e_k of every interval of a collocation solution, (N,); see the module docstring."""
     tr = solution.transcription
-    if not tr.degree:
+    if tr.coefficients is None or solution.collocation_states is None:
         raise ValueError("collocation defects need a Collocation transcription, not multiple shooting")
     tau = tr.coefficients.tau
     nodes = np.concatenate([tau, [1.0]]) if tau[-1] < 1 else tau

@@ -17,7 +17,7 @@ import numpy as np
 import models
 from models import Plant
 
-from .transcription import lagrange_basis
+from .transcription import Transcription, lagrange_basis
 
 
 def resimulate(plant: Plant, t, x0, u, params=None, *, method: str = "adaptive", rtol: float = 1e-10,
@@ -106,7 +106,7 @@ class OCPSolution:
     lam_g: np.ndarray
     lam_p: np.ndarray
     parameter_vector: np.ndarray
-    transcription: object = field(repr=False)
+    transcription: Transcription = field(repr=False)
     collocation_states: np.ndarray | None = field(default=None, repr=False)
     refinement: list = field(default_factory=list)
 
@@ -155,6 +155,7 @@ class OCPSolution:
         s = (times - self.t[k]) / h
         out = np.empty((times.size, self.plant.nx))
         if self.collocation_states is not None:
+            assert self.transcription.coefficients is not None
             tau = self.transcription.coefficients.tau
             for i in range(times.size):
                 values, _ = lagrange_basis(tau, s[i])

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -81,12 +82,12 @@ class OCPSolver:
             raise ValueError(f"max_iterations must be an integer >= 1, got {max_iterations}")
         self.ocp = ocp
         self.transcription = Transcription(ocp, transcription, chosen_as_parameters=chosen_as_parameters)
-        ipopt = {"print_level": int(print_level), "sb": "yes", "tol": float(tolerance),
+        ipopt: dict[str, Any] = {"print_level": int(print_level), "sb": "yes", "tol": float(tolerance),
                  "max_iter": int(max_iterations), "hessian_approximation": hessian}
         ipopt |= dict(ipopt_options or {})
-        self._options = {"print_time": False, "ipopt": ipopt}
+        self._options: dict[str, Any] = {"print_time": False, "ipopt": ipopt}
         self._solver = ca.nlpsol("ocp", "ipopt", self.transcription.nlp, self._options)
-        self._warm_solver = None
+        self._warm_solver: ca.Function | None = None
 
     @property
     def warm_solver(self) -> ca.Function:
@@ -183,13 +184,10 @@ class OCPSolver:
         over_x = np.maximum(np.maximum(lbx - w, w - ubx), 0) * tr.scale
         over_g = np.maximum(np.maximum(lbg - g, g - ubg), 0) if g.size else np.zeros(0)
         over_g = np.where(np.isfinite(over_g), over_g, np.inf)
-        ix = int(np.argmax(over_x)) if over_x.size else None
-        ig = int(np.argmax(over_g)) if over_g.size else None
-        best_x = over_x[ix] if ix is not None else -1.0
-        best_g = over_g[ig] if ig is not None else -1.0
-        if best_g >= best_x and ig is not None:
-            return tr.constraint_labels[ig], float(best_g)
-        return f"bound on {tr.decision_labels[ix]}", float(best_x)
+        ix, ig = int(np.argmax(over_x)), (int(np.argmax(over_g)) if over_g.size else -1)
+        if ig >= 0 and over_g[ig] >= over_x[ix]:
+            return tr.constraint_labels[ig], float(over_g[ig])
+        return f"bound on {tr.decision_labels[ix]}", float(over_x[ix])
 
     # ------------------------------------------------------------------ starting point
     def initial_guess(self, P, lbx, ubx, guess=None, guess_input=None) -> np.ndarray:
@@ -253,7 +251,7 @@ class OCPSolver:
         tr = self.transcription
         mesh_t = T * tr.mesh
         h = np.diff(mesh_t)
-        tau = tr.coefficients.tau if tr.degree else np.array([0.0])
+        tau = tr.coefficients.tau if tr.coefficients is not None else np.array([0.0])
         return mesh_t[:-1, None] + h[:, None] * tau[None, :]
 
     def _plant_params(self, P) -> np.ndarray:

@@ -223,7 +223,9 @@ class Transcription:
         chosen = {} if chosen_as_parameters else dict(ocp.chosen)
         self.chosen_names = tuple(chosen)
         self.fixed_param_names = tuple(p.name for p in plant.param_info if p.name not in chosen)
-        self.coefficients = collocation_coefficients(d, method.points) if d else None
+        is_collocation = isinstance(method, Collocation)
+        points = method.points if isinstance(method, Collocation) else ""
+        self.coefficients = collocation_coefficients(d, points) if is_collocation else None
 
         # ---------------------------------------------------------------- layout and scales
         states, colloc = np.empty((N + 1, nx), int), np.empty((N, d, nx), int)
@@ -306,7 +308,7 @@ class Transcription:
         # ---------------------------------------------------------------- dynamics
         integral_values = ca.SX.zeros(len(integrals))
         if d:
-            cc = self.coefficients
+            cc = collocation_coefficients(d, points)
             xk, xc = ca.SX.sym("xk", nx), ca.SX.sym("xc", nx, d)
             uk, pk, hk = ca.SX.sym("u", nu), ca.SX.sym("p", plant.n_params), ca.SX.sym("h")
             nodes = ca.horzcat(xk, xc)
@@ -326,6 +328,7 @@ class Transcription:
                     integral_values += h[k] * cc.quadrature[j] * \
                         integrand_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
         else:
+            assert isinstance(method, MultipleShooting)
             step = rk4_interval(plant, integrand_fn, method.substeps)
             for k in range(N):
                 x_next, q = step(X[k], U[k], C[k], t_mesh[k], h[k], p, T, *user_values)
@@ -398,7 +401,7 @@ class Transcription:
         bound_in = ca.vertcat(*user_symbols) if user_symbols else ca.SX(0, 1)
         bound_of = lambda e: ca.substitute(e, bound_in, ca.vertcat(*user_values)) if user_symbols else e
         general_path, general_point = [], []
-        method_is_radau = bool(d) and method.points == "radau"
+        method_is_radau = points == "radau"
         for con in ocp.constraints:
             if not ca.depends_on(con.expression, decisions):
                 raise ValueError(f"constraint {con.label!r} involves no decision of this problem "
@@ -440,9 +443,9 @@ class Transcription:
                              ca.vertcat(*[highs[i] for i in keep]),
                              [f"{general_path[i].label} at mesh point {k} (t = {at:.4g} {where})" for i in keep])
                 if k < N:
-                    interior = range(d - 1) if method.points == "radau" and d else range(d)
+                    interior = range(d - 1) if method_is_radau else range(d)
                     for j in interior:
-                        tj = t_mesh[k] + self.coefficients.tau[j + 1] * h[k]
+                        tj = t_mesh[k] + cc.tau[j + 1] * h[k]
                         values = path_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
                         rows.add(values, lows, highs, [f"{c.label} on interval {k}, collocation point {j + 1}"
                                                        for c in general_path])
