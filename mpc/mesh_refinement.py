@@ -41,7 +41,7 @@ def collocation_defects(solution: OCPSolution) -> np.ndarray:
         poly = np.vstack([solution.states[k], solution.collocation_states[k]])  # (d+1, nx)
         x = values @ poly
         rate = derivs @ poly / h[k]
-        f_values = np.asarray(f(x.T, np.tile(solution.inputs[k][:, None], (1, samples.size)), p)).T
+        f_values = np.asarray(f(x.T, np.tile(solution.plant_inputs[k][:, None], (1, samples.size)), p)).T
         defects[k] = h[k] * np.max(np.abs(rate - f_values) / tr.state_scale)
     return defects
 

@@ -206,6 +206,7 @@ class OptimalControlProblem:
             ca.vertcat(*sym(plant.input_names, "(T)"))
         self.control_start, self.control_end = ca.SX(0, 1), ca.SX(0, 1)
         self.parameters: dict[str, tuple[ca.SX, np.ndarray | None]] = {}
+        self.fed_input = self.input
         self.chosen: dict[str, ChosenParam] = {}
         self.scales: dict[str, float] = {}
         self.accumulated: list[Accumulated] = []
@@ -254,6 +255,22 @@ class OptimalControlProblem:
         self.control_start = ca.vertcat(self.control_start, start)
         self.control_end = ca.vertcat(self.control_end, end)
         return symbol
+
+    def plant_input(self, expression) -> None:
+        """What the plant receives instead of u: an expression of u, the controls, p and parameters, (nu,).
+
+        For an input-disturbance estimate d̂ given each solve, ``ocp.plant_input(ocp.input + d_hat)``
+        with ``d_hat = ocp.parameter("d_hat", nu)``. Bounds (the actuator limit included) stay on u;
+        `OCPSolution.plant_inputs` holds what the plant received and `verify` simulates that.
+        """
+        expression = _sx(expression, "plant_input(...)")
+        if expression.numel() != self.plant.nu:
+            raise ValueError(f"plant_input(...) needs {self.plant.nu} entries (one per input), "
+                             f"got {expression.numel()}")
+        if ca.depends_on(expression, ca.vertcat(self.state, self.t, self.final_time, self._point_symbols)):
+            raise ValueError("plant_input(...) may depend on u, the controls, p and parameters only "
+                             "(it is held on each interval)")
+        self.fed_input = ca.vec(expression)
 
     def choose(self, name: str, lower: float, upper: float, guess: float | None = None) -> ca.SX:
         """Make the plant parameter `name` a decision in [lower, upper] (co-design).

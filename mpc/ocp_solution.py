@@ -73,6 +73,7 @@ class OCPSolution:
     ----------
     t : (N+1,) mesh times, s;  states : (N+1, nx) at the mesh points
     inputs : (N, nu) held on [t_k, t_{k+1});  controls : (N, nc) the extra controls
+    plant_inputs : (N, nu) what the plant received (the inputs unless `plant_input` was set)
     params : dict, every plant parameter's value (chosen ones included), SI
     chosen : dict, the chosen parameters' values
     final_time : T, s;  objective : the minimized value
@@ -89,6 +90,7 @@ class OCPSolution:
     t: np.ndarray
     states: np.ndarray
     inputs: np.ndarray
+    plant_inputs: np.ndarray
     controls: np.ndarray
     params: dict
     chosen: dict
@@ -165,7 +167,7 @@ class OCPSolution:
         p = self.param_values()
         f = self.plant.casadi_f
         for i in range(times.size):
-            x0, x1, u = self.states[k[i]], self.states[k[i] + 1], self.inputs[k[i]]
+            x0, x1, u = self.states[k[i]], self.states[k[i] + 1], self.plant_inputs[k[i]]
             d0 = np.asarray(f(x0, u, p)).ravel() * h[i]
             d1 = np.asarray(f(x1, u, p)).ravel() * h[i]
             si = s[i]
@@ -175,8 +177,9 @@ class OCPSolution:
 
     # ------------------------------------------------------------------ check
     def verify(self, rtol: float = 1e-10, atol: float = 1e-10) -> Verification:
-        """Re-simulate the optimal input on the nonlinear plant (CVODES) and report the state defects."""
-        return verify_trajectory(self.plant, self.t, self.states, self.inputs, self.param_values(), rtol=rtol,
+        """Re-simulate the optimal input (as the plant received it) on the nonlinear plant (CVODES)
+        and report the state defects."""
+        return verify_trajectory(self.plant, self.t, self.states, self.plant_inputs, self.param_values(), rtol=rtol,
                                  atol=atol)
 
 

@@ -154,11 +154,14 @@ class OCPSolver:
         plant, layout = tr.plant, tr.layout
         finite = bool(np.all(np.isfinite(w)))
         if finite:
-            f, accumulated, T, p, g = (np.asarray(v, dtype=float).ravel() for v in tr.values(w, P))
+            values = tr.values(w, P)
+            f, accumulated, T, p, g = (np.asarray(v, dtype=float).ravel() for v in values[:5])
+            fed = np.asarray(values[5], dtype=float).reshape(plant.nu, -1).T
         else:
             f, accumulated, T, p = np.array([np.nan]), np.full(len(tr.ocp.accumulated), np.nan), np.array([np.nan]), \
                 np.full(plant.n_params, np.nan)
             g = np.full(lbg.size, np.nan)
+            fed = np.full((tr.intervals, plant.nu), np.nan)
         label, amount = self.largest_violation(w, g, lbx, ubx, lbg, ubg)
         status, success = _STATUS.get(ipopt_status, ("failed", False))
         success = success and finite
@@ -170,7 +173,8 @@ class OCPSolver:
         chosen = {name: float(phys[i]) for name, i in layout.chosen.items()}
         params = dict(zip([q.name for q in plant.param_info], p.tolist()))
         return OCPSolution(
-            t=float(T[0]) * tr.mesh, states=states, inputs=phys[layout.inputs], controls=phys[layout.controls],
+            t=float(T[0]) * tr.mesh, states=states, inputs=phys[layout.inputs], plant_inputs=fed,
+            controls=phys[layout.controls],
             params=params, chosen=chosen, final_time=float(T[0]), objective=float(f[0]), accumulated=accumulated,
             success=success, status=status, solver_status=ipopt_status, iterations=iterations, solve_time=solve_time,
             largest_violation=(label, amount), decision=w, lam_x=lam_x, lam_g=lam_g, lam_p=lam_p,

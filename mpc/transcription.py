@@ -304,6 +304,8 @@ class Transcription:
         summand_fn = ca.Function("summands", path_in, [ca.vertcat(*[a.integrand for a in sums])], path_names, ["l"])
         f = plant.casadi_f
         rows = _Rows()
+        fed_fn = ca.Function("plant_input", path_in, [ocp.fed_input], path_names, ["u_plant"])
+        fed = [fed_fn(X[k], U[k], C[k], t_mesh[k], p, T, *user_values) for k in range(N)]
 
         # ---------------------------------------------------------------- dynamics
         integral_values = ca.SX.zeros(len(integrals))
@@ -318,7 +320,7 @@ class Transcription:
                                    [ca.vec(residual), nodes @ ca.DM(cc.continuity)], ["x", "xc", "u", "p", "h"],
                                    ["residual", "x_end"])
             for k in range(N):
-                res, x_end = interval(X[k], ca.horzcat(*XC[k]), U[k], p, h[k])
+                res, x_end = interval(X[k], ca.horzcat(*XC[k]), fed[k], p, h[k])
                 rows.add(res, 0, 0, [f"collocation of {n} on interval {k}, point {j + 1}"
                                      for j in range(d) for n in plant.state_names])
                 rows.add((X[k + 1] - x_end) / state_scale, 0, 0,
@@ -331,7 +333,7 @@ class Transcription:
             assert isinstance(method, MultipleShooting)
             step = rk4_interval(plant, integrand_fn, method.substeps)
             for k in range(N):
-                x_next, q = step(X[k], U[k], C[k], t_mesh[k], h[k], p, T, *user_values)
+                x_next, q = step(X[k], U[k], fed[k], C[k], t_mesh[k], h[k], p, T, *user_values)
                 rows.add((X[k + 1] - x_next) / state_scale, 0, 0,
                          [f"shooting gap of {n} at mesh point {k + 1}" for n in plant.state_names])
                 integral_values += q
@@ -472,8 +474,8 @@ class Transcription:
             ubx_all[i] = ca.fmin(value, ubx[i])
         self.bounds = ca.Function("bounds", [P], [lbx_all, ubx_all, lbg, ubg],
                                   ["P"], ["lbx", "ubx", "lbg", "ubg"])
-        self.values = ca.Function("values", [w, P], [objective, self.accumulated_values, T, p, g],
-                                  ["w", "P"], ["f", "accumulated", "T", "p", "g"])
+        self.values = ca.Function("values", [w, P], [objective, self.accumulated_values, T, p, g, ca.horzcat(*fed)],
+                                  ["w", "P"], ["f", "accumulated", "T", "p", "g", "plant_inputs"])
 
     # -------------------------------------------------------------------- helpers
     def parameter_values(self, x0=None, params=None, plant_params=None) -> np.ndarray:
@@ -520,16 +522,16 @@ def rk4_interval(plant, integrands: ca.Function, substeps: int) -> ca.Function:
     """RK4 over one interval of symbolic length h, with the integrands integrated alongside.
 
     integrands : Function (x, u, c, t, p, T, user parameters...) -> L (nL,)
-    Returns the Function (x, u, c, t0, h, p, T, user parameters...) -> (x after h, ∫ L dt over h):
-    `substeps` steps of the arithmetic of `Plant.step_function`, with h an input so the
-    final time may be free and the mesh non-uniform.
+    Returns the Function (x, u, u_plant, c, t0, h, p, T, user parameters...) -> (x after h,
+    ∫ L dt over h): `substeps` steps of the arithmetic of `Plant.step_function` with the plant
+    fed u_plant, h an input so the final time may be free and the mesh non-uniform.
     """
-    x, u = ca.SX.sym("x", plant.nx), ca.SX.sym("u", plant.nu)
+    x, u, fed = ca.SX.sym("x", plant.nx), ca.SX.sym("u", plant.nu), ca.SX.sym("u_plant", plant.nu)
     c = ca.SX.sym("c", integrands.size1_in(2))
     t0, h, p, T = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("p", plant.n_params), ca.SX.sym("T")
     user_names = [integrands.name_in(i) for i in range(6, integrands.n_in())]
     user = [ca.SX.sym(name, integrands.size1_in(6 + i)) for i, name in enumerate(user_names)]
-    rate = lambda xs, ts: (plant.casadi_f(xs, u, p), integrands(xs, u, c, ts, p, T, *user))
+    rate = lambda xs, ts: (plant.casadi_f(xs, fed, p), integrands(xs, u, c, ts, p, T, *user))
     dt = h / substeps
     xs, q = x, ca.SX.zeros(integrands.size1_out(0))
     for i in range(substeps):
@@ -540,8 +542,8 @@ def rk4_interval(plant, integrands: ca.Function, substeps: int) -> ca.Function:
         k4, l4 = rate(xs + dt * k3, ts + dt)
         xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         q = q + dt / 6 * (l1 + 2 * l2 + 2 * l3 + l4)
-    return ca.Function("rk4_interval", [x, u, c, t0, h, p, T, *user], [ca.cse(xs), ca.cse(q)],
-                       ["x", "u", "c", "t0", "h", "p", "T", *user_names],
+    return ca.Function("rk4_interval", [x, u, fed, c, t0, h, p, T, *user], [ca.cse(xs), ca.cse(q)],
+                       ["x", "u", "u_plant", "c", "t0", "h", "p", "T", *user_names],
                        ["x_next", "integrals"])
 
 

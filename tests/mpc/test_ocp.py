@@ -141,6 +141,23 @@ def test_a_path_constraint_on_an_output_holds_at_every_collocation_point():
     assert solution.objective > unconstrained.objective
 
 
+def test_plant_input_feeds_a_disturbance_estimate_to_the_plant():
+    """The plant gets v = u + δ (δ a parameter, as an MPC's disturbance estimate). Rest to rest,
+    ∫v dt = 0, so ∫u² = ∫v² + δ² T: the optimal v is the undisturbed one and J grows by δ² T."""
+    plant, distance, final_time, N, offset = point_mass(mass=1.0, limit=100.0), 1.5, 2.0, 10, 0.4
+    ocp = rest_to_rest(plant, final_time, distance)
+    disturbance = ocp.parameter("d_hat", 1, value=0.0)
+    ocp.plant_input(ocp.input + disturbance)
+    ocp.minimize(ocp.integral(ocp.u.f**2))
+    solver = ocp.solver(mpc.MultipleShooting(intervals=N))
+    calm, pushed = solver.solve(), solver.solve(params={"d_hat": offset})
+    assert calm.success and pushed.success, pushed.status
+    assert pushed.objective == pytest.approx(calm.objective + offset**2 * final_time, rel=1e-8)
+    np.testing.assert_allclose(pushed.plant_inputs, calm.inputs, atol=1e-7)
+    np.testing.assert_allclose(pushed.inputs, calm.inputs - offset, atol=1e-7)
+    assert pushed.verify().max_defect < 1e-8
+
+
 def riccati_cost(A, B, Q, R, S, final_time, x0):
     """x0ᵀ P(0) x0 with -P' = AᵀP + PA - PBR⁻¹BᵀP + Q, P(T) = S, integrated backwards by scipy."""
     n = A.shape[0]
@@ -215,7 +232,7 @@ def test_multiple_shooting_uses_the_plants_rk4_map():
     p_value = plant.param_vector()
     for _ in range(5):
         x0, u0 = rng.normal(size=4), rng.normal(size=1)
-        x_next, integrals = step(x0, u0, np.zeros(0), 0.4, 0.2, p_value, 1.0)
+        x_next, integrals = step(x0, u0, u0, np.zeros(0), 0.4, 0.2, p_value, 1.0)
         np.testing.assert_allclose(np.asarray(x_next).ravel(), np.asarray(reference(x0, u0, p_value)).ravel(),
                                    rtol=1e-13, atol=1e-13)
         np.testing.assert_allclose(np.asarray(integrals).ravel(), [0.2 * u0[0] ** 2, (0.6**2 - 0.4**2) / 2],
@@ -351,6 +368,40 @@ def test_warm_start_from_the_answer_converges_at_once():
     assert again.success, again.status
     assert again.iterations <= 5 < first.iterations
     assert again.objective == pytest.approx(first.objective, rel=1e-7)
+
+
+def test_the_nmpc_problem_posed_here_has_nonlinear_mpc_problems_solution():
+    """mpc.NonlinearMPCProblem (SQP, Gauss-Newton, HPIPM) and this layer (IPOPT, exact Hessian)
+    on the same NLP: pendulum, N = 50, Ts = 0.01 s, stage cost Σ‖x - x_s‖²_Q + ‖u - u_s‖²_R,
+    terminal ‖x_N - x_s‖²_P, x_0 = x̂, the plant fed u + d̂, |u| <= 5 N. Same KKT point."""
+    plant = models.perturbed(models.get("pendulum"), 0.05)
+    sample_period, horizon = 0.01, 50
+    Q, R, P = np.diag([1.0, 10.0, 0.1, 0.1]), np.array([[1e-2]]), np.diag([10.0, 50.0, 5.0, 5.0])
+    x_hat, d_hat, x_s, u_s = np.array([0.1, 0.15, -0.2, 0.3]), np.array([0.5]), np.array([0.6, 0, 0, 0]), np.zeros(1)
+    reference = mpc.NonlinearMPCProblem(plant, sample_period, horizon, Q, R, max_iterations=50,
+                                        stationarity_tolerance=1e-9)
+    previous = reference.solve(x_hat, d_hat, x_s, u_s, P, np.zeros(1), np.zeros((horizon, 1)))
+    assert previous.success, previous.status
+    assert 0 < np.sum(np.abs(previous.inputs) < 4.9) < horizon  # some inputs saturate, some do not
+
+    ocp = mpc.OptimalControlProblem(plant, horizon * sample_period)
+    ocp.start_from()
+    disturbance, state_target = ocp.parameter("d_hat", 1), ocp.parameter("x_s", 4)
+    input_target, terminal = ocp.parameter("u_s", 1), ocp.parameter("P", 16)
+    ocp.plant_input(ocp.input + disturbance)
+    stage = ca.bilin(ca.DM(Q), ocp.state - state_target) + ca.bilin(ca.DM(R), ocp.input - input_target)
+    ocp.minimize(ocp.sum(stage) + ocp.at_end(ca.bilin(ca.reshape(terminal, 4, 4), ocp.state - state_target)))
+    solver = ocp.solver(mpc.MultipleShooting(intervals=horizon), tolerance=1e-10)
+    values = {"d_hat": d_hat, "x_s": x_s, "u_s": u_s, "P": P.T.ravel()}
+    ours = solver.solve(x0=x_hat, params=values)
+    assert ours.success, ours.status
+    np.testing.assert_allclose(ours.inputs, previous.inputs, atol=5e-5)
+    np.testing.assert_allclose(ours.states, previous.states, atol=1e-6)
+    # One sample later, warm-started: fewer iterations than from scratch.
+    later = solver.solve(x0=previous.states[1], params=values, warm_start=ours)
+    cold = solver.solve(x0=previous.states[1], params=values)
+    assert later.success and later.iterations < cold.iterations
+    np.testing.assert_allclose(later.inputs, cold.inputs, atol=1e-6)
 
 
 @pytest.mark.parametrize("kind", ["limited-memory", "trajectory", "simulated input"])
