@@ -26,6 +26,7 @@ solver other than IPOPT, or a real-time iteration, can use them.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -102,10 +103,9 @@ class MultipleShooting:
             raise ValueError(f"substeps must be an integer >= 1, got {self.substeps}")
         object.__setattr__(self, "substeps", int(self.substeps))
 
-    degree = 0
-
     @property
     def fractions(self) -> np.ndarray:
+        """Mesh points as fractions of T, (N+1,)."""
         return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
 
     def with_mesh(self, fractions) -> MultipleShooting:
@@ -226,12 +226,13 @@ class Transcription:
         is_collocation = isinstance(method, Collocation)
         points = method.points if isinstance(method, Collocation) else ""
         self.coefficients = collocation_coefficients(d, points) if is_collocation else None
+        tau_nodes = self.coefficients.tau if self.coefficients is not None else np.zeros(1)
 
         # ---------------------------------------------------------------- layout and scales
         states, colloc = np.empty((N + 1, nx), int), np.empty((N, d, nx), int)
         inputs, controls = np.empty((N, nu), int), np.empty((N, nc), int)
         labels: list[str] = []
-        counter = iter(range(10**9))
+        counter = itertools.count()
         take = lambda n: np.array([next(counter) for _ in range(n)], dtype=int)
         for k in range(N):
             states[k] = take(nx)
@@ -310,7 +311,8 @@ class Transcription:
         # ---------------------------------------------------------------- dynamics
         integral_values = ca.SX.zeros(len(integrals))
         if d:
-            cc = collocation_coefficients(d, points)
+            cc = self.coefficients
+            assert cc is not None
             xk, xc = ca.SX.sym("xk", nx), ca.SX.sym("xc", nx, d)
             uk, pk, hk = ca.SX.sym("u", nu), ca.SX.sym("p", plant.n_params), ca.SX.sym("h")
             nodes = ca.horzcat(xk, xc)
@@ -447,7 +449,7 @@ class Transcription:
                 if k < N:
                     interior = range(d - 1) if method_is_radau else range(d)
                     for j in interior:
-                        tj = t_mesh[k] + cc.tau[j + 1] * h[k]
+                        tj = t_mesh[k] + tau_nodes[j + 1] * h[k]
                         values = path_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
                         rows.add(values, lows, highs, [f"{c.label} on interval {k}, collocation point {j + 1}"
                                                        for c in general_path])
