@@ -1,0 +1,553 @@
+"""One optimal control problem, transcribed into one sparse nonlinear program.
+
+Both transcriptions split [0, T] into N intervals at mesh fractions
+0 = s_0 < s_1 < ... < s_N = 1 (uniform unless given), t_k = s_k T,
+h_k = t_{k+1} - t_k, and hold the input (and any extra control) constant on
+each interval: the sample-and-hold a controller applies, and what
+`OCPSolution.verify` re-simulates.
+
+- `Collocation`: on interval k the state is the polynomial of degree d
+  through x_k and d collocation states x_{k,1..d} at t_k + τ_j h_k, the
+  Legendre-Gauss (``"legendre"``) or Legendre-Gauss-Radau (``"radau"``)
+  points τ_j of (0, 1]. Its derivative equals f(x, u, p) at the collocation
+  points, and x_{k+1} is the polynomial's value at τ = 1. Integrals use the
+  points' quadrature weights. Accuracy at the mesh points: order 2d
+  (Legendre) and 2d - 1 (Radau) in h.
+- `MultipleShooting`: x_{k+1} = the plant's RK4 map over h_k (`substeps`
+  steps, the same arithmetic as `Plant.step_function`, with h_k symbolic
+  so T may be free), integrals integrated by the same RK4 steps.
+
+The decision vector is ordered stage by stage, w = (x_0, [x_{0,1..d}], u_0,
+c_0, x_1, ..., x_N, chosen parameters, T), each entry divided by its scale
+(`OptimalControlProblem.scale`; inputs by the actuator limit). `Transcription`
+exposes the NLP's pieces (`nlp`, `bounds`, `layout`, the row labels) so a
+solver other than IPOPT, or a real-time iteration, can use them.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+POINTS = ("legendre", "radau")
+MAX_DEGREE = 5
+
+
+def _intervals(value) -> int:
+    if isinstance(value, bool) or int(value) != value or value < 1:
+        raise ValueError(f"intervals must be an integer >= 1, got {value}")
+    return int(value)
+
+
+def _mesh(mesh, intervals: int) -> tuple | None:
+    if mesh is None:
+        return None
+    arr = np.asarray(mesh, dtype=float).reshape(-1)
+    if arr.size != intervals + 1 or not np.all(np.isfinite(arr)) or arr[0] != 0 or arr[-1] != 1 \
+            or np.any(np.diff(arr) <= 0):
+        raise ValueError(f"mesh must be {intervals + 1} increasing fractions of T from 0 to 1, got {mesh}")
+    return tuple(arr)
+
+
+@dataclass(frozen=True)
+class Collocation:
+    """Direct collocation on N intervals with `degree` points per interval (1-5).
+
+    points : "radau" (stiffly accurate, includes the interval's end) or "legendre" (Gauss)
+    mesh : optional N + 1 increasing fractions of T from 0 to 1 (default uniform);
+        when given, `intervals` is taken from it.
+    """
+
+    intervals: int = 50
+    degree: int = 3
+    points: str = "radau"
+    mesh: tuple | None = None
+
+    def __post_init__(self):
+        if self.mesh is not None:
+            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
+        object.__setattr__(self, "intervals", _intervals(self.intervals))
+        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+        if isinstance(self.degree, bool) or int(self.degree) != self.degree or not 1 <= self.degree <= MAX_DEGREE:
+            raise ValueError(f"degree must be an integer from 1 to {MAX_DEGREE}, got {self.degree}")
+        object.__setattr__(self, "degree", int(self.degree))
+        if self.points not in POINTS:
+            raise ValueError(f"points must be one of {', '.join(POINTS)}, got {self.points!r}")
+
+    @property
+    def fractions(self) -> np.ndarray:
+        """Mesh points as fractions of T, (N+1,)."""
+        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
+
+    def with_mesh(self, fractions) -> Collocation:
+        return Collocation(degree=self.degree, points=self.points, mesh=tuple(fractions))
+
+
+@dataclass(frozen=True)
+class MultipleShooting:
+    """Multiple shooting with the plant's RK4 map: `substeps` RK4 steps per interval, N intervals."""
+
+    intervals: int = 50
+    substeps: int = 1
+    mesh: tuple | None = None
+
+    def __post_init__(self):
+        if self.mesh is not None:
+            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
+        object.__setattr__(self, "intervals", _intervals(self.intervals))
+        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+        if isinstance(self.substeps, bool) or int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps}")
+        object.__setattr__(self, "substeps", int(self.substeps))
+
+    @property
+    def fractions(self) -> np.ndarray:
+        """Mesh points as fractions of T, (N+1,)."""
+        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
+
+    def with_mesh(self, fractions) -> MultipleShooting:
+        return MultipleShooting(substeps=self.substeps, mesh=tuple(fractions))
+
+
+@dataclass(frozen=True)
+class CollocationCoefficients:
+    """The Lagrange polynomials through τ_0 = 0 and the collocation points τ_1..τ_d of (0, 1].
+
+    tau : (d+1,);  derivative : (d+1, d), derivative[r, j] = ℓ_r'(τ_{j+1});
+    continuity : (d+1,), ℓ_r(1);  quadrature : (d,), the points' weights on [0, 1].
+    """
+
+    tau: np.ndarray
+    derivative: np.ndarray
+    continuity: np.ndarray
+    quadrature: np.ndarray
+
+
+def lagrange_basis(nodes, s) -> tuple[np.ndarray, np.ndarray]:
+    """Values and derivatives of the Lagrange polynomials through `nodes` at `s`, each (len(s), len(nodes))."""
+    nodes, s = np.asarray(nodes, dtype=float), np.atleast_1d(np.asarray(s, dtype=float))
+    values, derivs = np.empty((s.size, nodes.size)), np.empty((s.size, nodes.size))
+    for r in range(nodes.size):
+        others = np.delete(nodes, r)
+        poly = np.poly1d(np.poly(others)) / np.prod(nodes[r] - others)
+        values[:, r], derivs[:, r] = poly(s), np.polyder(poly)(s)
+    return values, derivs
+
+
+def collocation_coefficients(degree: int, points: str) -> CollocationCoefficients:
+    """Coefficients of the collocation equations for `degree` Legendre or Radau points."""
+    Collocation(degree=degree, points=points)  # validates
+    tau = np.array([0.0] + ca.collocation_points(degree, points))
+    _, derivs = lagrange_basis(tau, tau[1:])
+    values_at_one, _ = lagrange_basis(tau, [1.0])
+    weights = np.empty(degree)
+    for j in range(degree):
+        others = np.delete(tau[1:], j)
+        poly = np.poly1d(np.poly(others)) / np.prod(tau[j + 1] - others)
+        antiderivative = np.polyint(poly)
+        weights[j] = antiderivative(1.0) - antiderivative(0.0)
+    return CollocationCoefficients(tau, derivs.T.copy(), values_at_one[0], weights)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where each quantity sits in the decision vector w (indices into w).
+
+    states : (N+1, nx) at the mesh points;  collocation : (N, d, nx) or (N, 0, nx)
+    inputs : (N, nu);  controls : (N, nc);  chosen : name -> index;  final_time : index or None
+    """
+
+    states: np.ndarray
+    collocation: np.ndarray
+    inputs: np.ndarray
+    controls: np.ndarray
+    chosen: dict
+    final_time: int | None
+    size: int
+
+
+@dataclass
+class _Rows:
+    """Constraint rows g with bounds (SX in the NLP parameters) and labels."""
+
+    g: list = field(default_factory=list)
+    lower: list = field(default_factory=list)
+    upper: list = field(default_factory=list)
+    labels: list = field(default_factory=list)
+
+    def add(self, expressions, lower, upper, labels) -> None:
+        g = ca.vec(ca.SX(expressions))
+        n = g.numel()
+        fit = lambda b: ca.repmat(ca.SX(b), n, 1) if ca.SX(b).numel() == 1 else ca.vec(ca.SX(b))
+        self.g.append(g)
+        self.lower.append(fit(lower))
+        self.upper.append(fit(upper))
+        self.labels.extend(labels if isinstance(labels, list) else [labels] * n)
+
+
+class Transcription:
+    """The NLP of an `OptimalControlProblem` on one mesh.
+
+    Parameters
+    ----------
+    ocp : OptimalControlProblem
+    method : Collocation or MultipleShooting
+    chosen_as_parameters : treat the chosen plant parameters as given values (the inner
+        problem of nested co-design) instead of decisions.
+
+    Attributes
+    ----------
+    nlp : dict of SX  {"x": w (scaled decisions), "p": P (NLP parameters), "f": objective, "g": constraints}
+    bounds : casadi.Function  P -> (lbx, ubx, lbg, ubg), bounds of the scaled w and of g
+    layout : Layout;  scale : ndarray (nw,), physical value = scale * w
+    constraint_labels : list of str, one per row of g;  decision_labels : one per entry of w
+    parameter_slices : name -> slice of P ("plant" for the fixed plant parameters)
+    fixed_param_names, chosen_names : tuple of str
+    mesh : ndarray (N+1,), mesh points as fractions of T
+    """
+
+    def __init__(self, ocp, method=None, *, chosen_as_parameters: bool = False):
+        ocp.check_complete()
+        method = Collocation() if method is None else method
+        if not isinstance(method, (Collocation, MultipleShooting)):
+            raise ValueError(f"transcription must be a Collocation or a MultipleShooting, got {method!r}")
+        plant = ocp.plant
+        self.ocp, self.method, self.plant = ocp, method, plant
+        self.mesh = method.fractions
+        N, nx, nu, nc = method.intervals, plant.nx, plant.nu, len(ocp.controls)
+        d = method.degree if isinstance(method, Collocation) else 0
+        self.intervals, self.degree = N, d
+        chosen = {} if chosen_as_parameters else dict(ocp.chosen)
+        self.chosen_names = tuple(chosen)
+        self.fixed_param_names = tuple(p.name for p in plant.param_info if p.name not in chosen)
+        is_collocation = isinstance(method, Collocation)
+        points = method.points if isinstance(method, Collocation) else ""
+        self.coefficients = collocation_coefficients(d, points) if is_collocation else None
+        tau_nodes = self.coefficients.tau if self.coefficients is not None else np.zeros(1)
+
+        # ---------------------------------------------------------------- layout and scales
+        states, colloc = np.empty((N + 1, nx), int), np.empty((N, d, nx), int)
+        inputs, controls = np.empty((N, nu), int), np.empty((N, nc), int)
+        labels: list[str] = []
+        counter = itertools.count()
+        take = lambda n: np.array([next(counter) for _ in range(n)], dtype=int)
+        for k in range(N):
+            states[k] = take(nx)
+            labels += [f"{n} at mesh point {k}" for n in plant.state_names]
+            for j in range(d):
+                colloc[k, j] = take(nx)
+                labels += [f"{n} at interval {k} collocation point {j + 1}" for n in plant.state_names]
+            inputs[k] = take(nu)
+            labels += [f"{n} on interval {k}" for n in plant.input_names]
+            controls[k] = take(nc)
+            labels += [f"{n} on interval {k}" for n in ocp.controls]
+        states[N] = take(nx)
+        labels += [f"{n} at mesh point {N}" for n in plant.state_names]
+        chosen_index = {name: int(take(1)[0]) for name in chosen}
+        labels += [f"parameter {name}" for name in chosen]
+        final_index = int(take(1)[0]) if ocp.free_time else None
+        if final_index is not None:
+            labels.append("final time T")
+        nw = next(counter)
+        self.layout = Layout(states, colloc, inputs, controls, chosen_index, final_index, nw)
+        self.decision_labels = labels
+
+        state_scale = np.array([ocp.scales.get(n, 1.0) for n in plant.state_names])
+        input_scale = np.array([ocp.scales.get(n, plant.input_limit[i]) for i, n in enumerate(plant.input_names)])
+        control_scale = np.array([ocp.scales.get(n, 1.0) for n in ocp.controls])
+        scale = np.ones(nw)
+        scale[states] = state_scale
+        scale[colloc] = state_scale
+        scale[inputs] = input_scale
+        scale[controls] = control_scale
+        for name, index in chosen_index.items():
+            guess = chosen[name].guess
+            scale[index] = ocp.scales.get(name, guess if guess > 0 else chosen[name].upper)
+        if final_index is not None:
+            scale[final_index] = ocp.free_time.guess
+        self.scale = scale
+        self.state_scale = state_scale
+
+        # ---------------------------------------------------------------- symbols
+        w = ca.SX.sym("w", nw)
+        phys = w * ca.DM(scale)
+        sizes = [len(self.fixed_param_names)] + [sym.numel() for sym, _ in ocp.parameters.values()]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        P = ca.SX.sym("P", int(offsets[-1]))
+        self.parameter_slices = {"plant": slice(0, offsets[1])}
+        for i, name in enumerate(ocp.parameters):
+            self.parameter_slices[name] = slice(offsets[i + 1], offsets[i + 2])
+        user_values = [P[self.parameter_slices[name]] for name in ocp.parameters]
+        user_symbols = [sym for sym, _ in ocp.parameters.values()]
+        fixed_pos = {name: i for i, name in enumerate(self.fixed_param_names)}
+        p = ca.vertcat(*[phys[chosen_index[q.name]] if q.name in chosen else P[fixed_pos[q.name]]
+                         for q in plant.param_info])
+        T = phys[final_index] if final_index is not None else ca.SX(ocp.fixed_final_time)
+        self.final_time_expression = T
+        self.param_expression = p
+        X = [phys[states[k]] for k in range(N + 1)]
+        XC = [[phys[colloc[k, j]] for j in range(d)] for k in range(N)]
+        U = [phys[inputs[k]] for k in range(N)]
+        C = [phys[controls[k]] for k in range(N)]
+        t_mesh = [T * s for s in self.mesh]
+        h = [t_mesh[k + 1] - t_mesh[k] for k in range(N)]
+
+        # Path expressions as Functions of (x, u, c, t, p, T, user parameters).
+        path_in = [ocp.state, ocp.input, ocp.control_vector, ocp.t, ocp.param_vector, ocp.final_time, *user_symbols]
+        path_names = ["x", "u", "c", "t", "p", "T", *ocp.parameters]
+        integrals = [a for a in ocp.accumulated if a.kind == "integral"]
+        sums = [a for a in ocp.accumulated if a.kind == "sum"]
+        integrand_fn = ca.Function("integrands", path_in, [ca.vertcat(*[a.integrand for a in integrals])],
+                                   path_names, ["L"])
+        summand_fn = ca.Function("summands", path_in, [ca.vertcat(*[a.integrand for a in sums])], path_names, ["l"])
+        f = plant.casadi_f
+        rows = _Rows()
+        fed_fn = ca.Function("plant_input", path_in, [ocp.fed_input], path_names, ["u_plant"])
+        fed = [fed_fn(X[k], U[k], C[k], t_mesh[k], p, T, *user_values) for k in range(N)]
+
+        # ---------------------------------------------------------------- dynamics
+        integral_values = ca.SX.zeros(len(integrals))
+        if d:
+            cc = self.coefficients
+            assert cc is not None
+            xk, xc = ca.SX.sym("xk", nx), ca.SX.sym("xc", nx, d)
+            uk, pk, hk = ca.SX.sym("u", nu), ca.SX.sym("p", plant.n_params), ca.SX.sym("h")
+            nodes = ca.horzcat(xk, xc)
+            residual = ca.horzcat(*[(hk * f(xc[:, j], uk, pk) - nodes @ ca.DM(cc.derivative[:, j])) / state_scale
+                                    for j in range(d)])
+            interval = ca.Function("collocation_interval", [xk, xc, uk, pk, hk],
+                                   [ca.vec(residual), nodes @ ca.DM(cc.continuity)], ["x", "xc", "u", "p", "h"],
+                                   ["residual", "x_end"])
+            for k in range(N):
+                res, x_end = interval(X[k], ca.horzcat(*XC[k]), fed[k], p, h[k])
+                rows.add(res, 0, 0, [f"collocation of {n} on interval {k}, point {j + 1}"
+                                     for j in range(d) for n in plant.state_names])
+                rows.add((X[k + 1] - x_end) / state_scale, 0, 0,
+                         [f"continuity of {n} at mesh point {k + 1}" for n in plant.state_names])
+                for j in range(d):
+                    tj = t_mesh[k] + cc.tau[j + 1] * h[k]
+                    integral_values += h[k] * cc.quadrature[j] * \
+                        integrand_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
+        else:
+            assert isinstance(method, MultipleShooting)
+            step = rk4_interval(plant, integrand_fn, method.substeps)
+            for k in range(N):
+                x_next, q = step(X[k], U[k], fed[k], C[k], t_mesh[k], h[k], p, T, *user_values)
+                rows.add((X[k + 1] - x_next) / state_scale, 0, 0,
+                         [f"shooting gap of {n} at mesh point {k + 1}" for n in plant.state_names])
+                integral_values += q
+        sum_values = ca.SX.zeros(len(sums))
+        for k in range(N):
+            sum_values += summand_fn(X[k], U[k], C[k], t_mesh[k], p, T, *user_values)
+        if sums:
+            end_terms = summand_fn(X[N], U[N - 1], C[N - 1], T, p, T, *user_values)
+            sum_values += ca.vertcat(*[end_terms[i] if a.include_end else 0 for i, a in enumerate(sums)])
+        accumulated_values = []
+        counts = {"integral": 0, "sum": 0}
+        for a in ocp.accumulated:
+            source = integral_values if a.kind == "integral" else sum_values
+            accumulated_values.append(source[counts[a.kind]])
+            counts[a.kind] += 1
+        self.accumulated_values = ca.vertcat(*accumulated_values)
+
+        # ---------------------------------------------------------------- bounds and constraints
+        # Numeric bounds in arrays; bounds that are `parameter` values as SX, per entry.
+        lbx, ubx = np.full(nw, -np.inf), np.full(nw, np.inf)
+        lbx_of_params: dict[int, ca.SX] = {}
+        ubx_of_params: dict[int, ca.SX] = {}
+
+        def bound(indices, lower, upper):
+            indices = np.atleast_1d(indices)
+            for value, numeric, symbolic, pick in ((lower, lbx, lbx_of_params, ca.fmax),
+                                                   (upper, ubx, ubx_of_params, ca.fmin)):
+                value = ca.SX(value)
+                if value.is_constant():
+                    combine = np.maximum if pick is ca.fmax else np.minimum
+                    numeric[indices] = combine(numeric[indices], float(value) / scale[indices])
+                else:
+                    for i in indices:
+                        symbolic[i] = pick(symbolic[i], value / scale[i]) if i in symbolic else value / scale[i]
+
+        if ocp.actuator_limit:
+            for i in range(nu):
+                bound(inputs[:, i], -plant.input_limit[i], plant.input_limit[i])
+        for i, (lo, hi) in enumerate(ocp.controls.values()):
+            bound(controls[:, i], lo, hi)
+        for name, index in chosen_index.items():
+            bound(index, chosen[name].lower, chosen[name].upper)
+        if final_index is not None:
+            bound(final_index, ocp.free_time.lower, ocp.free_time.upper)
+
+        # Symbols that map onto one decision each, for constraints that are bounds.
+        path_targets = {}
+        for i, sym in enumerate(_elements(ocp.state)):
+            path_targets[sym.name()] = (sym, "state", i)
+        for i, sym in enumerate(_elements(ocp.input)):
+            path_targets[sym.name()] = (sym, "input", i)
+        for i, sym in enumerate(_elements(ocp.control_vector)):
+            path_targets[sym.name()] = (sym, "control", i)
+        point_targets = {}
+        for vec, where in ((ocp.state_start, states[0]), (ocp.state_end, states[N]), (ocp.input_start, inputs[0]),
+                           (ocp.input_end, inputs[N - 1]), (ocp.control_start, controls[0]),
+                           (ocp.control_end, controls[N - 1])):
+            for i, sym in enumerate(_elements(vec)):
+                point_targets[sym.name()] = (sym, int(where[i]))
+        for name, index in chosen_index.items():
+            point_targets[name] = (ocp.p[name], index)
+        if final_index is not None:
+            point_targets["T"] = (ocp.final_time, final_index)
+        decisions = ca.vertcat(ocp._path_symbols, ocp._point_symbols, *[ocp.p[n] for n in chosen],
+                               ocp.final_time if final_index is not None else ca.SX(0, 1))
+
+        bound_in = ca.vertcat(*user_symbols) if user_symbols else ca.SX(0, 1)
+        bound_of = lambda e: ca.substitute(e, bound_in, ca.vertcat(*user_values)) if user_symbols else e
+        general_path, general_point = [], []
+        method_is_radau = points == "radau"
+        for con in ocp.constraints:
+            if not ca.depends_on(con.expression, decisions):
+                raise ValueError(f"constraint {con.label!r} involves no decision of this problem "
+                                 "(its value is fixed by the parameters)")
+            lower, upper = bound_of(con.lower), bound_of(con.upper)
+            target = con.expression.name() if con.expression.is_symbolic() else None
+            if con.path and target in path_targets and ca.is_equal(con.expression, path_targets[target][0]):
+                _, kind, i = path_targets[target]
+                if kind == "state":
+                    first, last = (0 if con.include_start else 1), (N if con.include_end else N - 1)
+                    bound(states[first:last + 1, i], lower, upper)
+                    inner = colloc[:, :, i].ravel()
+                    if method_is_radau and not con.include_end:
+                        inner = inner[:-1]  # Radau's last point of the last interval is x_N
+                    bound(inner, lower, upper)
+                else:
+                    bound((inputs if kind == "input" else controls)[:, i], lower, upper)
+            elif not con.path and target in point_targets and ca.is_equal(con.expression, point_targets[target][0]):
+                bound(point_targets[target][1], lower, upper)
+            elif con.path:
+                general_path.append(con)
+            else:
+                general_point.append(con)
+
+        if general_path:
+            path_fn = ca.Function("path_constraints", path_in, [ca.vertcat(*[c.expression for c in general_path])],
+                                  path_names, ["g"])
+            lows = ca.vertcat(*[bound_of(c.lower) for c in general_path])
+            highs = ca.vertcat(*[bound_of(c.upper) for c in general_path])
+            where = "of T" if final_index is not None else "s"
+            for k in range(N + 1):
+                uk, ck = (U[k], C[k]) if k < N else (U[N - 1], C[N - 1])
+                keep = [i for i, c in enumerate(general_path)
+                        if not ((k == 0 and not c.include_start) or (k == N and not c.include_end))]
+                if keep:
+                    values = path_fn(X[k], uk, ck, t_mesh[k], p, T, *user_values)
+                    at = self.mesh[k] * (1 if final_index is not None else ocp.fixed_final_time)
+                    rows.add(ca.vertcat(*[values[i] for i in keep]), ca.vertcat(*[lows[i] for i in keep]),
+                             ca.vertcat(*[highs[i] for i in keep]),
+                             [f"{general_path[i].label} at mesh point {k} (t = {at:.4g} {where})" for i in keep])
+                if k < N:
+                    interior = range(d - 1) if method_is_radau else range(d)
+                    for j in interior:
+                        tj = t_mesh[k] + tau_nodes[j + 1] * h[k]
+                        values = path_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
+                        rows.add(values, lows, highs, [f"{c.label} on interval {k}, collocation point {j + 1}"
+                                                       for c in general_path])
+
+        point_in = [ocp.state_start, ocp.state_end, ocp.input_start, ocp.input_end, ocp.control_start,
+                    ocp.control_end, ca.vertcat(*[a.symbol for a in ocp.accumulated]), ocp.param_vector,
+                    ocp.final_time, *user_symbols]
+        point_args = [X[0], X[N], U[0], U[N - 1], C[0], C[N - 1], self.accumulated_values, p, T, *user_values]
+        if general_point:
+            point_fn = ca.Function("point_constraints", point_in, [ca.vertcat(*[c.expression for c in general_point])])
+            rows.add(point_fn(*point_args), ca.vertcat(*[bound_of(c.lower) for c in general_point]),
+                     ca.vertcat(*[bound_of(c.upper) for c in general_point]), [c.label for c in general_point])
+        objective = ca.Function("objective", point_in, [ocp.objective])(*point_args)
+
+        g = ca.vertcat(*rows.g) if rows.g else ca.SX(0, 1)
+        self.nlp = {"x": w, "p": P, "f": objective, "g": g}
+        self.constraint_labels = rows.labels
+        lbg = ca.vertcat(*rows.lower) if rows.lower else ca.SX(0, 1)
+        ubg = ca.vertcat(*rows.upper) if rows.upper else ca.SX(0, 1)
+        lbx_all, ubx_all = ca.SX(ca.DM(lbx)), ca.SX(ca.DM(ubx))
+        for i, value in lbx_of_params.items():
+            lbx_all[i] = ca.fmax(value, lbx[i])
+        for i, value in ubx_of_params.items():
+            ubx_all[i] = ca.fmin(value, ubx[i])
+        self.bounds = ca.Function("bounds", [P], [lbx_all, ubx_all, lbg, ubg],
+                                  ["P"], ["lbx", "ubx", "lbg", "ubg"])
+        self.values = ca.Function("values", [w, P], [objective, self.accumulated_values, T, p, g, ca.horzcat(*fed)],
+                                  ["w", "P"], ["f", "accumulated", "T", "p", "g", "plant_inputs"])
+
+    # -------------------------------------------------------------------- helpers
+    def parameter_values(self, x0=None, params=None, plant_params=None) -> np.ndarray:
+        """The NLP parameter vector P from defaults and overrides.
+
+        x0 : the initial state, for a problem with `start_from`
+        params : name -> value of `OptimalControlProblem.parameter`s
+        plant_params : name -> value of fixed plant parameters (default: the plant's)
+        """
+        ocp = self.ocp
+        values = dict(params or {})
+        for name in values:
+            if name not in ocp.parameters:
+                raise ValueError(f"params: the problem has no parameter {name!r}; its parameters are "
+                                 f"{', '.join(ocp.parameters) or 'none'}")
+        if x0 is not None:
+            if "x0" not in ocp.parameters:
+                raise ValueError("x0 given, but the problem has no start_from(): call ocp.start_from() to make the "
+                                 "initial state a parameter")
+            values["x0"] = x0
+        if plant_params:
+            for name in plant_params:
+                if name not in self.fixed_param_names:
+                    raise ValueError(f"plant_params: {name!r} is not a fixed parameter of {self.plant.name}; "
+                                     f"fixed parameters are {', '.join(self.fixed_param_names)}")
+        full = self.plant.param_vector(dict(plant_params or {}))
+        index = {q.name: i for i, q in enumerate(self.plant.param_info)}
+        out = np.empty(self.nlp["p"].numel())
+        out[self.parameter_slices["plant"]] = [full[index[n]] for n in self.fixed_param_names]
+        for name, (sym, default) in ocp.parameters.items():
+            value = values.get(name, default)
+            if value is None:
+                raise ValueError(f"params: parameter {name!r} has no default; give its value")
+            arr = np.asarray(value, dtype=float).reshape(-1)
+            if arr.size == 1 and sym.numel() > 1:
+                arr = np.full(sym.numel(), arr[0])
+            if arr.size != sym.numel() or not np.all(np.isfinite(arr)):
+                raise ValueError(f"params: {name!r} needs {sym.numel()} finite values, got {value!r}")
+            out[self.parameter_slices[name]] = arr
+        return out
+
+
+def rk4_interval(plant, integrands: ca.Function, substeps: int) -> ca.Function:
+    """RK4 over one interval of symbolic length h, with the integrands integrated alongside.
+
+    integrands : Function (x, u, c, t, p, T, user parameters...) -> L (nL,)
+    Returns the Function (x, u, u_plant, c, t0, h, p, T, user parameters...) -> (x after h,
+    ∫ L dt over h): `substeps` steps of the arithmetic of `Plant.step_function` with the plant
+    fed u_plant, h an input so the final time may be free and the mesh non-uniform.
+    """
+    x, u, fed = ca.SX.sym("x", plant.nx), ca.SX.sym("u", plant.nu), ca.SX.sym("u_plant", plant.nu)
+    c = ca.SX.sym("c", integrands.size1_in(2))
+    t0, h, p, T = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("p", plant.n_params), ca.SX.sym("T")
+    user_names = [integrands.name_in(i) for i in range(6, integrands.n_in())]
+    user = [ca.SX.sym(name, integrands.size1_in(6 + i)) for i, name in enumerate(user_names)]
+    rate = lambda xs, ts: (plant.casadi_f(xs, fed, p), integrands(xs, u, c, ts, p, T, *user))
+    dt = h / substeps
+    xs, q = x, ca.SX.zeros(integrands.size1_out(0))
+    for i in range(substeps):
+        ts = t0 + i * dt
+        k1, l1 = rate(xs, ts)
+        k2, l2 = rate(xs + dt / 2 * k1, ts + dt / 2)
+        k3, l3 = rate(xs + dt / 2 * k2, ts + dt / 2)
+        k4, l4 = rate(xs + dt * k3, ts + dt)
+        xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        q = q + dt / 6 * (l1 + 2 * l2 + 2 * l3 + l4)
+    return ca.Function("rk4_interval", [x, u, fed, c, t0, h, p, T, *user], [ca.cse(xs), ca.cse(q)],
+                       ["x", "u", "u_plant", "c", "t0", "h", "p", "T", *user_names],
+                       ["x_next", "integrals"])
+
+
+def _elements(vector: ca.SX) -> list:
+    return [vector[i] for i in range(vector.numel())]
