@@ -24,13 +24,13 @@ import control
 import numpy as np
 import scipy.optimize
 
-from .analysis import (Loop, SpecCheck, _trailing_zeros, as_polynomials, band_max, check_band_ratio,
-                       check_crossover, check_phase_margin, check_stable, margins, tf)
+from .analysis import (Loop, SpecCheck, as_polynomials, band_max, check_band_ratio, check_bandwidth, check_crossover,
+                       check_phase_margin, check_stable, margins, tf, zeros_at_origin)
 from .filters import lag, lead, lead_ratio, low_pass
 
 __all__ = ["prototype_crossover", "prototype_bandwidth", "prototype_phase_margin", "damping_for_phase_margin",
            "crossover_for_bandwidth", "lead_for_crossover", "LeadDesign", "improve_loop", "LoopshapingResult",
-           "flattening_prefilter", "phase_at", "low_frequency_sign"]
+           "flattening_prefilter", "phase_at", "low_frequency_sign", "frequency_design_checks"]
 
 
 # ----------------------------------------------------------------- prototype relations
@@ -73,8 +73,8 @@ def crossover_for_bandwidth(bandwidth: float, zeta: float) -> float:
 def low_frequency_sign(L) -> float:
     """Sign of L's low-frequency gain: of N_low/D_low, the lowest nonzero coefficients."""
     num, den = as_polynomials(L)
-    n_low = num[num.size - 1 - _trailing_zeros(num)]
-    d_low = den[den.size - 1 - _trailing_zeros(den)]
+    n_low = num[num.size - 1 - zeros_at_origin(num)]
+    d_low = den[den.size - 1 - zeros_at_origin(den)]
     return float(np.sign(n_low / d_low))
 
 
@@ -85,7 +85,7 @@ def phase_at(L, omega: float) -> float:
     (−180° for 1/s²), so the phase margin is 180° + phase at crossover.
     """
     num, den = as_polynomials(L)
-    n_type = _trailing_zeros(den) - _trailing_zeros(num)
+    n_type = zeros_at_origin(den) - zeros_at_origin(num)
     grid = np.logspace(np.log10(omega) - 8, np.log10(omega), 4000)
     resp = np.polyval(num, 1j * grid) / np.polyval(den, 1j * grid) * (1j * grid) ** n_type
     phase = np.unwrap(np.angle(resp))
@@ -342,3 +342,12 @@ def flattening_prefilter(T, tolerance: float = 0.01, order: int = 1) -> dict:
     F = low_pass(corner, order)
     return {"prefilter": F, "corner": float(corner), "peak_before": float(peak_before),
             "peak_after": float(band_max(F * T, 0.0, np.inf)[0])}
+
+
+def frequency_design_checks(loop: Loop, crossover: float, pm_deg: float, bandwidth: float) -> list[SpecCheck]:
+    """A frequency-response design's requirements: stable, crossover and phase margin as designed
+    (±1 deg), closed-loop bandwidth as asked."""
+    L = loop.loop_gain()
+    return [check_stable(loop), check_crossover(L, crossover),
+            check_phase_margin(L, target_deg=pm_deg, tolerance_deg=1.0),
+            check_bandwidth(loop.reference_to_output(), bandwidth)]

@@ -67,7 +67,7 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     runs = [(label, run) for (label, name), run in result.runs.items() if name == scenario]
     if not runs:
         return None
-    study, case = result.study, result.study.case
+    study, case = result.study, result.study
     scale, unit = tracked_scale(study.tracked_unit)
     fig = _figure(9, 6.5)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
@@ -113,7 +113,7 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     """Monte Carlo envelopes (min–max and 5–95 % bands, median) of every controller."""
     if not result.envelopes:
         return None
-    study, case = result.study, result.study.case
+    study, case = result.study, result.study
     scale, unit = tracked_scale(study.tracked_unit)
     items = list(result.envelopes.items())
     cols = min(3, len(items))
