@@ -21,10 +21,25 @@ from designs.pid import SIGMA, linearized_input_bound, pd_saturation
 from mpc import MPCSettings
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_report import ActuatorSizing
+from studies.codesign_report import actuator_sizing as size_actuator
 from studies.errata import Erratum
-from studies.homework import (ZETA, ClassicalDesign, StateSpaceChoices, error_record, loopshaped,
-                              loopshaping_record, margin_record, poles_record, record, root_locus_record,
-                              single_loop, single_loop_blocks, statespace_items_15_to_17, tf_record)
+from studies.homework import (
+    ZETA,
+    ClassicalDesign,
+    StateSpaceChoices,
+    error_record,
+    loopshaped,
+    loopshaping_record,
+    margin_record,
+    poles_record,
+    record,
+    root_locus_record,
+    single_loop,
+    single_loop_blocks,
+    statespace_items_15_to_17,
+    tf_record,
+)
 
 #: I.14(c): 10x better tracking and disturbance rejection below 0.007 rad/s, 10x better noise
 #: attenuation above 200 rad/s, relative to the PD loop.
@@ -113,13 +128,14 @@ def sizing_start(known: models.Plant) -> models.Block:
     return pid_at(sizing_hand_design(text), known, float(known.input_limit[0]))
 
 
+#: The smallest torque limit meeting the hand PD's own rise time at 1 N m (overshoot ≤ 5 %).
+SIZING = ActuatorSizing(text_limit=1.0, search_range=(0.75, 1.2), duration=3.0, parameter="torque limit",
+                        hand_design=sizing_hand_design, retune_start=sizing_start)
+
+
 def actuator_sizing(**options):
     """The smallest torque limit meeting the hand PD's own rise time at 1 N m (overshoot ≤ 5 %)."""
-    from studies.codesign_report import ActuatorSizing, actuator_sizing as size
-
-    sizing = ActuatorSizing(text_limit=1.0, search_range=(0.75, 1.2), duration=3.0, parameter="torque limit",
-                            hand_design=sizing_hand_design, retune_start=sizing_start)
-    return size(CASE, sizing, **options)
+    return size_actuator(CASE, SIZING, **options)
 
 
 # ----------------------------------------------------------------- drawing

@@ -19,17 +19,37 @@ from designs import analysis as an
 from designs.analysis import Loop, dc_gain
 from designs.filters import TransferFunctionBlock
 from designs.loops import cascade_blocks, successive_loop_closure
-from designs.loopshaping import (crossover_for_bandwidth, frequency_design_checks, lead_for_crossover,
-                                 low_frequency_sign, prototype_phase_margin)
+from designs.loopshaping import (
+    crossover_for_bandwidth,
+    frequency_design_checks,
+    lead_for_crossover,
+    low_frequency_sign,
+    prototype_phase_margin,
+)
 from designs.pid import SIGMA, linearized_input_bound
 from designs.rootlocus import dominant_pair, lead_by_angle
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_report import ActuatorSizing
+from studies.codesign_report import actuator_sizing as size_actuator
 from studies.errata import Erratum
-from studies.homework import (SEPARATION, ZETA, ClassicalDesign, StateSpaceChoices, cascade_records, error_record,
-                              integrator, margin_record, poles_record, rate_limit, record, root_locus_record,
-                              spec_records, tf_record)
+from studies.homework import (
+    SEPARATION,
+    ZETA,
+    ClassicalDesign,
+    StateSpaceChoices,
+    cascade_records,
+    error_record,
+    integrator,
+    margin_record,
+    poles_record,
+    rate_limit,
+    record,
+    root_locus_record,
+    spec_records,
+    tf_record,
+)
 
 #: V.13: inner (angle) loop bandwidth 20 rad/s with ζ = 0.7, outer (position) loop 2 rad/s with ζ = 0.6.
 BANDWIDTH_INNER, ZETA_INNER = 20.0, 0.7
@@ -197,13 +217,14 @@ def sizing_start(known: models.Plant) -> models.Block:
     return models.Cascade(block.outer, pid_at(block.inner, known, float(known.input_limit[0])), name=block.name)
 
 
+#: The smallest force limit meeting the hand PD's own rise time at 15 N (overshoot ≤ 5 %).
+SIZING = ActuatorSizing(text_limit=15.0, search_range=(13.25, 18.0), duration=6.0, parameter="force limit",
+                        hand_design=sizing_hand_design, retune_start=sizing_start)
+
+
 def actuator_sizing(**options):
     """The smallest force limit meeting the hand PD's own rise time at 15 N (overshoot ≤ 5 %)."""
-    from studies.codesign_report import ActuatorSizing, actuator_sizing as size
-
-    sizing = ActuatorSizing(text_limit=15.0, search_range=(13.25, 18.0), duration=6.0, parameter="force limit",
-                            hand_design=sizing_hand_design, retune_start=sizing_start)
-    return size(CASE, sizing, **options)
+    return size_actuator(CASE, SIZING, **options)
 
 
 # ----------------------------------------------------------------- drawing

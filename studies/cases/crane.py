@@ -20,16 +20,31 @@ from designs import analysis as an
 from designs.analysis import Loop, dc_gain
 from designs.filters import TransferFunctionBlock
 from designs.loops import PlacedPD, SuccessiveLoopClosure, cascade_blocks, cascade_plants, cascade_poles, place_pair
-from designs.loopshaping import (crossover_for_bandwidth, damping_for_phase_margin, frequency_design_checks,
-                                 lead_for_crossover, prototype_phase_margin)
+from designs.loopshaping import (
+    crossover_for_bandwidth,
+    damping_for_phase_margin,
+    frequency_design_checks,
+    lead_for_crossover,
+    prototype_phase_margin,
+)
 from designs.pid import pd_design
 from designs.tuning import Cost, Specs
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum, Remark
-from studies.homework import (ClassicalDesign, StateSpaceChoices, error_record, integrator, margin_record,
-                              poles_record, record, root_locus_record, spec_records, tf_record)
+from studies.homework import (
+    ClassicalDesign,
+    StateSpaceChoices,
+    error_record,
+    integrator,
+    margin_record,
+    poles_record,
+    record,
+    root_locus_record,
+    spec_records,
+    tf_record,
+)
 
 #: VI.8(c): 50 % overshoot and a 1 s rise time for the load angle.
 INNER_OVERSHOOT, INNER_RISE_TIME = 0.5, 1.0

@@ -23,10 +23,24 @@ from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum
-from studies.homework import (SEPARATION, STATESPACE_SEPARATION, ZETA, ClassicalDesign, StateSpaceChoices,
-                              cascade_records, error_record, integrator, loopshaped, loopshaping_record,
-                              margin_record, poles_record, rate_limit, record, statespace_items_15_to_17,
-                              tf_record)
+from studies.homework import (
+    SEPARATION,
+    STATESPACE_SEPARATION,
+    ZETA,
+    ClassicalDesign,
+    StateSpaceChoices,
+    cascade_records,
+    error_record,
+    integrator,
+    loopshaped,
+    loopshaping_record,
+    margin_record,
+    poles_record,
+    rate_limit,
+    record,
+    statespace_items_15_to_17,
+    tf_record,
+)
 
 #: II.14(c), outer loop: 10x better below 0.001 rad/s, 10x more noise attenuation above 20 rad/s.
 LOOPSHAPING = LoopSpec("II.14", "outer", low_frequency=0.001, high_frequency=20.0, factor=10.0)

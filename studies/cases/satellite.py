@@ -24,9 +24,23 @@ from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum
-from studies.homework import (SEPARATION, STATESPACE_SEPARATION, ZETA, ClassicalDesign, StateSpaceChoices,
-                              error_record, integrator, loopshaped, loopshaping_record, margin_record,
-                              poles_record, record, root_locus_record, statespace_items_15_to_17, tf_record)
+from studies.homework import (
+    SEPARATION,
+    STATESPACE_SEPARATION,
+    ZETA,
+    ClassicalDesign,
+    StateSpaceChoices,
+    error_record,
+    integrator,
+    loopshaped,
+    loopshaping_record,
+    margin_record,
+    poles_record,
+    record,
+    root_locus_record,
+    statespace_items_15_to_17,
+    tf_record,
+)
 
 #: III.14(c), outer loop: 10x better below 0.003 rad/s, 10x more noise attenuation above 10 rad/s.
 LOOPSHAPING = LoopSpec("III.14", "outer", low_frequency=0.003, high_frequency=10.0, factor=10.0)

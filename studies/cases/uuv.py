@@ -26,9 +26,22 @@ from designs.tuning import Specs
 from mpc import MPCSettings
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_report import ActuatorSizing
+from studies.codesign_report import actuator_sizing as size_actuator
 from studies.errata import Erratum
-from studies.homework import (ClassicalDesign, StateSpaceChoices, error_record, margin_record, poles_record, record,
-                              root_locus_record, single_loop, single_loop_blocks, spec_records, tf_record)
+from studies.homework import (
+    ClassicalDesign,
+    StateSpaceChoices,
+    error_record,
+    margin_record,
+    poles_record,
+    record,
+    root_locus_record,
+    single_loop,
+    single_loop_blocks,
+    spec_records,
+    tf_record,
+)
 
 #: IV.11: "assume that we have turbo charged our thrusters so that we can produce a peak torque of 250 N-m".
 THRUSTER_LIMIT = 250.0
@@ -175,17 +188,18 @@ def sizing_hand_design(known: models.Plant) -> models.Block:
                                  name="lead-lag (IV.11)")
 
 
+#: The smallest thruster torque meeting IV.11's rise time 0.9 s and overshoot 10 %.
+SIZING = ActuatorSizing(text_limit=THRUSTER_LIMIT, search_range=(50.0, 250.0), duration=5.0,
+                        parameter="torque limit", hand_design=sizing_hand_design,
+                        retune_start=sizing_hand_design,
+                        specs=Specs(rise_time=LEAD_LAG_SPECS["rise_time"],
+                                    max_overshoot=LEAD_LAG_SPECS["overshoot_percent"] / 100),
+                        specs_origin="IV.11: rise time < 0.9 s, overshoot < 10 %", free=("num",))
+
+
 def actuator_sizing(**options):
     """The smallest thruster torque meeting IV.11's rise time 0.9 s and overshoot 10 %."""
-    from studies.codesign_report import ActuatorSizing, actuator_sizing as size
-
-    sizing = ActuatorSizing(text_limit=THRUSTER_LIMIT, search_range=(50.0, 250.0), duration=5.0,
-                            parameter="torque limit", hand_design=sizing_hand_design,
-                            retune_start=sizing_hand_design,
-                            specs=Specs(rise_time=LEAD_LAG_SPECS["rise_time"],
-                                        max_overshoot=LEAD_LAG_SPECS["overshoot_percent"] / 100),
-                            specs_origin="IV.11: rise time < 0.9 s, overshoot < 10 %", free=("num",))
-    return size(CASE, sizing, **options)
+    return size_actuator(CASE, SIZING, **options)
 
 
 # ----------------------------------------------------------------- drawing

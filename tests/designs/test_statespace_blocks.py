@@ -198,10 +198,12 @@ def test_closed_loop_is_differentiable_in_the_gains():
     # central finite differences of the numeric simulation.
     import casadi as ca
 
-    from designs import statespace_cases as sc
+    from designs import statespace_design
 
     arm = models.get("arm")
-    block = sc.controllers("arm", arm)["LQR + Kalman"]
+    design = statespace_design.design(arm, "theta", poles=[-8 + 6j, -8 - 6j], Q=np.diag([1 / 0.87**2, 0.0, 1 / 0.2**2]),
+                                      R=[[1 / 0.26**2]], sample_period=TS)
+    block = statespace_design.controllers(design)["LQR + Kalman"]
     n = 100
     run = models.closed_loop_function(arm, block, n, substeps=2)
     gains = ca.MX.sym("g", block.gain_vector().size)
