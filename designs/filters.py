@@ -84,7 +84,7 @@ def low_pass(omega: float, order: int = 1) -> control.TransferFunction:
 
 
 def prefilter(omega: float, order: int = 1) -> control.TransferFunction:
-    """Reference prefilter F(s): a unit-DC-gain low-pass at `omega` rad/s (I.14(f))."""
+    """Reference prefilter F(s): a unit-DC-gain low-pass at `omega` rad/s."""
     return low_pass(omega, order)
 
 

@@ -1,23 +1,19 @@
 """Successive loop closure: cascade transfer functions from the linearization, inner and outer loops.
 
-The cascade u → q_inner → q_outer (pendulum F → θ → z, satellite τ → θ → φ,
-ball on beam F → θ → z, crane F → θ → x) comes from the plant's exact
-linearization q̈ = A_q q + A_v q̇ + B u, not from hand algebra:
+The cascade u → q_inner → q_outer (for example a cart's force → pendulum
+angle → cart position) comes from the plant's exact linearization
+q̈ = A_q q + A_v q̇ + B u, not from hand algebra:
 
 - inner plant: the inner coordinate's own row, q̈_i = A_q[i,i] q_i + A_v[i,i] q̇_i + B_i u,
-  with the outer coordinate's terms dropped. These are the "disturbances
-  that have been ignored" of II.6(c)/III.6(c); `CascadePlants.dropped`
-  lists them. This reproduces the text's θ/F = −2/(s² − 24.5) (II),
-  0.2/(s² + 0.01 s + 0.03) (III), 2.652/s² (V.6(c)) and
-  −6.667e−5/(s² + 1.308) (VI.6).
+  with the outer coordinate's terms dropped (the "disturbances that have
+  been ignored"); `CascadePlants.dropped` lists them.
 - outer plant: the exact ratio (q_outer/u)/(q_inner/u) of the full
-  linearization's transfer functions, which eliminates u: (g − ℓ s²)/s² (II),
-  (b s + k)/(J_p s² + b s + k) (III), −g/s² (V), −(ℓ s² + g)/s² (VI).
+  linearization's transfer functions, which eliminates u (for a pendulum on
+  a cart, (g − ℓ s²)/s²).
 
 The outer loop is designed on K_DC·G_outer, the inner loop replaced by its
-DC gain K_DC (the text's III.8(f), VI.8(f)); II.8(g) and V.8(g) assume
-K_DC = 1, which we replace by the computed value (it is not 1 for the
-pendulum: the inner plant has a0 ≠ 0).
+DC gain K_DC. Textbooks often assume K_DC = 1; we use the computed value
+(it is not 1 when the inner plant has a static term a0 ≠ 0).
 """
 
 from __future__ import annotations
@@ -136,9 +132,9 @@ def _reduce(num, den, tol: float = 1e-8):
 def low_frequency_model(G) -> control.TransferFunction:
     """Keep only the lowest-order term of G's numerator: G ≈ n_low s^k / D(s).
 
-    The pendulum's outer plant (g − ℓ s²)/s² becomes g/s², valid for
-    ω ≪ √(g/ℓ); used for the outer PD when the text asks the closed loop to
-    equal a second-order one (II.8(i)).
+    A pendulum's outer plant (g − ℓ s²)/s² becomes g/s², valid for
+    ω ≪ √(g/ℓ); used for an outer PD whose closed loop is to equal a
+    second-order one.
     """
     num, den = as_polynomials(G)
     k = zeros_at_origin(num)
@@ -289,10 +285,9 @@ def successive_loop_closure(known: models.Plant, inner: str, outer: str, *, inne
                             feedforward_gradient=None) -> SuccessiveLoopClosure:
     """The text's .8 two-loop design by saturation rules, with bandwidth separation.
 
-    Inner loop: k_p,θ = ±`inner_bound`/A_θ (II.8(d), III.8(b), V.8(d)), ω_n,θ
-    and k_d,θ from ζ_θ. Outer loop on K_DC·G_outer: k_p,outer = ±A_θ/A_outer
-    (II.8(h), III.8(g), V.8(h)), ω_n and k_d from ζ_outer (or a P loop with
-    ``outer_derivative=False``, III.8). The text leaves A_θ to the
+    Inner loop: k_p,θ = ±`inner_bound`/A_θ, ω_n,θ and k_d,θ from ζ_θ. Outer
+    loop on K_DC·G_outer: k_p,outer = ±A_θ/A_outer, ω_n and k_d from ζ_outer
+    (or a P loop with ``outer_derivative=False``). The text leaves A_θ to the
     student; unless `inner_step` is given we choose it so that
     ω_n,θ/ω_n,outer = `separation` (M = 10 by default), which makes the
     outer loop's "inner loop ≈ K_DC" assumption hold.

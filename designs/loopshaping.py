@@ -1,4 +1,4 @@
-"""Loopshaping (.14) and frequency-response design (IV.13, V.13, VI.13).
+"""Loopshaping (.14) and frequency-response design of lead, lag and notch compensators.
 
 - `improve_loop`: the .14 recipe. Given a loop L0 = P C_PD, add
   C(s) = K · lead · lag · low-pass so that tracking and disturbance
@@ -6,13 +6,13 @@
   factor above ω_high, the crossover stays put and the phase margin is
   restored. Every requirement is checked on the exact closed loops and
   reported met or not met (`analysis.SpecCheck`).
-- `flattening_prefilter`: I.14(f)'s low-pass prefilter F(s), the fastest
+- `flattening_prefilter`: a low-pass prefilter F(s), the fastest
   first-order F keeping max |F T| within 1 % of one.
 - `lead_for_crossover`: gain and one or two leads putting the crossover at
   ω_c with a given phase margin.
 - Second-order prototype relations (exact for L = ω_n²/(s (s + 2ζω_n))):
   crossover and bandwidth from ω_n, ζ and the phase margin from ζ, used to
-  turn "bandwidth 20 rad/s, damping ratio 0.7" (V.13) into a crossover and
+  turn "bandwidth 20 rad/s, damping ratio 0.7" into a crossover and
   a phase margin.
 """
 
@@ -201,7 +201,7 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
         `low_factor` for all frequencies below `low_frequency` rad/s
     high_frequency, high_factor : improve noise attenuation by `high_factor` above `high_frequency`
     phase_margin_deg : target phase margin (the text: "around 60 deg")
-    crossover : rad/s; default L0's own crossover (kept, III.14(d))
+    crossover : rad/s; default L0's own crossover (kept)
     lowpass_order : poles of the low-pass ("add one to two poles")
     lag_zero_ratio : lag zero at crossover / this (keeps the lag's phase lag small); raised
         towards crossover / 2 when no lag ratio can reach the low-frequency factor (type-0 loops)
@@ -318,7 +318,7 @@ def loop_improvement_specs(L0, L, low_frequency, low_factor, high_frequency, hig
 
 
 def flattening_prefilter(T, tolerance: float = 0.01, order: int = 1) -> dict:
-    """I.14(f): the fastest low-pass prefilter F with max |F(jω) T(jω)| ≤ 1 + tolerance.
+    """The fastest low-pass prefilter F with max |F(jω) T(jω)| ≤ 1 + tolerance (a flat closed loop).
 
     Returns
     -------

@@ -95,14 +95,14 @@ def integrator_gain(plant, kp: float, kd: float, zeta_min: float, overshoot_allo
     """The .10 choice of k_i along its root locus.
 
     "Choose k_i sufficiently large to drive the error to zero as quickly as
-    possible without significantly degrading the transient response"
-    (IV.10(d)). We take the largest k_i for which (1) every closed-loop pole
+    possible without significantly degrading the transient response".
+    We take the largest k_i for which (1) every closed-loop pole
     keeps damping ≥ `zeta_min` (we use 0.9 of the PD loop's ζ; found
     exactly with `gain_leaving_damping`) and (2) the step overshoot of the
     PID loop stays within `overshoot_allowance` percentage points of the PD
     loop's (the PI zero at −k_i/k_p adds overshoot the poles do not show;
-    bisection, None to skip). The sign of k_i is that of k_p (for the ball
-    on beam's outer loop both are negative, as V.12(f) says).
+    bisection, None to skip). The sign of k_i is that of k_p (both negative
+    for a plant of negative gain, such as −g/s²).
 
     Returns
     -------
@@ -157,7 +157,7 @@ def dominant_pair(wn: float, zeta: float) -> complex:
 
 @dataclass(frozen=True)
 class LeadLagDesign:
-    """C(s) = K (s + z)/(s + p) · (s + z_lag)/(s + p_lag) from the root locus (IV.11).
+    """C(s) = K (s + z)/(s + p) · (s + z_lag)/(s + p_lag) from the root locus.
 
     Attributes
     ----------
@@ -222,7 +222,7 @@ def lag_for_static_gain(design: LeadLagDesign, plant, static_gain: float, zero: 
     """Add a lag (s + z)/(s + p) raising the loop's static gain K_p = L(0) to `static_gain`.
 
     p = z · L_lead(0)/`static_gain`; z is chosen well below the dominant
-    poles so that the lag barely moves them (IV.11(c)).
+    poles so that the lag barely moves them.
     """
     if not zero > 0:
         raise ValueError(f"lag zero must be > 0 rad/s, got {zero}")

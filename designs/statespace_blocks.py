@@ -18,9 +18,9 @@ period Ts. With r̃ = r − y_r,e the reference relative to the operating point,
   text's −1/(C_r (A − B K)⁻¹ B)) every reference is an exact rest point of
   the known plant: u = u_e(q_ref(r)) there.
 
-  Why at q and not at the reference (the text's I.15 hint τ_e(θ^d)): with
-  the reference's equilibrium torque the loop's stiffness about θ^d is
-  k_p − (m g ℓ / 2) sin θ^d, negative for I.8's k_p = 0.304 N m/rad at
+  Why at q and not at the reference (a textbook hint feeds τ_e(θ^d) forward):
+  with the reference's equilibrium torque the loop's stiffness about θ^d is
+  k_p − (m g ℓ / 2) sin θ^d, negative for a k_p of 0.304 N m/rad at
   θ^d = 50° (0.56 N m/rad of gravity stiffness), so the arm stalls near
   θ = 0 instead of reaching the reference. Cancelling at the measured
   configuration keeps the designed poles everywhere on the arm.
@@ -239,7 +239,7 @@ class ObserverFeedback(_TrackingBlock):
         n_est = nx, or nx + 1 with `disturbance_observer`
     sample_period : s; the observer runs on the ZOH model at this period
     measured_outputs : names of the outputs the observer uses (default all);
-        the text's V.15 and VI.15 use the position only
+        a position measurement alone, for example
     disturbance_observer : estimate a constant input disturbance d and
         subtract d̂ from the command
 

@@ -118,9 +118,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m studies.errata", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DOC, help=f"file to write (default {DOC})")
     args = parser.parse_args(argv)
-    from . import cases
+    # As ``python -m studies.errata`` this file runs as __main__: use the module the case files import.
+    from studies import cases, errata
 
-    write_text(args.out, document([cases.get(n) for n in cases.names()]))
+    write_text(args.out, errata.document([cases.get(n) for n in cases.names()]))
     print(f"wrote {args.out}")
     return 0
 
