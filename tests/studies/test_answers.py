@@ -65,3 +65,10 @@ def test_provider_answers_are_merged_by_item(monkeypatch):
     assert found["I.5"]["note"] == "from the design" and "u_e" in found["I.5"]
     assert list(found).index("I.7") < list(found).index("I.8(c)") < list(found).index("errata")
     assert "I.8(c)" in answers.format_answers(patched, found, "arm")
+
+
+def test_kinetic_energy_and_equations_of_motion_are_printed_answers():
+    found = answers.model_answers(studies.get("ballbeam"))
+    assert found["V.1"]["latex"].startswith("$T = ") and r"\dot{z}" in found["V.1"]["latex"]
+    assert len(found["V.3"]["equations"]) == len(found["V.3"]["latex"]) == 2  # one per coordinate (z, θ)
+    assert all(text.startswith("$") and " = " in text for text in found["V.3"]["latex"])

@@ -290,3 +290,27 @@ def test_frequency_responses_are_the_loops_behind_the_13_answers(arm_answers):
              + _pd_dirty(0.0, a["I.8(d)"]["kd"]))
     np.testing.assert_allclose(data["PID (implemented)"]["loop"]["magnitude"], _mag(L, w), rtol=1e-9)
     np.testing.assert_allclose(data["PID (implemented)"]["plant"]["magnitude"], _mag(G, w), rtol=1e-9)
+
+
+def test_ballbeam_11_root_locus_lead_places_the_outer_pair():
+    """V.11: C(s) K_DC (−g/s²) closed with python-control has the pair at V.8(i)'s ω_n, ζ, all poles stable;
+    the angle and magnitude conditions hold at s*; the step numbers are python-control's step_info."""
+    a, p = classical_answers("ballbeam"), models.get("ballbeam")
+    rec = a["V.11(a)"]
+    K_dc, g = a["V.8(f)"]["dc_gain"], p.params["g"]
+    G = control.tf([-K_dc * g], [1, 0, 0])
+    C = _tf(rec, "C_")
+    wn, zeta = a["V.8(i)"]["wn"], a["V.8(i)"]["zeta"]
+    s_star = complex(-zeta * wn, wn * np.sqrt(1 - zeta**2))
+    loop = complex(control.evalfr(C * G, s_star))
+    assert abs(loop) == pytest.approx(1.0, rel=1e-9)
+    assert abs(np.angle(loop)) == pytest.approx(np.pi, rel=1e-9)
+    assert rec["zero"] == pytest.approx(0.5 * wn) and rec["gain"] < 0  # negative plant gain, negative lead
+    T = control.feedback(C * G, 1)
+    poles = control.poles(T)
+    assert np.min(np.abs(poles - s_star)) < 1e-8 and np.all(poles.real < 0)
+    grid = np.linspace(0, 30, 300001)
+    info = control.step_info(T, T=grid)  # times to the grid's resolution
+    assert a["V.11(b)"]["rise_time"] == pytest.approx(info["RiseTime"], abs=2 * grid[1])
+    assert a["V.11(b)"]["overshoot_percent"] == pytest.approx(info["Overshoot"], rel=1e-4)
+    assert a["V.11(b)"]["dc_gain"] == pytest.approx(1.0)
