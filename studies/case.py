@@ -218,13 +218,6 @@ class CaseStudy:
         """The case's registry name (its plant's)."""
         return self.plant
 
-    def loop_spec(self, item: str) -> LoopSpec:
-        """The loopshaping spec of homework `item` (ValueError naming the items otherwise)."""
-        for spec in self.loops:
-            if spec.item == item:
-                return spec
-        raise ValueError(f"{self.plant} has no loop spec {item!r}; its specs are {[s.item for s in self.loops]}")
-
     def truth(self, plant: models.Plant, label: str) -> models.Plant:
         """The simulated plant of controller `label`: `plant`, with its own actuator if the text gives one."""
         return plant.with_input_limit(self.input_limits[label]) if label in self.input_limits else plant
