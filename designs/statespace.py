@@ -29,7 +29,7 @@ import scipy.linalg
 import scipy.optimize
 import scipy.signal
 
-from models.lqr import (bryson_weights, controllability_matrix, dkalman, dlqr, finite_matrix, format_values,
+from models.lqr import (augment_disturbance, bryson_weights, controllability_matrix, dkalman, dlqr, finite_matrix, format_values,
                         kalman, lqr, message_prefix, observability_matrix, require_controllable, require_detectable,
                         require_observable, require_stabilizable, riccati_residual, square_matrix, state_input_pair,
                         state_output_pair, uncontrollable_modes, unobservable_modes)
@@ -256,24 +256,6 @@ def split_integral_gain(K_augmented, n_states: int) -> tuple[np.ndarray, np.ndar
     if K_augmented.shape[1] != n_states + 1:
         raise ValueError(f"K_augmented must have {n_states + 1} columns, got {K_augmented.shape}")
     return K_augmented[:, :n_states].copy(), -K_augmented[:, n_states].copy()
-
-
-def augment_disturbance(A, B, C, discrete: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Model with a constant input disturbance d as a state: x' = A x + B (u + d), d' = 0.
-
-    Continuous time by default; with ``discrete=True`` (A, B) is a ZOH model and
-    d_{k+1} = d_k, exact for a disturbance held like the input.
-
-    Returns
-    -------
-    A_d (nx+nu, nx+nu) = [[A, B], [0, 0]] (discrete: [[A, B], [0, I]]);  B_d = [B; 0];  C_d = [C, 0]
-    """
-    A, B = state_input_pair(A, B)
-    A, C = state_output_pair(A, C)
-    n, m = B.shape
-    lower = np.hstack([np.zeros((m, n)), np.eye(m) if discrete else np.zeros((m, m))])
-    A_d = np.vstack([np.hstack([A, B]), lower])
-    return A_d, np.vstack([B, np.zeros((m, m))]), np.hstack([C, np.zeros((C.shape[0], m))])
 
 
 def inner_outer_poles(linear, inner_state: int, input_room: float, angle_step: float, damping_ratio: float,

@@ -76,6 +76,24 @@ def format_values(values) -> str:
 
 
 # ------------------------------------------------------ controllability
+def augment_disturbance(A, B, C, discrete: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Model with a constant input disturbance d as a state: x' = A x + B (u + d), d' = 0.
+
+    Continuous time by default; with ``discrete=True`` (A, B) is a ZOH model and
+    d_{k+1} = d_k, exact for a disturbance held like the input.
+
+    Returns
+    -------
+    A_d (nx+nu, nx+nu) = [[A, B], [0, 0]] (discrete: [[A, B], [0, I]]);  B_d = [B; 0];  C_d = [C, 0]
+    """
+    A, B = state_input_pair(A, B)
+    A, C = state_output_pair(A, C)
+    n, m = B.shape
+    lower = np.hstack([np.zeros((m, n)), np.eye(m) if discrete else np.zeros((m, m))])
+    A_d = np.vstack([np.hstack([A, B]), lower])
+    return A_d, np.vstack([B, np.zeros((m, m))]), np.hstack([C, np.zeros((C.shape[0], m))])
+
+
 def controllability_matrix(A, B) -> np.ndarray:
     """[B, A B, ..., A^(n−1) B], shape (nx, nx·nu)."""
     A, B = state_input_pair(A, B)
