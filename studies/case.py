@@ -11,8 +11,9 @@ Nothing in the library packages (`designs`, `mpc`) names a case.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from models import signals
 

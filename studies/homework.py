@@ -27,8 +27,8 @@ Choices the text leaves to the student, made once here for every case:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
 
 import numpy as np
 
@@ -104,7 +104,8 @@ def integrator(G, kp: float, kd: float, zeta: float, derivative_on: str = "measu
 def root_locus_record(G, kp: float, kd: float, rl: dict) -> dict:
     """The k_i root-locus answer: gain, damping bound, overshoots, poles, Evans form, closed loop."""
     return record(ki=rl["ki"], zeta_min=rl["zeta_min"], ki_damping=rl["ki_damping"], overshoot_pd=rl["overshoot_pd"],
-                  overshoot_pid=rl["overshoot_pid"], poles=poles_record(rl["poles"]), **tf_record(rl["evans"], "evans_"),
+                  overshoot_pid=rl["overshoot_pid"], poles=poles_record(rl["poles"]),
+                  **tf_record(rl["evans"], "evans_"),
                   closed_loop_pid=tf_record(Loop.pid(G, kp, rl["ki"], kd).reference_to_output()))
 
 
@@ -178,7 +179,8 @@ def cascade_records(prefix: str, slc: SuccessiveLoopClosure, bound: dict, letter
     plants = slc.plants
     item = lambda key: f"{prefix}.8({letters[key]})"
     return {
-        item("inner_tf"): record(**tf_record(plants.inner, "plant_"), **tf_record(slc.inner.closed_loop, "closed_loop_"),
+        item("inner_tf"): record(**tf_record(plants.inner, "plant_"),
+                                 **tf_record(slc.inner.closed_loop, "closed_loop_"),
                                  dropped_coupling=plants.dropped),
         item("bound"): record(max_equilibrium_input=bound["max_equilibrium_input"], bound=bound["bound"],
                               input_limit=bound["input_limit"]),

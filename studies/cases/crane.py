@@ -119,7 +119,8 @@ def classical(known: models.Plant) -> ClassicalDesign:
     loop_out = Loop.unity(K_lead * plants.outer, lead_out.controller, "outer lead")
     a["VI.13(a)"] = record(bandwidth=bw_in, pm_target_deg=pm_in, crossover_target=wc_in, lead_zero=lead_in.zero,
                            lead_pole=lead_in.pole, gain=lead_in.gain, lead_count=lead_in.count,
-                           **tf_record(lead_in.controller, "C_"), **margin_record(plants.inner * lead_in.controller, ""),
+                           **tf_record(lead_in.controller, "C_"),
+                           **margin_record(plants.inner * lead_in.controller, ""),
                            bandwidth_achieved=float(control.bandwidth(loop_in.reference_to_output())),
                            stable=loop_in.is_stable(),
                            specs=spec_records(frequency_design_checks(loop_in, wc_in, pm_in, bw_in)))
