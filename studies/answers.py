@@ -9,7 +9,9 @@ case files' data (`studies.errata`).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import re
 from typing import Mapping
 
@@ -37,13 +39,19 @@ def printed_model(plant: models.Plant, numeral: str) -> dict:
     """The .1 and .3 answers: kinetic energy and equations of motion derived from the declaration.
 
     Each as sympy text and as LaTeX (dots for time derivatives); the equations
-    read M(q) q̈ = Q − C(q, q̇) q̇ − ∂V/∂q, one per coordinate.
+    read M(q) q̈ = Q − C(q, q̇) q̇ − ∂V/∂q, one per coordinate. Computed once per
+    declaration (simplifying takes a second or two).
     """
-    T = symbolic.kinetic_energy(plant)
-    equations = symbolic.equations_of_motion(plant)
-    return {f"{numeral}.1": {"T": str(T), "latex": f"$T = {symbolic.latex(T, plant)}$"},
+    return copy.deepcopy(_printed(plant.declaration, numeral))
+
+
+@functools.lru_cache(maxsize=16)
+def _printed(declaration, numeral: str) -> dict:
+    T = symbolic.kinetic_energy(declaration)
+    equations = symbolic.equations_of_motion(declaration)
+    return {f"{numeral}.1": {"T": str(T), "latex": f"$T = {symbolic.latex(T, declaration)}$"},
             f"{numeral}.3": {"equations": [f"{e.lhs} = {e.rhs}" for e in equations],
-                             "latex": [f"${symbolic.latex(e, plant)}$" for e in equations]}}
+                             "latex": [f"${symbolic.latex(e, declaration)}$" for e in equations]}}
 
 
 def model_answers(study: CaseStudy) -> dict:

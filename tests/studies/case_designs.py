@@ -6,6 +6,9 @@ import models
 import studies
 from studies import homework
 
+#: Every plant a case study designs: the registered cases' and crane1, the crane case's one-load model.
+DESIGNED = (*studies.names(), "crane1")
+
 
 def case_of(name: str):
     """The case study designing plant `name` (crane1's is the crane case)."""

@@ -3,14 +3,14 @@
 import control
 import numpy as np
 import pytest
-from case_designs import case_of, statespace_answers, statespace_controllers, statespace_design
+from case_designs import DESIGNED, case_of, statespace_answers, statespace_controllers, statespace_design
 
 import models
 from designs import statespace as ss
 from designs.statespace_design import LABELS
 from studies.cases import pendulum
 
-PLANTS = ["arm", "pendulum", "satellite", "uuv", "ballbeam", "crane1", "crane"]
+PLANTS = DESIGNED
 INTEGRAL_ACTION = ["pole placement + integrator", "disturbance observer", "LQR", "LQR + Kalman"]
 SUBSTEPS = 2  # RK4 at 5 ms: far finer than every closed-loop time constant here
 
