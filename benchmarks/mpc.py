@@ -47,6 +47,7 @@ import numpy as np  # noqa: E402
 
 import models  # noqa: E402
 import mpc  # noqa: E402
+import studies  # noqa: E402
 from mpc.reference_cvxpy import CvxpySolver  # noqa: E402
 
 PATHS = {
@@ -88,11 +89,17 @@ class Interleaved:
         return answers["d"]
 
 
+def case_mpc(kind: str, case, known, **overrides):
+    """The case study's linear or nonlinear MPC designed on `known`."""
+    build = mpc.linear_mpc if kind == "linear" else mpc.nonlinear_mpc
+    return build(known, case.mpc, tracked=case.tracked, **overrides)
+
+
 def linear_benchmark(steps: int, soft: bool) -> dict:
     name = "pendulum"
     plant = models.get(name)
-    known = models.perturbed(plant, 0.05)
-    case = models.case(name)
+    case = studies.get(name)
+    known = case.known_plant(plant)
     interleaved = {}
 
     def factory(problem):
@@ -100,14 +107,14 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
         return interleaved["solver"]
 
     overrides = {} if soft else {"soft_bounds": ()}
-    controller = mpc.linear_mpc(name, known, solver=factory, **overrides)
+    controller = case_mpc("linear", case, known, solver=factory, **overrides)
     assert controller.horizon == 50 and controller.sample_period == 0.01
     duration = steps * controller.sample_period
     result = models.simulate_closed_loop(plant, controller, case.step, duration,
                                          input_disturbance=case.input_disturbance)
     solver = interleaved["solver"]
     # The whole controller step (estimator, target, QP, clipping) with path (d) alone.
-    alone = models.simulate_closed_loop(plant, mpc.linear_mpc(name, known, **overrides), case.step, duration,
+    alone = models.simulate_closed_loop(plant, case_mpc("linear", case, known, **overrides), case.step, duration,
                                         input_disturbance=case.input_disturbance)
     medians = {key: 1e3 * float(np.median(solver.times[key])) for key in PATHS}
     reference = np.array(solver.first_moves["a"])
@@ -128,8 +135,8 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
 
 def nonlinear_benchmark(name: str, steps: int) -> dict:
     plant = models.get(name)
-    case = models.case(name)
-    controller = mpc.nonlinear_mpc(name, models.perturbed(plant, 0.05))
+    case = studies.get(name)
+    controller = case_mpc("nonlinear", case, case.known_plant(plant))
     xe = plant.equilibrium()[0]
     reference = xe[plant.state_names.index(case.tracked)] + case.step
     duration = min(steps * controller.sample_period, case.duration)
@@ -148,16 +155,14 @@ def nonlinear_benchmark(name: str, steps: int) -> dict:
 
 def settling_table() -> dict:
     """Both MPCs on every plant's step, known parameters ±5 %, with the input disturbance."""
-    from mpc.defaults import physical_soft_bounds
-
     rows = {}
-    for name in models.names():
-        plant, case = models.get(name), models.case(name)
+    for name in studies.names():
+        plant, case = models.get(name), studies.get(name)
         index = plant.state_names.index(case.tracked)
         reference = plant.equilibrium()[0][index] + case.step
-        for kind, build in (("linear", mpc.linear_mpc), ("nonlinear", mpc.nonlinear_mpc)):
+        for kind in ("linear", "nonlinear"):
             for sign in (1, -1):
-                controller = build(name, models.perturbed(plant, 0.05, sign))
+                controller = case_mpc(kind, case, models.perturbed(plant, case.known_rel, sign))
                 result = models.simulate_closed_loop(plant, controller, reference, case.duration,
                                                      input_disturbance=case.input_disturbance)
                 error = np.abs(result.x[:, index] - reference)
@@ -165,7 +170,7 @@ def settling_table() -> dict:
                 settle = float(result.t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(result.t) \
                     else (0.0 if not outside.size else float("inf"))
                 margins = [min(value.min() - lower, upper - value.max()) for _, row, lower, upper
-                           in physical_soft_bounds(name, plant) for value in [result.x @ row]]
+                           in mpc.physical_soft_bounds(case.mpc, plant) for value in [result.x @ row]]
                 solve = np.array([s["solve_time"] for s in result.status])
                 rows[f"{name} {kind} {sign:+d}"] = {
                     "settling_time_s": settle, "duration_s": case.duration,
@@ -200,7 +205,7 @@ def main(argv=None):
     print(f"ratio (b)/(d) = {linear['ratio_b_over_d']:.1f}, (c)/(d) = {linear['ratio_c_over_d']:.1f}; "
           f"whole controller step with (d): median {linear['controller_step_median_ms']:.3f} ms")
 
-    names = models.names() if args.all else ["arm", "pendulum"]
+    names = studies.names() if args.all else ["arm", "pendulum"]
     nonlinear = {}
     print("\nNonlinear MPC (SQP, Gauss-Newton Hessian, HPIPM QPs), solve time per sample")
     print(f"{'plant':10s} {'N':>4s} {'Ts s':>6s} {'median ms':>10s} {'p90 ms':>8s} {'max ms':>8s} {'SQP it':>7s} {'fails':>6s}")

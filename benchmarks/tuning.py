@@ -24,25 +24,33 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 import time
 
-import casadi as ca
-import numpy as np
-import scipy.optimize
+# Run as a script, this file's folder is sys.path[0], where benchmarks/mpc.py would shadow the mpc
+# package the case studies import; drop the folder.
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
 
-import models
-from designs import statespace_cases
-from designs.tuning import Cost, Scenario, TuningProblem, tune
+import casadi as ca  # noqa: E402
+import numpy as np  # noqa: E402
+import scipy.optimize  # noqa: E402
+
+import models  # noqa: E402
+import studies  # noqa: E402
+from designs.tuning import Cost, Scenario, TuningProblem, tune  # noqa: E402
+from studies.homework import statespace_controllers  # noqa: E402
 
 PLANT, LABEL, DURATION = "pendulum", "pole placement + integrator", 10.0
 COST = Cost("itae", energy_weight=1e-3)
-STEPS = {"saturating": models.case(PLANT).step, "linear": 0.2}  # m
+STEPS = {"saturating": studies.get(PLANT).step, "linear": 0.2}  # m
 
 
 def problem_data(step):
     plant = models.get(PLANT)
-    block = statespace_cases.controllers(PLANT)[LABEL]
-    scenario = Scenario(reference=step, duration=DURATION)
+    block = statespace_controllers(studies.get(PLANT))[LABEL]
+    scenario = Scenario(reference=step, duration=DURATION, tracked=studies.get(PLANT).tracked)
     start = block.gain_vector()
     # A box of a factor of three around each hand gain (k_r = 0 gets ±1).
     low = np.where(start > 0, start / 3, 3 * start)
@@ -116,7 +124,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.max_evaluations < 1:
         parser.error("--max-evaluations must be >= 1")
-    block = statespace_cases.controllers(PLANT)[LABEL]
+    block = statespace_controllers(studies.get(PLANT))[LABEL]
     print(f"{PLANT} '{LABEL}', {block.gain_vector().size} gains, {DURATION:g} s, "
           f"ITAE + {COST.energy_weight:g} energy")
     print(f"{'problem':11s} {'method':12s} {'wall s':>8s} {'cost':>10s}  notes")

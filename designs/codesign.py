@@ -27,7 +27,8 @@ import casadi as ca
 import numpy as np
 
 from models import Block, Plant
-from .tuning import Cost, Scenario, Specs, TuningProblem, TuningResult, _gain_bounds, _solve
+
+from .tuning import Cost, Scenario, Specs, TuningProblem, TuningResult, gain_bounds, solve
 
 
 @dataclass
@@ -77,11 +78,11 @@ def _check_ranges(plant: Plant, design_params: dict) -> None:
 def _run(plant, block, scenario, names, ranges, plant_cost, free, options, method, start_time):
     """One IPOPT solve over (free gains, the named parameters)."""
     problem = TuningProblem(plant, block, scenario, free=free, extra_params=names, **options["problem"])
-    lbx, ubx = _gain_bounds(problem, options["bounds"] if free else None)
+    lbx, ubx = gain_bounds(problem, options["bounds"] if free else None)
     lbx[problem.n_gains:] = [ranges[n][0] for n in names]
     ubx[problem.n_gains:] = [ranges[n][1] for n in names]
     cost_fn = _plant_cost_function(names, plant_cost)
-    result: TuningResult = _solve(problem, lbx, ubx, options["max_iter"], options["jit"],
+    result: TuningResult = solve(problem, lbx, ubx, options["max_iter"], options["jit"],
                                   plant_cost=lambda x: cost_fn(x[problem.n_gains:]), tol=options["tol"])
     values = dict(zip(names, result.decision[problem.n_gains:]))
     plant_cost_value = float(cost_fn(result.decision[problem.n_gains:]))
@@ -94,7 +95,7 @@ def _run(plant, block, scenario, names, ranges, plant_cost, free, options, metho
 
 def codesign(plant: Plant, block: Block, scenario: Scenario, design_params: dict, *,
              plant_cost: Callable | None = None, specs: Specs | None = None, cost: Cost | None = None,
-             free=None, bounds=None, samples=None, robust: str = "mean", tracked: str | None = None,
+             free=None, bounds=None, samples=None, robust: str = "mean",
              max_iter: int = 200, tol: float = 1e-8, jit: bool = False) -> dict[str, CodesignResult]:
     """Co-design the named plant parameters with the block's gains, both ways.
 
@@ -106,7 +107,7 @@ def codesign(plant: Plant, block: Block, scenario: Scenario, design_params: dict
     design_params : dict name -> (low, high), the parameters to decide and their ranges (SI)
     plant_cost : callable dict name -> MX symbol -> MX scalar, the price of the plant
         (for example ``lambda p: 0.1 * p["k"]``); default zero
-    specs, cost, free, bounds, samples, robust, tracked, max_iter, tol, jit
+    specs, cost, free, bounds, samples, robust, max_iter, tol, jit
         As in `designs.tuning.tune`. Parameters listed in `samples` rows are
         overwritten by the decision for the designed names.
 
@@ -117,16 +118,15 @@ def codesign(plant: Plant, block: Block, scenario: Scenario, design_params: dict
     """
     _check_ranges(plant, design_params)
     names = tuple(design_params)
-    options = {"problem": {"specs": specs, "cost": cost, "samples": samples, "robust": robust,
-                           "tracked": tracked},
+    options = {"problem": {"specs": specs, "cost": cost, "samples": samples, "robust": robust},
                "bounds": bounds, "max_iter": max_iter, "tol": tol, "jit": jit}
     start_time = time.perf_counter()
     plant_first = _run(plant, block, scenario, names, design_params, plant_cost, (), options,
                        "sequential", start_time)
     # Second sequential stage: the gains with the chosen plant fixed (a plain tuning problem).
     problem = TuningProblem(plant_first.plant, block, scenario, free=free, **options["problem"])
-    lbx, ubx = _gain_bounds(problem, bounds)
-    tuned = _solve(problem, lbx, ubx, max_iter, jit, tol=tol)
+    lbx, ubx = gain_bounds(problem, bounds)
+    tuned = solve(problem, lbx, ubx, max_iter, jit, tol=tol)
     cost_fn = _plant_cost_function(names, plant_cost)
     fixed_cost = float(cost_fn([plant_first.params[n] for n in names]))
     sequential = CodesignResult(

@@ -52,7 +52,7 @@ def back_calculation(integral, u_unsaturated, u_saturated, ki, sample_period: fl
 def integrate_while_slow(integral_prev, integral_next, rate, rate_limit: float):
     """Anti-windup for any sign of ki: keep the update only while |rate| < rate_limit.
 
-    The text's scheme for loops whose integrator gain is negative (II.16, V.12(f)),
+    The textbook's scheme for loops whose integrator gain is negative,
     where back-calculation would wind the integral the wrong way.
     """
     return ca.if_else(ca.fabs(rate) < rate_limit, integral_next, integral_prev)

@@ -18,7 +18,6 @@ differentiable in them.
 
 from __future__ import annotations
 
-
 import casadi as ca
 import control
 import numpy as np
@@ -31,7 +30,8 @@ from .discrete import saturate
 from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
 
 __all__ = ["lead", "lag", "proportional_integral", "notch", "low_pass", "prefilter", "lead_ratio",
-           "tustin_matrix", "tustin_coefficients", "TransferFunctionBlock"]
+           "tustin_matrix", "padded_coefficients", "TustinSection",
+           "TransferFunctionBlock"]
 
 
 # ----------------------------------------------------------------- builders
@@ -84,7 +84,7 @@ def low_pass(omega: float, order: int = 1) -> control.TransferFunction:
 
 
 def prefilter(omega: float, order: int = 1) -> control.TransferFunction:
-    """Reference prefilter F(s): a unit-DC-gain low-pass at `omega` rad/s (I.14(f))."""
+    """Reference prefilter F(s): a unit-DC-gain low-pass at `omega` rad/s."""
     return low_pass(omega, order)
 
 
@@ -109,7 +109,8 @@ def tustin_matrix(order: int, sample_period: float) -> np.ndarray:
     return matrix
 
 
-def _padded(G, what: str) -> tuple[np.ndarray, np.ndarray]:
+def padded_coefficients(G, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """(num, den) of a proper G(s), num padded with leading zeros to den's length; `what` names G in errors."""
     num, den = as_polynomials(G)
     if num.size > den.size:
         raise ValueError(f"{what} is not causal: numerator degree {num.size - 1} > denominator degree "
@@ -117,15 +118,7 @@ def _padded(G, what: str) -> tuple[np.ndarray, np.ndarray]:
     return np.pad(num, (den.size - num.size, 0)), den
 
 
-def tustin_coefficients(G, sample_period: float) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete (b, a) in descending powers of z, a[0] = 1, of G(s) by Tustin's rule (no prewarp)."""
-    num, den = _padded(G, "transfer function")
-    matrix = tustin_matrix(den.size - 1, sample_period)
-    b, a = matrix @ num, matrix @ den
-    return b / a[0], a / a[0]
-
-
-class _Section:
+class TustinSection:
     """Transposed direct form II of one Tustin-discretized C(s), written for symbolic coefficients.
 
     With a[0] = 1, state s and input e:  u = b0 e + s0,
@@ -209,14 +202,14 @@ class TransferFunctionBlock(models.Block):
         if not 0 <= tracking_pole < 1:
             raise ValueError(f"tracking_pole must be in [0, 1), got {tracking_pole}")
         self.tracking_pole = float(tracking_pole)
-        num, den = _padded(controller, "controller C(s)")
+        num, den = padded_coefficients(controller, "controller C(s)")
         gains = {"num": num, "den": den}
-        self._controller = _Section(den.size - 1, sample_period)
+        self._controller = TustinSection(den.size - 1, sample_period)
         self._prefilter = None
         if prefilter is not None:
-            f_num, f_den = _padded(prefilter, "prefilter F(s)")
+            f_num, f_den = padded_coefficients(prefilter, "prefilter F(s)")
             gains |= {"prefilter_num": f_num, "prefilter_den": f_den}
-            self._prefilter = _Section(f_den.size - 1, sample_period)
+            self._prefilter = TustinSection(f_den.size - 1, sample_period)
         self.output_limit = None if output_limit is None else positive(output_limit, "output_limit")
         self.anti_windup = anti_windup
         self.coordinate = coordinate

@@ -1,23 +1,19 @@
 """Successive loop closure: cascade transfer functions from the linearization, inner and outer loops.
 
-The cascade u → q_inner → q_outer (pendulum F → θ → z, satellite τ → θ → φ,
-ball on beam F → θ → z, crane F → θ → x) comes from the plant's exact
-linearization q̈ = A_q q + A_v q̇ + B u, not from hand algebra:
+The cascade u → q_inner → q_outer (for example a cart's force → pendulum
+angle → cart position) comes from the plant's exact linearization
+q̈ = A_q q + A_v q̇ + B u, not from hand algebra:
 
 - inner plant: the inner coordinate's own row, q̈_i = A_q[i,i] q_i + A_v[i,i] q̇_i + B_i u,
-  with the outer coordinate's terms dropped. These are the "disturbances
-  that have been ignored" of II.6(c)/III.6(c); `CascadePlants.dropped`
-  lists them. This reproduces the text's θ/F = −2/(s² − 24.5) (II),
-  0.2/(s² + 0.01 s + 0.03) (III), 2.652/s² (V.6(c)) and
-  −6.667e−5/(s² + 1.308) (VI.6).
+  with the outer coordinate's terms dropped (the "disturbances that have
+  been ignored"); `CascadePlants.dropped` lists them.
 - outer plant: the exact ratio (q_outer/u)/(q_inner/u) of the full
-  linearization's transfer functions, which eliminates u: (g − ℓ s²)/s² (II),
-  (b s + k)/(J_p s² + b s + k) (III), −g/s² (V), −(ℓ s² + g)/s² (VI).
+  linearization's transfer functions, which eliminates u (for a pendulum on
+  a cart, (g − ℓ s²)/s²).
 
 The outer loop is designed on K_DC·G_outer, the inner loop replaced by its
-DC gain K_DC (the text's III.8(f), VI.8(f)); II.8(g) and V.8(g) assume
-K_DC = 1, which we replace by the computed value (it is not 1 for the
-pendulum: the inner plant has a0 ≠ 0).
+DC gain K_DC. Textbooks often assume K_DC = 1; we use the computed value
+(it is not 1 when the inner plant has a static term a0 ≠ 0).
 """
 
 from __future__ import annotations
@@ -30,15 +26,16 @@ import numpy as np
 import scipy.optimize
 
 import models
-from models.linear import LinearModel
+from models.linear import LinearModel, chop
 
-from .analysis import _padd, _pmul, _poly, _trailing_zeros, as_polynomials, tf
+from .analysis import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
+from .filters import TustinSection, padded_coefficients
 from .pid import PID, SAMPLE_PERIOD, SIGMA, PDDesign, pd_design, pd_saturation, second_order_coefficients
 
 __all__ = ["CascadePlants", "cascade_plants", "coordinate_model", "low_frequency_model",
            "zero_cancelling_filter", "place_pair", "cascade_poles", "SuccessiveLoopClosure",
            "separation_for", "successive_loop_closure", "cascade_blocks", "FilteredBlock",
-           "zero_cancelling_design"]
+           "zero_cancelling_design", "outer_plant_seen", "coupling_tf", "PlacedPD"]
 
 
 def coordinate_model(lin: LinearModel) -> LinearModel:
@@ -105,8 +102,8 @@ def cascade_plants(known: models.Plant, inner: str, outer: str, lin: LinearModel
     n_in, d_in = as_polynomials(inner_full)
     n_out, d_out = as_polynomials(outer_full)
     # (N_out/D)/(N_in/D): the common denominator cancels; so do common powers of s.
-    num, den = _pmul(n_out, d_in), _pmul(d_out, n_in)
-    common = min(_trailing_zeros(num), _trailing_zeros(den))
+    num, den = poly_mul(n_out, d_in), poly_mul(d_out, n_in)
+    common = min(zeros_at_origin(num), zeros_at_origin(den))
     if common:
         num, den = num[:-common], den[:-common]
     num, den = _reduce(num, den)
@@ -117,7 +114,7 @@ def cascade_plants(known: models.Plant, inner: str, outer: str, lin: LinearModel
 
 def _reduce(num, den, tol: float = 1e-8):
     """Cancel common roots of num and den (roots equal to `tol` relative)."""
-    num, den = _poly(num), _poly(den)
+    num, den = polynomial(num), polynomial(den)
     num_roots, den_roots = list(np.roots(num)), list(np.roots(den))
     kept_num = []
     for z in num_roots:
@@ -128,20 +125,19 @@ def _reduce(num, den, tol: float = 1e-8):
             kept_num.append(z)
     if len(kept_num) == len(num_roots):
         return num, den
-    chop = lambda p: np.where(np.abs(p) <= 1e-12 * np.max(np.abs(p)), 0.0, p)
-    return (_poly(chop(num[0] * np.real(np.poly(kept_num)))),
-            _poly(chop(den[0] * np.real(np.poly(den_roots)))))
+    return (chop(num[0] * np.real(np.poly(kept_num)), 1e-12),
+            chop(den[0] * np.real(np.poly(den_roots)), 1e-12))
 
 
 def low_frequency_model(G) -> control.TransferFunction:
     """Keep only the lowest-order term of G's numerator: G ≈ n_low s^k / D(s).
 
-    The pendulum's outer plant (g − ℓ s²)/s² becomes g/s², valid for
-    ω ≪ √(g/ℓ); used for the outer PD when the text asks the closed loop to
-    equal a second-order one (II.8(i)).
+    A pendulum's outer plant (g − ℓ s²)/s² becomes g/s², valid for
+    ω ≪ √(g/ℓ); used for an outer PD whose closed loop is to equal a
+    second-order one.
     """
     num, den = as_polynomials(G)
-    k = _trailing_zeros(num)
+    k = zeros_at_origin(num)
     low = np.zeros(k + 1)
     low[0] = num[num.size - 1 - k]
     return tf(low, den)
@@ -187,7 +183,7 @@ def place_pair(L0, wn: float, zeta: float) -> dict:
     target = -np.polyval(den, s_star) / np.polyval(num, s_star)
     kd = target.imag / s_star.imag
     kp = target.real - kd * s_star.real
-    char = _padd(den, _pmul(num, [kd, kp]))
+    char = poly_add(den, poly_mul(num, [kd, kp]))
     poles = np.roots(char)
     return {"kp": float(kp), "kd": float(kd), "poles": poles[np.argsort(poles.real)]}
 
@@ -289,10 +285,9 @@ def successive_loop_closure(known: models.Plant, inner: str, outer: str, *, inne
                             feedforward_gradient=None) -> SuccessiveLoopClosure:
     """The text's .8 two-loop design by saturation rules, with bandwidth separation.
 
-    Inner loop: k_p,θ = ±`inner_bound`/A_θ (II.8(d), III.8(b), V.8(d)), ω_n,θ
-    and k_d,θ from ζ_θ. Outer loop on K_DC·G_outer: k_p,outer = ±A_θ/A_outer
-    (II.8(h), III.8(g), V.8(h)), ω_n and k_d from ζ_outer (or a P loop with
-    ``outer_derivative=False``, III.8). The text leaves A_θ to the
+    Inner loop: k_p,θ = ±`inner_bound`/A_θ, ω_n,θ and k_d,θ from ζ_θ. Outer
+    loop on K_DC·G_outer: k_p,outer = ±A_θ/A_outer, ω_n and k_d from ζ_outer
+    (or a P loop with ``outer_derivative=False``). The text leaves A_θ to the
     student; unless `inner_step` is given we choose it so that
     ω_n,θ/ω_n,outer = `separation` (M = 10 by default), which makes the
     outer loop's "inner loop ≈ K_DC" assumption hold.
@@ -412,11 +407,9 @@ class FilteredBlock(models.Block):
     """
 
     def __init__(self, block: models.Block, filter_tf, name: str | None = None):
-        from .filters import _padded, _Section
-
-        num, den = _padded(filter_tf, "filter F(s)")
+        num, den = padded_coefficients(filter_tf, "filter F(s)")
         self.block = block
-        self._section = _Section(den.size - 1, block.sample_period)
+        self._section = TustinSection(den.size - 1, block.sample_period)
         gains = dict(block.gains) | {"filter_num": num, "filter_den": den}
         super().__init__(sample_period=block.sample_period, n_state=block.n_state + self._section.order,
                          n_measured=block.n_measured, n_reference=block.n_reference, n_input=block.n_input,
@@ -455,3 +448,36 @@ def zero_cancelling_design(slc: SuccessiveLoopClosure, *, separation: float = 10
                                  outer_model=reduced, outer=outer, outer_dc_gain=outer.dc_gain,
                                  separation=slc.inner.wn / outer.wn, inner_limit=slc.inner_limit,
                                  full_poles=poles, outer_filter=filt)
+
+
+@dataclass(frozen=True)
+class PlacedPD:
+    """Gains of a PD placed by the root locus (`place_pair`), usable as the outer design of a
+    `SuccessiveLoopClosure` in `cascade_blocks`."""
+
+    kp: float
+    kd: float
+
+
+def outer_plant_seen(inner_loop, G_outer) -> control.TransferFunction:
+    """The plant an outer controller sees: the inner closed loop (reference to output) times the outer plant.
+
+    `inner_loop` is a `designs.analysis.Loop`; its roll-off is kept, unlike the
+    K_DC approximation of `successive_loop_closure`.
+    """
+    n_t, d_t = as_polynomials(inner_loop.reference_to_output())
+    n_o, d_o = as_polynomials(G_outer)
+    return tf(np.polymul(n_t, n_o), np.polymul(d_t, d_o))
+
+
+def coupling_tf(plants: CascadePlants) -> control.TransferFunction:
+    """Transfer function from the outer coordinate to the inner one through the dropped coupling terms.
+
+    The inner row's dropped stiffness c_q and damping c_v on the outer
+    coordinate act as (c_v s + c_q) outer / (inner characteristic polynomial).
+    """
+    outer = plants.outer_coordinate
+    c_q = plants.dropped.get(outer, 0.0)
+    c_v = plants.dropped.get("d" + outer, 0.0)
+    _, d_in = as_polynomials(plants.inner)
+    return tf([c_v, c_q], d_in / d_in[0])

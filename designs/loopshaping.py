@@ -1,4 +1,4 @@
-"""Loopshaping (.14) and frequency-response design (IV.13, V.13, VI.13).
+"""Loopshaping (.14) and frequency-response design of lead, lag and notch compensators.
 
 - `improve_loop`: the .14 recipe. Given a loop L0 = P C_PD, add
   C(s) = K · lead · lag · low-pass so that tracking and disturbance
@@ -6,13 +6,13 @@
   factor above ω_high, the crossover stays put and the phase margin is
   restored. Every requirement is checked on the exact closed loops and
   reported met or not met (`analysis.SpecCheck`).
-- `flattening_prefilter`: I.14(f)'s low-pass prefilter F(s), the fastest
+- `flattening_prefilter`: a low-pass prefilter F(s), the fastest
   first-order F keeping max |F T| within 1 % of one.
 - `lead_for_crossover`: gain and one or two leads putting the crossover at
   ω_c with a given phase margin.
 - Second-order prototype relations (exact for L = ω_n²/(s (s + 2ζω_n))):
   crossover and bandwidth from ω_n, ζ and the phase margin from ζ, used to
-  turn "bandwidth 20 rad/s, damping ratio 0.7" (V.13) into a crossover and
+  turn "bandwidth 20 rad/s, damping ratio 0.7" into a crossover and
   a phase margin.
 """
 
@@ -24,13 +24,13 @@ import control
 import numpy as np
 import scipy.optimize
 
-from .analysis import (Loop, SpecCheck, _trailing_zeros, as_polynomials, band_max, check_band_ratio,
-                       check_crossover, check_phase_margin, check_stable, margins, tf)
+from .analysis import (Loop, SpecCheck, as_polynomials, band_max, check_band_ratio, check_bandwidth, check_crossover,
+                       check_phase_margin, check_stable, margins, tf, zeros_at_origin)
 from .filters import lag, lead, lead_ratio, low_pass
 
 __all__ = ["prototype_crossover", "prototype_bandwidth", "prototype_phase_margin", "damping_for_phase_margin",
            "crossover_for_bandwidth", "lead_for_crossover", "LeadDesign", "improve_loop", "LoopshapingResult",
-           "flattening_prefilter", "phase_at", "low_frequency_sign"]
+           "flattening_prefilter", "phase_at", "low_frequency_sign", "frequency_design_checks"]
 
 
 # ----------------------------------------------------------------- prototype relations
@@ -73,8 +73,8 @@ def crossover_for_bandwidth(bandwidth: float, zeta: float) -> float:
 def low_frequency_sign(L) -> float:
     """Sign of L's low-frequency gain: of N_low/D_low, the lowest nonzero coefficients."""
     num, den = as_polynomials(L)
-    n_low = num[num.size - 1 - _trailing_zeros(num)]
-    d_low = den[den.size - 1 - _trailing_zeros(den)]
+    n_low = num[num.size - 1 - zeros_at_origin(num)]
+    d_low = den[den.size - 1 - zeros_at_origin(den)]
     return float(np.sign(n_low / d_low))
 
 
@@ -85,7 +85,7 @@ def phase_at(L, omega: float) -> float:
     (−180° for 1/s²), so the phase margin is 180° + phase at crossover.
     """
     num, den = as_polynomials(L)
-    n_type = _trailing_zeros(den) - _trailing_zeros(num)
+    n_type = zeros_at_origin(den) - zeros_at_origin(num)
     grid = np.logspace(np.log10(omega) - 8, np.log10(omega), 4000)
     resp = np.polyval(num, 1j * grid) / np.polyval(den, 1j * grid) * (1j * grid) ** n_type
     phase = np.unwrap(np.angle(resp))
@@ -201,7 +201,7 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
         `low_factor` for all frequencies below `low_frequency` rad/s
     high_frequency, high_factor : improve noise attenuation by `high_factor` above `high_frequency`
     phase_margin_deg : target phase margin (the text: "around 60 deg")
-    crossover : rad/s; default L0's own crossover (kept, III.14(d))
+    crossover : rad/s; default L0's own crossover (kept)
     lowpass_order : poles of the low-pass ("add one to two poles")
     lag_zero_ratio : lag zero at crossover / this (keeps the lag's phase lag small); raised
         towards crossover / 2 when no lag ratio can reach the low-frequency factor (type-0 loops)
@@ -318,7 +318,7 @@ def loop_improvement_specs(L0, L, low_frequency, low_factor, high_frequency, hig
 
 
 def flattening_prefilter(T, tolerance: float = 0.01, order: int = 1) -> dict:
-    """I.14(f): the fastest low-pass prefilter F with max |F(jω) T(jω)| ≤ 1 + tolerance.
+    """The fastest low-pass prefilter F with max |F(jω) T(jω)| ≤ 1 + tolerance (a flat closed loop).
 
     Returns
     -------
@@ -342,3 +342,12 @@ def flattening_prefilter(T, tolerance: float = 0.01, order: int = 1) -> dict:
     F = low_pass(corner, order)
     return {"prefilter": F, "corner": float(corner), "peak_before": float(peak_before),
             "peak_after": float(band_max(F * T, 0.0, np.inf)[0])}
+
+
+def frequency_design_checks(loop: Loop, crossover: float, pm_deg: float, bandwidth: float) -> list[SpecCheck]:
+    """A frequency-response design's requirements: stable, crossover and phase margin as designed
+    (±1 deg), closed-loop bandwidth as asked."""
+    L = loop.loop_gain()
+    return [check_stable(loop), check_crossover(L, crossover),
+            check_phase_margin(L, target_deg=pm_deg, tolerance_deg=1.0),
+            check_bandwidth(loop.reference_to_output(), bandwidth)]

@@ -269,9 +269,9 @@ def equilibrium_feedforward(known: models.Plant):
 def reference_feedforward(known: models.Plant, coordinate: str):
     """r ↦ u_e(q_r): the equilibrium input with `coordinate` at the reference, the rest at the operating point.
 
-    IV.11(e): "a model-based feedforward term that predicts the torque
-    required to overcome the gravity-buoyancy torque based on the desired
-    roll angle".
+    A model-based feedforward that predicts the input holding the plant at
+    the desired configuration (for a vehicle's roll, the gravity-buoyancy
+    torque at the desired roll angle).
     """
     if coordinate not in known.coordinate_names:
         raise ValueError(f"{known.name} has no coordinate {coordinate!r}; coordinates are "
@@ -307,7 +307,7 @@ class PID(models.Block):
     derivative_on : "measurement" (no derivative kick) or "error"
     anti_windup : "back_calculation" (integral bled by T_s/k_i (u − u_unsat)),
         "integrate_while_slow" (integrate only while |ẏ| < `rate_limit`, for
-        any sign of k_i: the text's V.12(f)) or "none"
+        any sign of k_i: the textbook's scheme for a negative k_i) or "none"
     rate_limit : units of y per s, for "integrate_while_slow"
     output_limit : symmetric saturation of the output (the actuator limit,
         or the outer loop's bound on the inner reference); None for none

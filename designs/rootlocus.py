@@ -1,4 +1,4 @@
-"""Root locus: Evans forms, the integrator gain of .10, and IV.11's lead-lag by the angle condition.
+"""Root locus: Evans forms, the integrator gain of .10, and lead-lag design by the angle condition.
 
 A characteristic equation D(s) + k N(s) = 0 is in Evans form 1 + k L(s) = 0
 with L = N/D. The locus itself comes from python-control
@@ -13,15 +13,16 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from .analysis import _padd, _pmul, _poly, as_polynomials, dc_gain, tf
+from .analysis import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
 
 __all__ = ["evans_form", "integrator_evans_form", "locus", "damping_ratios", "gain_leaving_damping",
-           "integrator_gain", "LeadLagDesign", "lead_by_angle", "lag_for_static_gain", "dominant_pair"]
+           "integrator_gain", "LeadLagDesign", "lead_by_angle", "lag_for_static_gain", "dominant_pair",
+           "lead_lag_for_static_gain"]
 
 
 def evans_form(char_base, char_gain) -> control.TransferFunction:
     """L(s) = N/D for the characteristic equation D(s) + k N(s) = 0 (descending coefficients)."""
-    den, num = _poly(char_base), _poly(char_gain)
+    den, num = polynomial(char_base), polynomial(char_gain)
     if not np.any(num):
         raise ValueError("the gain does not enter the characteristic equation")
     return tf(num, den)
@@ -34,7 +35,7 @@ def integrator_evans_form(plant, kp: float, kd: float = 0.0) -> control.Transfer
     characteristic polynomial does not depend on where k_d acts).
     """
     num, den = as_polynomials(plant)
-    base = _pmul([1.0, 0.0], _padd(den, _pmul(num, [kd, kp])))
+    base = poly_mul([1.0, 0.0], poly_add(den, poly_mul(num, [kd, kp])))
     return evans_form(base, num)
 
 
@@ -75,7 +76,7 @@ def gain_leaving_damping(L, zeta_min: float, sign: float = 1.0) -> float:
     # k real  <=>  Im(D conj(N)) = 0.
     cross = np.polymul(d_ray, np.conj(n_ray)).imag
     candidates = []
-    roots = np.roots(_poly(cross)) if np.any(np.abs(cross) > 0) else np.array([])
+    roots = np.roots(polynomial(cross)) if np.any(np.abs(cross) > 0) else np.array([])
     for w in roots:
         if abs(w.imag) < 1e-9 * max(1.0, abs(w)) and w.real > 0:
             s = w.real * direction
@@ -94,14 +95,14 @@ def integrator_gain(plant, kp: float, kd: float, zeta_min: float, overshoot_allo
     """The .10 choice of k_i along its root locus.
 
     "Choose k_i sufficiently large to drive the error to zero as quickly as
-    possible without significantly degrading the transient response"
-    (IV.10(d)). We take the largest k_i for which (1) every closed-loop pole
+    possible without significantly degrading the transient response".
+    We take the largest k_i for which (1) every closed-loop pole
     keeps damping ≥ `zeta_min` (we use 0.9 of the PD loop's ζ; found
     exactly with `gain_leaving_damping`) and (2) the step overshoot of the
     PID loop stays within `overshoot_allowance` percentage points of the PD
     loop's (the PI zero at −k_i/k_p adds overshoot the poles do not show;
-    bisection, None to skip). The sign of k_i is that of k_p (for the ball
-    on beam's outer loop both are negative, as V.12(f) says).
+    bisection, None to skip). The sign of k_i is that of k_p (both negative
+    for a plant of negative gain, such as −g/s²).
 
     Returns
     -------
@@ -156,7 +157,7 @@ def dominant_pair(wn: float, zeta: float) -> complex:
 
 @dataclass(frozen=True)
 class LeadLagDesign:
-    """C(s) = K (s + z)/(s + p) · (s + z_lag)/(s + p_lag) from the root locus (IV.11).
+    """C(s) = K (s + z)/(s + p) · (s + z_lag)/(s + p_lag) from the root locus.
 
     Attributes
     ----------
@@ -221,7 +222,7 @@ def lag_for_static_gain(design: LeadLagDesign, plant, static_gain: float, zero: 
     """Add a lag (s + z)/(s + p) raising the loop's static gain K_p = L(0) to `static_gain`.
 
     p = z · L_lead(0)/`static_gain`; z is chosen well below the dominant
-    poles so that the lag barely moves them (IV.11(c)).
+    poles so that the lag barely moves them.
     """
     if not zero > 0:
         raise ValueError(f"lag zero must be > 0 rad/s, got {zero}")
@@ -233,3 +234,30 @@ def lag_for_static_gain(design: LeadLagDesign, plant, static_gain: float, zero: 
         return design
     return LeadLagDesign(gain=design.gain, lead_zero=design.lead_zero, lead_pole=design.lead_pole,
                          target=design.target, lag_zero=float(zero), lag_pole=float(zero / ratio))
+
+
+def lead_lag_for_static_gain(plant, wn: float, zeta: float, lead_zero: float, lag_zero: float,
+                             static_gain: float) -> tuple[LeadLagDesign, LeadLagDesign]:
+    """A lead placing the dominant pair (ω_n, ζ) by the angle condition, and a lag raising K_p.
+
+    The lag is fixed first and the lead is placed on G·lag, so the lag's phase
+    at s* is compensated and the dominant poles stay exactly at s*; the lag
+    ratio is iterated until the static gain K_p = L(0) equals `static_gain`.
+
+    Returns
+    -------
+    (lead alone placed on G, the final lead-lag)
+    """
+    s_star = dominant_pair(wn, zeta)
+    lead_alone = lead_by_angle(plant, s_star, lead_zero)
+    g0 = dc_gain(plant)
+    ratio = static_gain / (lead_alone.gain * lead_zero / lead_alone.lead_pole * g0)
+    for _ in range(100):
+        lag_tf = tf([1.0, lag_zero], [1.0, lag_zero / ratio])
+        lead = lead_by_angle(plant * lag_tf, s_star, lead_zero)
+        achieved = lead.gain * lead_zero / lead.lead_pole * ratio * g0
+        new_ratio = ratio * static_gain / achieved
+        if abs(new_ratio - ratio) <= 1e-12 * ratio:
+            break
+        ratio = new_ratio
+    return lead_alone, lag_for_static_gain(lead, plant, static_gain, lag_zero)

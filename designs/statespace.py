@@ -4,8 +4,9 @@ Controllability, observability and the Riccati gains live in `models.lqr`
 (MPC needs them too) and are re-exported here, so one import serves a design.
 Everything here takes and returns numpy arrays and prints nothing; the
 controller blocks that run these gains on the nonlinear plants are in
-`designs.statespace_blocks`, the case studies' numbers in
-`designs.statespace_cases`.
+`designs.statespace_blocks`, and `designs.statespace_design` makes every
+design of a plant (pole placement, integrator, observers, LQR, Kalman) from
+the choices a case study passes it.
 
 Conventions
 -----------
@@ -28,17 +29,18 @@ import scipy.linalg
 import scipy.optimize
 import scipy.signal
 
-from models.lqr import (_fmt, _matrix, _pair_AB, _pair_AC, _prefix, _square, bryson_weights,
-                        controllability_matrix, dkalman, dlqr, kalman, lqr, observability_matrix,
-                        require_controllable, require_detectable, require_observable, require_stabilizable,
-                        riccati_residual, uncontrollable_modes, unobservable_modes)
+from models.lqr import (augment_disturbance, bryson_weights, controllability_matrix, dkalman, dlqr, finite_matrix, format_values,
+                        kalman, lqr, message_prefix, observability_matrix, require_controllable, require_detectable,
+                        require_observable, require_stabilizable, riccati_residual, square_matrix, state_input_pair,
+                        state_output_pair, uncontrollable_modes, unobservable_modes)
 
 __all__ = [
     "controllability_matrix", "observability_matrix", "uncontrollable_modes", "unobservable_modes",
     "require_controllable", "require_observable", "require_stabilizable", "require_detectable",
     "second_order_poles", "second_order_from_specs", "normalized_rise_time", "place",
     "pole_mismatch", "reference_gain", "reference_steady_state", "augment_integrator",
-    "split_integral_gain", "augment_disturbance", "observer_gain", "discrete_observer_gain",
+    "split_integral_gain", "augment_disturbance", "inner_outer_poles", "bryson_tracking_weights",
+    "observer_gain", "discrete_observer_gain",
     "current_estimator_gain", "bryson_weights", "lqr", "dlqr", "kalman", "dkalman",
     "riccati_residual",
 ]
@@ -106,17 +108,17 @@ def second_order_from_specs(rise_time: float, overshoot: float) -> tuple[float, 
 def _checked_poles(poles, n: int, n_inputs: int, what: str) -> np.ndarray:
     poles = np.atleast_1d(np.asarray(poles, dtype=complex)).ravel()
     if poles.size != n:
-        raise ValueError(f"{_prefix(what)}need {n} poles (one per state), got {poles.size}")
+        raise ValueError(f"{message_prefix(what)}need {n} poles (one per state), got {poles.size}")
     if not np.all(np.isfinite(poles)):
-        raise ValueError(f"{_prefix(what)}the requested poles are not finite: {_fmt(poles)}")
+        raise ValueError(f"{message_prefix(what)}the requested poles are not finite: {format_values(poles)}")
     complex_ones = poles[np.abs(poles.imag) > 0]
     if not np.allclose(np.sort_complex(complex_ones), np.sort_complex(complex_ones.conj()),
                        rtol=1e-12, atol=1e-12):
-        raise ValueError(f"{_prefix(what)}complex poles must come in conjugate pairs, got {_fmt(poles)}")
+        raise ValueError(f"{message_prefix(what)}complex poles must come in conjugate pairs, got {format_values(poles)}")
     for p in poles:
         count = int(np.sum(np.abs(poles - p) <= 1e-9 * max(1.0, abs(p))))
         if count > n_inputs:
-            raise ValueError(f"{_prefix(what)}the pole {_fmt([p])} is requested {count} times but the "
+            raise ValueError(f"{message_prefix(what)}the pole {format_values([p])} is requested {count} times but the "
                              f"system has {n_inputs} independent input(s); a pole can be placed at most "
                              f"rank(B) times: spread the repeated poles slightly")
     return poles
@@ -154,7 +156,7 @@ def place(A, B, poles, what: str = "") -> np.ndarray:
         inputs, or a placement whose eigenvalues miss the request (an
         ill-conditioned problem).
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     require_controllable(A, B, what)
     n_inputs = int(np.linalg.matrix_rank(B))
     poles = _checked_poles(poles, A.shape[0], n_inputs, what)
@@ -164,11 +166,11 @@ def place(A, B, poles, what: str = "") -> np.ndarray:
         result = scipy.signal.place_poles(A, B, poles, method="YT")
     K = np.real_if_close(result.gain_matrix, tol=1e6)
     if np.iscomplexobj(K):
-        raise ValueError(f"{_prefix(what)}placement returned a complex gain")
+        raise ValueError(f"{message_prefix(what)}placement returned a complex gain")
     K = np.asarray(K, dtype=float).reshape(B.shape[1], A.shape[0])
     miss = pole_mismatch(np.linalg.eigvals(A - B @ K), poles)
     if miss > 1e-6 * max(1.0, float(np.max(np.abs(poles)))):
-        raise ValueError(f"{_prefix(what)}pole placement is ill-conditioned: eig(A − B K) misses the "
+        raise ValueError(f"{message_prefix(what)}pole placement is ill-conditioned: eig(A − B K) misses the "
                          f"requested poles by {miss:.3g}")
     return K
 
@@ -185,8 +187,8 @@ def reference_steady_state(A, B, C_r) -> tuple[np.ndarray, np.ndarray]:
     ValueError
         When the tracked output has a zero at s = 0 (no rest state reaches it).
     """
-    A, B = _pair_AB(A, B)
-    C_r = _matrix(C_r, "C_r")
+    A, B = state_input_pair(A, B)
+    C_r = finite_matrix(C_r, "C_r")
     n = A.shape[0]
     if B.shape[1] != 1 or C_r.shape != (1, n):
         raise ValueError(f"reference_steady_state needs one input and one tracked output row C_r of "
@@ -216,9 +218,9 @@ def reference_gain(A, B, K, C_r) -> np.ndarray:
     ValueError
         When A − B K is singular or the DC gain C_r (A − B K)⁻¹ B is zero.
     """
-    A, B = _pair_AB(A, B)
-    K = _matrix(K, "K")
-    C_r = _matrix(C_r, "C_r")
+    A, B = state_input_pair(A, B)
+    K = finite_matrix(K, "K")
+    C_r = finite_matrix(C_r, "C_r")
     if K.shape != (B.shape[1], A.shape[0]) or C_r.shape != (1, A.shape[0]) or B.shape[1] != 1:
         raise ValueError(f"reference_gain needs B (nx, 1), K (1, nx), C_r (1, nx); got {B.shape}, "
                          f"{K.shape}, {C_r.shape}")
@@ -239,8 +241,8 @@ def augment_integrator(A, B, C_r) -> tuple[np.ndarray, np.ndarray]:
     A_I : (nx+1, nx+1) = [[A, 0], [−C_r, 0]]
     B_I : (nx+1, nu) = [B; 0]
     """
-    A, B = _pair_AB(A, B)
-    C_r = _matrix(C_r, "C_r")
+    A, B = state_input_pair(A, B)
+    C_r = finite_matrix(C_r, "C_r")
     n = A.shape[0]
     if C_r.shape != (1, n):
         raise ValueError(f"C_r must be one row of {n} entries, got shape {C_r.shape}")
@@ -250,27 +252,55 @@ def augment_integrator(A, B, C_r) -> tuple[np.ndarray, np.ndarray]:
 
 def split_integral_gain(K_augmented, n_states: int) -> tuple[np.ndarray, np.ndarray]:
     """(K (nu, nx), k_i (nu,)) from the gain of the integrator-augmented system, u = −K x + k_i x_I."""
-    K_augmented = _matrix(K_augmented, "K_augmented")
+    K_augmented = finite_matrix(K_augmented, "K_augmented")
     if K_augmented.shape[1] != n_states + 1:
         raise ValueError(f"K_augmented must have {n_states + 1} columns, got {K_augmented.shape}")
     return K_augmented[:, :n_states].copy(), -K_augmented[:, n_states].copy()
 
 
-def augment_disturbance(A, B, C) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Continuous model with a constant input disturbance d as a state: x' = A x + B (u + d), d' = 0.
+def inner_outer_poles(linear, inner_state: int, input_room: float, angle_step: float, damping_ratio: float,
+                      separation: float, what: str = "") -> np.ndarray:
+    """The .8 successive-loop rule as state-feedback poles (rad/s), (4,).
 
-    The ZOH-discrete counterpart has the identity in the lower-right block
-    (d_{k+1} = d_k); `designs.statespace_blocks.ObserverFeedback` builds it.
+    From the inner coordinate's row q̈_i = a q_i + b u + … of the linearization:
+    inner ωₙ² = |b| u_room / A − a, so the input just saturates when the inner
+    reference steps by `angle_step` A; the outer pair is `separation` times
+    slower; both with `damping_ratio`.
 
-    Returns
-    -------
-    A_d (nx+nu, nx+nu) = [[A, B], [0, 0]];  B_d = [B; 0];  C_d = [C, 0]
+    Parameters
+    ----------
+    linear : models.LinearModel (states (q, q̇))
+    inner_state : index of the inner coordinate in q
+    input_room : the input left for feedback (units of u)
+
+    Raises
+    ------
+    ValueError
+        When no ωₙ > 0 comes out (the step is too large to stabilize the inner loop).
     """
-    A, B = _pair_AB(A, B)
-    A, C = _pair_AC(A, C)
-    n, m = B.shape
-    A_d = np.block([[A, B], [np.zeros((m, n + m))]])
-    return A_d, np.vstack([B, np.zeros((m, m))]), np.hstack([C, np.zeros((C.shape[0], m))])
+    nq = linear.nx // 2
+    a, b = linear.A[nq + inner_state, inner_state], linear.B[nq + inner_state, 0]
+    wn_sq = abs(b) * input_room / angle_step - a
+    if wn_sq <= 0:
+        raise ValueError(f"{message_prefix(what)}a step of {angle_step:.3g} rad saturating the input cannot "
+                         f"stabilize the inner loop (ωₙ² = {wn_sq:.3g}); choose a smaller angle step")
+    wn = np.sqrt(wn_sq)
+    return np.concatenate([second_order_poles(wn, damping_ratio), second_order_poles(wn / separation, damping_ratio)])
+
+
+def bryson_tracking_weights(state_names, maxima: dict, integral_max: float,
+                            input_room: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bryson's rule for the integrator-augmented state (x, x_I) and one input.
+
+    `maxima` gives the largest acceptable excursion per state name (SI; states not
+    named are unweighted), `integral_max` that of the integrator state, `input_room`
+    the input's room above the equilibrium input.
+    """
+    unknown = set(maxima) - set(state_names)
+    if unknown:
+        raise ValueError(f"Bryson maxima for unknown states {sorted(unknown)}; states are {tuple(state_names)}")
+    state_max = [maxima.get(s, np.inf) for s in state_names] + [integral_max]
+    return bryson_weights(state_max, [input_room])
 
 
 def observer_gain(A, C, poles, what: str = "") -> np.ndarray:
@@ -281,7 +311,7 @@ def observer_gain(A, C, poles, what: str = "") -> np.ndarray:
     ValueError
         An unobservable pair (naming the modes) and every error of `place`.
     """
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     require_observable(A, C, what)
     return place(A.T, C.T, poles, what).T
 
@@ -293,8 +323,8 @@ def discrete_observer_gain(A_d, C, poles_z, what: str = "") -> np.ndarray:
     """
     poles_z = np.atleast_1d(np.asarray(poles_z, dtype=complex))
     if np.any(np.abs(poles_z) >= 1):
-        raise ValueError(f"{_prefix(what)}discrete observer poles must lie inside the unit circle, "
-                         f"got {_fmt(poles_z)}")
+        raise ValueError(f"{message_prefix(what)}discrete observer poles must lie inside the unit circle, "
+                         f"got {format_values(poles_z)}")
     return observer_gain(A_d, C, poles_z, what)
 
 
@@ -305,5 +335,5 @@ def current_estimator_gain(A_d, L_predictor) -> np.ndarray:
     the controller uses y_k in the same sample instead of one sample late.
     A ZOH model's A_d = exp(A Ts) is always invertible.
     """
-    A_d = _square(A_d, "A_d")
-    return np.linalg.solve(A_d, _matrix(L_predictor, "L_predictor"))
+    A_d = square_matrix(A_d, "A_d")
+    return np.linalg.solve(A_d, finite_matrix(L_predictor, "L_predictor"))

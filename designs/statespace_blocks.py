@@ -18,9 +18,9 @@ period Ts. With r̃ = r − y_r,e the reference relative to the operating point,
   text's −1/(C_r (A − B K)⁻¹ B)) every reference is an exact rest point of
   the known plant: u = u_e(q_ref(r)) there.
 
-  Why at q and not at the reference (the text's I.15 hint τ_e(θ^d)): with
-  the reference's equilibrium torque the loop's stiffness about θ^d is
-  k_p − (m g ℓ / 2) sin θ^d, negative for I.8's k_p = 0.304 N m/rad at
+  Why at q and not at the reference (a textbook hint feeds τ_e(θ^d) forward):
+  with the reference's equilibrium torque the loop's stiffness about θ^d is
+  k_p − (m g ℓ / 2) sin θ^d, negative for a k_p of 0.304 N m/rad at
   θ^d = 50° (0.56 N m/rad of gravity stiffness), so the arm stalls near
   θ = 0 instead of reaching the reference. Cancelling at the measured
   configuration keeps the designed poles everywhere on the arm.
@@ -53,7 +53,7 @@ import numpy as np
 
 import models
 from designs.discrete import back_calculation, integrate_while_slow, saturate, trapezoid
-from designs.statespace import pole_mismatch, reference_steady_state
+from designs.statespace import augment_disturbance, pole_mismatch, reference_steady_state
 
 __all__ = ["TrackingModel", "StateFeedback", "ObserverFeedback"]
 
@@ -84,9 +84,8 @@ class TrackingModel:
     _discrete: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
-    def from_plant(cls, plant: models.Plant, tracked: str | None = None) -> "TrackingModel":
-        """Linearize `plant` at its standard equilibrium; `tracked` defaults to the case study's."""
-        tracked = models.case(plant.name).tracked if tracked is None else tracked
+    def from_plant(cls, plant: models.Plant, tracked: str) -> "TrackingModel":
+        """Linearize `plant` at its standard equilibrium; `tracked` names the coordinate that follows r."""
         if tracked not in plant.coordinate_names:
             raise ValueError(f"{plant.name} has no coordinate {tracked!r}; coordinates are "
                              f"{', '.join(plant.coordinate_names)}")
@@ -240,7 +239,7 @@ class ObserverFeedback(_TrackingBlock):
         n_est = nx, or nx + 1 with `disturbance_observer`
     sample_period : s; the observer runs on the ZOH model at this period
     measured_outputs : names of the outputs the observer uses (default all);
-        the text's V.15 and VI.15 use the position only
+        a position measurement alone, for example
     disturbance_observer : estimate a constant input disturbance d and
         subtract d̂ from the command
 
@@ -263,12 +262,10 @@ class ObserverFeedback(_TrackingBlock):
         disc = model.discrete(sample_period)
         nx, nd = model.nx, int(self.disturbance_observer)
         self.n_estimate = nx + nd
-        A_o = np.eye(nx + nd)
-        A_o[:nx, :nx] = disc.A
         if nd:
-            A_o[:nx, nx:] = disc.B
-        B_o = np.vstack([disc.B, np.zeros((nd, 1))])
-        C_o = np.hstack([disc.C[self.rows], np.zeros((len(self.rows), nd))])
+            A_o, B_o, C_o = augment_disturbance(disc.A, disc.B, disc.C[self.rows], discrete=True)
+        else:
+            A_o, B_o, C_o = disc.A, disc.B, disc.C[self.rows]
         M = np.asarray(observer_gain, dtype=float).reshape(nx + nd, len(self.rows))
         error_poles = np.linalg.eigvals(A_o - A_o @ M @ C_o)
         if np.any(np.abs(error_poles) >= 1):

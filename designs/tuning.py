@@ -5,7 +5,7 @@ criterion of the nonlinear closed loop (`models.closed_loop_function`, one
 CasADi mapaccum, so its gradient is exact); the constraints are time-domain
 specs on every parameter sample. IPOPT solves it from the hand design.
 
-    result = tune(plant, block, Scenario(reference=0.8, duration=5.0),
+    result = tune(plant, block, Scenario(reference=0.8, duration=5.0, tracked="theta"),
                   specs=Specs(max_overshoot=0.05, settling_time=2.0))
     result.block          # the tuned block; result.improvement, result.violations
 """
@@ -34,12 +34,14 @@ class Scenario:
     duration : s
     x0 : initial plant state (nx,), default the plant's standard equilibrium
     input_disturbance : constant, callable or array (N, nu), added at the plant input
+    tracked : state name of the coordinate that follows the reference (keyword only)
     """
 
     reference: object
     duration: float
     x0: np.ndarray | None = None
     input_disturbance: object = 0.0
+    tracked: str = field(kw_only=True)
 
 
 @dataclass(frozen=True)
@@ -172,7 +174,6 @@ class TuningProblem:
     samples : (M, n_params) actual parameter vectors, default the plant's own
     robust : "mean" or "worst" over the samples
     free : names of the gains to tune (default all)
-    tracked : state name of the tracked coordinate (default the case study's)
     substeps : RK4 sub-steps per sample
     extra_params : names of plant parameters to decide together with the gains
         (co-design); they become decision variables after the gains
@@ -180,14 +181,14 @@ class TuningProblem:
 
     def __init__(self, plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None = None,
                  cost: Cost | None = None, samples=None, robust: str = "mean", free=None,
-                 tracked: str | None = None, substeps: int = 10, extra_params=()):
+                 substeps: int = 10, extra_params=()):
         if robust not in ("mean", "worst"):
             raise ValueError(f"robust must be 'mean' or 'worst', got {robust!r}")
         self.plant, self.block, self.scenario = plant, block, scenario
         self.specs = specs or Specs()
         self.cost = cost or Cost()
         self.robust = robust
-        self.tracked = tracked or models.case(plant.name).tracked
+        self.tracked = scenario.tracked
         if self.tracked not in plant.state_names:
             raise ValueError(f"{plant.name} has no state {self.tracked!r}; states are {plant.state_names}")
         self.samples = (plant.param_vector()[None] if samples is None
@@ -331,13 +332,13 @@ class TuningProblem:
 
 def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None = None,
          cost: Cost | None = None, samples=None, robust: str = "mean", free=None, bounds=None,
-         tracked: str | None = None, substeps: int = 10, max_iter: int = 200, tol: float = 1e-8,
+         substeps: int = 10, max_iter: int = 200, tol: float = 1e-8,
          hessian: str = "limited-memory", jit: bool = False, progress=None) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
     Parameters
     ----------
-    plant, block, scenario, specs, cost, samples, robust, free, tracked, substeps
+    plant, block, scenario, specs, cost, samples, robust, free, substeps
         As in `TuningProblem`.
     bounds : dict gain name -> (low, high), optional box bounds on the free gains
         (scalars or arrays shaped like the gain)
@@ -357,14 +358,15 @@ def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None 
         with the violated specs named.
     """
     problem = TuningProblem(plant, block, scenario, specs=specs, cost=cost, samples=samples,
-                            robust=robust, free=free, tracked=tracked, substeps=substeps)
-    lbx, ubx = _gain_bounds(problem, bounds)
+                            robust=robust, free=free, substeps=substeps)
+    lbx, ubx = gain_bounds(problem, bounds)
     if hessian not in ("limited-memory", "exact"):
         raise ValueError(f"hessian must be 'limited-memory' or 'exact', got {hessian!r}")
-    return _solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress)
+    return solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress)
 
 
-def _gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
+def gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) decision bounds from {gain name: (low, high)} (unbounded where not given)."""
     n = problem.decision.numel()
     lbx, ubx = np.full(n, -np.inf), np.full(n, np.inf)
     if not bounds:
@@ -383,7 +385,7 @@ def _gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray
     return lbx, ubx
 
 
-def _solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost=None,
+def solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost=None,
            tol: float = 1e-8, hessian: str = "limited-memory", progress=None) -> TuningResult:
     """IPOPT on the problem's objective (+ plant_cost(decision)), with the fallback logic."""
     start_time = time.perf_counter()

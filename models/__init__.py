@@ -6,10 +6,9 @@
 >>> lin = arm.linearize(xe, ue)
 """
 
-from . import catalog as _catalog  # noqa: F401  (registers the case studies)
+from . import catalog as _catalog  # noqa: F401  (registers the case studies' plants)
 from . import signals
 from .block import Block, Cascade, Controller, saturate
-from .cases import CASES, Case, case
 from .checks import SimulationError
 from .closed_loop import ClosedLoopResult, closed_loop_function, monte_carlo, simulate_closed_loop
 from .linear import LinearModel
@@ -18,8 +17,8 @@ from .simulate import Trajectory, simulate
 from .uncertainty import corner_params, perturbed, sample_params
 
 __all__ = [
-    "Block", "CASES", "Case", "Cascade", "ClosedLoopResult", "Controller", "LinearModel", "Param", "Physics", "Plant",
-    "SimulationError", "Trajectory", "case", "closed_loop_function", "corner_params", "declare", "get",
+    "Block", "Cascade", "ClosedLoopResult", "Controller", "LinearModel", "Param", "Physics", "Plant",
+    "SimulationError", "Trajectory", "closed_loop_function", "corner_params", "declare", "get",
     "monte_carlo", "names", "perturbed", "sample_params", "saturate", "signals", "simulate",
     "simulate_closed_loop",
 ]

@@ -83,7 +83,7 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     to machine code (see `models.compile`).
     """
     key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
-    cache = plant._step_cache
+    cache = plant.function_cache
     if key in cache:
         return cache[key][1]
     if not isinstance(controller, Block):
@@ -122,7 +122,7 @@ def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit
     """The cached `closed_loop_function` wrapped for fast numpy evaluation."""
     closed_loop_function(plant, controller, n_steps, substeps, jit)
     key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
-    return plant._step_cache[key][2]
+    return plant.function_cache[key][2]
 
 
 def _check_sizes(plant: Plant, controller) -> None:

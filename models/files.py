@@ -88,10 +88,15 @@ def check_writable(folder: str | os.PathLike) -> Path:
 
 
 # ---------------------------------------------------------------------------- JSON
-def to_jsonable(value: Any) -> Any:
-    """`value` as plain JSON types following the module's conventions."""
+def to_jsonable(value: Any, *, encode: bool = True) -> Any:
+    """`value` as plain JSON types following the module's conventions.
+
+    With ``encode=False`` only numpy goes: numpy scalars and arrays become Python
+    numbers and nested lists, while complex numbers, non-finite floats and other
+    objects stay as they are (homework records keep complex poles as complex).
+    """
     if isinstance(value, Mapping):
-        return {str(k): to_jsonable(v) for k, v in value.items()}
+        return {(str(k) if encode else k): to_jsonable(v, encode=encode) for k, v in value.items()}
     if isinstance(value, (str, bool)) or value is None:
         return value
     if isinstance(value, np.bool_):
@@ -100,17 +105,23 @@ def to_jsonable(value: Any) -> Any:
         return int(value)
     if isinstance(value, (float, np.floating)):
         value = float(value)
-        if math.isnan(value):
+        if encode and math.isnan(value):
             return "nan"
-        if math.isinf(value):
+        if encode and math.isinf(value):
             return "inf" if value > 0 else "-inf"
         return value
     if isinstance(value, (complex, np.complexfloating)):
+        if not encode:
+            return complex(value)
         return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
     if isinstance(value, np.ndarray):
-        return [to_jsonable(v) for v in value.tolist()] if value.ndim else to_jsonable(value.item())
+        if value.ndim == 0:
+            return to_jsonable(value.item(), encode=encode)
+        return [to_jsonable(v, encode=encode) for v in value.tolist()]
     if isinstance(value, (list, tuple)):
-        return [to_jsonable(v) for v in value]
+        return [to_jsonable(v, encode=encode) for v in value]
+    if not encode:
+        return value
     model = _lti_as_dict(value)
     if model is not None:
         return to_jsonable(model)

@@ -79,7 +79,7 @@ class LinearModel:
                 raise ValueError(f"{self.name} has no input {input!r}; inputs are {', '.join(self.input_names)}")
             j = self.input_names.index(input)
             sys = sys[:, j]
-        return _clean_tf(sys)
+        return clean_tf(sys)
 
     def discretize(self, sample_period: float) -> "LinearModel":
         """Exact zero-order-hold discretization at `sample_period` s (matrix exponential)."""
@@ -95,15 +95,18 @@ class LinearModel:
         return replace(self, A=phi[:nx, :nx], B=phi[:nx, nx:], sample_period=float(sample_period))
 
 
-def _clean_tf(sys: control.TransferFunction) -> control.TransferFunction:
-    num = [[_chop(np.atleast_1d(n)) for n in row] for row in sys.num]
-    den = [[_chop(np.atleast_1d(d)) for d in row] for row in sys.den]
+def clean_tf(sys: control.TransferFunction) -> control.TransferFunction:
+    """`sys` with every polynomial `chop`ped (roundoff below 1e-9 of the largest coefficient set to zero)."""
+    num = [[chop(np.atleast_1d(n)) for n in row] for row in sys.num]
+    den = [[chop(np.atleast_1d(d)) for d in row] for row in sys.den]
     if sys.ninputs == 1 and sys.noutputs == 1:
         return control.tf(num[0][0], den[0][0], sys.dt)
     return control.tf(num, den, sys.dt)
 
 
-def _chop(coeffs: np.ndarray, rel: float = 1e-9) -> np.ndarray:
+def chop(coeffs: np.ndarray, rel: float = 1e-9) -> np.ndarray:
+    """Descending coefficients with those below `rel` of the largest set to zero, leading zeros removed."""
+    coeffs = np.atleast_1d(np.asarray(coeffs, dtype=float))
     scale = np.max(np.abs(coeffs)) if coeffs.size else 0.0
     out = np.where(np.abs(coeffs) <= rel * scale, 0.0, coeffs)
     nonzero = np.flatnonzero(out)

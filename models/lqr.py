@@ -20,7 +20,8 @@ __all__ = [
 
 
 # ------------------------------------------------------------------ checks
-def _matrix(value, what: str) -> np.ndarray:
+def finite_matrix(value, what: str) -> np.ndarray:
+    """`value` as a finite 2-D float array (a vector becomes one row); ValueError naming `what`."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 1:
         arr = arr[None, :]
@@ -31,37 +32,41 @@ def _matrix(value, what: str) -> np.ndarray:
     return arr
 
 
-def _square(A, what: str = "A") -> np.ndarray:
-    A = _matrix(A, what)
+def square_matrix(A, what: str = "A") -> np.ndarray:
+    """`A` as a finite square matrix; ValueError naming `what` otherwise."""
+    A = finite_matrix(A, what)
     if A.shape[0] != A.shape[1]:
         raise ValueError(f"{what} must be square, got shape {A.shape}")
     return A
 
 
-def _pair_AB(A, B) -> tuple[np.ndarray, np.ndarray]:
-    A = _square(A)
+def state_input_pair(A, B) -> tuple[np.ndarray, np.ndarray]:
+    """(A (n, n), B (n, m)) checked to fit together."""
+    A = square_matrix(A)
     B = np.asarray(B, dtype=float)
     if B.ndim == 1:
         B = B[:, None]
-    B = _matrix(B, "B")
+    B = finite_matrix(B, "B")
     if B.shape[0] != A.shape[0]:
         raise ValueError(f"B must have {A.shape[0]} rows (one per state), got shape {B.shape}")
     return A, B
 
 
-def _pair_AC(A, C) -> tuple[np.ndarray, np.ndarray]:
-    A = _square(A)
-    C = _matrix(C, "C")
+def state_output_pair(A, C) -> tuple[np.ndarray, np.ndarray]:
+    """(A (n, n), C (p, n)) checked to fit together."""
+    A = square_matrix(A)
+    C = finite_matrix(C, "C")
     if C.shape[1] != A.shape[0]:
         raise ValueError(f"C must have {A.shape[0]} columns (one per state), got shape {C.shape}")
     return A, C
 
 
-def _prefix(what: str) -> str:
+def message_prefix(what: str) -> str:
+    """"what: " for error messages, or nothing."""
     return f"{what}: " if what else ""
 
 
-def _fmt(values) -> str:
+def format_values(values) -> str:
     """Poles for messages; parts below 1e-7 (roundoff about a repeated root) print as 0."""
     out = []
     for v in np.atleast_1d(np.asarray(values, dtype=complex)):
@@ -71,9 +76,27 @@ def _fmt(values) -> str:
 
 
 # ------------------------------------------------------ controllability
+def augment_disturbance(A, B, C, discrete: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Model with a constant input disturbance d as a state: x' = A x + B (u + d), d' = 0.
+
+    Continuous time by default; with ``discrete=True`` (A, B) is a ZOH model and
+    d_{k+1} = d_k, exact for a disturbance held like the input.
+
+    Returns
+    -------
+    A_d (nx+nu, nx+nu) = [[A, B], [0, 0]] (discrete: [[A, B], [0, I]]);  B_d = [B; 0];  C_d = [C, 0]
+    """
+    A, B = state_input_pair(A, B)
+    A, C = state_output_pair(A, C)
+    n, m = B.shape
+    lower = np.hstack([np.zeros((m, n)), np.eye(m) if discrete else np.zeros((m, m))])
+    A_d = np.vstack([np.hstack([A, B]), lower])
+    return A_d, np.vstack([B, np.zeros((m, m))]), np.hstack([C, np.zeros((C.shape[0], m))])
+
+
 def controllability_matrix(A, B) -> np.ndarray:
     """[B, A B, ..., A^(n−1) B], shape (nx, nx·nu)."""
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     blocks = [B]
     for _ in range(A.shape[0] - 1):
         blocks.append(A @ blocks[-1])
@@ -82,7 +105,7 @@ def controllability_matrix(A, B) -> np.ndarray:
 
 def observability_matrix(A, C) -> np.ndarray:
     """[C; C A; ...; C A^(n−1)], shape (nx·ny, nx)."""
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     return controllability_matrix(A.T, C.T).T
 
 
@@ -105,13 +128,13 @@ def uncontrollable_modes(A, B, tol: float = 1e-9) -> np.ndarray:
     `tol` is relative to the larger of ‖A‖ and ‖B‖: a mode counts as
     uncontrollable when the smallest singular value of [A − λI, B] is below it.
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     return _pbh_rank_deficient(A, B, tol)
 
 
 def unobservable_modes(A, C, tol: float = 1e-9) -> np.ndarray:
     """Eigenvalues of A invisible in the output C x (PBH test on the dual), complex array."""
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     return _pbh_rank_deficient(A.T, C.T, tol)
 
 
@@ -122,12 +145,12 @@ def require_controllable(A, B, what: str = "") -> int:
     -------
     int : rank of the controllability matrix (= nx).
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     modes = uncontrollable_modes(A, B)
     rank = int(np.linalg.matrix_rank(controllability_matrix(A, B)))
     if modes.size:
-        raise ValueError(f"{_prefix(what)}(A, B) is not controllable: the input cannot move the "
-                         f"mode(s) at s = {_fmt(modes)} (controllability matrix rank {rank} < {A.shape[0]})")
+        raise ValueError(f"{message_prefix(what)}(A, B) is not controllable: the input cannot move the "
+                         f"mode(s) at s = {format_values(modes)} (controllability matrix rank {rank} < {A.shape[0]})")
     return A.shape[0]
 
 
@@ -138,12 +161,12 @@ def require_observable(A, C, what: str = "") -> int:
     -------
     int : rank of the observability matrix (= nx).
     """
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     modes = unobservable_modes(A, C)
     rank = int(np.linalg.matrix_rank(observability_matrix(A, C)))
     if modes.size:
-        raise ValueError(f"{_prefix(what)}(A, C) is not observable: the output does not see the "
-                         f"mode(s) at s = {_fmt(modes)} (observability matrix rank {rank} < {A.shape[0]})")
+        raise ValueError(f"{message_prefix(what)}(A, C) is not observable: the output does not see the "
+                         f"mode(s) at s = {format_values(modes)} (observability matrix rank {rank} < {A.shape[0]})")
     return A.shape[0]
 
 
@@ -158,22 +181,22 @@ def require_stabilizable(A, B, what: str = "", discrete: bool = False) -> None:
     Checked before any Riccati solve: a solver asked for an unstabilizable
     pair can return a gain that leaves a mode at s = 0 without saying so.
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     bad = _unstable(uncontrollable_modes(A, B), discrete)
     if bad.size:
         where = "|z| >= 1" if discrete else "Re s >= 0"
-        raise ValueError(f"{_prefix(what)}(A, B) is not stabilizable: uncontrollable mode(s) with "
-                         f"{where} at {_fmt(bad)}")
+        raise ValueError(f"{message_prefix(what)}(A, B) is not stabilizable: uncontrollable mode(s) with "
+                         f"{where} at {format_values(bad)}")
 
 
 def require_detectable(A, C, what: str = "", discrete: bool = False) -> None:
     """Raise ValueError unless every unobservable mode of (A, C) is stable."""
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     bad = _unstable(unobservable_modes(A, C), discrete)
     if bad.size:
         where = "|z| >= 1" if discrete else "Re s >= 0"
-        raise ValueError(f"{_prefix(what)}(A, C) is not detectable: unobservable mode(s) with "
-                         f"{where} at {_fmt(bad)}")
+        raise ValueError(f"{message_prefix(what)}(A, C) is not detectable: unobservable mode(s) with "
+                         f"{where} at {format_values(bad)}")
 
 
 # ------------------------------------------------------------------- LQR
@@ -203,15 +226,15 @@ def _weights(A, B, Q, R, what: str) -> tuple[np.ndarray, np.ndarray]:
     R = R.reshape(1, 1) if R.size == 1 and m == 1 else R
     for name, W, size in (("Q", Q, n), ("R", R, m)):
         if W.shape != (size, size):
-            raise ValueError(f"{_prefix(what)}{name} must have shape ({size}, {size}), got {W.shape}")
+            raise ValueError(f"{message_prefix(what)}{name} must have shape ({size}, {size}), got {W.shape}")
         if not np.all(np.isfinite(W)):
-            raise ValueError(f"{_prefix(what)}weight {name} has non-finite entries")
+            raise ValueError(f"{message_prefix(what)}weight {name} has non-finite entries")
         if not np.allclose(W, W.T, rtol=1e-10, atol=1e-14 * np.abs(W).max(initial=0)):
-            raise ValueError(f"{_prefix(what)}weight {name} must be symmetric")
+            raise ValueError(f"{message_prefix(what)}weight {name} must be symmetric")
     if np.min(np.linalg.eigvalsh(Q)) < -1e-12 * max(1.0, np.abs(Q).max()):
-        raise ValueError(f"{_prefix(what)}Q must be positive semidefinite")
+        raise ValueError(f"{message_prefix(what)}Q must be positive semidefinite")
     if np.min(np.linalg.eigvalsh(R)) <= 0:
-        raise ValueError(f"{_prefix(what)}R must be positive definite")
+        raise ValueError(f"{message_prefix(what)}R must be positive definite")
     return Q, R
 
 
@@ -227,7 +250,7 @@ def riccati_residual(A, B, Q, R, P, discrete: bool = False) -> float:
     Aᵀ P A − P − Aᵀ P B (R + Bᵀ P B)⁻¹ Bᵀ P A + Q. The Frobenius norm is
     divided by the sum of the norms of the terms.
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     if discrete:
         gain_term = A.T @ P @ B @ np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
         terms = [A.T @ P @ A, -P, -gain_term, Q]
@@ -242,8 +265,8 @@ def _riccati_checked(A, B, Q, R, P, K, discrete: bool, what: str) -> None:
     closed = np.linalg.eigvals(A - B @ K)
     stable = np.all(np.abs(closed) < 1) if discrete else np.all(closed.real < 0)
     if not (np.all(np.isfinite(P)) and res < 1e-8 and stable):
-        raise ValueError(f"{_prefix(what)}the Riccati solve failed: relative residual {res:.3g}, "
-                         f"closed-loop poles {_fmt(closed)}")
+        raise ValueError(f"{message_prefix(what)}the Riccati solve failed: relative residual {res:.3g}, "
+                         f"closed-loop poles {format_values(closed)}")
 
 
 def lqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
@@ -267,7 +290,7 @@ def lqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
         Non-finite or indefinite weights, (A, B) not stabilizable, (A, Q^½)
         not detectable, or a solve whose residual or closed loop is wrong.
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     Q, R = _weights(A, B, Q, R, what)
     require_stabilizable(A, B, what)
     require_detectable(A, _weight_root(Q), f"{what} with the weight Q" if what else "weight Q")
@@ -298,7 +321,7 @@ def dlqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     ValueError
         As `lqr`, with stability meaning |z| < 1.
     """
-    A, B = _pair_AB(A, B)
+    A, B = state_input_pair(A, B)
     Q, R = _weights(A, B, Q, R, what)
     require_stabilizable(A, B, what, discrete=True)
     require_detectable(A, _weight_root(Q), f"{what} with the weight Q" if what else "weight Q",
@@ -322,7 +345,7 @@ def kalman(A, C, W, V, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     L : (nx, ny) = P Cᵀ V⁻¹, error dynamics A − L C
     P : (nx, nx) steady-state error covariance
     """
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     K, P = lqr(A.T, C.T, W, V, what)
     return K.T, P
 
@@ -341,6 +364,6 @@ def dkalman(A, C, W, V, what: str = "") -> tuple[np.ndarray, np.ndarray]:
         measurement-update gain.
     P : (nx, nx) steady-state prior (one-step prediction) error covariance
     """
-    A, C = _pair_AC(A, C)
+    A, C = state_output_pair(A, C)
     K, P = dlqr(A.T, C.T, W, V, what)
     return K.T, P

@@ -213,7 +213,9 @@ class Plant:
         self.casadi_f = self._sym.f
         self.casadi_h = self._sym.h
         self.casadi_energy = self._sym.energy
-        self._step_cache: dict = {}
+        # Compiled functions of this plant (RK4 steps, simulators), shared by the simulators; public so
+        # that models.simulate and models.closed_loop fill it without reaching into a private attribute.
+        self.function_cache: dict = {}
 
     # ----------------------------------------------------------------- sizes
     @property
@@ -432,7 +434,7 @@ class Plant:
         expanded to SX so a mapaccum over it runs in CasADi's fast VM.
         """
         key = (float(sample_period), int(substeps))
-        if key not in self._step_cache:
+        if key not in self.function_cache:
             if not np.isfinite(sample_period) or sample_period <= 0:
                 raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
             if int(substeps) < 1:
@@ -449,8 +451,8 @@ class Plant:
                 k4 = self.casadi_f(xs + h * k3, u, p)
                 xs = xs + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
             # Common subexpressions repeat across the unrolled stages.
-            self._step_cache[key] = ca.Function("rk4", [x, u, p], [ca.cse(xs)], ["x", "u", "p"], ["x_next"])
-        return self._step_cache[key]
+            self.function_cache[key] = ca.Function("rk4", [x, u, p], [ca.cse(xs)], ["x", "u", "p"], ["x_next"])
+        return self.function_cache[key]
 
 
 def get(name: str, input_limit=None, **overrides) -> Plant:

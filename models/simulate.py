@@ -106,7 +106,7 @@ def check_trajectory(name: str, t: np.ndarray, x: np.ndarray) -> None:
 def _rk4_run(plant: Plant, sample_period: float, substeps: int, n: int, jit: bool = False) -> NumpyCall:
     """(x0 (nx,), U (nu, N), p) -> [X (nx, N)]: the states after each sample."""
     key = ("rk4_run", float(sample_period), int(substeps), n, jit)
-    cache = plant._step_cache
+    cache = plant.function_cache
     if key not in cache:
         accum = plant.step_function(sample_period, substeps).mapaccum("rk4_run", n)
         x0, U, p = ca.MX.sym("x0", plant.nx), ca.MX.sym("U", plant.nu, n), ca.MX.sym("p", plant.n_params)
@@ -117,7 +117,7 @@ def _rk4_run(plant: Plant, sample_period: float, substeps: int, n: int, jit: boo
 
 def _adaptive(plant, x0, u, p, sample_period, rtol, atol) -> np.ndarray:
     key = ("cvodes", float(sample_period), rtol, atol)
-    cache = plant._step_cache
+    cache = plant.function_cache
     if key not in cache:
         x = ca.SX.sym("x", plant.nx)
         up = ca.SX.sym("up", plant.nu + plant.n_params)
@@ -161,7 +161,7 @@ def radau_matrices(degree: int) -> tuple[np.ndarray, np.ndarray]:
 def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.ndarray:
     n, nx = u.shape[0], plant.nx
     key = ("radau", float(sample_period), degree, n)
-    cache = plant._step_cache
+    cache = plant.function_cache
     if key not in cache:
         _, deriv = radau_matrices(degree)
         h = sample_period

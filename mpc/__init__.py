@@ -1,7 +1,6 @@
 """Constrained linear and nonlinear model predictive control."""
 
 from .controller import LinearMPC, NonlinearMPC
-from .defaults import DEFAULTS, MPCDefaults, SoftSpec, controllers, defaults, linear_mpc, nonlinear_mpc
 from .estimator import DisturbanceObserver, SteadyStateTarget
 from .linear import MPCProblem, QPParameters, QPSolution, SoftBound, problem_from_model, riccati_terminal_cost
 from .mesh_refinement import collocation_defects
@@ -13,12 +12,13 @@ from .ocp_solver import OCPSolver, WarmStart
 from .qp_fast import CondensedDaqpSolver
 from .qp_osqp import OsqpSolver
 from .reference_cvxpy import CvxpySolver
+from .settings import MPCSettings, SoftSpec, linear_mpc, nonlinear_mpc, physical_soft_bounds
 from .transcription import Collocation, MultipleShooting, Transcription
 
 __all__ = [
-    "CondensedDaqpSolver", "CvxpySolver", "DEFAULTS", "DisturbanceObserver", "LinearMPC", "MPCDefaults", "MPCProblem",
+    "CondensedDaqpSolver", "CvxpySolver", "DisturbanceObserver", "LinearMPC", "MPCProblem", "MPCSettings",
     "NonlinearMPC", "NonlinearMPCProblem", "OsqpSolver", "QPParameters", "QPSolution", "SoftBound", "SoftSpec",
-    "SteadyStateTarget", "controllers", "defaults", "linear_mpc", "nonlinear_mpc", "problem_from_model",
+    "SteadyStateTarget", "linear_mpc", "nonlinear_mpc", "physical_soft_bounds", "problem_from_model",
     "riccati_terminal_cost",
     # optimal control problems
     "Collocation", "FreeTime", "MultipleShooting", "NestedCodesignResult", "OCPSolution", "OCPSolver",

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models import Plant, case
+from models import Plant
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
 from .linear import MPCProblem, QPParameters, QPSolution, problem_from_model, riccati_terminal_cost
@@ -52,7 +52,7 @@ class _PlanFollower:
     measures = "outputs"
     n_reference = 1
 
-    def _setup_common(self, known: Plant, sample_period: float, horizon: int, tracked: str | None, name: str):
+    def _setup_common(self, known: Plant, sample_period: float, horizon: int, tracked: str, name: str):
         if not np.isfinite(sample_period) or sample_period <= 0:
             raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
         if int(horizon) != horizon or horizon < 1:
@@ -64,7 +64,7 @@ class _PlanFollower:
         self.sample_period = float(sample_period)
         self.horizon = int(horizon)
         self.name = name
-        self.tracked = tracked or case(known.name).tracked
+        self.tracked = tracked
         if self.tracked not in known.coordinate_names:
             raise ValueError(f"{known.name} has no coordinate {self.tracked!r} to track; coordinates are "
                              f"{', '.join(known.coordinate_names)}")
@@ -136,7 +136,7 @@ class LinearMPC(_PlanFollower):
     rate_limit : (nu,) bound on the input's rate of change in input units per second, or None
     solver : "daqp" (condensed, fastest), "osqp" (sparse) or "cvxpy" (the readable reference),
         or a callable problem -> solver object with solve(QPParameters) -> QPSolution and reset()
-    tracked : coordinate whose absolute value the reference gives (default: the case study's)
+    tracked : coordinate whose absolute value the reference gives
     operating_point : (xe, ue) to linearize about (default: the plant's standard equilibrium)
     input_noise_std, disturbance_step_std, measurement_std : the estimator's tuning, see
         `mpc.estimator.DisturbanceObserver`
@@ -144,7 +144,7 @@ class LinearMPC(_PlanFollower):
     """
 
     def __init__(self, known: Plant, *, sample_period: float, horizon: int, state_weight, input_weight,
-                 soft_bounds=(), rate_limit=None, solver="daqp", tracked: str | None = None,
+                 soft_bounds=(), rate_limit=None, solver="daqp", tracked: str,
                  operating_point=None, input_noise_std=None, disturbance_step_std=None,
                  measurement_std=1e-3, name: str = "linear MPC"):
         self._setup_common(known, sample_period, horizon, tracked, name)
@@ -231,7 +231,7 @@ class NonlinearMPC(_PlanFollower):
     """
 
     def __init__(self, known: Plant, *, sample_period: float, horizon: int, state_weight, input_weight,
-                 soft_bounds=(), rate_limit=None, tracked: str | None = None, substeps: int = 1,
+                 soft_bounds=(), rate_limit=None, tracked: str, substeps: int = 1,
                  max_iterations: int = 20, qp_solver: str = "hpipm", input_noise_std=None,
                  disturbance_step_std=None, measurement_std=1e-3, name: str = "nonlinear MPC"):
         self._setup_common(known, sample_period, horizon, tracked, name)

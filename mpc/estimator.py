@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from models.lqr import dkalman, unobservable_modes
+from models.lqr import augment_disturbance, dkalman, unobservable_modes
 
 
 class DisturbanceObserver:
@@ -58,9 +58,7 @@ class DisturbanceObserver:
             if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
                 raise ValueError(f"{name} must be finite and > 0, got {arr}")
             stds[name] = arr
-        self.A_aug = np.block([[A, B], [np.zeros((nu, nx)), np.eye(nu)]])
-        self.B_aug = np.vstack([B, np.zeros((nu, nu))])
-        self.C_aug = np.hstack([C, np.zeros((ny, nu))])
+        self.A_aug, self.B_aug, self.C_aug = augment_disturbance(A, B, C, discrete=True)
         hidden = [z for z in unobservable_modes(self.A_aug, self.C_aug) if abs(z) >= 1 - 1e-9]
         if hidden:
             raise ValueError(f"the input disturbance (or a mode at z = {hidden[0]:.4g}) is not observable from the "

@@ -4,49 +4,74 @@
 >>> table = studies.run("arm", scenarios=["step"], mc=0)      # a pandas DataFrame
 >>> result = studies.run_study("arm", mc=50, out="results")   # everything, files written
 
-Each study (``studies/arm.py`` ... ``studies/crane.py``) declares its
-controllers, where they come from and its scenarios; `studies.runner` runs
-them on the nonlinear plant, `models.metrics` computes every column and
-`studies.writers` writes the tables. ``python -m studies`` runs all six.
+Each case study is one file, ``studies/cases/<name>.py``, defining ``CASE =
+CaseStudy(...)``: its numbers, scenarios, designs, drawing and errata.
+`studies.cases` is the registry (`names()`, `get`, `register`);
+`studies.runner` runs every controller on the nonlinear plant,
+`models.metrics` computes every column and `studies.writers` writes the
+tables. ``python -m studies`` runs every registered case.
 """
 
 from __future__ import annotations
 
-import importlib
 import os
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 if TYPE_CHECKING:
     import pandas as pd
 
-    from .runner import Options, Study, StudyResult
-
-#: The six case studies, in the text's order.
-NAMES = ("arm", "pendulum", "satellite", "uuv", "ballbeam", "crane")
+    from .case import CaseStudy
+    from .runner import Options, StudyResult
 
 #: The scenarios a study can run, as named on the command line.
 SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
-__all__ = ["NAMES", "Options", "SCENARIO_NAMES", "Study", "StudyResult", "get", "run", "run_study"]
+__all__ = ["CaseStudy", "Options", "SCENARIO_NAMES", "StudyResult", "get", "names", "register", "run",
+           "run_study", "unregister"]
 
 
 def __getattr__(name: str):
-    # The runner imports CasADi and pandas; `python -m studies` with bad arguments should not wait for them.
-    if name in ("Options", "Study", "StudyResult"):
+    # The runner imports pandas; `python -m studies` with bad arguments should not wait for it.
+    if name in ("Options", "StudyResult"):
         from . import runner
 
         return getattr(runner, name)
+    if name == "CaseStudy":
+        from .case import CaseStudy
+
+        return CaseStudy
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def get(name: str) -> "Study":
-    """The declared study of plant `name` (ValueError listing the studies otherwise)."""
-    if name not in NAMES:
-        raise ValueError(f"unknown plant {name!r}; valid plants: {', '.join(NAMES)}")
-    return importlib.import_module(f"{__name__}.{name}").STUDY
+def names() -> tuple[str, ...]:
+    """Names of the registered case studies, in the text's order (see `studies.cases`)."""
+    from . import cases
+
+    return cases.names()
 
 
-def run_study(name: "str | Study", *, scenarios: Sequence[str] | None = None, mc: int = 200, mc_python: int = 10,
+def get(name: str) -> "CaseStudy":
+    """The case study `name` (ValueError listing the registered ones otherwise)."""
+    from . import cases
+
+    return cases.get(name)
+
+
+def register(case: "CaseStudy", replace: bool = False) -> "CaseStudy":
+    """Add a user's case study to the registry (see `studies.cases.register`)."""
+    from . import cases
+
+    return cases.register(case, replace)
+
+
+def unregister(name: str) -> None:
+    """Remove a case study from the registry."""
+    from . import cases
+
+    cases.unregister(name)
+
+
+def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200, mc_python: int = 10,
               mc_python_steps: int = 12_000, python_scenarios: Sequence[str] | None = None,
               python_budget: float | None = None,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
@@ -56,7 +81,7 @@ def run_study(name: "str | Study", *, scenarios: Sequence[str] | None = None, mc
 
     Parameters
     ----------
-    name : plant name of a declared study, or a `Study`
+    name : name of a registered case study, or a `CaseStudy`
     scenarios : names among "step", "steps", "disturbance", "noise", "mc" (default all)
     mc : Monte Carlo samples for block controllers (0 skips it)
     mc_python, mc_python_steps : most samples, and most simulated steps in all, of the Monte Carlo of
@@ -66,7 +91,7 @@ def run_study(name: "str | Study", *, scenarios: Sequence[str] | None = None, mc
     seed : seed of the parameter samples and of the noise
     quick : fewer animation frames and lighter plots
     out : output folder; nothing is written without it
-    providers : replace the study's ``module:function`` controller providers
+    providers : replace the case's ``module:function`` controller providers
     controllers : extra {label: controller} to compare
     strict : raise on provider or controller errors instead of noting them
     progress : progress(done, total, text) after each simulation
@@ -76,8 +101,9 @@ def run_study(name: "str | Study", *, scenarios: Sequence[str] | None = None, mc
     StudyResult (its `.table` is the DataFrame `run` returns)
     """
     from . import runner, writers
+    from .case import CaseStudy
 
-    study = name if isinstance(name, runner.Study) else get(name)
+    study = name if isinstance(name, CaseStudy) else get(name)
     options = runner.Options(scenarios=tuple(scenarios) if scenarios else None, mc=mc, mc_python=mc_python,
                       mc_python_steps=mc_python_steps,
                       python_scenarios=tuple(python_scenarios) if python_scenarios else None,
@@ -89,7 +115,7 @@ def run_study(name: "str | Study", *, scenarios: Sequence[str] | None = None, mc
     return result
 
 
-def run(name: "str | Study", **kwargs) -> "pd.DataFrame":
+def run(name: "str | CaseStudy", **kwargs) -> "pd.DataFrame":
     """Run one study and return its table: one row per (controller, scenario).
 
     Takes the keyword arguments of `run_study`. Every row is a simulation of

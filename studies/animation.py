@@ -1,12 +1,11 @@
 """Animations of a plant from its simulated state: a GIF and a self-contained HTML page.
 
-Each plant is drawn once, here, as a list of primitives (lines, polygons,
-circles) in world coordinates (m, y up) computed from the state and the
-plant's own parameters (ℓ, ℓ1, ℓ2, ...). The GIF renders the primitives with
-matplotlib; the HTML page embeds them as JSON and an inline script draws them
-in SVG, with a play button and a time slider (the text's slider-driven
-animation, homework .2). The satellite and the UUV have no lengths among
-their parameters; they are drawn with unit dimensions.
+Each case draws its plant once, in its case file, as a list of primitives
+(`studies.drawing`: lines, polygons, circles) in world coordinates (m, y up)
+computed from the state and the plant's own parameters. The GIF renders the
+primitives with matplotlib; the HTML page embeds them as JSON and an inline
+script draws them in SVG, with a play button and a time slider (the text's
+slider-driven animation, homework .2).
 """
 
 from __future__ import annotations
@@ -15,7 +14,6 @@ import html
 import json
 import math
 from pathlib import Path
-from typing import Callable
 
 import matplotlib
 
@@ -30,137 +28,20 @@ from PIL import Image  # noqa: E402
 
 from models import files  # noqa: E402
 
-BODY, ACCENT, REFERENCE, GROUND = "#1f4e79", "#e07b00", "#c00000", "#555555"
+from .drawing import GROUND  # noqa: E402
 
 
-def _line(points, color=BODY, width=3.0, dashed=False) -> dict:
-    return {"k": "line", "p": [list(p) for p in points], "c": color, "w": width, "d": dashed}
 
-
-def _polygon(points, fill=BODY, stroke=BODY) -> dict:
-    return {"k": "poly", "p": [list(p) for p in points], "f": fill, "c": stroke}
-
-
-def _circle(center, radius, fill=ACCENT, stroke=BODY) -> dict:
-    return {"k": "circle", "p": list(center), "r": radius, "f": fill, "c": stroke}
-
-
-def _rotated_rectangle(center, length, width, angle) -> list:
-    c, s = math.cos(angle), math.sin(angle)
-    half = [(length / 2, width / 2), (-length / 2, width / 2), (-length / 2, -width / 2), (length / 2, -width / 2)]
-    return [(center[0] + c * a - s * b, center[1] + s * a + c * b) for a, b in half]
-
-
-def _marker(x, y, size, up=True) -> list:
-    """A small triangle pointing at (x, y) from below (up=True) or above."""
-    h = size if up else -size
-    return [(x, y), (x - size / 2, y - h), (x + size / 2, y - h)]
-
-
-# ------------------------------------------------------------------------------- the plants
-def _arm(p: dict, s: dict, r: float) -> list:
-    ell, th = p["ell"], s["theta"]
-    tip = (ell * math.cos(th), ell * math.sin(th))
-    return [
-        _polygon([(-0.15 * ell, -0.3 * ell), (0.15 * ell, -0.3 * ell), (0, 0)], fill=GROUND, stroke=GROUND),
-        _line([(0, 0), (ell * 1.1 * math.cos(r), ell * 1.1 * math.sin(r))], REFERENCE, 1.5, True),
-        _line([(0, 0), tip], BODY, 8),
-        _circle((0, 0), 0.04 * ell, ACCENT),
-    ]
-
-
-def _pendulum(p: dict, s: dict, r: float) -> list:
-    ell, z, th = p["ell"], s["z"], s["theta"]
-    width, height = 0.6 * ell, 0.3 * ell
-    pivot = (z, height)
-    bob = (z + ell * math.sin(th), height + ell * math.cos(th))
-    return [
-        _line([(z - 40 * ell, 0), (z + 40 * ell, 0)], GROUND, 2),
-        _polygon(_marker(r, 0, 0.12 * ell), REFERENCE, REFERENCE),
-        _polygon([(z - width / 2, 0), (z + width / 2, 0), (z + width / 2, height), (z - width / 2, height)]),
-        _line([pivot, bob], GROUND, 3),
-        _circle(bob, 0.08 * ell, ACCENT),
-    ]
-
-
-def _satellite(p: dict, s: dict, r: float) -> list:
-    th, ph = s["theta"], s["phi"]
-    panel = []
-    for side in (1, -1):
-        center = (side * 1.5 * math.cos(ph), side * 1.5 * math.sin(ph))
-        panel.append(_polygon(_rotated_rectangle(center, 2.0, 0.25, ph), fill=ACCENT, stroke=BODY))
-    return [
-        _line([(-3 * math.cos(r), -3 * math.sin(r)), (3 * math.cos(r), 3 * math.sin(r))], REFERENCE, 1.5, True),
-        *panel,
-        _line([(-0.5 * math.cos(ph), -0.5 * math.sin(ph)), (0.5 * math.cos(ph), 0.5 * math.sin(ph))], GROUND, 2),
-        _polygon(_rotated_rectangle((0, 0), 1.0, 1.0, th)),
-    ]
-
-
-def _uuv(p: dict, s: dict, r: float) -> list:
-    phi = s["phi"]
-    up = (-math.sin(phi), math.cos(phi))        # the vehicle's mast direction, upright at phi = 0
-    ref = (-math.sin(r), math.cos(r))
-    hull = [(math.cos(a), 0.8 * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 25)[:-1]]
-    c, sn = math.cos(phi), math.sin(phi)
-    hull = [(c * x - sn * y, sn * x + c * y) for x, y in hull]
-    return [
-        _line([(-1.8, 1.2), (1.8, 1.2)], GROUND, 1.5),
-        _line([(-1.6 * ref[0], -1.6 * ref[1]), (1.6 * ref[0], 1.6 * ref[1])], REFERENCE, 1.5, True),
-        _polygon(hull, fill=BODY, stroke=BODY),
-        _line([(0.8 * up[0], 0.8 * up[1]), (1.3 * up[0], 1.3 * up[1])], ACCENT, 5),
-        _line([(-0.8 * up[0], -0.8 * up[1]), (-1.2 * up[0], -1.2 * up[1])], ACCENT, 5),
-    ]
-
-
-def _ballbeam(p: dict, s: dict, r: float) -> list:
-    ell, z, th = p["ell"], s["z"], s["theta"]
-    along, normal = (math.cos(th), math.sin(th)), (-math.sin(th), math.cos(th))
-    radius = 0.04 * ell
-    ball = (z * along[0] + radius * normal[0], z * along[1] + radius * normal[1])
-    mark = (r * along[0] - 0.01 * ell * normal[0], r * along[1] - 0.01 * ell * normal[1])
-    return [
-        _polygon([(-0.06 * ell, -0.15 * ell), (0.06 * ell, -0.15 * ell), (0, 0)], fill=GROUND, stroke=GROUND),
-        _line([(0, 0), (ell * along[0], ell * along[1])], BODY, 6),
-        _polygon([mark, (mark[0] - 0.03 * ell * normal[0] - 0.02 * ell * along[0],
-                         mark[1] - 0.03 * ell * normal[1] - 0.02 * ell * along[1]),
-                  (mark[0] - 0.03 * ell * normal[0] + 0.02 * ell * along[0],
-                   mark[1] - 0.03 * ell * normal[1] + 0.02 * ell * along[1])], REFERENCE, REFERENCE),
-        _circle(ball, radius, ACCENT),
-    ]
-
-
-def _crane(p: dict, s: dict, r: float) -> list:
-    x = s["x"]
-    ell1, ell2 = p["ell1"], p["ell2"]
-    width, height = 0.3 * ell1, 0.12 * ell1
-    shapes = [
-        _line([(x - 10 * ell2, height), (x + 10 * ell2, height)], GROUND, 2),
-        _polygon(_marker(r, height, 0.08 * ell1, up=False), REFERENCE, REFERENCE),
-        _polygon([(x - width / 2, 0), (x + width / 2, 0), (x + width / 2, height), (x - width / 2, height)]),
-    ]
-    for ell, th, mass in ((ell1, s["theta1"], p["m1"]), (ell2, s["theta2"], p["m2"])):
-        load = (x + ell * math.sin(th), -ell * math.cos(th))
-        shapes.append(_line([(x, 0), load], GROUND, 1.5))
-        shapes.append(_circle(load, 0.05 * ell1 * (mass / p["m1"]) ** (1 / 3), ACCENT))
-    return shapes
-
-
-#: plant name -> drawing (params dict, state dict, reference value) -> primitives
-DRAWINGS: dict[str, Callable] = {"arm": _arm, "pendulum": _pendulum, "satellite": _satellite, "uuv": _uuv,
-                                 "ballbeam": _ballbeam, "crane": _crane}
-
-
-def draw(plant, x, reference: float) -> list:
-    """Primitives of `plant` in state x (nx,) with the tracked coordinate's reference marked."""
-    if plant.name not in DRAWINGS:
-        raise ValueError(f"no drawing for {plant.name!r}; drawings exist for {', '.join(DRAWINGS)}")
-    return DRAWINGS[plant.name](dict(plant.params), dict(zip(plant.state_names, np.asarray(x, dtype=float))),
-                                float(reference))
+def draw(case, plant, x, reference: float) -> list:
+    """Primitives of the case's drawing of `plant` in state x (nx,), the tracked coordinate's reference marked."""
+    if case.drawing is None:
+        raise ValueError(f"the {case.plant} case has no drawing")
+    return case.drawing(dict(plant.params), dict(zip(plant.state_names, np.asarray(x, dtype=float))),
+                        float(reference))
 
 
 # ------------------------------------------------------------------------------- frames
-def frames(plant, run, max_frames: int) -> tuple[np.ndarray, list, list]:
+def frames(case, plant, run, max_frames: int) -> tuple[np.ndarray, list, list]:
     """Subsampled times (s), primitives and state readouts of a closed-loop run.
 
     Returns
@@ -176,7 +57,7 @@ def frames(plant, run, max_frames: int) -> tuple[np.ndarray, list, list]:
     for k in index:
         if not np.all(np.isfinite(run.x[k])):
             break
-        shapes.append(draw(plant, run.x[k], run.r[k, 0]))
+        shapes.append(draw(case, plant, run.x[k], run.r[k, 0]))
         readouts.append(_readout(plant, run.x[k], run.r[k, 0]))
     return times[:len(shapes)], shapes, readouts
 
@@ -212,14 +93,14 @@ def view(shapes: list, margin: float = 0.08) -> tuple[float, float, float, float
 
 
 # ------------------------------------------------------------------------------- GIF
-def write_gif(path: Path, plant, run, label: str, max_frames: int = 100, dpi: int = 80,
+def write_gif(path: Path, case, plant, run, label: str, max_frames: int = 100, dpi: int = 80,
               frame_ms: int | None = None) -> Path:
     """An animated GIF of the run, at most `max_frames` frames, real time or faster.
 
     Frames last at least 40 ms (browsers slow down faster GIFs); a long run
     plays faster than real time and the caption says how much.
     """
-    times, shapes, readouts = frames(plant, run, max_frames)
+    times, shapes, readouts = frames(case, plant, run, max_frames)
     step = float(times[1] - times[0]) if len(times) > 1 else 0.1
     frame_ms = frame_ms or int(min(100, max(40, round(1000 * step))))
     speed = 1000 * step / frame_ms
@@ -289,9 +170,9 @@ def _rounded(value, digits: int = 4):
     return value
 
 
-def write_html(path: Path, plant, run, label: str, caption: str = "", max_frames: int = 800) -> Path:
+def write_html(path: Path, case, plant, run, label: str, caption: str = "", max_frames: int = 800) -> Path:
     """A self-contained HTML page (inline SVG and script) animating the run, with play button and slider."""
-    times, shapes, readouts = frames(plant, run, max_frames)
+    times, shapes, readouts = frames(case, plant, run, max_frames)
     xmin, xmax, ymin, ymax = view(shapes)
     digits = max(3, 3 - int(math.floor(math.log10(max(xmax - xmin, ymax - ymin)))) + 1)
     data = {"t": [round(float(t), 4) for t in times], "frames": _rounded(shapes, digits), "readouts": readouts,

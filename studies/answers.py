@@ -1,27 +1,29 @@
 """Homework answers of a case study, keyed by item, and the errata that concern it.
 
-The model items (.5 equilibria, .6 transfer functions, .7 state space) come from
+The model items (.1 kinetic energy and .3 equations of motion as printed
+expressions, .5 equilibria, .6 transfer functions, .7 state space) come from
 the plant declared in `models`; the design items (.8, .10, .13, .14 and
-.15-.17) from the providers' ``answers(plant)`` functions; the errata are read
-from ``docs/errata.md``, never copied here.
+.15-.17) from the providers' ``answers(plant)`` functions; the errata from the
+case files' data (`studies.errata`).
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import re
-from pathlib import Path
 from typing import Mapping
 
 import control
 import numpy as np
 
 import models
-from models.linear import tf_string
+from models import symbolic
+from models.linear import clean_tf, tf_string
 
-from .runner import Study, call_providers
-
-ERRATA_PATH = Path(__file__).resolve().parent.parent / "docs" / "errata.md"
+from .case import CaseStudy
+from .runner import call_providers
 
 
 def _coordinate_tf(lin: models.LinearModel, coordinate: str, input_name: str) -> control.TransferFunction:
@@ -33,29 +35,41 @@ def _coordinate_tf(lin: models.LinearModel, coordinate: str, input_name: str) ->
     return control.minreal(single.tf(coordinate, input_name), verbose=False)
 
 
-def _chop(G: control.TransferFunction, rel: float = 1e-9) -> control.TransferFunction:
-    def clean(coeffs):
-        coeffs = np.ravel(coeffs).astype(float)
-        return np.where(np.abs(coeffs) <= rel * np.max(np.abs(coeffs)), 0.0, coeffs)
-    return control.tf(clean(G.num[0][0]), clean(G.den[0][0]), G.dt)
+def printed_model(plant: models.Plant, numeral: str) -> dict:
+    """The .1 and .3 answers: kinetic energy and equations of motion derived from the declaration.
+
+    Each as sympy text and as LaTeX (dots for time derivatives); the equations
+    read M(q) q̈ = Q − C(q, q̇) q̇ − ∂V/∂q, one per coordinate. Computed once per
+    declaration (simplifying takes a second or two).
+    """
+    return copy.deepcopy(_printed(plant.declaration, numeral))
 
 
-def model_answers(study: Study) -> dict:
-    """The .5, .6 and .7 answers from the plant's model (SI units, angles in rad).
+@functools.lru_cache(maxsize=16)
+def _printed(declaration, numeral: str) -> dict:
+    T = symbolic.kinetic_energy(declaration)
+    equations = symbolic.equations_of_motion(declaration)
+    return {f"{numeral}.1": {"T": str(T), "latex": f"$T = {symbolic.latex(T, declaration)}$"},
+            f"{numeral}.3": {"equations": [f"{e.lhs} = {e.rhs}" for e in equations],
+                             "latex": [f"${symbolic.latex(e, declaration)}$" for e in equations]}}
+
+
+def model_answers(study: CaseStudy) -> dict:
+    """The .1, .3, .5, .6 and .7 answers from the plant's model (SI units, angles in rad).
 
     Returns
     -------
-    dict item -> dict: ".5" the standard equilibrium and its linearization,
-    ".6" the transfer functions from the input to each output (and the
-    cascade of the successive-loop designs), ".7" the state-space matrices.
+    dict item -> dict: ".1"/".3" the printed kinetic energy and equations of
+    motion, ".5" the standard equilibrium and its linearization, ".6" the
+    transfer functions from the input to each output (and the cascade of the
+    successive-loop designs), ".7" the state-space matrices.
     """
-    case = study.case
-    n = case.numeral
+    n = study.numeral
     plant = models.get(study.plant)
     xe, ue = plant.equilibrium()
     lin = plant.linearize(xe, ue)
     u_name = plant.input_names[0]
-    out = {
+    out = printed_model(plant, n) | {
         f"{n}.5": {"x_e": dict(zip(plant.state_names, xe)), "u_e": dict(zip(plant.input_names, ue)),
                    "A": lin.A, "B": lin.B},
         f"{n}.6": {f"{o}/{u_name}": lin.tf(o, u_name) for o in plant.output_names},
@@ -68,7 +82,7 @@ def model_answers(study: Study) -> dict:
         model = models.get(name, **dict(overrides))
         mlin = model.linearize()
         g_inner = _coordinate_tf(mlin, inner, model.input_names[0])
-        g_outer = _chop(control.minreal(_coordinate_tf(mlin, outer, model.input_names[0]) / g_inner,
+        g_outer = clean_tf(control.minreal(_coordinate_tf(mlin, outer, model.input_names[0]) / g_inner,
                                         verbose=False))
         where = "" if name == study.plant else f" ({name}" + "".join(f", {k} = {v:g}" for k, v in
                                                                       dict(overrides).items()) + ")"
@@ -77,7 +91,7 @@ def model_answers(study: Study) -> dict:
     return out
 
 
-def provider_answers(study: Study, strict: bool = False) -> tuple[dict, list]:
+def provider_answers(study: CaseStudy, strict: bool = False) -> tuple[dict, list]:
     """The design answers from the study's answer providers, merged by item, and notes."""
     found, notes = call_providers(study.answer_providers, study.plant, strict=strict)
     merged: dict = {}
@@ -98,40 +112,23 @@ def provider_answers(study: Study, strict: bool = False) -> tuple[dict, list]:
     return merged, notes
 
 
-def errata(study: Study, path: Path = ERRATA_PATH) -> list[dict]:
-    """Rows of the errata tables in ``docs/errata.md`` that concern the study's case.
-
-    A row concerns the case when its first cell names one of the case's items
-    (numeral followed by a dot, e.g. "III.15", or the bare numeral) or the plant.
+def errata(study: CaseStudy) -> list[dict]:
+    """Rows of the errata (declared in the case files) that concern the study's case, in document order.
 
     Returns
     -------
-    list of dicts {section, <table headers>: cell text}; empty when the file is missing
+    list of dicts {section, item, <table headers>: cell text}
     """
-    if not path.exists():
-        return []
-    numeral = study.case.numeral
-    item = re.compile(rf"(?<![A-Z]){numeral}(?![A-Z])")
-    plant_word = re.compile(rf"\b{re.escape(study.plant)}\b")
-    rows, section, header = [], "", None
-    for line in path.read_text(encoding="utf-8").splitlines():
-        if line.startswith("#"):
-            section, header = line.lstrip("#").strip(), None
-            continue
-        if not line.startswith("|"):
-            header = None
-            continue
-        cells = [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line.strip()[1:-1])]
-        if header is None:
-            header = cells
-        elif all(set(c) <= set("-: ") for c in cells):
-            continue
-        elif item.search(cells[0]) or plant_word.search(cells[0]):
-            rows.append({"section": section, **dict(zip(header, cells))})
-    return rows
+    from . import cases
+    from .errata import errata_of
+
+    registered = [cases.get(n) for n in cases.names()]
+    if all(c is not study for c in registered):
+        registered.append(study)
+    return errata_of(study, registered)
 
 
-def collect(study: Study, strict: bool = False) -> tuple[dict, list]:
+def collect(study: CaseStudy, strict: bool = False) -> tuple[dict, list]:
     """All answers of the study keyed by item (model items first), the errata and notes."""
     answers = model_answers(study)
     designed, notes = provider_answers(study, strict)
@@ -181,16 +178,16 @@ def format_value(value, indent: str = "    ") -> str:
     return str(value)
 
 
-def format_answers(study: Study, answers: Mapping, title: str) -> str:
+def format_answers(study: CaseStudy, answers: Mapping, title: str) -> str:
     """The answers and errata as Markdown text, items in homework order."""
     lines = [f"# Homework answers: {title}", "",
-             "SI units, angles in rad. .5-.7 from the model declared in `models`; design items from the "
-             "providers' answers.", ""]
+             "SI units, angles in rad. .1-.7 from the model declared in `models`; design items from the "
+             "case's designs.", ""]
     for item, values in answers.items():
         if item == "errata":
             continue
         lines.append(f"- **{item}**" + format_value(values).replace("\n", "\n  "))
-    lines += ["", "## Errata found (from docs/errata.md)", ""]
+    lines += ["", "## Errata found (from the case files; all of them in docs/errata.md)", ""]
     found = answers.get("errata") or []
     if not found:
         lines.append("none for this case study")

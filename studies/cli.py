@@ -1,6 +1,6 @@
 """python -m studies: every controller on every plant, in tables, plots and animations.
 
-Runs the six case studies (or the plants named), prints each study's homework
+Runs every registered case study (or the plants named), prints each study's homework
 answers and errata, and writes OUT/<plant>/ (tables, answers, plots,
 animations), OUT/summary.md and OUT/index.html. Exit status 2 on bad
 arguments, 1 when a run fails, 0 otherwise.
@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from . import NAMES, SCENARIO_NAMES, get
+from . import SCENARIO_NAMES, get, names
 
 #: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
 #: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, and their scenarios.
@@ -36,7 +36,7 @@ def parser() -> argparse.ArgumentParser:
         prog="python -m studies", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  python -m studies --quick\n  python -m studies arm --scenario step --mc 500 --out DIR\n"
                "  python -m studies --list")
-    p.add_argument("plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(NAMES)})")
+    p.add_argument("plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(names())})")
     p.add_argument("--scenario", action="append", metavar="NAME",
                    help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}")
     p.add_argument("--mc", type=_count, metavar="N",
@@ -114,24 +114,17 @@ def _scenarios(values, p: argparse.ArgumentParser):
 
 
 def _list(plants, providers) -> str:
-    import models
-
     from .runner import design_controllers
 
-    lines = ["plants: " + ", ".join(NAMES), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
+    lines = ["plants: " + ", ".join(names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
     for name in plants:
         study = get(name)
-        known = models.perturbed(models.get(name), study.known_rel, 1.0)
-        found, notes = design_controllers(study, known, list(study.providers) + providers)
-        lines.append(f"{name}: {study.case.source}")
+        found, notes = design_controllers(study, study.known_plant(), list(study.providers) + providers)
+        lines.append(f"{name}: {study.source}")
         lines.append("  scenarios: " + ", ".join(f"{s.name} ({s.title})" for s in study.scenarios))
         lines.append("  controllers: " + (", ".join(found) if found else "none available yet"))
         lines += [f"  note: {n}" for n in notes]
     return "\n".join(lines)
-
-
-#: Plants in decreasing cost, so that parallel jobs finish together.
-COST_ORDER = ("crane", "satellite", "pendulum", "ballbeam", "uuv", "arm")
 
 
 def _run_plant(name: str, settings: dict, out: str, quiet: bool, queue=None) -> dict:
@@ -169,8 +162,10 @@ class _Inline:
 
 def _run_all(plants, settings: dict, providers: list, out: str, quiet: bool, jobs: int) -> list:
     progress = Progress(plants)
-    order = [p for p in COST_ORDER if p in plants]
-    per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in order}
+    # Parallel jobs take the plants last-registered first (the text's later plants, such as the crane, run
+    # longest, so the jobs finish together); every order writes the same tables.
+    order = list(reversed(plants))
+    per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in plants}
     finished = []
     try:
         if jobs == 1:
@@ -205,10 +200,11 @@ def _run_all(plants, settings: dict, providers: list, out: str, quiet: bool, job
 def main(argv=None) -> int:
     p = parser()
     args = p.parse_args(argv)
-    plants = args.plants or list(NAMES)
-    unknown = [name for name in plants if name not in NAMES]
+    registered = names()
+    plants = args.plants or list(registered)
+    unknown = [name for name in plants if name not in registered]
     if unknown:
-        p.error(f"unknown plant {unknown[0]!r}; valid plants: {', '.join(NAMES)}")
+        p.error(f"unknown plant {unknown[0]!r}; valid plants: {', '.join(registered)}")
     plants = list(dict.fromkeys(plants))
     scenarios = _scenarios(args.scenario, p)
     for spec in args.provider:
@@ -245,12 +241,12 @@ def main(argv=None) -> int:
     except Exception as err:
         print(f"python -m studies: failed: {type(err).__name__}: {err}", file=sys.stderr)
         return 1
-    for done in sorted(finished, key=lambda d: NAMES.index(d["name"])):
+    for done in sorted(finished, key=lambda d: registered.index(d["name"])):
         if done["answers"]:
             print(done["answers"], flush=True)
         _report(done, args.out)
-    writers.write_summary(args.out, NAMES)
-    writers.write_index(args.out, NAMES)
+    writers.write_summary(args.out, registered)
+    writers.write_index(args.out, registered)
     elapsed = time.perf_counter() - started
     print(f"wrote {os.path.join(args.out, 'index.html')} and {os.path.join(args.out, 'summary.md')}; "
           f"total {elapsed:.1f} s with {jobs} job{'s' if jobs > 1 else ''}", file=sys.stderr)

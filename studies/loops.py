@@ -25,6 +25,7 @@ import control
 import numpy as np
 
 import models
+from designs import analysis as an
 from models import Block, Cascade
 
 LOOPS = ("input", "inner", "outer")
@@ -92,7 +93,7 @@ def final_point(plant: models.Plant, block: Block, run) -> OperatingPoint:
 
 
 @dataclass(frozen=True)
-class Loop:
+class LoopGain:
     """A loop transfer L(z) as discrete state space (closed loop: 1 + L = 0).
 
     Attributes
@@ -121,39 +122,17 @@ class Loop:
         rhs = np.broadcast_to(self.B.astype(complex), (len(z), n, self.B.shape[1]))
         return (self.C @ np.linalg.solve(stacked, rhs))[:, 0, 0]
 
-    def margins(self, points: int = 20000) -> dict:
+    def margins(self) -> dict:
         """Gain margin (dB), phase margin (deg) and their crossover frequencies (rad/s).
 
-        Found on `points` log-spaced frequencies from 1e-4 rad/s to the Nyquist
-        frequency, crossings refined by linear interpolation in log ω: the gain
-        crossover where |L| = 1, the phase crossover where L is real and
-        negative. With several crossings the smallest margin is reported, as
-        `control.stability_margins` does (the tests compare the two).
+        python-control's `stability_margins` of the discrete loop's state space
+        (through `designs.analysis.margins`, the one margins computation): with
+        several crossings the smallest margin is reported; inf and nan when a
+        crossover does not exist.
         """
-        omega = np.logspace(-4, np.log10(0.9999 * np.pi / self.sample_period), points)
-        response = self.frequency_response(omega)
-        log_w = np.log(omega)
-        magnitude = np.log(np.abs(response))
-        phase_margin, gain_crossover = np.inf, np.nan
-        for k in np.flatnonzero(np.sign(magnitude[:-1]) != np.sign(magnitude[1:])):
-            a = magnitude[k] / (magnitude[k] - magnitude[k + 1])
-            w = np.exp(log_w[k] + a * (log_w[k + 1] - log_w[k]))
-            value = self.frequency_response([w])[0]
-            margin = (np.degrees(np.angle(value)) + 180.0) % 360.0
-            margin = margin - 360.0 if margin > 180.0 else margin
-            if abs(margin) < abs(phase_margin):
-                phase_margin, gain_crossover = margin, w
-        gain_margin, phase_crossover = np.inf, np.nan
-        imag = response.imag
-        for k in np.flatnonzero(np.sign(imag[:-1]) != np.sign(imag[1:])):
-            a = imag[k] / (imag[k] - imag[k + 1])
-            w = np.exp(log_w[k] + a * (log_w[k + 1] - log_w[k]))
-            value = self.frequency_response([w])[0]
-            if value.real < 0 and 1 / abs(value) < gain_margin:
-                gain_margin, phase_crossover = 1 / abs(value), w
-        return {"gain_margin_db": float(20 * np.log10(gain_margin)) if np.isfinite(gain_margin) else np.inf,
-                "phase_margin_deg": float(phase_margin), "phase_crossover_rad_s": float(phase_crossover),
-                "gain_crossover_rad_s": float(gain_crossover)}
+        m = an.margins(self.system())
+        return {"gain_margin_db": m["gm_db"], "phase_margin_deg": m["pm_deg"],
+                "phase_crossover_rad_s": m["phase_crossover"], "gain_crossover_rad_s": m["gain_crossover"]}
 
     def closed_loop_poles(self, gain: float = 1.0) -> np.ndarray:
         """Eigenvalues z of the loop closed with gain k: eig(A − k B C)."""
@@ -171,7 +150,7 @@ def _measurement_matrix(plant_lin: models.LinearModel, block: Block) -> np.ndarr
 
 
 def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = "input",
-         label: str = "") -> Loop:
+         label: str = "") -> LoopGain:
     """The loop gain of `block` on `plant` about `point`, broken where `which` says.
 
     Parameters
@@ -194,7 +173,7 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
         A = np.block([[Ad, np.zeros((nx, nc))], [k.By @ Cm, k.Ac]])
         B = np.vstack([Bd, np.zeros((nc, Bd.shape[1]))])
         C = -np.hstack([k.Dy @ Cm, k.Cc])
-        return Loop(label or block.name, which, A, B, C, block.sample_period)
+        return LoopGain(label or block.name, which, A, B, C, block.sample_period)
     no = block.outer.n_state
     xo, xi = point.xc[:no], point.xc[no:]
     outer = linearize_block(block.outer, xo, meas, point.r)
@@ -205,7 +184,7 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
         A = np.block([[Ad, np.zeros((nx, ni))], [inner.By @ Cm, inner.Ac]])
         B = np.vstack([Bd, np.zeros((ni, Bd.shape[1]))])
         C = -np.hstack([inner.Dy @ Cm, inner.Cc])
-        return Loop(label or block.name, which, A, B, C, block.sample_period)
+        return LoopGain(label or block.name, which, A, B, C, block.sample_period)
     ni, n_o = inner.Ac.shape[0], outer.Ac.shape[0]
     A = np.block([
         [Ad + Bd @ inner.Dy @ Cm, Bd @ inner.Cc, np.zeros((nx, n_o))],
@@ -216,10 +195,10 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
     C = -np.hstack([outer.Dy @ Cm, np.zeros((outer.Dy.shape[0], ni)), outer.Cc])
     if B.shape[1] != 1 or C.shape[0] != 1:
         raise ValueError(f"{block.name}: the outer loop of a cascade with {B.shape[1]} inner references is not SISO")
-    return Loop(label or block.name, which, A, B, C, block.sample_period)
+    return LoopGain(label or block.name, which, A, B, C, block.sample_period)
 
 
-def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference_value: float,
+def analyse(plant: models.Plant, case, controllers: dict, reference_value: float,
             runs: dict | None = None, truths: dict | None = None) -> tuple[dict, list]:
     """Every loop of every block controller about the point where it holds the plant at rest.
 
@@ -231,7 +210,7 @@ def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference
 
     Returns
     -------
-    loops : label -> {"input": Loop, and for a Cascade also "inner" and "outer"}
+    loops : label -> {"input": LoopGain, and for a Cascade also "inner" and "outer"}
     notes : controllers left out and why
     """
     out, notes = {}, []
@@ -260,8 +239,8 @@ def analyse(plant: models.Plant, case: models.Case, controllers: dict, reference
     return out, notes
 
 
-def spec_check(design: Loop, spec, baseline: Loop | None = None, points: int = 400) -> dict:
-    """Whether `design` meets the loopshaping `spec` (a `studies.runner.LoopSpec`).
+def spec_check(design: LoopGain, spec, baseline: LoopGain | None = None, points: int = 400) -> dict:
+    """Whether `design` meets the loopshaping `spec` (a `studies.case.LoopSpec`).
 
     Relative specs are checked on a log grid: below `spec.low_frequency`
     |L| >= factor |L_baseline|; above `spec.high_frequency` (up to the Nyquist

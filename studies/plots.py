@@ -67,7 +67,7 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     runs = [(label, run) for (label, name), run in result.runs.items() if name == scenario]
     if not runs:
         return None
-    study, case = result.study, result.study.case
+    study, case = result.study, result.study
     scale, unit = tracked_scale(study.tracked_unit)
     fig = _figure(9, 6.5)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
@@ -113,7 +113,7 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     """Monte Carlo envelopes (min–max and 5–95 % bands, median) of every controller."""
     if not result.envelopes:
         return None
-    study, case = result.study, result.study.case
+    study, case = result.study, result.study
     scale, unit = tracked_scale(study.tracked_unit)
     items = list(result.envelopes.items())
     cols = min(3, len(items))
@@ -137,7 +137,7 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     for ax in axes[-cols:]:
         ax.set_xlabel("t (s)")
     axes[0].legend(fontsize=7)
-    rel = next((s.rel for s in study.scenarios if s.monte_carlo), 0.05)
+    rel = next((s.rel for s in study.scenarios if s.monte_carlo), study.known_rel)
     fig.suptitle(f"{result.plant.title}: step on ±{100 * rel:g} % parameter samples (nonlinear plant)",
                  fontsize=10)
     fig.subplots_adjust(left=0.07, right=0.98, top=1 - 0.7 / fig.get_figheight(), bottom=0.5 / fig.get_figheight(),
@@ -157,8 +157,8 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
 
     Parameters
     ----------
-    loops : label -> {loop name: studies.loops.Loop}
-    spec : runner.LoopSpec;  checks : label -> spec_check result, shown in the legend
+    loops : label -> {loop name: studies.loops.LoopGain}
+    spec : studies.case.LoopSpec;  checks : label -> spec_check result, shown in the legend
     """
     chosen = [(label, found[spec.loop]) for label, found in loops.items() if spec.loop in found]
     if not chosen:

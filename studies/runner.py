@@ -1,8 +1,8 @@
-"""The one runner: every controller of a study through every scenario, on the nonlinear plant.
+"""The one runner: every controller of a case study through every scenario, on the nonlinear plant.
 
-A study (`Study`, declared in ``studies/<plant>.py``) names its plant, the
-controllers it compares, where they come from (provider functions
-``module:function`` returning ``{label: controller}``) and its scenarios. The
+A case (`studies.case.CaseStudy`, declared in ``studies/cases/<name>.py``) names
+its plant, the controllers it compares, where they come from (provider
+functions ``module:function`` returning ``{label: controller}``) and its scenarios. The
 runner designs the controllers from the model known to them (the text's
 +5 % parameter error), simulates each scenario with `models.simulate_closed_loop`
 (every row comes from the nonlinear plant, never from a linear model), runs
@@ -28,177 +28,16 @@ import numpy as np
 import pandas as pd
 
 import models
-from models import Block, metrics, signals
+from designs.pid import SIGMA
+from models import Block, metrics
 
 from . import SCENARIO_NAMES
-
-#: Controller labels in table order; a provider's other labels follow these.
-CONTROLLERS = ("PD", "PID", "PID (no anti-windup)", "loopshaped", "pole placement",
-               "pole placement + integrator", "observer-based", "disturbance observer", "LQR", "LQR + Kalman",
-               "linear MPC", "nonlinear MPC", "tuned")
-
-#: Where controllers come from: ``module:function``, called as ``function(plant_name, known=Plant)``.
-PROVIDERS = ("designs.classical:controllers", "designs.statespace_cases:controllers", "mpc:controllers",
-             "designs.tuning_cases:controllers")
-
-#: Where homework answers come from: ``module:function``, called as ``function(plant_name)``.
-ANSWER_PROVIDERS = ("designs.classical:answers", "designs.statespace_cases:answers")
-
-#: Time constant of the textbook's dirty derivative (s); sizes the velocity noise of full-state controllers.
-DIRTY_DERIVATIVE_SIGMA = 0.05
+from .case import CaseStudy, Scenario
 
 #: Work (samples x steps x instructions of the plant's RK4 step and the controller's step) from which
 #: a Monte Carlo map is JIT-compiled with jit="auto": compiling costs 0.5-2 s per controller, CasADi's
 #: virtual machine about 35 ns per instruction; measured break-even about 1e8 (pendulum, 20 samples).
 JIT_THRESHOLD = 1.5e8
-
-
-
-# ---------------------------------------------------------------------------- declarations
-@dataclass(frozen=True)
-class Scenario:
-    """One column block of a study table: what the closed loop is asked to do.
-
-    Attributes
-    ----------
-    name : short name used on the command line ("step", "steps", "disturbance", "noise", "mc")
-    title : one line for captions
-    levels : reference levels as multiples of the case's step, added to the equilibrium value
-    segment_fraction : each level lasts this fraction of the case's duration
-    input_disturbance : add the case's constant input disturbance from t = 0
-    noise : standard deviation of the measurement noise per plant output (SI units)
-    monte_carlo : run on parameter samples (the text's ±5 %) instead of the nominal plant
-    rel : half-width of the uniform parameter spread of the Monte Carlo
-    """
-
-    name: str
-    title: str
-    levels: tuple = (1.0,)
-    segment_fraction: float = 1.0
-    input_disturbance: bool = False
-    noise: Mapping[str, float] = field(default_factory=dict)
-    monte_carlo: bool = False
-    rel: float = 0.05
-
-    def duration(self, case: models.Case) -> float:
-        """Length of the run, s."""
-        return case.duration * self.segment_fraction * len(self.levels)
-
-    def reference(self, case: models.Case, equilibrium_value: float):
-        """The reference signal: the equilibrium value plus the levels times the case's step."""
-        if len(self.levels) == 1:
-            return signals.step(self.levels[0] * case.step, 0.0, equilibrium_value)
-        return signals.steps([level * case.step for level in self.levels],
-                             case.duration * self.segment_fraction, equilibrium_value)
-
-
-def step() -> Scenario:
-    """The text's step on the tracked coordinate, from the standard equilibrium, sized to saturate."""
-    return Scenario("step", "the text's step from the equilibrium (sized to saturate the actuator)")
-
-
-def series_of_steps(levels=(1.0, 0.0, -1.0, 0.0), segment_fraction: float = 0.5) -> Scenario:
-    """Steps through `levels` (multiples of the case's step), each held `segment_fraction` of the duration."""
-    text = ", ".join(f"{level:+g}" for level in levels)
-    return Scenario("steps", f"a series of steps ({text} times the text's step)", tuple(levels), segment_fraction)
-
-
-def input_disturbance() -> Scenario:
-    """The step with the case's constant input disturbance acting from t = 0 (the text's .16/.17)."""
-    return Scenario("disturbance", "the step with the case's constant input disturbance from t = 0",
-                    input_disturbance=True)
-
-
-def measurement_noise(noise: Mapping[str, float]) -> Scenario:
-    """The step with seeded Gaussian measurement noise of the given standard deviation per output (SI)."""
-    text = ", ".join(f"{k}: {v:g}" for k, v in noise.items())
-    return Scenario("noise", f"the step with seeded measurement noise (std {text}, SI)", noise=dict(noise))
-
-
-def parameter_monte_carlo(rel: float = 0.05) -> Scenario:
-    """The step on plants whose uncertain parameters are uniform within ±rel of nominal."""
-    return Scenario("mc", f"the step on ±{100 * rel:g} % parameter samples (Monte Carlo)",
-                    monte_carlo=True, rel=rel)
-
-
-@dataclass(frozen=True)
-class LoopSpec:
-    """Frequency-domain specs of the study's loopshaping homework, drawn on its Bode plot.
-
-    Attributes
-    ----------
-    item : homework item the specs come from ("I.14")
-    loop : where the loop is broken: "input" (plant input), "outer" or "inner" (of a `models.Cascade`)
-    design : label of the loopshaped controller
-    baseline : label of the controller the relative specs refer to (the PD of .9)
-    low_frequency : rad/s; below it |L| must be `factor` times the baseline's
-    high_frequency : rad/s; above it |L| must be 1/`factor` times the baseline's
-    factor : improvement factor
-    crossover : rad/s, target crossover (bandwidth) frequency
-    phase_margin : deg, least phase margin
-    """
-
-    item: str
-    loop: str = "input"
-    design: str = "loopshaped"
-    baseline: str | None = "PD"
-    low_frequency: float | None = None
-    high_frequency: float | None = None
-    factor: float = 10.0
-    crossover: float | None = None
-    phase_margin: float | None = None
-
-
-@dataclass(frozen=True)
-class Study:
-    """A case study as a table: plant, controllers, scenarios.
-
-    Attributes
-    ----------
-    plant : registry name of the plant (and of its `models.case`)
-    tracked_unit, input_unit : units of the tracked coordinate and of the input, for labels
-    scenarios : the scenarios, in table order
-    controllers : labels in table order (providers' other labels are appended)
-    providers : ``module:function`` returning {label: controller}, called with (plant, known=Plant)
-    answer_providers : ``module:function`` returning {item: {name: value}}, called with (plant)
-    bounds : params dict -> {state name: (low, high)}, counted as constraint violation
-    loops : the loopshaping specs, one Bode plot each
-    cascade : (inner output, outer output) of the .6 transfer-function cascade
-    cascade_model : (plant name, parameter overrides) of the .6 model when it is not the plant itself
-    known_rel : controllers are designed from the plant with its uncertain parameters scaled by 1 + known_rel
-    input_limits : controller label -> actuator limit of the plant that controller runs on, where the
-        text gives that design its own actuator (IV.11: 250 N m thrusters)
-    substeps : RK4 sub-steps of the plant per controller sample. Two (5 ms at Ts = 10 ms) resolve every
-        case's open-loop dynamics (at most a few rad/s) to about 1e-7 relative in the table's metrics,
-        checked against 10 by tests/studies/test_runner.py, at a third of the cost.
-    """
-
-    plant: str
-    tracked_unit: str
-    input_unit: str
-    scenarios: tuple
-    controllers: tuple = CONTROLLERS
-    providers: tuple = PROVIDERS
-    answer_providers: tuple = ANSWER_PROVIDERS
-    bounds: Callable[[dict], dict] | None = None
-    loops: tuple = ()
-    cascade: tuple | None = None
-    cascade_model: tuple | None = None
-    known_rel: float = 0.05
-    input_limits: Mapping[str, float] = field(default_factory=dict)
-    substeps: int = 2
-
-    @property
-    def case(self) -> models.Case:
-        return models.case(self.plant)
-
-    def truth(self, plant: models.Plant, label: str) -> models.Plant:
-        """The simulated plant of controller `label`: `plant`, with its own actuator if the text gives one."""
-        return plant.with_input_limit(self.input_limits[label]) if label in self.input_limits else plant
-
-    def state_bounds(self, params: Mapping[str, float]) -> dict:
-        return dict(self.bounds(dict(params))) if self.bounds else {}
-
 
 @dataclass(frozen=True)
 class Options:
@@ -276,7 +115,7 @@ class StudyResult:
 
     Attributes
     ----------
-    study : Study;  options : Options
+    study : CaseStudy;  options : Options
     plant : the truth (nominal parameters);  known : the model the controllers were designed from
     truths : controller label -> its simulated plant (`plant` unless the study gives it its own actuator)
     table : DataFrame, one row per (controller, scenario)
@@ -289,7 +128,7 @@ class StudyResult:
     answers : homework item -> answers (see `studies.answers`), with "errata"
     """
 
-    study: Study
+    study: CaseStudy
     options: Options
     plant: models.Plant
     known: models.Plant
@@ -311,6 +150,10 @@ class StudyResult:
 
 
 # ---------------------------------------------------------------------------- providers
+class NotProvided(LookupError):
+    """Raised by a provider that has nothing for this case (no design of its kind): noted, not a failure."""
+
+
 def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) -> tuple[list, list]:
     """Call each ``module:function`` provider; skip the ones that do not exist yet.
 
@@ -343,6 +186,8 @@ def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) 
             continue
         try:
             results.append((spec, function(*args, **kwargs)))
+        except NotProvided as err:
+            notes.append(f"{spec}: skipped, {err}")
         except Exception as err:
             if strict:
                 raise
@@ -351,7 +196,7 @@ def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) 
     return results, notes
 
 
-def design_controllers(study: Study, known: models.Plant, providers: Sequence[str] | None = None,
+def design_controllers(study: CaseStudy, known: models.Plant, providers: Sequence[str] | None = None,
                        strict: bool = False) -> tuple[dict, list]:
     """The study's controllers designed from `known`, in table order, and notes on what is missing."""
     found, notes = call_providers(study.providers if providers is None else providers, study.plant,
@@ -444,13 +289,13 @@ def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, f
     P = np.asarray(jac(np.zeros(plant.ny)))
     std_q = np.sqrt(np.diag(P @ np.diag(per_output**2) @ P.T))
     ts = controller.sample_period
-    beta = (2 * DIRTY_DERIVATIVE_SIGMA - ts) / (2 * DIRTY_DERIVATIVE_SIGMA + ts)
+    beta = (2 * SIGMA - ts) / (2 * SIGMA + ts)
     gain = (1 - beta) / ts * math.sqrt(2 / (1 + beta))
     return np.concatenate([std_q, gain * std_q])
 
 
 # ---------------------------------------------------------------------------- running
-def tracked_equilibrium(plant: models.Plant, case: models.Case) -> tuple[np.ndarray, float]:
+def tracked_equilibrium(plant: models.Plant, case: CaseStudy) -> tuple[np.ndarray, float]:
     """The standard equilibrium state and the tracked coordinate's value there."""
     xe, _ = plant.equilibrium()
     return xe, float(xe[plant.state_names.index(case.tracked)])
@@ -508,14 +353,14 @@ def _envelope(results, tracked_index: int) -> Envelope:
     return Envelope(t, quantiles, tracked, inputs, results[0].r[:, 0], len(results), len(results) - len(kept))
 
 
-def run_study(study: Study, options: Options | None = None, *, providers: Sequence[str] | None = None,
+def run_study(study: CaseStudy, options: Options | None = None, *, providers: Sequence[str] | None = None,
               controllers: Mapping | None = None, progress: Callable[[int, int, str], None] | None = None
               ) -> StudyResult:
     """Run every controller of `study` through its scenarios on the nonlinear plant.
 
     Parameters
     ----------
-    study : Study
+    study : CaseStudy
     options : Options (defaults: all scenarios, 200 Monte Carlo samples, seed 0)
     providers : replace the study's provider list (``module:function`` strings)
     controllers : extra {label: controller} added after the providers' (for example your own design)
@@ -527,9 +372,9 @@ def run_study(study: Study, options: Options | None = None, *, providers: Sequen
     """
     options = options or Options()
     started = time.perf_counter()
-    case = study.case
+    case = study
     plant = models.get(study.plant)
-    known = models.perturbed(plant, study.known_rel, 1.0) if study.known_rel else plant
+    known = study.known_plant(plant)
     designed, notes = design_controllers(study, known, providers, options.strict)
     for label, controller in (controllers or {}).items():
         if label in designed:
@@ -616,7 +461,7 @@ def _simulate(plant, controller, scenario: Scenario, case, options: Options, bas
 
 def _monte_carlo(study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes,
                  label) -> dict:
-    case = study.case
+    case = study
     batched = isinstance(controller, Block)
     duration = scenario.duration(case)
     steps = int(round(duration / controller.sample_period))
@@ -659,7 +504,7 @@ TABLE_COLUMNS = ("controller", "scenario", "status", *metrics.METRIC_COLUMNS, "s
                  "tracked", "tracked_unit", "input_unit", "wall_s")
 
 
-def _frame(rows: list, study: Study, case) -> pd.DataFrame:
+def _frame(rows: list, study: CaseStudy, case) -> pd.DataFrame:
     frame = pd.DataFrame(rows)
     for column in TABLE_COLUMNS:
         if column not in frame:

@@ -127,7 +127,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
         files["monte_carlo.png"] = "monte_carlo.png"
 
     _, base = _tracked_value(result)
-    found, loop_notes = loops_module.analyse(plant, study.case, result.controllers, base, result.runs,
+    found, loop_notes = loops_module.analyse(plant, study, result.controllers, base, result.runs,
                                              result.truths)
     notes += loop_notes
     checks = {}
@@ -141,7 +141,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
         if plots.bode(result, found, spec, folder / name, verdicts, dpi):
             files[name] = name
     if not any(spec.loop == "input" for spec in study.loops):
-        from .runner import LoopSpec
+        from .case import LoopSpec
 
         plain = LoopSpec("", "input", design="", baseline=None)
         if plots.bode(result, found, plain, folder / "bode_input.png", None, dpi):
@@ -156,13 +156,15 @@ def write_study(result, out: str | os.PathLike) -> dict:
         files["poles.png"] = "poles.png"
 
     best = result.best("step")
-    if best is not None and (best, "step") in result.runs:
+    if study.drawing is None:
+        notes.append(f"no animation: the {study.plant} case has no drawing")
+    elif best is not None and (best, "step") in result.runs:
         run = result.runs[(best, "step")]
         text = (f"{best}, the lowest ITAE in the step scenario; nonlinear simulation of the text's step "
-                f"({study.case.source}).")
-        animation.write_gif(folder / "animation.gif", plant, run, best, max_frames=30 if quick else 100,
+                f"({study.source}).")
+        animation.write_gif(folder / "animation.gif", study, plant, run, best, max_frames=30 if quick else 100,
                             dpi=64 if quick else 80)
-        animation.write_html(folder / "animation.html", plant, run, best, text, max_frames=400 if quick else 800)
+        animation.write_html(folder / "animation.html", study, plant, run, best, text, max_frames=400 if quick else 800)
         files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
     else:
         notes.append("no animation: no controller completed the step scenario")
@@ -171,14 +173,14 @@ def write_study(result, out: str | os.PathLike) -> dict:
     write_text(folder / "table.md", _study_markdown(result, notes, loop_rows))
     files["table.md"] = "table.md"
     write_json(folder / "run.json", {
-        "plant": plant.name, "title": plant.title, "numeral": study.case.numeral, "best": best,
+        "plant": plant.name, "title": plant.title, "numeral": study.numeral, "best": best,
         "settings": {"mc": result.options.mc, "mc_python": result.options.mc_python,
                      "mc_python_steps": result.options.mc_python_steps,
                      "python_scenarios": result.options.python_scenarios, "seed": result.options.seed,
                      "quick": quick, "scenarios": [s.name for s in study.scenarios
                                                    if result.options.scenarios is None
                                                    or s.name in result.options.scenarios]},
-        "timing": result.timing, "notes": notes, "files": files, "tracked": study.case.tracked,
+        "timing": result.timing, "notes": notes, "files": files, "tracked": study.tracked,
         "tracked_unit": study.tracked_unit, "input_unit": study.input_unit})
     return files
 
@@ -186,7 +188,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
 def _tracked_value(result):
     from .runner import tracked_equilibrium
 
-    return tracked_equilibrium(result.plant, result.study.case)
+    return tracked_equilibrium(result.plant, result.study)
 
 
 def _study_markdown(result, notes: list, loop_rows: list) -> str:

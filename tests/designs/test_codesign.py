@@ -23,7 +23,8 @@ class RollPD(models.Block):
 def test_simultaneous_is_never_worse_than_sequential():
     """UUV roll: the centre-of-buoyancy offset L (its ballast costs 200 per metre) with a PD."""
     uuv = models.get("uuv")
-    results = codesign(uuv, RollPD(uuv.input_limit[0]), Scenario(reference=np.deg2rad(30), duration=5.0),
+    results = codesign(uuv, RollPD(uuv.input_limit[0]),
+                       Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi"),
                        {"L": (0.01, 0.2)}, plant_cost=lambda p: 200 * p["L"] * 1e-3,
                        cost=Cost("itae"), specs=Specs(max_overshoot=0.05),
                        bounds={"kp": (0, 500), "kd": (0, 500)}, max_iter=100)
@@ -32,7 +33,8 @@ def test_simultaneous_is_never_worse_than_sequential():
     assert sim.objective <= seq.objective * (1 + 1e-9)
     # Both objectives are what they claim: re-evaluate each design on its plant independently.
     for res in (seq, sim):
-        problem = TuningProblem(res.plant, res.block, Scenario(reference=np.deg2rad(30), duration=5.0),
+        problem = TuningProblem(res.plant, res.block,
+                                Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi"),
                                 cost=Cost("itae"), specs=Specs(max_overshoot=0.05))
         value, _, violations = problem.values(problem.start())
         assert value == pytest.approx(res.closed_loop_cost, rel=1e-9) and not violations
@@ -54,7 +56,7 @@ def _arm_saturation_pd(plant):
 
 def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
     arm = models.get("arm")
-    scenario = Scenario(reference=np.deg2rad(50), duration=3.0)
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     specs = Specs(rise_time=0.8, max_overshoot=0.05)
     sized = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0, retune=False,
                           rel_tol=0.01)
@@ -77,7 +79,7 @@ def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
 def test_codesign_bad_input():
     uuv = models.get("uuv")
     block = RollPD(50.0)
-    scenario = Scenario(reference=0.5, duration=1.0)
+    scenario = Scenario(reference=0.5, duration=1.0, tracked="phi")
     with pytest.raises(ValueError, match="uuv has no parameter 'Lx'"):
         codesign(uuv, block, scenario, {"Lx": (0, 1)})
     with pytest.raises(ValueError, match="starts outside its range"):

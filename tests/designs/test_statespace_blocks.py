@@ -13,7 +13,7 @@ TS = 0.01
 @pytest.fixture(scope="module")
 def satellite():
     plant = models.get("satellite")
-    return plant, TrackingModel.from_plant(plant)
+    return plant, TrackingModel.from_plant(plant, "phi")
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +122,7 @@ def test_rate_gate_freezes_the_integrator_while_the_tracked_coordinate_moves(sat
 def test_arm_command_cancels_gravity_at_the_measured_angle():
     # u = (m g ell / 2) cos(theta) - K x + kr r: u_e + u_nl(q) = u_e(q) - G q with G = 0 at theta = 0.
     arm = models.get("arm")
-    model = TrackingModel.from_plant(arm)
+    model = TrackingModel.from_plant(arm, "theta")
     np.testing.assert_allclose(model.static_input_jacobian, [[0.0]], atol=1e-15)
     block = StateFeedback(model, [0.3, 0.08], 0.3, sample_period=TS)
     m, ell, g = arm.params["m"], arm.params["ell"], arm.params["g"]
@@ -134,7 +134,7 @@ def test_arm_command_cancels_gravity_at_the_measured_angle():
 
 def test_uuv_command_cancels_the_restoring_moment_beyond_its_linearization():
     uuv = models.get("uuv")
-    model = TrackingModel.from_plant(uuv)
+    model = TrackingModel.from_plant(uuv, "phi")
     stiffness = uuv.params["m"] * uuv.params["g"] * uuv.params["L"]
     np.testing.assert_allclose(model.static_input_jacobian, [[stiffness]], rtol=1e-12)
     block = StateFeedback(model, [100.0, 80.0], 150.0, sample_period=TS)
@@ -149,7 +149,7 @@ def test_closed_loop_linearized_at_the_reference_has_the_designed_poles(name, re
     # Cancelling the equilibrium input's nonlinearity at the measured configuration makes the
     # designed poles hold about every reference, not only about the operating point.
     plant = models.get(name)
-    model = TrackingModel.from_plant(plant)
+    model = TrackingModel.from_plant(plant, plant.coordinate_names[0])
     poles = [-3 + 2j, -3 - 2j]
     K = ss.place(model.linear.A, model.linear.B, poles)
     kr = ss.reference_gain(model.linear.A, model.linear.B, K, model.C_r)[0]
@@ -167,7 +167,7 @@ def test_closed_loop_linearized_at_the_reference_has_the_designed_poles(name, re
 
 def test_observer_starts_from_the_measured_configuration():
     sat = models.get("satellite")
-    model = TrackingModel.from_plant(sat)
+    model = TrackingModel.from_plant(sat, "phi")
     L = np.full((4, 2), 0.1)
     block = ObserverFeedback(model, np.ones(4), 1.0, L * 0.01, sample_period=TS)
     # y = (theta, phi - theta) = (0.2, 0.05)  =>  q = (0.2, 0.25)
@@ -175,7 +175,7 @@ def test_observer_starts_from_the_measured_configuration():
 
 
 def test_bad_block_inputs_name_the_culprit():
-    model = TrackingModel.from_plant(models.get("satellite"))
+    model = TrackingModel.from_plant(models.get("satellite"), "phi")
     with pytest.raises(ValueError, match="satellite: K must have 4 entries"):
         StateFeedback(model, [1, 2, 3], 1.0, sample_period=TS)
     with pytest.raises(ValueError, match="rate_limit gates the integrator"):
@@ -198,10 +198,12 @@ def test_closed_loop_is_differentiable_in_the_gains():
     # central finite differences of the numeric simulation.
     import casadi as ca
 
-    from designs import statespace_cases as sc
+    from designs import statespace_design
 
     arm = models.get("arm")
-    block = sc.controllers("arm", arm)["LQR + Kalman"]
+    design = statespace_design.design(arm, "theta", poles=[-8 + 6j, -8 - 6j], Q=np.diag([1 / 0.87**2, 0.0, 1 / 0.2**2]),
+                                      R=[[1 / 0.26**2]], sample_period=TS)
+    block = statespace_design.controllers(design)["LQR + Kalman"]
     n = 100
     run = models.closed_loop_function(arm, block, n, substeps=2)
     gains = ca.MX.sym("g", block.gain_vector().size)

@@ -59,8 +59,9 @@ def test_tuner_finds_the_closed_form_optimum_of_a_first_order_loop():
     lin = rho * (1 - phi**2) + gamma**2
     k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
     # 40 s: λ^(2N) ≈ e^-270, so the finite horizon is the infinite one to machine precision.
-    result = tune(plant, VelocityGain(1.0), Scenario(reference=0.0, duration=40.0, x0=[0.0, 1.0]),
-                  cost=Cost("ise", energy_weight=rho), tracked="ds", tol=1e-12)
+    result = tune(plant, VelocityGain(1.0),
+                  Scenario(reference=0.0, duration=40.0, x0=[0.0, 1.0], tracked="ds"),
+                  cost=Cost("ise", energy_weight=rho), tol=1e-12)
     assert result.success, result.message
     assert float(result.gains["k"]) == pytest.approx(k_star, abs=1e-6)
     assert result.cost == pytest.approx(ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2), rel=1e-9)
@@ -68,7 +69,7 @@ def test_tuner_finds_the_closed_form_optimum_of_a_first_order_loop():
 
 def test_cost_gradient_equals_central_differences(arm):
     block = ArmPD(arm)
-    problem = TuningProblem(arm, block, Scenario(reference=np.deg2rad(50), duration=3.0))
+    problem = TuningProblem(arm, block, Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"))
     grad = ca.Function("grad", [problem.decision], [ca.gradient(problem.objective, problem.decision)])
     obj = ca.Function("obj", [problem.decision], [problem.objective])
     for point in (problem.start(), np.array([0.8, 0.12])):
@@ -91,7 +92,7 @@ def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
     target = np.deg2rad(50)
     specs = Specs(max_overshoot=0.02, settling_time=1.5)
     # Without bounds ITAE keeps falling towards bang-bang as the gains grow.
-    result = tune(arm, block, Scenario(reference=target, duration=3.0), specs=specs,
+    result = tune(arm, block, Scenario(reference=target, duration=3.0, tracked="theta"), specs=specs,
                   bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
     assert result.success and result.feasible, result.message
     assert result.cost < 0.9 * result.initial_cost
@@ -102,7 +103,7 @@ def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
 
 
 def test_infeasible_specs_are_named(arm):
-    result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=2.0),
+    result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"),
                   specs=Specs(rise_time=0.05, max_overshoot=0.0), max_iter=30)
     assert not result.feasible and not result.success
     assert any("90 % of the step by 0.05 s" in v for v in result.violations)
@@ -111,7 +112,7 @@ def test_infeasible_specs_are_named(arm):
 
 def test_iteration_limit_returns_the_best_feasible_point(arm):
     calls = []
-    result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0),
+    result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
                   specs=Specs(max_overshoot=0.05), max_iter=2, progress=lambda *a: calls.append(a))
     assert result.status == "Maximum_Iterations_Exceeded"
     assert [c[0] for c in calls] == list(range(len(result.history))) == [0, 1, 2]
@@ -123,7 +124,7 @@ def test_iteration_limit_returns_the_best_feasible_point(arm):
 def test_robust_worst_case_is_no_better_than_nominal(arm):
     corners = models.corner_params(arm)
     block = ArmPD(arm)
-    scenario = Scenario(reference=np.deg2rad(50), duration=3.0)
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     nominal = TuningProblem(arm, block, scenario)
     worst = TuningProblem(arm, block, scenario, samples=corners, robust="worst")
     obj_nominal = nominal.values(nominal.start())[0]
@@ -147,7 +148,7 @@ def test_spectral_abscissa_of_a_linear_loop_equals_its_eigenvalues():
 @pytest.mark.parametrize("kwargs,message", [
     ({"free": ["kq"]}, "has no gain"),
     ({"robust": "median"}, "robust must be"),
-    ({"tracked": "phi"}, "arm has no state 'phi'"),
+    ({"scenario": Scenario(reference=0.5, duration=1.0, tracked="phi")}, "arm has no state 'phi'"),
     ({"cost": "itae"}, None),
 ])
 def test_bad_tuning_input(arm, kwargs, message):
@@ -156,13 +157,14 @@ def test_bad_tuning_input(arm, kwargs, message):
             Cost("l1")
         return
     with pytest.raises(ValueError, match=message):
-        TuningProblem(arm, ArmPD(arm), Scenario(reference=0.5, duration=1.0), **kwargs)
+        TuningProblem(arm, ArmPD(arm), **({"scenario": Scenario(reference=0.5, duration=1.0, tracked="theta")}
+                                          | kwargs))
 
 
 def test_a_violated_spec_reports_its_excess_from_a_fresh_simulation(arm):
     """The overshoot excess named in a violation is the simulated peak past the bound (unbounded below)."""
     block, reference = ArmPD(arm), np.deg2rad(50)
-    scenario = Scenario(reference=reference, duration=3.0)
+    scenario = Scenario(reference=reference, duration=3.0, tracked="theta")
     run = models.simulate_closed_loop(arm, block, reference, 3.0, x0=arm.equilibrium()[0], substeps=10)
     overshoot = (np.max(run.x[:, 0]) - reference) / reference
     assert overshoot > 0.01

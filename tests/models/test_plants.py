@@ -216,15 +216,6 @@ def test_overrides_and_variants():
     assert heavy.with_params(ell=0.4).params == {"m": 0.6, "ell": 0.4, "g": 9.8, "b": 0.01}
 
 
-def test_every_plant_has_a_case_whose_tracked_coordinate_exists():
-    for name in models.names():
-        case = models.case(name)
-        assert case.tracked in models.get(name).coordinate_names
-        assert case.step > 0 and case.design_step > 0 and case.input_disturbance > 0
-    with pytest.raises(ValueError, match="no case study for 'x'"):
-        models.case("x")
-
-
 @pytest.mark.parametrize("name", ALL)
 def test_configuration_is_recovered_from_the_outputs(name):
     plant = models.get(name)

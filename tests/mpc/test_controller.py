@@ -38,8 +38,9 @@ class OvershootingSolver(mpc.CondensedDaqpSolver):
         return solution
 
 
-def test_controllers_entry_point_returns_both_designs_following_the_protocol():
-    designs = mpc.controllers("pendulum", models.perturbed(models.get("pendulum"), 0.05))
+def test_controllers_entry_point_returns_both_designs_following_the_protocol(build_mpc):
+    designs = {label: build_mpc(kind, "pendulum", models.perturbed(models.get("pendulum"), 0.05))
+               for label, kind in (("linear MPC", "linear"), ("nonlinear MPC", "nonlinear"))}
     assert set(designs) == {"linear MPC", "nonlinear MPC"}
     for controller in designs.values():
         assert isinstance(controller, models.Controller)
@@ -47,9 +48,9 @@ def test_controllers_entry_point_returns_both_designs_following_the_protocol():
         assert controller.sample_period == 0.01
 
 
-def test_linear_mpc_command_never_exceeds_the_limit_and_does_saturate():
+def test_linear_mpc_command_never_exceeds_the_limit_and_does_saturate(build_mpc):
     plant = models.get("pendulum")
-    controller = mpc.linear_mpc("pendulum", models.perturbed(plant, 0.05))
+    controller = build_mpc("linear", "pendulum", models.perturbed(plant, 0.05))
     result = models.simulate_closed_loop(plant, controller, 2.0, 1.0, input_disturbance=0.5)
     limit = plant.input_limit[0]
     assert np.all(np.abs(result.u) <= limit)
@@ -60,9 +61,9 @@ def test_linear_mpc_command_never_exceeds_the_limit_and_does_saturate():
     assert all(s["success"] for s in result.status)
 
 
-def test_nonlinear_mpc_command_never_exceeds_the_limit_and_does_saturate():
+def test_nonlinear_mpc_command_never_exceeds_the_limit_and_does_saturate(build_mpc):
     plant = models.get("arm")
-    controller = mpc.nonlinear_mpc("arm", models.perturbed(plant, 0.05, -1))
+    controller = build_mpc("nonlinear", "arm", models.perturbed(plant, 0.05, -1))
     result = models.simulate_closed_loop(plant, controller, np.deg2rad(50), 0.4, input_disturbance=0.2)
     assert np.all(np.abs(result.u) <= plant.input_limit[0])
     assert np.max(np.abs(result.u)) == plant.input_limit[0]
@@ -70,9 +71,9 @@ def test_nonlinear_mpc_command_never_exceeds_the_limit_and_does_saturate():
 
 
 @pytest.mark.parametrize("kind", ["linear", "nonlinear"])
-def test_rate_limit_holds_on_the_command(kind):
+def test_rate_limit_holds_on_the_command(kind, build_mpc):
     plant = models.get("pendulum")
-    controller = (mpc.linear_mpc if kind == "linear" else mpc.nonlinear_mpc)("pendulum", rate_limit=[50.0])
+    controller = build_mpc(kind, "pendulum", rate_limit=[50.0])
     result = models.simulate_closed_loop(plant, controller, 1.0, 0.6)
     steps = np.abs(np.diff(np.concatenate([[0.0], result.u[:, 0]])))
     assert np.max(steps) <= 50.0 * 0.01 * (1 + 1e-12)
@@ -80,9 +81,9 @@ def test_rate_limit_holds_on_the_command(kind):
     assert all(s["success"] for s in result.status)
 
 
-def test_solver_answer_beyond_the_limit_is_clipped_exactly_and_the_excess_reported():
+def test_solver_answer_beyond_the_limit_is_clipped_exactly_and_the_excess_reported(build_mpc):
     plant = models.get("arm")
-    controller = mpc.linear_mpc("arm", solver=OvershootingSolver)
+    controller = build_mpc("linear", "arm", solver=OvershootingSolver)
     result = models.simulate_closed_loop(plant, controller, 0.3, 0.05)
     assert np.all(result.u == plant.input_limit[0])
     # The solver's plan is 1.5 (limit − ue) + ue in total input; the excess is what clipping removed.
@@ -90,10 +91,10 @@ def test_solver_answer_beyond_the_limit_is_clipped_exactly_and_the_excess_report
     assert result.status[0]["input_excess"] == pytest.approx(excess, rel=1e-12)
 
 
-def test_failed_solve_applies_the_shifted_previous_plan_clipped():
+def test_failed_solve_applies_the_shifted_previous_plan_clipped(build_mpc):
     plant = models.get("pendulum")
     failures = {3, 4, 9}
-    controller = mpc.linear_mpc("pendulum", solver=lambda problem: FailingSolver(problem, failures))
+    controller = build_mpc("linear", "pendulum", solver=lambda problem: FailingSolver(problem, failures))
     x = plant.equilibrium()[0]
     y, r = plant.output(x), np.array([2.0])
     xc = controller.initial_state(y, r)
@@ -111,25 +112,26 @@ def test_failed_solve_applies_the_shifted_previous_plan_clipped():
         assert np.all(np.abs(u) <= plant.input_limit)
 
 
-def test_failures_in_a_run_are_recorded_and_the_run_completes():
+def test_failures_in_a_run_are_recorded_and_the_run_completes(build_mpc):
     plant = models.get("pendulum")
-    controller = mpc.linear_mpc("pendulum", solver=lambda problem: FailingSolver(problem, range(5, 40, 3)))
+    controller = build_mpc("linear", "pendulum", solver=lambda problem: FailingSolver(problem, range(5, 40, 3)))
     result = models.simulate_closed_loop(plant, controller, 2.0, 1.0)
     failed = [k for k, s in enumerate(result.status) if s["fallback"]]
     assert failed == list(range(5, 40, 3))
     assert np.all(np.abs(result.u) <= plant.input_limit[0]) and np.all(result.u[failed] != 0)
 
 
-def test_iteration_limits_are_reported_and_handled():
+def test_iteration_limits_are_reported_and_handled(build_mpc):
     plant = models.get("pendulum")
-    linear = mpc.linear_mpc("pendulum", solver=lambda problem: mpc.CondensedDaqpSolver(problem, iteration_limit=1))
+    linear = build_mpc("linear", "pendulum",
+                       solver=lambda problem: mpc.CondensedDaqpSolver(problem, iteration_limit=1))
     result = models.simulate_closed_loop(plant, linear, 2.0, 0.5)
     hit = [s for s in result.status if s["status"] == "iteration limit"]
     assert hit and all(s["fallback"] and not s["success"] for s in hit)
     assert np.all(np.abs(result.u) <= plant.input_limit[0])
 
     arm = models.get("arm")
-    nonlinear = mpc.nonlinear_mpc("arm", max_iterations=1)
+    nonlinear = build_mpc("nonlinear", "arm", max_iterations=1)
     result = models.simulate_closed_loop(arm, nonlinear, 0.8, 0.3)
     hit = [s for s in result.status if s["status"] == "Maximum_Iterations_Exceeded"]
     assert hit and all(s["fallback"] for s in hit)
@@ -142,9 +144,9 @@ def ball_rolling_off():
     return plant, np.array([0.49, 0.0, 0.8, 0.0])
 
 
-def test_ball_rolling_off_makes_the_hard_state_constraint_infeasible():
+def test_ball_rolling_off_makes_the_hard_state_constraint_infeasible(build_mpc):
     plant, x = ball_rolling_off()
-    controller = mpc.linear_mpc("ballbeam")
+    controller = build_mpc("linear", "ballbeam")
     problem = controller.problem
     cvx, _, _ = mpc_problem(problem, x - controller.model.xe, np.zeros(1), np.zeros(4), np.zeros(1), np.zeros(1))
     g = cvx.variables()
@@ -155,9 +157,9 @@ def test_ball_rolling_off_makes_the_hard_state_constraint_infeasible():
 
 
 @pytest.mark.parametrize("kind", ["linear", "nonlinear"])
-def test_infeasible_state_constraint_still_gives_an_input_within_limits_and_reports_it(kind):
+def test_infeasible_state_constraint_still_gives_an_input_within_limits_and_reports_it(kind, build_mpc):
     plant, x = ball_rolling_off()
-    controller = (mpc.linear_mpc if kind == "linear" else mpc.nonlinear_mpc)("ballbeam")
+    controller = build_mpc(kind, "ballbeam")
     y = plant.output(x)
     xc = controller.initial_state(y, np.array([0.25]))
     offset = controller.model.xe if kind == "linear" else np.zeros(4)
@@ -189,16 +191,16 @@ def test_soft_bound_equals_the_hard_one_when_that_is_feasible(pendulum_qp_record
     assert compared >= 5
 
 
-def test_rerun_after_initial_state_gives_the_same_run():
+def test_rerun_after_initial_state_gives_the_same_run(build_mpc):
     plant = models.get("arm")
-    for controller in mpc.controllers("arm").values():
+    for controller in (build_mpc("linear", "arm"), build_mpc("nonlinear", "arm")):
         first = models.simulate_closed_loop(plant, controller, 0.6, 0.3, input_disturbance=0.2)
         second = models.simulate_closed_loop(plant, controller, 0.6, 0.3, input_disturbance=0.2)
         np.testing.assert_allclose(first.u, second.u, atol=1e-12, rtol=0)
 
 
 @pytest.mark.parametrize("x", [[0.0, 0.19, 0.0, 0.0], [0.3, 0.0, 0.0, -0.3], [0.0, -0.1, 0.0, -0.3]])
-def test_nonlinear_and_linear_mpc_plan_the_same_on_the_linear_satellite(x):
+def test_nonlinear_and_linear_mpc_plan_the_same_on_the_linear_satellite(x, build_mpc):
     """The satellite is linear: the NMPC's RK4 multiple shooting and the exact-ZOH QP are the
     same problem up to integration error. Whole plans are compared, from states that
     violate the panel-deflection bound, saturate, or neither."""
@@ -206,7 +208,7 @@ def test_nonlinear_and_linear_mpc_plan_the_same_on_the_linear_satellite(x):
     x = np.array(x)
     y, r = plant.output(x), np.array([0.5])
     plans, violations = [], []
-    for controller in (mpc.linear_mpc("satellite"), mpc.nonlinear_mpc("satellite")):
+    for controller in (build_mpc("linear", "satellite"), build_mpc("nonlinear", "satellite")):
         xc = controller.initial_state(y, r)
         xc[:4] = x
         xc, _ = controller.step(xc, y, r)
@@ -224,22 +226,20 @@ def test_nonlinear_and_linear_mpc_plan_the_same_on_the_linear_satellite(x):
     (dict(rate_limit=[0.0]), "rate_limit"),
     (dict(sample_period=-0.01), "sample_period"),
 ])
-def test_bad_design_input_names_the_culprit(change, match):
+def test_bad_design_input_names_the_culprit(change, match, build_mpc):
     with pytest.raises(ValueError, match=match):
-        mpc.linear_mpc("pendulum", **change)
+        build_mpc("linear", "pendulum", **change)
 
 
-def test_bad_problem_and_runtime_input_name_the_culprit():
+def test_bad_problem_and_runtime_input_name_the_culprit(build_mpc):
     with pytest.raises(ValueError, match="infeasible"):
         mpc.MPCProblem([[1.0]], [[1.0]], 1.0, 1.0, 5, 1.0, -1.0)
     with pytest.raises(ValueError, match="soft bound 'z'"):
         mpc.MPCProblem([[1.0]], [[1.0]], 1.0, 1.0, 5, -1.0, 1.0, soft_rows=[[1.0]], soft_lower=[1.0],
                        soft_upper=[0.0], soft_names=["z"])
-    with pytest.raises(ValueError, match="unknown plant 'segway'"):
-        mpc.controllers("segway")
     with pytest.raises(ValueError, match="horizon"):
-        mpc.nonlinear_mpc("arm", horizon=0)
-    controller = mpc.linear_mpc("pendulum")
+        build_mpc("nonlinear", "arm", horizon=0)
+    controller = build_mpc("linear", "pendulum")
     xc = controller.initial_state(np.zeros(2), np.zeros(1))
     with pytest.raises(ValueError, match="measurement"):
         controller.step(xc, np.zeros(3), np.zeros(1))
@@ -252,9 +252,9 @@ class CrashingSolver(mpc.CondensedDaqpSolver):
         raise RuntimeError("licence server unreachable")
 
 
-def test_a_solver_that_raises_is_a_reported_failure_not_an_exception():
+def test_a_solver_that_raises_is_a_reported_failure_not_an_exception(build_mpc):
     plant = models.get("arm")
-    controller = mpc.linear_mpc("arm", solver=CrashingSolver)
+    controller = build_mpc("linear", "arm", solver=CrashingSolver)
     result = models.simulate_closed_loop(plant, controller, 0.3, 0.05)
     assert all(s["fallback"] and "licence server unreachable" in s["status"] for s in result.status)
     # The first plan holds the equilibrium input of the measured configuration.

@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 import models
-import mpc
 from mpc.estimator import DisturbanceObserver, SteadyStateTarget
 
 
@@ -25,8 +24,8 @@ def test_observer_recovers_a_constant_input_disturbance_on_the_exact_model():
 
 
 @pytest.mark.parametrize("name", models.names())
-def test_default_estimators_are_stable(name):
-    controller = mpc.linear_mpc(name)
+def test_default_estimators_are_stable(name, build_mpc):
+    controller = build_mpc("linear", name)
     radius = np.max(np.abs(np.linalg.eigvals(controller.observer.error_dynamics())))
     assert radius < 1
 

@@ -8,19 +8,19 @@ import numpy as np
 import pytest
 
 import models
-import mpc
-from mpc.defaults import physical_soft_bounds
+import studies
+from mpc import physical_soft_bounds
 
 RUNS = [(name, kind, sign) for name in models.names() for kind in ("linear", "nonlinear") for sign in (1, -1)]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name, kind, sign", RUNS)
-def test_step_settles_within_limits_under_mismatch_and_disturbance(name, kind, sign):
+def test_step_settles_within_limits_under_mismatch_and_disturbance(name, kind, sign, build_mpc, mpc_settings):
     plant = models.get(name)
-    case = models.case(name)
+    case = studies.get("crane" if name == "crane1" else name)
     known = models.perturbed(plant, 0.05, sign)
-    controller = (mpc.linear_mpc if kind == "linear" else mpc.nonlinear_mpc)(name, known)
+    controller = build_mpc(kind, name, known)
     index = plant.state_names.index(case.tracked)
     reference = plant.equilibrium()[0][index] + case.step
     result = models.simulate_closed_loop(plant, controller, reference, case.duration,
@@ -31,7 +31,7 @@ def test_step_settles_within_limits_under_mismatch_and_disturbance(name, kind, s
     error = result.x[:, index] - reference
     settled = result.t >= 0.9 * case.duration
     assert np.max(np.abs(error[settled])) < 1e-3
-    for bound, row, lower, upper in physical_soft_bounds(name, plant):
+    for bound, row, lower, upper in physical_soft_bounds(mpc_settings(name)[0], plant):
         value = result.x @ row
         assert lower <= value.min() and value.max() <= upper, bound
     failed = sum(not s["success"] for s in result.status)

@@ -17,12 +17,13 @@ import control
 import numpy as np
 
 import models
+import studies
 from designs.discrete import dirty_derivative
 
 
 def _tracking_gains(plant: models.Plant, name: str, weight: float):
     """LQR gain K and feedforward (Nx, Nu) so that x → xe + Nx Δr, u → ue + Nu Δr."""
-    case = models.case(name)
+    case = studies.get(name)
     xe, ue = plant.equilibrium()
     lin = plant.linearize(xe, ue)
     i = plant.state_names.index(case.tracked)

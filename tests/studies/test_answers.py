@@ -1,5 +1,7 @@
 """Homework answers from the models against hand derivations, and the errata each study picks."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -42,7 +44,7 @@ def test_ballbeam_equilibrium_force_of_the_v14_hint():
     ("ballbeam", ["V.14 (ball on beam)", "V.14 hint", "IV.15, V.15, VI.15"], ["IV.3(b) vs IV.7", "VI.14(b)"]),
     ("arm", ["I.15 (arm)", "I.15(c)", "pendulum, satellite, arm parameters"], ["II.8(a)", "III.12"]),
 ])
-def test_errata_are_read_from_the_docs_for_the_case(plant, present, absent):
+def test_errata_declared_in_the_case_files_are_picked_for_the_case(plant, present, absent):
     items = [row["item"] for row in answers.errata(studies.get(plant))]
     for item in present:
         assert item in items
@@ -57,10 +59,16 @@ def test_provider_answers_are_merged_by_item(monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "fake_answers_for_studies", module)
-    patched = type(study)(**{k: getattr(study, k) for k in study.__dataclass_fields__} |
-                          {"answer_providers": ("fake_answers_for_studies:answers",)})
+    patched = dataclasses.replace(study, answer_providers=("fake_answers_for_studies:answers",))
     found, notes = answers.collect(patched)
     assert found["I.8(c)"] == {"kp": 0.3}
     assert found["I.5"]["note"] == "from the design" and "u_e" in found["I.5"]
     assert list(found).index("I.7") < list(found).index("I.8(c)") < list(found).index("errata")
     assert "I.8(c)" in answers.format_answers(patched, found, "arm")
+
+
+def test_kinetic_energy_and_equations_of_motion_are_printed_answers():
+    found = answers.model_answers(studies.get("ballbeam"))
+    assert found["V.1"]["latex"].startswith("$T = ") and r"\dot{z}" in found["V.1"]["latex"]
+    assert len(found["V.3"]["equations"]) == len(found["V.3"]["latex"]) == 2  # one per coordinate (z, θ)
+    assert all(text.startswith("$") and " = " in text for text in found["V.3"]["latex"])

@@ -5,6 +5,8 @@ import json
 import pandas as pd
 import pytest
 
+import studies
+
 from test_cli import run_cli
 
 PER_PLANT = ("table.csv", "table.md", "answers.json", "answers.md", "monte_carlo.csv", "loops.csv", "step.png",
@@ -17,7 +19,7 @@ def test_quick_run_of_all_six_studies_writes_every_file(tmp_path):
     out = tmp_path / "results"
     done = run_cli("--quick", "--out", str(out), "--provider", "example_providers:controllers", timeout=1800)
     assert done.returncode == 0, done.stderr[-3000:]
-    for plant in ("arm", "pendulum", "satellite", "uuv", "ballbeam", "crane"):
+    for plant in studies.names():
         for name in PER_PLANT:
             assert (out / plant / name).stat().st_size > 0, f"{plant}/{name}"
         assert (out / plant / "bode_input.png").exists(), plant

@@ -1,6 +1,7 @@
 """The runner: providers plugged in or skipped, rows from the nonlinear plant, seeded Monte Carlo,
 divergence reported as such, noise levels of full-state controllers."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -17,9 +18,7 @@ STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
 
 
 def arm_study(**changes):
-    base = studies.get("arm")
-    fields = {k: getattr(base, k) for k in base.__dataclass_fields__}
-    return runner.Study(**(fields | changes))
+    return dataclasses.replace(studies.get("arm"), **changes)
 
 
 def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
@@ -84,7 +83,7 @@ def test_monte_carlo_is_reproducible_from_its_seed():
 
 def test_python_controllers_get_fewer_samples_and_report_solver_status():
     study = arm_study(providers=(EXAMPLE,))
-    steps = int(round(study.case.duration / 0.01))
+    steps = int(round(study.duration / 0.01))
     options = runner.Options(scenarios=("step", "mc"), mc=50, mc_python=10, mc_python_steps=3 * steps)
     result = runner.run_study(study, options)
     table = result.table.set_index(["controller", "scenario"])
@@ -155,22 +154,19 @@ def test_run_returns_the_table_as_a_dataframe_with_the_documented_columns():
         studies.run("crane1")
 
 
-@pytest.mark.parametrize("plant", studies.NAMES)
+@pytest.mark.parametrize("plant", studies.names())
 def test_two_rk4_substeps_give_the_tables_of_ten(plant):
     """The studies integrate with 2 RK4 sub-steps per sample; 10 (the simulator's default) change
     no metric of the step by more than 1e-5 relative."""
-    base = studies.get(plant)
-    fields = {k: getattr(base, k) for k in base.__dataclass_fields__} | {"providers": ("example_providers:lqr_only",)}
-    rows = [runner.run_study(runner.Study(**(fields | {"substeps": n})), STEP_ONLY).table.iloc[0] for n in (2, 10)]
+    base = dataclasses.replace(studies.get(plant), providers=("example_providers:lqr_only",))
+    rows = [runner.run_study(dataclasses.replace(base, substeps=n), STEP_ONLY).table.iloc[0] for n in (2, 10)]
     for key in ("rise_time_s", "settling_time_s", "overshoot_pct", "iae", "itae", "peak_u", "energy"):
         assert rows[0][key] == pytest.approx(rows[1][key], rel=1e-5, abs=1e-9), key
 
 
 def test_a_design_with_its_own_actuator_runs_on_it():
     """IV.11 assumes 250 N m thrusters: that row's plant has them, the others keep 50 N m."""
-    base = studies.get("uuv")
-    fields = {k: getattr(base, k) for k in base.__dataclass_fields__}
-    study = runner.Study(**(fields | {"providers": ("example_providers:with_own_actuator",)}))
+    study = dataclasses.replace(studies.get("uuv"), providers=("example_providers:with_own_actuator",))
     result = runner.run_study(study, STEP_ONLY)
     table = result.table.set_index("controller")
     assert table.loc["LQR", "u_limit"] == 50.0 and table.loc["lead-lag (IV.11)", "u_limit"] == 250.0

@@ -1,14 +1,14 @@
-"""Tuned designs of the six case studies: the text's PID, tuned through the nonlinear loop.
+"""The offline tuner of the case studies' stored gains: each case's PID, tuned through the nonlinear loop.
 
-For each plant the start is the hand design labelled "PID" by `designs.classical`
-(the text's PID, or its successive loop closure with a PID outer loop),
-designed from the model known to the controller (the text's +5 % error). Its
+For each case the start is its classical design's "PID" (the text's PID, or
+its successive loop closure with a PID outer loop), designed from the model
+known to the controller (the case's known parameter error, +5 %). Its
 gains are tuned by `designs.tuning.tune` on the study's "disturbance" run (the
 text's step with the case's input disturbance from t = 0):
 
 * cost: ITAE of the tracked coordinate plus control energy, weighted so that
   energy makes `ENERGY_SHARE` of the hand design's cost, mean over the
-  parameter rows of `tuning_samples` (the corners of the ±5 % box on the
+  parameter rows of `tuning_samples` (the corners of the ±known_rel box on the
   uncertain parameters, or random samples where there are too many corners);
 * specs: overshoot no larger than the hand design's worst (at least 2 %),
   2 % settling no later than the hand design's worst when it settles, and a
@@ -21,11 +21,13 @@ text's step with the case's input disturbance from t = 0):
 * the actuator stays clipped at its limit inside the loop.
 
 Tuning takes from seconds (arm) to minutes (crane), so it runs offline:
-``python -m designs.tuning_cases [plant ...]`` tunes, validates the result on
+``python -m studies.tuner [case ...]`` tunes, validates the result on
 `N_VALIDATION` fresh samples (seed `VALIDATION_SEED`) and stores gains, costs
-and provenance in ``tuned_gains.json``. `controllers(name, known)` rebuilds the
-hand design and returns it with the stored gains; it refuses when the hand
-design no longer matches the one the gains were tuned from.
+and provenance in ``studies/cases/<case>_tuned_gains.json`` (package data, read
+with `importlib.resources`). `controllers(case, known)` rebuilds the hand
+design and returns it with the stored gains; it refuses when the hand design
+no longer matches the one the gains were tuned from. A case without stored
+gains has no "tuned" row.
 """
 
 from __future__ import annotations
@@ -35,18 +37,21 @@ import json
 import sys
 import time
 from dataclasses import replace
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 import models
-from models import files, metrics
-from designs import classical
 from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
+from models import files, metrics
+
+from . import cases
+from .case import CaseStudy
+from .homework import classical_design
 
 START = "PID"
 LABEL = "tuned"
-REL = 0.05
 MAX_CORNERS, N_TUNING, TUNING_SEED = 16, 8, 1
 N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
@@ -54,62 +59,63 @@ MIN_OVERSHOOT = 0.02
 MARGIN = 0.75
 GAIN_RANGE = 100.0
 SUBSTEPS = 2
-PLANTS = ("arm", "pendulum", "satellite", "uuv", "ballbeam", "crane")
-STORE = Path(__file__).with_name("tuned_gains.json")
+#: Folder of the stored gains when writing them (beside the case files).
+STORE_DIR = Path(cases.__file__).resolve().parent
 
 
-def known_plant(name: str) -> models.Plant:
-    """The model the studies' controllers are designed from: uncertain parameters +5 %."""
-    return models.perturbed(models.get(name), REL, 1.0)
+def store_name(case: CaseStudy) -> str:
+    """File name of the case's stored gains, beside the case files."""
+    return f"{case.plant}_tuned_gains.json"
 
 
-def scenario(name: str) -> Scenario:
+def scenario(case: CaseStudy) -> Scenario:
     """The text's step from the standard equilibrium, with the case's input disturbance from t = 0."""
-    plant, case = models.get(name), models.case(name)
+    plant = models.get(case.plant)
     xe, _ = plant.equilibrium()
     r = xe[plant.state_names.index(case.tracked)] + case.step
-    return Scenario(reference=r, duration=case.duration, x0=xe, input_disturbance=case.input_disturbance)
+    return Scenario(reference=r, duration=case.duration, x0=xe, input_disturbance=case.input_disturbance,
+                    tracked=case.tracked)
 
 
-def hand_design(name: str, known: models.Plant | None = None):
-    """The start: designs.classical's "PID" block designed from `known` (default `known_plant`)."""
-    return classical.controllers(name, known if known is not None else known_plant(name))[START]
+def hand_design(case: CaseStudy, known: models.Plant | None = None):
+    """The start: the case's classical "PID" block designed from `known` (default the case's known plant)."""
+    return classical_design(case, known if known is not None else case.known_plant()).controllers[START]
 
 
-def samples(name: str, n: int, seed: int) -> np.ndarray:
-    """(n, n_params) actual plants, uniform ±5 % on the case's uncertain parameters."""
-    return models.sample_params(models.get(name), n, REL, seed)
+def samples(case: CaseStudy, n: int, seed: int) -> np.ndarray:
+    """(n, n_params) actual plants, uniform ±known_rel on the case's uncertain parameters."""
+    return models.sample_params(models.get(case.plant), n, case.known_rel, seed)
 
 
-def tuning_samples(name: str) -> tuple[np.ndarray, str]:
+def tuning_samples(case: CaseStudy) -> tuple[np.ndarray, str]:
     """The parameter rows tuning sees, and how they were chosen.
 
-    The 2^k corners of the ±5 % box where there are at most `MAX_CORNERS` (the
+    The 2^k corners of the ±known_rel box where there are at most `MAX_CORNERS` (the
     extremes of a response that is monotone in each parameter); otherwise
     `N_TUNING` uniform samples (seed `TUNING_SEED`).
     """
-    corners = models.corner_params(models.get(name), REL)
+    corners = models.corner_params(models.get(case.plant), case.known_rel)
     if len(corners) <= MAX_CORNERS:
-        return corners, f"the {len(corners)} corners of the ±{100 * REL:g} % box"
-    return samples(name, N_TUNING, TUNING_SEED), f"{N_TUNING} uniform samples (seed {TUNING_SEED})"
+        return corners, f"the {len(corners)} corners of the ±{100 * case.known_rel:g} % box"
+    return samples(case, N_TUNING, TUNING_SEED), f"{N_TUNING} uniform samples (seed {TUNING_SEED})"
 
 
-def _problem(name, block, specs, cost, params) -> TuningProblem:
-    return TuningProblem(models.get(name), block, scenario(name), specs=specs, cost=cost, samples=params,
+def _problem(case, block, specs, cost, params) -> TuningProblem:
+    return TuningProblem(models.get(case.plant), block, scenario(case), specs=specs, cost=cost, samples=params,
                          substeps=SUBSTEPS)
 
 
-def _start_itae_and_energy(name, block, params) -> tuple[float, float]:
+def _start_itae_and_energy(case, block, params) -> tuple[float, float]:
     """Mean ITAE and mean control energy Σ u² Ts of `block` over `params` rows, one simulation each."""
-    problem = _problem(name, block, None, Cost("itae"), params)
+    problem = _problem(case, block, None, Cost("itae"), params)
     costs, _, u = (np.asarray(v) for v in problem.evaluate(problem.start()))
     return float(np.mean(costs)), float(block.sample_period * np.sum(u**2) / len(params))
 
 
-def worst_step(name: str, block, params) -> dict:
+def worst_step(case: CaseStudy, block, params) -> dict:
     """Worst overshoot (fraction) and 2 % settling time (s) of `block` on the scenario over `params` rows."""
-    plant, sc = models.get(name), scenario(name)
-    k = plant.state_names.index(models.case(name).tracked)
+    plant, sc = models.get(case.plant), scenario(case)
+    k = plant.state_names.index(case.tracked)
     worst = {"overshoot": 0.0, "settling_time_s": 0.0}
     for p in params:
         run = models.simulate_closed_loop(plant, block, sc.reference, sc.duration, x0=sc.x0, params=p,
@@ -120,9 +126,9 @@ def worst_step(name: str, block, params) -> dict:
     return worst
 
 
-def _measured_specs(name: str, block, params) -> tuple[Specs, dict]:
+def _measured_specs(case: CaseStudy, block, params) -> tuple[Specs, dict]:
     """Specs the tuned design must meet: the hand design's own worst response on `params`."""
-    worst = worst_step(name, block, params)
+    worst = worst_step(case, block, params)
     settling = worst["settling_time_s"]
     specs = Specs(max_overshoot=max(worst["overshoot"], MIN_OVERSHOOT),
                   settling_time=settling if np.isfinite(settling) else None, max_spectral_abscissa=0.0)
@@ -146,43 +152,44 @@ def _with_margin(specs: Specs) -> Specs:
                    settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time)
 
 
-def tune_case(name: str, max_iter: int = 100, jit: bool = True, progress=None) -> dict:
-    """Tune plant `name`'s hand design, validate on fresh samples; the record `tuned_gains.json` keeps."""
+def tune_case(case: CaseStudy, max_iter: int = 100, jit: bool = True, progress=None) -> dict:
+    """Tune the case's hand design, validate on fresh samples; the record its stored-gains file keeps."""
     started = time.perf_counter()
-    block = hand_design(name)
-    train, chosen = tuning_samples(name)
-    specs, hand_measured = _measured_specs(name, block, train)
-    itae, energy = _start_itae_and_energy(name, block, train)
+    block = hand_design(case)
+    train, chosen = tuning_samples(case)
+    specs, hand_measured = _measured_specs(case, block, train)
+    itae, energy = _start_itae_and_energy(case, block, train)
     weight = ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
     cost = Cost("itae", energy_weight=weight)
-    result = tune(models.get(name), block, scenario(name), specs=_with_margin(specs), cost=cost, samples=train,
+    result = tune(models.get(case.plant), block, scenario(case), specs=_with_margin(specs), cost=cost, samples=train,
                   bounds=gain_bounds(block), substeps=SUBSTEPS, max_iter=max_iter, jit=jit, progress=progress)
     record = {
-        "plant": name, "start": START, "start_gains": _listed(block.gains), "gains": _listed(result.gains),
-        "known": f"uncertain parameters +{100 * REL:g} % (models.perturbed)",
+        "plant": case.plant, "start": START, "start_gains": _listed(block.gains), "gains": _listed(result.gains),
+        "known": f"uncertain parameters +{100 * case.known_rel:g} % (models.perturbed)",
         "scenario": "the text's step with the case's input disturbance from t = 0",
         "cost": {"kind": "itae", "energy_weight": weight, "energy_share_at_start": ENERGY_SHARE},
         "tuning_margin": MARGIN, "gain_range": GAIN_RANGE,
         "specs": {"max_overshoot": specs.max_overshoot, "settling_time_s": specs.settling_time,
                   "settling_band": specs.settling_band, "max_spectral_abscissa": 0.0},
         "hand_measured": hand_measured,
-        "tuning": {"samples": len(train), "chosen": chosen, "seed": TUNING_SEED, "rel": REL, "initial_cost": result.initial_cost,
+        "tuning": {"samples": len(train), "chosen": chosen, "seed": TUNING_SEED, "rel": case.known_rel,
+                   "initial_cost": result.initial_cost,
                    "cost": result.cost, "improvement": result.improvement, "feasible": result.feasible,
                    "message": result.message, "iterations": result.iterations, "jit": jit,
                    "wall_time_s": time.perf_counter() - started},
     }
-    return record | {"validation": validate(name, record)}
+    return record | {"validation": validate(case, record)}
 
 
-def validate(name: str, record: dict) -> dict:
+def validate(case: CaseStudy, record: dict) -> dict:
     """Hand and tuned designs of `record` on `N_VALIDATION` fresh samples: costs, worst steps, violations."""
-    block = hand_design(name)
+    block = hand_design(case)
     tuned = block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})
     spec = record["specs"]
     specs = Specs(max_overshoot=spec["max_overshoot"], settling_time=spec["settling_time_s"],
                   settling_band=spec["settling_band"])
-    fresh = samples(name, N_VALIDATION, VALIDATION_SEED)
-    check = _problem(name, block, specs, Cost("itae", energy_weight=record["cost"]["energy_weight"]), fresh)
+    fresh = samples(case, N_VALIDATION, VALIDATION_SEED)
+    check = _problem(case, block, specs, Cost("itae", energy_weight=record["cost"]["energy_weight"]), fresh)
     _, hand_costs, hand_violations = check.values(check.start())
     _, tuned_costs, tuned_violations = check.values(tuned.gain_vector()[check.free_index])
     return {"samples": N_VALIDATION, "seed": VALIDATION_SEED,
@@ -190,7 +197,7 @@ def validate(name: str, record: dict) -> dict:
             "hand_worst": float(np.max(hand_costs)), "tuned_worst": float(np.max(tuned_costs)),
             "improvement_mean": float(1 - np.mean(tuned_costs) / np.mean(hand_costs)),
             "tuned_better_on": int(np.sum(tuned_costs < hand_costs)),
-            "hand_step": worst_step(name, block, fresh), "tuned_step": worst_step(name, tuned, fresh),
+            "hand_step": worst_step(case, block, fresh), "tuned_step": worst_step(case, tuned, fresh),
             "tuned_violations": tuned_violations, "hand_violations": hand_violations}
 
 
@@ -198,30 +205,31 @@ def _listed(gains: dict) -> dict:
     return {k: np.asarray(v, dtype=float).tolist() for k, v in gains.items()}
 
 
-def stored() -> dict:
-    """The records in tuned_gains.json, by plant ({} when there is none)."""
-    if not STORE.exists():
-        return {}
-    return json.loads(STORE.read_text())
+def stored(case: CaseStudy) -> dict | None:
+    """The case's stored tuning record (package data beside the case files), or None when there is none."""
+    data = resources.files(cases.__name__).joinpath(store_name(case))
+    if not data.is_file():
+        return None
+    return json.loads(data.read_text(encoding="utf-8"))
 
 
-def controllers(name: str, known: models.Plant | None = None) -> dict:
+def controllers(case: CaseStudy, known: models.Plant | None = None) -> dict:
     """{"tuned": block}: the hand design built from `known` with the stored tuned gains.
 
-    Raises ValueError when no gains are stored for `name`, or when the hand design
+    Raises ValueError when no gains are stored for the case, or when the hand design
     built from `known` differs from the one the gains were tuned from (rerun
-    ``python -m designs.tuning_cases NAME`` after changing a design).
+    ``python -m studies.tuner NAME`` after changing a design).
     """
-    record = stored().get(name)
+    record = stored(case)
     if record is None:
-        raise ValueError(f"no tuned gains stored for {name!r}; run `python -m designs.tuning_cases {name}`")
-    block = hand_design(name, known)
+        raise ValueError(f"no tuned gains stored for {case.plant!r}; run `python -m studies.tuner {case.plant}`")
+    block = hand_design(case, known)
     for key, value in record["start_gains"].items():
         now = np.asarray(block.gains[key], dtype=float)
         if now.shape != np.shape(value) or not np.allclose(now, value, rtol=1e-9, atol=1e-12):
-            raise ValueError(f"{name}: the stored tuned gains start from a different {START!r} design "
+            raise ValueError(f"{case.plant}: the stored tuned gains start from a different {START!r} design "
                              f"(gain {key} is now {now.tolist()}, was {value}); "
-                             f"rerun `python -m designs.tuning_cases {name}`")
+                             f"rerun `python -m studies.tuner {case.plant}`")
     return {LABEL: block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})}
 
 
@@ -232,35 +240,35 @@ def _report_every(n: int):
     return report
 
 
-def _write(name: str, record: dict) -> None:
-    """Store `record` under `name`, keeping the other plants' records as they are on disk now."""
-    files.write_json(STORE, stored() | {name: record})
+def write(case: CaseStudy, record: dict, folder: Path = STORE_DIR) -> Path:
+    """Store `record` as the case's tuned gains in `folder` (default beside the case files)."""
+    return files.write_json(Path(folder) / store_name(case), record)
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m designs.tuning_cases", description=__doc__.split("\n")[0])
-    parser.add_argument("plants", nargs="*", default=list(PLANTS),
-                        help="plants to tune (default all six)")
+    names = [n for n in cases.names() if cases.get(n).classical is not None]
+    parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
+    parser.add_argument("plants", nargs="*", default=names, help=f"cases to tune (default all: {', '.join(names)})")
     parser.add_argument("--max-iter", type=int, default=100, help="IPOPT iterations (default 100)")
     parser.add_argument("--validate", action="store_true",
                         help="re-validate the stored gains on the fresh samples, without tuning")
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
     args = parser.parse_args(argv)
-    unknown = [p for p in args.plants if p not in PLANTS]
+    unknown = [p for p in args.plants if p not in names]
     if unknown:
-        parser.error(f"unknown plant {unknown}; valid: {', '.join(PLANTS)}")
-    records = stored()
+        parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
     for name in args.plants:
+        case = cases.get(name)
         if args.validate:
-            if name not in records:
+            record = stored(case)
+            if record is None:
                 parser.error(f"no tuned gains stored for {name!r} to validate")
             print(f"validating {name} ...", flush=True)
-            record = records[name] | {"validation": validate(name, records[name])}
+            record = record | {"validation": validate(case, record)}
         else:
             print(f"tuning {name} ...", flush=True)
-            record = tune_case(name, args.max_iter, not args.no_jit, progress=_report_every(10))
-        records[name] = record
-        _write(name, record)
+            record = tune_case(case, args.max_iter, not args.no_jit, progress=_report_every(10))
+        write(case, record)
         t, v = record["tuning"], record["validation"]
         print(f"  {t['message']}; {t['iterations']} iterations, {t['wall_time_s']:.1f} s; "
               f"cost {t['initial_cost']:.4g} -> {t['cost']:.4g} ({100 * t['improvement']:.1f} % better); "

@@ -9,18 +9,20 @@ import numpy as np
 import pytest
 
 import models
-from designs import tuning_cases
+import studies
 from models import metrics
+from studies import tuner
 
-PLANTS = tuning_cases.PLANTS
+PLANTS = studies.names()
 CHECK_SEED, N_CHECK = 3, 4
 
 
 def _cost_and_metrics(name, block, params, weight):
-    plant, sc = models.get(name), tuning_cases.scenario(name)
-    k = plant.state_names.index(models.case(name).tracked)
+    case = studies.get(name)
+    plant, sc = models.get(name), tuner.scenario(case)
+    k = plant.state_names.index(case.tracked)
     run = models.simulate_closed_loop(plant, block, sc.reference, sc.duration, x0=sc.x0, params=params,
-                                      input_disturbance=sc.input_disturbance, substeps=tuning_cases.SUBSTEPS)
+                                      input_disturbance=sc.input_disturbance, substeps=tuner.SUBSTEPS)
     assert run.diverged_at is None
     ts = block.sample_period
     e = sc.reference - run.x[:-1, k]
@@ -31,20 +33,21 @@ def _cost_and_metrics(name, block, params, weight):
 
 @pytest.fixture(scope="module")
 def records():
-    return tuning_cases.stored()
+    return {name: tuner.stored(studies.get(name)) for name in PLANTS}
 
 
 @pytest.mark.parametrize("name", PLANTS)
 def test_tuned_design_beats_the_hand_design_and_meets_its_specs_on_unseen_samples(name, records):
-    assert name in records, f"no tuned gains stored for {name}; run python -m designs.tuning_cases {name}"
+    assert records[name] is not None, f"no tuned gains stored for {name}; run python -m studies.tuner {name}"
     record = records[name]
-    hand = tuning_cases.hand_design(name)
-    tuned = tuning_cases.controllers(name)["tuned"]
+    case = studies.get(name)
+    hand = tuner.hand_design(case)
+    tuned = tuner.controllers(case)["tuned"]
     for key, value in record["gains"].items():
         np.testing.assert_allclose(tuned.gains[key], value, rtol=0, atol=0)
     specs, weight = record["specs"], record["cost"]["energy_weight"]
     limit = models.get(name).input_limit
-    for params in tuning_cases.samples(name, N_CHECK, CHECK_SEED):
+    for params in tuner.samples(case, N_CHECK, CHECK_SEED):
         hand_cost, _, _ = _cost_and_metrics(name, hand, params, weight)
         cost, m, peak = _cost_and_metrics(name, tuned, params, weight)
         assert cost < hand_cost
@@ -56,27 +59,43 @@ def test_tuned_design_beats_the_hand_design_and_meets_its_specs_on_unseen_sample
 
 @pytest.mark.parametrize("name", PLANTS)
 def test_stored_record_is_consistent(name, records):
-    assert name in records, f"no tuned gains stored for {name}; run python -m designs.tuning_cases {name}"
+    assert records[name] is not None, f"no tuned gains stored for {name}; run python -m studies.tuner {name}"
     record = records[name]
     tuning, validation = record["tuning"], record["validation"]
     assert tuning["feasible"] and tuning["cost"] < tuning["initial_cost"]
     assert validation["tuned_mean"] < validation["hand_mean"] and not validation["tuned_violations"]
-    assert validation["seed"] == tuning_cases.VALIDATION_SEED != tuning_cases.TUNING_SEED
-    assert CHECK_SEED not in (tuning_cases.TUNING_SEED, validation["seed"])
-    rows, chosen = tuning_cases.tuning_samples(name)
+    assert validation["seed"] == tuner.VALIDATION_SEED != tuner.TUNING_SEED
+    assert CHECK_SEED not in (tuner.TUNING_SEED, validation["seed"])
+    rows, chosen = tuner.tuning_samples(studies.get(name))
     assert (tuning["samples"], tuning["chosen"]) == (len(rows), chosen)
 
 
 def test_a_changed_hand_design_refuses_the_stored_gains():
     other = models.perturbed(models.get("arm"), 0.10, 1.0)
     with pytest.raises(ValueError, match="start from a different 'PID' design"):
-        tuning_cases.controllers("arm", other)
-    with pytest.raises(ValueError, match="no tuned gains stored for 'crane1'"):
-        tuning_cases.controllers("crane1")
+        tuner.controllers(studies.get("arm"), other)
+
+
+def test_a_case_without_stored_gains_has_no_tuned_row():
+    import dataclasses
+
+    from studies import providers
+    from studies.runner import NotProvided
+
+    renamed = dataclasses.replace(studies.get("arm"), plant="arm_copy")
+    assert tuner.stored(renamed) is None
+    with pytest.raises(ValueError, match="no tuned gains stored for 'arm_copy'"):
+        tuner.controllers(renamed)
+    studies.register(renamed)
+    try:
+        with pytest.raises(NotProvided, match="no tuned gains stored for arm_copy"):
+            providers.tuned("arm_copy")
+    finally:
+        studies.unregister("arm_copy")
 
 
 @pytest.mark.slow
 def test_retuning_the_arm_reproduces_its_stored_record(records):
-    fresh = tuning_cases.tune_case("arm")
+    fresh = tuner.tune_case(studies.get("arm"))
     assert fresh["tuning"]["cost"] == pytest.approx(records["arm"]["tuning"]["cost"], rel=1e-3)
     assert fresh["validation"]["tuned_better_on"] == fresh["validation"]["samples"]

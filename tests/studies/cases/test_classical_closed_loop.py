@@ -7,9 +7,9 @@ off) and run on the nominal one, with the case's input disturbance.
 import control
 import numpy as np
 import pytest
+from case_designs import case_of, classical_controllers
 
 import models
-from designs import classical
 
 #: Long enough for the slowest integrator to finish (s): the arm's 0.2 N m disturbance is 75 % of its
 #: linearized torque bound, the pendulum's and crane's outer integrators are slow by design.
@@ -23,8 +23,8 @@ PLANTS = {name: models.get(name) for name in DURATION}
 
 def _run(name, label, known=None, step_multiple=1.0, disturbance=0.0, duration=None, plant=None):
     plant = PLANTS[name] if plant is None else plant
-    case = models.case(name)
-    block = classical.controllers(name, known)[label]
+    case = case_of(name)
+    block = classical_controllers(name, known)[label]
     x0, _ = plant.equilibrium()
     start = x0[plant.coordinate_names.index(case.tracked)]
     step = step_multiple * case.step
@@ -41,7 +41,7 @@ SIGNS = [1.0, pytest.param(-1.0, marks=pytest.mark.slow)]
 @pytest.mark.parametrize("name", ["arm", "pendulum", "satellite", "uuv", "ballbeam", "crane1"])
 def test_pid_removes_the_error_under_mismatch_and_disturbance(name, sign):
     known = models.perturbed(PLANTS[name], 0.05, sign)
-    res, y, plant = _run(name, "PID", known, disturbance=models.case(name).input_disturbance)
+    res, y, plant = _run(name, "PID", known, disturbance=case_of(name).input_disturbance)
     last_second = y[-int(1.0 / res.t[1]):]
     assert np.max(np.abs(last_second - 1.0)) < 1e-3
     assert np.max(np.abs(res.u)) <= plant.input_limit[0] * (1 + 1e-12)
@@ -51,7 +51,7 @@ def test_two_load_crane_pid_ignoring_the_second_load():
     # The controller does not see θ2, whose swing only the car's friction damps: the mean error over the
     # last 30 s is below 1e-3 of the step and the ripple below 1 %.
     known = models.perturbed(PLANTS["crane"], 0.05, 1.0)
-    res, y, plant = _run("crane", "PID", known, disturbance=models.case("crane").input_disturbance)
+    res, y, plant = _run("crane", "PID", known, disturbance=case_of("crane").input_disturbance)
     tail = y[-3000:]
     assert abs(np.mean(tail) - 1.0) < 1e-3 and np.max(np.abs(tail - 1.0)) < 1e-2
     assert np.max(np.abs(res.u)) <= plant.input_limit[0] * (1 + 1e-12)
@@ -82,7 +82,7 @@ def test_uuv_lead_lag_meets_IV11_with_the_250_N_m_thrusters(sign):
 @pytest.mark.parametrize("name", list(DURATION))
 def test_every_controller_runs_within_the_limit(name):
     plant = PLANTS[name]
-    for label in classical.controllers(name):
+    for label in classical_controllers(name):
         run_on = plant.with_input_limit(250.0) if label == "lead-lag (IV.11)" else plant
         res, y, _ = _run(name, label, duration=min(DURATION[name], 60.0), plant=run_on)
         assert res.diverged_at is None and np.all(np.isfinite(y))

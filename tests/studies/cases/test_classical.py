@@ -9,11 +9,13 @@ import control
 import numpy as np
 import pytest
 import scipy.optimize
+from case_designs import DESIGNED, classical_answers, classical_controllers
 
 import models
-from designs import classical
+import studies
+from studies import homework
 
-ZETA = classical.ZETA
+ZETA = homework.ZETA
 
 
 def _tf(record, prefix=""):
@@ -35,7 +37,7 @@ def _mag(G, w):
 
 @pytest.fixture(scope="module")
 def arm_answers():
-    return classical.answers("arm")
+    return classical_answers("arm")
 
 
 def test_arm_8_closed_forms(arm_answers):
@@ -106,7 +108,7 @@ def _pd_dirty(kp, kd, sigma=0.05):
 
 
 def test_pendulum_8_closed_forms():
-    a, p = classical.answers("pendulum"), models.get("pendulum")
+    a, p = classical_answers("pendulum"), models.get("pendulum")
     m1, m2, ell, g = (p.params[k] for k in ("m1", "m2", "ell", "g"))
     b0, a0 = -1 / (m2 * ell), -(m1 + m2) * g / (m2 * ell)
     a_th = a["II.8(d)"]["step"]
@@ -122,7 +124,7 @@ def test_pendulum_8_closed_forms():
     assert a["II.8(h)"]["kp"] == pytest.approx(kpz, rel=1e-9)
     assert a["II.8(i)"]["wn"] == pytest.approx(wnz, rel=1e-9)
     assert a["II.8(i)"]["kd"] == pytest.approx(2 * ZETA * wnz / (K * g), rel=1e-9)
-    assert wn / wnz == pytest.approx(classical.SEPARATION)
+    assert wn / wnz == pytest.approx(homework.SEPARATION)
     # Full linearization under u = kp_θ(kp_z(r − z) − kd_z ż − θ) − kd_θ θ̇, written out by hand.
     lin = p.linearize()
     kdz, kdt = a["II.8(i)"]["kd"], a["II.8(e)"]["kd"]
@@ -133,7 +135,7 @@ def test_pendulum_8_closed_forms():
 
 
 def test_satellite_8_and_10_closed_forms():
-    a, p = classical.answers("satellite"), models.get("satellite")
+    a, p = classical_answers("satellite"), models.get("satellite")
     Js, Jp, k, b = (p.params[n] for n in ("Js", "Jp", "k", "b"))
     a_th = a["III.8(b)"]["step"]
     kp = 5.0 / a_th
@@ -154,7 +156,7 @@ def test_satellite_8_and_10_closed_forms():
 
 
 def test_uuv_8_10_closed_forms():
-    a, p = classical.answers("uuv"), models.get("uuv")
+    a, p = classical_answers("uuv"), models.get("uuv")
     J, m, L, b, g = (p.params[n] for n in ("J", "m", "L", "b", "g"))
     kp = 50.0 / np.deg2rad(30)
     wn = np.sqrt((m * g * L + kp) / J)
@@ -167,7 +169,7 @@ def test_uuv_8_10_closed_forms():
 
 
 def test_uuv_11_lead_lag_meets_its_specs():
-    a = classical.answers("uuv")
+    a = classical_answers("uuv")
     assert all(s["met"] for s in a["IV.11(d)"]["specs"]), a["IV.11(d)"]["specs"]
     # The dominant pair sits where it was placed: closed-loop poles of 1 + C G recomputed here.
     G = models.get("uuv").linearize().tf("phi", "tau")
@@ -181,7 +183,7 @@ def test_uuv_11_lead_lag_meets_its_specs():
 
 
 def test_uuv_13_phases_and_final_design():
-    a, p = classical.answers("uuv"), models.get("uuv")
+    a, p = classical_answers("uuv"), models.get("uuv")
     G = p.linearize().tf("phi", "tau")
     jw = 2j
     g = complex(control.evalfr(G, jw))
@@ -204,7 +206,7 @@ def test_uuv_13_phases_and_final_design():
 
 
 def test_ballbeam_8_10_13():
-    a, p = classical.answers("ballbeam"), models.get("ballbeam")
+    a, p = classical_answers("ballbeam"), models.get("ballbeam")
     m1, m2, ell, g = (p.params[k] for k in ("m1", "m2", "ell", "g"))
     bound = 15.0 - (m1 + m2 / 2) * g
     assert a["V.8(c)"]["bound"] == pytest.approx(bound, rel=1e-9)
@@ -224,7 +226,7 @@ def test_ballbeam_8_10_13():
 
 
 def test_crane_8_10_13():
-    a, p = classical.answers("crane1"), models.get("crane1")
+    a, p = classical_answers("crane1"), models.get("crane1")
     mc, m, ell, g = (p.params[k] for k in ("mc", "m", "ell", "g"))
     zeta = -np.log(0.5) / np.sqrt(np.pi**2 + np.log(0.5) ** 2)
     assert a["VI.8(c)"]["zeta"] == pytest.approx(zeta, rel=1e-12)
@@ -251,17 +253,17 @@ def test_crane_8_10_13():
 
 
 def test_two_load_crane_answers_are_the_single_load_ones():
-    crane, single = classical.answers("crane"), classical.answers("crane1")
+    crane, single = classical_answers("crane"), classical_answers("crane1")
     assert "note" in crane
     for key in ("VI.8(c)", "VI.8(g)", "VI.13(b)"):
         assert crane[key] == single[key]
 
 
-@pytest.mark.parametrize("name", ["arm", "pendulum", "satellite", "uuv", "ballbeam", "crane1", "crane"])
+@pytest.mark.parametrize("name", DESIGNED)
 def test_controllers_have_the_labels_and_rebuild_from_gains(name):
-    blocks = classical.controllers(name)
+    blocks = classical_controllers(name)
     extra = {"uuv": {"lead-lag (IV.11)"}, "pendulum": {"PD (zero-cancelling filter)"}}
-    expected = set(classical.LABELS) | extra.get(name, set())
+    expected = set(homework.LABELS) | extra.get(name, set())
     assert set(blocks) == expected
     plant = models.get(name)
     for label, block in blocks.items():
@@ -273,18 +275,42 @@ def test_controllers_have_the_labels_and_rebuild_from_gains(name):
 
 
 def test_bad_requests_are_named():
-    with pytest.raises(ValueError, match="no classical design for 'boat'"):
-        classical.answers("boat")
-    with pytest.raises(ValueError, match="known plant is 'arm'"):
-        classical.controllers("uuv", models.get("arm"))
+    with pytest.raises(ValueError, match="unknown plant 'boat'"):
+        classical_answers("boat")
+    with pytest.raises(ValueError, match="the known plant is 'arm'; the uuv designs take 'uuv'"):
+        classical_controllers("uuv", models.get("arm"))
 
 
 def test_frequency_responses_are_the_loops_behind_the_13_answers(arm_answers):
     a = arm_answers
     w = np.array([0.1, 1.0, 10.0])
-    data = classical.frequency_responses("arm", omega=w)
+    data = homework.frequency_responses(homework.classical_design(studies.get("arm")), omega=w)
     G = models.get("arm").linearize().tf("theta", "tau")
     L = G * (a["I.8(c)"]["kp"] + a["I.10(d)"]["ki"] * control.tf([1], [1, 0])
              + _pd_dirty(0.0, a["I.8(d)"]["kd"]))
     np.testing.assert_allclose(data["PID (implemented)"]["loop"]["magnitude"], _mag(L, w), rtol=1e-9)
     np.testing.assert_allclose(data["PID (implemented)"]["plant"]["magnitude"], _mag(G, w), rtol=1e-9)
+
+
+def test_ballbeam_11_root_locus_lead_places_the_outer_pair():
+    """V.11: C(s) K_DC (−g/s²) closed with python-control has the pair at V.8(i)'s ω_n, ζ, all poles stable;
+    the angle and magnitude conditions hold at s*; the step numbers are python-control's step_info."""
+    a, p = classical_answers("ballbeam"), models.get("ballbeam")
+    rec = a["V.11(a)"]
+    K_dc, g = a["V.8(f)"]["dc_gain"], p.params["g"]
+    G = control.tf([-K_dc * g], [1, 0, 0])
+    C = _tf(rec, "C_")
+    wn, zeta = a["V.8(i)"]["wn"], a["V.8(i)"]["zeta"]
+    s_star = complex(-zeta * wn, wn * np.sqrt(1 - zeta**2))
+    loop = complex(control.evalfr(C * G, s_star))
+    assert abs(loop) == pytest.approx(1.0, rel=1e-9)
+    assert abs(np.angle(loop)) == pytest.approx(np.pi, rel=1e-9)
+    assert rec["zero"] == pytest.approx(0.5 * wn) and rec["gain"] < 0  # negative plant gain, negative lead
+    T = control.feedback(C * G, 1)
+    poles = control.poles(T)
+    assert np.min(np.abs(poles - s_star)) < 1e-8 and np.all(poles.real < 0)
+    grid = np.linspace(0, 20, 40001)
+    info = control.step_info(T, T=grid)  # times to the grid's resolution
+    assert a["V.11(b)"]["rise_time"] == pytest.approx(info["RiseTime"], abs=2 * grid[1])
+    assert a["V.11(b)"]["overshoot_percent"] == pytest.approx(info["Overshoot"], rel=1e-4)
+    assert a["V.11(b)"]["dc_gain"] == pytest.approx(1.0)

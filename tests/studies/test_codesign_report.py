@@ -2,16 +2,20 @@
 
 import numpy as np
 import pytest
+from case_designs import classical_controllers
 
 import models
-from designs import classical, codesign_cases as cc
 from designs.tuning import Cost, Scenario, Specs, TuningProblem
+from studies import codesign_report as cr
+from studies.cases import arm, ballbeam, crane, satellite, uuv
+
+#: The actuator-sizing cases by plant.
+SIZING = {"arm": arm, "uuv": uuv, "ballbeam": ballbeam}
 
 
 def _response(plant, block, scenario):
     """(t, y as a fraction of the step, u, run) of one fresh simulation, samples 1..N."""
-    tracked = models.case(plant.name).tracked
-    k = plant.state_names.index(tracked)
+    k = plant.state_names.index(scenario.tracked)
     run = models.simulate_closed_loop(plant, block, scenario.reference, scenario.duration, x0=scenario.x0)
     step = scenario.reference - scenario.x0[k]
     return run.t[1:], (run.x[1:, k] - scenario.x0[k]) / step, run.u, run
@@ -36,17 +40,18 @@ def _check_sizing(result):
         value, _, violations = fresh.values(fresh.start())
         assert value == pytest.approx(design.closed_loop_cost, rel=1e-9) and not violations
     # The hand rule really needs its limit: a few per cent less misses the spec.
+    case = SIZING[result.plant]
     smaller = seq.plant.with_input_limit(0.97 * seq.value)
-    assert not _meets(smaller, cc.hand_design(result.plant, smaller), result.scenario, result.specs)
+    assert not _meets(smaller, case.SIZING.hand_design(smaller), result.scenario, result.specs)
     # Nothing below the torque (force) that holds the target can work; re-tuning beats the rule.
-    assert cc.holding_limit(result.plant) < sim.value <= seq.value
+    assert cr.holding_limit(case.CASE, case.SIZING) < sim.value <= seq.value
 
 
 def test_arm_sizing_retuned_gains_need_a_smaller_motor():
-    result = cc.actuator_sizing("arm")
+    result = arm.actuator_sizing()
     _check_sizing(result)
     # The spec is the hand PD's own rise time at the text's 1 N m, so the rule needs about 1 N m.
-    assert result.sequential.value == pytest.approx(cc.TEXT_LIMIT["arm"], rel=0.03)
+    assert result.sequential.value == pytest.approx(arm.SIZING.text_limit, rel=0.03)
     assert result.simultaneous.value < 0.9 * result.sequential.value
     assert result.improvement == pytest.approx(1 - result.simultaneous.value / result.sequential.value)
 
@@ -54,36 +59,37 @@ def test_arm_sizing_retuned_gains_need_a_smaller_motor():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["uuv", "ballbeam"])
 def test_sizing_uuv_and_ballbeam(name):
-    result = cc.actuator_sizing(name)
+    result = SIZING[name].actuator_sizing()
     _check_sizing(result)
     assert result.simultaneous.value < 0.95 * result.sequential.value
     if name == "uuv":  # the text's IV.11 lead-lag meets its own specs with the 250 N m thrusters
-        assert result.specs == cc.UUV_SPECS and result.sequential.value < cc.TEXT_LIMIT["uuv"]
+        assert result.specs == uuv.SIZING.specs and result.sequential.value < uuv.THRUSTER_LIMIT
         # and the re-tuned lead-lag settles inside the text's 10 % steady-state error on a longer run
-        long = Scenario(result.scenario.reference, 10.0, result.scenario.x0)
+        long = Scenario(result.scenario.reference, 10.0, result.scenario.x0, tracked=result.scenario.tracked)
         _, y, _, _ = _response(result.simultaneous.plant, result.simultaneous.block, long)
         assert np.all(np.abs(y[-100:] - 1) < 0.1)
 
 
 def test_hand_designs_at_the_text_limit():
-    uuv = models.get("uuv").with_input_limit(250.0)
-    lead_lag = classical.controllers("uuv", uuv)["lead-lag (IV.11)"]
-    block = cc.hand_design("uuv", uuv)
+    turbo = models.get("uuv").with_input_limit(250.0)
+    lead_lag = classical_controllers("uuv", turbo)["lead-lag (IV.11)"]
+    block = uuv.SIZING.hand_design(turbo)
     for key in ("num", "den"):
         np.testing.assert_allclose(block.gains[key], lead_lag.gains[key])
     # The simultaneous start at the text's limit is the hand design itself.
     for name in ("arm", "ballbeam"):
-        known = models.get(name).with_input_limit(cc.TEXT_LIMIT[name])
-        hand, start = cc.hand_design(name, known), cc.retune_start(name, known)
+        sizing = SIZING[name].SIZING
+        known = models.get(name).with_input_limit(sizing.text_limit)
+        hand, start = sizing.hand_design(known), sizing.retune_start(known)
         np.testing.assert_allclose(start.gain_vector(), hand.gain_vector())
-        scenario = cc.sizing_scenario(name)
+        scenario = cr.sizing_scenario(SIZING[name].CASE, sizing)
         runs = [models.simulate_closed_loop(known, b, scenario.reference, 1.0, x0=scenario.x0) for b in (hand, start)]
         np.testing.assert_allclose(runs[0].u, runs[1].u, atol=1e-12)
     # Below the text's limit the start keeps the text's gains and saturates at the new limit.
-    arm = models.get("arm").with_input_limit(0.8)
-    start = cc.retune_start("arm", arm)
+    small = models.get("arm").with_input_limit(0.8)
+    start = arm.SIZING.retune_start(small)
     assert start.output_limit == 0.8
-    np.testing.assert_allclose(start.gain_vector(), cc.hand_design("arm", models.get("arm")).gain_vector())
+    np.testing.assert_allclose(start.gain_vector(), arm.SIZING.hand_design(models.get("arm")).gain_vector())
 
 
 def _check_codesign(result, plant_cost, low, high):
@@ -115,67 +121,68 @@ def _check_codesign(result, plant_cost, low, high):
 
 def test_satellite_stiffness_short_run_reports_what_it_designed():
     """A short, cheap run: the wiring (ranges, costs, fresh re-evaluation), not the optimum."""
-    result = cc.satellite_stiffness(max_iter=3, jit=False, duration=8.0)
-    _check_codesign(result, cc.satellite_plant_cost, *cc.SATELLITE_RANGE)
+    result = satellite.panel_stiffness(max_iter=3, jit=False, duration=8.0)
+    _check_codesign(result, satellite.stiffness_cost, *satellite.STIFFNESS_RANGE)
 
 
 def test_crane_short_run_reports_what_it_designed():
-    result = cc.crane_transfer(max_iter=2, jit=False, duration=6.0)
-    _check_codesign(result, cc.crane_plant_cost, *cc.CRANE_RANGE)
+    result = crane.cable_transfer(max_iter=2, jit=False, duration=6.0)
+    _check_codesign(result, crane.hoist_cost, *crane.CABLE_RANGE)
     assert result.plant == "crane1" and list(result.specs.state_bounds) == ["theta"]
 
 
 def test_plant_costs_in_their_units():
     # Lifting the 500 kg load by 1 m costs 2e-4 m s²/J × 500 kg × 9.81 m/s² × 1 m of ITAE.
-    assert cc.crane_plant_cost({"ell": 19.0}) == pytest.approx(cc.HOIST_PRICE * 500 * 9.81)
-    assert cc.crane_plant_cost({"ell": cc.CRANE_RANGE[1]}) == 0
-    assert cc.satellite_plant_cost({"k": 0.15}) == pytest.approx(0.15 * cc.STIFFNESS_PRICE)
+    assert crane.hoist_cost({"ell": 19.0}) == pytest.approx(crane.HOIST_PRICE * 500 * 9.81)
+    assert crane.hoist_cost({"ell": crane.CABLE_RANGE[1]}) == 0
+    assert satellite.stiffness_cost({"k": 0.15}) == pytest.approx(0.15 * satellite.STIFFNESS_PRICE)
 
 
 @pytest.mark.slow
 def test_satellite_and_crane_full_runs():
-    sat = cc.satellite_stiffness()
-    _check_codesign(sat, cc.satellite_plant_cost, *cc.SATELLITE_RANGE)
+    sat = satellite.panel_stiffness()
+    _check_codesign(sat, satellite.stiffness_cost, *satellite.STIFFNESS_RANGE)
     assert sat.sequential.feasible and sat.simultaneous.feasible
-    crane = cc.crane_transfer()
-    _check_codesign(crane, cc.crane_plant_cost, *cc.CRANE_RANGE)
-    assert crane.sequential.feasible and crane.simultaneous.feasible
+    transfer = crane.cable_transfer()
+    _check_codesign(transfer, crane.hoist_cost, *crane.CABLE_RANGE)
+    assert transfer.sequential.feasible and transfer.simultaneous.feasible
 
 
 def _fake_result(key="fake"):
     plant = models.get("arm")
-    block = cc.hand_design("arm", plant)
-    design = cc.Design(method="sequential", value=1.0, objective=1.0, closed_loop_cost=0.1, plant_cost=1.0,
+    block = arm.SIZING.hand_design(plant)
+    design = cr.Design(method="sequential", value=1.0, objective=1.0, closed_loop_cost=0.1, plant_cost=1.0,
                        feasible=True, violations=[], measured={"rise_time_s": 0.5, "overshoot": 0.01,
                                                                "peak_input": 1.0},
                        wall_time=0.5, message="ok", gains={}, plant=plant, block=block)
-    worse = cc.Design(**{**design.__dict__, "method": "simultaneous", "value": 0.8, "objective": 0.8,
+    worse = cr.Design(**{**design.__dict__, "method": "simultaneous", "value": 0.8, "objective": 0.8,
                          "feasible": False})
-    return cc.CaseResult(key=key, problem=f"problem {key}", plant="arm", parameter="torque limit", unit="N m",
-                         text_value=1.0, objective="smallest limit", scenario=cc.sizing_scenario("arm"),
+    return cr.CaseResult(key=key, problem=f"problem {key}", plant="arm", parameter="torque limit", unit="N m",
+                         text_value=1.0, objective="smallest limit",
+                         scenario=cr.sizing_scenario(arm.CASE, arm.SIZING),
                          specs=Specs(rise_time=0.5), cost=Cost(), sequential=design, simultaneous=worse,
                          notes=["a note"])
 
 
 def test_table_and_cli_write_the_document_atomically(tmp_path, monkeypatch, capsys):
     result = _fake_result()
-    text = cc.table([result])
+    text = cr.table([result])
     lines = text.strip().splitlines()
-    assert len(lines) == 3 and all(line.count("|") == len(cc.COLUMNS) + 1 for line in lines)
+    assert len(lines) == 3 and all(line.count("|") == len(cr.COLUMNS) + 1 for line in lines)
     assert "| problem fake | torque limit (N m) | 1 | 1 | 1 | 0.8 | 0.8 (infeasible) | 20.0 % | — | — | 0.5 / 0.5 |" in text
-    monkeypatch.setattr(cc, "PROBLEMS", {"fake": lambda: result})
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda: result})
     out = tmp_path / "sub" / "codesign.md"
-    assert cc.main(["--out", str(out)]) == 0
+    assert cr.main(["--out", str(out)]) == 0
     doc = out.read_text()
-    assert doc.startswith("# Co-design") and "`python -m designs.codesign_cases`" in doc and "a note" in doc
-    assert cc.table([result]) in doc
+    assert doc.startswith("# Co-design") and "`python -m studies.codesign_report`" in doc and "a note" in doc
+    assert cr.table([result]) in doc
     assert [p.name for p in out.parent.iterdir()] == ["codesign.md"]  # no temporary file left
     printed = capsys.readouterr().out
     assert "[1/1] fake ..." in printed and f"wrote {out}" in printed
 
 
 def test_committed_document_lists_every_problem():
-    doc = cc.DOC.read_text()
+    doc = cr.DOC.read_text()
     for problem in ("actuator sizing: arm", "actuator sizing: uuv", "actuator sizing: ballbeam",
                     "crane transfer (crane1)", "satellite panel"):
         assert f"| {problem} |" in doc
