@@ -156,7 +156,7 @@ def test_closed_loop_divergence_names_the_time(blow_up_plant):
 
 @pytest.mark.parametrize("kwargs,error,message", [
     ({"controller": Constant(0.0, n_measured=2)}, ValueError, "reads 2 measurements but arm provides 1"),
-    ({"duration": -1.0}, ValueError, "duration must be > 0"),
+    ({"duration": -1.0}, ValueError, r"duration \(s\) must be a finite number > 0, got -1.0"),
     ({"reference": np.zeros((5, 1))}, ValueError, "reference must be a constant"),
     ({"noise_std": -0.1}, ValueError, "noise_std must be finite and >= 0"),
     ({"reference": lambda t: np.where(t > 0.5, np.nan, 0.0)}, ValueError, "reference is not finite at t = 0.51"),
