@@ -84,6 +84,13 @@ def integer(value, what: str, minimum: int | None = None) -> int:
     return number
 
 
+def boolean(value, what: str) -> bool:
+    """Return `value` as a bool, refusing anything but True and False (a string "no" is truthy)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{what} must be True or False, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
 def real_array(value, what: str) -> np.ndarray:
     """`value` as a float array, refusing strings, bools and other non-numbers (TypeError naming `what`)."""
     arr = np.asarray(value)

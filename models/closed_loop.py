@@ -32,6 +32,7 @@ from .checks import (
     SimulationError,
     as_matrix,
     as_vector,
+    boolean,
     check_memory,
     format_bytes,
     integer,
@@ -293,12 +294,6 @@ def _doubles_per_step(plant: Plant, controller) -> int:
     return results + work
 
 
-def _flag(value, what: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{what} must be True or False, got {value!r}")
-    return bool(value)
-
-
 def check_seed(seed, what: str = "seed"):
     """A seed numpy's `default_rng` takes: None, an integer >= 0, a SeedSequence or a Generator."""
     if seed is None or isinstance(seed, (np.random.SeedSequence, np.random.Generator, np.random.BitGenerator)):
@@ -418,7 +413,7 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
     """
     setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
     substeps = integer(substeps, "substeps", minimum=1)
-    allow_divergence, jit = _flag(allow_divergence, "allow_divergence"), _flag(jit, "jit")
+    allow_divergence, jit = boolean(allow_divergence, "allow_divergence"), boolean(jit, "jit")
     seed = check_seed(seed)
     p = plant.param_vector(params)
     noise = _noise(setup, seed)
@@ -434,7 +429,7 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
         if isinstance(controller, Block) and xc_init.size != controller.n_state:
             raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has "
                              f"{controller.n_state}")
-    use_compiled = isinstance(controller, Block) if compiled is None else _flag(compiled, "compiled")
+    use_compiled = isinstance(controller, Block) if compiled is None else boolean(compiled, "compiled")
     if use_compiled and not isinstance(controller, Block):
         raise TypeError("only a Block can run compiled")
     if use_compiled:
@@ -536,7 +531,7 @@ def _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0,
             raise ValueError(f"param_samples row {row}: {err}") from None
     substeps = integer(substeps, "substeps", minimum=1)
     threads = integer(threads, "threads", minimum=1)
-    jit = _flag(jit, "jit")
+    jit = boolean(jit, "jit")
     seed = integer(seed, "seed", minimum=0)
     n, m, nc = len(setup.t) - 1, samples.shape[0], controller.n_state
     noisy = bool(np.any(setup.noise_std))

@@ -21,7 +21,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
-from .checks import as_vector, integer, positive, real, real_array
+from .checks import as_vector, boolean, integer, positive, real, real_array
 from .lagrangian import EquationsOfMotion, euler_lagrange
 from .linear import LinearModel
 
@@ -111,6 +111,8 @@ def declare(*, name: str, title: str, coordinates, inputs, params, input_limit,
         (refused otherwise, so a user plant cannot silently shadow a case study).
     """
     _check_name(name, "name")
+    _check_name(title, f"{name}: title")
+    register, replace = boolean(register, "register"), boolean(replace, "replace")
     coordinates = _names(coordinates, f"{name}: coordinates")
     inputs = _names(inputs, f"{name}: inputs")
     first_order = _names(first_order, f"{name}: first_order")
@@ -193,6 +195,8 @@ def names() -> list[str]:
 
 
 def declaration(name: str) -> Declaration:
+    """The registered declaration called `name` (ValueError listing the registered plants otherwise)."""
+    _check_name(name, "plant name")
     if name not in _REGISTRY:
         raise ValueError(f"unknown plant {name!r}; valid plants: {', '.join(_REGISTRY)}")
     return _REGISTRY[name]
@@ -603,6 +607,7 @@ class Plant:
         With `check`, raises unless f(xe, ue) = 0 (to 1e-8), because away
         from an equilibrium the linear model would miss a constant term.
         """
+        check = boolean(check, "check")
         if xe is None and ue is None:
             xe, ue = self.equilibrium(params=params)
         elif xe is None or ue is None:

@@ -16,7 +16,16 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .checks import SimulationError, as_matrix, as_vector, check_memory, first_divergence, integer, positive
+from .checks import (
+    SimulationError,
+    as_matrix,
+    as_vector,
+    boolean,
+    check_memory,
+    first_divergence,
+    integer,
+    positive,
+)
 from .compile import NumpyCall
 from .compile import jit as compile_jit
 from .plant import Plant
@@ -96,8 +105,7 @@ def simulate(plant: Plant, x0, u, sample_period: float, *, method: str = "rk4",
         degree = len(radau_matrices(degree)[0]) - 1  # checks the degree
     if method in ("adaptive", "collocation"):
         rtol, atol = positive(rtol, "rtol"), positive(atol, "atol")
-    if not isinstance(jit, (bool, np.bool_)):
-        raise TypeError(f"jit must be True or False, got {jit!r}")
+    jit = boolean(jit, "jit")
     p = plant.param_vector(params)
     n = u.shape[0]
     check_memory(_simulation_bytes(plant.nx, n, method, degree),
