@@ -102,7 +102,7 @@ def real_array(value, what: str) -> np.ndarray:
         except (TypeError, ValueError):
             raise TypeError(f"{what} must hold real numbers, got {value!r}") from None
     elif arr.dtype.kind not in "iuf":
-        raise TypeError(f"{what} must hold real numbers, got {arr.dtype.name} values {value!r}")
+        raise TypeError(f"{what} must hold real numbers, got {value!r}")
     return np.asarray(arr, dtype=float)
 
 

@@ -375,10 +375,10 @@ def first_faults(x: np.ndarray, u: np.ndarray, xc: np.ndarray | None = None,
 
 
 def _fault_cause(x, u, xc, k: int) -> str:
-    if k < len(u) and not np.all(np.isfinite(u[k])):
-        return f"the command u = {u[k]} is not finite"
     if xc is not None and xc.shape[1] and not np.all(np.isfinite(xc[k])):
         return "the controller's state became non-finite"
+    if k < len(u) and not np.all(np.isfinite(u[k])):
+        return f"the command u = {u[k]} is not finite"
     return f"the state left |x| <= {DIVERGENCE_BOUND:g} or became non-finite"
 
 

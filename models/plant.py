@@ -161,7 +161,7 @@ def _limit_vector(value, size: int, what: str, inputs) -> np.ndarray:
     if arr.ndim == 0:
         arr = np.full(size, float(arr))
     elif arr.shape != (size,):
-        raise ValueError(f"{what} must be one number or {size} numbers (one per input {tuple(inputs)}), "
+        raise ValueError(f"{what} must be one number for every input or one per input {tuple(inputs)}, "
                          f"got {value!r}")
     for entry in arr:
         if not np.isfinite(entry) or entry <= 0:
@@ -230,7 +230,10 @@ class _Symbolic:
         if ns and ca.depends_on(kinetic, s):
             raise ValueError(f"{decl.name}: the kinetic energy must not depend on the first-order states "
                              f"{decl.first_order} (the Euler-Lagrange derivation would miss their rates)")
-        self.eom: EquationsOfMotion = euler_lagrange(q, dq, kinetic, potential, forces, decl.coordinates)
+        try:
+            self.eom: EquationsOfMotion = euler_lagrange(q, dq, kinetic, potential, forces, decl.coordinates)
+        except ValueError as err:
+            raise ValueError(f"{decl.name}: {err}") from None
         if nq:
             _check_mass_matrix(decl, self.eom.mass_matrix, q, p)
         x = ca.vertcat(q, dq, s)
