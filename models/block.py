@@ -181,6 +181,9 @@ class Cascade(Block):
     """
 
     def __init__(self, outer: Block, inner: Block, name: str = "cascade"):
+        for role, block in (("outer", outer), ("inner", inner)):
+            if not isinstance(block, Block):
+                raise TypeError(f"{name}: the {role} controller must be a models.Block, got {type(block).__name__}")
         if outer.sample_period != inner.sample_period:
             raise ValueError(f"outer and inner blocks need the same sample period, got "
                              f"{outer.sample_period} and {inner.sample_period} s")

@@ -194,15 +194,20 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     Cached on the plant per (controller, N, substeps, jit); `jit` compiles it
     to machine code (see `models.compile`).
     """
+    if not isinstance(plant, Plant):
+        raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
     n_steps = integer(n_steps, "n_steps", minimum=1)
     substeps = integer(substeps, "substeps", minimum=1)
+    jit = boolean(jit, "jit")
+    if not isinstance(controller, Block):
+        raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
     key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
     cache = plant._step_cache
     if key in cache:
         return cache[key][1]
-    if not isinstance(controller, Block):
-        raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
     _check_sizes(plant, controller)
+    check_memory(8.0 * n_steps * _doubles_per_step(plant, controller),
+                 f"closed_loop_function of {n_steps} steps of {plant.name}", "use fewer steps")
     rk4 = plant.step_function(controller.sample_period, substeps)
     nx, nc = plant.nx, controller.n_state
     s = ca.SX.sym("s", nx + nc)

@@ -101,6 +101,8 @@ def solve_spd(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
         k = min(remaining, key=lambda i: sum((i, j) in a for j in remaining))
         remaining.remove(k)
         order.append(k)
+        if (k, k) not in a:
+            raise ValueError(f"the matrix has a structurally zero pivot in row {k}; it is not positive definite")
         for i in remaining:
             if (i, k) not in a:
                 continue

@@ -512,7 +512,11 @@ class Plant:
             raise ValueError(f"{self.name}: the input enters the forces nonlinearly; "
                              "use equilibrium() instead")
         q = as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
-        return np.asarray(self._sym.static_input(q, self.param_vector(params))).ravel()
+        ue = np.asarray(self._sym.static_input(q, self.param_vector(params))).ravel()
+        if not np.all(np.isfinite(ue)):
+            raise ValueError(f"{self.name}: no unique input holds the plant at rest at q = {q} (the static "
+                             "balance is singular there); use equilibrium() instead")
+        return ue
 
     @property
     def casadi_configuration(self) -> ca.Function:
@@ -536,7 +540,11 @@ class Plant:
         qs = ca.SX.sym("q", self.nq)
         p = self.param_vector(params)
         jac = ca.Function("equilibrium_input_jacobian", [qs], [ca.jacobian(self.casadi_equilibrium_input(qs, p), qs)])
-        return np.asarray(jac(q), dtype=float).reshape(self.nu, self.nq)
+        value = np.asarray(jac(q), dtype=float).reshape(self.nu, self.nq)
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"{self.name}: the equilibrium input has no finite derivative at q = {q} (the static "
+                             "balance is singular there)")
+        return value
 
     @property
     def casadi_equilibrium_input(self) -> ca.Function:
@@ -568,7 +576,10 @@ class Plant:
         p = self.param_vector(params)
         if not fixed:
             pns = SimpleNamespace(**dict(zip(self.params, p)))
-            fixed = dict(self.declaration.operating_point(pns))
+            point = self.declaration.operating_point(pns)
+            if not isinstance(point, Mapping):
+                raise TypeError(f"{self.name}: operating_point must return a dict of fixed values, got {point!r}")
+            fixed = dict(point)
         unknown_names = self.coordinate_names + self.first_order_names + self.input_names
         for key, value in fixed.items():
             if key not in unknown_names:

@@ -287,6 +287,34 @@ def test_declaring_a_registered_name_is_refused_unless_replace(private_registry)
     assert "my_new_plant" in models.names()
 
 
+def test_a_singular_static_balance_is_an_error_not_a_nan_feedforward():
+    """x' = -b x + u + 1 rests wherever u = b x - 1: no unique input, and the symbolic least-squares
+    solve of the static balance gives NaN, which was returned as the feedforward."""
+    def physics(q, dq, u, p, s):
+        return models.Physics(rates={"x": -p.m * s.x + u.u + 1.0}, outputs={"x": s.x})
+
+    lag = _declare(physics, coordinates=(), first_order=("x",))
+    with pytest.raises(ValueError, match=r"user: no unique input holds the plant at rest at q = \[\] \(the static "
+                                         r"balance is singular there\); use equilibrium\(\) instead"):
+        lag.equilibrium_input([])
+    np.testing.assert_allclose(lag.equilibrium(x=2.0)[1], [1.0])
+
+
+def test_an_operating_point_that_is_not_a_dict_is_named():
+    def physics(q, dq, u, p):
+        return models.Physics(kinetic=p.m * dq.q1**2 / 2, forces=[u.u], outputs={"q1": q.q1})
+
+    plant = _declare(physics, coordinates=("q1",), operating_point=lambda p: None)
+    with pytest.raises(TypeError, match=r"user: operating_point must return a dict of fixed values, got None"):
+        plant.equilibrium()
+
+
+def test_solve_spd_names_a_zero_pivot():
+    from models.lagrangian import solve_spd
+    with pytest.raises(ValueError, match=r"structurally zero pivot in row 0"):
+        solve_spd(ca.SX(np.array([[0.0, 1.0], [1.0, 2.0]])), ca.SX.sym("b", 2))
+
+
 def test_a_coordinate_without_kinetic_energy_is_named():
     """Today's KeyError (0, 0) from the elimination: q1 has no inertia."""
     def physics(q, dq, u, p):
@@ -485,6 +513,12 @@ def test_monte_carlo_arguments(kwargs, error, message):
     (lambda: models.get("arm").linearize().discretize("0.01"), TypeError, r"sample_period \(s\) must be a real"),
     (lambda: models.closed_loop_function(models.get("arm"), CountingBlock(1), 10.5), ValueError,
      r"n_steps must be an integer, got 10.5"),
+    (lambda: models.closed_loop_function(models.get("arm"), CountingBlock(1), 10**9), models.ResourceLimitError,
+     r"closed_loop_function of 1000000000 steps of arm needs about \d+ GiB"),
+    (lambda: models.closed_loop_function(models.get("arm"), PythonNaN(1), 10), TypeError,
+     r"closed_loop_function needs a Block"),
+    (lambda: models.Cascade(CountingBlock(1), "inner"), TypeError,
+     r"cascade: the inner controller must be a models.Block, got str"),
 ])
 def test_blocks_signals_and_uncertainty_arguments(call, error, message):
     with pytest.raises(error, match=message):
