@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import abc
 import copy
+from collections.abc import Mapping
 from functools import cached_property
-from typing import Mapping, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import casadi as ca
 import numpy as np
 
-from .checks import as_vector, positive
+from .checks import as_vector, integer, positive, real_array
 
 MEASURES = ("outputs", "state")
 
@@ -44,8 +45,17 @@ class Controller(Protocol):
 
 
 def saturate(u, limit):
-    """Clip u to [-limit, limit] elementwise (CasADi or numpy)."""
-    return ca.fmin(ca.fmax(u, -limit), limit)
+    """Clip u to [-limit, limit] elementwise (CasADi or numpy); NaN stays NaN.
+
+    Written with comparisons rather than fmin/fmax, which return the other
+    argument for NaN: a NaN command would silently become -limit, a finite
+    force, and a fault upstream would look like a saturated actuator. For
+    every other u the value equals fmin(fmax(u, -limit), limit) bit for bit,
+    and so does the derivative except exactly at u = ±limit.
+    """
+    if isinstance(u, (ca.SX, ca.MX, ca.DM)):
+        return ca.if_else(u > limit, limit, ca.if_else(u < -limit, -limit, u))
+    return np.clip(u, -np.asarray(limit), limit)
 
 
 class Block(abc.ABC):
@@ -67,13 +77,19 @@ class Block(abc.ABC):
     def __init__(self, *, sample_period: float, n_state: int, n_measured: int, n_reference: int,
                  n_input: int, gains: Mapping[str, float | np.ndarray], measures: str = "outputs",
                  name: str = ""):
-        self.sample_period = positive(sample_period, "sample_period (s)")
-        if measures not in MEASURES:
-            raise ValueError(f"measures must be one of {MEASURES}, got {measures!r}")
-        self.n_state, self.n_measured = int(n_state), int(n_measured)
-        self.n_reference, self.n_input = int(n_reference), int(n_input)
-        self.measures = measures
         self.name = name or type(self).__name__
+        if not isinstance(self.name, str):
+            raise TypeError(f"a block's name must be a string, got {name!r}")
+        self.sample_period = positive(sample_period, f"{self.name}: sample_period (s)")
+        if measures not in MEASURES:
+            raise ValueError(f"{self.name}: measures must be one of {MEASURES}, got {measures!r}")
+        self.n_state = integer(n_state, f"{self.name}: n_state", minimum=0)
+        self.n_measured = integer(n_measured, f"{self.name}: n_measured", minimum=0)
+        self.n_reference = integer(n_reference, f"{self.name}: n_reference", minimum=0)
+        self.n_input = integer(n_input, f"{self.name}: n_input", minimum=1)
+        self.measures = measures
+        if not isinstance(gains, Mapping):
+            raise TypeError(f"{self.name}: gains must be a mapping name -> value, got {gains!r}")
         self.gains = {k: self._checked_gain(k, v) for k, v in gains.items()}
 
     # ------------------------------------------------------------- to write
@@ -87,7 +103,9 @@ class Block(abc.ABC):
 
     # ------------------------------------------------------------- provided
     def _checked_gain(self, name, value) -> np.ndarray:
-        arr = np.array(value, dtype=float)
+        arr = np.array(real_array(value, f"{self.name}: gain {name}"))
+        if arr.ndim > 2:
+            raise ValueError(f"{self.name}: gain {name} must be a number, vector or matrix, got shape {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"{self.name}: gain {name} is not finite: {value}")
         return arr
@@ -111,7 +129,7 @@ class Block(abc.ABC):
             i += g.size
         return out
 
-    def with_gains(self, **gains) -> "Block":
+    def with_gains(self, **gains) -> Block:
         """A copy with some gains replaced (same shapes); shares the compiled step."""
         unknown = set(gains) - set(self.gains)
         if unknown:
@@ -163,6 +181,9 @@ class Cascade(Block):
     """
 
     def __init__(self, outer: Block, inner: Block, name: str = "cascade"):
+        for role, block in (("outer", outer), ("inner", inner)):
+            if not isinstance(block, Block):
+                raise TypeError(f"{name}: the {role} controller must be a models.Block, got {type(block).__name__}")
         if outer.sample_period != inner.sample_period:
             raise ValueError(f"outer and inner blocks need the same sample period, got "
                              f"{outer.sample_period} and {inner.sample_period} s")
@@ -191,7 +212,7 @@ class Cascade(Block):
         _, r_inner = self.outer.step(xo, y0, r0)
         return np.concatenate([xo, self.inner.initial_state(y0, r_inner)])
 
-    def with_gains(self, **gains) -> "Cascade":
+    def with_gains(self, **gains) -> Cascade:
         new = super().with_gains(**gains)
         new.outer = self.outer.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("outer.")})
         new.inner = self.inner.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("inner.")})

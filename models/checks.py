@@ -1,8 +1,109 @@
-"""Input validation shared by every package: one place that says what was wrong."""
+"""Input validation shared by every package: one place that says what was wrong.
+
+Type faults (a string, a bool or a list where a number belongs) raise
+TypeError; value faults (NaN, a negative period, a wrong length) raise
+ValueError; a request whose memory estimate exceeds `MEMORY_LIMIT_BYTES`
+raises `ResourceLimitError` before any work is done. Every message names the
+argument, the value given and what is allowed.
+"""
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
+
+#: Largest memory, in bytes, one call may allocate for its results and working
+#: arrays (estimated up front). Override by assigning a new value, e.g.
+#: ``models.checks.MEMORY_LIMIT_BYTES = 8 * 2**30``; it is read at every call.
+MEMORY_LIMIT_BYTES = 2**30
+
+
+class ResourceLimitError(ValueError):
+    """A request refused up front because it would need more memory than `MEMORY_LIMIT_BYTES`."""
+
+
+class SimulationError(RuntimeError):
+    """A simulation that diverged or whose solver failed; the message says when."""
+
+
+def _is_real_scalar(value) -> bool:
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    if isinstance(value, numbers.Real):
+        return True
+    return isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf"
+
+
+def real(value, what: str, *, finite: bool = True) -> float:
+    """Return one real number as a float.
+
+    Raises
+    ------
+    TypeError
+        Naming `what` when `value` is not a real number (a bool, a string, a
+        sequence or an array of several entries are refused, not converted).
+    ValueError
+        When `finite` and the value is NaN or infinite.
+    """
+    if not _is_real_scalar(value):
+        raise TypeError(f"{what} must be a real number, got {type(value).__name__} {value!r}")
+    number = float(value)
+    if finite and not np.isfinite(number):
+        raise ValueError(f"{what} must be finite, got {number}")
+    return number
+
+
+def positive(value, what: str) -> float:
+    """Return `value` as a float, or raise naming `what` unless it is a finite real number > 0."""
+    number = real(value, what, finite=False)
+    if not np.isfinite(number) or number <= 0:
+        raise ValueError(f"{what} must be a finite number > 0, got {number}")
+    return number
+
+
+def integer(value, what: str, minimum: int | None = None) -> int:
+    """Return `value` as an int, refusing fractions (2.7), bools and strings.
+
+    A float with an integral value (3.0) is accepted.
+
+    Raises
+    ------
+    TypeError
+        When `value` is not a real number.
+    ValueError
+        When it is not integral, or below `minimum`.
+    """
+    if not _is_real_scalar(value):
+        raise TypeError(f"{what} must be an integer, got {type(value).__name__} {value!r}")
+    if not isinstance(value, numbers.Integral) and not float(value).is_integer():
+        raise ValueError(f"{what} must be an integer, got {value!r}")
+    number = int(value)
+    if minimum is not None and number < minimum:
+        raise ValueError(f"{what} must be an integer >= {minimum}, got {number}")
+    return number
+
+
+def boolean(value, what: str) -> bool:
+    """Return `value` as a bool, refusing anything but True and False (a string "no" is truthy)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{what} must be True or False, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
+def real_array(value, what: str) -> np.ndarray:
+    """`value` as a float array, refusing strings, bools and other non-numbers (TypeError naming `what`)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind == "O":
+        if any(isinstance(v, (str, bytes, bool, np.bool_)) or v is None for v in arr.flat):
+            raise TypeError(f"{what} must hold real numbers, got {value!r}")
+        try:
+            arr = arr.astype(float)
+        except (TypeError, ValueError):
+            raise TypeError(f"{what} must hold real numbers, got {value!r}") from None
+    elif arr.dtype.kind not in "iuf":
+        raise TypeError(f"{what} must hold real numbers, got {value!r}")
+    return np.asarray(arr, dtype=float)
 
 
 def as_vector(value, size: int, what: str) -> np.ndarray:
@@ -10,10 +111,12 @@ def as_vector(value, size: int, what: str) -> np.ndarray:
 
     Raises
     ------
+    TypeError
+        Naming `what` when an entry is not a real number (a string, a bool).
     ValueError
         Naming `what` when the length is wrong or an entry is NaN or infinite.
     """
-    arr = np.asarray(value, dtype=float)
+    arr = real_array(value, what)
     if arr.ndim == 0 and size == 1:
         arr = arr.reshape(1)
     arr = arr.reshape(-1) if arr.ndim == 2 and 1 in arr.shape else arr
@@ -29,7 +132,7 @@ def as_matrix(value, columns: int, what: str, rows: int | None = None) -> np.nda
 
     A 1-D array is read as one column when `columns` is 1.
     """
-    arr = np.asarray(value, dtype=float)
+    arr = real_array(value, what)
     if arr.ndim == 1 and columns == 1:
         arr = arr[:, None]
     if arr.ndim != 2 or arr.shape[1] != columns or (rows is not None and arr.shape[0] != rows):
@@ -41,16 +144,32 @@ def as_matrix(value, columns: int, what: str, rows: int | None = None) -> np.nda
     return arr
 
 
-def positive(value: float, what: str) -> float:
-    """Return `value` as a float, or raise naming `what` unless it is finite and > 0."""
-    value = float(value)
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{what} must be a finite number > 0, got {value}")
-    return value
+def format_bytes(nbytes: float) -> str:
+    """'1.5 GiB' for 1.5 * 2**30."""
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if nbytes >= size:
+            return f"{nbytes / size:.3g} {unit}"
+    return f"{nbytes:.0f} B"
 
 
-class SimulationError(RuntimeError):
-    """A simulation that diverged or whose solver failed; the message says when."""
+def check_memory(nbytes: float, what: str, hint: str = "") -> None:
+    """Refuse a request whose estimated memory `nbytes` exceeds `MEMORY_LIMIT_BYTES`.
+
+    Parameters
+    ----------
+    nbytes : estimated bytes the request would allocate
+    what : the request, e.g. "simulate_closed_loop of 1e9 steps"
+    hint : how to stay within the limit (appended to the message)
+
+    Raises
+    ------
+    ResourceLimitError
+        Naming the request, its size and the limit.
+    """
+    if nbytes > MEMORY_LIMIT_BYTES:
+        raise ResourceLimitError(
+            f"{what} needs about {format_bytes(nbytes)}, above the limit of {format_bytes(MEMORY_LIMIT_BYTES)} "
+            f"(models.checks.MEMORY_LIMIT_BYTES){'; ' + hint if hint else ''}")
 
 
 def first_divergence(x: np.ndarray, bound: float) -> int | None:

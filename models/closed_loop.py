@@ -8,23 +8,54 @@ Every sample k (t_k = k * Ts, Ts the controller's sample period):
 
 n_k is seeded Gaussian measurement noise, d_k an input disturbance. For a
 `Block` the whole run is one CasADi mapaccum (and a Monte Carlo one map of
-it); other controllers (MPC) run the same step in a Python loop.
+it, in chunks of samples); other controllers (MPC) run the same step in a
+Python loop.
+
+Divergence, on every path: a run diverges at the first sample t_k at which
+the plant state x_k is non-finite or beyond `DIVERGENCE_BOUND`, the command
+u_k is non-finite, or a `Block`'s state x_c,k is non-finite. A NaN command is
+never clipped into a finite force: the plant's input is undefined from then
+on, and the states after it are NaN.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from .block import Block, Controller
-from .checks import SimulationError, as_matrix, as_vector, first_divergence
-from .compile import NumpyCall, jit as compile_jit
+from .block import Block, Controller, saturate
+from .checks import (
+    SimulationError,
+    as_matrix,
+    as_vector,
+    boolean,
+    check_memory,
+    format_bytes,
+    integer,
+    positive,
+    real_array,
+)
+from .compile import NumpyCall
+from .compile import jit as compile_jit
 from .plant import Plant
 from .signals import sample
-from .simulate import DIVERGENCE_BOUND
+from .simulate import DIVERGENCE_BOUND, output_call
+
+#: Working memory, in bytes, of one chunk of a Monte Carlo batch (CasADi's
+#: output buffers and the noise of the chunk's samples). Results do not depend
+#: on the chunk size. Override by assignment.
+MONTE_CARLO_CHUNK_BYTES = 64 * 2**20
+
+#: Samples x steps per chunk at most. CasADi stores the sparsity of every
+#: mapped input and output explicitly, so building the map of a chunk costs
+#: time superlinear in its size: 0.6 s for 256 pendulum runs of 2000 steps,
+#: 15 ms for 16 (measured); beyond ~64k sample-steps a call's own work
+#: (~30 ms) already dwarfs the per-call overhead.
+MONTE_CARLO_CHUNK_STEPS = 2**16
 
 
 @dataclass(frozen=True)
@@ -43,7 +74,8 @@ class ClosedLoopResult:
     step_time : (N,) s of controller computation per sample
     status : list of per-step solver records (dicts) for optimizing controllers, else None
     input_limit : (nu,)
-    diverged_at : time in s at which the state diverged, or None
+    diverged_at : s, the first sample time at which the state left the bound or became
+        non-finite, or the command or the controller state became non-finite; None if never
     """
 
     t: np.ndarray
@@ -72,6 +104,85 @@ class ClosedLoopResult:
         return self.x[:, self.state_names.index(name)]
 
 
+class MonteCarloResult(Sequence):
+    """Closed-loop runs of one controller on M parameter samples, held as arrays.
+
+    Indexing gives one sample as a `ClosedLoopResult` whose arrays are
+    read-only views into the batch (no copies); iterating gives every sample.
+
+    Attributes
+    ----------
+    t : (N+1,) s;  r : (N+1, n_reference);  d : (N, nu)   shared by every sample
+    x : (M, N+1, nx) plant states
+    xc : (M, N+1, n_state) controller states
+    u : (M, N, nu) commands;  measured : (M, N, n_measured)
+    params : (M, n_params) the actual parameters of each sample
+    diverged_at : (M,) s, NaN where the sample did not diverge (see the module docstring)
+    first_sample : index of this batch's first sample in the whole sample set
+        (non-zero for the chunks of `monte_carlo_chunks`)
+    y : (M, N+1, ny) noise-free outputs, computed on first use
+    """
+
+    def __init__(self, *, plant: Plant, controller: str, t, r, d, x, xc, u, measured, params, diverged_at,
+                 first_sample: int = 0):
+        self._plant = plant
+        self.controller = controller
+        self.t, self.r, self.d = t, r, d
+        self.x, self.xc, self.u, self.measured = x, xc, u, measured
+        self.params, self.diverged_at = params, diverged_at
+        self.first_sample = first_sample
+        self.input_limit = plant.input_limit.copy()
+        self.state_names, self.output_names, self.input_names = \
+            plant.state_names, plant.output_names, plant.input_names
+        self._y = None
+        self._step_time = np.full(len(t) - 1, np.nan)
+        for arr in (self.t, self.r, self.d, self.x, self.xc, self.u, self.measured, self.params,
+                    self.diverged_at, self.input_limit, self._step_time):
+            arr.setflags(write=False)
+
+    @property
+    def y(self) -> np.ndarray:
+        if self._y is None:
+            self._y = batch_outputs(self._plant, self.x, self.params)
+            self._y.setflags(write=False)
+        return self._y
+
+    def __len__(self) -> int:
+        return self.x.shape[0]
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        i = int(index)
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"sample {index} of a batch of {len(self)}")
+        i %= len(self)
+        k = self.diverged_at[i]
+        return ClosedLoopResult(
+            t=self.t, x=self.x[i], y=self.y[i], r=self.r, u=self.u[i], d=self.d, measured=self.measured[i],
+            xc=self.xc[i], step_time=self._step_time, status=None, input_limit=self.input_limit,
+            state_names=self.state_names, output_names=self.output_names, input_names=self.input_names,
+            controller=self.controller, diverged_at=None if np.isnan(k) else float(k), params=self.params[i])
+
+    def __iter__(self) -> Iterator[ClosedLoopResult]:
+        return (self[i] for i in range(len(self)))
+
+    def __repr__(self) -> str:
+        diverged = int(np.sum(~np.isnan(self.diverged_at)))
+        return (f"MonteCarloResult({self.controller!r}, {len(self)} samples x {len(self.t)} times, "
+                f"{diverged} diverged)")
+
+
+def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Noise-free outputs of M trajectories, (M, P, ny), from states x (M, P, nx) and params (M, n_params)."""
+    m, points = x.shape[0], x.shape[1]
+    call = output_call(plant, points)
+    y = np.empty((m, points, plant.ny))
+    for i in range(m):
+        y[i] = call(x[i].T, params[i])[0].T
+    return y
+
+
 def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps: int = 10,
                          jit: bool = False) -> ca.Function:
     """The whole run as one CasADi Function, differentiable in the gains and parameters.
@@ -79,16 +190,24 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     Signature ``(x0, xc0, R, noise, D, p, gains) -> (X, XC, U, measured)`` with
     R (n_reference, N), noise (n_measured, N), D (nu, N); X (nx, N) and XC
     (n_state, N) the states after each sample, U (nu, N) the commands.
+    The plant receives `saturate(U)`, which keeps a NaN command NaN.
     Cached on the plant per (controller, N, substeps, jit); `jit` compiles it
     to machine code (see `models.compile`).
     """
+    if not isinstance(plant, Plant):
+        raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
+    n_steps = integer(n_steps, "n_steps", minimum=1)
+    substeps = integer(substeps, "substeps", minimum=1)
+    jit = boolean(jit, "jit")
+    if not isinstance(controller, Block):
+        raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
     key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
     cache = plant.function_cache
     if key in cache:
         return cache[key][1]
-    if not isinstance(controller, Block):
-        raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
     _check_sizes(plant, controller)
+    check_memory(8.0 * n_steps * _doubles_per_step(plant, controller),
+                 f"closed_loop_function of {n_steps} steps of {plant.name}", "use fewer steps")
     rk4 = plant.step_function(controller.sample_period, substeps)
     nx, nc = plant.nx, controller.n_state
     s = ca.SX.sym("s", nx + nc)
@@ -100,7 +219,7 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     x, xc = s[:nx], s[nx:]
     meas = (plant.casadi_h(x, p) if controller.measures == "outputs" else x) + noise
     xc_next, u = controller.casadi_step(xc, meas, r, g)
-    x_next = rk4(x, ca.fmin(ca.fmax(u, -plant.input_limit), plant.input_limit) + d, p)
+    x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
     one = ca.Function("closed_loop_step", [s, r, noise, d, p, g], [ca.vertcat(x_next, xc_next), u, meas])
     run = one.mapaccum("closed_loop_run", n_steps)
     x0, xc0 = ca.MX.sym("x0", nx), ca.MX.sym("xc0", nc)
@@ -125,6 +244,30 @@ def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit
     return plant.function_cache[key][2]
 
 
+def _batch_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool, size: int,
+               threads: int, noisy: bool) -> NumpyCall:
+    """`size` closed-loop runs in one call, `threads` at a time; cached on the plant.
+
+    ``(x0 (nx,), XC0 (n_state, size), R (n_reference, N), noise, D (nu, N), P (n_params, size), gains)
+    -> (X (nx, N size), XC, U, measured)``, noise (n_measured, N size) when `noisy`, else
+    (n_measured, N) shared. Output columns are sample-major: sample i owns columns i N .. (i+1) N - 1.
+    """
+    key = ("closed_loop_batch", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit,
+           size, threads, noisy)
+    cache = plant.function_cache
+    if key not in cache:
+        run = closed_loop_function(plant, controller, n_steps, substeps, jit)
+        mapped = run.map(size, "thread", min(threads, size)) if size > 1 else run
+        nx, nc, nm = plant.nx, controller.n_state, controller.n_measured
+        args = [ca.MX.sym("x0", nx), ca.MX.sym("xc0", nc, size), ca.MX.sym("R", controller.n_reference, n_steps),
+                ca.MX.sym("noise", nm, n_steps * size if noisy else n_steps), ca.MX.sym("D", plant.nu, n_steps),
+                ca.MX.sym("p", plant.n_params, size), ca.MX.sym("gains", controller.gain_vector().size)]
+        fun = ca.Function("closed_loop_batch", args, mapped.call(args),
+                          ["x0", "xc0", "R", "noise", "D", "p", "gains"], ["X", "XC", "U", "measured"])
+        cache[key] = (controller.casadi_step, NumpyCall(fun))
+    return cache[key][1]
+
+
 def _check_sizes(plant: Plant, controller) -> None:
     n_meas = plant.ny if controller.measures == "outputs" else plant.nx
     if isinstance(controller, Block):
@@ -145,33 +288,103 @@ class _Setup:
     n_meas: int
 
 
+def _doubles_per_step(plant: Plant, controller) -> int:
+    """Doubles one closed-loop sample stores: results (x, y, xc, r, u, d, measured, t, step time) plus
+    CasADi's work arrays of the compiled run (its state and output buffers, the mapped controller
+    step that times the run). An estimate for `check_memory`, about 2x the results alone."""
+    nc = int(getattr(controller, "n_state", 0))
+    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
+    results = plant.nx + plant.ny + nc + controller.n_reference + 2 * plant.nu + n_meas + 2
+    work = 2 * (plant.nx + nc) + plant.nu + 2 * n_meas + nc + controller.n_reference
+    return results + work
+
+
+def check_seed(seed, what: str = "seed"):
+    """A seed numpy's `default_rng` takes: None, an integer >= 0, a SeedSequence or a Generator."""
+    if seed is None or isinstance(seed, (np.random.SeedSequence, np.random.Generator, np.random.BitGenerator)):
+        return seed
+    return integer(seed, what, minimum=0)
+
+
 def _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std) -> _Setup:
+    if not isinstance(plant, Plant):
+        raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
     if not isinstance(controller, Controller):
         raise TypeError(f"{controller!r} is not a controller: it needs sample_period, measures, "
                         "n_reference, initial_state and step")
     _check_sizes(plant, controller)
     ts = controller.sample_period
-    if not np.isfinite(duration) or duration <= 0:
-        raise ValueError(f"duration must be > 0 s, got {duration}")
+    duration = positive(duration, "duration (s)")
     n = int(round(duration / ts))
     if n < 1:
         raise ValueError(f"duration {duration} s is shorter than one sample ({ts} s)")
+    check_memory(8.0 * (n + 1) * _doubles_per_step(plant, controller),
+                 f"a closed loop of {n} samples ({duration:g} s at Ts = {ts:g} s) of {plant.name}",
+                 "shorten the run or lengthen the sample period")
     t = ts * np.arange(n + 1)
     x0 = plant.equilibrium()[0] if x0 is None else as_vector(x0, plant.nx, f"{plant.name} initial state")
     r = sample(reference, t, controller.n_reference, "reference")
     d = sample(input_disturbance, t[:-1], plant.nu, "input disturbance")
     n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    std = np.broadcast_to(np.asarray(noise_std, dtype=float), (n_meas,))
+    std = real_array(noise_std, "noise_std")
+    if std.ndim > 1 or std.size not in (1, n_meas):
+        raise ValueError(f"noise_std must be one number or {n_meas} numbers (one per measurement), "
+                         f"got shape {std.shape}")
+    std = np.broadcast_to(std, (n_meas,))
     if not np.all(np.isfinite(std)) or np.any(std < 0):
         raise ValueError(f"noise_std must be finite and >= 0, got {noise_std}")
     return _Setup(t, x0, r, d, np.array(std), n_meas)
 
 
-def _noise(setup: _Setup, seed: int | None) -> np.ndarray:
+def _noise(setup: _Setup, seed) -> np.ndarray:
     n = len(setup.t) - 1
     if not np.any(setup.noise_std):
         return np.zeros((n, setup.n_meas))
     return np.random.default_rng(seed).standard_normal((n, setup.n_meas)) * setup.noise_std
+
+
+def first_faults(x: np.ndarray, u: np.ndarray, xc: np.ndarray | None = None,
+                 bound: float = DIVERGENCE_BOUND) -> np.ndarray:
+    """Index k of the first fault of each run, -1 where there is none.
+
+    A fault at sample k: x_k non-finite or beyond `bound`, u_k non-finite, or xc_k non-finite.
+
+    Parameters
+    ----------
+    x : (M, N+1, nx);  u : (M, N, nu);  xc : (M, N+1, n_state) or None
+
+    Returns
+    -------
+    ndarray of int, (M,)
+    """
+    def clean(arr, bound=None) -> np.ndarray:
+        # Per run: finite (and within bound); two reductions, no temporary copy. NaN propagates
+        # through max and min, so a NaN anywhere makes the run suspect.
+        if arr is None or arr.size == 0:
+            return np.ones(x.shape[0], dtype=bool)
+        high, low = np.max(arr, axis=(1, 2)), np.min(arr, axis=(1, 2))
+        ok = np.isfinite(high) & np.isfinite(low)
+        return ok if bound is None else ok & (high <= bound) & (low >= -bound)
+
+    first = np.full(x.shape[0], -1)
+    suspect = ~(clean(x, bound) & clean(u) & clean(xc))
+    for i in np.flatnonzero(suspect):
+        with np.errstate(invalid="ignore"):
+            bad = ~np.all(np.abs(x[i]) <= bound, axis=1)
+        bad[:-1] |= ~np.all(np.isfinite(u[i]), axis=1)
+        if xc is not None and xc.shape[2]:
+            bad |= ~np.all(np.isfinite(xc[i]), axis=1)
+        if np.any(bad):
+            first[i] = int(np.argmax(bad))
+    return first
+
+
+def _fault_cause(x, u, xc, k: int) -> str:
+    if xc is not None and xc.shape[1] and not np.all(np.isfinite(xc[k])):
+        return "the controller's state became non-finite"
+    if k < len(u) and not np.all(np.isfinite(u[k])):
+        return f"the command u = {u[k]} is not finite"
+    return f"the state left |x| <= {DIVERGENCE_BOUND:g} or became non-finite"
 
 
 def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *, x0=None,
@@ -191,7 +404,7 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
     x0 : (nx,), default the plant's standard equilibrium state
     input_disturbance : constant, callable or array (N, nu), added at the plant input
     noise_std : float or (n_measured,), standard deviation of Gaussian measurement noise
-    seed : seed of the noise generator
+    seed : seed of the noise generator (None, an integer >= 0, or a numpy SeedSequence)
     compiled : force (True) or refuse (False) the compiled path; default: compiled for Blocks
     allow_divergence : return a result with `diverged_at` set instead of raising
     jit : compile the run to machine code first (Blocks only; pays off for long or repeated runs)
@@ -199,16 +412,29 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
     Raises
     ------
     SimulationError
-        When the state diverges, naming the time.
+        When the run diverges (see the module docstring), naming the time and the cause.
+    ResourceLimitError
+        Before any work, when the run would need more than `models.checks.MEMORY_LIMIT_BYTES`.
     """
     setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
+    substeps = integer(substeps, "substeps", minimum=1)
+    allow_divergence, jit = boolean(allow_divergence, "allow_divergence"), boolean(jit, "jit")
+    seed = check_seed(seed)
     p = plant.param_vector(params)
     noise = _noise(setup, seed)
     n = len(setup.t) - 1
     y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + \
         (noise[0] if n else 0.0)
-    xc_init = controller.initial_state(y0, setup.r[0]) if xc0 is None else np.asarray(xc0, dtype=float)
-    use_compiled = isinstance(controller, Block) if compiled is None else compiled
+    name = getattr(controller, "name", "controller")
+    if xc0 is not None:
+        size = controller.n_state if isinstance(controller, Block) else np.size(xc0)
+        xc_init = as_vector(xc0, size, f"{name}: initial controller state xc0")
+    else:
+        xc_init = np.asarray(controller.initial_state(y0, setup.r[0]), dtype=float).ravel()
+        if isinstance(controller, Block) and xc_init.size != controller.n_state:
+            raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has "
+                             f"{controller.n_state}")
+    use_compiled = isinstance(controller, Block) if compiled is None else boolean(compiled, "compiled")
     if use_compiled and not isinstance(controller, Block):
         raise TypeError("only a Block can run compiled")
     if use_compiled:
@@ -219,15 +445,16 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
         u, measured = U.T, M.T
         step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
         status = None
+        xc_check = xc
     else:
-        x, u, measured, step_time, status, xc = _python_loop(plant, controller, setup, p, noise,
-                                                              xc_init, substeps)
-    y = np.asarray(plant.casadi_h.map(n + 1)(x.T, p)).T
-    k = first_divergence(x, DIVERGENCE_BOUND)
-    diverged_at = None if k is None else float(setup.t[k])
+        x, u, measured, step_time, status, xc, xc_check = _python_loop(plant, controller, setup, p, noise,
+                                                                        xc_init, substeps)
+    k = int(first_faults(x[None], u[None], None if xc_check is None else xc_check[None])[0])
+    diverged_at = None if k < 0 else float(setup.t[k])
     if diverged_at is not None and not allow_divergence:
-        raise SimulationError(f"{plant.name} under {getattr(controller, 'name', 'controller')}: closed loop "
-                              f"diverged at t = {diverged_at:.4g} s")
+        raise SimulationError(f"{plant.name} under {name}: closed loop diverged at t = {diverged_at:.4g} s "
+                              f"({_fault_cause(x, u, xc_check, k)})")
+    y = batch_outputs(plant, x[None], p[None])[0]
     return ClosedLoopResult(t=setup.t, x=x, y=y, r=setup.r, u=u, d=setup.d, measured=measured, xc=xc,
                             step_time=step_time, status=status, input_limit=plant.input_limit.copy(),
                             state_names=plant.state_names, output_names=plant.output_names,
@@ -246,81 +473,197 @@ def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
 
 
 def _python_loop(plant, controller, setup, p, noise, xc, substeps):
+    """Step any controller in Python; stops at the first fault, leaving NaN after it.
+
+    Returns (x, u, measured, step_time, status, xc history of a Block or None,
+    controller states as an array for fault detection or None).
+    """
     n = len(setup.t) - 1
     rk4 = plant.step_function(controller.sample_period, substeps)
-    x = np.empty((n + 1, plant.nx))
+    x = np.full((n + 1, plant.nx), np.nan)
     x[0] = setup.x0
-    u = np.empty((n, plant.nu))
-    measured = np.empty((n, setup.n_meas))
-    step_time = np.empty(n)
+    u = np.full((n, plant.nu), np.nan)
+    measured = np.full((n, setup.n_meas), np.nan)
+    step_time = np.full(n, np.nan)
     states = [np.asarray(xc, dtype=float)]
     status = [] if hasattr(controller, "step_info") else None
     limit = plant.input_limit
-    for k in range(n):
+    name = getattr(controller, "name", "controller")
+    for k in range(n if np.all(np.isfinite(states[0])) else 0):
         meas = (np.asarray(plant.casadi_h(x[k], p)).ravel() if controller.measures == "outputs" else x[k]) + noise[k]
         start = time.perf_counter()
         xc, uk = controller.step(xc, meas, setup.r[k])
         step_time[k] = time.perf_counter() - start
         if status is not None:
             status.append(controller.step_info())
+        uk = np.asarray(uk, dtype=float).ravel()
+        if uk.size != plant.nu:
+            raise ValueError(f"{name} returned {uk.size} inputs, {plant.name} takes {plant.nu}")
         u[k], measured[k] = uk, meas
-        x[k + 1] = np.asarray(rk4(x[k], np.clip(uk, -limit, limit) + setup.d[k], p)).ravel()
         states.append(np.asarray(xc, dtype=float))
-        if first_divergence(x[k + 1:k + 2], DIVERGENCE_BOUND) is not None:
-            x[k + 2:] = np.nan
-            u[k + 1:] = np.nan
-            measured[k + 1:] = np.nan
-            step_time[k + 1:] = np.nan
+        if not np.all(np.isfinite(uk)):
+            break  # the plant's input is undefined: its state stays NaN from here on
+        x[k + 1] = np.asarray(rk4(x[k], saturate(uk, limit) + setup.d[k], p)).ravel()
+        if not np.all(np.isfinite(states[-1])) or not np.all(np.isfinite(x[k + 1])) or \
+                np.any(np.abs(x[k + 1]) > DIVERGENCE_BOUND):
             break
-    xc_hist = np.array(states) if isinstance(controller, Block) else None
-    if xc_hist is not None and len(xc_hist) < n + 1:
-        xc_hist = np.vstack([xc_hist, np.full((n + 1 - len(xc_hist), xc_hist.shape[1]), np.nan)])
-    return x, u, measured, step_time, status, xc_hist
+    padded = None
+    try:
+        history = np.array(states, dtype=float).reshape(len(states), -1)
+        padded = np.vstack([history, np.full((n + 1 - len(history), history.shape[1]), np.nan)])
+    except ValueError:  # a controller whose state changes shape: only its commands are checked
+        pass
+    xc_hist = padded if isinstance(controller, Block) else None
+    return x, u, measured, step_time, status, xc_hist, padded
+
+
+def _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps, input_disturbance,
+                      noise_std, seed, threads, jit, chunk_size):
+    """Validate a Monte Carlo request; returns everything a chunk needs."""
+    if not isinstance(controller, Block):
+        raise TypeError("monte_carlo batches Blocks; run other controllers with simulate_closed_loop")
+    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
+    samples = as_matrix(param_samples, plant.n_params, "param_samples")
+    if samples.shape[0] == 0:
+        raise ValueError("param_samples has no rows; give at least one parameter vector")
+    must_be_positive = np.array([p.positive for p in plant.param_info], dtype=bool)
+    invalid = np.any((samples < 0) | ((samples == 0) & must_be_positive), axis=1)
+    if np.any(invalid):
+        row = int(np.argmax(invalid))
+        try:
+            plant.param_vector(samples[row])
+        except ValueError as err:
+            raise ValueError(f"param_samples row {row}: {err}") from None
+    substeps = integer(substeps, "substeps", minimum=1)
+    threads = integer(threads, "threads", minimum=1)
+    jit = boolean(jit, "jit")
+    seed = integer(seed, "seed", minimum=0)
+    n, m, nc = len(setup.t) - 1, samples.shape[0], controller.n_state
+    noisy = bool(np.any(setup.noise_std))
+    work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if noisy else 2) * setup.n_meas
+                      + controller.n_reference)
+    if chunk_size is None:
+        by_steps = max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
+        chunk = int(min(m, max(1, min(by_steps, MONTE_CARLO_CHUNK_BYTES // work))))
+    else:
+        chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
+    return dict(setup=setup, samples=samples, substeps=substeps, threads=threads, jit=jit, seed=seed, n=n,
+                noisy=noisy, chunk=chunk, chunk_bytes=chunk * work)
+
+
+def _run_chunk(plant, controller, plan, start, stop, out) -> None:
+    """Run samples start..stop-1 into the arrays `out` (x, xc, u, measured, diverged_at) of stop - start rows."""
+    setup, samples, n = plan["setup"], plan["samples"], plan["n"]
+    c = stop - start
+    nx, nc, nm = plant.nx, controller.n_state, setup.n_meas
+    noise = np.zeros((c, n, nm)) if plan["noisy"] else None
+    if plan["noisy"]:
+        for j in range(c):
+            noise[j] = _noise(setup, np.random.SeedSequence([plan["seed"], start + j]))
+    if controller.measures == "outputs":
+        y0 = batch_outputs(plant, np.broadcast_to(setup.x0, (c, 1, nx)), samples[start:stop])[:, 0]
+    else:
+        y0 = np.broadcast_to(setup.x0, (c, nx))
+    if noise is not None and n:
+        y0 = y0 + noise[:, 0]
+    # One initial_state call per distinct first measurement (all samples share it without noise).
+    rows, inverse = np.unique(y0, axis=0, return_inverse=True)
+    initial = np.array([np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel()
+                        for row in rows]).reshape(len(rows), nc)
+    xc0 = initial[np.ravel(inverse)]
+    call = _batch_run(plant, controller, n, plan["substeps"], plan["jit"], c, plan["threads"], plan["noisy"])
+    noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
+    X, XC, U, M = call(setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, samples[start:stop].T,
+                       controller.gain_vector())
+    x, xc, u, measured, diverged_at = out
+    x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
+    xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
+    u[:] = U.T.reshape(c, n, plant.nu)
+    measured[:] = M.T.reshape(c, n, nm)
+    first = first_faults(x, u, xc)
+    diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
+
+
+def _allocate(plant, controller, plan, m) -> tuple:
+    n, nm = plan["n"], plan["setup"].n_meas
+    return (np.empty((m, n + 1, plant.nx)), np.empty((m, n + 1, controller.n_state)), np.empty((m, n, plant.nu)),
+            np.empty((m, n, nm)), np.empty(m))
 
 
 def monte_carlo(plant: Plant, controller: Block, reference, duration: float, param_samples, *,
                 x0=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0, seed: int = 0,
-                threads: int = 2, jit: bool = False) -> list[ClosedLoopResult]:
-    """Run `controller` on every parameter sample in one batched CasADi map.
+                threads: int = 2, jit: bool = False, chunk_size: int | None = None) -> MonteCarloResult:
+    """Run `controller` on every parameter sample, a chunk of samples per batched CasADi map.
 
     Parameters
     ----------
     param_samples : array (M, n_params) of actual parameter vectors (see `models.uncertainty`)
-    seed : noise of sample i is drawn from the generator seeded with (seed, i)
+    seed : integer >= 0; the noise of sample i is drawn from the generator seeded with (seed, i)
+    threads : evaluations run in parallel within a chunk
+    jit : compile the closed loop to machine code first (see `models.compile`)
+    chunk_size : samples per batched call; default from `MONTE_CARLO_CHUNK_BYTES`. Results do not
+        depend on it.
 
     Returns
     -------
-    list of ClosedLoopResult, one per sample; a diverged sample has `diverged_at` set.
+    MonteCarloResult: the batch as arrays; ``result[i]`` is sample i as a `ClosedLoopResult`, and a
+    diverged sample has `diverged_at` set.
+
+    Raises
+    ------
+    ResourceLimitError
+        Before any work, when the results would need more than `models.checks.MEMORY_LIMIT_BYTES`;
+        `monte_carlo_chunks` then runs the same samples holding one chunk at a time.
     """
-    if not isinstance(controller, Block):
-        raise TypeError("monte_carlo batches Blocks; run other controllers with simulate_closed_loop")
-    samples = as_matrix(param_samples, plant.n_params, "param_samples")
-    for row in samples:
-        plant.param_vector(row)
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    n, m = len(setup.t) - 1, samples.shape[0]
-    noises = [_noise(setup, np.random.SeedSequence([seed, i])) for i in range(m)]
-    xc0 = []
-    for i in range(m):
-        y0 = plant.output(setup.x0, samples[i]) if controller.measures == "outputs" else setup.x0
-        xc0.append(controller.initial_state(y0 + (noises[i][0] if n else 0), setup.r[0]))
-    run = closed_loop_function(plant, controller, n, substeps, jit)
-    batch = run.map(m, "thread", max(1, int(threads)))
-    noise_cols = np.hstack([z.T for z in noises]) if np.any(setup.noise_std) else np.zeros((setup.n_meas, n))
-    X, XC, U, M = (np.asarray(v) for v in batch(setup.x0, np.array(xc0).T if controller.n_state else
-                                                  np.zeros((0, m)), setup.r[:-1].T, noise_cols,
-                                                  setup.d.T, samples.T, controller.gain_vector()))
-    results = []
-    nc = controller.n_state
-    for i in range(m):
-        x = np.vstack([setup.x0, X[:, i * n:(i + 1) * n].T])
-        xc = np.vstack([xc0[i], XC[:, i * n:(i + 1) * n].T]) if nc else np.zeros((n + 1, 0))
-        y = np.asarray(plant.casadi_h.map(n + 1)(x.T, samples[i])).T
-        k = first_divergence(x, DIVERGENCE_BOUND)
-        results.append(ClosedLoopResult(
-            t=setup.t, x=x, y=y, r=setup.r, u=U[:, i * n:(i + 1) * n].T, d=setup.d,
-            measured=M[:, i * n:(i + 1) * n].T, xc=xc, step_time=np.full(n, np.nan), status=None,
-            input_limit=plant.input_limit.copy(), state_names=plant.state_names,
-            output_names=plant.output_names, input_names=plant.input_names, controller=controller.name,
-            diverged_at=None if k is None else float(setup.t[k]), params=samples[i]))
-    return results
+    plan = _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps,
+                             input_disturbance, noise_std, seed, threads, jit, chunk_size)
+    m, n, nm = plan["samples"].shape[0], plan["n"], plan["setup"].n_meas
+    per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+    check_memory(m * per_sample + plan["chunk_bytes"],
+                 f"monte_carlo of {m} samples x {n} steps ({format_bytes(per_sample)} per sample)",
+                 "run them with models.monte_carlo_chunks, which holds one chunk at a time")
+    out = _allocate(plant, controller, plan, m)
+    for start in range(0, m, plan["chunk"]):
+        stop = min(m, start + plan["chunk"])
+        _run_chunk(plant, controller, plan, start, stop, tuple(a[start:stop] for a in out))
+    return _result(plant, controller, plan, out, plan["samples"], 0)
+
+
+def monte_carlo_chunks(plant: Plant, controller: Block, reference, duration: float, param_samples, *,
+                       x0=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0, seed: int = 0,
+                       threads: int = 2, jit: bool = False, chunk_size: int | None = None
+                       ) -> Iterator[MonteCarloResult]:
+    """`monte_carlo`, one chunk of samples at a time: memory stays bounded by the chunk.
+
+    Arguments as `monte_carlo`; every argument is checked before the first chunk runs. Sample i
+    gets the same noise and the same numbers as in `monte_carlo` (each chunk's `first_sample`
+    says where it starts).
+
+    Yields
+    ------
+    MonteCarloResult of samples first_sample .. first_sample + len - 1
+    """
+    plan = _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps,
+                             input_disturbance, noise_std, seed, threads, jit, chunk_size)
+    n, nm = plan["n"], plan["setup"].n_meas
+    per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+    check_memory(plan["chunk"] * per_sample + plan["chunk_bytes"],
+                 f"a Monte Carlo chunk of {plan['chunk']} samples x {n} steps", "give a smaller chunk_size")
+
+    def chunks():
+        m = plan["samples"].shape[0]
+        for start in range(0, m, plan["chunk"]):
+            stop = min(m, start + plan["chunk"])
+            out = _allocate(plant, controller, plan, stop - start)
+            _run_chunk(plant, controller, plan, start, stop, out)
+            yield _result(plant, controller, plan, out, plan["samples"][start:stop], start)
+
+    return chunks()
+
+
+def _result(plant, controller, plan, out, samples, first_sample) -> MonteCarloResult:
+    setup = plan["setup"]
+    x, xc, u, measured, diverged_at = out
+    return MonteCarloResult(plant=plant, controller=controller.name, t=setup.t, r=setup.r, d=setup.d, x=x, xc=xc,
+                            u=u, measured=measured, params=np.array(samples), diverged_at=diverged_at,
+                            first_sample=first_sample)

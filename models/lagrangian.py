@@ -39,25 +39,44 @@ class EquationsOfMotion:
     accel: ca.SX
 
 
-def euler_lagrange(q: ca.SX, dq: ca.SX, kinetic: ca.SX, potential: ca.SX, forces) -> EquationsOfMotion:
+def euler_lagrange(q: ca.SX, dq: ca.SX, kinetic: ca.SX, potential: ca.SX, forces,
+                   coordinate_names=None) -> EquationsOfMotion:
     """Derive the equations of motion from the energies and generalized forces.
 
     Parameters
     ----------
     q, dq : SX column vectors, (nq,)
-        Generalized coordinates and their rates.
+        Generalized coordinates and their rates; nq may be 0 (no mechanics).
     kinetic, potential : SX scalars
         T(q, q̇) and V(q); any parameters appear as free symbols.
     forces : SX column vector or list of SX, (nq,)
         Generalized forces Q(q, q̇, u), including dissipation.
+    coordinate_names : sequence of str, optional
+        Names of q used in error messages.
+
+    Raises
+    ------
+    ValueError
+        When the forces do not match the coordinates, the potential depends on
+        the velocities, or a coordinate has no kinetic energy (its diagonal
+        mass-matrix entry is structurally zero, so q̈ is undetermined).
     """
     nq = q.numel()
+    names = list(coordinate_names) if coordinate_names is not None else [f"q[{i}]" for i in range(nq)]
     forces = ca.vertcat(*forces) if isinstance(forces, (list, tuple)) else ca.SX(forces)
     if forces.numel() != nq:
         raise ValueError(f"need one generalized force per coordinate ({nq}), got {forces.numel()}")
     if ca.depends_on(potential, dq):
         raise ValueError("the potential energy must not depend on the velocities")
+    if nq == 0:
+        empty = ca.SX(0, 1)
+        return EquationsOfMotion(ca.SX(0, 0), empty, empty, empty, empty)
     mass_matrix, momentum = ca.hessian(kinetic, dq)
+    for k in range(nq):
+        if ca.SX(mass_matrix[k, k]).is_zero():
+            raise ValueError(f"the kinetic energy has no term in the velocity of coordinate {names[k]!r} "
+                             "(zero mass-matrix diagonal), so its acceleration is undetermined; give it "
+                             "kinetic energy or declare it as a first-order state")
     coriolis = ca.jtimes(momentum, q, dq) - ca.gradient(kinetic, q)
     gravity = ca.gradient(potential, q)
     accel = solve_spd(mass_matrix, forces - coriolis - gravity)
@@ -82,6 +101,8 @@ def solve_spd(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
         k = min(remaining, key=lambda i: sum((i, j) in a for j in remaining))
         remaining.remove(k)
         order.append(k)
+        if (k, k) not in a:
+            raise ValueError(f"the matrix has a structurally zero pivot in row {k}; it is not positive definite")
         for i in remaining:
             if (i, k) not in a:
                 continue

@@ -8,6 +8,8 @@ import control
 import numpy as np
 import scipy.linalg
 
+from .checks import positive, real_array
+
 
 @dataclass(frozen=True)
 class LinearModel:
@@ -36,6 +38,27 @@ class LinearModel:
     sample_period: float | None = None
     name: str = ""
 
+    def __post_init__(self):
+        """Check every matrix and vector for shape and finiteness, naming the first that is wrong."""
+        who = self.name or "LinearModel"
+        A, B, C = (real_array(getattr(self, key), f"{who}: {key}") for key in "ABC")
+        nx = A.shape[0] if A.ndim == 2 else -1
+        nu = B.shape[1] if B.ndim == 2 else -1
+        ny = C.shape[0] if C.ndim == 2 else -1
+        want = {"A": (nx, nx), "B": (nx, nu), "C": (ny, nx), "D": (ny, nu), "xe": (nx,), "ue": (nu,), "ye": (ny,)}
+        for key, shape in want.items():
+            value = real_array(getattr(self, key), f"{who}: {key}")
+            if value.shape != shape or min(shape) < 0:
+                raise ValueError(f"{who}: {key} must have shape {shape} (nx = {nx}, nu = {nu}, ny = {ny} from "
+                                 f"A, B, C), got {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"{who}: {key} has non-finite entries")
+        for key, size in (("state_names", nx), ("input_names", nu), ("output_names", ny)):
+            if len(getattr(self, key)) != size:
+                raise ValueError(f"{who}: {key} must name {size} signals, got {getattr(self, key)}")
+        if self.sample_period is not None:
+            positive(self.sample_period, f"{who}: sample_period (s)")
+
     @property
     def nx(self) -> int:
         return self.A.shape[0]
@@ -54,7 +77,7 @@ class LinearModel:
             raise ValueError(f"{self.name} has no output {name!r}; outputs are {', '.join(self.output_names)}")
         return self.output_names.index(name)
 
-    def select_outputs(self, *names: str) -> "LinearModel":
+    def select_outputs(self, *names: str) -> LinearModel:
         """The same model keeping only the named outputs, in the given order."""
         rows = [self.output_index(n) for n in names]
         return replace(self, C=self.C[rows], D=self.D[rows], ye=self.ye[rows], output_names=tuple(names))
@@ -81,12 +104,11 @@ class LinearModel:
             sys = sys[:, j]
         return clean_tf(sys)
 
-    def discretize(self, sample_period: float) -> "LinearModel":
+    def discretize(self, sample_period: float) -> LinearModel:
         """Exact zero-order-hold discretization at `sample_period` s (matrix exponential)."""
         if self.sample_period is not None:
             raise ValueError(f"{self.name} is already discrete (Ts = {self.sample_period} s)")
-        if not np.isfinite(sample_period) or sample_period <= 0:
-            raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
+        sample_period = positive(sample_period, "sample_period (s)")
         nx, nu = self.nx, self.nu
         block = np.zeros((nx + nu, nx + nu))
         block[:nx, :nx] = self.A

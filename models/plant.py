@@ -1,20 +1,27 @@
 """Plants declared once by their energies; everything else derived.
 
 A declaration is a function of symbolic namespaces (q, dq, u, p) returning a
-`Physics` record; `declare` registers it. `Plant` turns the symbols into CasADi
-Functions (dynamics, outputs, energy, Jacobians) and numeric helpers.
+`Physics` record, or (q, dq, u, p, s) when the plant also has first-order
+states s with their own equations (a motor current, an actuator lag, a
+thermal state); `declare` registers it. `Plant` turns the symbols into
+CasADi Functions (dynamics, outputs, energy, Jacobians) and numeric helpers.
+
+State order: the coordinates q, then their rates q̇, then the first-order
+states s, so x = (q, q̇, s) and nx = 2 nq + ns. Either part may be empty: a
+purely first-order plant has no coordinates.
 """
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
 
-from .checks import as_vector
+from .checks import as_vector, boolean, integer, positive, real, real_array
 from .lagrangian import EquationsOfMotion, euler_lagrange
 from .linear import LinearModel
 
@@ -36,17 +43,22 @@ class Param:
 
 @dataclass(frozen=True)
 class Physics:
-    """What a declaration returns, all CasADi SX.
+    """What a declaration returns, all CasADi SX (or numbers).
 
-    kinetic : T(q, q̇, p) in J;  potential : V(q, p) in J
-    forces : generalized forces Q(q, q̇, u, p), one per coordinate
-    outputs : mapping output name -> expression of (q, p)
+    kinetic : T(q, q̇, p) in J;  potential : V(q, s, p) in J
+    forces : generalized forces Q(q, q̇, s, u, p), one per coordinate
+    outputs : mapping output name -> expression of (q, q̇, s, p); not of the inputs
+    rates : mapping first-order state name -> its derivative ṡ = g(q, q̇, s, u, p),
+        one per declared first-order state (or a sequence in declaration order)
+
+    A purely first-order plant gives only `rates` and `outputs`.
     """
 
-    kinetic: ca.SX
-    potential: ca.SX
-    forces: list
-    outputs: Mapping[str, ca.SX]
+    kinetic: ca.SX = 0
+    potential: ca.SX = 0
+    forces: Sequence = ()
+    outputs: Mapping[str, ca.SX] = field(default_factory=dict)
+    rates: Mapping[str, ca.SX] | Sequence = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -60,13 +72,15 @@ class Declaration:
     physics: Callable
     operating_point: Callable = field(default=lambda p: {})
     uncertain: tuple = ()
+    first_order: tuple = ()
 
 
 _REGISTRY: dict[str, Declaration] = {}
 
 
 def declare(*, name: str, title: str, coordinates, inputs, params, input_limit,
-            operating_point: Callable | None = None, uncertain=(), register: bool = True):
+            operating_point: Callable | None = None, uncertain=(), first_order=(), register: bool = True,
+            replace: bool = False):
     """Decorator turning `physics(q, dq, u, p) -> Physics` into a plant declaration.
 
     Parameters
@@ -74,42 +88,105 @@ def declare(*, name: str, title: str, coordinates, inputs, params, input_limit,
     name : str
         Registry name used by `models.get`.
     coordinates, inputs : sequence of str
-        Generalized coordinates q (state is (q, q̇)) and input names.
+        Generalized coordinates q and input names; q may be empty for a purely
+        first-order plant.
     params : sequence of Param
     input_limit : float or sequence of float
         Symmetric actuator limit |u_i| <= input_limit[i] on the total input.
     operating_point : callable p -> dict, optional
-        The standard equilibrium's fixed coordinates as a function of the
-        parameter namespace (for example the ball at the beam's middle).
+        The standard equilibrium's fixed coordinates (or first-order states,
+        or inputs) as a function of the parameter namespace (for example the
+        ball at the beam's middle).
     uncertain : sequence of str
         Parameters the case study says the controller knows only to ±5 %.
+    first_order : sequence of str
+        First-order states s; the physics function then takes a fifth
+        namespace, ``physics(q, dq, u, p, s)``, and gives ṡ in `Physics.rates`.
+        The state is x = (q, q̇, s).
     register : bool
         False builds a declaration for a user's own plant without adding it
         to the registry; pass it to `Plant`.
+    replace : bool
+        Allow `register` to replace a plant already registered under `name`
+        (refused otherwise, so a user plant cannot silently shadow a case study).
     """
+    _check_name(name, "name")
+    _check_name(title, f"{name}: title")
+    register, replace = boolean(register, "register"), boolean(replace, "replace")
+    coordinates = _names(coordinates, f"{name}: coordinates")
+    inputs = _names(inputs, f"{name}: inputs")
+    first_order = _names(first_order, f"{name}: first_order")
+    params = tuple(params) if isinstance(params, (list, tuple)) else params
+    if not isinstance(params, tuple) or not all(isinstance(p, Param) for p in params):
+        raise TypeError(f"{name}: params must be a sequence of models.Param, got {params!r}")
+    uncertain = _names(uncertain, f"{name}: uncertain")
+    limit = tuple(_limit_vector(input_limit, len(inputs), f"{name}: input_limit", inputs))
+    if operating_point is not None and not callable(operating_point):
+        raise TypeError(f"{name}: operating_point must be a callable p -> dict, got {operating_point!r}")
 
     def wrap(physics: Callable) -> Declaration:
-        limit = tuple(float(v) for v in np.atleast_1d(input_limit))
-        decl = Declaration(name, title, tuple(coordinates), tuple(inputs), tuple(params), limit,
-                           physics, operating_point or (lambda p: {}), tuple(uncertain))
+        if not callable(physics):
+            raise TypeError(f"{name}: declare(...) decorates a physics function, got {physics!r}")
+        decl = Declaration(name, title, coordinates, inputs, params, limit, physics,
+                           operating_point or (lambda p: {}), uncertain, first_order)
         _check_declaration(decl)
         if register:
+            if name in _REGISTRY and not replace:
+                raise ValueError(f"a plant named {name!r} is already registered ({_REGISTRY[name].title}); "
+                                 "pass replace=True to replace it, or register=False for a plant of your own")
             _REGISTRY[name] = decl
         return decl
 
     return wrap
 
 
+def _check_name(value, what: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise TypeError(f"{what} must be a non-empty string, got {value!r}")
+    return value
+
+
+def _names(values, what: str) -> tuple:
+    """A tuple of non-empty strings; a bare string is refused (it would be split into letters)."""
+    if isinstance(values, str) or not isinstance(values, (list, tuple)):
+        raise TypeError(f"{what} must be a list or tuple of names, got {values!r}")
+    for value in values:
+        _check_name(value, f"{what} entry")
+    return tuple(values)
+
+
+def _limit_vector(value, size: int, what: str, inputs) -> np.ndarray:
+    """Input limits as (size,) floats, each finite and > 0: one number for all, or one per input."""
+    arr = real_array(value, what)
+    if arr.ndim == 0:
+        arr = np.full(size, float(arr))
+    elif arr.shape != (size,):
+        raise ValueError(f"{what} must be one number for every input or one per input {tuple(inputs)}, "
+                         f"got {value!r}")
+    for entry in arr:
+        if not np.isfinite(entry) or entry <= 0:
+            raise ValueError(f"{what} must be finite and > 0, got {entry:g}")
+    return arr
+
+
 def _check_declaration(decl: Declaration) -> None:
     names = [p.name for p in decl.params]
-    for group, what in ((decl.coordinates, "coordinate"), (decl.inputs, "input"), (names, "parameter")):
+    states = decl.coordinates + tuple("d" + c for c in decl.coordinates) + decl.first_order
+    for group, what in ((decl.coordinates, "coordinate"), (decl.inputs, "input"), (names, "parameter"),
+                        (states, "state")):
         if len(set(group)) != len(group):
             raise ValueError(f"{decl.name}: repeated {what} name in {group}")
-    if len(decl.input_limit) != len(decl.inputs):
-        raise ValueError(f"{decl.name}: need one input limit per input {decl.inputs}")
+    if not states:
+        raise ValueError(f"{decl.name}: declare at least one coordinate or first-order state")
     for name in decl.uncertain:
         if name not in names:
             raise ValueError(f"{decl.name}: uncertain parameter {name!r} is not declared")
+    for p in decl.params:
+        _check_name(p.name, f"{decl.name}: Param name")
+        value = real(p.value, f"{decl.name}: Param {p.name} value", finite=False)
+        if not np.isfinite(value) or value < 0 or (p.positive and value == 0):
+            raise ValueError(f"{decl.name}: Param {p.name} ({p.unit}) must be finite and "
+                             f"{'> 0' if p.positive else '>= 0'}, got {value}")
 
 
 def names() -> list[str]:
@@ -118,63 +195,175 @@ def names() -> list[str]:
 
 
 def declaration(name: str) -> Declaration:
+    """The registered declaration called `name` (ValueError listing the registered plants otherwise)."""
+    _check_name(name, "plant name")
     if name not in _REGISTRY:
         raise ValueError(f"unknown plant {name!r}; valid plants: {', '.join(_REGISTRY)}")
     return _REGISTRY[name]
 
 
-_SYMBOLIC_CACHE: dict[str, "_Symbolic"] = {}
+_SYMBOLIC_CACHE: dict[str, _Symbolic] = {}
 
 
 class _Symbolic:
     """The CasADi Functions of one declaration; shared by every Plant built from it."""
 
     def __init__(self, decl: Declaration):
-        nq, nu = len(decl.coordinates), len(decl.inputs)
+        nq, nu, ns = len(decl.coordinates), len(decl.inputs), len(decl.first_order)
         q = ca.SX.sym("q", nq)
         dq = ca.SX.sym("dq", nq)
         u = ca.SX.sym("u", nu)
         p = ca.SX.sym("p", len(decl.params))
-        ns = lambda vec, keys: SimpleNamespace(**{k: vec[i] for i, k in enumerate(keys)})
-        phys = decl.physics(ns(q, decl.coordinates), ns(dq, decl.coordinates), ns(u, decl.inputs),
-                            ns(p, [pp.name for pp in decl.params]))
-        self.output_names = tuple(phys.outputs)
-        y = ca.vertcat(*phys.outputs.values())
-        if ca.depends_on(y, ca.vertcat(dq, u)):
-            raise ValueError(f"{decl.name}: outputs must depend on the configuration q only")
-        self.eom: EquationsOfMotion = euler_lagrange(q, dq, phys.kinetic, phys.potential, phys.forces)
-        x = ca.vertcat(q, dq)
-        xdot = ca.vertcat(dq, self.eom.accel)
+        s = ca.SX.sym("s", ns)
+        ns_ = lambda vec, keys: SimpleNamespace(**{k: vec[i] for i, k in enumerate(keys)})
+        spaces = [ns_(q, decl.coordinates), ns_(dq, decl.coordinates), ns_(u, decl.inputs),
+                  ns_(p, [pp.name for pp in decl.params])]
+        if ns:
+            spaces.append(ns_(s, decl.first_order))
+        phys = decl.physics(*spaces)
+        kinetic, potential, forces, outputs, rates = _checked_physics(decl, phys)
+        self.output_names = tuple(outputs)
+        y = ca.vertcat(*outputs.values()) if outputs else ca.SX(0, 1)
+        if ca.depends_on(y, u):
+            raise ValueError(f"{decl.name}: outputs must not depend on the inputs "
+                             f"({', '.join(n for n, e in outputs.items() if ca.depends_on(e, u))} do)")
+        if ns and ca.depends_on(kinetic, s):
+            raise ValueError(f"{decl.name}: the kinetic energy must not depend on the first-order states "
+                             f"{decl.first_order} (the Euler-Lagrange derivation would miss their rates)")
+        try:
+            self.eom: EquationsOfMotion = euler_lagrange(q, dq, kinetic, potential, forces, decl.coordinates)
+        except ValueError as err:
+            raise ValueError(f"{decl.name}: {err}") from None
+        if nq:
+            _check_mass_matrix(decl, self.eom.mass_matrix, q, p)
+        x = ca.vertcat(q, dq, s)
+        xdot = ca.vertcat(dq, self.eom.accel, rates)
         self.f = ca.Function("f", [x, u, p], [xdot], ["x", "u", "p"], ["xdot"])
         self.h = ca.Function("h", [x, p], [y], ["x", "p"], ["y"])
-        self.energy = ca.Function("energy", [x, p], [phys.kinetic + phys.potential], ["x", "p"], ["E"])
+        self.energy = ca.Function("energy", [x, p], [kinetic + potential], ["x", "p"], ["E"])
         self.jacobians = ca.Function("jacobians", [x, u, p],
                                      [ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x)],
                                      ["x", "u", "p"], ["A", "B", "C"])
-        # Configuration from outputs, when the outputs are linear in q and determine it.
-        out_per_q = ca.jacobian(y, q)
+        # Configuration from the outputs that depend on q alone, when those are
+        # linear in q and determine it.
+        rows = [i for i in range(y.numel()) if not ca.depends_on(y[i], ca.vertcat(dq, s))]
+        y_q = y if len(rows) == y.numel() else y[rows]
+        out_per_q = ca.jacobian(y_q, q)
         self.configuration = None
-        if not ca.depends_on(out_per_q, ca.vertcat(q, p)) and y.numel() >= nq:
+        if nq and not ca.depends_on(out_per_q, ca.vertcat(q, p)) and y_q.numel() >= nq:
             cq = np.array(ca.DM(out_per_q))
             if np.linalg.matrix_rank(cq) == nq:
-                offset = ca.substitute(y, q, ca.DM.zeros(nq))
+                offset = ca.substitute(y_q, q, ca.DM.zeros(nq))
                 ys = ca.SX.sym("y", y.numel())
-                q_of_y = ca.DM(np.linalg.pinv(cq)) @ (ys - offset)
+                ys_q = ys if len(rows) == y.numel() else ys[rows]
+                q_of_y = ca.DM(np.linalg.pinv(cq)) @ (ys_q - offset)
                 self.configuration = ca.Function("configuration", [ys, p], [q_of_y], ["y", "p"], ["q"])
-        # Static balance at rest: accelerations as a function of (q, u), for equilibria.
-        at_rest = ca.substitute(self.eom.accel, dq, ca.DM.zeros(nq))
-        qu = ca.vertcat(q, u)
-        self.static = ca.Function("static", [qu, p], [at_rest, ca.jacobian(at_rest, qu)])
+        # Static balance at rest (q̇ = 0): accelerations and first-order rates as
+        # a function of the unknowns (q, s, u), for equilibria.
+        at_rest = ca.substitute(ca.vertcat(self.eom.accel, rates), dq, ca.DM.zeros(nq))
+        unknowns = ca.vertcat(q, s, u)
+        self.static = ca.Function("static", [unknowns, p], [at_rest, ca.jacobian(at_rest, unknowns)])
         # Input that balances the static forces at configuration q (exact when
         # the balance is solvable, least squares otherwise); used as feedforward.
+        # With first-order states the balance also asks ṡ = 0, solved for (s, u).
         static_force = ca.substitute(self.eom.forces - self.eom.gravity, dq, ca.DM.zeros(nq))
-        force_per_input = ca.jacobian(static_force, u)
-        if ca.depends_on(force_per_input, u):
+        if ns:
+            static_force = ca.vertcat(static_force, ca.substitute(rates, dq, ca.DM.zeros(nq)))
+        balance_unknowns = ca.vertcat(s, u)
+        force_per_input = ca.jacobian(static_force, balance_unknowns)
+        if ca.depends_on(force_per_input, balance_unknowns):
             self.static_input = None
         else:
-            residual = ca.substitute(static_force, u, ca.DM.zeros(nu))
-            ue = -ca.solve(force_per_input.T @ force_per_input, force_per_input.T @ residual)
-            self.static_input = ca.Function("static_input", [q, p], [ue], ["q", "p"], ["u"])
+            residual = ca.substitute(static_force, balance_unknowns, ca.DM.zeros(ns + nu))
+            balance = -ca.solve(force_per_input.T @ force_per_input, force_per_input.T @ residual)
+            self.static_input = ca.Function("static_input", [q, p], [balance[ns:]], ["q", "p"], ["u"])
+
+
+def _scalar_expression(value, what: str) -> ca.SX:
+    """One CasADi SX scalar from an SX expression or a real number (TypeError/ValueError naming `what`)."""
+    if isinstance(value, (ca.SX, ca.DM)):
+        expr = ca.SX(value)
+    elif isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
+        expr = ca.SX(float(value))
+    else:
+        raise TypeError(f"{what} must be a CasADi SX expression or a number, got {type(value).__name__} "
+                        f"{value!r}")
+    if expr.shape != (1, 1):
+        raise ValueError(f"{what} must be one scalar expression, got shape {expr.shape}")
+    return expr
+
+
+def _checked_physics(decl: Declaration, phys) -> tuple:
+    """(kinetic, potential, forces (nq,), outputs {name: SX}, rates (ns,)) checked against `decl`."""
+    where = f"{decl.name}: the physics function {getattr(decl.physics, '__name__', decl.physics)!r}"
+    if not isinstance(phys, Physics):
+        raise TypeError(f"{where} must return models.Physics, got {type(phys).__name__} {phys!r}")
+    kinetic = _scalar_expression(phys.kinetic, f"{decl.name}: Physics.kinetic")
+    potential = _scalar_expression(phys.potential, f"{decl.name}: Physics.potential")
+    nq, ns = len(decl.coordinates), len(decl.first_order)
+    raw_forces = phys.forces
+    if isinstance(raw_forces, ca.SX):
+        raw_forces = [raw_forces[i] for i in range(raw_forces.numel())]
+    if isinstance(raw_forces, (str, Mapping)) or not isinstance(raw_forces, (list, tuple)):
+        raise TypeError(f"{decl.name}: Physics.forces must be a list with one generalized force per "
+                        f"coordinate {decl.coordinates}, got {phys.forces!r}")
+    if len(raw_forces) != nq:
+        raise ValueError(f"{decl.name}: Physics.forces needs one generalized force per coordinate "
+                         f"{decl.coordinates} ({nq}), got {len(raw_forces)}")
+    forces = [_scalar_expression(f, f"{decl.name}: generalized force of {c!r}")
+              for f, c in zip(raw_forces, decl.coordinates)]
+    if not isinstance(phys.outputs, Mapping):
+        raise TypeError(f"{decl.name}: Physics.outputs must be a mapping name -> expression, got {phys.outputs!r}")
+    outputs = {}
+    for key, value in phys.outputs.items():
+        _check_name(key, f"{decl.name}: output name")
+        outputs[key] = _scalar_expression(value, f"{decl.name}: output {key!r}")
+    raw_rates = phys.rates
+    if isinstance(raw_rates, Mapping):
+        if set(raw_rates) != set(decl.first_order):
+            raise ValueError(f"{decl.name}: Physics.rates must give one equation per first-order state "
+                             f"{decl.first_order}, got {tuple(raw_rates)}")
+        raw_rates = [raw_rates[k] for k in decl.first_order]
+    elif isinstance(raw_rates, ca.SX):
+        raw_rates = [raw_rates[i] for i in range(raw_rates.numel())]
+    elif isinstance(raw_rates, str) or not isinstance(raw_rates, (list, tuple)):
+        raise TypeError(f"{decl.name}: Physics.rates must map each first-order state to its derivative, "
+                        f"got {phys.rates!r}")
+    if len(raw_rates) != ns:
+        raise ValueError(f"{decl.name}: Physics.rates needs one equation per first-order state "
+                         f"{decl.first_order} ({ns}), got {len(raw_rates)}")
+    rates = [_scalar_expression(r, f"{decl.name}: first-order equation of {k!r}")
+             for r, k in zip(raw_rates, decl.first_order)]
+    return kinetic, potential, forces, outputs, ca.vertcat(*rates) if rates else ca.SX(0, 1)
+
+
+def _check_mass_matrix(decl: Declaration, mass_matrix: ca.SX, q: ca.SX, p: ca.SX) -> None:
+    """Refuse a mass matrix that is singular or indefinite at every sampled configuration.
+
+    Evaluated at the nominal parameters, at q = 0 and at two seeded random
+    configurations in [-1, 1]: a matrix singular at all three is singular
+    structurally (a combination of velocities has no kinetic energy), not at
+    an isolated configuration.
+    """
+    fun = ca.Function("mass_matrix", [q, p], [mass_matrix])
+    nominal = np.array([pp.value for pp in decl.params], dtype=float)
+    rng = np.random.default_rng(0)
+    points = [np.zeros(q.numel())] + [rng.uniform(-1.0, 1.0, q.numel()) for _ in range(2)]
+    singular = []
+    for point in points:
+        matrix = np.asarray(fun(point, nominal), dtype=float)
+        if not np.all(np.isfinite(matrix)):
+            return
+        eig, vectors = np.linalg.eigh((matrix + matrix.T) / 2)
+        scale = max(np.max(np.abs(eig)), np.finfo(float).tiny)
+        if eig[0] < -1e-12 * scale:
+            raise ValueError(f"{decl.name}: the mass matrix is not positive definite at q = {point.round(3)} "
+                             f"(eigenvalue {eig[0]:.3g}): the kinetic energy is negative for some velocities")
+        singular.append(vectors[:, 0] if eig[0] <= 1e-12 * scale else None)
+    if all(v is not None for v in singular):
+        combo = " + ".join(f"{c:.3g} d{n}" for c, n in zip(singular[0], decl.coordinates) if abs(c) > 1e-9)
+        raise ValueError(f"{decl.name}: the mass matrix is singular: the velocity combination {combo} has "
+                         "no kinetic energy, so the accelerations are undetermined")
 
 
 class Plant:
@@ -183,8 +372,9 @@ class Plant:
     Attributes
     ----------
     name, title : str
-    coordinate_names, state_names, input_names, output_names : tuple of str
-        States are (q, q̇); velocity names carry a ``d`` prefix (``dtheta``).
+    coordinate_names, first_order_names, state_names, input_names, output_names : tuple of str
+        States are (q, q̇, s): coordinates, their rates (names with a ``d``
+        prefix, ``dtheta``), then the first-order states.
     params : dict
         Parameter values (SI), nominal unless overridden.
     param_info : tuple of Param
@@ -196,6 +386,10 @@ class Plant:
 
     def __init__(self, decl: Declaration, params: Mapping[str, float] | None = None,
                  input_limit=None):
+        if not isinstance(decl, Declaration):
+            raise TypeError(f"Plant needs a declaration made by models.declare, got {type(decl).__name__} {decl!r}")
+        if params is not None and not isinstance(params, Mapping):
+            raise TypeError(f"{decl.name}: params must be a mapping name -> value, got {params!r}")
         self.declaration = decl
         if decl.name not in _SYMBOLIC_CACHE or _SYMBOLIC_CACHE[decl.name][0] is not decl:
             _SYMBOLIC_CACHE[decl.name] = (decl, _Symbolic(decl))
@@ -204,12 +398,13 @@ class Plant:
         self.title = decl.title
         self.param_info = decl.params
         self.coordinate_names = decl.coordinates
-        self.state_names = decl.coordinates + tuple("d" + c for c in decl.coordinates)
+        self.first_order_names = decl.first_order
+        self.state_names = decl.coordinates + tuple("d" + c for c in decl.coordinates) + decl.first_order
         self.input_names = decl.inputs
         self.output_names = self._sym.output_names
         self.params = self._validated({p.name: p.value for p in decl.params} | dict(params or {}))
-        limit = decl.input_limit if input_limit is None else np.broadcast_to(input_limit, (self.nu,))
-        self.input_limit = np.array([self._check_limit(v) for v in limit])
+        limit = decl.input_limit if input_limit is None else input_limit
+        self.input_limit = _limit_vector(limit, self.nu, f"{self.name}: input_limit", self.input_names)
         self.casadi_f = self._sym.f
         self.casadi_h = self._sym.h
         self.casadi_energy = self._sym.energy
@@ -223,8 +418,13 @@ class Plant:
         return len(self.coordinate_names)
 
     @property
+    def n_first_order(self) -> int:
+        """Number of first-order states s (after q and q̇ in the state)."""
+        return len(self.first_order_names)
+
+    @property
     def nx(self) -> int:
-        return 2 * self.nq
+        return 2 * self.nq + self.n_first_order
 
     @property
     def nu(self) -> int:
@@ -248,11 +448,11 @@ class Plant:
         return f"Plant({self.name!r}, {vals}, input_limit={self.input_limit.tolist()})"
 
     # ------------------------------------------------------------ parameters
-    def with_params(self, **overrides) -> "Plant":
+    def with_params(self, **overrides) -> Plant:
         """A copy with some parameter values changed (validated)."""
         return Plant(self.declaration, self.params | overrides, self.input_limit)
 
-    def with_input_limit(self, input_limit) -> "Plant":
+    def with_input_limit(self, input_limit) -> Plant:
         """A copy with another actuator limit (for example the UUV's 250 N m variant)."""
         return Plant(self.declaration, self.params, input_limit)
 
@@ -278,20 +478,14 @@ class Plant:
             if key not in info:
                 raise ValueError(f"{self.name} has no parameter {key!r}; its parameters are "
                                  f"{', '.join(info)}")
-            value = float(value)
             pinfo = info[key]
+            value = real(value, f"{self.name}: parameter {key} ({pinfo.unit})", finite=False)
             if not np.isfinite(value) or value < 0 or (pinfo.positive and value == 0):
                 need = "> 0" if pinfo.positive else ">= 0"
                 raise ValueError(f"{self.name}: parameter {key} ({pinfo.unit}) must be finite and "
                                  f"{need}, got {value}")
             out[key] = value
         return out
-
-    def _check_limit(self, value) -> float:
-        value = float(value)
-        if not np.isfinite(value) or value <= 0:
-            raise ValueError(f"{self.name}: input_limit must be finite and > 0, got {value}")
-        return value
 
     # -------------------------------------------------------------- numerics
     def f(self, x, u, params=None) -> np.ndarray:
@@ -306,7 +500,7 @@ class Plant:
         return np.asarray(self.casadi_h(x, self.param_vector(params))).ravel()
 
     def energy(self, x, params=None) -> float:
-        """Total mechanical energy T + V in J at state x."""
+        """Total mechanical energy T + V in J at state x (the first-order states store none of it)."""
         x = as_vector(x, self.nx, f"{self.name} state {self.state_names}")
         return float(self.casadi_energy(x, self.param_vector(params)))
 
@@ -320,7 +514,11 @@ class Plant:
             raise ValueError(f"{self.name}: the input enters the forces nonlinearly; "
                              "use equilibrium() instead")
         q = as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
-        return np.asarray(self._sym.static_input(q, self.param_vector(params))).ravel()
+        ue = np.asarray(self._sym.static_input(q, self.param_vector(params))).ravel()
+        if not np.all(np.isfinite(ue)):
+            raise ValueError(f"{self.name}: no unique input holds the plant at rest at q = {q} (the static "
+                             "balance is singular there); use equilibrium() instead")
+        return ue
 
     @property
     def casadi_configuration(self) -> ca.Function:
@@ -344,7 +542,11 @@ class Plant:
         qs = ca.SX.sym("q", self.nq)
         p = self.param_vector(params)
         jac = ca.Function("equilibrium_input_jacobian", [qs], [ca.jacobian(self.casadi_equilibrium_input(qs, p), qs)])
-        return np.asarray(jac(q), dtype=float).reshape(self.nu, self.nq)
+        value = np.asarray(jac(q), dtype=float).reshape(self.nu, self.nq)
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"{self.name}: the equilibrium input has no finite derivative at q = {q} (the static "
+                             "balance is singular there)")
+        return value
 
     @property
     def casadi_equilibrium_input(self) -> ca.Function:
@@ -354,7 +556,7 @@ class Plant:
         return self._sym.static_input
 
     def equilibrium(self, params=None, tol: float = 1e-10, **fixed) -> tuple[np.ndarray, np.ndarray]:
-        """Solve f(x, u) = 0 at rest with the named coordinates (or inputs) fixed.
+        """Solve f(x, u) = 0 at rest with the named coordinates (or first-order states, or inputs) fixed.
 
         With nothing fixed, the declaration's standard operating point is used
         (for example the ball at the middle of the beam). Remaining unknowns
@@ -369,21 +571,31 @@ class Plant:
         Raises
         ------
         ValueError
-            For an unknown name, or when no equilibrium has the fixed values.
+            For an unknown name, when every unknown is fixed (nothing left to
+            solve for), or when no equilibrium has the fixed values.
         """
+        tol = positive(tol, f"{self.name}: equilibrium tol")
         p = self.param_vector(params)
         if not fixed:
             pns = SimpleNamespace(**dict(zip(self.params, p)))
-            fixed = dict(self.declaration.operating_point(pns))
-        unknown_names = self.coordinate_names + self.input_names
+            point = self.declaration.operating_point(pns)
+            if not isinstance(point, Mapping):
+                raise TypeError(f"{self.name}: operating_point must return a dict of fixed values, got {point!r}")
+            fixed = dict(point)
+        unknown_names = self.coordinate_names + self.first_order_names + self.input_names
         for key, value in fixed.items():
             if key not in unknown_names:
+                first_order = f", first-order states {self.first_order_names}" if self.first_order_names else ""
                 raise ValueError(f"{self.name}: cannot fix {key!r}; choose among coordinates "
-                                 f"{self.coordinate_names} and inputs {self.input_names}")
-            if not np.isfinite(float(value)):
+                                 f"{self.coordinate_names}{first_order} and inputs {self.input_names}")
+            if not np.isfinite(real(value, f"{self.name}: fixed value {key}", finite=False)):
                 raise ValueError(f"{self.name}: fixed value {key}={value} is not finite")
-        z = np.array([float(fixed.get(n, 0.0)) for n in unknown_names])
         free = np.array([n not in fixed for n in unknown_names])
+        if not free.any():
+            given = ", ".join(f"{k}={v:g}" for k, v in fixed.items())
+            raise ValueError(f"{self.name}: equilibrium({given}) fixes every coordinate and input, leaving "
+                             "nothing to solve for; leave at least one free (to test a point, evaluate f(x, u))")
+        z = np.array([float(fixed.get(n, 0.0)) for n in unknown_names])
         for _ in range(60):
             res, jac = (np.asarray(v) for v in self._sym.static(z, p))
             res = res.ravel()
@@ -394,12 +606,15 @@ class Plant:
             if np.max(np.abs(step)) < 1e-15:
                 break
         res = np.asarray(self._sym.static(z, p)[0]).ravel()
-        if not np.all(np.isfinite(z)) or np.max(np.abs(res)) > tol:
-            worst = self.coordinate_names[int(np.argmax(np.abs(res)))]
+        if not np.all(np.isfinite(z)) or not np.all(np.isfinite(res)) or np.max(np.abs(res)) > tol:
+            worst = int(np.argmax(np.abs(np.nan_to_num(res, nan=np.inf))))
+            what = (f"the acceleration of {self.coordinate_names[worst]}" if worst < self.nq
+                    else f"the rate of {self.first_order_names[worst - self.nq]}")
             given = ", ".join(f"{k}={v:g}" for k, v in fixed.items())
-            raise ValueError(f"{self.name}: no equilibrium with {given}: the acceleration of {worst} "
+            raise ValueError(f"{self.name}: no equilibrium with {given}: {what} "
                              f"cannot vanish (residual {np.max(np.abs(res)):.3g} after Gauss-Newton)")
-        return np.concatenate([z[:self.nq], np.zeros(self.nq)]), z[self.nq:]
+        nqs = self.nq + self.n_first_order
+        return np.concatenate([z[:self.nq], np.zeros(self.nq), z[self.nq:nqs]]), z[nqs:]
 
     def linearize(self, xe=None, ue=None, params=None, check: bool = True) -> LinearModel:
         """Exact Jacobian linearization about (xe, ue).
@@ -408,6 +623,7 @@ class Plant:
         With `check`, raises unless f(xe, ue) = 0 (to 1e-8), because away
         from an equilibrium the linear model would miss a constant term.
         """
+        check = boolean(check, "check")
         if xe is None and ue is None:
             xe, ue = self.equilibrium(params=params)
         elif xe is None or ue is None:
@@ -433,12 +649,10 @@ class Plant:
         `substeps` fixed RK4 steps with the input held; the expression is
         expanded to SX so a mapaccum over it runs in CasADi's fast VM.
         """
-        key = (float(sample_period), int(substeps))
+        sample_period = positive(sample_period, "sample_period (s)")
+        substeps = integer(substeps, "substeps", minimum=1)
+        key = (sample_period, substeps)
         if key not in self.function_cache:
-            if not np.isfinite(sample_period) or sample_period <= 0:
-                raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
-            if int(substeps) < 1:
-                raise ValueError(f"substeps must be >= 1, got {substeps}")
             x = ca.SX.sym("x", self.nx)
             u = ca.SX.sym("u", self.nu)
             p = ca.SX.sym("p", self.n_params)

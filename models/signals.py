@@ -1,26 +1,32 @@
 """Reference and disturbance signals sampled at t_k = k * Ts.
 
 Each returns a callable ``signal(t) -> ndarray`` that accepts an array of
-times, so the simulator samples it once, exactly at k * Ts.
+times, so the simulator samples it once, exactly at k * Ts. Every number is
+checked when the signal is made, so a bad amplitude is named there rather
+than as a non-finite sample later.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .checks import positive, real, real_array
+
 
 def step(amplitude: float, start: float = 0.0, offset: float = 0.0):
     """offset for t < start, offset + amplitude from `start` s on."""
+    amplitude, start, offset = real(amplitude, "amplitude"), real(start, "start (s)"), real(offset, "offset")
     return lambda t: np.where(np.asarray(t) >= start, offset + amplitude, offset)
 
 
 def steps(levels, period: float, offset: float = 0.0):
     """A series of steps: ``offset + levels[i]`` on [i * period, (i + 1) * period), last level held."""
-    levels = np.asarray(levels, dtype=float)
+    levels = real_array(levels, "levels")
     if levels.ndim != 1 or levels.size == 0:
-        raise ValueError("levels must be a non-empty 1-D sequence")
-    if not np.isfinite(period) or period <= 0:
-        raise ValueError(f"period must be > 0 s, got {period}")
+        raise ValueError(f"levels must be a non-empty 1-D sequence, got shape {levels.shape}")
+    if not np.all(np.isfinite(levels)):
+        raise ValueError(f"levels must be finite, got {levels}")
+    period, offset = positive(period, "period (s)"), real(offset, "offset")
 
     def signal(t):
         idx = np.clip(np.floor(np.asarray(t) / period + 1e-9).astype(int), 0, levels.size - 1)
@@ -31,13 +37,13 @@ def steps(levels, period: float, offset: float = 0.0):
 
 def square(amplitude: float, period: float, offset: float = 0.0):
     """Square wave: offset + amplitude for the first half of each period, offset − amplitude after."""
-    if not np.isfinite(period) or period <= 0:
-        raise ValueError(f"period must be > 0 s, got {period}")
+    amplitude, period, offset = real(amplitude, "amplitude"), positive(period, "period (s)"), real(offset, "offset")
     return lambda t: offset + amplitude * np.where((np.asarray(t) % period) < period / 2, 1.0, -1.0)
 
 
 def ramp(slope: float, start: float = 0.0, offset: float = 0.0):
     """offset + slope * (t − start) after `start`, offset before."""
+    slope, start, offset = real(slope, "slope"), real(start, "start (s)"), real(offset, "offset")
     return lambda t: offset + slope * np.maximum(np.asarray(t) - start, 0.0)
 
 
@@ -45,11 +51,16 @@ def sample(signal, t: np.ndarray, width: int, what: str) -> np.ndarray:
     """Sample a signal given as a constant, a sequence, an array (len(t), width) or a callable.
 
     Returns ndarray (len(t), width), checked finite.
+
+    Raises
+    ------
+    TypeError
+        Naming `what` when the signal (or what a callable returns) is not numbers: a string is
+        refused, not converted.
+    ValueError
+        When the shape does not fit or a sample is not finite (naming its time).
     """
-    if callable(signal):
-        values = np.asarray(signal(t), dtype=float)
-    else:
-        values = np.asarray(signal, dtype=float)
+    values = real_array(signal(t) if callable(signal) else signal, what)
     if values.ndim == 0 or (values.ndim == 1 and values.size == width and len(t) != width):
         values = np.broadcast_to(values, (len(t), width))
     elif values.ndim == 1 and values.size == len(t):

@@ -16,11 +16,27 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .checks import SimulationError, as_matrix, as_vector, first_divergence
-from .compile import NumpyCall, jit as compile_jit
+from .checks import (
+    SimulationError,
+    as_matrix,
+    as_vector,
+    boolean,
+    check_memory,
+    first_divergence,
+    integer,
+    positive,
+)
+from .compile import NumpyCall
+from .compile import jit as compile_jit
 from .plant import Plant
 
 METHODS = ("rk4", "adaptive", "collocation")
+
+#: Longest trajectory whose output map `output_call` expands into one SX Function.
+EXPANDED_OUTPUT_POINTS = 100_000
+
+#: Collocation degrees CasADi's Radau points are tabulated for.
+COLLOCATION_DEGREES = range(1, 10)
 
 #: States beyond this magnitude (m or rad, SI) count as a diverged simulation.
 DIVERGENCE_BOUND = 1e6
@@ -72,17 +88,28 @@ def simulate(plant: Plant, x0, u, sample_period: float, *, method: str = "rk4",
     ------
     SimulationError
         When the state diverges or a solver fails, with the time it happened.
+    ResourceLimitError
+        Before any work, when the run would need more than `models.checks.MEMORY_LIMIT_BYTES`.
     """
+    if not isinstance(plant, Plant):
+        raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     x0 = as_vector(x0, plant.nx, f"{plant.name} initial state {plant.state_names}")
     u = as_matrix(u, plant.nu, f"{plant.name} input sequence")
     if u.shape[0] == 0:
         raise ValueError("the input sequence is empty")
-    if not np.isfinite(sample_period) or sample_period <= 0:
-        raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
+    sample_period = positive(sample_period, "sample_period (s)")
+    substeps = integer(substeps, "substeps", minimum=1)
+    if method == "collocation":
+        degree = len(radau_matrices(degree)[0]) - 1  # checks the degree
+    if method in ("adaptive", "collocation"):
+        rtol, atol = positive(rtol, "rtol"), positive(atol, "atol")
+    jit = boolean(jit, "jit")
     p = plant.param_vector(params)
     n = u.shape[0]
+    check_memory(_simulation_bytes(plant.nx, n, method, degree),
+                 f"simulate ({method}) of {plant.name} over {n} samples", "simulate a shorter input sequence")
     if method == "rk4":
         x = _rk4_run(plant, sample_period, substeps, n, jit)(x0, u.T, p)[0].T
     elif method == "adaptive":
@@ -93,6 +120,34 @@ def simulate(plant: Plant, x0, u, sample_period: float, *, method: str = "rk4",
     t = sample_period * np.arange(n + 1)
     check_trajectory(plant.name, t, x)
     return Trajectory(t, x, u, plant.state_names, plant.input_names, method)
+
+
+def _simulation_bytes(nx: int, n: int, method: str, degree: int) -> float:
+    """Estimated bytes a simulation allocates beyond its input: the states (result, CasADi's output
+    and a copy), and for collocation the Newton system of n·nx·degree unknowns, whose sparse
+    Jacobian and factors hold about 3·nx·(degree + 1) entries per unknown."""
+    states = 3.0 * (n + 1) * nx
+    if method != "collocation":
+        return 8.0 * states
+    unknowns = n * nx * degree
+    return 8.0 * (states + unknowns * (4 + 3 * nx * (degree + 1)))
+
+
+def output_call(plant: Plant, points: int) -> NumpyCall:
+    """Noise-free outputs along one trajectory, in one call; cached on the plant.
+
+    ``(X (nx, points), p (n_params,)) -> [Y (ny, points)]``. Expanded to one SX
+    Function up to `EXPANDED_OUTPUT_POINTS` points: a mapped call of a tiny h
+    costs about 1 µs per point in CasADi's virtual machine, the expanded one a
+    few ns.
+    """
+    key = ("outputs", points)
+    cache = plant.function_cache
+    if key not in cache:
+        X, p = ca.MX.sym("X", plant.nx, points), ca.MX.sym("p", plant.n_params)
+        fun = ca.Function("outputs", [X, p], [plant.casadi_h.map(points)(X, p)], ["X", "p"], ["Y"])
+        cache[key] = NumpyCall(fun.expand() if points <= EXPANDED_OUTPUT_POINTS else fun)
+    return cache[key]
 
 
 def check_trajectory(name: str, t: np.ndarray, x: np.ndarray) -> None:
@@ -149,12 +204,15 @@ def radau_matrices(degree: int) -> tuple[np.ndarray, np.ndarray]:
     deriv : ndarray, (degree + 1, degree)  deriv[l, j] is the derivative at tau[j+1] of
         the Lagrange polynomial through tau that is one at tau[l]
     """
+    degree = integer(degree, "degree", minimum=1)
+    if degree not in COLLOCATION_DEGREES:
+        raise ValueError(f"degree must be an integer from 1 to {COLLOCATION_DEGREES[-1]} (Radau points), got {degree}")
     tau = np.array([0.0] + ca.collocation_points(degree, "radau"))
     deriv = np.empty((degree + 1, degree))
-    for l in range(degree + 1):
-        others = np.delete(tau, l)
-        poly = np.poly1d(np.poly(others)) / np.prod(tau[l] - others)
-        deriv[l] = np.polyder(poly)(tau[1:])
+    for node in range(degree + 1):
+        others = np.delete(tau, node)
+        poly = np.poly1d(np.poly(others)) / np.prod(tau[node] - others)
+        deriv[node] = np.polyder(poly)(tau[1:])
     return tau, deriv
 
 

@@ -156,7 +156,7 @@ def test_closed_loop_divergence_names_the_time(blow_up_plant):
 
 @pytest.mark.parametrize("kwargs,error,message", [
     ({"controller": Constant(0.0, n_measured=2)}, ValueError, "reads 2 measurements but arm provides 1"),
-    ({"duration": -1.0}, ValueError, "duration must be > 0"),
+    ({"duration": -1.0}, ValueError, r"duration \(s\) must be a finite number > 0, got -1.0"),
     ({"reference": np.zeros((5, 1))}, ValueError, "reference must be a constant"),
     ({"noise_std": -0.1}, ValueError, "noise_std must be finite and >= 0"),
     ({"reference": lambda t: np.where(t > 0.5, np.nan, 0.0)}, ValueError, "reference is not finite at t = 0.51"),
@@ -174,3 +174,50 @@ def test_block_rejects_bad_gains():
         Constant(np.nan)
     with pytest.raises(ValueError, match="has no gain"):
         Constant(1.0).with_gains(kp=1.0)
+
+
+@pytest.mark.parametrize("measures", ["state", "outputs"])
+def test_monte_carlo_is_bit_identical_to_single_runs_whatever_the_chunking(measures):
+    """Each sample of the batch equals a separate simulate_closed_loop run (another code path: one
+    unmapped Function per run) exactly, with noise, for chunks of 1, 2 and the default size."""
+    pend = models.get("pendulum")
+    if measures == "state":
+        lin = pend.linearize()
+        import control
+        K = control.place(lin.A, lin.B, [-3, -3.5, -4, -4.5])[0]
+        ctrl = StateFeedback(K, -1.0 / (np.array([1, 0, 0, 0]) @ np.linalg.solve(lin.A - lin.B @ K[None], lin.B))[0])
+    else:
+        ctrl = models.Cascade(Proportional(0.1, index=0, n_measured=2), Proportional(-40.0, index=1, n_measured=2))
+    samples = models.sample_params(pend, 5, seed=8)
+    kw = dict(noise_std=1e-3, seed=21, input_disturbance=0.1, substeps=2)
+    batches = [models.monte_carlo(pend, ctrl, 0.3, 2.0, samples, chunk_size=c, **kw) for c in (1, 2, None)]
+    chunked = list(models.monte_carlo_chunks(pend, ctrl, 0.3, 2.0, samples, chunk_size=2, **kw))
+    for i, row in enumerate(samples):
+        single = models.simulate_closed_loop(pend, ctrl, 0.3, 2.0, params=row, noise_std=1e-3, substeps=2,
+                                             seed=np.random.SeedSequence([21, i]), input_disturbance=0.1,
+                                             allow_divergence=True)
+        chunk = chunked[i // 2][i % 2]
+        for batch in batches:
+            for field in ("x", "y", "u", "xc", "measured", "params", "t", "r", "d", "input_limit"):
+                np.testing.assert_array_equal(getattr(batch[i], field), getattr(single, field), err_msg=field)
+                np.testing.assert_array_equal(getattr(chunk, field), getattr(single, field), err_msg=field)
+            assert batch[i].diverged_at == single.diverged_at
+    assert not np.allclose(batches[0][0].x, batches[0][1].x)  # the samples differ
+
+
+def test_monte_carlo_result_is_a_read_only_sequence_of_views():
+    arm = models.get("arm")
+    batch = models.monte_carlo(arm, StateFeedback([0.6, 0.05], 0.6), 0.3, 1.0, models.sample_params(arm, 4))
+    assert len(batch) == 4 and batch.x.shape == (4, 101, 2) and batch.u.shape == (4, 100, 1)
+    assert batch.y.shape == (4, 101, 1) and batch.xc.shape == (4, 101, 0)
+    runs = list(batch)
+    assert len(runs) == 4 and all(isinstance(r, models.ClosedLoopResult) for r in runs)
+    np.testing.assert_array_equal(batch[-1].x, batch.x[3])
+    assert np.shares_memory(batch[2].x, batch.x)  # a view, not a copy
+    assert [r.diverged_at for r in batch[1:3]] == [None, None]
+    with pytest.raises(ValueError, match="read-only"):
+        batch[0].x[0, 0] = 1.0
+    with pytest.raises(IndexError, match="sample 4 of a batch of 4"):
+        batch[4]
+    # Outputs are the plant's h of each sample's states (the arm measures θ).
+    np.testing.assert_array_equal(batch.y[:, :, 0], batch.x[:, :, 0])

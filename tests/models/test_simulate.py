@@ -87,7 +87,7 @@ def test_divergence_names_the_time(method, blow_up_plant):
     ({"method": "euler"}, "unknown method 'euler'"),
     ({"x0": [0.0]}, "initial state .* must have 2 entries"),
     ({"u": np.full((3, 1), np.nan)}, "input sequence has a non-finite entry at row 0"),
-    ({"sample_period": -0.01}, "sample_period must be > 0"),
+    ({"sample_period": -0.01}, r"sample_period \(s\) must be a finite number > 0, got -0.01"),
 ])
 def test_simulate_bad_input(kwargs, message):
     args = {"x0": [0.0, 0.0], "u": np.zeros((3, 1)), "sample_period": 0.01} | kwargs
