@@ -101,9 +101,10 @@ def test_python_controllers_get_fewer_samples_and_report_solver_status():
 def test_a_diverged_run_is_reported_as_diverged_with_its_time():
     result = runner.run_study(arm_study(providers=("example_providers:diverging",)), STEP_ONLY)
     row = result.table.iloc[0]
-    # The example controller commands NaN from its 100th step: the state is lost at t = 1.01 s.
-    assert row.status == "diverged at t = 1.01 s"
-    assert row.diverged_at_s == pytest.approx(1.01)
+    # The example controller commands NaN from its 100th step (t = 1 s): the run diverges at that command,
+    # before the plant integrates it.
+    assert row.status == "diverged at t = 1 s"
+    assert row.diverged_at_s == pytest.approx(1.0)
     assert all(math.isnan(row[k]) for k in metrics.METRIC_COLUMNS if k != "u_limit")
     assert result.best() is None
 
