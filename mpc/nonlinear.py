@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+import models
 from models import Plant
 
 
@@ -162,9 +163,6 @@ class NonlinearMPCProblem:
             "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
             "error_on_fail": False,
         }
-        if jit:
-            options |= {"jit": True, "compiler": "shell", "jit_cleanup": True,
-                        "jit_options": {"flags": ["-O1"], "verbose": False}}
         if qp_solver == "hpipm":
             options["qpsol_options"] = {"N": N, "nx": [nx] * (N + 1), "nu": [nu + ns] * N + [0],
                                         "ng": [stage_rows.size1() - nx] * N + [0], "error_on_fail": False}
@@ -173,8 +171,10 @@ class NonlinearMPCProblem:
         else:
             options["qpsol_options"] = {"error_on_fail": False}
         self.qp_solver = qp_solver
-        self.solver = ca.nlpsol("nmpc", "sqpmethod",
-                                {"x": decision, "p": parameters, "f": cost, "g": g_all}, options)
+        nlp = {"x": decision, "p": parameters, "f": cost, "g": g_all}
+        # jit: compiled without a shell and cached (models.compile); -O1 keeps compiling short.
+        self.solver = (models.compile.jit_nlpsol("nmpc", "sqpmethod", nlp, options, flags=("-O1",)) if jit
+                       else ca.nlpsol("nmpc", "sqpmethod", nlp, options))
         self.lbg, self.ubg = np.concatenate(lbg), np.concatenate(ubg)
         self._stage, self._stage_rows = stage, stage_rows.size1()
         stage_lower = np.concatenate([np.full(nx, -np.inf), np.full(nu, -1.0), np.zeros(ns)])
