@@ -46,6 +46,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from . import interrupts
+
 #: Libraries run on the machine that compiles them (the machine is part of the cache key),
 #: so -march=native is safe.
 FLAGS = ("-O3", "-march=native")
@@ -277,6 +279,8 @@ def jit(fun: ca.Function, flags=FLAGS) -> ca.Function:
     try:
         return ca.external(fun.name(), str(library))
     except RuntimeError as err:  # a cache on a noexec mount, for example
+        if interrupts.is_interrupt(err):
+            raise KeyboardInterrupt from err
         _warn_once("load", f"cannot load the compiled library {str(library)!r}: {str(err).splitlines()[0]}")
         return fun
 
@@ -300,6 +304,8 @@ def jit_nlpsol(name: str, plugin: str, problem: dict, options: dict, flags=FLAGS
     try:
         return ca.nlpsol(name, plugin, str(library), loaded_options)
     except RuntimeError as err:
+        if interrupts.is_interrupt(err):
+            raise KeyboardInterrupt from err
         _warn_once("load", f"cannot load the compiled library {str(library)!r}: {str(err).splitlines()[0]}")
         return solver
 

@@ -29,7 +29,12 @@ import casadi as ca
 import numpy as np
 
 import models
-from models import Plant
+from models import Plant, interrupts
+
+from .linear import integer, real, real_array
+
+#: QP solvers of the SQP, with the options each is given (CasADi conic plugins).
+QP_SOLVERS = ("hpipm", "qrqp", "ipqp")
 
 
 @dataclass
@@ -82,11 +87,14 @@ class NonlinearMPCProblem:
     def __init__(self, plant: Plant, sample_period: float, horizon: int, state_weight, input_weight, *,
                  soft_bounds=(), rate_limit=None, substeps: int = 1, max_iterations: int = 20,
                  qp_solver: str = "hpipm", stationarity_tolerance: float = 1e-4, jit: bool = False):
-        if int(horizon) != horizon or horizon < 1:
-            raise ValueError(f"horizon must be an integer >= 1, got {horizon}")
-        if int(max_iterations) < 1:
-            raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
-        nx, nu, N = plant.nx, plant.nu, int(horizon)
+        N = integer(horizon, "horizon")
+        max_iterations = integer(max_iterations, "max_iterations")
+        substeps = integer(substeps, "substeps")
+        if qp_solver not in QP_SOLVERS:
+            raise ValueError(f"qp_solver must be one of {', '.join(map(repr, QP_SOLVERS))}, got {qp_solver!r}")
+        tolerance = real(stationarity_tolerance, "stationarity_tolerance", positive=True)
+        sample_period = real(sample_period, "sample_period (s)", positive=True)
+        nx, nu = plant.nx, plant.nu
         Q = _weight(state_weight, nx, "state_weight Q", definite=False)
         R = _weight(input_weight, nu, "input_weight R", definite=True)
         limit = plant.input_limit
@@ -94,7 +102,8 @@ class NonlinearMPCProblem:
         ns = len(soft)
         self.plant, self.nx, self.nu, self.horizon, self.n_soft = plant, nx, nu, N, ns
         self.sample_period, self.input_limit, self.soft_bounds = float(sample_period), limit.copy(), soft
-        self.rate_limit = None if rate_limit is None else np.broadcast_to(np.asarray(rate_limit, float), (nu,)).copy()
+        self.rate_limit = None if rate_limit is None else \
+            np.broadcast_to(real_array(rate_limit, "rate_limit"), (nu,)).copy()
         if self.rate_limit is not None and (not np.all(np.isfinite(self.rate_limit)) or np.any(self.rate_limit <= 0)):
             raise ValueError(f"rate_limit must be finite and > 0 per sample, got {self.rate_limit}")
         step = plant.step_function(sample_period, substeps)
@@ -159,7 +168,7 @@ class NonlinearMPCProblem:
                                    ["x", "p", "lam_f", "lam_g"], ["hess"]).expand()
         options = {
             "expand": True, "hess_lag": gauss_newton, "qpsol": qp_solver, "max_iter": int(max_iterations),
-            "tol_du": float(stationarity_tolerance), "tol_pr": 1e-6,
+            "tol_du": tolerance, "tol_pr": 1e-6,
             "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
             "error_on_fail": False,
         }
@@ -248,6 +257,8 @@ class NonlinearMPCProblem:
             iterations = int(stats.get("iter_count", 0))
             decision = np.asarray(result["x"], dtype=float).ravel()
         except Exception as err:  # CasADi raises on NaN in a function evaluation, for example
+            if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi reports as an error
+                raise KeyboardInterrupt from err
             status, success, iterations = f"solver error: {err}".splitlines()[0], False, 0
             decision = np.full(self.lbx.size, np.nan)
         success = success and bool(np.all(np.isfinite(decision)))
@@ -264,10 +275,11 @@ class NonlinearMPCProblem:
 
 
 def _weight(value, n, what, definite) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    arr = real_array(value, what)
     arr = arr * np.eye(n) if arr.ndim == 0 else (np.diag(arr) if arr.ndim == 1 else arr)
     if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), got {np.shape(value)}")
+        raise ValueError(f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), "
+                         f"got {np.shape(value)}")
     arr = (arr + arr.T) / 2
     smallest = np.min(np.linalg.eigvalsh(arr))
     if smallest < 0 or (definite and smallest == 0):

@@ -26,7 +26,7 @@ import daqp
 import numpy as np
 import scipy.linalg
 
-from .linear import INFINITY, MPCProblem, QPParameters, QPSolution
+from .linear import INFINITY, MPCProblem, QPParameters, QPSolution, integer
 
 #: DAQP exit flags (daqp/include/constants.h).
 DAQP_STATUS = {1: "optimal", 2: "soft optimal", -1: "primal infeasible", -2: "cycling detected",
@@ -97,9 +97,7 @@ class CondensedDaqpSolver:
         self.blower = np.concatenate([np.tile(problem.input_lower, N) / self.scale[:self.n_inputs],
                                       np.zeros(self.n_slacks), np.full(self.A.shape[0], -INFINITY)])
         self._n_lower, self._n_upper = self.lower_rows.size, self.upper_rows.size
-        if int(iteration_limit) < 1:
-            raise ValueError(f"iteration_limit must be >= 1, got {iteration_limit}")
-        self.iteration_limit = int(iteration_limit)
+        self.iteration_limit = integer(iteration_limit, "iteration_limit")
         self._f = np.concatenate([np.zeros(self.n_inputs), self.f_slacks * self.scale[self.n_inputs:]])
         self._f_per_theta = self.F_theta * self.scale[:self.n_inputs, None]  # f of the scaled inputs
         self._bounds_vary = bool(self._n_lower or self._n_upper or problem.rate_limit is not None)
