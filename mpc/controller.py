@@ -29,6 +29,8 @@ non-finite reference are errors (ValueError).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from models import Plant, case, interrupts
@@ -129,6 +131,9 @@ class _PlanFollower:
         self._info: dict = {}
         nx, nu = known.nx, known.nu
         self._slices = (slice(0, nx), slice(nx, nx + nu), slice(nx + nu, nx + nu + self.horizon * nu))
+        self._state_shape = (nx + nu + self.horizon * nu,)
+        self._measurement_shape = (known.ny,)
+        self._plan_shape = (self.horizon, nu)
 
     @property
     def n_state(self) -> int:
@@ -149,12 +154,16 @@ class _PlanFollower:
 
         x_c and y may hold non-finite values (the step reports them); r must be finite.
         """
-        xc = np.asarray(xc, dtype=float)
-        y = _vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
-        r = _finite_vector(r, 1, f"{self.name}: reference")
-        if xc.shape != (self.n_state,):
-            raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
-        return xc, y, r, xc[self._slices[2]].reshape(self.horizon, self.plant.nu)
+        # Arrays of the right kind pass without copies (the simulator's case); anything else is converted.
+        if not (type(xc) is np.ndarray and xc.dtype == np.float64 and xc.shape == self._state_shape):
+            xc = real_array(xc, f"{self.name}: controller state")
+            if xc.shape != self._state_shape:
+                raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
+        if not (type(y) is np.ndarray and y.dtype == np.float64 and y.shape == self._measurement_shape):
+            y = _vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
+        if not (type(r) is np.ndarray and r.dtype == np.float64 and r.shape == (1,) and math.isfinite(r[0])):
+            r = _finite_vector(r, 1, f"{self.name}: reference")
+        return xc, y, r, xc[self._slices[2]].reshape(self._plan_shape)
 
     def _follow(self, solution_inputs, success: bool, status: str, plan: np.ndarray) \
             -> tuple[np.ndarray, np.ndarray, bool, float, bool, str]:
@@ -170,11 +179,13 @@ class _PlanFollower:
             success, status = False, f"non-finite solution (solver: {status})"
         fallback = not success
         candidate = np.vstack([plan[1:], plan[-1:]]) if fallback else solution_inputs
-        excess = max(0.0, float(np.max(np.abs(candidate[0]) - self.input_limit)))
-        new_plan = np.clip(candidate, -self.input_limit, self.input_limit)
+        limit = self.input_limit
+        excess = max(0.0, float((np.abs(candidate[0]) - limit).max()))
+        new_plan = np.minimum(np.maximum(candidate, -limit), limit)
         if self._rate_per_sample is not None:
-            new_plan[0] = np.clip(new_plan[0], plan[0] - self._rate_per_sample, plan[0] + self._rate_per_sample)
-            new_plan[0] = np.clip(new_plan[0], -self.input_limit, self.input_limit)
+            rate = self._rate_per_sample
+            new_plan[0] = np.minimum(np.maximum(new_plan[0], plan[0] - rate), plan[0] + rate)
+            new_plan[0] = np.minimum(np.maximum(new_plan[0], -limit), limit)
         command = new_plan[0].copy()
         if not _finite(command):
             success, status = False, f"non-finite command ({status})"
@@ -234,6 +245,9 @@ class LinearMPC(_PlanFollower):
         self.target = SteadyStateTarget(self.model.A, self.model.B, tracked_row)
         self._xe, self._ue, self._ye = self.model.xe, self.model.ue, self.model.ye
         self._reference_offset = self.model.xe[self.tracked_index]
+        # The stacked estimate (x̂, d̂) moves one sample with (A_aug, B_aug) under the command ũ.
+        self._estimate = slice(0, known.nx + nu)
+        self._A_aug, self._B_aug = self.observer.A_aug, np.vstack([self.model.B, np.zeros((nu, nu))])
 
     def initial_state(self, y0, r0) -> np.ndarray:
         """x_c at the first sample: at rest at the measured configuration, d̂ = 0, holding input as plan."""
@@ -246,15 +260,15 @@ class LinearMPC(_PlanFollower):
         """One sample: correct the estimate with y, solve the QP for reference r, command the first input."""
         sx, sd, _ = self._slices
         xc, y, r, plan = self._read(xc, y, r)
-        model = self.model
-        x_hat, d_hat = xc[sx], xc[sd]
+        estimate = xc[self._estimate]
         fault = None
         if not _finite(y):  # a lost measurement: the prediction stands as the estimate
             fault = "non-finite measurement"
         else:
-            x_hat, d_hat = self.observer.correct(x_hat, d_hat, y - self._ye - model.C @ x_hat)
-            if not (_finite(x_hat) and _finite(d_hat)):
+            estimate = self.observer.update(estimate, y - self._ye)
+            if not _finite(estimate):
                 fault = "non-finite estimate"
+        x_hat, d_hat = estimate[sx], estimate[sd]
         solution = None
         if fault is None:
             x_target, u_target = self.target(r - self._reference_offset, d_hat)
@@ -270,16 +284,17 @@ class LinearMPC(_PlanFollower):
                                   fault)
         new_plan, u, fallback, excess, success, status = self._follow(solution.inputs + self._ue, solution.success,
                                                                       solution.status, plan)
-        x_next = model.A @ x_hat + model.B @ (u - self._ue + d_hat)
         ns = self.problem.n_soft
         self._info = {
             "solver": self.solver.name, "status": status, "success": success,
             "iterations": solution.iterations, "solve_time": solution.solve_time, "fallback": fallback,
             "input_excess": excess,
-            "soft_violation": float(np.max(solution.slacks)) if ns and success else 0.0,
-            "soft_violation_now": self._violation_now(x_hat),
+            "soft_violation": float(solution.slacks.max()) if ns and success else 0.0,
+            "soft_violation_now": self._violation_now(x_hat) if ns else 0.0,
         }
-        return np.concatenate([x_next, d_hat, new_plan.ravel()]), u
+        # (x̂, d̂) one sample on: x̂⁺ = A x̂ + B (ũ + d̂), d̂⁺ = d̂.
+        predicted = self._A_aug @ estimate + self._B_aug @ (u - self._ue)
+        return np.concatenate((predicted, new_plan.ravel())), u
 
     def _violation_now(self, x_hat) -> float:
         """Violation of the MPC's (backed-off) soft bounds by the current estimate."""

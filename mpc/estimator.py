@@ -89,6 +89,10 @@ class DisturbanceObserver:
         step = self.gain @ innovation
         return x_pred + step[:self.nx], d_pred + step[self.nx:]
 
+    def update(self, predicted, measured) -> np.ndarray:
+        """`correct` on the stacked estimate: (x̂, d̂)_{k|k} (nx + nu,) from (x̂, d̂)_{k|k−1} and ỹ_k."""
+        return predicted + self.gain @ (measured - self.C_aug @ predicted)
+
     def error_dynamics(self) -> np.ndarray:
         """(I − L C) A_aug: the estimation error's transition matrix; Schur stable by construction."""
         return (np.eye(self.nx + self.nu) - self.gain @ self.C_aug) @ self.A_aug

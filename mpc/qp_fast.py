@@ -101,11 +101,21 @@ class CondensedDaqpSolver:
         self._f = np.concatenate([np.zeros(self.n_inputs), self.f_slacks * self.scale[self.n_inputs:]])
         self._f_per_theta = self.F_theta * self.scale[:self.n_inputs, None]  # f of the scaled inputs
         self._bounds_vary = bool(self._n_lower or self._n_upper or problem.rate_limit is not None)
+        # Buffers the hot path writes into: theta = (x0, d, x_s, u_s) and the inputs' part of f.
+        self._theta = np.zeros(2 * (nx + nu))
+        self._theta_parts = (slice(0, nx), slice(nx, nx + nu), slice(nx + nu, 2 * nx + nu), slice(2 * nx + nu, None))
+        self._f_inputs = self._f[:self.n_inputs]
+        self._shapes = ((N, nu), (N, ns))
         self.reset()
 
     def _update_vectors(self, params: QPParameters) -> None:
-        theta = np.concatenate([params.x0, params.disturbance, params.x_target, params.u_target])
-        self._f[:self.n_inputs] = self._f_per_theta @ theta
+        theta, (x0, d, xs, us) = self._theta, self._theta_parts
+        theta[x0], theta[d], theta[xs], theta[us] = params.x0, params.disturbance, params.x_target, params.u_target
+        np.dot(self._f_per_theta, theta, out=self._f_inputs)
+        if self._bounds_vary:
+            self._update_bounds(theta, params.u_previous)
+
+    def _update_bounds(self, theta: np.ndarray, u_previous: np.ndarray) -> None:
         start = self.n_inputs + self.n_slacks
         if self._n_lower or self._n_upper:
             offset = self.soft_offset @ theta[:self.problem.nx + self.problem.nu]
@@ -117,27 +127,32 @@ class CondensedDaqpSolver:
             nu = self.problem.nu
             self.bupper[start:] = self.rate_bound
             self.blower[start:] = -self.rate_bound
-            self.bupper[start:start + nu] += params.u_previous
-            self.blower[start:start + nu] += params.u_previous
+            self.bupper[start:start + nu] += u_previous
+            self.blower[start:start + nu] += u_previous
 
     def solve(self, params: QPParameters) -> QPSolution:
-        """Update f and the bounds for `params`, solve warm-started, return the plan."""
+        """Update f and the bounds for `params`, solve warm-started, return the plan.
+
+        The hot path of linear MPC: the matrices are fixed, the vectors are written into
+        buffers in place, and DAQP keeps its factorization and active set between calls.
+        """
         start = time.perf_counter()
         self._update_vectors(params)
+        model = self._model
         if not self._set_up:
-            flag, _ = self._model.setup(self.H_scaled, self._f, self.A, self.bupper, self.blower)
+            flag, _ = model.setup(self.H_scaled, self._f, self.A, self.bupper, self.blower)
             self._set_up = True
             if flag < 0:
                 return self._failure(f"setup failed ({DAQP_STATUS.get(flag, flag)})", start)
         elif self._bounds_vary:
-            self._model.update(f=self._f, bupper=self.bupper, blower=self.blower)
+            model.update(f=self._f, bupper=self.bupper, blower=self.blower)
         else:
-            self._model.update(f=self._f)
-        z, _, flag, info = self._model.solve()
-        z = z * self.scale
+            model.update(f=self._f)
+        z, _, flag, info = model.solve()
+        z *= self.scale  # DAQP returns a fresh array
         success = flag > 0 and bool(np.isfinite(z).all())
-        N, nu, ns = self.problem.horizon, self.problem.nu, self.problem.n_soft
-        return QPSolution(z[:self.n_inputs].reshape(N, nu), z[self.n_inputs:].reshape(N, ns), success,
+        n, (inputs, slacks) = self.n_inputs, self._shapes
+        return QPSolution(z[:n].reshape(inputs), z[n:].reshape(slacks), success,
                           DAQP_STATUS.get(flag, f"exit flag {flag}"), info["iterations"],
                           time.perf_counter() - start)
 
