@@ -29,6 +29,7 @@ non-finite reference are errors (ValueError).
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -264,6 +265,8 @@ class LinearMPC(_PlanFollower):
         fault = None
         if not _finite(y):  # a lost measurement: the prediction stands as the estimate
             fault = "non-finite measurement"
+        elif not _finite(estimate):
+            fault = "non-finite estimate"
         else:
             estimate = self.observer.update(estimate, y - self._ye)
             if not _finite(estimate):
@@ -292,8 +295,9 @@ class LinearMPC(_PlanFollower):
             "soft_violation": float(solution.slacks.max()) if ns and success else 0.0,
             "soft_violation_now": self._violation_now(x_hat) if ns else 0.0,
         }
-        # (x̂, d̂) one sample on: x̂⁺ = A x̂ + B (ũ + d̂), d̂⁺ = d̂.
-        predicted = self._A_aug @ estimate + self._B_aug @ (u - self._ue)
+        # (x̂, d̂) one sample on: x̂⁺ = A x̂ + B (ũ + d̂), d̂⁺ = d̂ (non-finite after a fault, reported above).
+        with np.errstate(invalid="ignore", over="ignore") if not success else contextlib.nullcontext():
+            predicted = self._A_aug @ estimate + self._B_aug @ (u - self._ue)
         return np.concatenate((predicted, new_plan.ravel())), u
 
     def _violation_now(self, x_hat) -> float:
