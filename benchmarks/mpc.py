@@ -28,7 +28,10 @@ same DAQP call 24 us after OSQP alone, 99 us after cvxpy) while a millisecond
 OSQP call barely changes, so that ratio measures cache misses more than solvers.
 ``linear_median_ms`` is the whole linear MPC step (estimator, target, DAQP,
 clipping) in the closed loop, and ``ratio_c_over_linear_step`` OSQP's solve
-alone over it.
+alone over it. ``exported_c_step_median_ms`` is the same controller exported
+as C (`mpc.export`), compiled and called through ctypes in the same closed
+loop (``exported_c_max_command_diff``: its largest difference from the Python
+controller's commands).
 
 The nonlinear MPC's solve time is measured on its own closed loop (arm and
 pendulum by default, every plant with --all). --settling runs every plant's
@@ -60,6 +63,8 @@ import numpy as np  # noqa: E402
 
 import models  # noqa: E402
 import mpc  # noqa: E402
+from models.compile import CompilationError  # noqa: E402
+from mpc.export import export_linear_mpc  # noqa: E402
 from mpc.reference_cvxpy import CvxpySolver  # noqa: E402
 
 PATHS = {
@@ -159,6 +164,14 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
     interleaved_diffs = {key: float(np.max(np.abs(np.array(solver.first_moves[key]) - interleaved_reference)))
                          for key in "bcd"}
     step_ms = 1e3 * float(np.median(alone.step_time))
+    try:
+        compiled = export_linear_mpc(mpc.linear_mpc(name, known, **overrides), "benchmark_mpc").load()
+        in_c = models.simulate_closed_loop(plant, compiled, case.step, duration,
+                                           input_disturbance=case.input_disturbance)
+        exported = {"exported_c_step_median_ms": 1e3 * float(np.median(in_c.step_time)),
+                    "exported_c_max_command_diff": float(np.max(np.abs(in_c.u - alone.u)))}
+    except CompilationError as err:
+        exported = {"exported_c_step_median_ms": None, "exported_c_unavailable": str(err)}
     return {
         "plant": name, "steps": steps, "soft_bounds": soft, "horizon": controller.horizon,
         "sample_period": controller.sample_period, "block": BLOCK,
@@ -173,7 +186,7 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
         "interleaved_max_first_move_diff": max(interleaved_diffs.values()),
         "interleaved_failures": {key: int(np.sum(~np.array(solver.status[key]))) for key in PATHS},
         "controller_step_median_ms": step_ms, "linear_median_ms": step_ms,
-        "ratio_c_over_linear_step": medians["c"] / step_ms,
+        "ratio_c_over_linear_step": medians["c"] / step_ms, **exported,
         "saturated_steps": int(np.sum(np.abs(result.u) >= plant.input_limit)),
         "max_abs_u": float(np.max(np.abs(result.u))),
     }
@@ -255,6 +268,12 @@ def main(argv=None):
           f"(interleaved every step: {linear['interleaved_ratio_c_over_d']:.1f}); whole linear MPC step with (d): "
           f"median {linear['linear_median_ms']:.4f} ms, OSQP's solve alone / that = "
           f"{linear['ratio_c_over_linear_step']:.1f}")
+    if linear["exported_c_step_median_ms"] is not None:
+        print(f"exported to C (mpc.export), called through ctypes: median step "
+              f"{linear['exported_c_step_median_ms']:.4f} ms, commands within "
+              f"{linear['exported_c_max_command_diff']:.1e} of the Python controller's")
+    else:
+        print(f"exported to C: not measured ({linear['exported_c_unavailable']})")
 
     names = models.names() if args.all else ["arm", "pendulum"]
     nonlinear = {}

@@ -188,7 +188,7 @@ class _PlanFollower:
             new_plan[0] = np.minimum(np.maximum(new_plan[0], plan[0] - rate), plan[0] + rate)
             new_plan[0] = np.minimum(np.maximum(new_plan[0], -limit), limit)
         command = new_plan[0].copy()
-        if not _finite(command):
+        if fallback and not _finite(command):  # a solution was checked finite above
             success, status = False, f"non-finite command ({status})"
         return new_plan, command, fallback, excess, success, status
 

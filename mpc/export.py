@@ -9,13 +9,18 @@ rate limit, and the one-sample prediction of the estimate. The first state
 comes from the first measurement as in Python (`name_init`).
 
 The QP solver is Goldfarb and Idnani's dual method (Math. Programming 27,
-1983), in the form of Di Gaspero's QuadProg++: it starts from the
-unconstrained minimum (precomputed as an affine map of the parameters) and
-adds the most violated constraint until none is violated, keeping H = L Lᵀ's
-factor J = L⁻ᵀ orthogonally updated (Givens rotations). A strictly convex QP
-has one solution, so the command equals DAQP's to rounding (the tests hold
-them to 1e-9 over closed loops). It needs no warm start; each solve costs at
-most one rank update per active constraint, O(n²) each.
+1983), in the form of Di Gaspero's QuadProg++: from a minimizer over an
+active set with nonnegative multipliers it adds the most violated constraint
+until none is violated, keeping H = L Lᵀ's factor J = L⁻ᵀ orthogonally
+updated (Givens rotations). A strictly convex QP has one solution, so the
+command equals DAQP's to rounding (the tests hold them to 1e-9 over closed
+loops). Each solve starts from the unconstrained minimum of the inputs
+(precomputed as an affine map of the parameters) with every soft-bound slack
+at its bound s = 0: the slacks' Hessian block is diagonal and apart from the
+inputs', so that start's factorization is J with the slack columns moved to
+the front and its multipliers are the slacks' linear weights (>= 0) — a
+valid start that saves one O(n²) update per slack. Each further active
+constraint costs O(n²).
 
 Memory is one struct per controller (``name_state``): the controller state
 and the solver's work arrays, two n×n of them (n = N nu + N ns decision
@@ -79,6 +84,23 @@ def constraints(qp: CondensedQP) -> dict[str, np.ndarray]:
             "b0": np.array(b0), "bm": np.array(bm).reshape(len(b0), qp.n_parameters)}
 
 
+def slack_start(qp: CondensedQP, table: dict, J0: np.ndarray) -> dict[str, np.ndarray]:
+    """The solver's start with every slack at its bound s >= 0 active (see the module docstring).
+
+    column : J's columns in order (the slacks' first);  active : constraint indices of s_j >= 0;
+    variable : their variables;  r : R's diagonal (J0's slack diagonal);  multiplier : f at the slacks.
+    """
+    slacks = np.arange(qp.n_inputs, qp.n)
+    lower_bound = {int(v): k for k, (row, v, sign) in enumerate(zip(table["row"], table["variable"], table["sign"]))
+                   if row < 0 and sign > 0}
+    if np.any(qp.H[:qp.n_inputs, qp.n_inputs:]) or np.any(qp.H[qp.n_inputs:, qp.n_inputs:] - np.diag(np.diag(
+            qp.H[qp.n_inputs:, qp.n_inputs:]))) or np.any(qp.lower[slacks] != 0) or np.any(qp.f[slacks] < 0):
+        raise UnsupportedExport("the QP's slacks are not separate with bounds s >= 0 and weights >= 0")
+    return {"column": np.concatenate([slacks, np.arange(qp.n_inputs)]).astype(int),
+            "active": np.array([lower_bound[int(v)] for v in slacks], dtype=int),
+            "variable": slacks, "r": np.diag(J0)[slacks], "multiplier": qp.f[slacks]}
+
+
 def init_kernel(controller: LinearMPC, name: str) -> ca.Function:
     """(y0) -> (x̂0 − xe, u0): `LinearMPC.initial_state`'s start, at rest at the measured configuration."""
     plant = controller.plant
@@ -120,7 +142,9 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
     L = np.linalg.cholesky(qp.H)
     J0 = scipy.linalg.solve_triangular(L, np.eye(qp.n), lower=True).T
     H_inverse = J0 @ J0.T
+    start = slack_start(qp, table, J0)
     sizes = dict(NX=nx, NU=nu, NY=ny, NE=nx + nu, NH=N, NI=N * nu, NZ=qp.n, NP=qp.n_parameters,
+                 NSTART=len(start["active"]),
                  NM=max(1, qp.rows.shape[0]), NC=max(1, len(table["b0"])), NCON=len(table["b0"]),
                  NSTATE=nx + nu + N * nu)
     rate = controller._rate_per_sample
@@ -136,6 +160,9 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
         c_array("ROWS", qp.rows if qp.rows.size else [0.0]),
         c_array("CON_ROW", table["row"], kind="int"), c_array("CON_VARIABLE", table["variable"], kind="int"),
         c_array("CON_SIGN", table["sign"]), c_array("CON_B0", table["b0"]), c_array("CON_BM", table["bm"]),
+        c_array("START_COLUMN", start["column"], kind="int"), c_array("START_ACTIVE", start["active"], kind="int"),
+        c_array("START_VARIABLE", start["variable"], kind="int"), c_array("START_R", start["r"]),
+        c_array("START_MULTIPLIER", start["multiplier"]),
     ])
     upper = name.upper()
     header = _HEADER.substitute(
@@ -342,8 +369,17 @@ static int solve_scaled(${p}_state *m, double *z) {
     int *A = m->active, *inactive = m->inactive, *excluded = m->excluded;
     int i, j, k, l, ip, iq = 0;
     m->iterations = 0;
-    for (i = 0; i < NZ * NZ; ++i) J[i] = J0[i];
+    /* Start: the slacks at their bounds (see mpc.export), the inputs at their unconstrained minimum. */
+    for (i = 0; i < NZ; ++i)
+        for (j = 0; j < NZ; ++j) J[i * NZ + j] = J0[i * NZ + START_COLUMN[j]];
     for (i = 0; i < NCON; ++i) inactive[i] = i;
+    for (k = 0; k < NSTART; ++k) {
+        for (i = 0; i <= k; ++i) m->R[i * NZ + k] = i == k ? START_R[k] : 0.0;
+        A[k] = START_ACTIVE[k];
+        u[k] = START_MULTIPLIER[k];
+        z[START_VARIABLE[k]] = 0.0;
+    }
+    iq = NSTART;
     for (;;) {
         for (i = 0; i < iq; ++i) inactive[A[i]] = -1;
         for (i = 0; i < NCON; ++i) { excluded[i] = 0; s[i] = constraint_value(i, z) - b[i]; }
