@@ -146,7 +146,7 @@ class _PlanFollower:
         y0 = _finite_vector(y0, self.plant.ny, f"{self.name}: first measurement {self.plant.output_names}")
         _finite_vector(r0, 1, f"{self.name}: first reference")
         q0 = np.asarray(self.plant.casadi_configuration(y0, self._known_params)).ravel()
-        x0 = np.concatenate([q0, np.zeros(self.plant.nq)])
+        x0 = np.concatenate([q0, np.zeros(self.plant.nx - self.plant.nq)])  # at rest (velocities, other states 0)
         u0 = np.clip(self.plant.equilibrium_input(q0, self._known_params), -self.input_limit, self.input_limit)
         return x0, u0
 
