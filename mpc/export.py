@@ -147,7 +147,7 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
                  NSTART=len(start["active"]),
                  NM=max(1, qp.rows.shape[0]), NC=max(1, len(table["b0"])), NCON=len(table["b0"]),
                  NSTATE=nx + nu + N * nu)
-    rate = controller._rate_per_sample
+    rate = controller.problem.rate_limit  # per sample
     data = "".join([
         c_array("A_AUG", observer.A_aug), c_array("B_AUG", np.vstack([model.B, np.zeros((nu, nu))])),
         c_array("GAIN", observer.gain), c_array("C_AUG", observer.C_aug),
@@ -179,7 +179,7 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
         p=name, P=upper, controller=controller.name,
         sizes="".join(f"#define {key} {value}\n" for key, value in sizes.items()),
         casadi=generated_code([init], f"{name}_casadi"), data=data,
-        reference_offset=c_number(controller._reference_offset), has_rate=int(rate is not None),
+        reference_offset=c_number(model.xe[controller.tracked_index]), has_rate=int(rate is not None),
         tolerance=c_number(TOLERANCE), work_arg=work["arg"], work_res=work["res"],
         max_iterations=10 * (qp.n + sizes["NC"]), nonfinite_command=NONFINITE_COMMAND)
     return ExportedC(name=name, controller=controller.name, header=header, source=source,

@@ -27,7 +27,9 @@ def private_cache(tmp_path_factory, monkeypatch):
 
 
 class ExportedQP:
-    """The exported C's `name_solve_qp` as a solver path: solve(QPParameters) -> QPSolution."""
+    """The exported C's `name_solve_qp` as a solver path: solve(QPParameters) -> QPSolution.
+
+    The C of an arm controller whose QP is replaced by `problem`: only its QP is called here."""
 
     name = "exported C"
 
