@@ -32,14 +32,12 @@ DEFAULT_SETTINGS = dict(eps_abs=1e-7, eps_rel=1e-7, polishing=True, max_iter=200
 
 
 def _checked_settings(settings) -> dict:
-    """`settings` as a dict of numbers, flags and choices; negative numbers refused (OSQP reports only a code)."""
+    """`settings` as a dict of numbers and flags, negative numbers refused (OSQP itself reports only a code)."""
     if settings is None:
         return {}
     if not isinstance(settings, dict):
         raise TypeError(f"settings must be a dict of OSQP settings, got {type(settings).__name__} {settings!r}")
     for key, value in settings.items():
-        if isinstance(value, str):  # a choice such as linsys_solver: OSQP names what it accepts
-            continue
         if not isinstance(value, (bool, int, float, np.integer, np.floating)):
             raise TypeError(f"OSQP setting {key} must be a number or True/False, got {type(value).__name__} {value!r}")
         if not isinstance(value, bool) and not value >= 0:
