@@ -27,37 +27,29 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
 
-import control
-import numpy as np
+# Run as a script, this file's folder is sys.path[0] and "import studies" would find this
+# file instead of the package; drop the folder so the package is imported.
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
 
-import models
-from designs import statespace
-from designs.statespace_blocks import StateFeedback, TrackingModel
-from models.files import write_json
+import control  # noqa: E402
+import numpy as np  # noqa: E402
+
+import models  # noqa: E402
+import studies  # noqa: E402
+from designs.statespace_blocks import StateFeedback  # noqa: E402
+from models.files import write_json  # noqa: E402
+from studies import providers  # noqa: E402
 
 PLANT, SAMPLE_PERIOD, DURATION, SUBSTEPS, THREADS, REL = "pendulum", 0.01, 20.0, 2, 2, 0.05
 
 
 def pole_placement(known: models.Plant) -> StateFeedback:
-    """The pendulum's II.15(c) pole-placement block from the design primitives.
-
-    The .8 successive-loop rule: the inner (angle) loop's ωₙ² = |b| F_max / A_θ − a from the
-    linearization's θ̈ = a θ + b F with A_θ = 10°, the outer (position) loop 5 times slower,
-    ζ = 0.707 in both; K by pole placement, k_r for unit DC gain on z. (The gains equal those of
-    `designs.statespace_cases`' "pole placement", which this file does not import because that
-    module is moving.)
-    """
-    model = TrackingModel.from_plant(known, "z")
-    lin = model.linear
-    a, b = lin.A[3, 1], lin.B[3, 0]
-    inner = np.sqrt(abs(b) * known.input_limit[0] / np.deg2rad(10) - a)
-    poles = np.concatenate([statespace.second_order_poles(inner, 0.707),
-                            statespace.second_order_poles(inner / 5, 0.707)])
-    K = statespace.place(lin.A, lin.B, poles, PLANT)
-    kr = statespace.reference_gain(lin.A, lin.B, K, model.C_r)
-    return StateFeedback(model, K, kr, sample_period=SAMPLE_PERIOD, name="pole placement")
+    """The pendulum case's II.15(c) pole-placement block, designed from `known`."""
+    return providers.statespace(PLANT, known)["pole placement"]
 
 
 def python_control_loop(plant: models.Plant, block: StateFeedback) -> control.InterconnectedSystem:
@@ -90,9 +82,9 @@ def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[flo
 def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_samples: int = 3) -> dict:
     """Samples per second of `models.monte_carlo` and of python-control on the studies' Monte Carlo."""
     plant = models.get(PLANT)
-    known = models.perturbed(plant, REL, 1.0)
+    case = studies.get(PLANT)
+    known = case.known_plant(plant)
     block = pole_placement(known)
-    case = models.case(PLANT)
     reference = models.signals.step(case.step, 0.0, plant.equilibrium()[0][0])
     params = models.sample_params(plant, samples, rel=REL, seed=0)
 

@@ -405,10 +405,10 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost
     opts = {"ipopt": {"max_iter": int(max_iter), "print_level": 0, "tol": tol, "acceptable_tol": 100 * tol,
                       "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
-    if jit:
-        opts |= {"jit": True, "compiler": "shell", "jit_cleanup": True,
-                 "jit_options": {"flags": models.compile.FLAGS, "verbose": False}}
-    solver = ca.nlpsol("tuning", "ipopt", {"x": z, "f": f_of_x(scale * z), "g": g_of_x(scale * z)}, opts)
+    nlp = {"x": z, "f": f_of_x(scale * z), "g": g_of_x(scale * z)}
+    # Compiled without a shell and cached (models.compile); CasADi's virtual machine when impossible.
+    build = models.compile.jit_nlpsol if jit else ca.nlpsol
+    solver = build("tuning", "ipopt", nlp, opts)
     sol = solver(x0=start / scale, lbx=lbx / scale, ubx=ubx / scale, lbg=problem.lbg, ubg=problem.ubg)
     stats = solver.stats()
     status = stats["return_status"]

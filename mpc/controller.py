@@ -16,17 +16,37 @@ Every sample: if the solver reports failure (or an iteration limit, or a
 non-finite answer), the plan shifted by one sample is applied instead. The
 command is clipped to ±input_limit *after* solving, so |u| <= limit holds
 exactly; the excess clipped away is reported in `step_info()`.
+
+Nothing non-finite passes silently. A non-finite measurement is not used
+(the estimate is the model's prediction) and the step is a failure with
+status "non-finite measurement"; a non-finite estimate skips the solve
+("non-finite estimate"); a solver answer with non-finite entries is a
+failure ("non-finite solution"); and if the command itself is non-finite
+(the plan to fall back on is) the status says "non-finite command". Such
+steps have success False and fallback True. Sizes that do not match and a
+non-finite reference are errors (ValueError).
 """
 
 from __future__ import annotations
 
+import contextlib
+import math
+
 import numpy as np
 
-from models import Plant
+from models import Plant, interrupts
+from models.checks import integer, positive, real_array
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
-from .linear import MPCProblem, QPParameters, QPSolution, problem_from_model, riccati_terminal_cost
-from .nonlinear import NonlinearMPCProblem
+from .linear import (
+    MPCProblem,
+    QPParameters,
+    QPSolution,
+    SoftBound,
+    problem_from_model,
+    riccati_terminal_cost,
+)
+from .nonlinear import NLPSolution, NonlinearMPCProblem
 from .qp_fast import CondensedDaqpSolver
 from .qp_osqp import OsqpSolver
 from .reference_cvxpy import CvxpySolver
@@ -34,11 +54,47 @@ from .reference_cvxpy import CvxpySolver
 SOLVERS = {"daqp": CondensedDaqpSolver, "osqp": OsqpSolver, "cvxpy": CvxpySolver}
 
 
+def make_solver(solver, problem: MPCProblem):
+    """The QP solver object for `solver`: a name in `SOLVERS` or a callable problem -> solver."""
+    if isinstance(solver, str):
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))} or a callable "
+                             f"problem -> solver, got {solver!r}")
+        return SOLVERS[solver](problem)
+    if not callable(solver):
+        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))} or a callable problem -> solver, "
+                         f"got {solver!r}")
+    made = solver(problem)
+    missing = [m for m in ("solve", "reset") if not callable(getattr(made, m, None))]
+    if missing:
+        raise ValueError(f"solver {solver!r} made {type(made).__name__}, which has no {' or '.join(missing)} method")
+    return made
+
+
+def _vector(value, size: int, what: str) -> np.ndarray:
+    arr = real_array(value, what).reshape(-1)
+    if arr.size != size:
+        raise ValueError(f"{what} must have {size} entries, got {value!r}")
+    return arr
+
+
 def _finite_vector(value, size: int, what: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float).reshape(-1)
-    if arr.size != size or not np.all(np.isfinite(arr)):
+    arr = _vector(value, size, what)
+    if not np.all(np.isfinite(arr)):
         raise ValueError(f"{what} must be {size} finite values, got {value!r}")
     return arr
+
+
+def _soft_bounds(bounds) -> tuple[SoftBound, ...]:
+    bounds = tuple(bounds)
+    wrong = [b for b in bounds if not isinstance(b, SoftBound)]
+    if wrong:
+        raise TypeError(f"soft_bounds must be SoftBound objects (mpc.SoftBound.on(plant, ...)), got {wrong[0]!r}")
+    return bounds
+
+
+def _finite(arr: np.ndarray) -> bool:
+    return bool(np.isfinite(arr).all())
 
 
 class _PlanFollower:
@@ -53,10 +109,10 @@ class _PlanFollower:
     n_reference = 1
 
     def _setup_common(self, known: Plant, sample_period: float, horizon: int, tracked: str, name: str):
-        if not np.isfinite(sample_period) or sample_period <= 0:
-            raise ValueError(f"sample_period must be > 0 s, got {sample_period}")
-        if int(horizon) != horizon or horizon < 1:
-            raise ValueError(f"horizon must be an integer >= 1, got {horizon}")
+        if not isinstance(known, Plant):
+            raise TypeError(f"known must be a models.Plant, got {type(known).__name__} {known!r}")
+        sample_period = positive(sample_period, "sample_period (s)")
+        horizon = integer(horizon, "horizon", minimum=1)
         if known.nu != 1:
             raise ValueError(f"{known.name} has {known.nu} inputs; these controllers track one coordinate "
                              "with one input")
@@ -74,6 +130,9 @@ class _PlanFollower:
         self._info: dict = {}
         nx, nu = known.nx, known.nu
         self._slices = (slice(0, nx), slice(nx, nx + nu), slice(nx + nu, nx + nu + self.horizon * nu))
+        self._state_shape = (nx + nu + self.horizon * nu,)
+        self._measurement_shape = (known.ny,)
+        self._plan_shape = (self.horizon, nu)
 
     @property
     def n_state(self) -> int:
@@ -85,34 +144,51 @@ class _PlanFollower:
         y0 = _finite_vector(y0, self.plant.ny, f"{self.name}: first measurement {self.plant.output_names}")
         _finite_vector(r0, 1, f"{self.name}: first reference")
         q0 = np.asarray(self.plant.casadi_configuration(y0, self._known_params)).ravel()
-        x0 = np.concatenate([q0, np.zeros(self.plant.nq)])
+        x0 = np.concatenate([q0, np.zeros(self.plant.nx - self.plant.nq)])  # at rest (velocities, other states 0)
         u0 = np.clip(self.plant.equilibrium_input(q0, self._known_params), -self.input_limit, self.input_limit)
         return x0, u0
 
     def _read(self, xc, y, r) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Checked (x_c, y, r) of one step and the stored input plan, (horizon, nu)."""
-        xc = np.asarray(xc, dtype=float)
-        y = _finite_vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
-        r = _finite_vector(r, 1, f"{self.name}: reference")
-        if xc.shape != (self.n_state,):
-            raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
-        return xc, y, r, xc[self._slices[2]].reshape(self.horizon, self.plant.nu)
+        """(x_c, y, r) of one step with their sizes checked, and the stored input plan, (horizon, nu).
 
-    def _follow(self, solution_inputs, success: bool, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, float]:
-        """The plan to follow (clipped), the command, whether the fallback was used, the clipped excess.
-
-        The solver's plan when it succeeded, else the previous plan shifted by one sample.
-        Clipping happens here, after solving, so the command is within ±input_limit exactly
-        (and within the rate limit of the previous command, which is itself within the limit).
+        x_c and y may hold non-finite values (the step reports them); r must be finite.
         """
-        fallback = not (success and bool(np.isfinite(solution_inputs).all()))
+        # Arrays of the right kind pass without copies (the simulator's case); anything else is converted.
+        if not (type(xc) is np.ndarray and xc.dtype == np.float64 and xc.shape == self._state_shape):
+            xc = real_array(xc, f"{self.name}: controller state")
+            if xc.shape != self._state_shape:
+                raise ValueError(f"{self.name}: controller state must have {self.n_state} entries, got {xc.shape}")
+        if not (type(y) is np.ndarray and y.dtype == np.float64 and y.shape == self._measurement_shape):
+            y = _vector(y, self.plant.ny, f"{self.name}: measurement {self.plant.output_names}")
+        if not (type(r) is np.ndarray and r.dtype == np.float64 and r.shape == (1,) and math.isfinite(r[0])):
+            r = _finite_vector(r, 1, f"{self.name}: reference")
+        return xc, y, r, xc[self._slices[2]].reshape(self._plan_shape)
+
+    def _follow(self, solution_inputs, success: bool, status: str, plan: np.ndarray) \
+            -> tuple[np.ndarray, np.ndarray, bool, float, bool, str]:
+        """The plan to follow (clipped), the command, whether the fallback was used, the clipped
+        excess, and the step's success and status.
+
+        The solver's plan when it succeeded with finite values, else the previous plan shifted by
+        one sample. Clipping happens here, after solving, so the command is within ±input_limit
+        exactly (and within the rate limit of the previous command, which is itself within the
+        limit). A non-finite command (the plan fallen back on was non-finite) is reported.
+        """
+        if success and not _finite(solution_inputs):
+            success, status = False, f"non-finite solution (solver: {status})"
+        fallback = not success
         candidate = np.vstack([plan[1:], plan[-1:]]) if fallback else solution_inputs
-        excess = max(0.0, float(np.max(np.abs(candidate[0]) - self.input_limit)))
-        new_plan = np.clip(candidate, -self.input_limit, self.input_limit)
+        limit = self.input_limit
+        excess = max(0.0, float((np.abs(candidate[0]) - limit).max()))
+        new_plan = np.minimum(np.maximum(candidate, -limit), limit)
         if self._rate_per_sample is not None:
-            new_plan[0] = np.clip(new_plan[0], plan[0] - self._rate_per_sample, plan[0] + self._rate_per_sample)
-            new_plan[0] = np.clip(new_plan[0], -self.input_limit, self.input_limit)
-        return new_plan, new_plan[0].copy(), fallback, excess
+            rate = self._rate_per_sample
+            new_plan[0] = np.minimum(np.maximum(new_plan[0], plan[0] - rate), plan[0] + rate)
+            new_plan[0] = np.minimum(np.maximum(new_plan[0], -limit), limit)
+        command = new_plan[0].copy()
+        if fallback and not _finite(command):  # a solution was checked finite above
+            success, status = False, f"non-finite command ({status})"
+        return new_plan, command, fallback, excess, success, status
 
     def step_info(self) -> dict:
         """The last step's record: solver, status, success, iterations, solve_time (s), fallback,
@@ -150,13 +226,13 @@ class LinearMPC(_PlanFollower):
         self._setup_common(known, sample_period, horizon, tracked, name)
         xe, ue = known.equilibrium() if operating_point is None else operating_point
         self.model = known.linearize(xe, ue).discretize(self.sample_period)
-        per_sample_rate = None if rate_limit is None else np.asarray(rate_limit, dtype=float) * self.sample_period
+        per_sample_rate = None if rate_limit is None else real_array(rate_limit, "rate_limit") * self.sample_period
         self._rate_per_sample = per_sample_rate
-        self.soft_bounds = tuple(soft_bounds)
+        self.soft_bounds = _soft_bounds(soft_bounds)
         self.problem: MPCProblem = problem_from_model(
             self.model, state_weight, input_weight, self.horizon, self.input_limit,
             rate_limit=per_sample_rate, soft_bounds=self.soft_bounds)
-        self.solver = SOLVERS[solver](self.problem) if isinstance(solver, str) else solver(self.problem)
+        self.solver = make_solver(solver, self.problem)
         nu = known.nu
         self.observer = DisturbanceObserver(
             self.model.A, self.model.B, self.model.C,
@@ -168,6 +244,9 @@ class LinearMPC(_PlanFollower):
         self.target = SteadyStateTarget(self.model.A, self.model.B, tracked_row)
         self._xe, self._ue, self._ye = self.model.xe, self.model.ue, self.model.ye
         self._reference_offset = self.model.xe[self.tracked_index]
+        # The stacked estimate (x̂, d̂) moves one sample with (A_aug, B_aug) under the command ũ.
+        self._estimate = slice(0, known.nx + nu)
+        self._A_aug, self._B_aug = self.observer.A_aug, np.vstack([self.model.B, np.zeros((nu, nu))])
 
     def initial_state(self, y0, r0) -> np.ndarray:
         """x_c at the first sample: at rest at the measured configuration, d̂ = 0, holding input as plan."""
@@ -180,26 +259,44 @@ class LinearMPC(_PlanFollower):
         """One sample: correct the estimate with y, solve the QP for reference r, command the first input."""
         sx, sd, _ = self._slices
         xc, y, r, plan = self._read(xc, y, r)
-        model = self.model
-        x_hat, d_hat = self.observer.correct(xc[sx], xc[sd], y - self._ye - model.C @ xc[sx])
-        x_target, u_target = self.target(r - self._reference_offset, d_hat)
-        params = QPParameters(x_hat, d_hat, x_target, u_target, plan[0] - self._ue)
-        try:
-            solution = self.solver.solve(params)
-        except Exception as err:  # a crashing solver is a failed solve: reported, never raised mid-run
+        estimate = xc[self._estimate]
+        fault = None
+        if not _finite(y):  # a lost measurement: the prediction stands as the estimate
+            fault = "non-finite measurement"
+        elif not _finite(estimate):
+            fault = "non-finite estimate"
+        else:
+            estimate = self.observer.update(estimate, y - self._ye)
+            if not _finite(estimate):
+                fault = "non-finite estimate"
+        x_hat, d_hat = estimate[sx], estimate[sd]
+        solution = None
+        if fault is None:
+            x_target, u_target = self.target(r - self._reference_offset, d_hat)
+            params = QPParameters(x_hat, d_hat, x_target, u_target, plan[0] - self._ue)
+            try:
+                solution = self.solver.solve(params)
+            except Exception as err:  # a crashing solver is a failed solve: reported, never raised mid-run
+                if interrupts.is_interrupt(err):
+                    raise KeyboardInterrupt from err
+                fault = f"solver raised {type(err).__name__}: {err}"
+        if solution is None:
             solution = QPSolution(np.full_like(plan, np.nan), np.zeros((self.horizon, self.problem.n_soft)), False,
-                                  f"solver raised {type(err).__name__}: {err}")
-        new_plan, u, fallback, excess = self._follow(solution.inputs + self._ue, solution.success, plan)
-        x_next = model.A @ x_hat + model.B @ (u - self._ue + d_hat)
+                                  fault)
+        new_plan, u, fallback, excess, success, status = self._follow(solution.inputs + self._ue, solution.success,
+                                                                      solution.status, plan)
         ns = self.problem.n_soft
         self._info = {
-            "solver": self.solver.name, "status": solution.status, "success": solution.success,
+            "solver": self.solver.name, "status": status, "success": success,
             "iterations": solution.iterations, "solve_time": solution.solve_time, "fallback": fallback,
             "input_excess": excess,
-            "soft_violation": float(np.max(solution.slacks)) if ns and solution.success else 0.0,
-            "soft_violation_now": self._violation_now(x_hat),
+            "soft_violation": float(solution.slacks.max()) if ns and success else 0.0,
+            "soft_violation_now": self._violation_now(x_hat) if ns else 0.0,
         }
-        return np.concatenate([x_next, d_hat, new_plan.ravel()]), u
+        # (x̂, d̂) one sample on: x̂⁺ = A x̂ + B (ũ + d̂), d̂⁺ = d̂ (non-finite after a fault, reported above).
+        with np.errstate(invalid="ignore", over="ignore") if not success else contextlib.nullcontext():
+            predicted = self._A_aug @ estimate + self._B_aug @ (u - self._ue)
+        return np.concatenate((predicted, new_plan.ravel())), u
 
     def _violation_now(self, x_hat) -> float:
         """Violation of the MPC's (backed-off) soft bounds by the current estimate."""
@@ -234,13 +331,14 @@ class NonlinearMPC(_PlanFollower):
                  soft_bounds=(), rate_limit=None, tracked: str, substeps: int = 1,
                  max_iterations: int = 20, qp_solver: str = "hpipm", input_noise_std=None,
                  disturbance_step_std=None, measurement_std=1e-3, name: str = "nonlinear MPC"):
+        interrupts.watch()  # Ctrl-C stops a run even where CasADi swallows it (see models.interrupts)
         self._setup_common(known, sample_period, horizon, tracked, name)
         nx = known.nx
         self.Q = np.diag(state_weight) if np.ndim(state_weight) == 1 else np.asarray(state_weight, dtype=float)
         self.R = np.diag(input_weight) if np.ndim(input_weight) == 1 else np.atleast_2d(input_weight).astype(float)
-        per_sample_rate = None if rate_limit is None else np.asarray(rate_limit, dtype=float) * self.sample_period
+        per_sample_rate = None if rate_limit is None else real_array(rate_limit, "rate_limit") * self.sample_period
         self._rate_per_sample = per_sample_rate
-        self.soft_bounds = tuple(soft_bounds)
+        self.soft_bounds = _soft_bounds(soft_bounds)
         self.nlp = NonlinearMPCProblem(known, self.sample_period, self.horizon, self.Q, self.R,
                                        soft_bounds=self.soft_bounds, rate_limit=per_sample_rate,
                                        substeps=substeps, max_iterations=max_iterations, qp_solver=qp_solver)
@@ -270,31 +368,65 @@ class NonlinearMPC(_PlanFollower):
 
     def initial_state(self, y0, r0) -> np.ndarray:
         """x_c at the first sample: at rest at the measured configuration, d̂ = 0, holding input as plan."""
+        interrupts.watch()
+        interrupts.clear()
         x0, u0 = self._start(y0, r0)
         self.nlp.reset()
         self._info = {}
         return np.concatenate([x0, np.zeros(self.plant.nu), np.tile(u0, self.horizon)])
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
-        """One sample: correct the estimate with y, solve the NLP for reference r, command the first input."""
+        """One sample: correct the estimate with y, solve the NLP for reference r, command the first input.
+
+        Raises KeyboardInterrupt at the end of the step when a Ctrl-C arrived during it, and at the
+        start when one arrived since the last step and was swallowed (see `models.interrupts`).
+        """
+        interrupts.check()
+        try:
+            with interrupts.deferred():  # no CasADi call sees the interrupt: raised when the step ends
+                return self._step(xc, y, r)
+        except KeyboardInterrupt:
+            interrupts.clear()  # delivered
+            raise
+        except Exception as err:
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
+            raise
+
+    def _step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
         sx, sd, _ = self._slices
         xc, y, r, plan = self._read(xc, y, r)
         p = self._known_params
-        innovation = y - np.asarray(self.plant.casadi_h(xc[sx], p)).ravel()
-        x_hat, d_hat = self.observer.correct(xc[sx], xc[sd], innovation)
-        x_target, v_target, P = self.target(r[0])
-        solution = self.nlp.solve(x_hat, d_hat, x_target, v_target - d_hat, P, plan[0], plan)
-        new_plan, u, fallback, excess = self._follow(solution.inputs, solution.success, plan)
+        x_hat, d_hat = xc[sx], xc[sd]
+        fault = None
+        if not _finite(y):  # a lost measurement: the prediction stands as the estimate
+            fault = "non-finite measurement"
+        else:
+            innovation = y - np.asarray(self.plant.casadi_h(x_hat, p)).ravel()
+            x_hat, d_hat = self.observer.correct(x_hat, d_hat, innovation)
+            if not (_finite(x_hat) and _finite(d_hat)):
+                fault = "non-finite estimate"
+        if fault is None:
+            x_target, v_target, P = self.target(r[0])
+            solution = self.nlp.solve(x_hat, d_hat, x_target, v_target - d_hat, P, plan[0], plan)
+        else:
+            N, nu = self.horizon, self.plant.nu
+            solution = NLPSolution(np.full((N, nu), np.nan), np.full((N + 1, self.plant.nx), np.nan),
+                                   np.zeros((N, len(self.soft_bounds))), False, fault, 0, 0.0)
+        new_plan, u, fallback, excess, success, status = self._follow(solution.inputs, solution.success,
+                                                                      solution.status, plan)
         x_next = np.asarray(self.step_model(x_hat, u + d_hat, p)).ravel()
-        if not np.all(np.isfinite(x_next)):
+        if not _finite(x_next) and _finite(x_hat) and _finite(u):
+            # The model's prediction blew up from a finite estimate: hold the estimate, say so.
             x_next = x_hat
+            status += "; non-finite model prediction, estimate held"
         g = self._soft_rows @ x_hat
         now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
         self._info = {
-            "solver": f"sqpmethod/{self.nlp.qp_solver}", "status": solution.status, "success": solution.success,
+            "solver": f"sqpmethod/{self.nlp.qp_solver}", "status": status, "success": success,
             "iterations": solution.iterations, "solve_time": solution.solve_time, "fallback": fallback,
             "input_excess": excess,
-            "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and solution.success else 0.0,
+            "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
             "soft_violation_now": float(np.max(now)) if now.size else 0.0,
         }
         return np.concatenate([x_next, d_hat, new_plan.ravel()]), u

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from models.checks import real_array
 from models.lqr import augment_disturbance, dkalman, unobservable_modes
 
 
@@ -48,13 +49,20 @@ class DisturbanceObserver:
     """
 
     def __init__(self, A, B, C, input_noise_std, disturbance_step_std, measurement_std):
-        A, B, C = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (A, B, C))
+        A, B, C = (np.atleast_2d(real_array(m, what)) for m, what in ((A, "A"), (B, "B"), (C, "C")))
         nx, nu, ny = A.shape[0], B.shape[1], C.shape[0]
+        if A.shape != (nx, nx) or B.shape[0] != nx or C.shape[1] != nx:
+            raise ValueError(f"A must be square with B and C fitting it: got A {A.shape}, B {B.shape}, C {C.shape}")
+        if not all(np.all(np.isfinite(m)) for m in (A, B, C)):
+            raise ValueError("A, B and C must be finite")
         stds = {}
         for name, value, n in (("input_noise_std", input_noise_std, nu),
                                ("disturbance_step_std", disturbance_step_std, nu),
                                ("measurement_std", measurement_std, ny)):
-            arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+            arr = real_array(value, name)
+            if arr.size not in (1, n):
+                raise ValueError(f"{name} must be a number or {n} numbers, got shape {arr.shape}")
+            arr = np.broadcast_to(arr.reshape(-1), (n,)).copy()
             if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
                 raise ValueError(f"{name} must be finite and > 0, got {arr}")
             stds[name] = arr
@@ -77,6 +85,10 @@ class DisturbanceObserver:
         """Measurement update from the innovation ỹ − C x̂_{k|k−1}: (x̂_{k|k}, d̂_{k|k})."""
         step = self.gain @ innovation
         return x_pred + step[:self.nx], d_pred + step[self.nx:]
+
+    def update(self, predicted, measured) -> np.ndarray:
+        """`correct` on the stacked estimate: (x̂, d̂)_{k|k} (nx + nu,) from (x̂, d̂)_{k|k−1} and ỹ_k."""
+        return predicted + self.gain @ (measured - self.C_aug @ predicted)
 
     def error_dynamics(self) -> np.ndarray:
         """(I − L C) A_aug: the estimation error's transition matrix; Schur stable by construction."""

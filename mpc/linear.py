@@ -24,18 +24,22 @@ that change every sample. `mpc.qp_fast`, `mpc.qp_osqp` and
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
 from models import LinearModel, Plant
+from models.checks import integer, real_array
 from models.lqr import dlqr
 
 #: Stand-in for an infinite bound in solvers that want finite numbers.
 INFINITY = 1e30
 
 
+# The checks below have the contract of models.checks.integer, real and real_array (TypeError
+# for a string, a bool or a list where a number belongs; ValueError for a bad value).
 @dataclass(frozen=True)
 class SoftBound:
     """A softened bound lower ≤ row·x ≤ upper on the absolute state.
@@ -65,7 +69,7 @@ class SoftBound:
 
     @classmethod
     def on(cls, plant: Plant, combination: dict, lower: float, upper: float, *, scale: float | None = None,
-           linear_weight: float = 1e3, quadratic_weight: float = 1e1, name: str | None = None) -> "SoftBound":
+           linear_weight: float = 1e3, quadratic_weight: float = 1e1, name: str | None = None) -> SoftBound:
         """A bound on a linear combination of named states, e.g. ``{"phi": 1, "theta": -1}``.
 
         Parameters
@@ -78,18 +82,49 @@ class SoftBound:
             The weights are given per violation of one `scale`:
             w = linear_weight / scale, ρ = quadratic_weight / scale².
         """
+        if not isinstance(combination, Mapping):
+            raise TypeError(f"soft bound {name!r}: combination must be a mapping state name -> coefficient, "
+                            f"got {type(combination).__name__} {combination!r}")
+        if not combination:
+            raise ValueError(f"soft bound {name!r}: combination is empty; give state name -> coefficient")
+        label = name or " ".join(_term(coef, state) for state, coef in combination.items())
         row = np.zeros(plant.nx)
         for state, coef in combination.items():
             if state not in plant.state_names:
                 raise ValueError(f"{plant.name} has no state {state!r}; states are {', '.join(plant.state_names)}")
-            row[plant.state_names.index(state)] = float(coef)
+            row[plant.state_names.index(state)] = real_array(coef, f"soft bound {label!r}: coefficient of {state}")
+        if not np.any(row) or not np.all(np.isfinite(row)):
+            raise ValueError(f"soft bound {label!r}: the combination {combination!r} needs finite coefficients, "
+                             "not all zero")
+        lower = float(real_array(lower, f"soft bound {label!r}: lower"))
+        upper = float(real_array(upper, f"soft bound {label!r}: upper"))
+        if np.isnan(lower) or np.isnan(upper):
+            raise ValueError(f"soft bound {label!r}: bounds must not be NaN, got lower {lower}, upper {upper}")
+        if lower > upper:
+            raise ValueError(f"soft bound {label!r}: lower {lower} > upper {upper}; need lower <= upper")
+        if not (np.isfinite(lower) or np.isfinite(upper)):
+            raise ValueError(f"soft bound {label!r} has no finite side (lower {lower}, upper {upper})")
+        for weight, value, strict in (("linear_weight", linear_weight, False), ("quadratic_weight", quadratic_weight,
+                                                                                True)):
+            value = float(real_array(value, f"soft bound {label!r}: {weight}"))
+            if not np.isfinite(value) or value < 0 or (strict and value == 0):
+                raise ValueError(f"soft bound {label!r}: {weight} must be finite and {'> 0' if strict else '>= 0'}, "
+                                 f"got {value}")
         if scale is None:
             finite = [b for b in (lower, upper) if np.isfinite(b)]
             scale = (upper - lower) / 2 if len(finite) == 2 else (abs(finite[0]) if finite and finite[0] else 1.0)
+        scale = float(real_array(scale, f"soft bound {label!r}: scale"))
         if not np.isfinite(scale) or scale <= 0:
-            raise ValueError(f"soft bound scale must be finite and > 0, got {scale}")
-        label = name or " ".join(f"{c:+g} {s}" for s, c in combination.items())
-        return cls(label, row, float(lower), float(upper), linear_weight / scale, quadratic_weight / scale**2)
+            raise ValueError(f"soft bound {label!r}: scale must be finite and > 0, got {scale}")
+        return cls(label, row, lower, upper, linear_weight / scale, quadratic_weight / scale**2)
+
+
+def _term(coefficient, state: str) -> str:
+    """'+1 theta' for a label; the coefficient as given when it is not a number (checked later)."""
+    try:
+        return f"{coefficient:+g} {state}"
+    except (TypeError, ValueError):
+        return f"{coefficient!r} {state}"
 
 
 class QPParameters(NamedTuple):
@@ -151,7 +186,7 @@ def riccati_terminal_cost(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
 
 def _square(value, n: int, what: str) -> np.ndarray:
     """A weight given as a scalar, a diagonal (n,) or a matrix (n, n), checked finite and symmetric."""
-    arr = np.asarray(value, dtype=float)
+    arr = real_array(value, what)
     if arr.ndim == 0:
         arr = arr * np.eye(n)
     elif arr.ndim == 1:
@@ -203,10 +238,8 @@ class MPCProblem:
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
             raise ValueError("A and B must be finite")
         nu = B.shape[1]
-        if int(horizon) != horizon or horizon < 1:
-            raise ValueError(f"horizon must be an integer >= 1, got {horizon}")
         self.A, self.B = A, B
-        self.nx, self.nu, self.horizon = nx, nu, int(horizon)
+        self.nx, self.nu, self.horizon = nx, nu, integer(horizon, "horizon", minimum=1)
         self.Q = _square(state_weight, nx, "state_weight Q")
         self.R = _square(input_weight, nu, "input_weight R")
         if np.min(np.linalg.eigvalsh(self.Q)) < -1e-12 * max(1.0, np.max(np.abs(self.Q))):
@@ -233,7 +266,10 @@ class MPCProblem:
 
     @staticmethod
     def _vector(value, n, what) -> np.ndarray:
-        arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+        arr = real_array(value, what)
+        if arr.size not in (1, n) or arr.ndim > 1:
+            raise ValueError(f"{what} must be a number or {n} numbers, got shape {arr.shape}")
+        arr = np.broadcast_to(arr.reshape(-1) if arr.ndim else arr, (n,)).copy()
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"{what} must be finite, got {arr}")
         return arr

@@ -28,7 +28,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from models import Plant
+import models
+from models import Plant, interrupts
+from models.checks import integer, positive, real_array
+
+#: QP solvers of the SQP, with the options each is given (CasADi conic plugins).
+QP_SOLVERS = ("hpipm", "qrqp", "ipqp")
 
 
 @dataclass
@@ -81,11 +86,14 @@ class NonlinearMPCProblem:
     def __init__(self, plant: Plant, sample_period: float, horizon: int, state_weight, input_weight, *,
                  soft_bounds=(), rate_limit=None, substeps: int = 1, max_iterations: int = 20,
                  qp_solver: str = "hpipm", stationarity_tolerance: float = 1e-4, jit: bool = False):
-        if int(horizon) != horizon or horizon < 1:
-            raise ValueError(f"horizon must be an integer >= 1, got {horizon}")
-        if int(max_iterations) < 1:
-            raise ValueError(f"max_iterations must be >= 1, got {max_iterations}")
-        nx, nu, N = plant.nx, plant.nu, int(horizon)
+        N = integer(horizon, "horizon", minimum=1)
+        max_iterations = integer(max_iterations, "max_iterations", minimum=1)
+        substeps = integer(substeps, "substeps", minimum=1)
+        if qp_solver not in QP_SOLVERS:
+            raise ValueError(f"qp_solver must be one of {', '.join(map(repr, QP_SOLVERS))}, got {qp_solver!r}")
+        tolerance = positive(stationarity_tolerance, "stationarity_tolerance")
+        sample_period = positive(sample_period, "sample_period (s)")
+        nx, nu = plant.nx, plant.nu
         Q = _weight(state_weight, nx, "state_weight Q", definite=False)
         R = _weight(input_weight, nu, "input_weight R", definite=True)
         limit = plant.input_limit
@@ -93,7 +101,8 @@ class NonlinearMPCProblem:
         ns = len(soft)
         self.plant, self.nx, self.nu, self.horizon, self.n_soft = plant, nx, nu, N, ns
         self.sample_period, self.input_limit, self.soft_bounds = float(sample_period), limit.copy(), soft
-        self.rate_limit = None if rate_limit is None else np.broadcast_to(np.asarray(rate_limit, float), (nu,)).copy()
+        self.rate_limit = None if rate_limit is None else \
+            np.broadcast_to(real_array(rate_limit, "rate_limit"), (nu,)).copy()
         if self.rate_limit is not None and (not np.all(np.isfinite(self.rate_limit)) or np.any(self.rate_limit <= 0)):
             raise ValueError(f"rate_limit must be finite and > 0 per sample, got {self.rate_limit}")
         step = plant.step_function(sample_period, substeps)
@@ -158,13 +167,10 @@ class NonlinearMPCProblem:
                                    ["x", "p", "lam_f", "lam_g"], ["hess"]).expand()
         options = {
             "expand": True, "hess_lag": gauss_newton, "qpsol": qp_solver, "max_iter": int(max_iterations),
-            "tol_du": float(stationarity_tolerance), "tol_pr": 1e-6,
+            "tol_du": tolerance, "tol_pr": 1e-6,
             "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
             "error_on_fail": False,
         }
-        if jit:
-            options |= {"jit": True, "compiler": "shell", "jit_cleanup": True,
-                        "jit_options": {"flags": ["-O1"], "verbose": False}}
         if qp_solver == "hpipm":
             options["qpsol_options"] = {"N": N, "nx": [nx] * (N + 1), "nu": [nu + ns] * N + [0],
                                         "ng": [stage_rows.size1() - nx] * N + [0], "error_on_fail": False}
@@ -173,8 +179,10 @@ class NonlinearMPCProblem:
         else:
             options["qpsol_options"] = {"error_on_fail": False}
         self.qp_solver = qp_solver
-        self.solver = ca.nlpsol("nmpc", "sqpmethod",
-                                {"x": decision, "p": parameters, "f": cost, "g": g_all}, options)
+        nlp = {"x": decision, "p": parameters, "f": cost, "g": g_all}
+        # jit: compiled without a shell and cached (models.compile); -O1 keeps compiling short.
+        self.solver = (models.compile.jit_nlpsol("nmpc", "sqpmethod", nlp, options, flags=("-O1",)) if jit
+                       else ca.nlpsol("nmpc", "sqpmethod", nlp, options))
         self.lbg, self.ubg = np.concatenate(lbg), np.concatenate(ubg)
         self._stage, self._stage_rows = stage, stage_rows.size1()
         stage_lower = np.concatenate([np.full(nx, -np.inf), np.full(nu, -1.0), np.zeros(ns)])
@@ -248,6 +256,8 @@ class NonlinearMPCProblem:
             iterations = int(stats.get("iter_count", 0))
             decision = np.asarray(result["x"], dtype=float).ravel()
         except Exception as err:  # CasADi raises on NaN in a function evaluation, for example
+            if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi reports as an error
+                raise KeyboardInterrupt from err
             status, success, iterations = f"solver error: {err}".splitlines()[0], False, 0
             decision = np.full(self.lbx.size, np.nan)
         success = success and bool(np.all(np.isfinite(decision)))
@@ -264,10 +274,11 @@ class NonlinearMPCProblem:
 
 
 def _weight(value, n, what, definite) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    arr = real_array(value, what)
     arr = arr * np.eye(n) if arr.ndim == 0 else (np.diag(arr) if arr.ndim == 1 else arr)
     if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), got {np.shape(value)}")
+        raise ValueError(f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), "
+                         f"got {np.shape(value)}")
     arr = (arr + arr.T) / 2
     smallest = np.min(np.linalg.eigvalsh(arr))
     if smallest < 0 or (definite and smallest == 0):

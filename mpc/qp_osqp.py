@@ -31,6 +31,20 @@ DEFAULT_SETTINGS = dict(eps_abs=1e-7, eps_rel=1e-7, polishing=True, max_iter=200
                         warm_starting=True)
 
 
+def _checked_settings(settings) -> dict:
+    """`settings` as a dict of numbers and flags, negative numbers refused (OSQP itself reports only a code)."""
+    if settings is None:
+        return {}
+    if not isinstance(settings, dict):
+        raise TypeError(f"settings must be a dict of OSQP settings, got {type(settings).__name__} {settings!r}")
+    for key, value in settings.items():
+        if not isinstance(value, (bool, int, float, np.integer, np.floating)):
+            raise TypeError(f"OSQP setting {key} must be a number or True/False, got {type(value).__name__} {value!r}")
+        if not isinstance(value, bool) and not value >= 0:
+            raise ValueError(f"OSQP setting {key} must be a number >= 0, got {value!r}")
+    return dict(settings)
+
+
 class OsqpSolver:
     """Sparse MPC QP with OSQP.
 
@@ -44,7 +58,7 @@ class OsqpSolver:
 
     def __init__(self, problem: MPCProblem, settings: dict | None = None):
         self.problem = problem
-        self.settings = DEFAULT_SETTINGS | dict(settings or {})
+        self.settings = DEFAULT_SETTINGS | _checked_settings(settings)
         N, nx, nu, ns = problem.horizon, problem.nx, problem.nu, problem.n_soft
         self.n_states, self.n_inputs, self.n_slacks = (N + 1) * nx, N * nu, N * ns
         eye = lambda n: sparse.identity(n, format="csc")

@@ -55,7 +55,8 @@ def mpc_problem(problem: MPCProblem, x0, disturbance, x_target, u_target, u_prev
         constraints += [cp.abs(u[0] - u_previous) <= problem.rate_limit,
                         cp.abs(cp.diff(u, axis=0)) <= problem.rate_limit]
     if ns:
-        cost += cp.sum(s @ problem.soft_linear_weight) + cp.sum_squares(s @ np.diag(np.sqrt(problem.soft_quadratic_weight)))
+        cost += cp.sum(s @ problem.soft_linear_weight) + \
+            cp.sum_squares(s @ np.diag(np.sqrt(problem.soft_quadratic_weight)))
         g = x[1:] @ G.T
         lower, upper = np.isfinite(problem.soft_lower), np.isfinite(problem.soft_upper)
         if lower.any():
@@ -87,6 +88,9 @@ class CvxpySolver:
 
     def __init__(self, problem: MPCProblem, parametrized: bool = True, solver: str = "CLARABEL",
                  solver_options: dict | None = None):
+        if solver not in cp.installed_solvers():
+            raise ValueError(f"solver {solver!r} is not an installed cvxpy solver; installed: "
+                             f"{', '.join(cp.installed_solvers())}")
         self.problem = problem
         self.parametrized = parametrized
         self.solver = solver

@@ -109,8 +109,8 @@ def linear_mpc(known: Plant, settings: MPCSettings, *, tracked: str, solver: str
 
 def nonlinear_mpc(known: Plant, settings: MPCSettings, *, tracked: str, **overrides) -> NonlinearMPC:
     """The nonlinear MPC designed on `known` with `settings`; keyword arguments override them."""
-    return NonlinearMPC(known, substeps=settings.substeps, tracked=tracked,
-                        **(design_arguments(known, settings) | overrides))
+    arguments = {"substeps": settings.substeps} | design_arguments(known, settings) | overrides
+    return NonlinearMPC(known, tracked=tracked, **arguments)
 
 
 def physical_soft_bounds(settings: MPCSettings, plant: Plant) -> list[tuple[str, np.ndarray, float, float]]:

@@ -1,7 +1,7 @@
 """Every solver path solves the same QP: the condensed DAQP path, OSQP on the sparse
 problem and cvxpy rebuilt from numbers return the first input of the cvxpy reference
-(Clarabel, parametrized) to 1e-5, on instances that saturate the input, violate a soft
-bound and hit a rate limit.
+(Clarabel, parametrized) to 1e-5 (DAQP, exact, to 1e-8 of the input limit), on instances
+that saturate the input, violate a soft bound and hit a rate limit.
 
 The tolerance is 1e-5 in the plant's input unit (N or N m) and, for the crane, 1e-5 of
 its 5 kN limit. One exception, measured and kept visible here: OSQP (first-order) does
@@ -29,6 +29,9 @@ PATHS = {
 }
 #: Paths that must succeed on every instance of a case.
 ALWAYS_SUCCEED = {"daqp", "cvxpy rebuilt"}
+#: DAQP's active-set solution is exact: its first input is held to this fraction of the input limit
+#: (measured: 5e-10 of the limit or less; the crane's 1e-5 N is the reference's own error).
+EXACT = 1e-8
 
 
 def pendulum_problem(rate_limit=1.0):
@@ -90,6 +93,7 @@ def test_first_input_of_every_path_matches_the_cvxpy_reference(case):
     paths = {name: make(problem) for name, make in PATHS.items()}
     must_succeed = ALWAYS_SUCCEED | ({"osqp"} if osqp_converges else set())
     successes = dict.fromkeys(PATHS, 0)
+    limit = max(1.0, float(np.max(problem.input_upper - problem.input_lower)) / 2)
     saturated = violated = rate_bound = 0
     for params in random_instances(problem, scale, 12, seed=len(case)):
         ref = reference.solve(params)
@@ -108,11 +112,11 @@ def test_first_input_of_every_path_matches_the_cvxpy_reference(case):
             if not solution.success:
                 continue
             successes[name] += 1
-            atol = osqp_tolerance if name == "osqp" else tolerance
+            atol = osqp_tolerance if name == "osqp" else (EXACT * limit if name == "daqp" else tolerance)
             np.testing.assert_allclose(solution.inputs[0], u0, atol=atol, rtol=0, err_msg=name)
             # Same optimum, not just the same first move.
             assert problem.cost(params, solution.inputs, solution.slacks) == pytest.approx(
-                problem.cost(params, ref.inputs, ref.slacks), rel=1e-6 if atol == tolerance else 1e-4, abs=1e-9), name
+                problem.cost(params, ref.inputs, ref.slacks), rel=1e-6 if atol <= tolerance else 1e-4, abs=1e-9), name
     assert min(successes.values()) >= 1
     # The instances exercise the constraints they are meant to.
     assert saturated >= 2
