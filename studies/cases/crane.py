@@ -33,6 +33,7 @@ from designs.tuning import Cost, Specs
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_open_loop import OpenLoopCodesign
 from studies.errata import Erratum, Remark
 from studies.homework import (
     ClassicalDesign,
@@ -358,6 +359,28 @@ TRAJECTORIES = (
 )
 
 
+# ----------------------------------------------------------------- open-loop co-design: the cable for the fastest move
+def cable_min_time(quick: bool) -> TrajectorySetup:
+    """crane1's cable length ℓ in CABLE_RANGE chosen with the force history for the minimum-time 10 m transfer."""
+    plant = models.get("crane1")
+    ocp = transfer(plant, FreeTime(2.0, 60.0, 10.0))
+    ocp.choose("ell", *CABLE_RANGE, guess=plant.params["ell"])
+    ocp.minimize(ocp.final_time)
+    return TrajectorySetup(
+        ocp, Collocation(intervals=30 if quick else 60), {}, "T (s)",
+        f"crane1 (the car and one load, VI.8, with the car's friction) moves {CASE.step:g} m from rest to rest, "
+        f"the load hanging still at the end, |F| ≤ 5 kN, |θ| ≤ {TRANSFER_SWING:g} rad, in the least time, with the "
+        f"cable length ℓ in [{CABLE_RANGE[0]:g}, {CABLE_RANGE[1]:g}] m decided with the force. A longer cable "
+        "swings slower and costs transfer time: dT*/dℓ, the envelope derivative, is the price of each metre "
+        "(and, at the shortest cable, what the bound costs).")
+
+
+OPEN_LOOP_CODESIGN = (
+    OpenLoopCodesign("crane_cable", "crane: cable length for the minimum-time 10 m transfer", "crane1", cable_min_time,
+                     "ell", "m", text_value=10.0, sweep=(5.0, 10.0, 15.0, 20.0)),
+)
+
+
 # ----------------------------------------------------------------- drawing
 def draw(p: dict, s: dict, r: float) -> list:
     """Car on its rail, both loads on their cables; the reference car position marked."""
@@ -436,5 +459,5 @@ CASE = CaseStudy(
     cascade_model=("crane1", {"b": 0.0}),
     classical=classical, statespace=STATESPACE, mpc=MPC, design_models=("crane1",),
     codesign={"crane": cable_transfer},
-    drawing=draw, errata=ERRATA + (REMARK,), trajectories=TRAJECTORIES,
+    drawing=draw, errata=ERRATA + (REMARK,), trajectories=TRAJECTORIES, open_loop_codesign=OPEN_LOOP_CODESIGN,
 )
