@@ -577,15 +577,12 @@ def write(result: CaseTrajectories, out) -> dict:
             label = solved.problem.title
             caption = (f"{label}: the optimized motion (collocation interpolant, nonlinear model), "
                        f"T = {solved.solution.final_time:.4g} s.")
-            for suffix, writer in (("gif", animation.write_gif), ("html", animation.write_html)):
-                name = f"trajectory_{key}.{suffix}"
-                if suffix == "gif":
-                    writer(folder / name, result.case, result.plant, run, label, max_frames=30 if quick else 100,
-                           dpi=64 if quick else 80)
-                else:
-                    writer(folder / name, result.case, result.plant, run, label, caption,
-                           max_frames=300 if quick else 600)
-                files[name] = name
+            gif, page = f"trajectory_{key}.gif", f"trajectory_{key}.html"
+            animation.write_gif(folder / gif, result.case, result.plant, run, label, max_frames=30 if quick else 100,
+                                dpi=64 if quick else 80)
+            animation.write_html(folder / page, result.case, result.plant, run, label, caption,
+                                 max_frames=300 if quick else 600)
+            files |= {gif: gif, page: page}
     for key, tracked in result.tracking.items():
         problem = result.solved[key].problem
         name = f"trajectory_{key}_tracking.png"
@@ -681,6 +678,7 @@ def _tracking_section(result: CaseTrajectories, problem: TrajectoryProblem, trac
     from models.files import format_number, markdown_table
 
     case, spec, unit = result.case, problem.tracking, result.case.input_unit
+    assert spec is not None
     planned = tracked.planned
     held = sum(bool(r["held"]) for r in tracked.rows)
     settled = ", ".join(f"|{name} − end| ≤ {_cell(bound, name)}" for name, bound in spec.settled.items())
