@@ -180,6 +180,7 @@ class CaseTrajectories:
     tracking: dict = field(default_factory=dict)
     compared: dict = field(default_factory=dict)
     step_rows: dict = field(default_factory=dict)
+    step_runs: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     timing: dict = field(default_factory=dict)
 
@@ -385,6 +386,15 @@ def step_rows(study_result, problem: TrajectoryProblem) -> list[dict]:
     return rows
 
 
+def fastest_step(study_result, rows: list[dict]):
+    """(label, settling time s, run) of the study's step run that settles first, or None if none settles."""
+    settled = [r for r in rows if np.isfinite(r["settling_time_s"])]
+    if not settled:
+        return None
+    best = min(settled, key=lambda r: r["settling_time_s"])
+    return best["controller"], best["settling_time_s"], study_result.runs[(best["controller"], "step")]
+
+
 def solve_case(case, *, quick: bool = False, study_result=None, strict: bool = False, seed: int = 0
                ) -> CaseTrajectories:
     """Solve, verify, track and compare every trajectory problem of `case` (a `CaseStudy`).
@@ -421,6 +431,7 @@ def solve_case(case, *, quick: bool = False, study_result=None, strict: bool = F
                 result.compared[problem.key] = compare(case, problem, plant, solved)
                 if problem.compare_step and study_result is not None:
                     result.step_rows[problem.key] = step_rows(study_result, problem)
+                    result.step_runs[problem.key] = fastest_step(study_result, result.step_rows[problem.key])
             result.timing[problem.key] = time.perf_counter() - started
         except Exception as err:
             if strict:
@@ -442,6 +453,12 @@ def _figure(width: float, height: float, rows: int):
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig, fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+
+
+def _margins(fig) -> None:
+    """Room for the two-line title and the time axis, in inches whatever the figure's height."""
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0.11, right=0.98, top=1 - 0.6 / height, bottom=0.5 / height, hspace=0.15)
 
 
 def _held(ax, t, u, **style):
@@ -476,7 +493,7 @@ def plot_problem(result: CaseTrajectories, solved: SolvedTrajectory, path: Path,
     axes[0].legend(fontsize=7, loc="best")
     axes[-1].legend(fontsize=7, loc="best")
     fig.suptitle(f"{plant.title}:\n{solved.problem.title}, T = {s.final_time:.4g} s", fontsize=9)
-    fig.subplots_adjust(left=0.11, right=0.98, top=0.91, bottom=0.07, hspace=0.15)
+    _margins(fig)
     return plots.save(fig, path, dpi)
 
 
@@ -516,23 +533,33 @@ def plot_tracking(result: CaseTrajectories, problem: TrajectoryProblem, tracked:
     fig.suptitle(f"{plant.title}: {problem.title},\ntracked by a time-varying LQR designed on the "
                  f"{100 * result.case.known_rel:+g} % model; the truth nominal and ±{100 * result.case.known_rel:g} % "
                  "samples", fontsize=9)
-    fig.subplots_adjust(left=0.11, right=0.98, top=0.91, bottom=0.07, hspace=0.15)
+    _margins(fig)
     return plots.save(fig, path, dpi)
 
 
-def plot_comparison(result: CaseTrajectories, problem: TrajectoryProblem, runs: list, path: Path, dpi: int) -> Path:
-    """The optimal input and the open-loop commands on the plant: coordinates and input."""
+def plot_comparison(result: CaseTrajectories, problem: TrajectoryProblem, runs: list, path: Path, dpi: int,
+                    closed_loop=None) -> Path:
+    """The optimal input and the open-loop commands on the plant: coordinates and input.
+
+    closed_loop : (label, settling time s, run) of a study's step run to draw too (dashed), or None
+    """
     from . import plots
 
     plant = result.plant
     fig, axes = _figure(8, 1.7 * (plant.nq + 1) + 0.8, plant.nq + 1)
-    for j, compared in enumerate(runs):
-        run = compared.run
-        style = dict(color=f"C{j}", linewidth=1.3 if j == 0 else 1.0)
+    curves = [(c.label, c.run, dict(color=f"C{j}", linewidth=1.3 if j == 0 else 1.0)) for j, c in enumerate(runs)]
+    end = max(c.run.t[-1] for c in runs)
+    if closed_loop is not None:
+        label, settling, run = closed_loop
+        curves.append((f"closed loop: {label} (settles first, {settling:.3g} s)", run,
+                       dict(color="0.3", linewidth=1.0, linestyle="--")))
+        end = max(end, 1.2 * settling)
+    for label, run, style in curves:
         for ax, name in zip(axes, plant.coordinate_names):
             scale, _ = display_unit(name)
-            ax.plot(run.t, scale * run.state(name), label=compared.label, **style)
+            ax.plot(run.t, scale * run.state(name), label=label, **style)
         _held(axes[-1], run.t, run.u[:, 0], **style)
+    axes[-1].set_xlim(0, end)
     for ax, name in zip(axes, plant.coordinate_names):
         ax.set_ylabel(f"{name} ({display_unit(name)[1]})")
         ax.grid(True, alpha=0.3)
@@ -543,9 +570,9 @@ def plot_comparison(result: CaseTrajectories, problem: TrajectoryProblem, runs: 
     axes[-1].set_xlabel("t (s)")
     axes[-1].grid(True, alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{plant.title}: {problem.title}\nagainst open-loop commands (each then the input holding the end)",
-                 fontsize=9)
-    fig.subplots_adjust(left=0.11, right=0.98, top=0.91, bottom=0.07, hspace=0.15)
+    fig.suptitle(f"{plant.title}: {problem.title}\nagainst open-loop commands (each then the input holding the end)"
+                 + ("" if closed_loop is None else ",\nand the study's first step response to settle"), fontsize=9)
+    _margins(fig)
     return plots.save(fig, path, dpi)
 
 
@@ -596,7 +623,8 @@ def write(result: CaseTrajectories, out) -> dict:
         files[f"trajectory_{key}_tracking.csv"] = f"trajectory_{key}_tracking.csv"
     for key, runs in result.compared.items():
         name = f"trajectory_{key}_comparison.png"
-        files[name] = plot_comparison(result, result.solved[key].problem, runs, folder / name, dpi).name
+        files[name] = plot_comparison(result, result.solved[key].problem, runs, folder / name, dpi,
+                                      result.step_runs.get(key)).name
         rows = [c.row for c in runs] + [{"command": f"closed loop: {r['controller']}", **r}
                                          for r in result.step_rows.get(key, [])]
         write_csv(folder / f"trajectory_{key}_comparison.csv", pd.DataFrame(rows))
@@ -723,10 +751,11 @@ def _comparison_section(result: CaseTrajectories, problem: TrajectoryProblem, ru
     rows = []
     for compared in runs:
         r = compared.row
-        rows.append({**r, "extremes": _report_text(r, problem), "residual": _report_text(r, problem, "residual_")})
+        rows.append({**r, "extremes": _report_text(r, problem), "residual": _report_text(r, problem, "residual_"),
+                     "end": _cell(r["end_error"], result.case.tracked)})
     columns = [("command", "command", format_number), ("move_time_s", "move (s)", format_number),
                ("peak_u", f"peak |u| ({unit})", format_number), ("extremes", "largest along the run", format_number),
-               ("end_error", f"|{result.case.tracked} − end| when the command ends", format_number),
+               ("end", f"|{result.case.tracked} − end| when the command ends", format_number),
                ("residual", "residual after the command", format_number),
                ("description", "what it is", format_number)]
     out = [text, "", markdown_table(rows, columns)]
