@@ -15,7 +15,7 @@ import scipy.linalg
 __all__ = [
     "controllability_matrix", "observability_matrix", "uncontrollable_modes", "unobservable_modes",
     "require_controllable", "require_observable", "require_stabilizable", "require_detectable",
-    "bryson_weights", "riccati_residual", "lqr", "dlqr", "kalman", "dkalman",
+    "bryson_weights", "riccati_residual", "lqr", "dlqr", "dlqr_time_varying", "kalman", "dkalman",
 ]
 
 
@@ -331,6 +331,56 @@ def dlqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
     _riccati_checked(A, B, Q, R, P, K, True, what)
     return K, P
+
+
+def dlqr_time_varying(As, Bs, Q, R, final_weight, what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Finite-horizon discrete LQR along a time-varying model: the backward Riccati recursion.
+
+    Minimizes Σₖ₌₀ᴺ⁻¹ (x_kᵀ Q x_k + u_kᵀ R u_k) + x_Nᵀ P_N x_N subject to
+    x_{k+1} = A_k x_k + B_k u_k, with u_k = −K_k x_k:
+
+        K_k = (R + B_kᵀ P_{k+1} B_k)⁻¹ B_kᵀ P_{k+1} A_k,
+        P_k = Q + A_kᵀ P_{k+1} (A_k − B_k K_k),         P_N = final_weight.
+
+    Used for tracking a trajectory with the deviation model linearized along
+    it (time-varying LQR); with `final_weight` the `dlqr` cost of the last
+    point, the gains join the infinite-horizon LQR there without a jump.
+
+    Parameters
+    ----------
+    As : (N, nx, nx);  Bs : (N, nx, nu)
+    Q : (nx, nx) symmetric >= 0;  R : (nu, nu) symmetric > 0
+    final_weight : (nx, nx) symmetric >= 0, P_N
+
+    Returns
+    -------
+    K : (N, nu, nx) the gains;  P : (N + 1, nx, nx) the cost-to-go matrices, x₀ᵀ P₀ x₀ the optimal cost
+    """
+    As = np.asarray(As, dtype=float)
+    Bs = np.asarray(Bs, dtype=float)
+    if As.ndim != 3 or As.shape[1] != As.shape[2] or As.shape[0] < 1:
+        raise ValueError(f"{message_prefix(what)}As must have shape (N, nx, nx) with N >= 1, got {As.shape}")
+    steps, n = As.shape[0], As.shape[1]
+    if Bs.ndim != 3 or Bs.shape[:2] != (steps, n):
+        raise ValueError(f"{message_prefix(what)}Bs must have shape ({steps}, {n}, nu), got {Bs.shape}")
+    if not (np.all(np.isfinite(As)) and np.all(np.isfinite(Bs))):
+        raise ValueError(f"{message_prefix(what)}As and Bs must be finite")
+    Q, R = _weights(As[0], Bs[0], Q, R, what)
+    final = finite_matrix(final_weight, "final_weight")
+    if final.shape != (n, n) or not np.allclose(final, final.T, rtol=1e-10, atol=1e-14 * np.abs(final).max(initial=0)):
+        raise ValueError(f"{message_prefix(what)}final_weight must be a symmetric ({n}, {n}) matrix, got shape "
+                         f"{final.shape}")
+    if np.min(np.linalg.eigvalsh(final)) < -1e-12 * max(1.0, np.abs(final).max()):
+        raise ValueError(f"{message_prefix(what)}final_weight must be positive semidefinite")
+    gains = np.empty((steps, Bs.shape[2], n))
+    costs = np.empty((steps + 1, n, n))
+    costs[steps] = final
+    for k in range(steps - 1, -1, -1):
+        A, B, P = As[k], Bs[k], costs[k + 1]
+        gains[k] = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+        P = Q + A.T @ P @ (A - B @ gains[k])
+        costs[k] = (P + P.T) / 2
+    return gains, costs
 
 
 def kalman(A, C, W, V, what: str = "") -> tuple[np.ndarray, np.ndarray]:

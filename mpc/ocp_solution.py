@@ -159,11 +159,9 @@ class OCPSolution:
         if self.collocation_states is not None:
             assert self.transcription.coefficients is not None
             tau = self.transcription.coefficients.tau
-            for i in range(times.size):
-                values, _ = lagrange_basis(tau, s[i])
-                nodes = np.vstack([self.states[k[i]], self.collocation_states[k[i]]])
-                out[i] = values[0] @ nodes
-            return out
+            values, _ = lagrange_basis(tau, s)  # every time at once: the basis is the costly part
+            nodes = np.concatenate([self.states[k][:, None, :], self.collocation_states[k]], axis=1)
+            return np.einsum("ij,ijn->in", values, nodes)
         p = self.param_values()
         f = self.plant.casadi_f
         for i in range(times.size):

@@ -111,8 +111,26 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
                       threads=threads, jit=jit, strict=strict, quick=quick)
     result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress)
     if out is not None:
+        if study.trajectories:
+            write_trajectories(result, out)
         writers.write_study(result, out)
     return result
+
+
+def write_trajectories(result: StudyResult, out: str | os.PathLike) -> None:
+    """Solve, track and compare the study's optimal trajectories (`studies.trajectories`) and write their files
+    into out/<plant>/; the wall time goes to ``result.timing["trajectories_s"]``, failures to its notes."""
+    import time
+
+    from . import trajectories
+
+    started = time.perf_counter()
+    options = result.options
+    solved = trajectories.solve_case(result.study, quick=options.quick, study_result=result, strict=options.strict,
+                                     seed=options.seed)
+    trajectories.write(solved, out)
+    result.notes += [f"trajectories: {note}" for note in solved.notes]
+    result.timing["trajectories_s"] = time.perf_counter() - started
 
 
 def run(name: "str | CaseStudy", **kwargs) -> "pd.DataFrame":

@@ -181,6 +181,10 @@ class CaseStudy:
     codesign : key -> function returning a `studies.codesign_report.CaseResult` (its co-design problems)
     drawing : (params dict, state dict, reference) -> animation primitives (`studies.animation`)
     errata : `studies.errata.Erratum` rows and remarks this case found in the text
+    trajectories : `studies.trajectories.TrajectoryProblem`s, its optimal motions (solved, tracked and
+        drawn by `studies.trajectories`)
+    open_loop_codesign : `studies.codesign_open_loop.OpenLoopCodesign`s, plant parameters decided with
+        an input history (reported by `studies.codesign_open_loop`)
     """
 
     plant: str
@@ -213,6 +217,8 @@ class CaseStudy:
     codesign: Mapping[str, Callable[[], Any]] = field(default_factory=dict)
     drawing: Callable[[dict, dict, float], list] | None = None
     errata: tuple = ()
+    trajectories: tuple = ()
+    open_loop_codesign: tuple = ()
 
     @property
     def name(self) -> str:

@@ -18,7 +18,7 @@ from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
 from designs.pid import SIGMA, linearized_input_bound, pd_saturation
-from mpc import MPCSettings
+from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.codesign_report import ActuatorSizing
@@ -40,6 +40,7 @@ from studies.homework import (
     statespace_items_15_to_17,
     tf_record,
 )
+from studies.trajectories import TrajectoryProblem, TrajectorySetup
 
 #: I.14(c): 10x better tracking and disturbance rejection below 0.007 rad/s, 10x better noise
 #: attenuation above 200 rad/s, relative to the PD loop.
@@ -138,6 +139,27 @@ def actuator_sizing(**options):
     return size_actuator(CASE, SIZING, **options)
 
 
+# ----------------------------------------------------------------- trajectory optimization: point to point
+def point_to_point_time(plant: models.Plant, quick: bool, solved: dict) -> TrajectorySetup:
+    """The text's 50° step from level, rest to rest, in the least time T (free in [0.05, 5] s) within 1 N m."""
+    ocp = OptimalControlProblem(plant, FreeTime(0.05, 5.0, 1.0))
+    ocp.minimize(ocp.final_time)
+    ocp.subject_to(ocp.at_start(ocp.state) == [0.0, 0.0])
+    ocp.subject_to(ocp.at_end(ocp.state) == [CASE.step, 0.0])
+    return TrajectorySetup(
+        ocp, Collocation(intervals=20 if quick else 40), {}, "T (s)",
+        f"From level at rest to θ = {np.degrees(CASE.step):g} deg at rest (the text's step), |τ| ≤ 1 N m, in the "
+        "least time; the gravity torque m g ℓ/2 cos θ (0.735 N m at level) leaves 0.26 N m to accelerate and "
+        "1.7 N m to brake. Bang-bang with one switch; the held input puts the switch on a mesh point, so T is "
+        "within about one interval of the continuous-time answer.")
+
+
+TRAJECTORIES = (
+    TrajectoryProblem("point_to_point_time", "50° point to point, minimum time", point_to_point_time,
+                      report={"dtheta": "rate"}, compare_step=True),
+)
+
+
 # ----------------------------------------------------------------- drawing
 def draw(p: dict, s: dict, r: float) -> list:
     """The rod from its pivot at angle θ, the reference angle dashed."""
@@ -187,5 +209,5 @@ CASE = CaseStudy(
     loops=(LOOPSHAPING,),
     classical=classical, statespace=STATESPACE, mpc=MPC,
     codesign={"arm": actuator_sizing},
-    drawing=draw, errata=ERRATA,
+    drawing=draw, errata=ERRATA, trajectories=TRAJECTORIES,
 )

@@ -17,6 +17,7 @@ import numpy as np
 
 import models
 from designs import analysis as an
+from designs import input_shaping
 from designs.analysis import Loop, dc_gain
 from designs.filters import TransferFunctionBlock
 from designs.loops import PlacedPD, SuccessiveLoopClosure, cascade_blocks, cascade_plants, cascade_poles, place_pair
@@ -29,9 +30,10 @@ from designs.loopshaping import (
 )
 from designs.pid import pd_design
 from designs.tuning import Cost, Specs
-from mpc import MPCSettings, SoftSpec
+from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_open_loop import OpenLoopCodesign
 from studies.errata import Erratum, Remark
 from studies.homework import (
     ClassicalDesign,
@@ -45,6 +47,7 @@ from studies.homework import (
     spec_records,
     tf_record,
 )
+from studies.trajectories import OpenLoopCommand, TrajectoryProblem, TrajectorySetup
 
 #: VI.8(c): 50 % overshoot and a 1 s rise time for the load angle.
 INNER_OVERSHOOT, INNER_RISE_TIME = 0.5, 1.0
@@ -257,6 +260,127 @@ def cable_transfer(*, max_iter: int | None = None, jit: bool = True, duration: f
                             cr.CODESIGN_MAX_ITER if max_iter is None else max_iter, jit)
 
 
+# ----------------------------------------------------------------- trajectory optimization: the 10 m transfer
+#: Swing bound of the optimized transfer, rad, on every cable: the MPC's soft bound (5.7 deg).
+TRANSFER_SWING = 0.1
+#: Sample period of the shaped open-loop commands, s (their switching instants are rounded to it).
+SHAPED_SAMPLE_PERIOD = 0.01
+
+
+def transfer(plant: models.Plant, final_time) -> OptimalControlProblem:
+    """The text's 10 m step done open loop: from rest to rest (every load hanging still), |θ_i| <= TRANSFER_SWING."""
+    ocp = OptimalControlProblem(plant, final_time)
+    end = np.zeros(plant.nx)
+    end[plant.state_names.index(CASE.tracked)] = CASE.step
+    ocp.subject_to(ocp.at_start(ocp.state) == 0)
+    ocp.subject_to(ocp.at_end(ocp.state) == end)
+    for name in plant.coordinate_names:
+        if name != CASE.tracked:
+            ocp.subject_to(ocp.bounded(-TRANSFER_SWING, ocp.x[name], TRANSFER_SWING))
+    return ocp
+
+
+def transfer_time(plant: models.Plant, quick: bool, solved: dict) -> TrajectorySetup:
+    """The least time T (free in [2, 60] s) for the 10 m transfer within 5 kN and the swing bound."""
+    ocp = transfer(plant, FreeTime(2.0, 60.0, 15.0))
+    ocp.minimize(ocp.final_time)
+    return TrajectorySetup(
+        ocp, Collocation(intervals=40 if quick else 80), {}, "T (s)",
+        f"The car moves {CASE.step:g} m from rest to rest with both loads hanging still at the end, |F| ≤ 5 kN, "
+        f"every swing angle within ±{TRANSFER_SWING:g} rad ({np.degrees(TRANSFER_SWING):.3g} deg, the MPC's "
+        "soft bound), in the least time. Started from the linear interpolation of the end states.")
+
+
+def rigid_body(plant: models.Plant) -> tuple[float, float]:
+    """(mass, damping) of car and loads moving as one body: Σ masses (kg) and the car's friction (N s/m)."""
+    p = plant.params
+    return p["mc"] + sum(p[name] for name in ("m", "m1", "m2") if name in p), p["b"]
+
+
+def swing_modes(plant: models.Plant) -> list:
+    """(ω_n rad/s, ζ) of the plant's swing modes about rest, slowest first."""
+    return input_shaping.oscillatory_modes(plant.linearize().A)
+
+
+def shaped_bang_bang(plant: models.Plant, shaper, force: float, description: str) -> OpenLoopCommand:
+    """The rigid body's rest-to-rest bang-bang for the step at `force`, convolved with `shaper`, sampled."""
+    mass, damping = rigid_body(plant)
+    accelerate, decelerate = input_shaping.rest_to_rest_bang_bang(mass, damping, force, CASE.step)
+    command = input_shaping.bang_bang(accelerate, decelerate, force)
+    steps = int(np.ceil((accelerate + decelerate + shaper.duration) / SHAPED_SAMPLE_PERIOD))
+    middles = SHAPED_SAMPLE_PERIOD * (np.arange(steps) + 0.5)
+    return OpenLoopCommand(SHAPED_SAMPLE_PERIOD, shaper.apply(command, middles)[:, None], description)
+
+
+def zv_full_force(plant: models.Plant) -> OpenLoopCommand:
+    """ZV on crane1's swing mode (the one-load model of VI.8: the car and load 1), shaping the 5 kN bang-bang."""
+    p = plant.params
+    one_load = models.get("crane1", mc=p["mc"], m=p["m1"], ell=p["ell1"], b=p["b"], g=p["g"])
+    omega, zeta = swing_modes(one_load)[0]
+    shaper = input_shaping.zero_vibration(omega, zeta)
+    return shaped_bang_bang(plant, shaper, float(plant.input_limit[0]),
+                            f"ZV shaper of crane1's swing mode (ω_n = {omega:.4g} rad/s, ζ = {zeta:.3g}; impulses "
+                            f"{shaper.amplitudes[0]:.3f}, {shaper.amplitudes[1]:.3f} at 0, {shaper.duration:.3g} s) "
+                            "on the rigid body's 5 kN rest-to-rest bang-bang (with friction)")
+
+
+def zv_zv_within_swing(plant: models.Plant) -> OpenLoopCommand:
+    """ZV-ZV on both swing modes of the two-load crane, on the fastest bang-bang whose shaped motion keeps
+    every swing angle within TRANSFER_SWING (the force found by bisection on RK4 runs of the plant)."""
+    modes = swing_modes(plant)
+    shaper = input_shaping.zero_vibration(*modes[0])
+    for mode in modes[1:]:
+        shaper = shaper.convolve(input_shaping.zero_vibration(*mode))
+    swings = [plant.state_names.index(n) for n in plant.coordinate_names if n != CASE.tracked]
+
+    def largest_swing(force):
+        command = shaped_bang_bang(plant, shaper, force, "")
+        run = models.simulate(plant, np.zeros(plant.nx), command.inputs, command.sample_period, substeps=2)
+        return float(np.max(np.abs(run.x[:, swings])))
+
+    low, high = 0.0, float(plant.input_limit[0])
+    if largest_swing(high) <= TRANSFER_SWING:
+        low = high
+    while high - low > 1.0:  # N
+        middle = (low + high) / 2
+        low, high = (middle, high) if largest_swing(middle) <= TRANSFER_SWING else (low, middle)
+    text = ", ".join(f"{w:.4g} rad/s" for w, _ in modes)
+    return shaped_bang_bang(plant, shaper, low,
+                            f"ZV-ZV shaper of the crane's swing modes ({text}; {len(shaper.times)} impulses over "
+                            f"{shaper.duration:.3g} s) on the rigid body's rest-to-rest bang-bang at "
+                            f"{low / 1000:.4g} kN, the largest force keeping every swing within {TRANSFER_SWING:g} rad")
+
+
+TRAJECTORIES = (
+    TrajectoryProblem("transfer_time", "10 m transfer, minimum time", transfer_time,
+                      report={"theta1": "swing 1", "theta2": "swing 2"}, compare_step=True,
+                      open_loop={"ZV, 5 kN bang-bang": zv_full_force,
+                                 "ZV-ZV, bang-bang within the swing bound": zv_zv_within_swing}),
+)
+
+
+# ----------------------------------------------------------------- open-loop co-design: the cable for the fastest move
+def cable_min_time(quick: bool) -> TrajectorySetup:
+    """crane1's cable length ℓ in CABLE_RANGE chosen with the force history for the minimum-time 10 m transfer."""
+    plant = models.get("crane1")
+    ocp = transfer(plant, FreeTime(2.0, 60.0, 10.0))
+    ocp.choose("ell", *CABLE_RANGE, guess=plant.params["ell"])
+    ocp.minimize(ocp.final_time)
+    return TrajectorySetup(
+        ocp, Collocation(intervals=30 if quick else 60), {}, "T (s)",
+        f"crane1 (the car and one load, VI.8, with the car's friction) moves {CASE.step:g} m from rest to rest, "
+        f"the load hanging still at the end, |F| ≤ 5 kN, |θ| ≤ {TRANSFER_SWING:g} rad, in the least time, with the "
+        f"cable length ℓ in [{CABLE_RANGE[0]:g}, {CABLE_RANGE[1]:g}] m decided with the force. A longer cable "
+        "swings slower and costs transfer time: dT*/dℓ, the envelope derivative, is the price of each metre "
+        "(and, at the shortest cable, what the bound costs).")
+
+
+OPEN_LOOP_CODESIGN = (
+    OpenLoopCodesign("crane_cable", "crane: cable length for the minimum-time 10 m transfer", "crane1", cable_min_time,
+                     "ell", "m", text_value=10.0, sweep=(5.0, 10.0, 15.0, 20.0)),
+)
+
+
 # ----------------------------------------------------------------- drawing
 def draw(p: dict, s: dict, r: float) -> list:
     """Car on its rail, both loads on their cables; the reference car position marked."""
@@ -335,5 +459,5 @@ CASE = CaseStudy(
     cascade_model=("crane1", {"b": 0.0}),
     classical=classical, statespace=STATESPACE, mpc=MPC, design_models=("crane1",),
     codesign={"crane": cable_transfer},
-    drawing=draw, errata=ERRATA + (REMARK,),
+    drawing=draw, errata=ERRATA + (REMARK,), trajectories=TRAJECTORIES, open_loop_codesign=OPEN_LOOP_CODESIGN,
 )

@@ -19,7 +19,7 @@ from designs.analysis import Loop, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
 from designs.loops import cascade_blocks, outer_plant_seen, successive_loop_closure, zero_cancelling_design
 from designs.pid import SIGMA, linearized_input_bound
-from mpc import MPCSettings, SoftSpec
+from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum
@@ -41,6 +41,7 @@ from studies.homework import (
     statespace_items_15_to_17,
     tf_record,
 )
+from studies.trajectories import Tracking, TrajectoryProblem, TrajectorySetup
 
 #: II.14(c), outer loop: 10x better below 0.001 rad/s, 10x more noise attenuation above 20 rad/s.
 LOOPSHAPING = LoopSpec("II.14", "outer", low_frequency=0.001, high_frequency=20.0, factor=10.0)
@@ -138,6 +139,64 @@ MPC = MPCSettings(
           "2.5 times")
 
 
+# ----------------------------------------------------------------- trajectory optimization: the swing-up
+#: Cart travel allowed during the swing-up, m each way. The text gives no track length; ±0.5 m (a 1 m track,
+#: twice the rod) keeps the swing-up a few pumps long. The same bound as benchmarks/ocp.py.
+SWING_UP_TRAVEL = 0.5
+#: Horizon of the minimum-effort swing-up, s: 1.5 times the minimum time (2.69 s), a multiple of the 0.01 s
+#: sample period so the tracking controller's samples fall on the mesh.
+SWING_UP_DURATION = 4.0
+#: Hanging straight down at rest, the cart at the middle of its track: (z, θ, ż, θ̇).
+HANGING = (0.0, math.pi, 0.0, 0.0)
+
+
+def swing_up(plant: models.Plant, final_time) -> OptimalControlProblem:
+    """From hanging at rest to upright at rest, the cart back at z = 0, |z| <= SWING_UP_TRAVEL, |F| <= 5 N."""
+    ocp = OptimalControlProblem(plant, final_time)
+    ocp.subject_to(ocp.at_start(ocp.state) == list(HANGING))
+    ocp.subject_to(ocp.at_end(ocp.state) == 0)
+    ocp.subject_to(ocp.bounded(-SWING_UP_TRAVEL, ocp.x.z, SWING_UP_TRAVEL))
+    return ocp
+
+
+def swing_up_effort(plant: models.Plant, quick: bool, solved: dict) -> TrajectorySetup:
+    """Least ∫F² dt over SWING_UP_DURATION s; starts from the cart pushed back and forth once (2 N)."""
+    ocp = swing_up(plant, SWING_UP_DURATION)
+    ocp.minimize(ocp.integral(ocp.u.F**2))
+    return TrajectorySetup(
+        ocp, Collocation(intervals=50 if quick else 100),
+        {"guess_input": lambda t: [2.0 * math.sin(2 * math.pi * t / SWING_UP_DURATION)]}, "∫F² dt (N² s)",
+        f"From hanging straight down at rest to upright at rest with the cart back at z = 0, in "
+        f"{SWING_UP_DURATION:g} s, |F| ≤ 5 N, cart travel |z| ≤ {SWING_UP_TRAVEL:g} m (our choice: the text gives "
+        "no track), least ∫F² dt. Started from the plant pushed by F = 2 sin(2πt/T) N (the linear guess "
+        "stops IPOPT at a point of local infeasibility).")
+
+
+def swing_up_time(plant: models.Plant, quick: bool, solved: dict) -> TrajectorySetup:
+    """Least T in [1, 8] s, started from the minimum-effort swing-up."""
+    ocp = swing_up(plant, FreeTime(1.0, 8.0, SWING_UP_DURATION))
+    ocp.minimize(ocp.final_time)
+    return TrajectorySetup(
+        ocp, Collocation(intervals=50 if quick else 100), {"guess": solved["swing_up_effort"]}, "T (s)",
+        f"The same swing-up in the least time T (free in [1, 8] s), |F| ≤ 5 N, |z| ≤ {SWING_UP_TRAVEL:g} m; "
+        "started from the minimum-effort answer. Bang-bang except where the travel bound is active.")
+
+
+#: Track the minimum-effort swing-up: Bryson maxima 0.1 m and 0.1 rad on the deviations, 1 m/s and 1 rad/s on
+#: their rates, 1 N of feedback force; 20 % of the 5 N actuator kept for the feedback; caught by the LQR at
+#: upright for 4 s; held when within 1° and 5 cm of upright at the middle in the last second.
+SWING_UP_TRACKING = Tracking(
+    state_max={"z": 0.1, "theta": 0.1, "dz": 1.0, "dtheta": 1.0}, input_max=(1.0,), headroom=0.2, hold=4.0,
+    samples=5, settled={"theta": math.radians(1.0), "z": 0.05})
+
+TRAJECTORIES = (
+    TrajectoryProblem("swing_up_effort", "swing-up, minimum effort", swing_up_effort,
+                      report={"z": "cart travel"}, tracking=SWING_UP_TRACKING),
+    TrajectoryProblem("swing_up_time", "swing-up, minimum time", swing_up_time, depends=("swing_up_effort",),
+                      report={"z": "cart travel"}),
+)
+
+
 # ----------------------------------------------------------------- drawing
 def draw(p: dict, s: dict, r: float) -> list:
     """Cart on its track, the rod and bob above it; the reference cart position marked."""
@@ -208,5 +267,5 @@ CASE = CaseStudy(
     loops=(LOOPSHAPING,),
     cascade=("theta", "z"),  # II.6(b): F -> theta (inner), theta -> z (outer)
     classical=classical, statespace=STATESPACE, mpc=MPC,
-    drawing=draw, errata=ERRATA,
+    drawing=draw, errata=ERRATA, trajectories=TRAJECTORIES,
 )

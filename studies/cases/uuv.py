@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+import casadi
 import control
 import numpy as np
 
@@ -23,9 +24,10 @@ from designs.loopshaping import lead_for_crossover, phase_at
 from designs.pid import pd_saturation
 from designs.rootlocus import lead_lag_for_static_gain
 from designs.tuning import Specs
-from mpc import MPCSettings
+from mpc import Collocation, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_open_loop import OpenLoopCodesign
 from studies.codesign_report import ActuatorSizing
 from studies.codesign_report import actuator_sizing as size_actuator
 from studies.errata import Erratum
@@ -42,6 +44,7 @@ from studies.homework import (
     spec_records,
     tf_record,
 )
+from studies.trajectories import TrajectorySetup
 
 #: IV.11: "assume that we have turbo charged our thrusters so that we can produce a peak torque of 250 N-m".
 THRUSTER_LIMIT = 250.0
@@ -202,6 +205,42 @@ def actuator_sizing(**options):
     return size_actuator(CASE, SIZING, **options)
 
 
+# ----------------------------------------------------------------- open-loop co-design: roll agility
+#: Horizon of the roll manoeuvre, s, and the range of the centre-of-gravity offset L below the centre of
+#: buoyancy, m (the text's 0.03 m inside).
+ROLL_TIME = 1.5
+ROLL_OFFSET_RANGE = (0.005, 0.1)
+
+
+def roll_agility(quick: bool) -> TrajectorySetup:
+    """The offset L and the torque history that roll furthest in ROLL_TIME s and stop there, holdable.
+
+    The hydrostatic moment m g L sin φ is the UUV's spring: as the issue's spring-mass, a stiffer roll
+    stores energy on the way and gives it back, too stiff a one pulls the vehicle back. At the end the
+    thrusters must be able to hold the angle: m g L sin φ(T) <= 50 N m.
+    """
+    plant = models.get("uuv")
+    ocp = OptimalControlProblem(plant, ROLL_TIME)
+    ocp.choose("L", *ROLL_OFFSET_RANGE)
+    ocp.maximize(ocp.at_end(ocp.x.phi))
+    ocp.subject_to(ocp.at_start(ocp.state) == 0)
+    ocp.subject_to(ocp.at_end(ocp.x.dphi) == 0)
+    holding = ocp.p.m * ocp.p.g * ocp.p.L * casadi.sin(ocp.at_end(ocp.x.phi))
+    ocp.subject_to(holding <= float(plant.input_limit[0]), label="the thrusters hold the final roll")
+    return TrajectorySetup(
+        ocp, Collocation(intervals=30 if quick else 60), {}, "φ(T) (rad), maximized",
+        f"From upright at rest, roll as far as possible in {ROLL_TIME:g} s and stop there (φ'(T) = 0), |τ| ≤ 50 N m, "
+        "with the thrusters able to hold the final angle (m g L sin φ(T) ≤ 50 N m), choosing the centre-of-gravity "
+        f"offset L in [{ROLL_OFFSET_RANGE[0]:g}, {ROLL_OFFSET_RANGE[1]:g}] m with the torque history. The "
+        "hydrostatic moment acts as the spring of the issue's spring-mass problem.")
+
+
+OPEN_LOOP_CODESIGN = (
+    OpenLoopCodesign("uuv_roll", "UUV: centre-of-gravity offset for the furthest roll in 1.5 s", "uuv",
+                     roll_agility, "L", "m", text_value=0.03, maximized=True, sweep=(0.005, 0.015, 0.03, 0.05, 0.1)),
+)
+
+
 # ----------------------------------------------------------------- drawing
 def draw(p: dict, s: dict, r: float) -> list:
     """The hull in cross-section rolled by φ, its mast and keel; no lengths among the parameters: unit size."""
@@ -272,5 +311,5 @@ CASE = CaseStudy(
     input_limits={"lead-lag (IV.11)": THRUSTER_LIMIT},
     classical=classical, statespace=STATESPACE, mpc=MPC,
     codesign={"uuv": actuator_sizing},
-    drawing=draw, errata=ERRATA,
+    drawing=draw, errata=ERRATA, open_loop_codesign=OPEN_LOOP_CODESIGN,
 )
