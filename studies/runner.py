@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 import models
+import models.closed_loop
 from designs.pid import SIGMA
 from models import Block, checks, interrupts, metrics
 
@@ -609,6 +610,10 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
             else:
                 sim_time += elapsed
             rows.append(row)
+            if not python:
+                # A closed loop of 60000 steps holds hundreds of MB of work memory; rows of the same length
+                # are rare (step and noise), so free it now rather than hold every row's at once.
+                models.closed_loop.release(truth, controller)
             interrupts.check()
             done += 1
             if progress:

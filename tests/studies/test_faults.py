@@ -33,6 +33,7 @@ from fault_providers import HOSTILE_LABELS
 
 import models
 import models.checks
+import models.closed_loop
 import studies
 from models import files, metrics
 from studies import runner, writers
@@ -427,6 +428,23 @@ def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(mon
     np.testing.assert_array_equal(envelope.tracked, np.quantile(theta, envelope.quantiles, axis=0))
 
 
+def test_a_controllers_compiled_closed_loops_are_freed_after_each_row():
+    """The work memory of a closed loop (hundreds of MB at 1 ms over a minute) is not kept once its row
+    is done: after the study no cached closed-loop Function of the controller is left on the plant."""
+    result = runner.run_study(arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step", "mc"),
+                                                                                          mc=3))
+    lqr = result.controllers["LQR"]
+
+    def cached():
+        return [key for key, value in result.plant.function_cache.items()
+                if isinstance(value, tuple) and value[0] is lqr.casadi_step]
+
+    assert cached() == []
+    models.simulate_closed_loop(result.plant, lqr, 0.1, 1.0)
+    assert len(cached()) == 1
+    assert models.closed_loop.release(result.plant, lqr) == 1 and cached() == []
+
+
 # =========================================================================== class 8: bad input
 @pytest.mark.parametrize("args,message", [
     (["--seed", "-1"], "argument --seed: the seed must be a whole number >= 0, got -1"),
@@ -538,6 +556,23 @@ def test_the_same_seed_gives_the_same_bytes_and_the_timings_are_apart(tmp_path):
     assert all(v > 0 for v in mpc)
     per_sample = timings[0][timings[0]["sample"].notna()]
     assert set(per_sample.controller) == {"linear MPC"} and len(per_sample) == 2
+
+
+@pytest.mark.slow
+def test_two_runs_of_the_command_write_the_same_tables(workdir):
+    """The command twice with the same seed (MPC rows included, within their step budget): table.csv and
+    monte_carlo.csv of every plant are byte-identical; run ids differ."""
+    outs = []
+    for k in range(2):
+        done = cli("arm", "uuv", "--scenario", "step,mc", "--mc", "6", "--mc-python", "2", "--quiet", "--seed", "3",
+                   "--out", f"out{k}", cwd=workdir)
+        assert done.returncode == 0, done.stderr[-3000:]
+        outs.append(workdir / f"out{k}")
+    for plant in ("arm", "uuv"):
+        for name in ("table.csv", "monte_carlo.csv"):
+            assert (outs[0] / plant / name).read_bytes() == (outs[1] / plant / name).read_bytes(), (plant, name)
+        ids = [json.loads((o / plant / "run.json").read_text())["run_id"] for o in outs]
+        assert ids[0] != ids[1]
 
 
 def unescape_markdown(text: str) -> str:
