@@ -218,12 +218,22 @@ def format_number(value: Any, digits: int = 4) -> str:
 Column = tuple  # (source column, header, converter value -> cell text)
 
 
-def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
-    """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str."""
-    header = "| " + " | ".join(escape_markdown(h) for _, h, _ in columns) + " |"
+def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column], literal: bool = True) -> str:
+    """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str.
+
+    With `literal` (the default) every cell is shown as written (`escape_markdown`): labels and
+    messages never become formatting, links or HTML. ``literal=False`` is for cells written as
+    Markdown on purpose (code spans in a document's text): only '|' and line breaks are escaped.
+    """
+    escape = escape_markdown if literal else _escape_cell
+    header = "| " + " | ".join(escape(h) for _, h, _ in columns) + " |"
     rule = "|" + "|".join("---" for _ in columns) + "|"
-    body = ["| " + " | ".join(escape_markdown(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
+    body = ["| " + " | ".join(escape(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
     return "\n".join([header, rule, *body]) + "\n"
+
+
+def _escape_cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
 
 
 def html_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
