@@ -370,16 +370,22 @@ def main(argv=None) -> int:
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
             writers.publish(staging, args.out, registered, run_id)
             published = True
+    except Exception as err:
+        if not interrupts.is_interrupt(err):  # an interrupt CasADi reported as an error is handled below
+            print(f"python -m studies: failed: {type(err).__name__}: {err}; nothing of this run was written to "
+                  f"{args.out}", file=sys.stderr)
+            return 1
+        interrupted = True
     except KeyboardInterrupt:
+        interrupted = True
+    else:
+        interrupted = False
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    if interrupted:
         print("python -m studies: interrupted" + (f"; run {run_id} was complete and is in {args.out}" if published
               else f"; nothing of this run was written to {args.out}"), file=sys.stderr)
         return 130
-    except Exception as err:
-        print(f"python -m studies: failed: {type(err).__name__}: {err}; nothing of this run was written to "
-              f"{args.out}", file=sys.stderr)
-        return 1
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
     for done in sorted(finished, key=lambda d: registered.index(d["name"])):
         if done["answers"]:
             print(done["answers"], flush=True)

@@ -174,6 +174,23 @@ def test_an_interrupt_casadi_reports_as_an_error_stops_the_study():
         runner.run_study(arm_study("fault_providers:interrupt_in_disguise"), STEP_ONLY)
 
 
+def test_the_command_reads_an_interrupt_reported_as_an_error_as_an_interrupt(workdir, monkeypatch, capsys):
+    """A worker's CasADi call turned Ctrl-C into SystemError('... KeyboardInterrupt'): exit 130 and
+    nothing written, not 'failed' and exit 1."""
+    from studies import cli as command
+
+    def interrupted(*args, **kwargs):
+        raise SystemError("<built-in function Function_call> returned a result with an exception set: "
+                          "KeyboardInterrupt")
+
+    monkeypatch.setattr(command, "_run_all", interrupted)
+    monkeypatch.chdir(workdir)
+    before = previous_run(workdir / "out")
+    assert command.main(["arm", "--quick", "--out", "out"]) == 130
+    assert "python -m studies: interrupted; nothing of this run was written to out" in capsys.readouterr().err
+    assert snapshot(workdir / "out") == before
+
+
 def test_an_interrupted_write_leaves_the_previous_folder(tmp_path, monkeypatch):
     """Ctrl-C while a study's files are written (in the middle of its plots): out/arm is the earlier
     folder, file for file, and no staging folder is left."""
