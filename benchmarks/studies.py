@@ -13,22 +13,35 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   interconnected) on the first few samples; its trajectories are compared
   with ours.
 
-Room is left for the measurements of `python -m studies` (wall time and peak
-memory of ``--quick`` and of the default run) and of a Dask Monte Carlo on 1
-versus 2 workers: add a function of the parsed arguments returning a dict of
-figures, and register it in `MEASUREMENTS`.
+- ``quick`` and ``full``: wall time and peak memory of ``python -m studies --quick``
+  and of the default ``python -m studies``, each run as a user runs it (a child
+  process writing into a temporary folder, removed after). Peak memory two ways:
+  ``*_peak_mb``, the largest resident set of any one process of the run
+  (``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss``, children included, the
+  measure of the 2 GB limit), and ``*_tree_peak_mb``, the largest sum of the
+  resident sets of the run's processes at once (the command and its worker
+  processes), sampled every 0.2 s from /proc. ``full`` takes 5-8 minutes.
 
-Usage: python benchmarks/studies.py [--json PATH] [--only mc] [--samples 1000] [--repeat 3]
+Room is left for a Dask Monte Carlo on 1 versus 2 workers: add a function of
+the parsed arguments returning a dict of figures, and register it in `MEASUREMENTS`.
+
+Usage: python benchmarks/studies.py [--json PATH] [--only mc quick full] [--samples 1000] [--repeat 3]
        [--baseline-samples 3]
+       python benchmarks/studies.py --only quick full --json studies.json   (the run's time and memory)
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
+import subprocess
 import sys
+import tempfile
+import threading
 import time
+from pathlib import Path
 
 # Run as a script, this file's folder is sys.path[0] and "import studies" would find this
 # file instead of the package; drop the folder so the package is imported.
@@ -125,14 +138,92 @@ def _measure_mc(args) -> dict:
     return monte_carlo_throughput(args.samples, args.repeat, args.baseline_samples)
 
 
+def _tree_rss_bytes(root: int) -> int:
+    """Resident memory of process `root` and all its descendants now, from /proc (0 once it ended)."""
+    parents = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+                parents[int(entry.name)] = int(stat[stat.rindex(")") + 2:].split()[1])
+            except (OSError, ValueError):
+                continue
+    tree, grew = {root}, True
+    while grew:
+        found = {pid for pid, parent in parents.items() if parent in tree} - tree
+        tree |= found
+        grew = bool(found)
+    total = 0
+    for pid in tree:
+        try:
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1]) * 1024
+        except OSError:
+            continue
+    return total
+
+
+#: Runs a command and prints its children's peak resident set (KiB): a fresh process per command, so
+#: RUSAGE_CHILDREN covers that command's processes only.
+_PEAK_OF_CHILDREN = ("import resource, subprocess, sys; code = subprocess.call(sys.argv[1:]); "
+                     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(code)")
+
+
+def run_studies_command(*arguments: str) -> dict:
+    """Wall time and peak memory of ``python -m studies ARGUMENTS --quiet --out <temporary>``.
+
+    Returns
+    -------
+    dict: wall_s; peak_mb, the largest resident set of any one process of the command (ru_maxrss of
+    RUSAGE_CHILDREN, children included); tree_peak_mb, the largest sum over its processes at once
+    """
+    repo = Path(__file__).resolve().parent.parent
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])),
+               MPLBACKEND="Agg")
+    workdir = Path(tempfile.mkdtemp(prefix="studies-benchmark-"))
+    tree_peak = [0]
+    try:
+        start = time.perf_counter()
+        process = subprocess.Popen([sys.executable, "-c", _PEAK_OF_CHILDREN, sys.executable, "-m", "studies",
+                                    *arguments, "--quiet", "--out", str(workdir / "results")], cwd=workdir, env=env,
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        done = threading.Event()
+
+        def sample():
+            while not done.wait(0.2):
+                tree_peak[0] = max(tree_peak[0], _tree_rss_bytes(process.pid))
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
+        out, err = process.communicate()
+        wall = time.perf_counter() - start
+        done.set()
+        sampler.join()
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+    if process.returncode != 0:
+        raise RuntimeError(f"python -m studies {' '.join(arguments)} exited {process.returncode}: {err[-2000:]}")
+    return {"wall_s": wall, "peak_mb": int(out.split()[-1]) / 1024, "tree_peak_mb": tree_peak[0] / 2**20}
+
+
+def _measure_command(name: str, arguments: tuple) -> dict:
+    figures = run_studies_command(*arguments)
+    return {f"{name}_{key}": value for key, value in figures.items()}
+
+
 #: name -> function(parsed arguments) -> {figure: value}
-MEASUREMENTS = {"mc": _measure_mc}
+MEASUREMENTS = {"mc": _measure_mc,
+                "quick": lambda args: _measure_command("quick", ("--quick",)),
+                "full": lambda args: _measure_command("full", ())}
 
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", metavar="PATH", help="write every figure as one JSON object")
-    parser.add_argument("--only", nargs="*", choices=list(MEASUREMENTS), default=list(MEASUREMENTS))
+    parser.add_argument("--only", nargs="*", choices=list(MEASUREMENTS), default=["mc", "quick"],
+                        help="measurements to run (default mc and quick; full, the default run of python -m "
+                             "studies, takes minutes: ask for it)")
     parser.add_argument("--samples", type=int, default=1000, help="Monte Carlo samples (mc)")
     parser.add_argument("--repeat", type=int, default=3, help="timed repeats of the Monte Carlo (mc)")
     parser.add_argument("--baseline-samples", type=int, default=3, help="python-control samples (mc)")

@@ -237,6 +237,22 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     return fun
 
 
+def release(plant: Plant, controller: Block) -> int:
+    """Drop the closed-loop Functions of `controller` cached on `plant`, with the work memory and output
+    buffers they hold (hundreds of MB for a long run at a short sample period); returns how many.
+
+    The next simulation of that controller builds (and, with jit, compiles) them again: call it when
+    the controller's runs on this plant are done.
+    """
+    step = controller.casadi_step
+    keys = [key for key, value in plant.function_cache.items()
+            if isinstance(key, tuple) and key[0] in ("closed_loop", "closed_loop_batch")
+            and isinstance(value, tuple) and value[0] is step]
+    for key in keys:
+        del plant.function_cache[key]
+    return len(keys)
+
+
 def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool) -> NumpyCall:
     """The cached `closed_loop_function` wrapped for fast numpy evaluation."""
     closed_loop_function(plant, controller, n_steps, substeps, jit)

@@ -20,6 +20,9 @@ import html
 import json
 import math
 import os
+import re
+import secrets
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
@@ -66,6 +69,48 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return Path(path)
+
+
+def fresh_folder(parent: str | os.PathLike, prefix: str, suffix: str = "") -> Path:
+    """A new, uniquely named folder in `parent` (created if needed), with the permissions a plain
+    mkdir gives under the current umask (not the 0700 of `tempfile.mkdtemp`)."""
+    parent = Path(parent)
+    parent.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(prefix=prefix, suffix=suffix, dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(folder, 0o777 & ~umask)
+    return folder
+
+
+def replace_folder(source: str | os.PathLike, target: str | os.PathLike) -> Path:
+    """Put the folder `source` in the place of `target`, replacing the folder there, by renames.
+
+    `target` is renamed aside to a hidden sibling, `source` renamed onto `target`, and the old folder
+    removed: `target` holds either every old file or every new one, never a mix (between the two
+    renames it is briefly absent). Both must be on one filesystem (siblings are).
+
+    Raises
+    ------
+    NotADirectoryError
+        When `target` exists and is not a folder (it is left alone).
+    """
+    source, target = Path(source), Path(target)
+    if target.exists() and not target.is_dir():
+        raise NotADirectoryError(f"cannot replace {str(target)!r} by a folder: it is a file")
+    old = None
+    if target.exists():
+        old = target.with_name(f".{target.name}.old-{secrets.token_hex(4)}")
+        os.rename(target, old)
+    try:
+        os.rename(source, target)
+    except BaseException:
+        if old is not None:
+            os.rename(old, target)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return target
 
 
 def check_writable(folder: str | os.PathLike) -> Path:
@@ -173,12 +218,22 @@ def format_number(value: Any, digits: int = 4) -> str:
 Column = tuple  # (source column, header, converter value -> cell text)
 
 
-def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
-    """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str."""
-    header = "| " + " | ".join(_escape_md(h) for _, h, _ in columns) + " |"
+def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column], literal: bool = True) -> str:
+    """A GitHub Markdown table; `columns` are (key, header, format) with format value -> str.
+
+    With `literal` (the default) every cell is shown as written (`escape_markdown`): labels and
+    messages never become formatting, links or HTML. ``literal=False`` is for cells written as
+    Markdown on purpose (code spans in a document's text): only '|' and line breaks are escaped.
+    """
+    escape = escape_markdown if literal else _escape_cell
+    header = "| " + " | ".join(escape(h) for _, h, _ in columns) + " |"
     rule = "|" + "|".join("---" for _ in columns) + "|"
-    body = ["| " + " | ".join(_escape_md(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
+    body = ["| " + " | ".join(escape(fmt(row.get(key))) for key, _, fmt in columns) + " |" for row in rows]
     return "\n".join([header, rule, *body]) + "\n"
+
+
+def _escape_cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
 
 
 def html_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
@@ -189,8 +244,27 @@ def html_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def _escape_md(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+#: Characters that start Markdown syntax anywhere in a line (emphasis, code, links, inline HTML,
+#: entities, strikethrough, table cells, headings); each is escaped with a backslash.
+_MARKDOWN_SPECIAL = re.compile(r"([\\`*_\[\]<>|~&#])")
+#: A list or block-quote marker at the start of a text (escaped too).
+_MARKDOWN_LEADING = re.compile(r"^(\s*)([-+]|\d+[.)])(?=\s|$)")
+
+
+def escape_markdown(text: str) -> str:
+    """`text` shown literally in Markdown, on one line: what a label says is what the reader sees,
+    never formatting, a link or HTML (the counterpart of `html.escape`)."""
+    text = _MARKDOWN_SPECIAL.sub(r"\\\1", str(text).replace("\r", " ").replace("\n", " "))
+    return _MARKDOWN_LEADING.sub(lambda m: m.group(1) + m.group(2)[:-1] + "\\" + m.group(2)[-1], text)
+
+
+def fill_template(template: str, values: Mapping[str, str]) -> str:
+    """`template` with every placeholder (a key of `values`) replaced by its value, in one pass:
+    a value that contains a placeholder is inserted as it is, never substituted again."""
+    if not values:
+        return template
+    pattern = re.compile("|".join(re.escape(key) for key in sorted(values, key=len, reverse=True)))
+    return pattern.sub(lambda m: values[m.group(0)], template)
 
 
 def scaled(scale: float = 1.0, digits: int = 4) -> Callable[[Any], str]:

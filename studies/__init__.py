@@ -73,10 +73,11 @@ def unregister(name: str) -> None:
 
 def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200, mc_python: int = 10,
               mc_python_steps: int = 12_000, python_scenarios: Sequence[str] | None = None,
-              python_budget: float | None = None,
+              python_budget: float | None = None, python_steps: int | None = None,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
               providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
-              threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None) -> "StudyResult":
+              threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None,
+              run_id: str | None = None) -> "StudyResult":
     """Run one study; with `out`, write its tables, answers, plots and animation into out/<plant>/.
 
     Parameters
@@ -88,38 +89,53 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
         controllers simulated step by step (MPC)
     python_scenarios : scenarios run for those controllers (default all)
     python_budget : seconds of compute time each of them may spend on the plant (default unlimited)
-    seed : seed of the parameter samples and of the noise
+    python_steps : simulated steps each of them may take on the plant, rows in table order; a row that
+        does not fit is skipped and says so (default unlimited; see `studies.Options`)
+    seed : seed (integer >= 0) of the parameter samples and of the noise
     quick : fewer animation frames and lighter plots
-    out : output folder; nothing is written without it
+    out : output folder; nothing is written without it. out/<plant> is written aside and replaces
+        the previous folder whole when complete (see `studies.writers.write_study`)
     providers : replace the case's ``module:function`` controller providers
     controllers : extra {label: controller} to compare
     strict : raise on provider or controller errors instead of noting them
     progress : progress(done, total, text) after each simulation
+    run_id : the id recorded in out/<plant>/run.json (default a new one)
 
     Returns
     -------
     StudyResult (its `.table` is the DataFrame `run` returns)
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming the argument, before any work, when one is not what is allowed.
+    models.checks.ResourceLimitError
+        Before any work, when the Monte Carlo would need more memory than allowed.
     """
     from . import runner, writers
     from .case import CaseStudy
 
+    if not isinstance(name, (str, CaseStudy)):
+        raise TypeError(f"name must be a plant name or a CaseStudy, got {type(name).__name__} {name!r}")
+    if out is not None and (not isinstance(out, (str, os.PathLike)) or not str(os.fspath(out)).strip()):
+        raise ValueError(f"out must name a folder (or be None to write nothing), got {out!r}")
     study = name if isinstance(name, CaseStudy) else get(name)
-    options = runner.Options(scenarios=tuple(scenarios) if scenarios else None, mc=mc, mc_python=mc_python,
-                      mc_python_steps=mc_python_steps,
-                      python_scenarios=tuple(python_scenarios) if python_scenarios else None,
-                      python_budget=python_budget, seed=seed,
-                      threads=threads, jit=jit, strict=strict, quick=quick)
+    options = runner.Options(scenarios=scenarios, mc=mc, mc_python=mc_python, mc_python_steps=mc_python_steps,
+                             python_scenarios=python_scenarios, python_budget=python_budget,
+                             python_steps=python_steps, seed=seed, threads=threads, jit=jit, strict=strict,
+                             quick=quick)
     result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress)
     if out is not None:
         if study.trajectories:
-            write_trajectories(result, out)
-        writers.write_study(result, out)
+            solve_trajectories(result)
+        writers.write_study(result, out, run_id)
     return result
 
 
-def write_trajectories(result: StudyResult, out: str | os.PathLike) -> None:
-    """Solve, track and compare the study's optimal trajectories (`studies.trajectories`) and write their files
-    into out/<plant>/; the wall time goes to ``result.timing["trajectories_s"]``, failures to its notes."""
+def solve_trajectories(result: StudyResult) -> None:
+    """Solve, track and compare the study's optimal trajectories (`studies.trajectories`) into
+    ``result.trajectories`` (written with the study's files); the wall time goes to
+    ``result.timing["trajectories_s"]``, failures to its notes."""
     import time
 
     from . import trajectories
@@ -128,7 +144,7 @@ def write_trajectories(result: StudyResult, out: str | os.PathLike) -> None:
     options = result.options
     solved = trajectories.solve_case(result.study, quick=options.quick, study_result=result, strict=options.strict,
                                      seed=options.seed)
-    trajectories.write(solved, out)
+    result.trajectories = solved
     result.notes += [f"trajectories: {note}" for note in solved.notes]
     result.timing["trajectories_s"] = time.perf_counter() - started
 

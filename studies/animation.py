@@ -177,10 +177,11 @@ def write_html(path: Path, case, plant, run, label: str, caption: str = "", max_
     digits = max(3, 3 - int(math.floor(math.log10(max(xmax - xmin, ymax - ymin)))) + 1)
     data = {"t": [round(float(t), 4) for t in times], "frames": _rounded(shapes, digits), "readouts": readouts,
             "view": [xmin, ymin, xmax - xmin, ymax - ymin]}
-    page = _TEMPLATE.replace("__TITLE__", html.escape(f"{plant.title}: {label}"))
-    page = page.replace("__CAPTION__", html.escape(caption))
-    # </script> cannot occur in JSON of numbers and plain labels; escape '<' anyway.
-    page = page.replace("__DATA__", json.dumps(data, separators=(",", ":")).replace("<", "\\u003c"))
+    # One pass: a label containing a placeholder is shown as it is, never filled in. '<' is escaped in
+    # the JSON so no label can close the script.
+    page = files.fill_template(_TEMPLATE, {
+        "__TITLE__": html.escape(f"{plant.title}: {label}"), "__CAPTION__": html.escape(caption),
+        "__DATA__": json.dumps(data, separators=(",", ":")).replace("<", "\\u003c")})
     return files.write_text(path, page)
 
 

@@ -421,7 +421,7 @@ def table(results: list[CaseResult]) -> str:
                  _number(sim.value), _objective(sim), f"{100 * r.improvement:.1f} %", _objective(r.sequential_retuned),
                  "—" if over is None else f"{100 * over:.1f} %", f"{seq.wall_time:.1f} / {sim.wall_time:.1f}"]
         rows.append(dict(zip(COLUMNS, cells)))
-    return files.markdown_table(rows, [(c, c, str) for c in COLUMNS])
+    return files.markdown_table(rows, [(c, c, str) for c in COLUMNS], literal=False)
 
 
 def report(results: list[CaseResult], command: str) -> str:

@@ -107,7 +107,7 @@ def document(cases) -> str:
             parts.append(intro + "\n\n")
         rows = [entry.row() for _, entry in declared if isinstance(entry, Erratum) and entry.section == key]
         columns = [(h, h, format_number) for h in ("item", *headers)]
-        parts.append(markdown_table(rows, columns))
+        parts.append(markdown_table(rows, columns, literal=False))  # the errata are written in Markdown
         for _, entry in declared:
             if isinstance(entry, Remark) and entry.section == key:
                 parts.append("\n" + entry.text.strip() + "\n")

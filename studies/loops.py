@@ -26,7 +26,7 @@ import numpy as np
 
 import models
 from designs import analysis as an
-from models import Block, Cascade
+from models import Block, Cascade, interrupts
 
 LOOPS = ("input", "inner", "outer")
 
@@ -230,6 +230,8 @@ def analyse(plant: models.Plant, case, controllers: dict, reference_value: float
                 found["inner"] = loop(plant_of, controller, point, "inner", label)
                 found["outer"] = loop(plant_of, controller, point, "outer", label)
         except Exception as err:  # the linear analysis is a plot; the table still has the controller
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
             notes.append(f"{label}: no loop analysis ({type(err).__name__}: {err})")
             continue
         if point.residual > 1e-6:

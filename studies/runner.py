@@ -21,15 +21,16 @@ import math
 import shutil
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 import models
+import models.closed_loop
 from designs.pid import SIGMA
-from models import Block, metrics
+from models import Block, checks, interrupts, metrics
 
 from . import SCENARIO_NAMES
 from .case import CaseStudy, Scenario
@@ -52,8 +53,13 @@ class Options:
         optimizing controller costs about as much on every plant (at least one sample)
     python_scenarios : scenarios run for controllers that are not Blocks (default all); the others
         get a row saying they were skipped
+    python_steps : simulated steps a controller that is not a Block may take on one plant, its rows
+        in table order (default unlimited). A row that would take it past is skipped whole before it
+        runs (a Monte Carlo row runs the samples that fit), and says so: the budget is counted in
+        steps, so the same settings skip the same rows on every machine.
     python_budget : seconds of its own compute time a controller that is not a Block may spend on
-        one plant (default unlimited); past it, its remaining rows say so instead of holding numbers
+        one plant (default unlimited); past it, its remaining rows say so instead of holding numbers.
+        Counted in wall-clock time: which rows it skips depends on the machine and its load.
     seed : seed of the parameter samples and of the measurement noise
     threads : threads of the batched Monte Carlo map
     jit : True, False or "auto" (compile the Monte Carlo map when it has >= JIT_THRESHOLD steps)
@@ -68,6 +74,7 @@ class Options:
     python_scenarios: tuple | None = None
     python_budget: float | None = None
     seed: int = 0
+    python_steps: int | None = None
     threads: int = 2
     jit: bool | str = "auto"
     strict: bool = False
@@ -75,15 +82,42 @@ class Options:
 
     def __post_init__(self):
         for name in ("mc", "mc_python", "mc_python_steps"):
-            value = getattr(self, name)
-            if int(value) != value or value < 0:
-                raise ValueError(f"{name} (Monte Carlo samples) must be an integer >= 0, got {value}")
-        for chosen in (self.scenarios, self.python_scenarios):
-            unknown = [s for s in chosen or () if s not in SCENARIO_NAMES]
-            if unknown:
-                raise ValueError(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
-        if self.jit not in (True, False, "auto"):
+            checks.integer(getattr(self, name), f"{name} (Monte Carlo samples)", minimum=0)
+        object.__setattr__(self, "scenarios", scenario_names(self.scenarios, "scenarios"))
+        object.__setattr__(self, "python_scenarios", scenario_names(self.python_scenarios, "python_scenarios"))
+        if self.python_budget is not None:
+            checks.positive(self.python_budget, "python_budget (seconds)")
+        if self.python_steps is not None:
+            checks.integer(self.python_steps, "python_steps (simulated steps)", minimum=1)
+        checks.integer(self.seed, "seed", minimum=0)
+        checks.integer(self.threads, "threads", minimum=1)
+        if not (isinstance(self.jit, bool) or (isinstance(self.jit, str) and self.jit == "auto")):
             raise ValueError(f"jit must be True, False or 'auto', got {self.jit!r}")
+        checks.boolean(self.strict, "strict")
+        checks.boolean(self.quick, "quick")
+
+
+def scenario_names(value, what: str = "scenarios") -> tuple | None:
+    """`value` (None, or a list or tuple of scenario names) as a tuple of known names.
+
+    Raises
+    ------
+    TypeError
+        Naming `what` when `value` is a single string or not a sequence of strings.
+    ValueError
+        For an unknown name or an empty selection.
+    """
+    if value is None:
+        return None
+    if isinstance(value, str) or not isinstance(value, (list, tuple)):
+        raise TypeError(f"{what} must be a list of scenario names such as ['step'], got "
+                        f"{type(value).__name__} {value!r}")
+    if not value:
+        raise ValueError(f"{what} is empty; give None for every scenario or some of: {', '.join(SCENARIO_NAMES)}")
+    unknown = [s for s in value if s not in SCENARIO_NAMES]
+    if unknown:
+        raise ValueError(f"unknown scenario {unknown[0]!r} in {what}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
+    return tuple(value)
 
 
 # ---------------------------------------------------------------------------- results
@@ -126,6 +160,9 @@ class StudyResult:
     notes : skipped providers, failures and other remarks, in order
     timing : seconds spent per phase
     answers : homework item -> answers (see `studies.answers`), with "errata"
+    providers : the ``module:function`` providers asked for controllers
+    trajectories : the case's solved optimal trajectories (`studies.trajectories.CaseTrajectories`), when
+        `studies.solve_trajectories` ran
     """
 
     study: CaseStudy
@@ -141,6 +178,8 @@ class StudyResult:
     timing: dict
     answers: dict = field(default_factory=dict)
     truths: dict = field(default_factory=dict)
+    providers: tuple = ()
+    trajectories: object = None
 
     def best(self, scenario: str = "step") -> str | None:
         """The controller with the lowest ITAE in `scenario` among runs that did not diverge or fail."""
@@ -154,8 +193,47 @@ class NotProvided(LookupError):
     """Raised by a provider that has nothing for this case (no design of its kind): noted, not a failure."""
 
 
+def provider_specs(value, what: str = "providers") -> tuple:
+    """`value` (a list or tuple of ``module:function`` strings) as a tuple, or an error naming `what`."""
+    if isinstance(value, str) or not isinstance(value, (list, tuple)):
+        raise TypeError(f"{what} must be a list of 'module:function' strings, got {type(value).__name__} {value!r}")
+    for spec in value:
+        if not isinstance(spec, str) or spec.count(":") != 1 or not all(part.strip() for part in spec.split(":")):
+            raise ValueError(f"{what}: each provider is 'module:function', got {spec!r}")
+    return tuple(value)
+
+
+class ProviderNotFound(LookupError):
+    """A ``module:function`` provider whose module cannot be imported or has no such function."""
+
+
+def find_provider(spec: str) -> Callable:
+    """The function a ``module:function`` provider names.
+
+    Raises
+    ------
+    ProviderNotFound
+        Naming the provider when its module does not exist or has no such function (an error
+        raised while importing an existing module propagates as it is).
+    """
+    module_name, _, function_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as err:
+        if err.name and (module_name == err.name or module_name.startswith(err.name + ".")):
+            raise ProviderNotFound(f"provider {spec!r}: no module named {err.name!r}") from None
+        raise
+    function = getattr(module, function_name, None)
+    if not callable(function):
+        raise ProviderNotFound(f"provider {spec!r}: module {module_name} has no function {function_name}()")
+    return function
+
+
 def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) -> tuple[list, list]:
-    """Call each ``module:function`` provider; skip the ones that do not exist yet.
+    """Call each ``module:function`` provider.
+
+    A provider that does not exist (`ProviderNotFound`), fails to import or raises is noted and
+    skipped, or with `strict` raised; one that raises `NotProvided` is noted in either case.
 
     Returns
     -------
@@ -164,31 +242,27 @@ def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) 
     """
     results, notes = [], []
     for spec in specs:
-        module_name, _, function_name = spec.partition(":")
         try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as err:
-            if err.name and (module_name == err.name or module_name.startswith(err.name + ".")):
-                notes.append(f"{spec}: skipped, module {module_name} is not importable yet")
-                continue
+            function = find_provider(spec)
+        except ProviderNotFound as err:
             if strict:
                 raise
-            notes.append(f"{spec}: skipped, importing {module_name} failed: {err}")
+            notes.append(f"{spec}: skipped, {str(err).split(': ', 1)[1]}")
             continue
         except Exception as err:  # a provider that fails to import must not stop the other studies
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
             if strict:
                 raise
-            notes.append(f"{spec}: skipped, importing {module_name} failed: {type(err).__name__}: {err}")
-            continue
-        function = getattr(module, function_name, None)
-        if function is None:
-            notes.append(f"{spec}: skipped, {module_name} has no {function_name}() yet")
+            notes.append(f"{spec}: skipped, importing {spec.partition(':')[0]} failed: {type(err).__name__}: {err}")
             continue
         try:
             results.append((spec, function(*args, **kwargs)))
         except NotProvided as err:
             notes.append(f"{spec}: skipped, {err}")
         except Exception as err:
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
             if strict:
                 raise
             where = traceback.extract_tb(err.__traceback__)[-1]
@@ -230,14 +304,17 @@ class BudgetExceeded(RuntimeError):
 
 
 class Budgeted:
-    """A controller (not a Block) that raises `BudgetExceeded` once its steps took `seconds` in all.
+    """A controller (not a Block) that raises `BudgetExceeded` once its steps took `seconds` in all
+    (never when `seconds` is None), and KeyboardInterrupt before a step when a Ctrl-C arrived that
+    the previous step's CasADi calls swallowed (see `models.interrupts`).
 
     Everything else is the wrapped controller's: sample period, measurement,
     initial state, solver records (`step_info`), name.
     """
 
-    def __init__(self, controller, seconds: float):
-        self.controller, self.seconds, self.spent, self.steps = controller, float(seconds), 0.0, 0
+    def __init__(self, controller, seconds: float | None):
+        self.controller, self.spent, self.steps = controller, 0.0, 0
+        self.seconds = None if seconds is None else float(seconds)
         self.sample_period = controller.sample_period
         self.measures = controller.measures
         self.n_reference = controller.n_reference
@@ -247,13 +324,14 @@ class Budgeted:
         return self.controller.initial_state(y0, r0)
 
     def step(self, xc, y, r):
-        if self.spent > self.seconds:
+        interrupts.check()
+        if self.seconds is not None and self.spent > self.seconds:
             raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time")
         start = time.perf_counter()
         out = self.controller.step(xc, y, r)
         self.spent += time.perf_counter() - start
         self.steps += 1
-        if self.spent > self.seconds:
+        if self.seconds is not None and self.spent > self.seconds:
             raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time at t = "
                                  f"{self.steps * self.sample_period:.3g} s")
         return out
@@ -301,32 +379,78 @@ def tracked_equilibrium(plant: models.Plant, case: CaseStudy) -> tuple[np.ndarra
     return xe, float(xe[plant.state_names.index(case.tracked)])
 
 
+#: What a row's status says first: how its simulation went, not whether it meets its specs. "ok": every
+#: step ran as designed; "degraded": it ran, but some steps' solver failed or fell back on its previous
+#: plan (the count follows); "diverged": the state left its bound or a value became non-finite;
+#: "failed": an error stopped the row; "skipped": not run (the reason follows).
+STATUS_KINDS = ("ok", "degraded", "diverged", "failed", "skipped")
+
+
+def status_kind(status) -> str:
+    """The kind a row's status starts with, one of `STATUS_KINDS` ("failed" for anything else,
+    such as a missing status)."""
+    words = str(status).replace(":", " ").split()
+    return words[0] if words and words[0] in STATUS_KINDS else "failed"
+
+
+def solver_counts(records) -> tuple[int, int, int]:
+    """(steps, steps whose solver did not succeed, steps that fell back) of per-step solver records.
+
+    A record says success with "success" (bool) or, without it, with a "status" text naming success
+    (solved, optimal, succeeded); a fallback with "fallback" (bool).
+    """
+    steps = failed = fallback = 0
+    for record in records or ():
+        if not isinstance(record, Mapping):
+            continue
+        steps += 1
+        if "success" in record:
+            failed += not bool(record["success"])
+        elif "status" in record:
+            text = str(record["status"]).lower().replace(" ", "_")
+            failed += not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
+        fallback += bool(record.get("fallback", False))
+    return steps, failed, fallback
+
+
+def degraded_status(steps: int, failed: int, fallback: int, what: str = "steps") -> str | None:
+    """'degraded: solver failed on 3 of 500 steps, fallback on 2' (None when nothing failed)."""
+    if not failed and not fallback:
+        return None
+    parts = [f"solver failed on {failed} of {steps} {what}"] if failed else []
+    parts += [f"fallback on {fallback}" + ("" if failed else f" of {steps} {what}")] if fallback else []
+    return "degraded: " + ", ".join(parts)
+
+
 def _status(result) -> str:
-    return "ok" if result.diverged_at is None else f"diverged at t = {result.diverged_at:.3g} s"
+    if result.diverged_at is not None:
+        return f"diverged at t = {result.diverged_at:.3g} s"
+    return degraded_status(*solver_counts(result.status)) or "ok"
 
 
 def _solver_issues(result) -> float:
     """Steps whose solver record does not report success (NaN when there are no records)."""
     if not result.status:
         return math.nan
-    bad = 0
-    for record in result.status:
-        if not isinstance(record, Mapping):
-            continue
-        if "success" in record:
-            bad += not bool(record["success"])
-        elif "status" in record:
-            text = str(record["status"]).lower().replace(" ", "_")
-            bad += not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
-    return float(bad)
+    return float(solver_counts(result.status)[1])
 
 
-def python_samples(options: Options, steps_per_run: int) -> int:
+def python_samples(options: Options, steps_per_run: int, remaining: int | None = None) -> int:
     """Monte Carlo samples of a controller simulated step by step: at most `mc_python`, at most
-    `mc_python_steps` simulated steps in all, at least one (none when mc or mc_python is 0)."""
+    `mc_python_steps` simulated steps in all, at least one (none when mc or mc_python is 0), and
+    no more than fit in `remaining` simulated steps of its budget (see `Options.python_steps`)."""
     if options.mc == 0 or options.mc_python == 0:
         return 0
-    return max(1, min(options.mc, options.mc_python, options.mc_python_steps // max(steps_per_run, 1)))
+    count = max(1, min(options.mc, options.mc_python, options.mc_python_steps // max(steps_per_run, 1)))
+    return count if remaining is None else min(count, remaining // max(steps_per_run, 1))
+
+
+def row_steps(scenario: Scenario, case: CaseStudy, controller, options: Options, remaining: int | None) -> int:
+    """Simulated steps a row of a controller that is not a Block takes (0: none fit in `remaining`)."""
+    steps = int(round(scenario.duration(case) / controller.sample_period))
+    if scenario.monte_carlo:
+        return steps * python_samples(options, steps, remaining)
+    return steps if remaining is None or steps <= remaining else 0
 
 
 def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
@@ -339,18 +463,48 @@ def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: 
     return samples * steps * instructions >= JIT_THRESHOLD and compiler is not None
 
 
-def _envelope(results, tracked_index: int) -> Envelope:
+def _envelope(t: np.ndarray, reference: np.ndarray, tracked: list, inputs: list, samples: int) -> Envelope:
+    """Quantiles over samples of the tracked coordinate `tracked` and first input `inputs` of the
+    samples that did not diverge (lists of (N+1,) and (N,) arrays)."""
     quantiles = (0.0, 0.05, 0.5, 0.95, 1.0)
-    kept = [r for r in results if r.diverged_at is None]
-    t = results[0].t
-    if kept:
-        y = np.array([r.x[:, tracked_index] for r in kept])
-        u = np.array([r.u[:, 0] for r in kept])
-        tracked, inputs = np.quantile(y, quantiles, axis=0), np.quantile(u, quantiles, axis=0)
+    if tracked:
+        y = np.quantile(np.array(tracked), quantiles, axis=0)
+        u = np.quantile(np.array(inputs), quantiles, axis=0)
     else:
-        tracked = np.full((len(quantiles), len(t)), np.nan)
-        inputs = np.full((len(quantiles), len(t) - 1), np.nan)
-    return Envelope(t, quantiles, tracked, inputs, results[0].r[:, 0], len(results), len(results) - len(kept))
+        y = np.full((len(quantiles), len(t)), np.nan)
+        u = np.full((len(quantiles), len(t) - 1), np.nan)
+    return Envelope(t, quantiles, y, u, reference, samples, samples - len(tracked))
+
+
+def monte_carlo_bytes(study: CaseStudy, options: Options, n_params: int, sample_period: float | None = None
+                      ) -> float:
+    """Estimated bytes the runner holds for the Monte Carlo of one controller on `study`.
+
+    Per sample: the tracked coordinate and the first input over the run, kept for the envelope (and
+    copied once by its quantiles), and the sample's row of parameters and metrics. The simulator's
+    own working memory is bounded separately (`models.closed_loop.MONTE_CARLO_CHUNK_BYTES`).
+
+    Parameters
+    ----------
+    n_params : the plant's parameter count
+    sample_period : s, the controller's (default: the case's)
+    """
+    scenario = next((s for s in study.scenarios if s.monte_carlo), None)
+    if scenario is None or options.mc == 0:
+        return 0.0
+    steps = scenario.duration(study) / (sample_period or study.sample_period)
+    row = n_params + len(metrics.METRIC_COLUMNS) + 4
+    return options.mc * 8.0 * (2 * 2 * (steps + 1) + row)
+
+
+def check_resources(study: CaseStudy, options: Options, n_params: int) -> None:
+    """Refuse, before any work, a study whose Monte Carlo would hold more than
+    `models.checks.MEMORY_LIMIT_BYTES` (ResourceLimitError naming the samples and the limit)."""
+    needed = monte_carlo_bytes(study, options, n_params,
+                               min(study.sample_period, study.observer_sample_period))
+    if needed:
+        checks.check_memory(needed, f"a Monte Carlo of {options.mc} samples on {study.plant}",
+                            "give fewer samples (mc)")
 
 
 def run_study(study: CaseStudy, options: Options | None = None, *, providers: Sequence[str] | None = None,
@@ -370,10 +524,22 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
     -------
     StudyResult
     """
-    options = options or Options()
+    if not isinstance(study, CaseStudy):
+        raise TypeError(f"study must be a CaseStudy, got {type(study).__name__} {study!r}")
+    options = Options() if options is None else options
+    if not isinstance(options, Options):
+        raise TypeError(f"options must be a studies.Options, got {type(options).__name__} {options!r}")
+    providers = None if providers is None else provider_specs(providers)
+    if controllers is not None and not isinstance(controllers, Mapping):
+        raise TypeError(f"controllers must be a dict {{label: controller}}, got {type(controllers).__name__}")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a function progress(done, total, text), got {progress!r}")
+    plant = models.get(study.plant)
+    check_resources(study, options, plant.n_params)
+    interrupts.watch()  # Ctrl-C stops the study even where CasADi swallows it
+    interrupts.clear()
     started = time.perf_counter()
     case = study
-    plant = models.get(study.plant)
     known = study.known_plant(plant)
     designed, notes = design_controllers(study, known, providers, options.strict)
     for label, controller in (controllers or {}).items():
@@ -398,22 +564,32 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
     truths = {}
     for label, controller in designed.items():
         truth = truths[label] = study.truth(plant, label)
-        if options.python_budget is not None and not isinstance(controller, Block):
+        python = not isinstance(controller, Block)
+        if python:
             controller = Budgeted(controller, options.python_budget)
+        used = 0  # simulated steps of this controller so far (see Options.python_steps)
         for scenario in scenarios:
             tick = time.perf_counter()
-            row = {"controller": label, "scenario": scenario.name, "kind": "block" if isinstance(controller, Block)
-                   else "python"}
+            row = {"controller": label, "scenario": scenario.name, "kind": "python" if python else "block"}
+            remaining = None if options.python_steps is None or not python else options.python_steps - used
             try:
-                if (not isinstance(controller, Block) and options.python_scenarios is not None
+                needed = row_steps(scenario, case, controller, options, remaining) if python else 0
+                if (python and options.python_scenarios is not None
                         and scenario.name not in options.python_scenarios):
                     row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                     row |= {"status": "skipped: controllers that optimize each step run only "
                                       + ", ".join(options.python_scenarios) + " here", "samples": 0}
+                elif python and remaining is not None and needed == 0:
+                    whole = row_steps(scenario, case, controller, options, None)
+                    row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
+                    row |= {"status": f"skipped: needs {whole} simulated steps, {remaining} left of its budget of "
+                                      f"{options.python_steps} on this plant", "samples": 0}
                 elif scenario.monte_carlo:
+                    used += needed
                     row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
-                                        sample_rows, envelopes, label)
+                                        sample_rows, envelopes, label, remaining)
                 else:
+                    used += needed
                     result = _simulate(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
                     row |= metrics.run_metrics(result, case.tracked, bounds)
@@ -423,6 +599,8 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                 row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                 row |= {"status": f"skipped: {err}", "samples": 0}
             except Exception as err:
+                if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
+                    raise KeyboardInterrupt from err
                 if options.strict:
                     raise
                 row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
@@ -435,18 +613,23 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
             else:
                 sim_time += elapsed
             rows.append(row)
+            if not python:
+                # A closed loop of 60000 steps holds hundreds of MB of work memory; rows of the same length
+                # are rare (step and noise), so free it now rather than hold every row's at once.
+                models.closed_loop.release(truth, controller)
+            interrupts.check()
             done += 1
             if progress:
                 progress(done, total, f"{study.plant}: {label} / {scenario.name}")
     table = _frame(rows, study, case)
     timing |= {"simulate_s": sim_time, "monte_carlo_s": mc_time, "total_s": time.perf_counter() - started}
-    samples = pd.DataFrame(sample_rows)
+    samples = pd.concat(sample_rows, ignore_index=True) if sample_rows else pd.DataFrame()
     from .answers import collect
 
     answers, answer_notes = collect(study, options.strict)
     notes += answer_notes
     return StudyResult(study, options, plant, known, table, runs, envelopes, samples, designed, notes, timing,
-                       answers, truths)
+                       answers, truths, tuple(study.providers if providers is None else providers))
 
 
 def _simulate(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,
@@ -460,42 +643,65 @@ def _simulate(plant, controller, scenario: Scenario, case, options: Options, bas
 
 
 def _monte_carlo(study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes,
-                 label) -> dict:
+                 label, remaining: int | None = None) -> dict:
+    """The Monte Carlo row of one controller; its per-sample rows are appended to `sample_rows` (one
+    DataFrame) and its envelope stored in `envelopes`. Samples are consumed as they are simulated
+    (a chunk at a time for a Block): only the tracked coordinate and the first input stay."""
     case = study
     batched = isinstance(controller, Block)
     duration = scenario.duration(case)
     steps = int(round(duration / controller.sample_period))
-    count = options.mc if batched else python_samples(options, steps)
+    count = options.mc if batched else python_samples(options, steps, remaining)
     if count == 0:
         raise ValueError("no Monte Carlo samples for a controller that is not a Block (mc_python = 0)")
+    checks.check_memory(monte_carlo_bytes(study, replace(options, mc=count), plant.n_params,
+                                          controller.sample_period),
+                        f"the Monte Carlo of {label} ({count} samples of {steps} steps)", "give fewer samples (mc)")
     # The same seeded samples for every controller; a Python controller gets their first `count`.
     samples = models.sample_params(plant, options.mc, rel=scenario.rel, seed=options.seed)[:count]
     if batched:
-        results = models.monte_carlo(plant, controller, scenario.reference(case, base), duration, samples,
-                                     seed=options.seed, threads=options.threads, substeps=study.substeps,
-                                     jit=_use_jit(options, plant, controller, count, steps, study.substeps))
+        chunks = models.monte_carlo_chunks(plant, controller, scenario.reference(case, base), duration, samples,
+                                           seed=options.seed, threads=options.threads, substeps=study.substeps,
+                                           jit=_use_jit(options, plant, controller, count, steps, study.substeps))
+        results = (run for chunk in chunks for run in chunk)
     else:
-        results = [_simulate(plant, controller, scenario, case, options, base, study.substeps, params=row)
-                   for row in samples]
-    per_sample = []
+        results = (_simulate(plant, controller, scenario, case, options, base, study.substeps, params=row)
+                   for row in samples)
+    per_sample, diverged_at, tracked, inputs, step_times = [], [], [], [], []
     names = list(plant.params)
-    for i, (result, row) in enumerate(zip(results, samples)):
-        values = metrics.run_metrics(result, case.tracked, study.state_bounds(dict(zip(names, row))))
-        per_sample.append(values)
-        sample_rows.append({"controller": label, "sample": i, **dict(zip(names, row)), **values,
-                            "diverged_at_s": result.diverged_at})
-    envelopes[label] = _envelope(results, tracked_index)
+    counts = np.zeros(3, dtype=int)
+    t = reference = None
+    for result, row in zip(results, samples):
+        per_sample.append(metrics.run_metrics(result, case.tracked, study.state_bounds(dict(zip(names, row)))))
+        if t is None:
+            t, reference = np.array(result.t), np.array(result.r[:, 0])
+        diverged_at.append(math.nan if result.diverged_at is None else float(result.diverged_at))
+        if result.diverged_at is None:
+            tracked.append(np.array(result.x[:, tracked_index]))
+            inputs.append(np.array(result.u[:, 0]))
+        if not batched:
+            step_times.append(result.step_time)
+            counts += solver_counts(result.status)
+    frame = pd.DataFrame(per_sample)
+    frame.insert(0, "controller", label)
+    frame.insert(1, "sample", np.arange(count))
+    for j, name in enumerate(names):
+        frame.insert(2 + j, name, samples[:, j])
+    frame["diverged_at_s"] = diverged_at
+    sample_rows.append(frame)
+    diverged = [t for t in diverged_at if not math.isnan(t)]
+    envelopes[label] = _envelope(t, reference, tracked, inputs, count)
     out = metrics.aggregate(per_sample)
-    diverged = [r.diverged_at for r in results if r.diverged_at is not None]
-    status = "ok" if not diverged else (f"{len(diverged)} of {count} diverged (first at t = "
-                                        f"{min(diverged):.3g} s)")
+    if diverged:
+        status = f"diverged: {len(diverged)} of {count} samples, first at t = {min(diverged):.3g} s"
+    else:
+        status = degraded_status(*counts, what=f"steps of {count} samples") or "ok"
     out |= {"status": status, "samples": count, "diverged_samples": len(diverged),
             "diverged_at_s": min(diverged) if diverged else None}
     if not batched:
-        out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate([r.step_time for r in results])))
-        out["step_ms_max"] = 1e3 * float(np.nanmax(np.concatenate([r.step_time for r in results])))
-        issues = [_solver_issues(r) for r in results]
-        out["solver_issues"] = float(np.nansum(issues)) if not all(np.isnan(issues)) else math.nan
+        out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate(step_times)))
+        out["step_ms_max"] = 1e3 * float(np.nanmax(np.concatenate(step_times)))
+        out["solver_issues"] = float(counts[1]) if counts[0] else math.nan
     return out
 
 

@@ -582,14 +582,19 @@ def _target(result: CaseTrajectories, solution) -> float:
 
 def write(result: CaseTrajectories, out) -> dict:
     """Write OUT/<plant>/trajectories.md and .csv, the figures and the animations; returns {kind: file name}."""
+    folder = Path(out) / result.case.plant
+    folder.mkdir(parents=True, exist_ok=True)
+    return write_files(result, folder)
+
+
+def write_files(result: CaseTrajectories, folder: Path) -> dict:
+    """Write trajectories.md and .csv, the figures and the animations into `folder`; returns {kind: file name}."""
     import pandas as pd
 
     from models.files import write_csv, write_text
 
     from . import animation
 
-    folder = Path(out) / result.case.plant
-    folder.mkdir(parents=True, exist_ok=True)
     quick = result.quick
     dpi = 72 if quick else 100
     files: dict = {}

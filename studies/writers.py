@@ -6,17 +6,80 @@ conventions, Markdown/HTML tables); this module decides what each study writes.
 
 from __future__ import annotations
 
+import datetime
+import hashlib
 import html
 import json
 import math
 import os
+import secrets
+import shutil
 import time
 from pathlib import Path
 
 import numpy as np
 
-from models.files import (JSON_CONVENTIONS, format_number, html_table, markdown_table, scaled, write_csv,
-                          write_json, write_text)
+from models.files import (JSON_CONVENTIONS, escape_markdown, format_number, fresh_folder, html_table,
+                          markdown_table, replace_folder, scaled, write_csv, write_json, write_text)
+
+#: Columns of the study table that measure compute time: they change from run to run, so they go to
+#: timings.csv, and table.csv and monte_carlo.csv are the same bytes for the same seed and settings.
+TIMING_COLUMNS = ("wall_s", "step_ms", "step_ms_max")
+
+
+# ---------------------------------------------------------------------------- one run
+def new_run_id() -> str:
+    """A run's id: its UTC start time and 6 random hex digits, such as '20261201T120338Z-3f2a9c'."""
+    now = datetime.datetime.now(datetime.UTC)
+    return f"{now:%Y%m%dT%H%M%SZ}-{secrets.token_hex(3)}"
+
+
+def new_staging(out: str | os.PathLike, run_id: str) -> Path:
+    """A fresh hidden folder in `out` where a run writes its plant folders before `publish`."""
+    return fresh_folder(out, f".run-{run_id}.", ".partial")
+
+
+def publish(staging: str | os.PathLike, out: str | os.PathLike, names, run_id: str) -> None:
+    """Move every plant folder a run wrote into `staging` to `out`, each replacing the one there
+    (`models.files.replace_folder`), then write out/summary.md and out/index.html over the plants
+    `names` found in `out`. Called when the whole run succeeded: an interrupted run publishes nothing."""
+    staging, out = Path(staging), Path(out)
+    for folder in sorted(p for p in staging.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        replace_folder(folder, out / folder.name)
+    write_summary(out, names, run_id)
+    write_index(out, names, run_id)
+
+
+def file_digest(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's bytes, hex."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def check_study_folder(folder: str | os.PathLike) -> list[str]:
+    """What is wrong with a study folder: missing run.json, or files that are not the ones its run
+    wrote (changed, missing or extra, against run.json's SHA-256 manifest). Empty when it holds one
+    run's files and nothing else."""
+    folder = Path(folder)
+    try:
+        info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
+        manifest = dict(info["sha256"])
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        return [f"no readable run.json manifest ({type(err).__name__})"]
+    problems = []
+    for name, digest in manifest.items():
+        path = folder / name
+        if not path.is_file():
+            problems.append(f"{name} is missing")
+        elif file_digest(path) != digest:
+            problems.append(f"{name} is not the file run {info.get('run_id')} wrote")
+    extra = sorted(p.name for p in folder.iterdir() if p.name != "run.json" and p.name not in manifest
+                   and not p.name.startswith("."))
+    problems += [f"{name} is not from run {info.get('run_id')}" for name in extra]
+    return problems
 
 
 # ---------------------------------------------------------------------------- a study's files
@@ -92,30 +155,52 @@ def _loop_rows(loops_found: dict, specs, checks: dict) -> list:
     return rows
 
 
-def write_study(result, out: str | os.PathLike) -> dict:
+def write_study(result, out: str | os.PathLike, run_id: str | None = None) -> dict:
     """Write everything a study produced into ``out/<plant>/``; returns {kind: file name}.
 
     Files: table.csv, table.md, answers.json, answers.md, monte_carlo.csv,
-    loops.csv, <scenario>.png, monte_carlo.png, bode_<loop>.png,
+    loops.csv, timings.csv, <scenario>.png, monte_carlo.png, bode_<loop>.png,
     root_locus.png, poles.png, animation.gif, animation.html, run.json.
+
+    The folder is written beside ``out/<plant>`` and replaces it whole when every file is
+    written (`models.files.replace_folder`); an interrupted write leaves the previous folder.
+    run.json records `run_id` (default a new one, see `new_run_id`), the settings and the
+    SHA-256 of every other file (see `check_study_folder`). table.csv and monte_carlo.csv
+    hold no timings (those are in timings.csv and run.json): the same seed and settings give
+    the same bytes.
     """
+    run_id = new_run_id() if run_id is None else str(run_id)
+    out = Path(out)
+    # Every file goes into a fresh hidden sibling first, swapped in by one rename when complete: out/<plant>
+    # holds one run's files, whatever interrupts this one.
+    folder = fresh_folder(out, f".{result.study.plant}.", ".partial")
+    try:
+        files = _write_files(result, folder, run_id)
+        replace_folder(folder, out / result.study.plant)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return files
+
+
+def _write_files(result, folder: Path, run_id: str) -> dict:
     import pandas as pd
 
     from . import animation, answers as answers_module, loops as loops_module, plots
 
     started = time.perf_counter()
-    folder = Path(out) / result.study.plant
-    folder.mkdir(parents=True, exist_ok=True)
     study, plant, quick = result.study, result.plant, result.options.quick
     dpi = 72 if quick else 100
     files: dict = {}
     notes = list(result.notes)
 
-    write_csv(folder / "table.csv", result.table)
+    table, samples = result.table, result.samples
+    write_csv(folder / "table.csv", table.drop(columns=[c for c in TIMING_COLUMNS if c in table]))
     files["table.csv"] = "table.csv"
-    if len(result.samples):
-        write_csv(folder / "monte_carlo.csv", result.samples)
+    if len(samples):
+        write_csv(folder / "monte_carlo.csv", samples.drop(columns=[c for c in TIMING_COLUMNS if c in samples]))
         files["monte_carlo.csv"] = "monte_carlo.csv"
+    write_csv(folder / "timings.csv", timings_frame(table, samples))
+    files["timings.csv"] = "timings.csv"
     write_json(folder / "answers.json", {"_conventions": JSON_CONVENTIONS, **result.answers})
     write_text(folder / "answers.md", answers_module.format_answers(study, result.answers, plant.title))
     files |= {"answers.json": "answers.json", "answers.md": "answers.md"}
@@ -169,20 +254,62 @@ def write_study(result, out: str | os.PathLike) -> dict:
     else:
         notes.append("no animation: no controller completed the step scenario")
 
+    if result.trajectories is not None:
+        from . import trajectories
+
+        files |= trajectories.write_files(result.trajectories, folder)
+
     result.timing["files_s"] = time.perf_counter() - started
-    write_text(folder / "table.md", _study_markdown(result, notes, loop_rows))
+    write_text(folder / "table.md", _study_markdown(result, notes, loop_rows, run_id))
     files["table.md"] = "table.md"
     write_json(folder / "run.json", {
-        "plant": plant.name, "title": plant.title, "numeral": study.numeral, "best": best,
-        "settings": {"mc": result.options.mc, "mc_python": result.options.mc_python,
-                     "mc_python_steps": result.options.mc_python_steps,
-                     "python_scenarios": result.options.python_scenarios, "seed": result.options.seed,
-                     "quick": quick, "scenarios": [s.name for s in study.scenarios
-                                                   if result.options.scenarios is None
-                                                   or s.name in result.options.scenarios]},
+        "plant": plant.name, "title": plant.title, "numeral": study.numeral, "best": best, "run_id": run_id,
+        "settings": run_settings(result), "status": status_counts(result.table),
         "timing": result.timing, "notes": notes, "files": files, "tracked": study.tracked,
-        "tracked_unit": study.tracked_unit, "input_unit": study.input_unit})
+        "tracked_unit": study.tracked_unit, "input_unit": study.input_unit,
+        "sha256": {name: file_digest(folder / name) for name in sorted(files.values())}})
     return files
+
+
+def run_settings(result) -> dict:
+    """Everything that decides a study's numbers: the options, the providers and the case's scenarios."""
+    options, study = result.options, result.study
+    return {"mc": options.mc, "mc_python": options.mc_python, "mc_python_steps": options.mc_python_steps,
+            "python_scenarios": options.python_scenarios, "python_budget": options.python_budget,
+            "python_steps": options.python_steps, "seed": options.seed, "quick": options.quick,
+            "strict": options.strict, "jit": options.jit,
+            "threads": options.threads, "providers": list(result.providers),
+            "scenarios": [s.name for s in study.scenarios if options.scenarios is None or s.name in options.scenarios]}
+
+
+def status_counts(table) -> dict:
+    """Rows of each status kind (`studies.runner.STATUS_KINDS`), in that order."""
+    from .runner import STATUS_KINDS, status_kind
+
+    kinds = [status_kind(s) for s in table.status] if len(table) else []
+    return {kind: kinds.count(kind) for kind in STATUS_KINDS}
+
+
+def not_ok_rows(table) -> list:
+    """(controller, scenario, status) of every row whose status is not "ok", in table order."""
+    from .runner import status_kind
+
+    return [(str(r.controller), str(r.scenario), str(r.status)) for r in table.itertuples()
+            if status_kind(r.status) != "ok"]
+
+
+def timings_frame(table, samples):
+    """timings.csv: compute times of each row (and of each Monte Carlo sample that has one)."""
+    import pandas as pd
+
+    keep = ["controller", "scenario"]
+    rows = table[keep + [c for c in TIMING_COLUMNS if c in table]].assign(sample=pd.NA)
+    frames = [rows[keep + ["sample"] + [c for c in TIMING_COLUMNS if c in rows]]]
+    if len(samples) and any(c in samples for c in TIMING_COLUMNS):
+        per = samples[["controller", "sample"] + [c for c in TIMING_COLUMNS if c in samples]]
+        per = per[per.drop(columns=["controller", "sample"]).notna().any(axis=1)].assign(scenario="mc")
+        frames.append(per[keep + ["sample"] + [c for c in TIMING_COLUMNS if c in per]])
+    return pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
 
 
 def _tracked_value(result):
@@ -191,12 +318,29 @@ def _tracked_value(result):
     return tracked_equilibrium(result.plant, result.study)
 
 
-def _study_markdown(result, notes: list, loop_rows: list) -> str:
+def status_lines(table) -> list:
+    """Markdown lines saying how the rows ran: the count of each status kind and every row that is
+    not "ok" (skipped rows of the same reason counted once)."""
+    counts = status_counts(table)
+    lines = ["Status of the rows: " + ", ".join(f"{n} {kind}" for kind, n in counts.items() if n) + "."]
+    skipped: dict = {}
+    for controller, scenario, status in not_ok_rows(table):
+        if status.startswith("skipped"):
+            skipped.setdefault(status, []).append(f"{controller} / {scenario}")
+        else:
+            lines.append(f"- **{escape_markdown(controller)} / {escape_markdown(scenario)}**: "
+                         f"{escape_markdown(status)}")
+    for status, where in skipped.items():
+        lines.append(f"- {escape_markdown(status)}: {escape_markdown(', '.join(where))}")
+    return lines
+
+
+def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> str:
     study, plant = result.study, result.plant
     columns = _unit_columns(study.tracked_unit, study.input_unit)
     rows = result.table.to_dict("records")
-    parts = [f"# {plant.title}: controllers compared", "", caption(result), "",
-             markdown_table(rows, columns), DEFINITIONS, ""]
+    parts = [f"# {plant.title}: controllers compared", "", f"Run {run_id}; settings in run.json.", "",
+             caption(result), "", *status_lines(result.table), "", markdown_table(rows, columns), DEFINITIONS, ""]
     mc_rows = [r for r in rows if r["scenario"] == "mc"]
     if mc_rows:
         angle = study.tracked_unit == "rad"
@@ -224,12 +368,15 @@ def _study_markdown(result, notes: list, loop_rows: list) -> str:
                   "slowest pole: largest real part of s = ln(z)/Ts of the closed loop.", ""]
     timing = ", ".join(f"{k[:-2].replace('_', ' ')} {v:.1f} s" for k, v in result.timing.items())
     timing = timing.replace("total", "simulations in all").replace("files", "plots, animations and files")
-    parts += ["## Notes", ""] + [f"- {n}" for n in notes or ["none"]] + ["", f"Run time: {timing}.", ""]
+    parts += ["## Notes", ""] + [f"- {escape_markdown(n)}" for n in notes or ["none"]]
+    parts += ["", f"Run time: {timing}.", ""]
     return "\n".join(parts)
 
 
 # ---------------------------------------------------------------------------- across studies
 def _read_studies(out: Path, names) -> list:
+    """(name, run.json, table with its timings) of every study folder found in `out`; run.json gains
+    "problems", what `check_study_folder` found wrong with the folder."""
     import pandas as pd
 
     found = []
@@ -237,9 +384,24 @@ def _read_studies(out: Path, names) -> list:
         folder = out / name
         if (folder / "run.json").exists() and (folder / "table.csv").exists():
             info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
+            info["problems"] = check_study_folder(folder)
             table = pd.read_csv(folder / "table.csv", keep_default_na=True)
+            if (folder / "timings.csv").exists():
+                timings = pd.read_csv(folder / "timings.csv")
+                timings = timings[timings["sample"].isna()].drop(columns=["sample"])
+                table = table.merge(timings, on=["controller", "scenario"], how="left")
             found.append((name, info, table))
     return found
+
+
+def _run_of(info: dict, run_id: str | None) -> str:
+    """Which run a study folder comes from, and whether it is whole, in words."""
+    text = f"run {info.get('run_id', 'unknown')}"
+    if run_id is not None and info.get("run_id") != run_id:
+        text += f" (an earlier run, not {run_id})"
+    if info.get("problems"):
+        text += "; folder not as its run wrote it: " + "; ".join(info["problems"])
+    return text
 
 
 def _cell(table, controller: str, scenario: str = "step") -> str:
@@ -252,55 +414,82 @@ def _cell(table, controller: str, scenario: str = "step") -> str:
     return f"{format_number(row.settling_time_s, 3)} s / {format_number(row.overshoot_pct, 2)} %"
 
 
-def write_summary(out: str | os.PathLike, names) -> Path:
-    """OUT/summary.md across the studies found in `out` (read back from their table.csv and run.json)."""
+def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> Path:
+    """OUT/summary.md across the studies found in `out` (read back from their table.csv and run.json).
+
+    Each plant says which run wrote it (and, given `run_id`, whether that is this run) and how its
+    rows ran (`studies.runner.STATUS_KINDS`), listing every row that is not "ok".
+    """
+    from .runner import STATUS_KINDS
+
     out = Path(out)
     studies = _read_studies(out, names)
     labels = []
     for _, _, table in studies:
         labels += [c for c in table.controller.unique() if c not in labels]
-    lines = ["# Summary: every controller on every plant", "",
-             "Each cell: 2 % settling time / overshoot of the text's step on the nonlinear plant (from "
-             "OUT/<plant>/table.csv; ∞: not settled by the end of the run; — : controller not provided "
-             "for that plant).", ""]
+    lines = ["# Summary: every controller on every plant", ""]
+    if run_id is not None:
+        lines += [f"Run {run_id}. A plant folder written by another run says so below.", ""]
+    lines += ["Each cell: 2 % settling time / overshoot of the text's step on the nonlinear plant (from "
+              "OUT/<plant>/table.csv; ∞: not settled by the end of the run; — : controller not provided "
+              "for that plant; otherwise the row's status).", ""]
     columns = [("controller", "controller", format_number)] + [(n, n, format_number) for n, _, _ in studies]
     rows = [{"controller": label, **{n: _cell(t, label) for n, _, t in studies}} for label in labels]
     lines += [markdown_table(rows, columns)]
     lines += ["## Per plant", ""]
-    per = [{"plant": n, "best": info.get("best") or "—", "controllers": int(t.controller.nunique()),
-            "diverged": int((t.status.astype(str).str.contains("diverged")).sum()),
-            "failed": int((t.status.astype(str).str.startswith("failed")).sum()),
+    per = [{"plant": n, "run": _run_of(info, run_id), "best": info.get("best") or "—",
+            "controllers": int(t.controller.nunique()), **status_counts(t),
             "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
             "settings": f"mc {info['settings']['mc']}, seed {info['settings']['seed']}"
                         + (", quick" if info["settings"]["quick"] else "")} for n, info, t in studies]
     lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
-                                   for k in ("plant", "best", "controllers", "diverged", "failed", "time",
+                                   for k in ("plant", "run", "best", "controllers", *STATUS_KINDS, "time",
                                              "settings")])]
+    for n, _, table in studies:
+        if not_ok_rows(table):
+            lines += ["", f"Rows of {n} that are not ok:", ""] + status_lines(table)[1:]
     common = set.intersection(*(set(info["notes"]) for _, info, _ in studies)) if len(studies) > 1 else set()
     if common:
         first = studies[0][1]["notes"]
-        lines += ["", "Notes on every plant:", ""] + [f"- {note}" for note in first if note in common]
+        lines += ["", "Notes on every plant:", ""] + [f"- {escape_markdown(note)}" for note in first if note in common]
     for n, info, _ in studies:
         own = [note for note in info["notes"] if note not in common]
         if own:
-            lines += ["", f"Notes on {n}:", ""] + [f"- {note}" for note in own]
+            lines += ["", f"Notes on {n}:", ""] + [f"- {escape_markdown(note)}" for note in own]
     return write_text(out / "summary.md", "\n".join(lines) + "\n")
 
 
-def write_index(out: str | os.PathLike, names) -> Path:
-    """OUT/index.html linking every table, answer file, plot and animation found in `out`."""
+def _status_html(table, info: dict, run_id: str | None) -> str:
+    """The run a plant's folder comes from and its rows that are not ok, as HTML."""
+    counts = ", ".join(f"{n} {kind}" for kind, n in status_counts(table).items() if n)
+    parts = [f'<p class="run">{html.escape(_run_of(info, run_id))}. Rows: {html.escape(counts)}.</p>']
+    bad = not_ok_rows(table)
+    if bad:
+        parts.append('<ul class="not-ok">' + "".join(
+            f"<li><b>{html.escape(c)} / {html.escape(s)}</b>: {html.escape(st)}</li>" for c, s, st in bad)
+            + "</ul>")
+    return "".join(parts)
+
+
+def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Path:
+    """OUT/index.html linking every table, answer file, plot and animation found in `out`; each plant
+    says which run wrote it and lists its rows that are not "ok" (see `write_summary`)."""
     out = Path(out)
     studies = _read_studies(out, names)
     body = ["<h1>Case studies: every controller on every plant</h1>",
             '<p>Tables, plots and animations from nonlinear closed-loop simulations. '
-            '<a href="summary.md">summary.md</a></p>', "<ul>"]
+            '<a href="summary.md">summary.md</a></p>']
+    if run_id is not None:
+        body.append(f"<p>Run {html.escape(run_id)}.</p>")
+    body.append("<ul>")
     body += [f'<li><a href="#{n}">{html.escape(info["title"])}</a></li>' for n, info, _ in studies]
     body.append("</ul>")
     for n, info, table in studies:
         files = info["files"]
         links = " · ".join(f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
                            for f in files.values() if not f.endswith(".png") and not f.endswith(".gif"))
-        body += [f'<h2 id="{n}">{html.escape(info["title"])}</h2>', f"<p>{links}</p>"]
+        body += [f'<h2 id="{n}">{html.escape(info["title"])}</h2>', f"<p>{links}</p>",
+                 _status_html(table, info, run_id)]
         if info.get("best"):
             body.append(f'<p>Best in the step scenario (lowest ITAE): {html.escape(info["best"])}</p>')
         if "animation.gif" in files:
