@@ -62,6 +62,10 @@ from .transcription import Transcription
 #: gain (pendulum, N = 50: 32 s against 8 s; the step's time equal within noise).
 COMPILE_FLAGS = ("-O1",)
 
+#: DAQP's tolerance on constraint violation (its default, 1e-6, moved first moves by 1e-3 N where the
+#: cost is flat along an active bound: pendulum, mid-swing).
+PRIMAL_TOLERANCE = 1e-10
+
 #: Largest QP residual (stationarity and bound violation, in scaled units) a solve may leave.
 QP_TOLERANCE = 1e-6
 
@@ -284,7 +288,7 @@ class RealTimeIteration:
         h = h_c + H_q0_f @ ds0
         lba, uba = lo_f - C_0_f @ ds0, hi_f - C_0_f @ ds0
         qp = ca.conic("rti_qp", "daqp", {"h": ca.Sparsity.dense(nQ, nQ), "a": ca.Sparsity.dense(m, nQ)},
-                      {"error_on_fail": False})
+                      {"error_on_fail": False, "daqp": {"primal_tol": PRIMAL_TOLERANCE}})
         answer = qp(h=H_qq_f, g=h, a=C_q_f, lba=lba, uba=uba, lbx=lbq_f, ubx=ubq_f)
         dq = answer["x"]
         stationarity = ca.mmax(ca.fabs(H_qq_f @ dq + h + C_q_f.T @ answer["lam_a"] + answer["lam_x"]))
