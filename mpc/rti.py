@@ -193,16 +193,26 @@ class RealTimeIteration:
         q_idx = [list(map(int, stage_q[k])) for k in range(N)]
         lin = self._evaluate_stages(stages, wm, Pm, s_idx, q_idx)
         A = [lin[k]["A"] for k in range(N)]
-        B = [lin[k]["B"] for k in range(N)]
         a = [lin[k]["a"] for k in range(N)]
+        # Inputs and controls that enter the dynamics (d) and those that do not (σ: slacks): only d
+        # needs eliminating, so the recursions run on z = (Δs_0, 1, Δd_0, ..., Δd_{N-1}).
+        entering = set()
+        for fun in stages["functions"][:N]:
+            entering |= set(fun.sparsity_out("B").get_col())
+        dyn = sorted(entering)
+        stat = [i for i in range(nq) if i not in entering]
+        nd, nst = len(dyn), len(stat)
+        self.dynamic_columns, self.static_columns = dyn, stat
+        nz = nx + 1 + N * nd
+        B = [lin[k]["B"][:, dyn] for k in range(N)]
         # Dense recursions as one stage Function each, run by mapaccum (compact generated code).
-        # E_k (nq x nz) selects interval k's Δq_k from z; as an input sequence.
-        selections = ca.DM(nq, N * nz)
+        # E_k (nd x nz) selects interval k's Δd_k from z; as an input sequence.
+        selections = ca.DM(nd, N * nz)
         for k in range(N):
-            for i in range(nq):
-                selections[i, k * nz + nx + 1 + k * nq + i] = 1
-        G, Am, Bm, am, Em = (ca.MX.sym("Gamma", nx, nz), ca.MX.sym("A", nx, nx), ca.MX.sym("B", nx, nq),
-                             ca.MX.sym("a", nx), ca.MX.sym("E", nq, nz))
+            for i in range(nd):
+                selections[i, k * nz + nx + 1 + k * nd + i] = 1
+        G, Am, Bm, am, Em = (ca.MX.sym("Gamma", nx, nz), ca.MX.sym("A", nx, nx), ca.MX.sym("B", nx, nd),
+                             ca.MX.sym("a", nx), ca.MX.sym("E", nd, nz))
         one = ca.DM(1, nz)
         one[0, nx] = 1  # z's constant entry: a_k enters Γ_{k+1} as a_k e₁ᵀ
         forward = ca.Function("rti_forward", [G, Am, Bm, am, Em], [Am @ G + Bm @ Em + am @ one])
@@ -211,53 +221,85 @@ class RealTimeIteration:
         E_seq = ca.DM(selections)
         Gammas = forward.mapaccum("rti_forward_all", N)(Gamma0, A_seq, B_seq, a_seq, E_seq)
         Gamma = [Gamma0] + ca.horzsplit(Gammas, nz)
-        # Backward: W_k = [Y_k, λ_k] = [H_ss Γ_k + H_sq E_k, ∇_s f] + A_kᵀ W_{k+1}, and interval k's
-        # condensed Hessian rows and gradient [H_sqᵀ Γ_k + H_qq E_k, ∇_q f] + B_kᵀ W_{k+1}.
+        # Backward, with the stage Hessian's blocks over (s, d, σ):
+        # W_k = [H_ss Γ_k + H_sd E_k, ∇_s f] + A_kᵀ W_{k+1}; interval k's condensed Hessian rows and
+        # gradient of d, [H_ds Γ_k + H_dd E_k, ∇_d f] + B_kᵀ W_{k+1}, and of σ, [H_σs Γ_k + H_σd E_k, ∇_σ f].
         Wn, Hm, gm = ca.MX.sym("W", nx, nz + 1), ca.MX.sym("H", nx + nq, nx + nq), ca.MX.sym("grad", nx + nq)
         Gk = ca.MX.sym("Gamma", nx, nz)
-        H_ss, H_sq, H_qq = Hm[:nx, :nx], Hm[:nx, nx:], Hm[nx:, nx:]
+        sx, sd, ss = list(range(nx)), [nx + i for i in dyn], [nx + i for i in stat]
         backward = ca.Function("rti_backward", [Wn, Gk, Am, Bm, Em, Hm, gm],
-                               [ca.horzcat(H_ss @ Gk + H_sq @ Em, gm[:nx]) + Am.T @ Wn,
-                                ca.horzcat(H_sq.T @ Gk + H_qq @ Em, gm[nx:]) + Bm.T @ Wn])
+                               [ca.horzcat(Hm[sx, sx] @ Gk + Hm[sx, sd] @ Em, gm[sx]) + Am.T @ Wn,
+                                ca.horzcat(Hm[sd, sx] @ Gk + Hm[sd, sd] @ Em, gm[sd]) + Bm.T @ Wn,
+                                ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em, gm[ss])])
         W_N = ca.horzcat(lin[N]["H"] @ Gamma[N], lin[N]["grad"])
         order = list(reversed(range(N)))
         H_seq = ca.horzcat(*[lin[k]["H"] for k in order])
         g_seq = ca.horzcat(*[lin[k]["grad"] for k in order])
         reverse = lambda blocks, width: ca.horzcat(*[blocks[:, k * width:(k + 1) * width] for k in order])
-        W_all, Hq_all = backward.mapaccum("rti_backward_all", N)(
-            W_N, ca.horzcat(*[Gamma[k] for k in order]), reverse(A_seq, nx), reverse(B_seq, nq),
+        _, Hd_all, Hs_all = backward.mapaccum("rti_backward_all", N)(
+            W_N, ca.horzcat(*[Gamma[k] for k in order]), reverse(A_seq, nx), reverse(B_seq, nd),
             reverse(E_seq, nz), H_seq, g_seq)
-        Hq_all = ca.vertcat(*reversed(ca.horzsplit(Hq_all, nz + 1)))  # interval 0 first, (N nq, nz + 1)
-        gq_all = Hq_all[:, nz]
-        Hq_all = Hq_all[:, :nz]
-        qcols = list(range(nx + 1, nz))
-        H_qq = ca.densify(Hq_all[:, qcols])
-        H_q0 = ca.densify(Hq_all[:, :nx])
-        h_const = gq_all + Hq_all[:, nx]
+        Hd_all = ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz + 1)))  # interval 0 first, (N nd, nz + 1)
+        Hs_all = ca.vertcat(*reversed(ca.horzsplit(Hs_all, nz + 1))) if nst else ca.MX(0, nz + 1)
+        # Back to the QP's variables Δq (interval by interval, as in w) with constant selections.
+        T_d, T_s = ca.DM(N * nq, N * nd), ca.DM(N * nq, N * nst)
+        for k in range(N):
+            for j, i in enumerate(dyn):
+                T_d[k * nq + i, k * nd + j] = 1
+            for j, i in enumerate(stat):
+                T_s[k * nq + i, k * nst + j] = 1
+        T_d, T_s = ca.sparsify(T_d), ca.sparsify(T_s)
+        dcols = list(range(nx + 1, nz))
+        H_ss_blocks = ca.diagcat(*[lin[k]["H"][ss, ss] for k in range(N)]) if nst else ca.MX(0, 0)
+        S_d = Hs_all[:, dcols]
+        H_qq = ca.densify(T_d @ Hd_all[:, dcols] @ T_d.T + T_s @ S_d @ T_d.T + T_d @ S_d.T @ T_s.T
+                          + T_s @ H_ss_blocks @ T_s.T)
+        H_q0 = ca.densify(T_d @ Hd_all[:, :nx] + T_s @ Hs_all[:, :nx])
+        h_const = ca.densify(T_d @ (Hd_all[:, nz] + Hd_all[:, nx]) + T_s @ (Hs_all[:, nz] + Hs_all[:, nx]))
         E = [E_seq[:, k * nz:(k + 1) * nz] for k in range(N)]
-        # Rows of interval k: J (s_k, q_k, s_{k+1}) with Δs = Γ z and Δq = E z; the end's rows J s_N.
-        row_blocks, row_values, row_index = [], [], []
+        # Rows of interval k: J (s_k, q_k, s_{k+1}, q_{k-1}) with Δs = Γ z, Δd = E z and Δσ in place;
+        # the end's rows J (s_N, q_{N-1}).
+        qd = lambda offset: [offset + i for i in dyn]
+        qs = lambda offset: [offset + i for i in stat]
+
+        def static_at(k):
+            selection = ca.DM(nst, N * nst)
+            for j in range(nst):
+                selection[j, k * nst + j] = 1
+            return ca.sparsify(selection)
+
+        row_blocks, row_static, row_values, row_index = [], [], [], []
         for k in range(N + 1):
             J, value, index = lin[k]["J_g"], lin[k]["g"], stages["rows"][k]
             if not index:
                 continue
             block = J[:, :nx] @ Gamma[k]
+            static = ca.MX(len(index), N * nst)
             if k < N:
-                block = block + J[:, nx:nx + nq] @ E[k] + J[:, nx + nq:2 * nx + nq] @ Gamma[k + 1]
+                block = block + J[:, qd(nx)] @ E[k] + J[:, nx + nq:2 * nx + nq] @ Gamma[k + 1]
+                if nst:
+                    static = static + J[:, qs(nx)] @ static_at(k)
                 if k:
-                    block = block + J[:, 2 * nx + nq:] @ E[k - 1]
+                    block = block + J[:, qd(2 * nx + nq)] @ E[k - 1]
+                    if nst:
+                        static = static + J[:, qs(2 * nx + nq)] @ static_at(k - 1)
             else:
-                block = block + J[:, nx:] @ E[N - 1]
+                block = block + J[:, qd(nx)] @ E[N - 1]
+                if nst:
+                    static = static + J[:, qs(nx)] @ static_at(N - 1)
             row_blocks.append(block)
+            row_static.append(static)
             row_values.append(value)
             row_index += index
         m = len(row_index)
         if m:
-            rows, g_o = ca.vertcat(*row_blocks), ca.vertcat(*row_values)
+            rows, rows_static = ca.vertcat(*row_blocks), ca.vertcat(*row_static)
+            g_o = ca.vertcat(*row_values)
             lbg_o, ubg_o = lbg_all[row_index], ubg_all[row_index]
+            C_q = ca.densify(rows[:, dcols] @ T_d.T + (rows_static @ T_s.T if nst else 0))
         else:
             rows, g_o, lbg_o, ubg_o = ca.MX(0, nz), ca.MX(0, 1), ca.MX(0, 1), ca.MX(0, 1)
-        C_q = ca.densify(rows[:, qcols])
+            C_q = ca.MX(0, N * nq)
         C_0 = ca.densify(rows[:, :nx])
         row_lo = ca.densify(lbg_o - g_o - rows[:, nx])
         row_hi = ca.densify(ubg_o - g_o - rows[:, nx])
@@ -281,7 +323,8 @@ class RealTimeIteration:
         lo_f, hi_f, C_0_f = pieces[4], pieces[5], ca.reshape(pieces[6], m, nx)
         lbq_f, ubq_f = pieces[7], pieces[8]
         A_f = [ca.reshape(v, nx, nx) for v in ca.vertsplit(pieces[9], nx * nx)] if N else []
-        B_f = [ca.reshape(v, nx, nq) for v in ca.vertsplit(pieces[10], nx * nq)] if nq else [ca.MX(nx, 0)] * N
+        nd = len(self.dynamic_columns)
+        B_f = [ca.reshape(v, nx, nd) for v in ca.vertsplit(pieces[10], nx * nd)] if nd else [ca.MX(nx, 0)] * N
         a_f = ca.vertsplit(pieces[11], nx)
         w_bar = pieces[12]
         ds0 = x0m / ca.DM(self.state_scale) - w_bar[s_idx[0]]
@@ -298,7 +341,7 @@ class RealTimeIteration:
         for k in range(N):
             dq_k = dq[k * nq:(k + 1) * nq]
             pieces_w += [ds, dq_k]
-            ds = A_f[k] @ ds + B_f[k] @ dq_k + a_f[k]
+            ds = A_f[k] @ ds + B_f[k] @ dq_k[self.dynamic_columns] + a_f[k]
         pieces_w.append(ds)
         delta = ca.vertcat(*pieces_w)
         feedback = ca.Function("rti_feedback", [data, x0m], [w_bar + delta, ca.vertcat(stationarity, violation)],
