@@ -120,6 +120,9 @@ class RealTimeIteration:
         (soften them with a control, as MPC does).
     compiled : compile the phases to machine code (`models.compile`); False evaluates them in
         CasADi's virtual machine (same numbers, slower)
+    slack_shortcut : first solve the QP with every static control (slack) at its lower bound and the
+        rows holding them left out, and solve the whole QP only when that answer is not its optimum
+        (same answer; the small QP is what a sample with every soft bound inactive needs)
 
     Attributes
     ----------
@@ -131,7 +134,7 @@ class RealTimeIteration:
     shift_index : (nw,) int, ``w[shift_index]`` is w one interval later (the last repeated)
     """
 
-    def __init__(self, transcription: Transcription, *, compiled: bool = True):
+    def __init__(self, transcription: Transcription, *, compiled: bool = True, slack_shortcut: bool = True):
         if not isinstance(transcription, Transcription):
             raise TypeError(f"transcription must be a mpc.Transcription, got {type(transcription).__name__}")
         tr = self.transcription = transcription
@@ -311,6 +314,15 @@ class RealTimeIteration:
         sizes = [int(v.numel()) for v in stacked]
         self._data_sizes = sizes
         self.n_rows = int(C_q.size1())
+        # Rows that hold a static control (a soft bound's slack) and whether those controls couple with the
+        # dynamic inputs in the condensed Hessian: the feedback first tries every static control at its
+        # lower bound (see `feedback`).
+        self.soft_rows = sorted(set(rows_static.sparsity().row())) if m and nst else []
+        static_entries = set(stage_q[:, stat].ravel().tolist()) if nst else set()
+        coupled = any((i in static_entries) != (j in static_entries)
+                      for i, j in zip(*stages["hessian"].get_triplet()))
+        lower_static = np.asarray(probe(values)[0], dtype=float).ravel()[stage_q[:, stat].ravel()] if nst else []
+        self.reduced_first = bool(slack_shortcut and nst and not coupled and np.all(np.isfinite(lower_static)))
         prepare = ca.Function("rti_prepare", [wm, Pm], [ca.vertcat(*stacked)], ["w", "P"], ["data"])
 
         # ------------------------------------------------------------- feedback (MX)
@@ -330,11 +342,11 @@ class RealTimeIteration:
         ds0 = x0m / ca.DM(self.state_scale) - w_bar[s_idx[0]]
         h = h_c + H_q0_f @ ds0
         lba, uba = lo_f - C_0_f @ ds0, hi_f - C_0_f @ ds0
-        qp = ca.conic("rti_qp", "daqp", {"h": ca.Sparsity.dense(nQ, nQ), "a": ca.Sparsity.dense(m, nQ)},
-                      {"error_on_fail": False, "daqp": {"primal_tol": PRIMAL_TOLERANCE}})
-        answer = qp(h=H_qq_f, g=h, a=C_q_f, lba=lba, uba=uba, lbx=lbq_f, ubx=ubq_f)
-        dq = answer["x"]
-        stationarity = ca.mmax(ca.fabs(H_qq_f @ dq + h + C_q_f.T @ answer["lam_a"] + answer["lam_x"]))
+        full = self._qp(nQ, m, "rti_qp")
+        dq, lam_a, lam_x = full(H_qq_f, h, C_q_f, lba, uba, lbq_f, ubq_f)
+        if self.reduced_first:
+            dq, lam_a, lam_x = self._reduced_first(full, H_qq_f, h, C_q_f, lba, uba, lbq_f, ubq_f, N, nq)
+        stationarity = ca.mmax(ca.fabs(H_qq_f @ dq + h + C_q_f.T @ lam_a + lam_x))
         Cdq = C_q_f @ dq
         violation = ca.mmax(ca.vertcat(0, lba - Cdq, Cdq - uba, lbq_f - dq, dq - ubq_f))
         ds, pieces_w = ds0, []
@@ -433,7 +445,8 @@ class RealTimeIteration:
             key = (len(rows_by_stage[k]), tuple(str(fun.sparsity_out(i)) for i in range(fun.n_out())),
                    tuple(np.round(np.asarray(o, dtype=float).ravel(), 10).tobytes() for o in out))
             groups.setdefault(key, []).append(k)
-        return {"functions": functions, "groups": list(groups.values()), "rows": rows_by_stage}
+        return {"functions": functions, "groups": list(groups.values()), "rows": rows_by_stage,
+                "hessian": hessian.sparsity()}
 
     @staticmethod
     def _evaluate_stages(stages, wm, Pm, s_idx, q_idx) -> list[dict]:
@@ -457,6 +470,59 @@ class RealTimeIteration:
         g, J_g, grad, H = stages["functions"][N](wm[s_idx[N]], wm[q_idx[N - 1]], Pm)
         lin[N] = {"g": g, "J_g": J_g, "grad": grad, "H": H}
         return lin
+
+    @staticmethod
+    def _qp(n: int, m: int, name: str) -> ca.Function:
+        """(H, g, A, lba, uba, lbx, ubx) -> (x, lam_a, lam_x) of DAQP on a dense QP of n variables, m rows."""
+        solver = ca.conic(name, "daqp", {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(m, n)},
+                          {"error_on_fail": False, "daqp": {"primal_tol": PRIMAL_TOLERANCE}})
+        H, g, A = ca.MX.sym("H", n, n), ca.MX.sym("g", n), ca.MX.sym("A", m, n)
+        lba, uba, lbx, ubx = ca.MX.sym("lba", m), ca.MX.sym("uba", m), ca.MX.sym("lbx", n), ca.MX.sym("ubx", n)
+        answer = solver(h=H, g=g, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
+        return ca.Function(name, [H, g, A, lba, uba, lbx, ubx], [answer["x"], answer["lam_a"], answer["lam_x"]])
+
+    def _reduced_first(self, full, H, h, C, lba, uba, lbq, ubq, N, nq):
+        """The QP's answer, trying first every static control (slack) at its lower bound.
+
+        With the slacks fixed there, the QP in the dynamic inputs alone, without the rows that hold a
+        slack, is a fraction of the size (no slack variables, no soft rows; DAQP starts from an empty
+        working set, so each slack at its bound costs an iteration). Its answer is the whole QP's when
+        the soft rows hold there and every slack's gradient is >= 0 (the bound's multiplier has the
+        right sign): the KKT conditions of the whole QP. Otherwise the whole QP is solved (a switch:
+        only one branch runs).
+        """
+        dyn = [k * nq + i for k in range(N) for i in self.dynamic_columns]
+        sig = [k * nq + i for k in range(N) for i in self.static_columns]
+        soft = self.soft_rows
+        hard = [r for r in range(self.n_rows) if r not in set(soft)]
+        T_dyn, T_sig = ca.DM(N * nq, len(dyn)), ca.DM(N * nq, len(sig))
+        for j, i in enumerate(dyn):
+            T_dyn[i, j] = 1
+        for j, i in enumerate(sig):
+            T_sig[i, j] = 1
+        T_dyn, T_sig = ca.sparsify(T_dyn), ca.sparsify(T_sig)
+        sigma = lbq[sig]
+        reduced = self._qp(len(dyn), len(hard), "rti_qp_reduced")
+        shift = C[hard, sig] @ sigma if hard else ca.MX(0, 1)
+        x_r, lam_a_r, lam_x_r = reduced(H[dyn, dyn], h[dyn] + H[dyn, sig] @ sigma, C[hard, dyn],
+                                        lba[hard] - shift, uba[hard] - shift, lbq[dyn], ubq[dyn])
+        dq_r = T_dyn @ x_r + T_sig @ sigma
+        gradient = H @ dq_r + h
+        rows = C[soft, :] @ dq_r
+        tolerance = 10 * PRIMAL_TOLERANCE
+        holds = ca.logic_and(ca.mmin(rows - lba[soft]) >= -tolerance, ca.mmin(uba[soft] - rows) >= -tolerance)
+        optimal = ca.logic_and(holds, ca.mmin(gradient[sig]) >= -tolerance)
+        lam_a = ca.MX.zeros(self.n_rows)
+        if hard:
+            lam_a[hard] = lam_a_r
+        lam_x = T_dyn @ lam_x_r - T_sig @ gradient[sig]
+        inputs = [ca.MX.sym(name, *value.shape) for name, value in
+                  (("H", H), ("h", h), ("C", C), ("lba", lba), ("uba", uba), ("lbq", lbq), ("ubq", ubq),
+                   ("dq", dq_r), ("lam_a", lam_a), ("lam_x", lam_x))]
+        whole = ca.Function("rti_whole_qp", inputs, full(*inputs[:7]))
+        kept = ca.Function("rti_reduced_answer", inputs, inputs[7:])
+        choice = ca.Function.if_else("rti_qp_choice", kept, whole)
+        return choice(optimal, H, h, C, lba, uba, lbq, ubq, dq_r, lam_a, lam_x)
 
     def compiled_step(self) -> ca.Function:
         """`step_function` compiled (cached here and in `models.compile`'s cache)."""

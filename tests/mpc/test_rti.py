@@ -86,6 +86,26 @@ def test_preparation_then_feedback_is_the_single_call(soft_rti):
     assert rti.report(residuals) == report
 
 
+@pytest.mark.parametrize("state", ["soft bound inactive", "soft bound violated"])
+def test_the_slack_shortcut_gives_the_whole_qps_answer(soft_rti, state):
+    """The feedback that first tries every slack at zero (a QP in the inputs alone) and the one that
+    always solves the whole QP return the same step, where the soft bound holds and where it does not."""
+    ocp, ipopt, shortcut = soft_rti
+    whole = RealTimeIteration(ipopt.transcription, compiled=False, slack_shortcut=False)
+    assert shortcut.reduced_first and not whole.reduced_first
+    tr = ipopt.transcription
+    x0 = np.array([0.0, 0.02, 0.0, 0.05]) if state == "soft bound inactive" else X_HAT
+    P = tr.parameter_values(x0, values(x0))
+    w = shortcut.solve(np.zeros(tr.layout.size), P, x0, tolerance=1e-10).decision
+    slacks = w[tr.layout.controls].ravel()
+    assert (slacks.max() > 1e-3) == (state == "soft bound violated")
+    shifted = shortcut.shift(w)
+    ours, report = shortcut.feedback(shortcut.prepare(shifted, P), x0 * 1.01)
+    theirs, _ = whole.feedback(whole.prepare(shifted, P), x0 * 1.01)
+    assert report.success, report.status
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-9)
+
+
 def test_rate_limit_links_neighbouring_inputs_as_ipopt_does():
     """|u_k - u_{k-1}| <= 0.3 N with u_{-1} = 1 N given: the first move may differ from 1 N by 0.3 N at most."""
     _, ocp = pendulum_problem(soft=False, rate=np.array([0.3]))
