@@ -71,9 +71,7 @@ def unregister(name: str) -> None:
     cases.unregister(name)
 
 
-def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200, mc_python: int = 10,
-              mc_python_steps: int = 12_000, python_scenarios: Sequence[str] | None = None,
-              python_budget: float | None = None,
+def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
               providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
               threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None) -> "StudyResult":
@@ -83,11 +81,7 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     ----------
     name : name of a registered case study, or a `CaseStudy`
     scenarios : names among "step", "steps", "disturbance", "noise", "mc" (default all)
-    mc : Monte Carlo samples for block controllers (0 skips it)
-    mc_python, mc_python_steps : most samples, and most simulated steps in all, of the Monte Carlo of
-        controllers simulated step by step (MPC)
-    python_scenarios : scenarios run for those controllers (default all)
-    python_budget : seconds of compute time each of them may spend on the plant (default unlimited)
+    mc : Monte Carlo samples of every controller, MPC included (0 skips it)
     seed : seed of the parameter samples and of the noise
     quick : fewer animation frames and lighter plots
     out : output folder; nothing is written without it
@@ -104,11 +98,8 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     from .case import CaseStudy
 
     study = name if isinstance(name, CaseStudy) else get(name)
-    options = runner.Options(scenarios=tuple(scenarios) if scenarios else None, mc=mc, mc_python=mc_python,
-                      mc_python_steps=mc_python_steps,
-                      python_scenarios=tuple(python_scenarios) if python_scenarios else None,
-                      python_budget=python_budget, seed=seed,
-                      threads=threads, jit=jit, strict=strict, quick=quick)
+    options = runner.Options(scenarios=tuple(scenarios) if scenarios else None, mc=mc, seed=seed,
+                             threads=threads, jit=jit, strict=strict, quick=quick)
     result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress)
     if out is not None:
         writers.write_study(result, out)

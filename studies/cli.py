@@ -15,10 +15,9 @@ import time
 
 from . import SCENARIO_NAMES, get, names
 
-#: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
-#: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, and their scenarios.
-FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 12_000, "python_scenarios": None, "python_budget": 30.0}
-QUICK = {"mc": 10, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",), "python_budget": 5.0}
+#: Defaults of a full run and of --quick: Monte Carlo samples of every controller (MPC included).
+FULL = {"mc": 200}
+QUICK = {"mc": 10}
 
 
 def _count(text: str) -> int:
@@ -40,20 +39,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", action="append", metavar="NAME",
                    help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}")
     p.add_argument("--mc", type=_count, metavar="N",
-                   help=f"Monte Carlo samples for block controllers, one batched map (default {FULL['mc']}, "
+                   help=f"Monte Carlo samples of every controller, MPC included (default {FULL['mc']}, "
                         f"--quick {QUICK['mc']}; 0 skips the Monte Carlo)")
-    p.add_argument("--mc-python", type=_count, metavar="N",
-                   help=f"Monte Carlo samples for controllers simulated step by step, such as MPC (default "
-                        f"{FULL['mc_python']}, --quick {QUICK['mc_python']})")
-    p.add_argument("--mpc-budget", type=float, metavar="SECONDS",
-                   help="compute time each controller that optimizes every step may spend per plant; past it "
-                        f"its remaining rows say so (default {FULL['python_budget']:g}, --quick "
-                        f"{QUICK['python_budget']:g})")
     p.add_argument("--seed", type=int, default=0, help="seed of the parameter samples and the noise (default 0)")
     p.add_argument("--out", default="results", metavar="DIR", help="output folder (default results/)")
     p.add_argument("--quick", action="store_true",
-                   help=f"{QUICK['mc']} Monte Carlo samples, only the step for controllers that optimize each step "
-                        "(MPC), lighter plots and animations")
+                   help=f"{QUICK['mc']} Monte Carlo samples, lighter plots and animations")
     p.add_argument("--jobs", type=int, default=2, metavar="N",
                    help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
                         "everything in this process)")
@@ -212,20 +203,13 @@ def main(argv=None) -> int:
             p.error(f"--provider needs MODULE:FUNCTION, got {spec!r}")
     if args.jobs < 1:
         p.error(f"--jobs must be >= 1, got {args.jobs}")
-    if args.mpc_budget is not None and not args.mpc_budget > 0:
-        p.error(f"--mpc-budget must be > 0 seconds, got {args.mpc_budget}")
     if args.list:
         print(_list(plants, args.provider))
         return 0
     defaults = dict(QUICK if args.quick else FULL)
     jobs = min(args.jobs, len(plants))
     settings = {"scenarios": scenarios, "mc": defaults["mc"] if args.mc is None else args.mc,
-                "mc_python": defaults["mc_python"] if args.mc_python is None else args.mc_python,
-                "mc_python_steps": defaults["mc_python_steps"], "python_scenarios": defaults["python_scenarios"],
-                "python_budget": defaults["python_budget"] if args.mpc_budget is None else args.mpc_budget,
                 "seed": args.seed, "quick": args.quick, "strict": args.strict, "threads": max(1, 2 // jobs)}
-    if args.mc_python is not None:
-        settings["mc_python_steps"] = 10**9  # an explicit --mc-python is not capped by simulated steps
 
     from models import files
 

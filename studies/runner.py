@@ -7,8 +7,10 @@ runner designs the controllers from the model known to them (the text's
 +5 % parameter error), simulates each scenario with `models.simulate_closed_loop`
 (every row comes from the nonlinear plant, never from a linear model), runs
 the parameter Monte Carlo of a `models.Block` as one batched CasADi map
-(`models.monte_carlo`) and of any other controller (MPC) as a loop over
-fewer samples, and computes every column with `models.metrics`.
+(`models.monte_carlo`) and of any other controller (MPC) as a loop over the
+same samples, and computes every column with `models.metrics`. Every
+controller runs every scenario on the same samples: there is no time budget,
+so the same command gives the same table on any machine.
 
 A provider that is not importable yet, or has no such function yet, is
 skipped with a note; the notes travel with the results into the tables.
@@ -46,14 +48,8 @@ class Options:
     Attributes
     ----------
     scenarios : names of the scenarios to run (default: all of the study's)
-    mc : Monte Carlo samples for Block controllers (one batched map); 0 skips the Monte Carlo
-    mc_python : most samples for controllers that are not Blocks (MPC), simulated one by one
-    mc_python_steps : and at most this many simulated samples in all, so the Monte Carlo of an
-        optimizing controller costs about as much on every plant (at least one sample)
-    python_scenarios : scenarios run for controllers that are not Blocks (default all); the others
-        get a row saying they were skipped
-    python_budget : seconds of its own compute time a controller that is not a Block may spend on
-        one plant (default unlimited); past it, its remaining rows say so instead of holding numbers
+    mc : Monte Carlo samples of every controller (a Block's as one batched map, any other's one by
+        one on the same samples); 0 skips the Monte Carlo
     seed : seed of the parameter samples and of the measurement noise
     threads : threads of the batched Monte Carlo map
     jit : True, False or "auto" (compile the Monte Carlo map when it has >= JIT_THRESHOLD steps)
@@ -63,10 +59,6 @@ class Options:
 
     scenarios: tuple | None = None
     mc: int = 200
-    mc_python: int = 10
-    mc_python_steps: int = 12_000
-    python_scenarios: tuple | None = None
-    python_budget: float | None = None
     seed: int = 0
     threads: int = 2
     jit: bool | str = "auto"
@@ -74,14 +66,11 @@ class Options:
     quick: bool = False
 
     def __post_init__(self):
-        for name in ("mc", "mc_python", "mc_python_steps"):
-            value = getattr(self, name)
-            if int(value) != value or value < 0:
-                raise ValueError(f"{name} (Monte Carlo samples) must be an integer >= 0, got {value}")
-        for chosen in (self.scenarios, self.python_scenarios):
-            unknown = [s for s in chosen or () if s not in SCENARIO_NAMES]
-            if unknown:
-                raise ValueError(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
+        if int(self.mc) != self.mc or self.mc < 0:
+            raise ValueError(f"mc (Monte Carlo samples) must be an integer >= 0, got {self.mc}")
+        unknown = [s for s in self.scenarios or () if s not in SCENARIO_NAMES]
+        if unknown:
+            raise ValueError(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
         if self.jit not in (True, False, "auto"):
             raise ValueError(f"jit must be True, False or 'auto', got {self.jit!r}")
 
@@ -224,44 +213,6 @@ def design_controllers(study: CaseStudy, known: models.Plant, providers: Sequenc
     return ordered, notes
 
 
-# ---------------------------------------------------------------------------- time budget
-class BudgetExceeded(RuntimeError):
-    """A controller simulated step by step used up its time budget."""
-
-
-class Budgeted:
-    """A controller (not a Block) that raises `BudgetExceeded` once its steps took `seconds` in all.
-
-    Everything else is the wrapped controller's: sample period, measurement,
-    initial state, solver records (`step_info`), name.
-    """
-
-    def __init__(self, controller, seconds: float):
-        self.controller, self.seconds, self.spent, self.steps = controller, float(seconds), 0.0, 0
-        self.sample_period = controller.sample_period
-        self.measures = controller.measures
-        self.n_reference = controller.n_reference
-
-    def initial_state(self, y0, r0):
-        self.steps = 0
-        return self.controller.initial_state(y0, r0)
-
-    def step(self, xc, y, r):
-        if self.spent > self.seconds:
-            raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time")
-        start = time.perf_counter()
-        out = self.controller.step(xc, y, r)
-        self.spent += time.perf_counter() - start
-        self.steps += 1
-        if self.spent > self.seconds:
-            raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time at t = "
-                                 f"{self.steps * self.sample_period:.3g} s")
-        return out
-
-    def __getattr__(self, name):
-        return getattr(self.controller, name)
-
-
 # ---------------------------------------------------------------------------- noise
 def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, float]) -> np.ndarray:
     """Noise standard deviation of each measurement the controller reads.
@@ -319,14 +270,6 @@ def _solver_issues(result) -> float:
             text = str(record["status"]).lower().replace(" ", "_")
             bad += not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
     return float(bad)
-
-
-def python_samples(options: Options, steps_per_run: int) -> int:
-    """Monte Carlo samples of a controller simulated step by step: at most `mc_python`, at most
-    `mc_python_steps` simulated steps in all, at least one (none when mc or mc_python is 0)."""
-    if options.mc == 0 or options.mc_python == 0:
-        return 0
-    return max(1, min(options.mc, options.mc_python, options.mc_python_steps // max(steps_per_run, 1)))
 
 
 def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
@@ -398,19 +341,12 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
     truths = {}
     for label, controller in designed.items():
         truth = truths[label] = study.truth(plant, label)
-        if options.python_budget is not None and not isinstance(controller, Block):
-            controller = Budgeted(controller, options.python_budget)
         for scenario in scenarios:
             tick = time.perf_counter()
             row = {"controller": label, "scenario": scenario.name, "kind": "block" if isinstance(controller, Block)
                    else "python"}
             try:
-                if (not isinstance(controller, Block) and options.python_scenarios is not None
-                        and scenario.name not in options.python_scenarios):
-                    row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
-                    row |= {"status": "skipped: controllers that optimize each step run only "
-                                      + ", ".join(options.python_scenarios) + " here", "samples": 0}
-                elif scenario.monte_carlo:
+                if scenario.monte_carlo:
                     row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
                                         sample_rows, envelopes, label)
                 else:
@@ -419,9 +355,6 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                     row |= metrics.run_metrics(result, case.tracked, bounds)
                     row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
                             "solver_issues": _solver_issues(result)}
-            except BudgetExceeded as err:
-                row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
-                row |= {"status": f"skipped: {err}", "samples": 0}
             except Exception as err:
                 if options.strict:
                     raise
@@ -465,11 +398,9 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     batched = isinstance(controller, Block)
     duration = scenario.duration(case)
     steps = int(round(duration / controller.sample_period))
-    count = options.mc if batched else python_samples(options, steps)
-    if count == 0:
-        raise ValueError("no Monte Carlo samples for a controller that is not a Block (mc_python = 0)")
-    # The same seeded samples for every controller; a Python controller gets their first `count`.
-    samples = models.sample_params(plant, options.mc, rel=scenario.rel, seed=options.seed)[:count]
+    count = options.mc
+    # The same seeded samples for every controller.
+    samples = models.sample_params(plant, count, rel=scenario.rel, seed=options.seed)
     if batched:
         results = models.monte_carlo(plant, controller, scenario.reference(case, base), duration, samples,
                                      seed=options.seed, threads=options.threads, substeps=study.substeps,

@@ -59,10 +59,9 @@ def caption(result) -> str:
             f"{100 * study.known_rel:+g} %.")
     if mc is not None:
         text += (f" Monte Carlo rows (scenario `mc`): worst case over the samples (uniform ±{100 * mc.rel:g} % on "
-                 f"{uncertain}, seed {options.seed}); block controllers run as one batched CasADi map on "
-                 f"{options.mc} samples, controllers that optimize each step (MPC) one by one on the first "
-                 f"{min(options.mc, options.mc_python)} at most, and at most {options.mc_python_steps} simulated "
-                 "steps in all (the `runs` column gives the count); spreads are in table.csv (`*_std`).")
+                 f"{uncertain}, seed {options.seed}); every controller runs the same {options.mc} samples, block "
+                 "controllers as one batched CasADi map, controllers that optimize each step (MPC) one by one "
+                 "(the `runs` column gives the count); spreads are in table.csv (`*_std`).")
     return text
 
 
@@ -174,9 +173,7 @@ def write_study(result, out: str | os.PathLike) -> dict:
     files["table.md"] = "table.md"
     write_json(folder / "run.json", {
         "plant": plant.name, "title": plant.title, "numeral": study.numeral, "best": best,
-        "settings": {"mc": result.options.mc, "mc_python": result.options.mc_python,
-                     "mc_python_steps": result.options.mc_python_steps,
-                     "python_scenarios": result.options.python_scenarios, "seed": result.options.seed,
+        "settings": {"mc": result.options.mc, "seed": result.options.seed,
                      "quick": quick, "scenarios": [s.name for s in study.scenarios
                                                    if result.options.scenarios is None
                                                    or s.name in result.options.scenarios]},
