@@ -153,8 +153,7 @@ class NonlinearMPCProblem:
         self._states, self._inputs = layout.states, layout.inputs
         self._slacks = layout.controls
         self._input_scale = tr.scale[layout.inputs[0]]
-        self._model_step = plant.step_function(self.sample_period, substeps)
-        self._rollout = self._model_step.mapaccum("rollout", N)
+        self._rollout = plant.step_function(self.sample_period, substeps).mapaccum("rollout", N)
         self._known = plant.param_vector()
         self.reset()
 
@@ -215,12 +214,7 @@ class NonlinearMPCProblem:
         success = result.qp.success and result.converged and bool(np.all(np.isfinite(w)))
         if success:
             status = "solved" if result.iterations == 1 else f"converged in {result.iterations} iterations"
-            self._guess = guess = self.rti.shift(w)
-            # The new last state: the model run one sample from x_N with the repeated last input.
-            x_N, u_last = w[self._states[-1]] * self.rti.state_scale, w[self._inputs[-1]] * self._input_scale
-            end = np.asarray(self._model_step(x_N, u_last + d_hat, self._known)).ravel()
-            if np.all(np.isfinite(end)):
-                guess[self._states[-1]] = end / self.rti.state_scale
+            self._guess = self.rti.shift(w)
         else:
             status = (result.qp.status if not result.qp.success else
                       "non-finite iterate" if not np.all(np.isfinite(w)) else
