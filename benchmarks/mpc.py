@@ -33,7 +33,25 @@ as C (`mpc.export`), compiled and called through ctypes in the same closed
 loop (``exported_c_max_command_diff``: its largest difference from the Python
 controller's commands).
 
-The nonlinear MPC's solve time is measured on its own closed loop (arm and
+The nonlinear MPC (real-time iteration, `mpc.rti`) runs the same pendulum
+closed loop (N = 50, Ts = 0.01 s, |F| <= 5 N, input bounds only unless
+--soft): ``nmpc_median_ms`` and ``nmpc_p99_ms`` are its per-step preparation
+plus feedback times. Every sample's problem (x̂, d̂, x_s, u_s) is recorded and
+solved again, in the same run, by
+
+    (f) acados SQP-RTI (Gauss-Newton, partial condensing HPIPM, explicit RK4,
+        generated C, Cython wrapper), in a subprocess with the python of the
+        environment named by $ACADOS_PYTHON (default
+        benchmarks/.venv-acados/bin/python; see benchmarks/acados_pendulum.py
+        for how to create it), timed around its set calls and solve:
+        ``acados_median_ms``, ``ratio_nmpc_vs_acados`` = acados / ours; where
+        acados cannot run, ``acados_unavailable`` says why and the ratio is
+        against our converged SQP (``sqp_median_ms``) instead;
+    (g) do-mpc's default NMPC (orthogonal collocation, IPOPT) on the same
+        problem: ``do_mpc_median_ms`` over the first `--do-mpc-steps` samples.
+
+First moves of both are compared with ours (``*_max_first_move_diff``).
+Its solve time on other plants is measured on their own closed loops (arm and
 pendulum by default, every plant with --all). --settling runs every plant's
 step with both MPCs on the ±5 % models with the input disturbance (the slow
 tests' scenario) and prints settling times, peak commands and soft-bound margins.
@@ -43,7 +61,7 @@ slack (the exact penalty's degenerate vertex); there it stops at its
 iteration limit or reports "solved inaccurate" with first inputs off by up to
 0.1-1 N, so its failures are counted in the table.
 
-Usage: python benchmarks/mpc.py [--steps 500] [--soft] [--all] [--settling] [--json PATH]
+Usage: python benchmarks/mpc.py [--steps 500] [--soft] [--all] [--settling] [--do-mpc-steps 100] [--json PATH]
 """
 
 from __future__ import annotations
@@ -51,14 +69,18 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
+import warnings
 
 # Run as a script, this file's folder is sys.path[0] and "import mpc" would find this
 # file instead of the package; drop the folder so the package is imported.
 _HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
 
+import casadi as ca  # noqa: E402
 import numpy as np  # noqa: E402
 
 import models  # noqa: E402
@@ -219,6 +241,212 @@ def nonlinear_benchmark(name: str, steps: int) -> dict:
     }
 
 
+# ---------------------------------------------------------------------------- nonlinear MPC against acados and do-mpc
+#: Python templates of the CasADi operations the plants' equations use (for the acados process,
+#: whose older CasADi cannot read a Function serialized by ours).
+OPERATIONS = {
+    ca.OP_ADD: "{0} + {1}", ca.OP_SUB: "{0} - {1}", ca.OP_MUL: "{0} * {1}", ca.OP_DIV: "{0} / {1}",
+    ca.OP_NEG: "-{0}", ca.OP_SQ: "{0} * {0}", ca.OP_TWICE: "2 * {0}", ca.OP_SIN: "ca.sin({0})",
+    ca.OP_COS: "ca.cos({0})", ca.OP_TAN: "ca.tan({0})", ca.OP_SQRT: "ca.sqrt({0})", ca.OP_EXP: "ca.exp({0})",
+    ca.OP_LOG: "ca.log({0})", ca.OP_POW: "{0} ** {1}", ca.OP_ATAN: "ca.atan({0})", ca.OP_FABS: "ca.fabs({0})",
+    ca.OP_INV: "1 / {0}",
+}
+
+
+def casadi_to_python(fun: ca.Function) -> str:
+    """Source of ``def f(x, u, p, ca)`` returning the outputs of the SX Function ``fun(x, u, p)``
+    as a list, instruction by instruction."""
+    lines = ["def f(x, u, p, ca):", "    inputs = (x, u, p)", f"    out = [None] * {fun.nnz_out(0)}"]
+    for k in range(fun.n_instructions()):
+        op, args, result = fun.instruction_id(k), fun.instruction_input(k), fun.instruction_output(k)
+        if op == ca.OP_INPUT:
+            lines.append(f"    w{result[0]} = inputs[{args[0]}][{args[1]}]")
+        elif op == ca.OP_OUTPUT:
+            lines.append(f"    out[{result[1]}] = w{args[0]}")
+        elif op == ca.OP_CONST:
+            lines.append(f"    w{result[0]} = {float(fun.instruction_constant(k))!r}")
+        elif op in OPERATIONS:
+            lines.append(f"    w{result[0]} = " + OPERATIONS[op].format(*(f"w{a}" for a in args)))
+        else:
+            raise ValueError(f"casadi_to_python: operation {op} of {fun.name()} has no template")
+    lines.append("    return out")
+    return "\n".join(lines)
+
+
+def acados_python() -> str:
+    """The python of the environment holding acados: $ACADOS_PYTHON, else benchmarks/.venv-acados/bin/python."""
+    return os.environ.get("ACADOS_PYTHON") or os.path.join(_HERE, ".venv-acados", "bin", "python")
+
+
+def run_acados(problem: dict) -> dict:
+    """benchmarks/acados_pendulum.py on `problem` in a subprocess; its result, or why it could not run."""
+    python = acados_python()
+    if not os.path.exists(python):
+        return {"available": False, "reason": f"no acados environment at {python} (set ACADOS_PYTHON; see "
+                                              "benchmarks/acados_pendulum.py)"}
+    try:
+        where = subprocess.run([python, "-c", "import acados, os; print(os.path.dirname(acados.__file__))"],
+                               check=True, capture_output=True, text=True, timeout=120).stdout.strip()
+    except (OSError, subprocess.SubprocessError) as err:
+        return {"available": False, "reason": f"{python} cannot import acados: {err}"}
+    environment = dict(os.environ)
+    # Its tools (cython) on the PATH, as if the environment were activated.
+    environment["PATH"] = os.pathsep.join(filter(None, [os.path.dirname(python), environment.get("PATH", "")]))
+    # The generated solver loads acados' shared libraries from the wheel.
+    environment["LD_LIBRARY_PATH"] = os.pathsep.join(
+        filter(None, [os.path.join(where, "install", "lib"), environment.get("LD_LIBRARY_PATH", "")]))
+    with tempfile.TemporaryDirectory(prefix="acados-problem-") as folder:
+        problem_path, result_path = os.path.join(folder, "problem.json"), os.path.join(folder, "result.json")
+        with open(problem_path, "w") as handle:
+            json.dump(problem, handle)
+        try:
+            done = subprocess.run([python, os.path.join(_HERE, "acados_pendulum.py"), problem_path, result_path],
+                                  env=environment, capture_output=True, text=True, timeout=1800)
+        except subprocess.SubprocessError as err:
+            return {"available": False, "reason": f"the acados process did not finish: {err}"}
+        if not os.path.exists(result_path):
+            tail = " | ".join((done.stderr or done.stdout or "").strip().splitlines()[-3:])
+            return {"available": False, "reason": f"the acados process failed (exit {done.returncode}): {tail}"}
+        with open(result_path) as handle:
+            return json.load(handle)
+
+
+def do_mpc_run(plant, known, case, settings: dict, recorded: list) -> dict:
+    """do-mpc's default NMPC (orthogonal collocation, IPOPT) on the recorded samples' problems."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import do_mpc
+
+    nx, nu = plant.nx, plant.nu
+    model = do_mpc.model.Model("continuous")
+    x = model.set_variable("_x", "x", (nx, 1))
+    u = model.set_variable("_u", "u", (nu, 1))
+    d_hat = model.set_variable("_tvp", "d_hat", (nu, 1))
+    x_s = model.set_variable("_tvp", "x_s", (nx, 1))
+    u_s = model.set_variable("_tvp", "u_s", (nu, 1))
+    model.set_rhs("x", known.casadi_f(x, u + d_hat, known.param_vector()))
+    model.setup()
+    controller = do_mpc.controller.MPC(model)
+    controller.set_param(n_horizon=settings["horizon"], t_step=settings["sample_period"], store_full_solution=False,
+                         nlpsol_opts={"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0})
+    Q, R, P = (ca.DM(settings[k]) for k in ("Q", "R", "P"))
+    error = x - x_s
+    controller.set_objective(lterm=ca.bilin(Q, error) + ca.bilin(R, u - u_s), mterm=ca.bilin(P, error))
+    controller.set_rterm(u=0.0)
+    limit = known.input_limit
+    controller.bounds["lower", "_u", "u"] = -limit
+    controller.bounds["upper", "_u", "u"] = limit
+    template = controller.get_tvp_template()
+    current = {key: recorded[0][key] for key in ("d_hat", "x_s", "u_s")}
+
+    def tvp(_):
+        for k in range(settings["horizon"] + 1):
+            template["_tvp", k, "d_hat"] = current["d_hat"]
+            template["_tvp", k, "x_s"] = current["x_s"]
+            template["_tvp", k, "u_s"] = current["u_s"]
+        return template
+
+    controller.set_tvp_fun(tvp)
+    controller.setup()
+    times, first = [], []
+    for index, step in enumerate(recorded):
+        current.update(d_hat=step["d_hat"], x_s=step["x_s"], u_s=step["u_s"])
+        x0 = np.array(step["x_hat"]).reshape(-1, 1)
+        if index == 0:
+            controller.x0 = x0
+            controller.set_initial_guess()
+        begin = time.perf_counter()
+        u0 = controller.make_step(x0)
+        elapsed = time.perf_counter() - begin
+        if index:
+            times.append(elapsed)
+        first.append(np.asarray(u0, dtype=float).ravel().tolist())
+    return {"step_ms": [1e3 * t for t in times], "first_moves": first}
+
+
+def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
+    """Our NMPC's closed loop on the pendulum, each sample's problem solved again by acados and do-mpc."""
+    name = "pendulum"
+    plant, case = models.get(name), studies.get(name)
+    known = case.known_plant(plant)
+    overrides = {} if soft else {"soft_bounds": ()}
+    controller = case_mpc("nonlinear", case, known, **overrides)
+    assert controller.horizon == 50 and controller.sample_period == 0.01
+    recorded = []
+    solve = controller.nlp.solve
+
+    def recording(x_hat, d_hat, x_target, u_target, terminal, u_previous, plan):
+        recorded.append({"x_hat": np.asarray(x_hat).tolist(), "d_hat": np.asarray(d_hat).tolist(),
+                         "x_s": np.asarray(x_target).tolist(), "u_s": np.asarray(u_target).tolist(),
+                         "P": np.asarray(terminal).tolist()})
+        return solve(x_hat, d_hat, x_target, u_target, terminal, u_previous, plan)
+
+    controller.nlp.solve = recording
+    duration = steps * controller.sample_period
+    result = models.simulate_closed_loop(plant, controller, case.step, duration,
+                                         input_disturbance=case.input_disturbance)
+    info = result.status
+    ours = 1e3 * np.array([s["preparation_time"] + s["feedback_time"] for s in info[1:]])  # the first is cold
+    feedback = 1e3 * np.array([s["feedback_time"] for s in info[1:]])
+    preparation = 1e3 * np.array([s["preparation_time"] for s in info[1:]])
+    our_moves = np.asarray(result.u)[:, 0]
+    if np.unique([json.dumps(r["P"]) for r in recorded]).size != 1:
+        raise RuntimeError("the terminal weight changed along the run; acados is given one")
+    settings = {"horizon": controller.horizon, "sample_period": controller.sample_period,
+                "Q": controller.Q.tolist(), "R": controller.R.tolist(), "P": recorded[0]["P"]}
+    figures = {
+        "nmpc_plant": name, "nmpc_steps": len(ours), "nmpc_soft_bounds": soft,
+        "nmpc_median_ms": float(np.median(ours)), "nmpc_p99_ms": float(np.percentile(ours, 99)),
+        "nmpc_max_ms": float(np.max(ours)),
+        "nmpc_feedback_median_ms": float(np.median(feedback)),
+        "nmpc_preparation_median_ms": float(np.median(preparation)),
+        "nmpc_controller_step_median_ms": 1e3 * float(np.median(result.step_time)),
+        "nmpc_failures": int(sum(not s["success"] for s in info)),
+        "nmpc_saturated_steps": int(np.sum(np.abs(our_moves) >= plant.input_limit[0] - 1e-9)),
+    }
+    # The converged SQP on the same samples (the fallback comparison when acados cannot run).
+    sqp = case_mpc("nonlinear", case, known, iteration="sqp", **overrides)
+    sqp_times = []
+    for record in recorded[1:]:
+        begin = time.perf_counter()
+        sqp.nlp.solve(record["x_hat"], record["d_hat"], record["x_s"], record["u_s"], np.array(record["P"]),
+                      np.zeros(plant.nu), np.zeros((controller.horizon, plant.nu)))
+        sqp_times.append(time.perf_counter() - begin)
+    figures["sqp_median_ms"] = 1e3 * float(np.median(sqp_times))
+
+    problem = {"nx": plant.nx, "nu": plant.nu, "horizon": controller.horizon, "sample_period": controller.sample_period,
+               "substeps": case.mpc.substeps, "params": known.param_vector().tolist(),
+               "model_code": casadi_to_python(known.casadi_f), "input_limit": known.input_limit.tolist(),
+               "Q": settings["Q"], "R": settings["R"], "P": settings["P"], "steps": recorded,
+               "soft": [{"row": b.row.tolist(), "lower": b.lower, "upper": b.upper,
+                         "linear_weight": b.linear_weight, "quadratic_weight": b.quadratic_weight}
+                        for b in controller.soft_bounds]}
+    acados = run_acados(problem)
+    if acados.get("available"):
+        step_ms = np.array(acados["step_ms"])
+        moves = np.array(acados["first_moves"])[:, 0]
+        figures |= {"acados_median_ms": float(np.median(step_ms)), "acados_p99_ms": float(np.percentile(step_ms, 99)),
+                    "acados_time_tot_median_ms": float(np.median(acados["time_tot_ms"])),
+                    "acados_wrapper": acados["wrapper"], "acados_build_s": acados["build_s"],
+                    "acados_max_first_move_diff": float(np.max(np.abs(moves - our_moves))),
+                    "acados_failures": int(sum(code not in (0,) for code in acados["status"]))}
+        figures["ratio_nmpc_vs_acados"] = figures["acados_median_ms"] / figures["nmpc_median_ms"]
+    else:
+        figures |= {"acados_median_ms": None, "acados_unavailable": acados.get("reason", "unknown"),
+                    "ratio_nmpc_vs_acados": None,
+                    "ratio_nmpc_vs_sqp": figures["sqp_median_ms"] / figures["nmpc_median_ms"]}
+    subset = recorded[:max(2, do_mpc_steps)]
+    try:
+        done = do_mpc_run(plant, known, case, settings, subset)
+        moves = np.array(done["first_moves"])[:, 0]
+        figures |= {"do_mpc_median_ms": float(np.median(done["step_ms"])), "do_mpc_steps": len(done["step_ms"]),
+                    "do_mpc_max_first_move_diff": float(np.max(np.abs(moves - our_moves[:len(moves)]))),
+                    "ratio_do_mpc_over_nmpc": float(np.median(done["step_ms"])) / figures["nmpc_median_ms"]}
+    except Exception as err:  # do-mpc is an optional extra
+        figures |= {"do_mpc_median_ms": None, "do_mpc_unavailable": f"{type(err).__name__}: {err}"[:300]}
+    return figures
+
+
 def settling_table() -> dict:
     """Both MPCs on every plant's step, known parameters ±5 %, with the input disturbance."""
     rows = {}
@@ -255,6 +483,7 @@ def main(argv=None):
     parser.add_argument("--soft", action="store_true", help="keep the soft |theta| bound in the linear MPC")
     parser.add_argument("--all", action="store_true", help="time the nonlinear MPC on every plant")
     parser.add_argument("--settling", action="store_true", help="settling table of both MPCs on every plant")
+    parser.add_argument("--do-mpc-steps", type=int, default=100, help="samples do-mpc solves (about 30 ms each)")
     parser.add_argument("--json", metavar="PATH", help="write the figures as one JSON object")
     args = parser.parse_args(argv)
 
@@ -280,9 +509,31 @@ def main(argv=None):
     else:
         print(f"exported to C: not measured ({linear['exported_c_unavailable']})")
 
+    rti = nmpc_pendulum_benchmark(args.steps, args.soft, args.do_mpc_steps)
+    print(f"\nNonlinear MPC, pendulum: N = 50, Ts = 0.01 s, {rti['nmpc_steps']} closed-loop steps "
+          f"({rti['nmpc_saturated_steps']} saturated), {'soft |theta| bound' if args.soft else 'input bounds only'}")
+    print(f"{'path':44s} {'median ms':>10s} {'p99 ms':>8s} {'max |u0 - ours|':>16s}")
+    print(f"{'(e) ours: real-time iteration (prep + feedback)':44s} {rti['nmpc_median_ms']:10.4f} "
+          f"{rti['nmpc_p99_ms']:8.4f} {'-':>16s}")
+    print(f"{'    preparation / feedback alone':44s} {rti['nmpc_preparation_median_ms']:10.4f} "
+          f"{rti['nmpc_feedback_median_ms']:8.4f}")
+    print(f"{'    ours: SQP to convergence':44s} {rti['sqp_median_ms']:10.4f}")
+    if rti["acados_median_ms"] is not None:
+        print(f"{'(f) acados SQP-RTI (' + rti['acados_wrapper'][:10] + ')':44s} {rti['acados_median_ms']:10.4f} "
+              f"{rti['acados_p99_ms']:8.4f} {rti['acados_max_first_move_diff']:16.2e}")
+        print(f"ratio acados / ours = {rti['ratio_nmpc_vs_acados']:.2f}")
+    else:
+        print(f"(f) acados: not measured ({rti['acados_unavailable']}); converged SQP / RTI = "
+              f"{rti['ratio_nmpc_vs_sqp']:.2f}")
+    if rti["do_mpc_median_ms"] is not None:
+        print(f"{'(g) do-mpc default (collocation, IPOPT)':44s} {rti['do_mpc_median_ms']:10.4f} {'':8s} "
+              f"{rti['do_mpc_max_first_move_diff']:16.2e}")
+    else:
+        print(f"(g) do-mpc: not measured ({rti['do_mpc_unavailable']})")
+
     names = studies.names() if args.all else ["arm", "pendulum"]
     nonlinear = {}
-    print("\nNonlinear MPC (SQP, Gauss-Newton Hessian, HPIPM QPs), solve time per sample")
+    print("\nNonlinear MPC (real-time iteration, condensed DAQP QPs), solve time per sample")
     print(f"{'plant':10s} {'N':>4s} {'Ts s':>6s} {'median ms':>10s} {'p90 ms':>8s} {'max ms':>8s} {'SQP it':>7s} "
           f"{'fails':>6s}")
     for name in names:
@@ -303,7 +554,7 @@ def main(argv=None):
                   f"{row['max_solve_ms']:8.1f} {row['failed_steps']:7d}")
 
     if args.json:
-        figures = dict(linear)
+        figures = dict(linear) | rti
         figures["nonlinear"] = nonlinear
         for name, row in nonlinear.items():
             figures[f"nmpc_median_ms_{name}"] = row["median_ms"]

@@ -39,6 +39,7 @@ from .checks import (
     positive,
     real_array,
 )
+from . import interrupts
 from .compile import NumpyCall
 from .compile import jit as compile_jit
 from .plant import Plant
@@ -506,6 +507,7 @@ def _python_loop(plant, controller, setup, p, noise, xc, substeps):
     limit = plant.input_limit
     name = getattr(controller, "name", "controller")
     for k in range(n if np.all(np.isfinite(states[0])) else 0):
+        interrupts.check()  # a Ctrl-C the previous step's CasADi calls swallowed
         meas = (np.asarray(plant.casadi_h(x[k], p)).ravel() if controller.measures == "outputs" else x[k]) + noise[k]
         start = time.perf_counter()
         xc, uk = controller.step(xc, meas, setup.r[k])

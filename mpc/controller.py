@@ -36,6 +36,7 @@ import numpy as np
 
 from models import Plant, interrupts
 from models.checks import integer, positive, real_array
+from models.compile import NumpyCall
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
 from .linear import (
@@ -194,7 +195,8 @@ class _PlanFollower:
         """The last step's record: solver, status, success, iterations, solve_time (s), fallback,
         input_excess (what clipping removed from the solver's first input), soft_violation
         (largest predicted soft-bound violation over the horizon, in the bound's unit) and
-        soft_violation_now (the estimate's current violation)."""
+        soft_violation_now (the estimate's current violation). The nonlinear MPC adds
+        preparation_time and feedback_time (s, the real-time iteration's two phases) and qp_status."""
         return dict(self._info)
 
 
@@ -315,21 +317,29 @@ class NonlinearMPC(_PlanFollower):
     coordinate at r (cached per reference value), and the terminal weight is
     the Riccati solution of the linearization there.
 
+    Each sample runs one real-time iteration (`mpc.rti`): the preparation
+    (linearization at the previous plan shifted by a sample, condensing) and the
+    feedback (the QP for the corrected estimate); `step_info()` reports both
+    times, the iterations and the QP's status. The first sample, and the first
+    after a failed one, iterates to convergence from the plan rolled out
+    through the model.
+
     Parameters
     ----------
     known : Plant
     sample_period, horizon, state_weight, input_weight, soft_bounds, tracked, name : as `LinearMPC`
     rate_limit : (nu,) input units per second, or None
     substeps : RK4 steps per sample in the prediction model
-    max_iterations : SQP iterations per sample
-    qp_solver : CasADi conic plugin for the SQP's QPs: "hpipm" (structure-exploiting interior
-        point, the default; "qrqp" when a rate limit couples the stages) or "qrqp"
+    iteration : "rti" (one SQP iteration per sample, the default) or "sqp" (iterated to convergence)
+    max_iterations : SQP iterations where iterating to convergence
+    tolerance : the SQP's convergence test, max |Δw| (inputs scaled by their limit)
+    compiled : compile the iteration to machine code (`models.compile`); False runs CasADi's virtual machine
     input_noise_std, disturbance_step_std, measurement_std : estimator tuning, as `LinearMPC`
     """
 
     def __init__(self, known: Plant, *, sample_period: float, horizon: int, state_weight, input_weight,
-                 soft_bounds=(), rate_limit=None, tracked: str, substeps: int = 1,
-                 max_iterations: int = 20, qp_solver: str = "hpipm", input_noise_std=None,
+                 soft_bounds=(), rate_limit=None, tracked: str, substeps: int = 1, iteration: str = "rti",
+                 max_iterations: int = 50, tolerance: float = 1e-8, compiled: bool = True, input_noise_std=None,
                  disturbance_step_std=None, measurement_std=1e-3, name: str = "nonlinear MPC"):
         interrupts.watch()  # Ctrl-C stops a run even where CasADi swallows it (see models.interrupts)
         self._setup_common(known, sample_period, horizon, tracked, name)
@@ -341,8 +351,11 @@ class NonlinearMPC(_PlanFollower):
         self.soft_bounds = _soft_bounds(soft_bounds)
         self.nlp = NonlinearMPCProblem(known, self.sample_period, self.horizon, self.Q, self.R,
                                        soft_bounds=self.soft_bounds, rate_limit=per_sample_rate,
-                                       substeps=substeps, max_iterations=max_iterations, qp_solver=qp_solver)
+                                       substeps=substeps, iteration=iteration, max_iterations=max_iterations,
+                                       tolerance=tolerance, compiled=compiled)
         self.step_model = known.step_function(self.sample_period, substeps)
+        # Numeric calls without CasADi's DM conversions (half the cost of these small calls).
+        self._predict, self._output = NumpyCall(self.step_model), NumpyCall(known.casadi_h)
         linear = known.linearize().discretize(self.sample_period)
         self.observer = DisturbanceObserver(
             linear.A, linear.B, linear.C,
@@ -402,7 +415,7 @@ class NonlinearMPC(_PlanFollower):
         if not _finite(y):  # a lost measurement: the prediction stands as the estimate
             fault = "non-finite measurement"
         else:
-            innovation = y - np.asarray(self.plant.casadi_h(x_hat, p)).ravel()
+            innovation = y - self._output(x_hat, p)[0].ravel()
             x_hat, d_hat = self.observer.correct(x_hat, d_hat, innovation)
             if not (_finite(x_hat) and _finite(d_hat)):
                 fault = "non-finite estimate"
@@ -415,7 +428,7 @@ class NonlinearMPC(_PlanFollower):
                                    np.zeros((N, len(self.soft_bounds))), False, fault, 0, 0.0)
         new_plan, u, fallback, excess, success, status = self._follow(solution.inputs, solution.success,
                                                                       solution.status, plan)
-        x_next = np.asarray(self.step_model(x_hat, u + d_hat, p)).ravel()
+        x_next = self._predict(x_hat, u + d_hat, p)[0].ravel()
         if not _finite(x_next) and _finite(x_hat) and _finite(u):
             # The model's prediction blew up from a finite estimate: hold the estimate, say so.
             x_next = x_hat
@@ -423,9 +436,10 @@ class NonlinearMPC(_PlanFollower):
         g = self._soft_rows @ x_hat
         now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
         self._info = {
-            "solver": f"sqpmethod/{self.nlp.qp_solver}", "status": status, "success": success,
-            "iterations": solution.iterations, "solve_time": solution.solve_time, "fallback": fallback,
-            "input_excess": excess,
+            "solver": f"{self.nlp.iteration}/{self.nlp.qp_solver}", "status": status, "success": success,
+            "iterations": solution.iterations, "solve_time": solution.solve_time,
+            "preparation_time": solution.preparation_time, "feedback_time": solution.feedback_time,
+            "qp_status": solution.qp_status, "fallback": fallback, "input_excess": excess,
             "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
             "soft_violation_now": float(np.max(now)) if now.size else 0.0,
         }

@@ -3,6 +3,7 @@
     minimize    Φ(x(0), x(T), p, T, ∫L dt, Σ ℓ)                 (`minimize`, `integral`, `sum`)
     subject to  ẋ = f(x, u, p)                                   (the plant, always)
                 g_lo <= g(x(t), u(t), p, t) <= g_hi   on [0, T]    (path: `subject_to` on x, u, y, t)
+                i_lo <= i(x_k, u_k, x_{k+1}, u_{k-1}) <= i_hi  k = 0..N-1  (interval: on `x_next`, `u_previous`)
                 e_lo <= e(x(0), x(T), p, T, ∫L dt) <= e_hi          (boundary: `at_start`, `at_end`)
                 |u| <= input limit                                  (by default)
 
@@ -115,6 +116,8 @@ class Constraint:
     path : True for a constraint along the trajectory (on x, u, y, t), False for one
         on boundary values, integrals, parameters and the final time.
     include_start, include_end : whether a path constraint also holds at t = 0 and t = T.
+    interval : True for a constraint on each interval, linking its input to the state at its
+        end (`x_next`) or to the previous interval's input (`u_previous`).
     """
 
     expression: ca.SX
@@ -124,6 +127,7 @@ class Constraint:
     path: bool
     include_start: bool = True
     include_end: bool = True
+    interval: bool = False
 
 
 @dataclass(frozen=True)
@@ -169,6 +173,11 @@ class OptimalControlProblem:
         Time along the trajectory, s.
     final_time : casadi.SX
         T (a symbol even when fixed; its value is substituted in the transcription).
+    x_next, u_previous : Names
+        On interval k, the state at its end x_{k+1} and the input of interval k-1 (on the first
+        interval the value given to `input_before`), for constraints linking neighbours.
+    state_next, input_previous : casadi.SX, (nx,), (nu,)
+        The same symbols as vectors.
     """
 
     def __init__(self, plant: Plant, final_time, *, actuator_limit: bool = True):
@@ -204,6 +213,11 @@ class OptimalControlProblem:
             ca.vertcat(*sym(plant.state_names, "(T)"))
         self.input_start, self.input_end = ca.vertcat(*sym(plant.input_names, "(0)")), \
             ca.vertcat(*sym(plant.input_names, "(T)"))
+        next_states, previous_inputs = sym(plant.state_names, "(k+1)"), sym(plant.input_names, "(k-1)")
+        self.state_next, self.input_previous = ca.vertcat(*next_states), ca.vertcat(*previous_inputs)
+        self.x_next = Names("state at the interval's end", owner, plant.state_names, next_states)
+        self.u_previous = Names("input of the previous interval", owner, plant.input_names, previous_inputs)
+        self.input_before_start: ca.SX | None = None
         self.control_start, self.control_end = ca.SX(0, 1), ca.SX(0, 1)
         self.parameters: dict[str, tuple[ca.SX, np.ndarray | None]] = {}
         self.fed_input = self.input
@@ -267,7 +281,8 @@ class OptimalControlProblem:
         if expression.numel() != self.plant.nu:
             raise ValueError(f"plant_input(...) needs {self.plant.nu} entries (one per input), "
                              f"got {expression.numel()}")
-        if ca.depends_on(expression, ca.vertcat(self.state, self.t, self.final_time, self._point_symbols)):
+        if ca.depends_on(expression, ca.vertcat(self.state, self.t, self.final_time, self._point_symbols,
+                                                self._interval_symbols)):
             raise ValueError("plant_input(...) may depend on u, the controls, p and parameters only "
                              "(it is held on each interval)")
         self.fed_input = ca.vec(expression)
@@ -317,12 +332,37 @@ class OptimalControlProblem:
         return ca.vertcat(self.state_start, self.state_end, self.input_start, self.input_end,
                           self.control_start, self.control_end, *acc)
 
+    @property
+    def _interval_symbols(self) -> ca.SX:
+        return ca.vertcat(self.state_next, self.input_previous)
+
     def _check_path(self, expression, what: str) -> ca.SX:
         expression = _sx(expression, what)
         if ca.depends_on(expression, self._point_symbols):
             raise ValueError(f"{what} must be an expression along the path (of x, u, y, t), "
                              "not of at_start/at_end values or integrals")
+        if ca.depends_on(expression, self._interval_symbols):
+            raise ValueError(f"{what} cannot use x_next or u_previous: they belong in subject_to(...) "
+                             "(constraints on each interval)")
         return expression
+
+    def input_before(self, value) -> None:
+        """The input applied before the first interval, (nu,): `u_previous` on interval 0.
+
+        A number or an expression of `parameter` values, e.g. the input a controller applied
+        last: ``ocp.input_before(ocp.parameter("u_prev", nu))``. Needed by constraints on
+        `u_previous` (an input rate limit).
+        """
+        value = _sx(value, "input_before(...)")
+        if value.numel() == 1 and self.plant.nu > 1:
+            value = ca.repmat(value, self.plant.nu, 1)
+        if value.numel() != self.plant.nu:
+            raise ValueError(f"input_before(...) needs {self.plant.nu} entries (one per input), got {value.numel()}")
+        decisions = ca.vertcat(self._path_symbols, self._point_symbols, self._interval_symbols,
+                               self.param_vector, self.final_time)
+        if ca.depends_on(value, decisions):
+            raise ValueError("input_before(...) must be a number or an expression of parameter values")
+        self.input_before_start = ca.vec(value)
 
     def at_start(self, expression) -> ca.SX:
         """`expression` of (x, u, t) evaluated at t = 0 (u: the first interval's input)."""
@@ -369,7 +409,7 @@ class OptimalControlProblem:
         objective = _sx(objective, "the objective")
         if objective.numel() != 1:
             raise ValueError(f"the objective must be a scalar, got shape {objective.shape}")
-        if ca.depends_on(objective, self._path_symbols):
+        if ca.depends_on(objective, ca.vertcat(self._path_symbols, self._interval_symbols)):
             raise ValueError("the objective depends on the path (x, u, y or t): wrap that part in "
                              "ocp.integral(...), ocp.sum(...), ocp.at_start(...) or ocp.at_end(...)")
         self.objective = objective
@@ -385,9 +425,13 @@ class OptimalControlProblem:
 
         A constraint on (x, u, y, t) holds along the whole path (at every
         collocation point, or every shooting node); `include_start` and
-        `include_end` drop it at t = 0 or t = T. Constraints on
-        at_start/at_end values, integrals, p and T hold once. Each side may
-        use `parameter` values; a side free of decisions becomes a bound.
+        `include_end` drop it at t = 0 or t = T. A constraint that also uses
+        `x_next` or `u_previous` holds once on each interval k = 0..N-1 (with
+        the state at its end and the previous interval's input): a soft
+        bound's slack paired with the next state, an input rate limit.
+        Constraints on at_start/at_end values, integrals, p and T hold once.
+        Each side may use `parameter` values; a side free of decisions
+        becomes a bound.
         """
         if isinstance(constraint, (list, tuple)):
             for item in constraint:
@@ -397,16 +441,18 @@ class OptimalControlProblem:
             path = bool(ca.depends_on(expression, self._path_symbols)) or \
                 bool(ca.depends_on(ca.vertcat(lower, upper), self._path_symbols))
             point = bool(ca.depends_on(ca.vertcat(expression, lower, upper), self._point_symbols))
-            if path and point:
+            interval = bool(ca.depends_on(ca.vertcat(expression, lower, upper), self._interval_symbols))
+            if (path or interval) and point:
                 raise ValueError(f"constraint {text} mixes the path (x, u, y, t) with at_start/at_end "
                                  "values or integrals; write them as separate constraints")
-            self.constraints.append(Constraint(expression, lower, upper, label or text, path,
-                                               bool(include_start), bool(include_end)))
+            self.constraints.append(Constraint(expression, lower, upper, label or text, path or interval,
+                                               bool(include_start), bool(include_end), interval))
 
     def _relations(self, constraint):
         """(expression, lower, upper, text) per scalar relation; decision-free sides become bounds."""
         # Sides free of these are bounds (numbers and `parameter` values).
-        decisions = ca.vertcat(self._path_symbols, self._point_symbols, self.param_vector, self.final_time)
+        decisions = ca.vertcat(self._path_symbols, self._point_symbols, self._interval_symbols, self.param_vector,
+                               self.final_time)
         inf = ca.SX(np.inf)
         if isinstance(constraint, Bounded):
             expression = _sx(constraint.expression, "bounded(...) expression")

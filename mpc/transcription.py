@@ -204,6 +204,8 @@ class Transcription:
     bounds : casadi.Function  P -> (lbx, ubx, lbg, ubg), bounds of the scaled w and of g
     layout : Layout;  scale : ndarray (nw,), physical value = scale * w
     constraint_labels : list of str, one per row of g;  decision_labels : one per entry of w
+    dynamics_rows : (N, nx) rows of g holding the shooting gaps (x_{k+1} - F(x_k, u_k)) / scale,
+        multiple shooting only (None for collocation)
     parameter_slices : name -> slice of P ("plant" for the fixed plant parameters)
     fixed_param_names, chosen_names : tuple of str
     mesh : ndarray (N+1,), mesh points as fractions of T
@@ -310,6 +312,8 @@ class Transcription:
 
         # ---------------------------------------------------------------- dynamics
         integral_values = ca.SX.zeros(len(integrals))
+        ends = []  # the state at each interval's end as its own integration gives it (x_{k+1} when feasible)
+        dynamics_rows = None
         if d:
             cc = self.coefficients
             assert cc is not None
@@ -323,6 +327,7 @@ class Transcription:
                                    ["residual", "x_end"])
             for k in range(N):
                 res, x_end = interval(X[k], ca.horzcat(*XC[k]), fed[k], p, h[k])
+                ends.append(x_end)
                 rows.add(res, 0, 0, [f"collocation of {n} on interval {k}, point {j + 1}"
                                      for j in range(d) for n in plant.state_names])
                 rows.add((X[k + 1] - x_end) / state_scale, 0, 0,
@@ -334,8 +339,11 @@ class Transcription:
         else:
             assert isinstance(method, MultipleShooting)
             step = rk4_interval(plant, integrand_fn, method.substeps)
+            dynamics_rows = np.empty((N, nx), int)
             for k in range(N):
                 x_next, q = step(X[k], U[k], fed[k], C[k], t_mesh[k], h[k], p, T, *user_values)
+                ends.append(x_next)
+                dynamics_rows[k] = len(rows.labels) + np.arange(nx)
                 rows.add((X[k + 1] - x_next) / state_scale, 0, 0,
                          [f"shooting gap of {n} at mesh point {k + 1}" for n in plant.state_names])
                 integral_values += q
@@ -399,7 +407,8 @@ class Transcription:
             point_targets[name] = (ocp.p[name], index)
         if final_index is not None:
             point_targets["T"] = (ocp.final_time, final_index)
-        decisions = ca.vertcat(ocp._path_symbols, ocp._point_symbols, *[ocp.p[n] for n in chosen],
+        decisions = ca.vertcat(ocp._path_symbols, ocp._point_symbols, ocp._interval_symbols,
+                               *[ocp.p[n] for n in chosen],
                                ocp.final_time if final_index is not None else ca.SX(0, 1))
 
         bound_in = ca.vertcat(*user_symbols) if user_symbols else ca.SX(0, 1)
@@ -430,6 +439,8 @@ class Transcription:
             else:
                 general_point.append(con)
 
+        interval_constraints = [c for c in general_path if c.interval]
+        general_path = [c for c in general_path if not c.interval]
         if general_path:
             path_fn = ca.Function("path_constraints", path_in, [ca.vertcat(*[c.expression for c in general_path])],
                                   path_names, ["g"])
@@ -454,6 +465,25 @@ class Transcription:
                         rows.add(values, lows, highs, [f"{c.label} on interval {k}, collocation point {j + 1}"
                                                        for c in general_path])
 
+        if interval_constraints:
+            # On interval k: x_next is the state its integration ends in (equal to x_{k+1} at a
+            # feasible point) so that each row involves the decisions of interval k alone, the
+            # stage structure a Riccati or condensing QP solver wants; u_previous is u_{k-1}.
+            expressions = ca.vertcat(*[c.expression for c in interval_constraints])
+            uses_previous = ca.depends_on(expressions, ocp.input_previous)
+            if uses_previous and ocp.input_before_start is None:
+                raise ValueError("a constraint uses u_previous: give the input before the first interval with "
+                                 "ocp.input_before(...)")
+            before = bound_of(ocp.input_before_start) if uses_previous else ca.SX.zeros(nu)
+            interval_fn = ca.Function("interval_constraints", [*path_in, ocp.state_next, ocp.input_previous],
+                                      [expressions], [*path_names, "x_next", "u_previous"], ["g"])
+            lows = ca.vertcat(*[bound_of(c.lower) for c in interval_constraints])
+            highs = ca.vertcat(*[bound_of(c.upper) for c in interval_constraints])
+            for k in range(N):
+                values = interval_fn(X[k], U[k], C[k], t_mesh[k], p, T, *user_values, ends[k],
+                                     U[k - 1] if k else before)
+                rows.add(values, lows, highs, [f"{c.label} on interval {k}" for c in interval_constraints])
+
         point_in = [ocp.state_start, ocp.state_end, ocp.input_start, ocp.input_end, ocp.control_start,
                     ocp.control_end, ca.vertcat(*[a.symbol for a in ocp.accumulated]), ocp.param_vector,
                     ocp.final_time, *user_symbols]
@@ -466,6 +496,7 @@ class Transcription:
 
         g = ca.vertcat(*rows.g) if rows.g else ca.SX(0, 1)
         self.nlp = {"x": w, "p": P, "f": objective, "g": g}
+        self.dynamics_rows = dynamics_rows
         self.constraint_labels = rows.labels
         lbg = ca.vertcat(*rows.lower) if rows.lower else ca.SX(0, 1)
         ubg = ca.vertcat(*rows.upper) if rows.upper else ca.SX(0, 1)

@@ -71,9 +71,7 @@ def unregister(name: str) -> None:
     cases.unregister(name)
 
 
-def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200, mc_python: int = 10,
-              mc_python_steps: int = 12_000, python_scenarios: Sequence[str] | None = None,
-              python_budget: float | None = None, python_steps: int | None = None,
+def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
               providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
               threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None,
@@ -84,13 +82,7 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     ----------
     name : name of a registered case study, or a `CaseStudy`
     scenarios : names among "step", "steps", "disturbance", "noise", "mc" (default all)
-    mc : Monte Carlo samples for block controllers (0 skips it)
-    mc_python, mc_python_steps : most samples, and most simulated steps in all, of the Monte Carlo of
-        controllers simulated step by step (MPC)
-    python_scenarios : scenarios run for those controllers (default all)
-    python_budget : seconds of compute time each of them may spend on the plant (default unlimited)
-    python_steps : simulated steps each of them may take on the plant, rows in table order; a row that
-        does not fit is skipped and says so (default unlimited; see `studies.Options`)
+    mc : Monte Carlo samples of every controller, MPC included (0 skips it)
     seed : seed (integer >= 0) of the parameter samples and of the noise
     quick : fewer animation frames and lighter plots
     out : output folder; nothing is written without it. out/<plant> is written aside and replaces
@@ -120,9 +112,7 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     if out is not None and (not isinstance(out, (str, os.PathLike)) or not str(os.fspath(out)).strip()):
         raise ValueError(f"out must name a folder (or be None to write nothing), got {out!r}")
     study = name if isinstance(name, CaseStudy) else get(name)
-    options = runner.Options(scenarios=scenarios, mc=mc, mc_python=mc_python, mc_python_steps=mc_python_steps,
-                             python_scenarios=python_scenarios, python_budget=python_budget,
-                             python_steps=python_steps, seed=seed, threads=threads, jit=jit, strict=strict,
+    options = runner.Options(scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict,
                              quick=quick)
     result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress)
     if out is not None:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import os
 import shutil
 import sys
@@ -21,14 +20,9 @@ import time
 
 from . import SCENARIO_NAMES, get, names
 
-#: Defaults of a full run and of --quick: Monte Carlo samples for blocks; for controllers simulated
-#: step by step (MPC) the most samples, the most simulated steps of their Monte Carlo, their scenarios,
-#: and the most simulated steps of all their rows on one plant (a budget in steps, not seconds, so the
-#: same arguments give the same tables on every machine).
-FULL = {"mc": 200, "mc_python": 10, "mc_python_steps": 12_000, "python_scenarios": None, "python_budget": None,
-        "python_steps": 4000}
-QUICK = {"mc": 10, "mc_python": 1, "mc_python_steps": 0, "python_scenarios": ("step",), "python_budget": None,
-         "python_steps": 1000}
+#: Defaults of a full run and of --quick: Monte Carlo samples of every controller (MPC included).
+FULL = {"mc": 200}
+QUICK = {"mc": 10}
 
 
 def _count(text: str) -> int:
@@ -51,16 +45,6 @@ def _seed(text: str) -> int:
     return value
 
 
-def _steps(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of steps, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"the budget must be >= 1 simulated step, got {value}")
-    return value
-
-
 def _folder(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError(f"expected a folder name, got {text!r} (use . for this folder)")
@@ -78,25 +62,14 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", action="append", metavar="NAME",
                    help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}")
     p.add_argument("--mc", type=_count, metavar="N",
-                   help=f"Monte Carlo samples for block controllers, one batched map (default {FULL['mc']}, "
+                   help=f"Monte Carlo samples of every controller, MPC included (default {FULL['mc']}, "
                         f"--quick {QUICK['mc']}; 0 skips the Monte Carlo)")
-    p.add_argument("--mc-python", type=_count, metavar="N",
-                   help=f"Monte Carlo samples for controllers simulated step by step, such as MPC (default "
-                        f"{FULL['mc_python']}, --quick {QUICK['mc_python']})")
-    p.add_argument("--mpc-steps", type=_steps, metavar="N",
-                   help="simulated steps each controller that optimizes every step may take per plant, its rows "
-                        "in table order; a row that does not fit is skipped and says so (default "
-                        f"{FULL['python_steps']}, --quick {QUICK['python_steps']})")
-    p.add_argument("--mpc-budget", type=float, metavar="SECONDS",
-                   help="also stop such a controller after this much compute time per plant (default: no time "
-                        "limit; the rows it skips then depend on the machine's speed)")
     p.add_argument("--seed", type=_seed, default=0,
                    help="seed of the parameter samples and the noise, a whole number >= 0 (default 0)")
     p.add_argument("--out", type=_folder, default="results", metavar="DIR",
                    help="output folder (default results/)")
     p.add_argument("--quick", action="store_true",
-                   help=f"{QUICK['mc']} Monte Carlo samples, only the step for controllers that optimize each step "
-                        "(MPC), lighter plots and animations")
+                   help=f"{QUICK['mc']} Monte Carlo samples, lighter plots and animations")
     p.add_argument("--jobs", type=int, default=2, metavar="N",
                    help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
                         "everything in this process)")
@@ -254,8 +227,7 @@ def check_resources(plants, settings: dict) -> None:
 
     from . import runner
 
-    keys = ("scenarios", "mc", "mc_python", "mc_python_steps", "python_scenarios", "python_budget",
-            "python_steps", "seed")
+    keys = ("scenarios", "mc", "seed")
     options = runner.Options(**{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items() if k in keys})
     for name in plants:
         study = get(name)
@@ -326,21 +298,13 @@ def main(argv=None) -> int:
             p.error(f"--provider needs MODULE:FUNCTION, got {spec!r}")
     if args.jobs < 1:
         p.error(f"--jobs must be >= 1, got {args.jobs}")
-    if args.mpc_budget is not None and not (math.isfinite(args.mpc_budget) and args.mpc_budget > 0):
-        p.error(f"--mpc-budget must be > 0 seconds, got {args.mpc_budget}")
     if args.list:
         print(_list(plants, args.provider))
         return 0
     defaults = dict(QUICK if args.quick else FULL)
     jobs = min(args.jobs, len(plants))
     settings = {"scenarios": scenarios, "mc": defaults["mc"] if args.mc is None else args.mc,
-                "mc_python": defaults["mc_python"] if args.mc_python is None else args.mc_python,
-                "mc_python_steps": defaults["mc_python_steps"], "python_scenarios": defaults["python_scenarios"],
-                "python_budget": defaults["python_budget"] if args.mpc_budget is None else args.mpc_budget,
-                "python_steps": defaults["python_steps"] if args.mpc_steps is None else args.mpc_steps,
                 "seed": args.seed, "quick": args.quick, "strict": args.strict, "threads": max(1, 2 // jobs)}
-    if args.mc_python is not None:
-        settings["mc_python_steps"] = 10**9  # an explicit --mc-python is not capped by simulated steps
 
     from models import checks, files, interrupts
 

@@ -7,8 +7,10 @@ runner designs the controllers from the model known to them (the text's
 +5 % parameter error), simulates each scenario with `models.simulate_closed_loop`
 (every row comes from the nonlinear plant, never from a linear model), runs
 the parameter Monte Carlo of a `models.Block` as one batched CasADi map
-(`models.monte_carlo`) and of any other controller (MPC) as a loop over
-fewer samples, and computes every column with `models.metrics`.
+(`models.monte_carlo`) and of any other controller (MPC) as a loop over the
+same samples, and computes every column with `models.metrics`. Every
+controller runs every scenario on the same samples: there is no time budget,
+so the same command gives the same table on any machine.
 
 A provider that is not importable yet, or has no such function yet, is
 skipped with a note; the notes travel with the results into the tables.
@@ -21,7 +23,7 @@ import math
 import shutil
 import time
 import traceback
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -47,19 +49,8 @@ class Options:
     Attributes
     ----------
     scenarios : names of the scenarios to run (default: all of the study's)
-    mc : Monte Carlo samples for Block controllers (one batched map); 0 skips the Monte Carlo
-    mc_python : most samples for controllers that are not Blocks (MPC), simulated one by one
-    mc_python_steps : and at most this many simulated samples in all, so the Monte Carlo of an
-        optimizing controller costs about as much on every plant (at least one sample)
-    python_scenarios : scenarios run for controllers that are not Blocks (default all); the others
-        get a row saying they were skipped
-    python_steps : simulated steps a controller that is not a Block may take on one plant, its rows
-        in table order (default unlimited). A row that would take it past is skipped whole before it
-        runs (a Monte Carlo row runs the samples that fit), and says so: the budget is counted in
-        steps, so the same settings skip the same rows on every machine.
-    python_budget : seconds of its own compute time a controller that is not a Block may spend on
-        one plant (default unlimited); past it, its remaining rows say so instead of holding numbers.
-        Counted in wall-clock time: which rows it skips depends on the machine and its load.
+    mc : Monte Carlo samples of every controller (a Block's as one batched map, any other's one by
+        one on the same samples); 0 skips the Monte Carlo
     seed : seed of the parameter samples and of the measurement noise
     threads : threads of the batched Monte Carlo map
     jit : True, False or "auto" (compile the Monte Carlo map when it has >= JIT_THRESHOLD steps)
@@ -69,26 +60,15 @@ class Options:
 
     scenarios: tuple | None = None
     mc: int = 200
-    mc_python: int = 10
-    mc_python_steps: int = 12_000
-    python_scenarios: tuple | None = None
-    python_budget: float | None = None
     seed: int = 0
-    python_steps: int | None = None
     threads: int = 2
     jit: bool | str = "auto"
     strict: bool = False
     quick: bool = False
 
     def __post_init__(self):
-        for name in ("mc", "mc_python", "mc_python_steps"):
-            checks.integer(getattr(self, name), f"{name} (Monte Carlo samples)", minimum=0)
+        checks.integer(self.mc, "mc (Monte Carlo samples)", minimum=0)
         object.__setattr__(self, "scenarios", scenario_names(self.scenarios, "scenarios"))
-        object.__setattr__(self, "python_scenarios", scenario_names(self.python_scenarios, "python_scenarios"))
-        if self.python_budget is not None:
-            checks.positive(self.python_budget, "python_budget (seconds)")
-        if self.python_steps is not None:
-            checks.integer(self.python_steps, "python_steps (simulated steps)", minimum=1)
         checks.integer(self.seed, "seed", minimum=0)
         checks.integer(self.threads, "threads", minimum=1)
         if not (isinstance(self.jit, bool) or (isinstance(self.jit, str) and self.jit == "auto")):
@@ -298,48 +278,6 @@ def design_controllers(study: CaseStudy, known: models.Plant, providers: Sequenc
     return ordered, notes
 
 
-# ---------------------------------------------------------------------------- time budget
-class BudgetExceeded(RuntimeError):
-    """A controller simulated step by step used up its time budget."""
-
-
-class Budgeted:
-    """A controller (not a Block) that raises `BudgetExceeded` once its steps took `seconds` in all
-    (never when `seconds` is None), and KeyboardInterrupt before a step when a Ctrl-C arrived that
-    the previous step's CasADi calls swallowed (see `models.interrupts`).
-
-    Everything else is the wrapped controller's: sample period, measurement,
-    initial state, solver records (`step_info`), name.
-    """
-
-    def __init__(self, controller, seconds: float | None):
-        self.controller, self.spent, self.steps = controller, 0.0, 0
-        self.seconds = None if seconds is None else float(seconds)
-        self.sample_period = controller.sample_period
-        self.measures = controller.measures
-        self.n_reference = controller.n_reference
-
-    def initial_state(self, y0, r0):
-        self.steps = 0
-        return self.controller.initial_state(y0, r0)
-
-    def step(self, xc, y, r):
-        interrupts.check()
-        if self.seconds is not None and self.spent > self.seconds:
-            raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time")
-        start = time.perf_counter()
-        out = self.controller.step(xc, y, r)
-        self.spent += time.perf_counter() - start
-        self.steps += 1
-        if self.seconds is not None and self.spent > self.seconds:
-            raise BudgetExceeded(f"over its budget of {self.seconds:g} s of compute time at t = "
-                                 f"{self.steps * self.sample_period:.3g} s")
-        return out
-
-    def __getattr__(self, name):
-        return getattr(self.controller, name)
-
-
 # ---------------------------------------------------------------------------- noise
 def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, float]) -> np.ndarray:
     """Noise standard deviation of each measurement the controller reads.
@@ -433,24 +371,6 @@ def _solver_issues(result) -> float:
     if not result.status:
         return math.nan
     return float(solver_counts(result.status)[1])
-
-
-def python_samples(options: Options, steps_per_run: int, remaining: int | None = None) -> int:
-    """Monte Carlo samples of a controller simulated step by step: at most `mc_python`, at most
-    `mc_python_steps` simulated steps in all, at least one (none when mc or mc_python is 0), and
-    no more than fit in `remaining` simulated steps of its budget (see `Options.python_steps`)."""
-    if options.mc == 0 or options.mc_python == 0:
-        return 0
-    count = max(1, min(options.mc, options.mc_python, options.mc_python_steps // max(steps_per_run, 1)))
-    return count if remaining is None else min(count, remaining // max(steps_per_run, 1))
-
-
-def row_steps(scenario: Scenario, case: CaseStudy, controller, options: Options, remaining: int | None) -> int:
-    """Simulated steps a row of a controller that is not a Block takes (0: none fit in `remaining`)."""
-    steps = int(round(scenario.duration(case) / controller.sample_period))
-    if scenario.monte_carlo:
-        return steps * python_samples(options, steps, remaining)
-    return steps if remaining is None or steps <= remaining else 0
 
 
 def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
@@ -565,39 +485,19 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
     for label, controller in designed.items():
         truth = truths[label] = study.truth(plant, label)
         python = not isinstance(controller, Block)
-        if python:
-            controller = Budgeted(controller, options.python_budget)
-        used = 0  # simulated steps of this controller so far (see Options.python_steps)
         for scenario in scenarios:
             tick = time.perf_counter()
             row = {"controller": label, "scenario": scenario.name, "kind": "python" if python else "block"}
-            remaining = None if options.python_steps is None or not python else options.python_steps - used
             try:
-                needed = row_steps(scenario, case, controller, options, remaining) if python else 0
-                if (python and options.python_scenarios is not None
-                        and scenario.name not in options.python_scenarios):
-                    row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
-                    row |= {"status": "skipped: controllers that optimize each step run only "
-                                      + ", ".join(options.python_scenarios) + " here", "samples": 0}
-                elif python and remaining is not None and needed == 0:
-                    whole = row_steps(scenario, case, controller, options, None)
-                    row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
-                    row |= {"status": f"skipped: needs {whole} simulated steps, {remaining} left of its budget of "
-                                      f"{options.python_steps} on this plant", "samples": 0}
-                elif scenario.monte_carlo:
-                    used += needed
+                if scenario.monte_carlo:
                     row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
-                                        sample_rows, envelopes, label, remaining)
+                                        sample_rows, envelopes, label)
                 else:
-                    used += needed
                     result = _simulate(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
                     row |= metrics.run_metrics(result, case.tracked, bounds)
                     row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
                             "solver_issues": _solver_issues(result)}
-            except BudgetExceeded as err:
-                row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
-                row |= {"status": f"skipped: {err}", "samples": 0}
             except Exception as err:
                 if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
                     raise KeyboardInterrupt from err
@@ -643,7 +543,7 @@ def _simulate(plant, controller, scenario: Scenario, case, options: Options, bas
 
 
 def _monte_carlo(study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes,
-                 label, remaining: int | None = None) -> dict:
+                 label) -> dict:
     """The Monte Carlo row of one controller; its per-sample rows are appended to `sample_rows` (one
     DataFrame) and its envelope stored in `envelopes`. Samples are consumed as they are simulated
     (a chunk at a time for a Block): only the tracked coordinate and the first input stay."""
@@ -651,14 +551,11 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     batched = isinstance(controller, Block)
     duration = scenario.duration(case)
     steps = int(round(duration / controller.sample_period))
-    count = options.mc if batched else python_samples(options, steps, remaining)
-    if count == 0:
-        raise ValueError("no Monte Carlo samples for a controller that is not a Block (mc_python = 0)")
-    checks.check_memory(monte_carlo_bytes(study, replace(options, mc=count), plant.n_params,
-                                          controller.sample_period),
+    count = options.mc
+    checks.check_memory(monte_carlo_bytes(study, options, plant.n_params, controller.sample_period),
                         f"the Monte Carlo of {label} ({count} samples of {steps} steps)", "give fewer samples (mc)")
-    # The same seeded samples for every controller; a Python controller gets their first `count`.
-    samples = models.sample_params(plant, options.mc, rel=scenario.rel, seed=options.seed)[:count]
+    # The same seeded samples for every controller.
+    samples = models.sample_params(plant, count, rel=scenario.rel, seed=options.seed)
     if batched:
         chunks = models.monte_carlo_chunks(plant, controller, scenario.reference(case, base), duration, samples,
                                            seed=options.seed, threads=options.threads, substeps=study.substeps,

@@ -122,10 +122,9 @@ def caption(result) -> str:
             f"{100 * study.known_rel:+g} %.")
     if mc is not None:
         text += (f" Monte Carlo rows (scenario `mc`): worst case over the samples (uniform ±{100 * mc.rel:g} % on "
-                 f"{uncertain}, seed {options.seed}); block controllers run as one batched CasADi map on "
-                 f"{options.mc} samples, controllers that optimize each step (MPC) one by one on the first "
-                 f"{min(options.mc, options.mc_python)} at most, and at most {options.mc_python_steps} simulated "
-                 "steps in all (the `runs` column gives the count); spreads are in table.csv (`*_std`).")
+                 f"{uncertain}, seed {options.seed}); every controller runs the same {options.mc} samples, block "
+                 "controllers as one batched CasADi map, controllers that optimize each step (MPC) one by one "
+                 "(the `runs` column gives the count); spreads are in table.csv (`*_std`).")
     return text
 
 
@@ -274,9 +273,7 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
 def run_settings(result) -> dict:
     """Everything that decides a study's numbers: the options, the providers and the case's scenarios."""
     options, study = result.options, result.study
-    return {"mc": options.mc, "mc_python": options.mc_python, "mc_python_steps": options.mc_python_steps,
-            "python_scenarios": options.python_scenarios, "python_budget": options.python_budget,
-            "python_steps": options.python_steps, "seed": options.seed, "quick": options.quick,
+    return {"mc": options.mc, "seed": options.seed, "quick": options.quick,
             "strict": options.strict, "jit": options.jit,
             "threads": options.threads, "providers": list(result.providers),
             "scenarios": [s.name for s in study.scenarios if options.scenarios is None or s.name in options.scenarios]}

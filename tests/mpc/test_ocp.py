@@ -370,19 +370,20 @@ def test_warm_start_from_the_answer_converges_at_once():
     assert again.objective == pytest.approx(first.objective, rel=1e-7)
 
 
-def test_the_nmpc_problem_posed_here_has_nonlinear_mpc_problems_solution():
-    """mpc.NonlinearMPCProblem (SQP, Gauss-Newton, HPIPM) and this layer (IPOPT, exact Hessian)
-    on the same NLP: pendulum, N = 50, Ts = 0.01 s, stage cost Σ‖x - x_s‖²_Q + ‖u - u_s‖²_R,
-    terminal ‖x_N - x_s‖²_P, x_0 = x̂, the plant fed u + d̂, |u| <= 5 N. Same KKT point."""
+def test_the_nmpc_problem_posed_here_is_what_nonlinear_mpc_problem_solves():
+    """mpc.NonlinearMPCProblem (this layer's OCP, Gauss-Newton SQP to convergence, condensed DAQP QPs)
+    and IPOPT (exact Hessian) on the same NLP written by hand here: pendulum, N = 50, Ts = 0.01 s,
+    stage cost Σ‖x - x_s‖²_Q + ‖u - u_s‖²_R, terminal ‖x_N - x_s‖²_P, x_0 = x̂, the plant fed u + d̂,
+    |u| <= 5 N. Same KKT point."""
     plant = models.perturbed(models.get("pendulum"), 0.05)
     sample_period, horizon = 0.01, 50
     Q, R, P = np.diag([1.0, 10.0, 0.1, 0.1]), np.array([[1e-2]]), np.diag([10.0, 50.0, 5.0, 5.0])
     x_hat, d_hat, x_s, u_s = np.array([0.1, 0.15, -0.2, 0.3]), np.array([0.5]), np.array([0.6, 0, 0, 0]), np.zeros(1)
-    reference = mpc.NonlinearMPCProblem(plant, sample_period, horizon, Q, R, max_iterations=50,
-                                        stationarity_tolerance=1e-9)
-    previous = reference.solve(x_hat, d_hat, x_s, u_s, P, np.zeros(1), np.zeros((horizon, 1)))
-    assert previous.success, previous.status
-    assert 0 < np.sum(np.abs(previous.inputs) < 4.9) < horizon  # some inputs saturate, some do not
+    problem = mpc.NonlinearMPCProblem(plant, sample_period, horizon, Q, R, iteration="sqp", tolerance=1e-11,
+                                      compiled=False)
+    ours = problem.solve(x_hat, d_hat, x_s, u_s, P, np.zeros(1), np.zeros((horizon, 1)))
+    assert ours.success, ours.status
+    assert 0 < np.sum(np.abs(ours.inputs) < 4.9) < horizon  # some inputs saturate, some do not
 
     ocp = mpc.OptimalControlProblem(plant, horizon * sample_period)
     ocp.start_from()
@@ -391,17 +392,44 @@ def test_the_nmpc_problem_posed_here_has_nonlinear_mpc_problems_solution():
     ocp.plant_input(ocp.input + disturbance)
     stage = ca.bilin(ca.DM(Q), ocp.state - state_target) + ca.bilin(ca.DM(R), ocp.input - input_target)
     ocp.minimize(ocp.sum(stage) + ocp.at_end(ca.bilin(ca.reshape(terminal, 4, 4), ocp.state - state_target)))
-    solver = ocp.solver(mpc.MultipleShooting(intervals=horizon), tolerance=1e-10)
+    solver = ocp.solver(mpc.MultipleShooting(intervals=horizon), tolerance=1e-12)
     values = {"d_hat": d_hat, "x_s": x_s, "u_s": u_s, "P": P.T.ravel()}
-    ours = solver.solve(x0=x_hat, params=values)
-    assert ours.success, ours.status
-    np.testing.assert_allclose(ours.inputs, previous.inputs, atol=5e-5)
-    np.testing.assert_allclose(ours.states, previous.states, atol=1e-6)
+    reference = solver.solve(x0=x_hat, params=values)
+    assert reference.success, reference.status
+    np.testing.assert_allclose(ours.inputs, reference.inputs, atol=1e-7)
+    np.testing.assert_allclose(ours.states, reference.states, atol=1e-8)
     # One sample later, warm-started: fewer iterations than from scratch.
-    later = solver.solve(x0=previous.states[1], params=values, warm_start=ours)
-    cold = solver.solve(x0=previous.states[1], params=values)
+    later = solver.solve(x0=reference.states[1], params=values, warm_start=reference)
+    cold = solver.solve(x0=reference.states[1], params=values)
     assert later.success and later.iterations < cold.iterations
     np.testing.assert_allclose(later.inputs, cold.inputs, atol=1e-6)
+
+
+def test_an_interval_constraint_on_x_next_bounds_the_next_mesh_state():
+    """On a double integrator, x_next.s <= 0.5 on every interval holds mesh states 1..N at or below
+    0.5, as a path constraint without the start does (IPOPT on both, same answer)."""
+    mass = point_mass(mass=1.0, limit=100.0)
+    solutions = []
+    for kind in ("interval", "path"):
+        ocp = mpc.OptimalControlProblem(mass, 2.0)
+        ocp.start_from([0.0, 0.0])
+        ocp.minimize(ocp.sum((ocp.x.s - 1.0) ** 2 + 1e-3 * ocp.u.f**2))
+        if kind == "interval":
+            ocp.subject_to(ocp.x_next.s <= 0.5)
+        else:
+            ocp.subject_to(ocp.x.s <= 0.5, include_start=False)
+        solution = ocp.solve(mpc.MultipleShooting(intervals=20), solver_options={"tolerance": 1e-12})
+        assert solution.success, solution.status
+        solutions.append(solution)
+    assert np.max(solutions[0].states[:, 0]) == pytest.approx(0.5, abs=1e-7)
+    np.testing.assert_allclose(solutions[0].states, solutions[1].states, atol=1e-7)
+    ocp = mpc.OptimalControlProblem(mass, 1.0)
+    ocp.minimize(ocp.sum(ocp.u.f**2))
+    ocp.subject_to(ocp.u.f - ocp.u_previous.f <= 1.0)
+    with pytest.raises(ValueError, match="u_previous: give the input before the first interval"):
+        ocp.solve(mpc.MultipleShooting(intervals=5))
+    with pytest.raises(ValueError, match="cannot use x_next or u_previous"):
+        ocp.sum(ocp.x_next.s)
 
 
 @pytest.mark.parametrize("kind", ["limited-memory", "trajectory", "simulated input"])

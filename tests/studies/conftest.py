@@ -32,7 +32,7 @@ def arm_study(tmp_path_factory):
     from studies import writers
 
     out = tmp_path_factory.mktemp("results")
-    result = studies.run_study("arm", providers=(EXAMPLE,), mc=8, mc_python=2, seed=5, quick=True, out=out)
+    result = studies.run_study("arm", providers=(EXAMPLE,), mc=8, seed=5, quick=True, out=out)
     writers.write_summary(out, studies.names())
     writers.write_index(out, studies.names())
     return result, out

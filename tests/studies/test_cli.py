@@ -20,7 +20,6 @@ def run_cli(*args, timeout=300):
     (["arm", "--scenario", "step,ramp"], "unknown scenario 'ramp'; valid scenarios: step, steps, disturbance"),
     (["arm", "--provider", "nocolon"], "--provider needs MODULE:FUNCTION"),
     (["arm", "--jobs", "0"], "--jobs must be >= 1"),
-    (["arm", "--mpc-budget", "0"], "--mpc-budget must be > 0 seconds"),
 ])
 def test_bad_arguments_exit_2_with_the_documented_message(args, message):
     done = run_cli(*args)

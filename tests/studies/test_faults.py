@@ -269,7 +269,7 @@ def test_a_failed_run_leaves_the_output_folder_as_it_was(workdir):
 def test_status_kinds():
     assert [runner.status_kind(s) for s in ("ok", "degraded: solver failed on 3 of 500 steps",
                                             "diverged at t = 1 s", "diverged: 2 of 9 samples, first at t = 1 s",
-                                            "failed: ValueError: x", "skipped: over its budget", math.nan, "")] \
+                                            "failed: ValueError: x", "skipped: no such scenario", math.nan, "")] \
         == ["ok", "degraded", "diverged", "diverged", "failed", "skipped", "failed", "failed"]
 
 
@@ -277,7 +277,7 @@ def test_an_mpc_whose_solver_fails_on_every_step_is_degraded_not_ok():
     """500 failed solves (each falling back on the previous plan) in the step, and in every step of
     the Monte Carlo samples: 'degraded' with the counts, never 'ok', and not the best row."""
     result = runner.run_study(arm_study("fault_providers:solver_always_fails", "example_providers:lqr_only"),
-                              runner.Options(scenarios=("step", "mc"), mc=4, mc_python=2))
+                              runner.Options(scenarios=("step", "mc"), mc=2))
     table = result.table.set_index(["controller", "scenario"]).status
     assert table[("failing MPC", "step")] == "degraded: solver failed on 500 of 500 steps, fallback on 500"
     assert table[("failing MPC", "mc")] == \
@@ -305,26 +305,6 @@ def test_a_diverging_and_a_failing_controller_have_their_own_status_and_the_othe
     with pytest.raises(FloatingPointError, match="factorization broke down"):
         runner.run_study(arm_study("fault_providers:raises_mid_run"), runner.Options(scenarios=("step",), mc=0,
                                                                                      strict=True))
-
-
-def test_a_budget_in_steps_skips_whole_rows_the_same_way_every_time():
-    """600 simulated steps for the arm's MPC (Ts = 10 ms): the step (500) runs, the series of steps
-    (1000) is skipped before it runs, the disturbance (500) would not fit in the 100 left either."""
-    options = runner.Options(scenarios=("step", "steps", "disturbance"), mc=0, python_steps=600)
-    table = runner.run_study(arm_study(EXAMPLE), options).table.set_index(["controller", "scenario"])
-    assert table.loc[("linear MPC", "step"), "status"].startswith("degraded")  # ran (10 failed solves)
-    assert table.loc[("linear MPC", "steps"), "status"] == \
-        "skipped: needs 1000 simulated steps, 100 left of its budget of 600 on this plant"
-    assert table.loc[("linear MPC", "disturbance"), "status"] == \
-        "skipped: needs 500 simulated steps, 100 left of its budget of 600 on this plant"
-    assert math.isnan(table.loc[("linear MPC", "steps"), "iae"])
-    assert table.loc[("LQR", "steps"), "status"] == "ok"  # blocks have no such budget
-
-
-def test_the_monte_carlo_of_an_mpc_runs_the_samples_that_fit_its_budget():
-    options = runner.Options(scenarios=("step", "mc"), mc=10, mc_python=10, python_steps=2000)
-    table = runner.run_study(arm_study(EXAMPLE), options).table.set_index(["controller", "scenario"])
-    assert table.loc[("linear MPC", "mc"), "samples"] == 3  # 1500 steps left: three runs of 500
 
 
 def test_a_provider_that_returns_no_dict_is_noted():
@@ -471,12 +451,6 @@ def test_a_controllers_compiled_closed_loops_are_freed_after_each_row():
     (["--out", "  "], "argument --out: expected a folder name, got '  ' (use . for this folder)"),
     (["--scenario", ""], "--scenario names no scenario; valid scenarios: step, steps, disturbance, noise, mc"),
     (["--scenario", " , "], "--scenario names no scenario"),
-    (["--mpc-budget", "nan"], "--mpc-budget must be > 0 seconds, got nan"),
-    (["--mpc-budget", "inf"], "--mpc-budget must be > 0 seconds, got inf"),
-    (["--mpc-budget", "-2"], "--mpc-budget must be > 0 seconds, got -2.0"),
-    (["--mpc-steps", "0"], "argument --mpc-steps: the budget must be >= 1 simulated step, got 0"),
-    (["--mpc-steps", "1e3"], "argument --mpc-steps: expected a whole number of steps, got '1e3'"),
-    (["--mc-python", "-1"], "argument --mc-python: the number of samples must be >= 0, got -1"),
     (["--jobs", "two"], "argument --jobs: invalid int value: 'two'"),
     (["--provider", "a:b:c"], "--provider needs MODULE:FUNCTION, got 'a:b:c'"),
     (["--provider", " :controllers"], "--provider needs MODULE:FUNCTION, got ' :controllers'"),
@@ -501,18 +475,13 @@ def test_bad_command_line_arguments_exit_2_naming_the_argument(workdir, monkeypa
     ({"scenarios": "step"}, TypeError, "scenarios must be a list of scenario names such as ['step'], got str 'step'"),
     ({"scenarios": []}, ValueError, "scenarios is empty; give None for every scenario"),
     ({"scenarios": ["step", "ramp"]}, ValueError, "unknown scenario 'ramp' in scenarios"),
-    ({"python_scenarios": "step"}, TypeError, "python_scenarios must be a list of scenario names"),
     ({"mc": True}, TypeError, "mc (Monte Carlo samples) must be an integer, got bool True"),
     ({"mc": "5"}, TypeError, "mc (Monte Carlo samples) must be an integer, got str '5'"),
     ({"mc": 2.5}, ValueError, "mc (Monte Carlo samples) must be an integer, got 2.5"),
     ({"mc": -1}, ValueError, "mc (Monte Carlo samples) must be an integer >= 0, got -1"),
-    ({"mc_python": None}, TypeError, "mc_python (Monte Carlo samples) must be an integer, got NoneType None"),
     ({"seed": -1}, ValueError, "seed must be an integer >= 0, got -1"),
     ({"seed": "0"}, TypeError, "seed must be an integer, got str '0'"),
     ({"threads": 0}, ValueError, "threads must be an integer >= 1, got 0"),
-    ({"python_budget": 0}, ValueError, "python_budget (seconds) must be a finite number > 0, got 0.0"),
-    ({"python_budget": math.nan}, ValueError, "python_budget (seconds) must be a finite number > 0, got nan"),
-    ({"python_steps": 0}, ValueError, "python_steps (simulated steps) must be an integer >= 1, got 0"),
     ({"quick": "no"}, TypeError, "quick must be True or False, got str 'no'"),
     ({"strict": 1}, TypeError, "strict must be True or False, got int 1"),
     ({"jit": "yes"}, ValueError, "jit must be True, False or 'auto', got 'yes'"),
@@ -558,7 +527,7 @@ def test_the_same_seed_gives_the_same_bytes_and_the_timings_are_apart(tmp_path):
     Monte Carlo included: table.csv and monte_carlo.csv are byte-identical; compute times are only in
     timings.csv (and they differ); another seed changes the Monte Carlo."""
     study = arm_study(EXAMPLE)
-    options = runner.Options(scenarios=("step", "mc"), mc=5, mc_python=2, seed=11)
+    options = runner.Options(scenarios=("step", "mc"), mc=3, seed=11)
     outs = []
     for k, seed in enumerate((11, 11, 12)):
         result = runner.run_study(study, dataclasses.replace(options, seed=seed))
@@ -578,11 +547,11 @@ def test_the_same_seed_gives_the_same_bytes_and_the_timings_are_apart(tmp_path):
 
 @pytest.mark.slow
 def test_two_runs_of_the_command_write_the_same_tables(workdir):
-    """The command twice with the same seed (MPC rows included, within their step budget): table.csv and
+    """The command twice with the same seed (MPC rows included, on the same samples): table.csv and
     monte_carlo.csv of every plant are byte-identical; run ids differ."""
     outs = []
     for k in range(2):
-        done = cli("arm", "uuv", "--scenario", "step,mc", "--mc", "6", "--mc-python", "2", "--quiet", "--seed", "3",
+        done = cli("arm", "uuv", "--scenario", "step,mc", "--mc", "3", "--quiet", "--seed", "3",
                    "--out", f"out{k}", cwd=workdir)
         assert done.returncode == 0, done.stderr[-3000:]
         outs.append(workdir / f"out{k}")
