@@ -114,11 +114,21 @@ class Violation:
         return self.value - self.bound
 
     def __str__(self) -> str:
-        value = "∞" if math.isinf(self.value) else f"{self.value:.3g}"
+        digits = 3 if f"{self.value:.3g}" != f"{self.bound:.3g}" else 5
+        value = "∞" if math.isinf(self.value) else f"{self.value:.{digits}g}"
         unit = f" {self.unit}" if self.unit else ""
-        relative = (f" (+{100 * self.excess / self.bound:.0f} %)" if self.bound > 0 and math.isfinite(self.value)
-                    else "")
+        if self.unit == "%":
+            return f"{self.spec} {value} % > {self.bound:.3g} %{self.note}"
+        if math.isinf(self.value):
+            return f"{self.spec} ∞ > {self.bound:.3g}{unit}"
+        if self.bound == 0:
+            return f"{self.spec} {value}{unit}"
+        relative = f" (+{100 * self.excess / self.bound:.0f} %)" if self.bound > 0 else ""
         return f"{self.spec} {value}{unit} > {self.bound:.3g}{unit}{relative}"
+
+    @property
+    def note(self) -> str:
+        return " of the step" if self.spec == "ss error" else ""
 
 
 @dataclass(frozen=True)
@@ -181,7 +191,7 @@ def check(specs: Specs, metrics: Mapping, step: float, *, excursions: Mapping[st
     over("settling time", metrics.get("settling_time_s"), specs.max_settling_time_s, "s")
     over("overshoot", metrics.get("overshoot_pct"), specs.max_overshoot_pct, "%")
     ss_error = metrics.get("ss_error")
-    over("ss error", None if ss_error is None else 100 * ss_error / step, specs.max_ss_error_pct, "% of the step")
+    over("ss error", None if ss_error is None else 100 * ss_error / step, specs.max_ss_error_pct, "%")
     if specs.input_limit:
         peak, limit = metrics.get("peak_u"), metrics.get("u_limit")
         if peak is not None and limit is not None and limit > 0:
@@ -191,7 +201,7 @@ def check(specs: Specs, metrics: Mapping, step: float, *, excursions: Mapping[st
         if excess is None:
             raise ValueError(f"the specs bound {name!r}; pass its excursion (models.metrics.bound_excursions)")
         if excess > 0:
-            found.append(Violation(f"{name} outside [{low:g}, {high:g}] by", float(excess), 0.0))
+            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0))
     for name, (value, tolerance) in specs.final_values.items():
         final = (finals or {}).get(name)
         if final is None:
@@ -218,15 +228,18 @@ def verdict(specs: Specs, metrics: Mapping, step: float, status: str = "ok", *,
     return Verdict(MEETS)
 
 
-def judge(specs: Specs, result, tracked: str, step: float, status: str | None = None) -> Verdict:
+def judge(specs: Specs, result, tracked: str, step: float, status: str | None = None,
+          measured: Mapping | None = None) -> Verdict:
     """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
 
-    Metrics, state excursions and final values are computed here with `models.metrics`;
-    a run that diverged (`result.diverged_at`) is "diverged" whatever `status` says.
+    Metrics (unless given as `measured`, from `models.metrics.run_metrics`), state excursions and
+    final values are computed here with `models.metrics`; a run that diverged
+    (`result.diverged_at`) is "diverged" whatever `status` says.
     """
     if result.diverged_at is not None:
         return Verdict(DIVERGED, (), f"diverged at t = {result.diverged_at:.3g} s")
-    measured = metrics_module.run_metrics(result, tracked, specs.state_bounds)
+    if measured is None:
+        measured = metrics_module.run_metrics(result, tracked, specs.state_bounds)
     excursions = metrics_module.bound_excursions(result.x, result.state_names, specs.state_bounds)
     finals = metrics_module.final_values(result.t, result.x, result.state_names, list(specs.final_values))
     return verdict(specs, measured, step, status or "ok", excursions=excursions, finals=finals)

@@ -29,7 +29,7 @@ import pandas as pd
 
 import models
 from designs.pid import SIGMA
-from models import Block, metrics
+from models import Block, metrics, specs
 
 from . import SCENARIO_NAMES
 from .case import CaseStudy, Scenario
@@ -390,7 +390,6 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
         scenarios = [s for s in scenarios if not s.monte_carlo]
     xe, base = tracked_equilibrium(plant, case)
     tracked_index = plant.state_names.index(case.tracked)
-    bounds = study.state_bounds(plant.params)
 
     rows, sample_rows, runs, envelopes = [], [], {}, {}
     total, done = len(designed) * len(scenarios), 0
@@ -410,23 +409,29 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                     row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                     row |= {"status": "skipped: controllers that optimize each step run only "
                                       + ", ".join(options.python_scenarios) + " here", "samples": 0}
+                    row |= verdict_columns(specs.Verdict(specs.SKIPPED, (), row["status"]))
                 elif scenario.monte_carlo:
                     row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
                                         sample_rows, envelopes, label)
                 else:
                     result = _simulate(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
-                    row |= metrics.run_metrics(result, case.tracked, bounds)
+                    judged = study.specs_for(scenario.name, truth.params)
+                    row |= metrics.run_metrics(result, case.tracked, judged.state_bounds)
                     row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
                             "solver_issues": _solver_issues(result)}
+                    row |= verdict_columns(specs.judge(judged, result, case.tracked, case.step, row["status"],
+                                                       measured=row))
             except BudgetExceeded as err:
                 row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                 row |= {"status": f"skipped: {err}", "samples": 0}
+                row |= verdict_columns(specs.Verdict(specs.SKIPPED, (), row["status"]))
             except Exception as err:
                 if options.strict:
                     raise
                 row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                 row |= {"status": f"failed: {type(err).__name__}: {err}".splitlines()[0][:200]}
+                row |= verdict_columns(specs.Verdict(specs.FAILED, (), row["status"]))
                 notes.append(f"{label} / {scenario.name}: {row['status']}")
             elapsed = time.perf_counter() - tick
             row["wall_s"] = elapsed
@@ -477,13 +482,15 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     else:
         results = [_simulate(plant, controller, scenario, case, options, base, study.substeps, params=row)
                    for row in samples]
-    per_sample = []
+    per_sample, verdicts = [], []
     names = list(plant.params)
     for i, (result, row) in enumerate(zip(results, samples)):
-        values = metrics.run_metrics(result, case.tracked, study.state_bounds(dict(zip(names, row))))
+        judged = study.specs_for(scenario.name, dict(zip(names, row)))
+        values = metrics.run_metrics(result, case.tracked, judged.state_bounds)
         per_sample.append(values)
+        verdicts.append(specs.judge(judged, result, case.tracked, case.step, measured=values))
         sample_rows.append({"controller": label, "sample": i, **dict(zip(names, row)), **values,
-                            "diverged_at_s": result.diverged_at})
+                            "diverged_at_s": result.diverged_at, **verdict_columns(verdicts[-1])})
     envelopes[label] = _envelope(results, tracked_index)
     out = metrics.aggregate(per_sample)
     diverged = [r.diverged_at for r in results if r.diverged_at is not None]
@@ -491,6 +498,7 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
                                         f"{min(diverged):.3g} s)")
     out |= {"status": status, "samples": count, "diverged_samples": len(diverged),
             "diverged_at_s": min(diverged) if diverged else None}
+    out |= verdict_columns(specs.combine(verdicts))
     if not batched:
         out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate([r.step_time for r in results])))
         out["step_ms_max"] = 1e3 * float(np.nanmax(np.concatenate([r.step_time for r in results])))
@@ -499,8 +507,14 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     return out
 
 
-TABLE_COLUMNS = ("controller", "scenario", "status", *metrics.METRIC_COLUMNS, "solver_issues", "samples",
-                 "diverged_samples", "diverged_at_s", *(f"{k}_std" for k in metrics.SPREAD_COLUMNS), "kind",
+def verdict_columns(verdict: specs.Verdict) -> dict:
+    """The table's verdict columns of a `models.specs.Verdict`: its label and what it found."""
+    return {"verdict": verdict.label, "verdict_detail": verdict.detail}
+
+
+TABLE_COLUMNS = ("controller", "scenario", "status", "verdict", "verdict_detail", *metrics.METRIC_COLUMNS,
+                 "solver_issues", "samples", "diverged_samples", "diverged_at_s",
+                 *(f"{k}_std" for k in metrics.SPREAD_COLUMNS), "kind",
                  "tracked", "tracked_unit", "input_unit", "wall_s")
 
 
