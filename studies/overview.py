@@ -34,6 +34,10 @@ from models import specs  # noqa: E402
 
 from . import style  # noqa: E402
 
+#: Horizontal box plots: `orientation` from matplotlib 3.10 on, `vert` before (deprecated since).
+_HORIZONTAL = ({"orientation": "horizontal"} if tuple(int(v) for v in matplotlib.__version__.split(".")[:2]) >= (3, 10)
+               else {"vert": False})
+
 #: Relative ITAE at which the heat map's colour is fully "bad" (ten times the best on the plant).
 WORST_RATIO = 10.0
 
@@ -140,7 +144,9 @@ def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
                       linestyle="none" if marker else style.of(label).linestyle, markersize=7)
                for label in labels]
     ncol = style.legend_columns(labels, fig.get_figwidth(), fontsize=8)
-    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    legend = fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    for i, text in enumerate(legend.get_texts()):
+        text.set_gid(f"legend-label-{i}")  # found by the browser test, and by anyone scripting the page
     rows = -(-len(labels) // ncol)
     fig.subplots_adjust(bottom=(0.35 + 0.22 * rows) / fig.get_figheight())
 
@@ -203,7 +209,7 @@ def boxplots(out: Path, studies) -> str | None:
         return None
     labels = controller_order([s for _, _, s in found])
     fig, axes = _grid(len(found), 2, 13.0, 4.4)
-    for ax, (_, info, samples) in zip(axes, found):
+    for ax, (name, info, samples) in zip(axes, found):
         present = [label for label in labels if label in set(samples.controller)]
         data, kept = [], []
         for label in present:
@@ -215,7 +221,7 @@ def boxplots(out: Path, studies) -> str | None:
         if not data:
             ax.set_visible(False)
             continue
-        parts = ax.boxplot(data, vert=False, patch_artist=True, widths=0.6, flierprops={"markersize": 3})
+        parts = ax.boxplot(data, patch_artist=True, widths=0.6, flierprops={"markersize": 3}, **_HORIZONTAL)
         for patch, label in zip(parts["boxes"], kept):
             look = style.of(label)
             patch.set_facecolor(look.color)
@@ -224,6 +230,8 @@ def boxplots(out: Path, studies) -> str | None:
         for median in parts["medians"]:
             median.set_color("black")
         ax.set_yticks(range(1, len(kept) + 1), kept, fontsize=8)
+        for i, tick in enumerate(ax.get_yticklabels()):
+            tick.set_gid(f"box-label-{name}-{i}")
         ax.invert_yaxis()
         if max(float(np.max(v)) for v in data) > 20 * min(float(np.min(v)) for v in data if np.min(v) > 0):
             ax.set_xscale("log")
