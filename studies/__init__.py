@@ -76,7 +76,8 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
               python_budget: float | None = None,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
               providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
-              threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None) -> "StudyResult":
+              threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None,
+              executor=None) -> "StudyResult":
     """Run one study; with `out`, write its tables, answers, plots and animation into out/<plant>/.
 
     Parameters
@@ -95,6 +96,8 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     controllers : extra {label: controller} to compare
     strict : raise on provider or controller errors instead of noting them
     progress : progress(done, total, text) after each simulation
+    executor : a `dask.distributed.Client` (or a `studies.distributed` executor) to run the Monte Carlo
+        of Block controllers on; default this process. The numbers do not depend on it.
 
     Returns
     -------
@@ -109,7 +112,8 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
                       python_scenarios=tuple(python_scenarios) if python_scenarios else None,
                       python_budget=python_budget, seed=seed,
                       threads=threads, jit=jit, strict=strict, quick=quick)
-    result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress)
+    result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress,
+                              executor=executor)
     if out is not None:
         writers.write_study(result, out)
     return result

@@ -25,14 +25,14 @@ from . import style  # noqa: E402
 #: Commands beyond this multiple of the actuator limit are cut off in input plots (and the plot says so).
 INPUT_PLOT_RANGE = 3.0
 
-def _figure(width: float, height: float) -> Figure:
+def figure(width: float, height: float) -> Figure:
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig
 
 
-def _legend_below(fig: Figure, handles, labels, ncol: int | None = None, top: float = 0.9,
-                  hspace: float = 0.25) -> None:
+def legend_below(fig: Figure, handles, labels, ncol: int | None = None, top: float = 0.9,
+                 hspace: float = 0.25, left: float = 0.09) -> None:
     """A figure legend under the axes, with room made for it (no layout engine: it is slow).
 
     `ncol` defaults to as many columns of the labels as fit across the figure (`style.legend_columns`).
@@ -41,7 +41,7 @@ def _legend_below(fig: Figure, handles, labels, ncol: int | None = None, top: fl
     rows = -(-len(labels) // ncol)
     height = fig.get_figheight()
     bottom = (0.45 + 0.2 * rows) / height + 0.06
-    fig.subplots_adjust(left=0.09, right=0.98, top=top, bottom=bottom, hspace=hspace, wspace=0.3)
+    fig.subplots_adjust(left=left, right=0.98, top=top, bottom=bottom, hspace=hspace, wspace=0.3)
     fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
 
 
@@ -69,7 +69,7 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
         return None
     study, case = result.study, result.study
     scale, unit = tracked_scale(study.tracked_unit)
-    fig = _figure(9, 6.5)
+    fig = figure(9, 6.5)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
     limit = float(np.max(result.plant.input_limit))
     widest = INPUT_PLOT_RANGE * max(float(np.max(run.input_limit)) for _, run in runs)
@@ -103,7 +103,7 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
     bottom.legend(loc="upper right", fontsize=7)
-    _legend_below(fig, *top.get_legend_handles_labels(), hspace=0.12 if not clipped else 0.2)
+    legend_below(fig, *top.get_legend_handles_labels(), hspace=0.12 if not clipped else 0.2)
     return save(fig, path, dpi)
 
 
@@ -116,7 +116,7 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     items = list(result.envelopes.items())
     cols = min(3, len(items))
     rows = -(-len(items) // cols)
-    fig = _figure(4 * cols, 2.6 * rows + 0.6)
+    fig = figure(4 * cols, 2.6 * rows + 0.6)
     axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, squeeze=False)).ravel()
     for ax, (label, env) in zip(axes, items):
         t = env.t
@@ -163,7 +163,7 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
     if not chosen:
         return None
     omega = _frequency_grid([lp for _, lp in chosen], spec)
-    fig = _figure(9, 6.5)
+    fig = figure(9, 6.5)
     mag, phase = fig.subplots(2, 1, sharex=True)
     for label, lp in chosen:
         response = lp.frequency_response(omega)
@@ -213,7 +213,7 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
     phase.set_xlabel("ω (rad/s)")
     for ax in (mag, phase):
         ax.grid(True, which="both", alpha=0.3)
-    _legend_below(fig, *mag.get_legend_handles_labels(), top=0.94, hspace=0.12)
+    legend_below(fig, *mag.get_legend_handles_labels(), top=0.94, hspace=0.12)
     return save(fig, path, dpi)
 
 
@@ -236,7 +236,7 @@ def root_loci(result, loops: dict, path: Path, dpi: int = 110, gains: int = 300)
         return None
     cols = min(3, len(chosen))
     rows = -(-len(chosen) // cols)
-    fig = _figure(4 * cols, 3.4 * rows + 0.5)
+    fig = figure(4 * cols, 3.4 * rows + 0.5)
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
     for ax, (label, lp) in zip(axes, chosen):
         locus = np.concatenate([lp.s_plane(lp.closed_loop_poles(k)) for k in np.logspace(-2, 2, gains)])
@@ -266,7 +266,7 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     """Closed-loop poles (s = ln(z)/Ts) of every block controller and the plant's open-loop poles."""
     if not loops:
         return None
-    fig = _figure(8, 6.5)
+    fig = figure(8, 6.5)
     ax = fig.subplots()
     everything = []
     for label, found in loops.items():
@@ -287,5 +287,5 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     ax.set_ylabel("Im s (rad/s)")
     ax.set_title(f"{result.plant.title}: closed-loop poles, exact linearization at rest, s = ln(z)/Ts",
                  fontsize=10)
-    _legend_below(fig, *ax.get_legend_handles_labels(), top=0.94)
+    legend_below(fig, *ax.get_legend_handles_labels(), top=0.94)
     return save(fig, path, dpi)

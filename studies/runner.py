@@ -31,7 +31,7 @@ import models
 from designs.pid import SIGMA
 from models import Block, metrics, specs
 
-from . import SCENARIO_NAMES
+from . import SCENARIO_NAMES, distributed
 from .case import CaseStudy, Scenario
 
 #: Work (samples x steps x instructions of the plant's RK4 step and the controller's step) from which
@@ -329,8 +329,9 @@ def python_samples(options: Options, steps_per_run: int) -> int:
     return max(1, min(options.mc, options.mc_python, options.mc_python_steps // max(steps_per_run, 1)))
 
 
-def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
-             substeps: int = 10) -> bool:
+def use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
+            substeps: int = 10) -> bool:
+    """Whether to JIT-compile a Monte Carlo map of `samples` runs of `steps` (`Options.jit`, `JIT_THRESHOLD`)."""
     if options.jit != "auto":
         return bool(options.jit)
     instructions = (plant.step_function(controller.sample_period, substeps).n_instructions()
@@ -354,8 +355,8 @@ def _envelope(results, tracked_index: int) -> Envelope:
 
 
 def run_study(study: CaseStudy, options: Options | None = None, *, providers: Sequence[str] | None = None,
-              controllers: Mapping | None = None, progress: Callable[[int, int, str], None] | None = None
-              ) -> StudyResult:
+              controllers: Mapping | None = None, progress: Callable[[int, int, str], None] | None = None,
+              executor=None) -> StudyResult:
     """Run every controller of `study` through its scenarios on the nonlinear plant.
 
     Parameters
@@ -365,12 +366,20 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
     providers : replace the study's provider list (``module:function`` strings)
     controllers : extra {label: controller} added after the providers' (for example your own design)
     progress : called as progress(done, total, text) after each simulation
+    executor : where the Monte Carlo of Block controllers runs: None (this process), a
+        `dask.distributed.Client` or a `studies.distributed` executor; the numbers are the same
 
     Returns
     -------
     StudyResult
+
+    Raises
+    ------
+    studies.distributed.RunFailed
+        When work sent to a Dask cluster could not complete (never noted as a failed row).
     """
     options = options or Options()
+    executor = distributed.executor_of(executor)
     started = time.perf_counter()
     case = study
     plant = models.get(study.plant)
@@ -412,9 +421,9 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                     row |= verdict_columns(specs.Verdict(specs.SKIPPED, (), row["status"]))
                 elif scenario.monte_carlo:
                     row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
-                                        sample_rows, envelopes, label)
+                                        sample_rows, envelopes, label, executor)
                 else:
-                    result = _simulate(truth, controller, scenario, case, options, base, study.substeps)
+                    result = simulate_scenario(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
                     judged = study.specs_for(scenario.name, truth.params)
                     row |= metrics.run_metrics(result, case.tracked, judged.state_bounds)
@@ -422,6 +431,8 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                             "solver_issues": _solver_issues(result)}
                     row |= verdict_columns(specs.judge(judged, result, case.tracked, case.step, row["status"],
                                                        measured=row))
+            except distributed.RunFailed:
+                raise
             except BudgetExceeded as err:
                 row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                 row |= {"status": f"skipped: {err}", "samples": 0}
@@ -454,8 +465,9 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                        answers, truths)
 
 
-def _simulate(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,
-              params=None):
+def simulate_scenario(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,
+                      params=None):
+    """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed."""
     noise = measurement_noise_std(plant, controller, scenario.noise) if scenario.noise else 0.0
     return models.simulate_closed_loop(
         plant, controller, scenario.reference(case, base), scenario.duration(case), params=params,
@@ -465,7 +477,7 @@ def _simulate(plant, controller, scenario: Scenario, case, options: Options, bas
 
 
 def _monte_carlo(study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes,
-                 label) -> dict:
+                 label, executor=None) -> dict:
     case = study
     batched = isinstance(controller, Block)
     duration = scenario.duration(case)
@@ -476,11 +488,12 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     # The same seeded samples for every controller; a Python controller gets their first `count`.
     samples = models.sample_params(plant, options.mc, rel=scenario.rel, seed=options.seed)[:count]
     if batched:
-        results = models.monte_carlo(plant, controller, scenario.reference(case, base), duration, samples,
-                                     seed=options.seed, threads=options.threads, substeps=study.substeps,
-                                     jit=_use_jit(options, plant, controller, count, steps, study.substeps))
+        results = distributed.monte_carlo(executor, plant, controller, scenario.reference(case, base), duration,
+                                          samples, seed=options.seed, threads=options.threads,
+                                          substeps=study.substeps,
+                                          jit=use_jit(options, plant, controller, count, steps, study.substeps))
     else:
-        results = [_simulate(plant, controller, scenario, case, options, base, study.substeps, params=row)
+        results = [simulate_scenario(plant, controller, scenario, case, options, base, study.substeps, params=row)
                    for row in samples]
     per_sample, verdicts = [], []
     names = list(plant.params)
