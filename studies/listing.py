@@ -55,8 +55,13 @@ def _constants(tree: ast.Module) -> dict:
 
 
 def _value(node: ast.AST, constants: dict):
+    """A literal, a module-level constant, `studies.case.CONTROLLERS`, or a sum of those (tuples)."""
     if isinstance(node, ast.Name) and node.id in constants:
         return constants[node.id]
+    if isinstance(node, ast.Name) and node.id == "CONTROLLERS":
+        return default_controllers()
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add):
+        return _value(node.left, constants) + _value(node.right, constants)
     return ast.literal_eval(node)
 
 
