@@ -185,7 +185,7 @@ def scatter(studies) -> str | None:
         ax.tick_params(labelsize=8)
     fig.suptitle("The text's step: settling time against overshoot (filled: meets its specs; hollow: misses them)",
                  fontsize=11)
-    fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.55 / fig.get_figheight(), hspace=0.45, wspace=0.25)
+    fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.85 / fig.get_figheight(), hspace=0.45, wspace=0.25)
     _legend(fig, labels)
     return _svg(fig, "scatter")
 
@@ -237,11 +237,10 @@ def boxplots(out: Path, studies) -> str | None:
             ax.set_xscale("log")
         unit = {"rad": "rad", "m": "m"}.get(str(info.get("tracked_unit")), str(info.get("tracked_unit")))
         ax.set_xlabel(f"ITAE ({unit} s²), per sample", fontsize=8)
-        ax.set_title(f"{info['title']}: {int(samples.groupby('controller').size().max())} samples per block",
-                     fontsize=10)
+        ax.set_title(f"{info['title']}: {int(samples.groupby('controller').size().max())} samples", fontsize=9)
         ax.grid(True, axis="x", alpha=0.3)
         ax.tick_params(axis="x", labelsize=8)
     fig.suptitle("Monte Carlo on the ±5 % parameter box: spread of the step's ITAE per controller", fontsize=11)
-    fig.subplots_adjust(left=0.17, right=0.98, top=1 - 0.55 / fig.get_figheight(), bottom=0.6 / fig.get_figheight(),
+    fig.subplots_adjust(left=0.17, right=0.98, top=1 - 0.9 / fig.get_figheight(), bottom=0.6 / fig.get_figheight(),
                         hspace=0.4, wspace=0.55)
     return _svg(fig, "boxplots")

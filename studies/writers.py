@@ -305,7 +305,7 @@ def _cell(table, controller: str, scenario: str = "step") -> str:
     row = rows.iloc[0]
     mark = verdict_text(row.get("verdict")).split(" ")[0] if isinstance(row.get("verdict"), str) else ""
     if row.status != "ok" and not np.isfinite(float(row.settling_time_s)):
-        return f"{mark} {row.status}".strip()
+        return f"{mark} {str(row.status).split(':')[0]}".strip()  # the reason is in the plant's table.md
     return f"{mark} {format_number(row.settling_time_s, 3)} s / {format_number(row.overshoot_pct, 2)} %".strip()
 
 
