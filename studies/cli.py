@@ -203,16 +203,16 @@ def install(out: str, files: dict) -> None:
 
     from models.files import write_bytes
 
-    out = Path(out)
-    staging = out / f".staging-{uuid.uuid4().hex[:8]}"
+    folder = Path(out)
+    staging = folder / f".staging-{uuid.uuid4().hex[:8]}"
     try:
         for relative, data in files.items():
             write_bytes(staging / relative, data)
-        for folder in sorted(p for p in staging.iterdir() if p.is_dir()):
-            target, old = out / folder.name, out / f".old-{folder.name}-{staging.name[9:]}"
+        for plant in sorted(p for p in staging.iterdir() if p.is_dir()):
+            target, old = folder / plant.name, folder / f".old-{plant.name}-{staging.name[9:]}"
             if target.exists():
                 target.rename(old)
-            folder.rename(target)
+            plant.rename(target)
             shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -292,7 +292,8 @@ def _run_all(plants, settings: dict, providers: list, out: str, answers: bool, j
         run = uuid.uuid4().hex[:8]
         futures = [executor.client.submit(plant_task, (name, per_plant[name], answers), pure=False,
                                           key=f"plant-{name}-{run}") for name in order]
-        reports, files = [], {}
+        reports: list = []
+        files: dict = {}
         try:
             for future in as_completed(futures):  # as they finish, so the bar moves
                 report, written = _gather(future)

@@ -104,7 +104,7 @@ def connect(scheduler=None, workers: int | None = None) -> Iterator[Local | Dask
             except (OSError, TimeoutError) as err:
                 raise RunFailed(f"cannot reach the Dask scheduler at {scheduler!r}: {err}") from None
         else:
-            cluster = stack.enter_context(LocalCluster(n_workers=int(workers), threads_per_worker=1,
+            cluster = stack.enter_context(LocalCluster(n_workers=int(workers or 1), threads_per_worker=1,
                                                        processes=True, dashboard_address=None,
                                                        silence_logs=logging.ERROR))
             client = stack.enter_context(Client(cluster))
@@ -163,6 +163,8 @@ def monte_carlo(executor, plant, controller, reference, duration: float, param_s
     parts = executor.map(_monte_carlo_part, [(plant, controller, reference, duration, samples[a:a + size], a, kwargs)
                                              for a in starts],
                          what=f"the Monte Carlo of {getattr(controller, 'name', 'a controller')} on {plant.name}")
-    joined = {key: np.concatenate([p[key] for p in parts]) for key in ("x", "xc", "u", "measured", "diverged_at")}
+    x, xc, u, measured, diverged_at = (np.concatenate([p[key] for p in parts])
+                                       for key in ("x", "xc", "u", "measured", "diverged_at"))
     return models.MonteCarloResult(plant=plant, controller=controller.name, t=parts[0]["t"], r=parts[0]["r"],
-                                   d=parts[0]["d"], params=samples, **joined)
+                                   d=parts[0]["d"], x=x, xc=xc, u=u, measured=measured, params=samples,
+                                   diverged_at=diverged_at)

@@ -67,7 +67,7 @@ def _value(node: ast.AST, constants: dict):
 
 def _scenarios(node: ast.AST) -> tuple:
     calls = node.elts if isinstance(node, (ast.Tuple, ast.List)) else [node]
-    names = []
+    names: list = []
     for call in calls:
         if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id in BUILDERS):
             raise ValueError(f"scenarios must call the studies.case builders, found {ast.dump(call)[:80]}")

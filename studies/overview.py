@@ -141,7 +141,7 @@ def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure
 
 def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
     handles = [Line2D([], [], color=style.of(label).color, marker=style.of(label).marker if marker else None,
-                      linestyle="none" if marker else style.of(label).linestyle, markersize=7)
+                      linestyle="none" if marker else style.of(label).linestyle, markersize=7)  # type: ignore[arg-type]
                for label in labels]
     ncol = style.legend_columns(labels, fig.get_figwidth(), fontsize=8)
     legend = fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)

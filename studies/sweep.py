@@ -186,7 +186,8 @@ def write_sweep(study: CaseStudy, grid: Grid, table, out, notes: Sequence[str] =
     legend = "  ".join(f"{symbol} {label}" for label, (symbol, _) in style.VERDICTS.items())
     strip.set_title(f"verdict against the specs (colour): {legend}", fontsize=8)
     cost.set_title(f"{plant.title}: {scenario} as {grid.param} varies (filled: meets its specs)", fontsize=10)
-    plots.legend_below(fig, *cost.get_legend_handles_labels(), top=0.95, hspace=0.15, left=0.2)
+    handles, names = cost.get_legend_handles_labels()
+    plots.legend_below(fig, handles, names, top=0.95, hspace=0.15, left=0.2)
     plots.save(fig, folder / "sweep.png", 100)
     lines = [f"# {plant.title}: sweep of {grid.param}", "",
              f"Every controller, designed from the known model, on the nonlinear plant with {grid.param} from "
