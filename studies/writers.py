@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from models import specs
 from models.files import (JSON_CONVENTIONS, format_number, html_table, markdown_table, scaled, write_csv,
                           write_json, write_text)
 
@@ -310,7 +311,7 @@ def _cell(table, controller: str, scenario: str = "step") -> str:
 
 
 #: Verdict counts reported per plant, in this order.
-COUNTED = ("meets specs", "violates", "limit cycle", "skipped")
+COUNTED = specs.LABELS
 
 
 def verdict_counts(table) -> dict:
@@ -340,14 +341,11 @@ def write_summary(out: str | os.PathLike, names) -> Path:
     lines += ["## Per plant", ""]
     per = [{"plant": n, "best": info.get("best") or "—", "controllers": int(t.controller.nunique()),
             **verdict_counts(t),
-            "diverged": int((t.status.astype(str).str.contains("diverged")).sum()),
-            "failed": int((t.status.astype(str).str.startswith("failed")).sum()),
             "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
             "settings": f"mc {info['settings']['mc']}, seed {info['settings']['seed']}"
                         + (", quick" if info["settings"]["quick"] else "")} for n, info, t in studies]
     lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
-                                   for k in ("plant", "best", "controllers", *COUNTED, "diverged", "failed",
-                                             "time", "settings")])]
+                                   for k in ("plant", "best", "controllers", *COUNTED, "time", "settings")])]
     common = set.intersection(*(set(info["notes"]) for _, info, _ in studies)) if len(studies) > 1 else set()
     if common:
         first = studies[0][1]["notes"]
