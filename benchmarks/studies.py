@@ -101,7 +101,9 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
     plant = models.get(PLANT)
     known = models.perturbed(plant, REL, 1.0)
     block = pole_placement(known)
-    case = models.case(PLANT)
+    import studies
+
+    case = studies.get(PLANT)
     reference = models.signals.step(case.step, 0.0, plant.equilibrium()[0][0])
     params = models.sample_params(plant, samples, rel=REL, seed=0)
 
