@@ -40,6 +40,10 @@ class Local:
     def map(self, function: Callable, items: Sequence, what: str = "") -> list:
         return [function(item) for item in items]
 
+    def share(self, value):
+        """`value` itself: in this process there is nothing to send."""
+        return value
+
 
 class Dask:
     """Run work on a `dask.distributed.Client`'s workers; results come back in the order of the items."""
@@ -52,6 +56,11 @@ class Dask:
     @property
     def workers(self) -> int:
         return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def share(self, value):
+        """A future of `value` held by every worker: tasks that take it (in their argument tuple) get one
+        deserialized copy per worker, so what it caches (a plant's compiled functions) is built once there."""
+        return self.client.scatter([value], broadcast=True, hash=False)[0]
 
     def map(self, function: Callable, items: Sequence, what: str = "work") -> list:
         """function(item) for every item, on the workers.
@@ -133,7 +142,7 @@ MIN_SAMPLES_PER_TASK = 16
 def _monte_carlo_part(task: tuple) -> dict:
     import models
 
-    plant, controller, reference, duration, samples, first, kwargs = task
+    (plant, controller, reference), duration, samples, first, kwargs = task
     batch = models.monte_carlo(plant, controller, reference, duration, samples, first_sample=first, **kwargs)
     return {"x": np.array(batch.x), "xc": np.array(batch.xc), "u": np.array(batch.u),
             "measured": np.array(batch.measured), "diverged_at": np.array(batch.diverged_at),
@@ -160,8 +169,8 @@ def monte_carlo(executor, plant, controller, reference, duration: float, param_s
     size = max(MIN_SAMPLES_PER_TASK, math.ceil(len(samples) / (4 * executor.workers)))
     starts = range(0, len(samples), size)
     kwargs = dict(kwargs, threads=1)
-    parts = executor.map(_monte_carlo_part, [(plant, controller, reference, duration, samples[a:a + size], a, kwargs)
-                                             for a in starts],
+    loop = executor.share((plant, controller, reference))
+    parts = executor.map(_monte_carlo_part, [(loop, duration, samples[a:a + size], a, kwargs) for a in starts],
                          what=f"the Monte Carlo of {getattr(controller, 'name', 'a controller')} on {plant.name}")
     x, xc, u, measured, diverged_at = (np.concatenate([p[key] for p in parts])
                                        for key in ("x", "xc", "u", "measured", "diverged_at"))
