@@ -20,13 +20,19 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   (``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss``, children included, the
   measure of the 2 GB limit), and ``*_tree_peak_mb``, the largest sum of the
   resident sets of the run's processes at once (the command and its worker
-  processes), sampled every 0.2 s from /proc. ``full`` takes 5-8 minutes.
+  processes), sampled every 0.2 s from /proc.
+- ``dask``: the studies' Monte Carlo on Dask. Every Block controller of the
+  pendulum study (designed on the +5 % known model), 2,000 samples of the ±5 %
+  box, 20 s each, 2 RK4 sub-steps, CasADi's virtual machine (no JIT, so no
+  compiler time in either run), through `studies.distributed.monte_carlo` on
+  a LocalCluster of 1 and of 2 single-threaded worker processes, timed after
+  the workers have imported the packages. Each controller's states and
+  commands are hashed: the 1-worker, 2-worker and in-process (`models.monte_carlo`)
+  runs must agree bit for bit. Figures: seconds on 1 and 2 workers, the
+  speedup, and whether the numbers are identical.
 
-Room is left for a Dask Monte Carlo on 1 versus 2 workers: add a function of
-the parsed arguments returning a dict of figures, and register it in `MEASUREMENTS`.
-
-Usage: python benchmarks/studies.py [--json PATH] [--only mc quick full] [--samples 1000] [--repeat 3]
-       [--baseline-samples 3]
+Usage: python benchmarks/studies.py [--json PATH] [--only mc quick full dask] [--samples 1000] [--repeat 3]
+       [--baseline-samples 3] [--dask-samples 2000]
        python benchmarks/studies.py --only quick full --json studies.json   (the run's time and memory)
 """
 
@@ -134,6 +140,50 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
     }
 
 
+def _digest(batch: models.MonteCarloResult) -> str:
+    import hashlib
+
+    return hashlib.sha256(np.ascontiguousarray(batch.x).tobytes() + np.ascontiguousarray(batch.u).tobytes()
+                          + np.nan_to_num(batch.diverged_at, nan=-1.0).tobytes()).hexdigest()
+
+
+def dask_monte_carlo(samples: int = 2000, workers=(1, 2)) -> dict:
+    """Seconds of every pendulum Block's Monte Carlo on Dask LocalClusters of `workers` processes, and identity."""
+    import studies
+    from studies import distributed, runner
+
+    case = studies.get(PLANT)
+    plant = models.get(PLANT)
+    designed, _ = runner.design_controllers(case, case.known_plant(plant))
+    blocks = {label: c for label, c in designed.items() if isinstance(c, models.Block)}
+    _, base = runner.tracked_equilibrium(plant, case)
+    reference = case.scenarios[0].reference(case, base)
+    params = models.sample_params(plant, samples, rel=REL, seed=0)
+    kwargs = dict(substeps=case.substeps, jit=False)
+    digests, seconds = {}, {}
+    start = time.perf_counter()
+    digests["in-process"] = [_digest(models.monte_carlo(plant, block, reference, DURATION, params, threads=THREADS,
+                                                        **kwargs)) for block in blocks.values()]
+    seconds["in-process"] = time.perf_counter() - start
+    for count in workers:
+        with distributed.connect(workers=count) as executor:
+            distributed.monte_carlo(executor, plant, next(iter(blocks.values())), reference, 1.0,  # warm-up
+                                    params[:4 * count * distributed.MIN_SAMPLES_PER_TASK], **kwargs)
+            start = time.perf_counter()
+            digests[count] = [_digest(distributed.monte_carlo(executor, plant, block, reference, DURATION, params,
+                                                              **kwargs)) for block in blocks.values()]
+            seconds[count] = time.perf_counter() - start
+    first, last = workers[0], workers[-1]
+    return {
+        "dask_mc_samples": samples, "dask_mc_controllers": len(blocks), "dask_mc_duration_s": DURATION,
+        "dask_in_process_s": seconds["in-process"], "dask_in_process_threads": THREADS,
+        **{f"dask_{count}_workers_s": seconds[count] for count in workers},
+        f"dask_speedup_{last}_vs_{first}_workers": seconds[first] / seconds[last],
+        "dask_samples_per_s": samples * len(blocks) / seconds[last],
+        "dask_identical": all(digests[count] == digests["in-process"] for count in workers),
+    }
+
+
 def _measure_mc(args) -> dict:
     return monte_carlo_throughput(args.samples, args.repeat, args.baseline_samples)
 
@@ -212,10 +262,15 @@ def _measure_command(name: str, arguments: tuple) -> dict:
     return {f"{name}_{key}": value for key, value in figures.items()}
 
 
+def _measure_dask(args) -> dict:
+    return dask_monte_carlo(args.dask_samples)
+
+
 #: name -> function(parsed arguments) -> {figure: value}
 MEASUREMENTS = {"mc": _measure_mc,
                 "quick": lambda args: _measure_command("quick", ("--quick",)),
-                "full": lambda args: _measure_command("full", ())}
+                "full": lambda args: _measure_command("full", ()),
+                "dask": _measure_dask}
 
 
 def main(argv=None) -> dict:
@@ -227,8 +282,9 @@ def main(argv=None) -> dict:
     parser.add_argument("--samples", type=int, default=1000, help="Monte Carlo samples (mc)")
     parser.add_argument("--repeat", type=int, default=3, help="timed repeats of the Monte Carlo (mc)")
     parser.add_argument("--baseline-samples", type=int, default=3, help="python-control samples (mc)")
+    parser.add_argument("--dask-samples", type=int, default=2000, help="Monte Carlo samples per controller (dask)")
     args = parser.parse_args(argv)
-    for name in ("samples", "repeat", "baseline_samples"):
+    for name in ("samples", "repeat", "baseline_samples", "dask_samples"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be >= 1")
     if args.baseline_samples > args.samples:
@@ -246,4 +302,9 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
+    # Run as a script, this folder comes first on sys.path, and this file's name would hide the studies package.
+    import sys
+
+    if sys.path and os.path.realpath(sys.path[0]) == os.path.dirname(os.path.realpath(__file__)):
+        sys.path.pop(0)
     main()

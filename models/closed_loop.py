@@ -577,7 +577,7 @@ def _run_chunk(plant, controller, plan, start, stop, out) -> None:
     noise = np.zeros((c, n, nm)) if plan["noisy"] else None
     if plan["noisy"]:
         for j in range(c):
-            noise[j] = _noise(setup, np.random.SeedSequence([plan["seed"], start + j]))
+            noise[j] = _noise(setup, np.random.SeedSequence([plan["seed"], plan.get("first_sample", 0) + start + j]))
     if controller.measures == "outputs":
         y0 = batch_outputs(plant, np.broadcast_to(setup.x0, (c, 1, nx)), samples[start:stop])[:, 0]
     else:
@@ -610,7 +610,8 @@ def _allocate(plant, controller, plan, m) -> tuple:
 
 def monte_carlo(plant: Plant, controller: Block, reference, duration: float, param_samples, *,
                 x0=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0, seed: int = 0,
-                threads: int = 2, jit: bool = False, chunk_size: int | None = None) -> MonteCarloResult:
+                threads: int = 2, jit: bool = False, chunk_size: int | None = None,
+                first_sample: int = 0) -> MonteCarloResult:
     """Run `controller` on every parameter sample, a chunk of samples per batched CasADi map.
 
     Parameters
@@ -621,6 +622,8 @@ def monte_carlo(plant: Plant, controller: Block, reference, duration: float, par
     jit : compile the closed loop to machine code first (see `models.compile`)
     chunk_size : samples per batched call; default from `MONTE_CARLO_CHUNK_BYTES`. Results do not
         depend on it.
+    first_sample : index of the first row of `param_samples` in a larger sample set: row j gets the
+        noise of sample first_sample + j, so a set split into parts (for other processes) runs as a whole
 
     Returns
     -------
@@ -635,6 +638,7 @@ def monte_carlo(plant: Plant, controller: Block, reference, duration: float, par
     """
     plan = _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps,
                              input_disturbance, noise_std, seed, threads, jit, chunk_size)
+    plan["first_sample"] = integer(first_sample, "first_sample", minimum=0)
     m, n, nm = plan["samples"].shape[0], plan["n"], plan["setup"].n_meas
     per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
     check_memory(m * per_sample + plan["chunk_bytes"],
@@ -644,7 +648,7 @@ def monte_carlo(plant: Plant, controller: Block, reference, duration: float, par
     for start in range(0, m, plan["chunk"]):
         stop = min(m, start + plan["chunk"])
         _run_chunk(plant, controller, plan, start, stop, tuple(a[start:stop] for a in out))
-    return _result(plant, controller, plan, out, plan["samples"], 0)
+    return _result(plant, controller, plan, out, plan["samples"], plan["first_sample"])
 
 
 def monte_carlo_chunks(plant: Plant, controller: Block, reference, duration: float, param_samples, *,

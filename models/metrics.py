@@ -16,6 +16,11 @@ longer than the run), not a number that looks like a result. python-control's
 and sample (not interpolated) times; `tests/models/test_metrics.py` checks the
 two agree to one sample on linear responses.
 
+Sustained oscillation (a limit cycle): in the second half of the last
+constant-reference segment, the output minus a fitted quadratic trend swings
+by more than the settling band, at least two full periods, without decaying
+(see `oscillation`). A response that settles, or only drifts, has none.
+
 Integral metrics: IAE = ∫|e| dt and ITAE = ∫(t − t_step)|e| dt with e = r − y,
 t_step the time of the most recent change of the reference (the plain ITAE for
 a single step at t = 0). Input metrics are computed from the commanded input
@@ -26,13 +31,14 @@ input the actuator delivered (the command clipped to the limit).
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 #: Columns of a study table that are metrics, in order.
 METRIC_COLUMNS = ("rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae", "itae", "peak_u",
-                  "u_limit", "saturated_frac", "energy", "violation", "step_ms", "step_ms_max")
+                  "u_limit", "saturated_frac", "energy", "violation", "step_ms", "step_ms_max",
+                  "oscillation_amplitude", "oscillation_period_s")
 
 #: Metrics whose Monte Carlo spread (standard deviation) is reported as ``<name>_std``.
 SPREAD_COLUMNS = ("rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae", "itae", "peak_u",
@@ -40,6 +46,14 @@ SPREAD_COLUMNS = ("rise_time_s", "settling_time_s", "overshoot_pct", "ss_error",
 
 #: Relative tolerance for counting a command as at the actuator limit.
 SATURATION_TOLERANCE = 1e-3
+
+#: Settling band, as a fraction of the step: the settling time and the smallest oscillation that counts.
+SETTLING_BAND = 0.02
+
+#: An oscillation is sustained when its amplitude in the second half of the window is at least this
+#: fraction of that in the first half (a decaying one, e^{-ζ ω_n T/4} over a window T, falls below it
+#: for ζ ω_n T > 0.9).
+SUSTAINED_RATIO = 0.8
 
 
 def first_crossing(t: np.ndarray, y: np.ndarray, level: float, direction: float) -> float:
@@ -66,7 +80,7 @@ def first_crossing(t: np.ndarray, y: np.ndarray, level: float, direction: float)
     return float(t[k - 1] + (t[k] - t[k - 1]) * (level - y0) / (y1 - y0))
 
 
-def step_metrics(t, y, *, initial: float, target: float, band: float = 0.02,
+def step_metrics(t, y, *, initial: float, target: float, band: float = SETTLING_BAND,
                  rise_limits: tuple = (0.1, 0.9), final_window: float = 0.05) -> dict:
     """Rise time, settling time, overshoot and steady-state error of one step.
 
@@ -201,14 +215,94 @@ def input_metrics(t, u, limit) -> dict:
             "input_violation": float(max(0.0, np.max((magnitude - limit) / limit)))}
 
 
+def bound_excursions(x: np.ndarray, state_names: Sequence[str], bounds: Mapping[str, tuple]) -> dict:
+    """How far each bounded state went beyond its (low, high) bounds, in its own units (0 if never).
+
+    Parameters
+    ----------
+    x : (N+1, nx) states;  state_names : (nx,) names
+    bounds : state name -> (low, high), SI units
+
+    Returns
+    -------
+    dict state name -> largest max(low − x, x − high, 0) over the run
+    """
+    out = {}
+    for name, (low, high) in bounds.items():
+        if name not in state_names:
+            raise ValueError(f"bounds name state {name!r}, which is not one of {tuple(state_names)}")
+        if not high > low:
+            raise ValueError(f"bounds of {name!r} must have low < high, got ({low}, {high})")
+        values = x[:, list(state_names).index(name)]
+        out[name] = max(0.0, float(np.max(np.maximum(low - values, values - high))))
+    return out
+
+
 def bound_violation(x: np.ndarray, state_names: Sequence[str], bounds: Mapping[str, tuple]) -> float:
     """Largest excursion of a state beyond its (low, high) bounds, as a fraction of high − low (0 if none)."""
-    worst = 0.0
-    for name, (low, high) in bounds.items():
-        values = x[:, list(state_names).index(name)]
-        excess = np.maximum(low - values, values - high)
-        worst = max(worst, float(np.max(excess)) / (high - low))
-    return max(worst, 0.0)
+    excess = bound_excursions(x, state_names, bounds)
+    return max([excess[name] / (high - low) for name, (low, high) in bounds.items()], default=0.0)
+
+
+def final_values(t: np.ndarray, x: np.ndarray, state_names: Sequence[str], names: Sequence[str],
+                 final_window: float = 0.05) -> dict:
+    """Mean of each named state over the last `final_window` fraction of the run (as ss_error's window)."""
+    n_final = max(1, int(math.ceil(final_window * len(t))))
+    return {name: float(np.mean(x[-n_final:, list(state_names).index(name)])) for name in names}
+
+
+def _crossings(values: np.ndarray, hysteresis: float) -> int:
+    """Sign changes of `values` that swing from beyond +hysteresis to beyond −hysteresis or back."""
+    sides = np.sign(values) * (np.abs(values) > hysteresis)
+    sides = sides[sides != 0]
+    return int(np.count_nonzero(np.diff(sides)))
+
+
+def oscillation(t, y, r, band: float = SETTLING_BAND, step: float | None = None) -> dict:
+    """Amplitude and period of a sustained oscillation at the end of a run (NaN when there is none).
+
+    The window is the second half of the last constant-reference segment. The
+    output minus a least-squares quadratic (which absorbs an approach to rest
+    or a drift) must cross zero, with a hysteresis of a quarter of the
+    threshold, at least 4 times (two periods) in the window and twice in each
+    half; its amplitude (half the peak-to-peak) must exceed ``band * step``
+    in the second half and be at least `SUSTAINED_RATIO` of the first half's.
+
+    Parameters
+    ----------
+    t, y, r : (N+1,) s, tracked output, reference
+    band : threshold as a fraction of the step (the settling band)
+    step : step size the threshold refers to (default: the last segment's step, or
+        the largest reference change when the last segment has none)
+
+    Returns
+    -------
+    dict with oscillation_amplitude (units of y) and oscillation_period_s (s), NaN if not sustained
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    r = np.asarray(r, dtype=float)
+    none = {"oscillation_amplitude": math.nan, "oscillation_period_s": math.nan}
+    parts = segments(t, y, r)
+    a, b, before, after = parts[-1]
+    if step is None:
+        step = abs(after - before) or max((abs(p[3] - p[2]) for p in parts), default=0.0)
+    start = a + (b - a) // 2
+    if b - start < 8 or step == 0 or not np.all(np.isfinite(y[start:b])):
+        return none
+    tw, yw = t[start:b], y[start:b]
+    scale = tw - tw[0]
+    residual = yw - np.polyval(np.polyfit(scale, yw, 2), scale)
+    threshold = band * abs(step)
+    half = len(residual) // 2
+    first, second = residual[:half], residual[half:]
+    amplitude = [(float(np.max(p)) - float(np.min(p))) / 2 for p in (first, second)]
+    crossings = [_crossings(p, threshold / 4) for p in (first, second)]
+    total = _crossings(residual, threshold / 4)
+    if (total < 4 or min(crossings) < 2 or amplitude[1] <= threshold
+            or amplitude[1] < SUSTAINED_RATIO * amplitude[0]):
+        return none
+    return {"oscillation_amplitude": amplitude[1], "oscillation_period_s": 2 * float(tw[-1] - tw[0]) / total}
 
 
 def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None) -> dict:
@@ -242,6 +336,7 @@ def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None)
         for key in worst:
             worst[key] = max(worst[key], seg[key])
     metrics |= worst
+    metrics |= oscillation(t, y, r)
     metrics |= tracking_integrals(t, y, r)
     inputs = input_metrics(t, result.u, result.input_limit)
     violation = inputs.pop("input_violation")

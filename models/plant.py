@@ -412,6 +412,13 @@ class Plant:
         # that models.simulate and models.closed_loop fill it without reaching into a private attribute.
         self.function_cache: dict = {}
 
+    def __reduce__(self):
+        # Pickled by name (for worker processes, e.g. Dask): the receiver rebuilds it from its own registry.
+        if _REGISTRY.get(self.name) is not self.declaration:
+            raise TypeError(f"the plant {self.name!r} is not the registered declaration of that name, so another "
+                            "process cannot rebuild it; declare it with register=True in an importable module")
+        return (registered_plant, (self.name, dict(self.params), self.input_limit.tolist()))
+
     # ----------------------------------------------------------------- sizes
     @property
     def nq(self) -> int:
@@ -672,3 +679,8 @@ class Plant:
 def get(name: str, input_limit=None, **overrides) -> Plant:
     """The registered plant `name` with parameter overrides, e.g. ``get("arm", m=0.6)``."""
     return Plant(declaration(name), overrides, input_limit)
+
+
+def registered_plant(name: str, params: Mapping[str, float], input_limit) -> Plant:
+    """The registered plant `name` with these parameter values and actuator limit (how a Plant unpickles)."""
+    return Plant(declaration(name), params, input_limit)

@@ -15,7 +15,8 @@ tables. ``python -m studies`` runs every registered case.
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -50,14 +51,14 @@ def names() -> tuple[str, ...]:
     return cases.names()
 
 
-def get(name: str) -> "CaseStudy":
+def get(name: str) -> CaseStudy:
     """The case study `name` (ValueError listing the registered ones otherwise)."""
     from . import cases
 
     return cases.get(name)
 
 
-def register(case: "CaseStudy", replace: bool = False) -> "CaseStudy":
+def register(case: CaseStudy, replace: bool = False) -> CaseStudy:
     """Add a user's case study to the registry (see `studies.cases.register`)."""
     from . import cases
 
@@ -71,11 +72,11 @@ def unregister(name: str) -> None:
     cases.unregister(name)
 
 
-def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None, mc: int = 200,
+def run_study(name: str | CaseStudy, *, scenarios: Sequence[str] | None = None, mc: int = 200,
               seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
               providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
               threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None,
-              run_id: str | None = None) -> "StudyResult":
+              run_id: str | None = None, executor=None) -> StudyResult:
     """Run one study; with `out`, write its tables, answers, plots and animation into out/<plant>/.
 
     Parameters
@@ -92,6 +93,8 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     strict : raise on provider or controller errors instead of noting them
     progress : progress(done, total, text) after each simulation
     run_id : the id recorded in out/<plant>/run.json (default a new one)
+    executor : a `dask.distributed.Client` (or a `studies.distributed` executor) to run the Monte Carlo
+        of Block controllers on; default this process. The numbers do not depend on it.
 
     Returns
     -------
@@ -114,7 +117,8 @@ def run_study(name: "str | CaseStudy", *, scenarios: Sequence[str] | None = None
     study = name if isinstance(name, CaseStudy) else get(name)
     options = runner.Options(scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict,
                              quick=quick)
-    result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress)
+    result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress,
+                              executor=executor)
     if out is not None:
         if study.trajectories:
             solve_trajectories(result)
@@ -139,7 +143,7 @@ def solve_trajectories(result: StudyResult) -> None:
     result.timing["trajectories_s"] = time.perf_counter() - started
 
 
-def run(name: "str | CaseStudy", **kwargs) -> "pd.DataFrame":
+def run(name: str | CaseStudy, **kwargs) -> pd.DataFrame:
     """Run one study and return its table: one row per (controller, scenario).
 
     Takes the keyword arguments of `run_study`. Every row is a simulation of

@@ -5,7 +5,9 @@ Each case draws its plant once, in its case file, as a list of primitives
 computed from the state and the plant's own parameters. The GIF renders the
 primitives with matplotlib; the HTML page embeds them as JSON and an inline
 script draws them in SVG, with a play button and a time slider (the text's
-slider-driven animation, homework .2).
+slider-driven animation, homework .2), a picker of the controller shown, an
+optional faint "ghost" of a second controller, and the commanded input beside
+the drawing with the actuator limit. The reference marker carries a label.
 """
 
 from __future__ import annotations
@@ -28,16 +30,53 @@ from PIL import Image  # noqa: E402
 
 from models import files  # noqa: E402
 
-from .drawing import GROUND  # noqa: E402
-
+from . import style  # noqa: E402
+from .drawing import GROUND, REFERENCE, text  # noqa: E402
 
 
 def draw(case, plant, x, reference: float) -> list:
-    """Primitives of the case's drawing of `plant` in state x (nx,), the tracked coordinate's reference marked."""
+    """Primitives of the case's drawing of `plant` in state x (nx,), the tracked coordinate's reference marked
+    and labelled (`label_target`)."""
     if case.drawing is None:
         raise ValueError(f"the {case.plant} case has no drawing")
-    return case.drawing(dict(plant.params), dict(zip(plant.state_names, np.asarray(x, dtype=float))),
-                        float(reference))
+    shapes = case.drawing(dict(plant.params), dict(zip(plant.state_names, np.asarray(x, dtype=float))),
+                          float(reference))
+    return label_target(shapes, target_text(case, reference))
+
+
+def target_text(case, reference: float) -> str:
+    """"target θ = 50°" / "target z = 2 m": the reference of the tracked coordinate, angles in degrees."""
+    symbol = {"theta": "θ", "phi": "φ", "z": "z", "x": "x"}.get(case.tracked, case.tracked)
+    if case.tracked_unit == "rad":
+        return f"target {symbol} = {math.degrees(reference):.3g}°"
+    return f"target {symbol} = {reference:.3g} {case.tracked_unit}"
+
+
+def label_target(shapes: list, label: str) -> list:
+    """`shapes` with a text label beside the first primitive drawn in the reference colour.
+
+    The label goes past the marker, away from the centre of the other primitives, by a
+    tenth of the drawing's size. Without such a primitive the shapes are returned unchanged.
+    """
+    marks = [prim for prim in shapes if prim.get("c") == REFERENCE or prim.get("f") == REFERENCE]
+    if not marks:
+        return shapes
+    mark = np.array(marks[0]["p"] if marks[0]["k"] != "circle" else [marks[0]["p"]], dtype=float)
+    others = [q for prim in shapes if prim is not marks[0] and prim["k"] != "text" and not is_track(prim)
+              for q in (prim["p"] if prim["k"] != "circle" else [prim["p"]])]
+    everything = np.vstack([mark, np.array(others, dtype=float).reshape(-1, 2)])
+    size = float(np.max(np.ptp(everything, axis=0))) or 1.0
+    if marks[0]["k"] == "line":
+        anchor = mark[-1]  # a reference line's far end
+    else:
+        anchor = mark.mean(axis=0)
+    center = np.array(others, dtype=float).reshape(-1, 2).mean(axis=0) if others else anchor - [0, 1]
+    away = anchor - center
+    away = away / (np.linalg.norm(away) or 1.0)
+    if marks[0]["k"] != "line":
+        away = np.array([0.0, -1.0 if away[1] <= 0 else 1.0])  # markers sit on a rail or beam: label below/above
+    spot = anchor + 0.1 * size * away
+    return [*shapes, text(tuple(spot), label, REFERENCE)]
 
 
 # ------------------------------------------------------------------------------- frames
@@ -70,6 +109,11 @@ def _readout(plant, x, reference) -> str:
     return ", ".join(parts)
 
 
+def is_track(prim: dict) -> bool:
+    """Whether a primitive is a long ground line or track (left out of views and label placement)."""
+    return prim["k"] == "line" and prim["c"] == GROUND and prim["w"] == 2
+
+
 def view(shapes: list, margin: float = 0.08) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) holding every point of every frame, with a margin.
 
@@ -78,12 +122,15 @@ def view(shapes: list, margin: float = 0.08) -> tuple[float, float, float, float
     xs, ys = [], []
     for frame in shapes:
         for prim in frame:
-            if prim["k"] == "line" and prim["c"] == GROUND and prim["w"] == 2:
+            if is_track(prim):
                 continue
             if prim["k"] == "circle":
                 (cx, cy), rad = prim["p"], prim["r"]
                 xs += [cx - rad, cx + rad]
                 ys += [cy - rad, cy + rad]
+            elif prim["k"] == "text":
+                xs.append(prim["p"][0])
+                ys.append(prim["p"][1])
             else:
                 xs += [q[0] for q in prim["p"]]
                 ys += [q[1] for q in prim["p"]]
@@ -142,6 +189,8 @@ def _artist(ax, prim: dict, dpi: int):
     elif prim["k"] == "poly":
         artist = Polygon(prim["p"], closed=True, facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
         ax.add_patch(artist)
+    elif prim["k"] == "text":
+        artist = ax.text(*prim["p"], prim["s"], color=prim["c"], fontsize=7, ha="center", va="center")
     else:
         artist = Circle(prim["p"], prim["r"], facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
         ax.add_patch(artist)
@@ -154,6 +203,9 @@ def _update(artist, prim: dict) -> None:
         artist.set_data(points[:, 0], points[:, 1])
     elif prim["k"] == "poly":
         artist.set_xy(prim["p"])
+    elif prim["k"] == "text":
+        artist.set_position(prim["p"])
+        artist.set_text(prim["s"])
     else:
         artist.set_center(prim["p"])
         artist.set_radius(prim["r"])
@@ -170,19 +222,47 @@ def _rounded(value, digits: int = 4):
     return value
 
 
-def write_html(path: Path, case, plant, run, label: str, caption: str = "", max_frames: int = 800) -> Path:
-    """A self-contained HTML page (inline SVG and script) animating the run, with play button and slider."""
-    times, shapes, readouts = frames(case, plant, run, max_frames)
-    xmin, xmax, ymin, ymax = view(shapes)
-    digits = max(3, 3 - int(math.floor(math.log10(max(xmax - xmin, ymax - ymin)))) + 1)
-    data = {"t": [round(float(t), 4) for t in times], "frames": _rounded(shapes, digits), "readouts": readouts,
-            "view": [xmin, ymin, xmax - xmin, ymax - ymin]}
+def write_html(path: Path, case, plant, runs, selected: str | None = None, caption: str = "",
+               max_frames: int = 300, verdicts: dict | None = None) -> Path:
+    """A self-contained HTML page (inline SVG and script) animating the runs of several controllers.
+
+    Parameters
+    ----------
+    runs : controller label -> ClosedLoopResult (the same scenario), in picker order
+    selected : the label shown first (default: the first)
+    max_frames : frames kept per run (subsampled evenly, the last always kept)
+    verdicts : label -> verdict text, shown in the picker and beside the title
+    """
+    runs = dict(runs)
+    if not runs:
+        raise ValueError("write_html needs at least one run")
+    selected = next(iter(runs)) if selected is None else selected
+    if selected not in runs:
+        raise ValueError(f"selected controller {selected!r} is not among the runs: {', '.join(runs)}")
+    data = {"order": list(runs), "selected": selected, "runs": {}, "input": plant.input_names[0],
+            "input_unit": case.input_unit, "verdicts": dict(verdicts or {}),
+            "colors": {label: style.of(label).color for label in runs}}
+    for label, run in runs.items():
+        data["runs"][label] = run_data(case, plant, run, max_frames)
     # One pass: a label containing a placeholder is shown as it is, never filled in. '<' is escaped in
     # the JSON so no label can close the script.
     page = files.fill_template(_TEMPLATE, {
-        "__TITLE__": html.escape(f"{plant.title}: {label}"), "__CAPTION__": html.escape(caption),
-        "__DATA__": json.dumps(data, separators=(",", ":")).replace("<", "\\u003c")})
+        "__TITLE__": html.escape(f"{plant.title}: the controllers on the text's step"),
+        "__CAPTION__": html.escape(caption),
+        "__DATA__": json.dumps(data, separators=(",", ":"), ensure_ascii=False).replace("<", "\\u003c")})
     return files.write_text(path, page)
+
+
+def run_data(case, plant, run, max_frames: int) -> dict:
+    """What the page holds of one run: frame times (s), primitives, readouts, view box, command and limit."""
+    times, shapes, readouts = frames(case, plant, run, max_frames)
+    xmin, xmax, ymin, ymax = view(shapes)
+    digits = max(3, 3 - int(math.floor(math.log10(max(xmax - xmin, ymax - ymin)))) + 1)
+    index = np.searchsorted(run.t, times - 1e-9)
+    command = run.u[np.minimum(index, len(run.u) - 1), 0]
+    return {"t": [round(float(t), 4) for t in times], "frames": _rounded(shapes, digits), "readouts": readouts,
+            "view": [xmin, ymin, xmax - xmin, ymax - ymin], "u": [round(float(v), 5) for v in command],
+            "limit": float(np.max(run.input_limit))}
 
 
 _TEMPLATE = """<!DOCTYPE html>
@@ -192,20 +272,36 @@ _TEMPLATE = """<!DOCTYPE html>
 <title>__TITLE__</title>
 <style>
   body { font-family: system-ui, sans-serif; margin: 1.5em; color: #222; }
-  #scene { width: 100%; max-width: 720px; height: 440px; border: 1px solid #ccc; background: #fafafa; display: block; }
-  .controls { display: flex; gap: 0.8em; align-items: center; max-width: 720px; margin-top: 0.6em; }
-  #slider { flex: 1; }
+  .stage { display: flex; gap: 1em; flex-wrap: wrap; align-items: flex-start; }
+  #scene { width: 640px; max-width: 100%; height: 420px; border: 1px solid #ccc; background: #fafafa; display: block; }
+  #input { width: 300px; height: 420px; border: 1px solid #ccc; background: #fff; display: block; }
+  .controls { display: flex; gap: 0.8em; align-items: center; flex-wrap: wrap; max-width: 960px; margin-top: 0.6em; }
+  #slider { flex: 1; min-width: 200px; }
   #time { font-variant-numeric: tabular-nums; min-width: 6em; }
   #readout { font-size: 0.9em; color: #444; margin-top: 0.4em; }
-  .caption { font-size: 0.85em; color: #555; max-width: 720px; }
+  #verdict { font-size: 0.9em; margin-left: 0.5em; }
+  .caption { font-size: 0.85em; color: #555; max-width: 960px; }
 </style>
 </head>
 <body>
 <h1 style="font-size:1.2em">__TITLE__</h1>
 <p class="caption">__CAPTION__</p>
+<div class="controls">
+  <label>controller <select id="controller"></select></label>
+  <label>ghost <select id="ghost"><option value="">none</option></select></label>
+  <span id="verdict"></span>
+</div>
+<div class="stage">
 <svg id="scene" xmlns="http://www.w3.org/2000/svg" preserveAspectRatio="xMidYMid meet">
-  <g id="world"><g id="frame"></g></g>
+  <g id="world"><g id="ghostframe" opacity="0.3"></g><g id="frame"></g></g>
 </svg>
+<svg id="input" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 300 420">
+  <text x="150" y="18" text-anchor="middle" font-size="13" id="input-title"></text>
+  <g id="input-plot"></g>
+  <line id="cursor" y1="30" y2="390" stroke="#888" stroke-width="1"></line>
+  <text id="input-value" x="150" y="410" text-anchor="middle" font-size="12"></text>
+</svg>
+</div>
 <div class="controls">
   <button id="play" type="button">Play</button>
   <input id="slider" type="range" min="0" value="0" step="1" aria-label="time">
@@ -221,19 +317,31 @@ const NS = "http://www.w3.org/2000/svg";
 const scene = document.getElementById("scene");
 const world = document.getElementById("world");
 const frameGroup = document.getElementById("frame");
+const ghostGroup = document.getElementById("ghostframe");
 const slider = document.getElementById("slider");
 const playButton = document.getElementById("play");
 const timeLabel = document.getElementById("time");
 const readout = document.getElementById("readout");
 const speedSelect = document.getElementById("speed");
-const [vx, vy, vw, vh] = DATA.view;
-scene.setAttribute("viewBox", `${vx} ${-(vy + vh)} ${vw} ${vh}`);
+const picker = document.getElementById("controller");
+const ghostPicker = document.getElementById("ghost");
+const verdictLabel = document.getElementById("verdict");
+const inputPlot = document.getElementById("input-plot");
+const cursor = document.getElementById("cursor");
+const inputValue = document.getElementById("input-value");
 world.setAttribute("transform", "scale(1,-1)");
-slider.max = String(DATA.t.length - 1);
+for (const label of DATA.order) {
+  for (const select of [picker, ghostPicker]) {
+    const option = document.createElement("option");
+    option.value = label;
+    option.textContent = label;
+    select.appendChild(option);
+  }
+}
 
 function points(list) { return list.map(p => `${p[0]},${p[1]}`).join(" "); }
 
-function element(prim) {
+function element(prim, height) {
   let el;
   if (prim.k === "line") {
     el = document.createElementNS(NS, "polyline");
@@ -247,6 +355,16 @@ function element(prim) {
     el.setAttribute("points", points(prim.p));
     el.setAttribute("fill", prim.f);
     el.setAttribute("stroke-width", 1);
+  } else if (prim.k === "text") {
+    el = document.createElementNS(NS, "text");
+    el.setAttribute("transform", `translate(${prim.p[0]},${prim.p[1]}) scale(1,-1)`);
+    el.setAttribute("font-size", 0.045 * height);
+    el.setAttribute("text-anchor", "middle");
+    el.setAttribute("dominant-baseline", "middle");
+    el.setAttribute("fill", prim.c);
+    el.setAttribute("class", "label");
+    el.textContent = prim.s;
+    return el;
   } else {
     el = document.createElementNS(NS, "circle");
     el.setAttribute("cx", prim.p[0]);
@@ -260,13 +378,73 @@ function element(prim) {
   return el;
 }
 
-let current = 0;
+// The input panel: t from 0 to the end across x in [30, 290], u from -1.3 L to 1.3 L up y in [390, 30].
+let run = DATA.runs[DATA.selected], ghost = null, current = 0, scale = {};
+function svg(name, attributes, text) {
+  const el = document.createElementNS(NS, name);
+  for (const [k, v] of Object.entries(attributes)) el.setAttribute(k, v);
+  if (text !== undefined) el.textContent = text;
+  return el;
+}
+function drawInput() {
+  const runs = [run].concat(ghost ? [ghost] : []);
+  const limit = Math.max(...runs.map(r => r.limit));
+  const top = Math.max(1.3 * limit, ...runs.map(r => Math.max(...r.u.map(Math.abs))));
+  const end = Math.max(...runs.map(r => r.t[r.t.length - 1]));
+  scale = { x: t => 30 + 260 * t / end, y: u => 210 - 180 * u / top };
+  const parts = [svg("line", { x1: 30, x2: 290, y1: scale.y(0), y2: scale.y(0), stroke: "#bbb" })];
+  for (const sign of [1, -1]) {
+    parts.push(svg("line", { x1: 30, x2: 290, y1: scale.y(sign * run.limit), y2: scale.y(sign * run.limit),
+                            stroke: "#c00000", "stroke-dasharray": "5 3", class: "limit" }));
+  }
+  parts.push(svg("text", { x: 288, y: scale.y(run.limit) - 4, "text-anchor": "end", "font-size": 11,
+                          fill: "#c00000", id: "limit-label" },
+                 `limit ±${+run.limit.toPrecision(3)} ${DATA.input_unit}`));
+  parts.push(svg("text", { x: 32, y: 402, "font-size": 11, fill: "#555" }, "0 s"));
+  parts.push(svg("text", { x: 290, y: 402, "font-size": 11, fill: "#555", "text-anchor": "end" },
+                 `${end.toFixed(1)} s`));
+  for (const [r, opacity] of runs.map((r, i) => [r, i ? 0.35 : 1])) {
+    const label = r === run ? picker.value : ghostPicker.value;
+    const path = r.u.map((u, i) => `${scale.x(r.t[i]).toFixed(1)},${scale.y(u).toFixed(1)}`).join(" ");
+    parts.push(svg("polyline", { points: path, fill: "none", stroke: DATA.colors[label], "stroke-width": 1.5,
+                                opacity, class: r === run ? "command" : "ghost-command" }));
+  }
+  inputPlot.replaceChildren(...parts);
+  document.getElementById("input-title").textContent = `commanded ${DATA.input} (${DATA.input_unit})`;
+}
+
+function ghostIndex(t) {
+  let k = 0;
+  while (k < ghost.t.length - 1 && ghost.t[k + 1] <= t + 1e-9) k++;
+  return k;
+}
+
 function show(index) {
-  current = Math.max(0, Math.min(DATA.t.length - 1, index));
-  frameGroup.replaceChildren(...DATA.frames[current].map(element));
+  current = Math.max(0, Math.min(run.t.length - 1, index));
+  const height = run.view[3];
+  frameGroup.replaceChildren(...run.frames[current].map(p => element(p, height)));
+  ghostGroup.replaceChildren(...(ghost ? ghost.frames[ghostIndex(run.t[current])].map(p => element(p, height)) : []));
   slider.value = String(current);
-  timeLabel.textContent = `t = ${DATA.t[current].toFixed(2)} s`;
-  readout.textContent = DATA.readouts[current];
+  timeLabel.textContent = `t = ${run.t[current].toFixed(2)} s`;
+  readout.textContent = run.readouts[current];
+  const x = scale.x(run.t[current]);
+  cursor.setAttribute("x1", x);
+  cursor.setAttribute("x2", x);
+  inputValue.textContent = `${DATA.input} = ${run.u[current].toPrecision(3)} ${DATA.input_unit}`;
+}
+
+function select(label) {
+  const time = run.t[current];
+  run = DATA.runs[label];
+  picker.value = label;
+  const [vx, vy, vw, vh] = run.view;
+  scene.setAttribute("viewBox", `${vx} ${-(vy + vh)} ${vw} ${vh}`);
+  slider.max = String(run.t.length - 1);
+  verdictLabel.textContent = DATA.verdicts[label] || "";
+  drawInput();
+  let k = 0;
+  while (k < run.t.length - 1 && run.t[k + 1] <= time + 1e-9) k++;
+  show(k);
 }
 
 let playing = false, lastStamp = null, simTime = 0;
@@ -275,20 +453,27 @@ function tick(stamp) {
   if (lastStamp !== null) simTime += (stamp - lastStamp) / 1000 * Number(speedSelect.value);
   lastStamp = stamp;
   let index = current;
-  while (index < DATA.t.length - 1 && DATA.t[index + 1] <= simTime) index++;
+  while (index < run.t.length - 1 && run.t[index + 1] <= simTime) index++;
   show(index);
-  if (index >= DATA.t.length - 1) { stop(); return; }
+  if (index >= run.t.length - 1) { stop(); return; }
   requestAnimationFrame(tick);
 }
 function start() {
-  if (current >= DATA.t.length - 1) show(0);
-  playing = true; lastStamp = null; simTime = DATA.t[current];
+  if (current >= run.t.length - 1) show(0);
+  playing = true; lastStamp = null; simTime = run.t[current];
   playButton.textContent = "Pause";
   requestAnimationFrame(tick);
 }
 function stop() { playing = false; playButton.textContent = "Play"; }
 playButton.addEventListener("click", () => (playing ? stop() : start()));
 slider.addEventListener("input", () => { stop(); show(Number(slider.value)); });
+picker.addEventListener("change", () => select(picker.value));
+ghostPicker.addEventListener("change", () => {
+  ghost = ghostPicker.value ? DATA.runs[ghostPicker.value] : null;
+  drawInput();
+  show(current);
+});
+select(DATA.selected);
 show(0);
 </script>
 </body>

@@ -13,7 +13,7 @@ import copy
 import dataclasses
 import functools
 import re
-from typing import Mapping
+from collections.abc import Mapping
 
 import control
 import numpy as np

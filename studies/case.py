@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from models import signals
+from models.specs import Specs
 
 if TYPE_CHECKING:
     import models
@@ -161,7 +162,9 @@ class CaseStudy:
     controllers : labels in table order (providers' other labels are appended)
     providers : ``module:function`` returning {label: controller}, called with (plant, known=Plant)
     answer_providers : ``module:function`` returning {item: {name: value}}, called with (plant)
-    bounds : params dict -> {state name: (low, high)}, counted as constraint violation
+    bounds : params dict -> {state name: (low, high)}, counted as constraint violation and judged as a spec
+    specs : scenario name -> `models.specs.Specs` the rows of that scenario are judged by; "*" for the
+        scenarios not named (default: no step specs, only the actuator limit, the bounds and no limit cycle)
     loops : the loopshaping specs (`LoopSpec`), one Bode plot each
     cascade : (inner output, outer output) of the .6 transfer-function cascade
     cascade_model : (plant name, parameter overrides) of the .6 model when it is not the plant itself
@@ -204,6 +207,7 @@ class CaseStudy:
     providers: tuple = PROVIDERS
     answer_providers: tuple = ANSWER_PROVIDERS
     bounds: Callable[[dict], dict] | None = None
+    specs: Mapping[str, Specs] = field(default_factory=dict)
     loops: tuple = ()
     cascade: tuple | None = None
     cascade_model: tuple | None = None
@@ -231,6 +235,11 @@ class CaseStudy:
 
     def state_bounds(self, params: Mapping[str, float]) -> dict:
         return dict(self.bounds(dict(params))) if self.bounds else {}
+
+    def specs_for(self, scenario: str, params: Mapping[str, float]) -> Specs:
+        """The specs of `scenario` on the plant with `params`: the case's, with its state bounds added."""
+        chosen = self.specs.get(scenario, self.specs.get("*", Specs()))
+        return chosen.with_state_bounds(self.state_bounds(params))
 
     def known_plant(self, plant: models.Plant | None = None) -> models.Plant:
         """The model the controllers are designed from: the uncertain parameters scaled by 1 + known_rel."""

@@ -1,12 +1,17 @@
 """python -m studies: every controller on every plant, in tables, plots and animations.
 
-Runs every registered case study (or the plants named), prints each study's homework
-answers and errata, and writes OUT/<plant>/ (tables, answers, plots,
-animations), OUT/summary.md and OUT/index.html. Every plant folder is written
-aside and moved into OUT when the whole run succeeded: an interrupted or
-failed run leaves OUT as it was. Exit status 2 on bad arguments, 1 when a run
-fails (or, with --strict, when a provider is missing or a row is not ok), 130
-when interrupted (Ctrl-C), 0 otherwise.
+Runs every registered case study (or the plants named) and writes OUT/<plant>/
+(tables with each row's verdict against the case's specs, answers, plots,
+animations), OUT/summary.md and OUT/index.html. The console shows one progress
+bar, then one line per plant, every row that is not ok or misses its specs,
+and the files to open; homework answers go to OUT/<plant>/answers.md (printed
+with --answers or -v). ``--sweep PARAM=LOW:HIGH:N`` runs every controller of
+one plant over a grid of its true parameter instead. ``--workers N`` or
+``--scheduler ADDRESS`` run the work on Dask (the same numbers). Every plant
+folder is written aside and moved into OUT when the whole run succeeded: an
+interrupted or failed run leaves OUT as it was. Exit status 2 on bad
+arguments, 1 when a run fails (or, with --strict, when a provider is missing
+or a row is not ok), 130 when interrupted (Ctrl-C), 0 otherwise.
 """
 
 from __future__ import annotations
@@ -16,9 +21,10 @@ import contextlib
 import os
 import shutil
 import sys
+import textwrap
 import time
 
-from . import SCENARIO_NAMES, get, names
+from . import SCENARIO_NAMES, listing
 
 #: Defaults of a full run and of --quick: Monte Carlo samples of every controller (MPC included).
 FULL = {"mc": 200}
@@ -53,12 +59,22 @@ def _folder(text: str) -> str:
     return text
 
 
+def _known_names() -> list:
+    """The plants the command knows: the case files' (read without importing them), or the imported registry."""
+    if "studies.cases" in sys.modules:
+        from . import names
+
+        return list(names())
+    return list(listing.names())
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m studies", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  python -m studies --quick\n  python -m studies arm --scenario step --mc 500 --out DIR\n"
-               "  python -m studies --list")
-    p.add_argument("plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(names())})")
+               "  python -m studies pendulum --sweep m2=0.5:2:8 --workers 2\n  python -m studies --list")
+    p.add_argument("plants", nargs="*", metavar="PLANT",
+                   help=f"plants to study (default all: {', '.join(_known_names())})")
     p.add_argument("--scenario", action="append", metavar="NAME",
                    help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}")
     p.add_argument("--mc", type=_count, metavar="N",
@@ -73,59 +89,77 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=2, metavar="N",
                    help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
                         "everything in this process)")
-    p.add_argument("--list", action="store_true", help="list plants, scenarios and controllers, run nothing")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="run on a Dask LocalCluster of N worker processes: the plants, or one plant's Monte Carlo "
+                        "samples and sweep points (the same numbers as without Dask)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on the Dask cluster of this scheduler (tcp://host:8786); its workers must import "
+                        "this package")
+    p.add_argument("--sweep", metavar="PARAM=LOW:HIGH:N",
+                   help="instead of the study: every controller of one plant on N values of its true parameter "
+                        "PARAM from LOW to HIGH (writes OUT/PLANT/sweep.csv, sweep.png, sweep.md)")
+    p.add_argument("--list", action="store_true",
+                   help="list plants, scenarios and declared controllers (designs nothing, runs nothing)")
     p.add_argument("--provider", action="append", default=[], metavar="MODULE:FUNCTION",
                    help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 on a missing or failing provider (before running), on a controller error, and "
                         "when any row is not ok (degraded, diverged, failed or skipped)")
-    p.add_argument("--quiet", action="store_true", help="do not print the homework answers (still written)")
+    p.add_argument("--answers", action="store_true",
+                   help="print the homework answers and errata (always written to OUT/<plant>/answers.md)")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the answers and every note as well")
+    p.add_argument("--quiet", action="store_true", help="no progress bar: only the closing lines")
     return p
 
 
 class Progress:
-    """One progress bar over every plant's simulations on a terminal; occasional lines otherwise (logs, CI).
+    """One tqdm bar over every plant's runs, its total fixed before the run starts.
 
-    `update(plant, done, total, text)` is called after each simulation of a plant;
-    the bar counts the simulations of the plants started so far.
+    Each plant has a share of the total: its declared controllers times its scenarios (from the
+    case files, `studies.listing`). `update(plant, done, total, text)` after each simulation moves
+    the bar to the plant's share times done/total, so controllers a provider adds or lacks change
+    the pace, never the total.
     """
 
-    def __init__(self, plants, stream=sys.stderr, width: int = 28, every: float = 10.0):
-        self.plants, self.stream, self.width, self.every = list(plants), stream, width, every
-        self.tty = stream.isatty()
-        self.started = time.perf_counter()
-        self.last = -float("inf")
-        self.counts: dict = {}
+    def __init__(self, slots: dict, stream=None, disable: bool = False):
+        from tqdm import tqdm
+
+        stream = stream or sys.stderr
+        tty = stream.isatty()
+        self.slots = dict(slots)
+        self.done = dict.fromkeys(self.slots, 0.0)
+        self.bar = tqdm(total=sum(self.slots.values()), unit="run", file=stream, disable=disable,
+                        dynamic_ncols=True, mininterval=0.2 if tty else 20.0, ascii=not tty,
+                        bar_format="{desc} {percentage:3.0f}%|{bar}| {n}/{total} runs [{elapsed}<{remaining}]"
+                                   "{postfix}", desc=f"{len(self.slots)} plant{'s' * (len(self.slots) > 1)}")
 
     def update(self, plant: str, done: int, total: int, text: str) -> None:
-        self.counts[plant] = (done, total)
-        done_all = sum(d for d, _ in self.counts.values())
-        total_all = sum(t for _, t in self.counts.values())
-        finished = sum(d == t for d, t in self.counts.values())
-        elapsed = time.perf_counter() - self.started
-        head = f"{finished}/{len(self.plants)} plants, {done_all}/{total_all} runs, {elapsed:6.1f} s"
-        if self.tty:
-            filled = int(self.width * done_all / max(total_all, 1))
-            line = f"\r[{'#' * filled}{'-' * (self.width - filled)}] {head}  {text}"
-            self.stream.write(line[:150].ljust(110))
-            self.stream.flush()
-        elif elapsed - self.last >= self.every or done == total:
-            self.last = elapsed
-            self.stream.write(f"{head}: {text}\n")
-            self.stream.flush()
+        self.done[plant] = self.slots.get(plant, 0) * min(done, total) / max(total, 1)
+        reached = int(round(sum(self.done.values())))
+        self.bar.set_postfix_str(text[:50], refresh=False)
+        if reached > self.bar.n:
+            self.bar.update(reached - self.bar.n)
 
     def close(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
+        self.bar.close()
+
+
+def progress_slots(plants, scenarios, settings: dict) -> dict:
+    """plant -> runs it is expected to make: declared controllers x the scenarios it will run."""
+    slots = {}
+    for name in plants:
+        listed = listing.get(name) if name in listing.names() else None
+        declared = listed.scenarios if listed else SCENARIO_NAMES
+        chosen = [s for s in declared if (scenarios is None or s in scenarios)
+                  and not (s == "mc" and settings.get("mc") == 0)]
+        slots[name] = max(1, len(chosen) * len(listed.controllers if listed else (1,)))
+    return slots
 
 
 def _scenarios(values, p: argparse.ArgumentParser):
     if not values:
         return None
     names = [n.strip() for v in values for n in v.split(",") if n.strip()]
-    if not names:
-        p.error(f"--scenario names no scenario; valid scenarios: {', '.join(SCENARIO_NAMES)}")
     unknown = [n for n in names if n not in SCENARIO_NAMES]
     if unknown:
         p.error(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
@@ -133,55 +167,120 @@ def _scenarios(values, p: argparse.ArgumentParser):
 
 
 def _list(plants, providers) -> str:
-    from .runner import design_controllers
-
-    lines = ["plants: " + ", ".join(names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
+    """Plants, scenarios and declared controllers, read from the case files (nothing designed or imported)."""
+    lines = ["plants: " + ", ".join(_known_names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
     for name in plants:
-        study = get(name)
-        found, notes = design_controllers(study, study.known_plant(), list(study.providers) + providers)
-        lines.append(f"{name}: {study.source}")
-        lines.append("  scenarios: " + ", ".join(f"{s.name} ({s.title})" for s in study.scenarios))
-        lines.append("  controllers: " + (", ".join(found) if found else "none available yet"))
-        lines += [f"  note: {n}" for n in notes]
+        listed = listing.get(name)
+        lines.append(f"{name}: {listed.source}")
+        lines.append("  scenarios: " + ", ".join(listed.scenarios))
+        lines.append("  controllers: " + ", ".join(listed.controllers))
+        lines += [f"  + the controllers of {spec}, named when they are designed" for spec in providers]
+    lines += ["", "Controllers are listed as each case declares them; a provider may lack some (the run notes "
+                  "which) or add others."]
     return "\n".join(lines)
 
 
-def _run_plant(name: str, settings: dict, out: str, quiet: bool, queue=None, run_id: str | None = None) -> dict:
-    """Run and write one study; returns what the command prints (picklable, for --jobs)."""
-    from . import run_study
+def _run_plant(name: str, settings: dict, out: str, answers: bool, queue=None, executor=None,
+               run_id: str | None = None) -> dict:
+    """Run and write one study; returns what the command prints (picklable, for --jobs and Dask)."""
+    from . import get, run_study
     from .answers import format_answers
-    from .writers import not_ok_rows, status_counts
+    from .writers import not_ok_rows, verdict_counts
 
     study = get(name)
     progress = None if queue is None else (lambda done, total, text: queue.put((name, done, total, text)))
-    result = run_study(study, out=out, progress=progress, run_id=run_id, **settings)
-    return {"name": name, "answers": None if quiet else format_answers(study, result.answers, result.plant.title),
-            "controllers": len(result.controllers), "rows": len(result.table), "timing": result.timing,
-            "notes": list(result.notes), "status": status_counts(result.table),
-            "not_ok": not_ok_rows(result.table)}
+    result = run_study(study, out=out, progress=progress, executor=executor, run_id=run_id, **settings)
+    table = result.table
+    return {"name": name, "answers": format_answers(study, result.answers, result.plant.title) if answers else None,
+            "controllers": len(result.controllers), "rows": len(table), "timing": result.timing,
+            "notes": list(result.notes), "best": result.best("step"), "counts": verdict_counts(table),
+            "not_ok": not_ok_lines(table), "not_ok_rows": len(not_ok_rows(table))}
 
 
-def _report(done: dict, out: str) -> None:
-    timing = done["timing"]
-    print(f"{done['name']}: {done['controllers']} controllers, {done['rows']} rows; simulations "
-          f"{timing['total_s']:.1f} s, files {timing.get('files_s', float('nan')):.1f} s "
-          f"-> {os.path.join(out, done['name'], 'table.md')}", file=sys.stderr)
-    _report_status(done)
-    for note in done["notes"]:
-        print(f"  note: {note}", file=sys.stderr)
+def plant_task(task: tuple) -> tuple:
+    """One plant on a Dask worker: run it into a private folder, return its report and its files as bytes.
+
+    Nothing is written where the client can see it until every plant has come back (`install`).
+    """
+    import tempfile
+    from pathlib import Path
+
+    name, settings, answers, run_id = task
+    with tempfile.TemporaryDirectory(prefix="studies-") as folder:
+        report = _run_plant(name, settings, folder, answers, run_id=run_id)
+        files = {str(path.relative_to(folder)): path.read_bytes()
+                 for path in sorted(Path(folder).rglob("*")) if path.is_file()}
+    return report, files
 
 
-def _report_status(done: dict) -> None:
-    """The count of each row status, and every row that is not ok (skipped rows grouped by reason)."""
-    print("  rows: " + ", ".join(f"{n} {kind}" for kind, n in done["status"].items() if n), file=sys.stderr)
-    skipped: dict = {}
-    for controller, scenario, status in done["not_ok"]:
-        if status.startswith("skipped"):
-            skipped.setdefault(status, []).append(f"{controller} / {scenario}")
-        else:
-            print(f"  {status.split(':')[0].split()[0].upper()}: {controller} / {scenario}: {status}", file=sys.stderr)
-    for status, where in skipped.items():
-        print(f"  SKIPPED {len(where)}: {status.partition(': ')[2]} ({', '.join(where)})", file=sys.stderr)
+def install(out: str, files: dict) -> None:
+    """Write the plants' folders {relative path: bytes} into `out`, each plant folder replaced as a whole."""
+    import shutil
+    import uuid
+    from pathlib import Path
+
+    from models.files import write_bytes
+
+    folder = Path(out)
+    staging = folder / f".staging-{uuid.uuid4().hex[:8]}"
+    try:
+        for relative, data in files.items():
+            write_bytes(staging / relative, data)
+        for plant in sorted(p for p in staging.iterdir() if p.is_dir()):
+            target, old = folder / plant.name, folder / f".old-{plant.name}-{staging.name[9:]}"
+            if target.exists():
+                target.rename(old)
+            plant.rename(target)
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def not_ok_lines(table, width: int = 118) -> list:
+    """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".
+
+    Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
+    scenarios, so the list stays short while naming every (controller, scenario).
+    """
+    scenarios = list(dict.fromkeys(table.scenario))
+    groups: dict = {}
+    for row in table.to_dict("records"):
+        verdict, status = str(row.get("verdict")), str(row.get("status"))
+        if verdict == "meets specs" and status == "ok":
+            continue
+        key = verdict if verdict != "meets specs" else status.split(":")[0]
+        groups.setdefault(key, {}).setdefault(row["controller"], []).append(row["scenario"])
+    lines = []
+    for key, by_controller in groups.items():
+        by_set: dict = {}
+        for controller, where in by_controller.items():
+            tag = "all" if where == scenarios else ", ".join(where)
+            by_set.setdefault(tag, []).append(controller)
+        text = "; ".join(f"{', '.join(controllers)} [{tag}]" for tag, controllers in by_set.items())
+        lines += textwrap.wrap(f"{key}: {text}", width, initial_indent="  ", subsequent_indent="      ")
+    return lines
+
+
+def _plant_line(done: dict) -> str:
+    plural = {"meets specs": "meet specs", "violates": "violate"}
+    counts = ", ".join(f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items()
+                       if n)
+    best = f"; best step ITAE: {done['best']}" if done.get("best") else ""
+    return f"{done['name']}: {done['controllers']} controllers, {done['rows']} rows: {counts or 'no verdicts'}{best}"
+
+
+def closing_lines(finished: list, out: str, verbose: bool = False) -> list:
+    """What the run ends with: a line per plant, each followed by its rows that are not ok, and the paths."""
+    lines = []
+    for done in finished:
+        lines.append(_plant_line(done))
+        lines += done["not_ok"]
+        failures = [n for n in done["notes"] if "failed" in n and not n.startswith("not provided")]
+        lines += [f"  note: {n}" for n in (done["notes"] if verbose else failures)]
+    lines.append(f"open {os.path.join(out, 'index.html')} (every plant at a glance) or "
+                 f"{os.path.join(out, 'summary.md')}; {os.path.join(out, '<plant>', 'table.md')} says what each "
+                 "row misses, and by how much")
+    return lines
 
 
 @contextlib.contextmanager
@@ -225,7 +324,7 @@ def check_resources(plants, settings: dict) -> None:
     (`models.checks.ResourceLimitError` naming the samples and the limit)."""
     import models
 
-    from . import runner
+    from . import get, runner
 
     keys = ("scenarios", "mc", "seed")
     options = runner.Options(**{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items() if k in keys})
@@ -244,49 +343,125 @@ class _Inline:
         self.progress.update(*item)
 
 
-def _run_all(plants, settings: dict, providers: list, out: str, quiet: bool, jobs: int,
-             run_id: str | None = None) -> list:
-    progress = Progress(plants)
+def _run_all(plants, settings: dict, providers: list, out: str, answers: bool, jobs: int, progress: Progress,
+             executor=None, run_id: str | None = None) -> list:
+    from . import get
+
     # Parallel jobs take the plants last-registered first (the text's later plants, such as the crane, run
     # longest, so the jobs finish together); every order writes the same tables.
     order = list(reversed(plants))
     per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in plants}
     finished = []
-    try:
-        if jobs == 1:
-            for name in plants:
-                finished.append(_run_plant(name, per_plant[name], out, quiet, _Inline(progress), run_id))
-            return finished
-        import concurrent.futures
-        import multiprocessing
-        import queue as queue_module
+    if executor is not None and executor.distributed and len(plants) > 1:
+        import uuid
 
-        context = multiprocessing.get_context("spawn")
-        with context.Manager() as manager, \
-                concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool, _stop_workers_on_error():
-            messages = manager.Queue()
-            pending = {pool.submit(_run_plant, name, per_plant[name], out, quiet, messages, run_id)
-                       for name in order}
-            while pending:
-                try:
-                    progress.update(*messages.get(timeout=0.2))
-                except queue_module.Empty:
-                    pass
-                done = {f for f in pending if f.done()}
-                for future in done:
-                    finished.append(future.result())
-                pending -= done
-            while not messages.empty():
-                progress.update(*messages.get())
+        from distributed import as_completed
+
+        run = uuid.uuid4().hex[:8]
+        futures = [executor.client.submit(plant_task, (name, per_plant[name], answers, run_id), pure=False,
+                                          key=f"plant-{name}-{run}") for name in order]
+        reports: list = []
+        files: dict = {}
+        try:
+            for future in as_completed(futures):  # as they finish, so the bar moves
+                report, written = _gather(future)
+                reports.append(report)
+                files |= written
+                progress.update(report["name"], 1, 1, f"{report['name']} done")
+        finally:
+            executor.client.cancel(futures)
+        install(out, files)
+        return reports
+    if jobs == 1 or (executor is not None and executor.distributed):
+        for name in plants:
+            finished.append(_run_plant(name, per_plant[name], out, answers, _Inline(progress), executor, run_id))
         return finished
-    finally:
+    import concurrent.futures
+    import multiprocessing
+    import queue as queue_module
+
+    context = multiprocessing.get_context("spawn")
+    with context.Manager() as manager, \
+            concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool, _stop_workers_on_error():
+        messages = manager.Queue()
+        pending = {pool.submit(_run_plant, name, per_plant[name], out, answers, messages, None, run_id)
+                   for name in order}
+        while pending:
+            try:
+                progress.update(*messages.get(timeout=0.2))
+            except queue_module.Empty:
+                pass
+            done = {f for f in pending if f.done()}
+            for future in done:
+                finished.append(future.result())
+            pending -= done
+        while not messages.empty():
+            progress.update(*messages.get())
+    return finished
+
+
+def _gather(future):
+    """A plant task's result, with a dead worker reported as `studies.distributed.RunFailed`."""
+    from distributed import KilledWorker
+
+    from .distributed import RunFailed
+
+    try:
+        return future.result()
+    except KilledWorker as err:
+        raise RunFailed(f"{future.key}: a Dask worker died while running it and the scheduler gave up after "
+                        f"retrying ({err}); nothing was written") from None
+
+
+def _run_sweep(args, p, plants, settings, progress_stream) -> int:
+    from . import get, runner
+    from .distributed import connect
+    from .sweep import Grid, run_sweep, sweep_summary, write_sweep
+
+    if len(plants) != 1:
+        p.error(f"--sweep runs one plant; name exactly one, got {len(plants)}")
+    try:
+        grid = Grid.parse(args.sweep)
+    except ValueError as err:
+        p.error(str(err))
+    scenario = (settings["scenarios"] or ["step"])
+    if len(scenario) != 1 or scenario[0] == "mc":
+        p.error(f"--sweep runs one scenario other than mc; got {', '.join(scenario)}")
+    import models
+
+    name = plants[0]
+    plant = models.get(name)
+    if grid.param not in plant.params:
+        p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
+    options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
+    study = get(name)
+    progress = Progress({name: len(listing.get(name).controllers)}, progress_stream, disable=args.quiet)
+    started = time.perf_counter()
+    try:
+        with connect(args.scheduler, args.workers) as executor:
+            table, notes = run_sweep(study, grid, scenario=scenario[0], options=options,
+                                     providers=list(study.providers) + args.provider, executor=executor,
+                                     progress=lambda done, total, text: progress.update(name, done, total, text))
+    except Exception as err:
         progress.close()
+        print(f"python -m studies: the sweep failed: {type(err).__name__}: {err}", file=sys.stderr)
+        return 1
+    progress.close()
+    write_sweep(study, grid, table, args.out, notes, scenario[0])
+    lines = [f"{name}: {table.controller.nunique()} controllers x {len(grid.values)} values of {grid.param} "
+             f"({grid.values[0]:g} to {grid.values[-1]:g}), scenario {scenario[0]}", *sweep_summary(table, grid)]
+    lines += [f"  note: {n}" for n in notes if args.verbose or "failed" in n]
+    folder = os.path.join(args.out, name)
+    lines.append(f"open {os.path.join(folder, 'sweep.png')} (cost and verdict against {grid.param}), "
+                 f"{os.path.join(folder, 'sweep.md')} and sweep.csv; {time.perf_counter() - started:.1f} s")
+    print("\n".join(lines))
+    return 0
 
 
 def main(argv=None) -> int:
     p = parser()
     args = p.parse_args(argv)
-    registered = names()
+    registered = _known_names()
     plants = args.plants or list(registered)
     unknown = [name for name in plants if name not in registered]
     if unknown:
@@ -298,17 +473,20 @@ def main(argv=None) -> int:
             p.error(f"--provider needs MODULE:FUNCTION, got {spec!r}")
     if args.jobs < 1:
         p.error(f"--jobs must be >= 1, got {args.jobs}")
+    if args.workers is not None and args.workers < 1:
+        p.error(f"--workers must be >= 1, got {args.workers}")
+    if args.workers is not None and args.scheduler:
+        p.error("give --workers (a local Dask cluster) or --scheduler (an existing one), not both")
     if args.list:
         print(_list(plants, args.provider))
         return 0
     defaults = dict(QUICK if args.quick else FULL)
-    jobs = min(args.jobs, len(plants))
+    dask = args.workers is not None or bool(args.scheduler)
+    jobs = 1 if dask else min(args.jobs, len(plants))
     settings = {"scenarios": scenarios, "mc": defaults["mc"] if args.mc is None else args.mc,
                 "seed": args.seed, "quick": args.quick, "strict": args.strict, "threads": max(1, 2 // jobs)}
 
     from models import checks, files, interrupts
-
-    from . import writers
 
     try:
         check_resources(plants, settings)
@@ -324,23 +502,36 @@ def main(argv=None) -> int:
         files.check_writable(args.out)
     except OSError as err:
         p.error(str(err))
+    if args.sweep:
+        return _run_sweep(args, p, plants, settings, sys.stderr)
+
+    from . import writers
+    from .distributed import connect
+
+    answers = args.answers or args.verbose
     started = time.perf_counter()
     run_id = writers.new_run_id()
     staging = writers.new_staging(args.out, run_id)
+    progress = Progress(progress_slots(plants, scenarios, settings), disable=args.quiet)
     interrupts.watch()
     published = False
     try:
-        finished = _run_all(plants, settings, args.provider, str(staging), args.quiet, jobs, run_id)
+        with connect(args.scheduler, args.workers) as executor:
+            finished = _run_all(plants, settings, args.provider, str(staging), answers, jobs, progress, executor,
+                                run_id)
+        progress.close()
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
             writers.publish(staging, args.out, registered, run_id)
             published = True
     except Exception as err:
+        progress.close()
         if not interrupts.is_interrupt(err):  # an interrupt CasADi reported as an error is handled below
             print(f"python -m studies: failed: {type(err).__name__}: {err}; nothing of this run was written to "
                   f"{args.out}", file=sys.stderr)
             return 1
         interrupted = True
     except KeyboardInterrupt:
+        progress.close()
         interrupted = True
     else:
         interrupted = False
@@ -350,18 +541,18 @@ def main(argv=None) -> int:
         print("python -m studies: interrupted" + (f"; run {run_id} was complete and is in {args.out}" if published
               else f"; nothing of this run was written to {args.out}"), file=sys.stderr)
         return 130
-    for done in sorted(finished, key=lambda d: registered.index(d["name"])):
+    finished = sorted(finished, key=lambda d: registered.index(d["name"]))
+    for done in finished:
         if done["answers"]:
             print(done["answers"], flush=True)
-        _report(done, args.out)
-    elapsed = time.perf_counter() - started
-    print(f"wrote run {run_id}: {os.path.join(args.out, 'index.html')} and {os.path.join(args.out, 'summary.md')}; "
-          f"total {elapsed:.1f} s with {jobs} job{'s' if jobs > 1 else ''}", file=sys.stderr)
-    not_ok = sum(len(done["not_ok"]) for done in finished)
+    where = (f"on Dask ({args.scheduler or f'{args.workers} local workers'})" if dask
+             else f"with {jobs} job{'s' if jobs > 1 else ''}")
+    lines = closing_lines(finished, args.out, args.verbose)
+    lines.append(f"wrote run {run_id}; total {time.perf_counter() - started:.1f} s {where}")
     if missing:
-        print(f"python -m studies: ran without {len(missing)} missing provider(s): "
-              + "; ".join(missing), file=sys.stderr)
+        lines.append(f"python -m studies: ran without {len(missing)} missing provider(s): " + "; ".join(missing))
+    not_ok = sum(done["not_ok_rows"] for done in finished)
     if args.strict and not_ok:
-        print(f"python -m studies: --strict: {not_ok} row(s) not ok (listed above)", file=sys.stderr)
-        return 1
-    return 0
+        lines.append(f"python -m studies: --strict: {not_ok} row(s) not ok (listed above)")
+    print("\n".join(lines), flush=True)
+    return 1 if args.strict and not_ok else 0

@@ -38,3 +38,8 @@ def marker(x, y, size, up=True) -> list:
     """A small triangle pointing at (x, y) from below (up=True) or above."""
     h = size if up else -size
     return [(x, y), (x - size / 2, y - h), (x + size / 2, y - h)]
+
+
+def text(position, string: str, color=REFERENCE) -> dict:
+    """A text label centred at `position` (world coordinates, m)."""
+    return {"k": "text", "p": list(position), "s": str(string), "c": color}

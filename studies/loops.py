@@ -213,7 +213,7 @@ def analyse(plant: models.Plant, case, controllers: dict, reference_value: float
     loops : label -> {"input": LoopGain, and for a Cascade also "inner" and "outer"}
     notes : controllers left out and why
     """
-    out, notes = {}, []
+    out, notes, unrested = {}, [], {}
     for label, controller in controllers.items():
         if not isinstance(controller, Block):
             notes.append(f"{label}: not a Block (it optimizes each step), no linear loop analysis")
@@ -235,9 +235,11 @@ def analyse(plant: models.Plant, case, controllers: dict, reference_value: float
             notes.append(f"{label}: no loop analysis ({type(err).__name__}: {err})")
             continue
         if point.residual > 1e-6:
-            notes.append(f"{label}: the loop does not come to rest under a constant command (|f| = "
-                         f"{point.residual:.2g}); linearized about its final state")
+            unrested[label] = point.residual
         out[label] = found
+    if unrested:
+        notes.append(f"linearized about the final state of their run, where the loop is not exactly at rest under "
+                     f"the constant command (|f| up to {max(unrested.values()):.2g}): {', '.join(unrested)}")
     return out, notes
 
 

@@ -20,28 +20,28 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from models import files  # noqa: E402
 
+from . import style  # noqa: E402
+
 #: Commands beyond this multiple of the actuator limit are cut off in input plots (and the plot says so).
 INPUT_PLOT_RANGE = 3.0
 
-_STYLES = ["-", "--", "-.", ":"]
-
-
-def _color(i: int):
-    return matplotlib.colormaps["tab20"](i % 20 / 20 + 0.025) if i >= 10 else matplotlib.colormaps["tab10"](i)
-
-
-def _figure(width: float, height: float) -> Figure:
+def figure(width: float, height: float) -> Figure:
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig
 
 
-def _legend_below(fig: Figure, handles, labels, ncol: int, top: float = 0.9, hspace: float = 0.25) -> None:
-    """A figure legend under the axes, with room made for it (no layout engine: it is slow)."""
+def legend_below(fig: Figure, handles, labels, ncol: int | None = None, top: float = 0.9,
+                 hspace: float = 0.25, left: float = 0.09) -> None:
+    """A figure legend under the axes, with room made for it (no layout engine: it is slow).
+
+    `ncol` defaults to as many columns of the labels as fit across the figure (`style.legend_columns`).
+    """
+    ncol = ncol or style.legend_columns(labels, fig.get_figwidth())
     rows = -(-len(labels) // ncol)
     height = fig.get_figheight()
     bottom = (0.45 + 0.2 * rows) / height + 0.06
-    fig.subplots_adjust(left=0.09, right=0.98, top=top, bottom=bottom, hspace=hspace, wspace=0.3)
+    fig.subplots_adjust(left=left, right=0.98, top=top, bottom=bottom, hspace=hspace, wspace=0.3)
     fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
 
 
@@ -69,31 +69,29 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
         return None
     study, case = result.study, result.study
     scale, unit = tracked_scale(study.tracked_unit)
-    fig = _figure(9, 6.5)
+    fig = figure(9, 6.5)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
     limit = float(np.max(result.plant.input_limit))
     widest = INPUT_PLOT_RANGE * max(float(np.max(run.input_limit)) for _, run in runs)
     clipped = False
-    for i, (label, run) in enumerate(runs):
-        style = dict(color=_color(i), linestyle=_STYLES[(i // 10) % len(_STYLES)], linewidth=1.3)
+    for label, run in runs:
+        line = style.of(label).line()
         tag = label if run.diverged_at is None else f"{label} (diverged at {run.diverged_at:.3g} s)"
         y = run.x[:, run.state_names.index(case.tracked)] * scale
-        top.plot(run.t, y, label=tag, **style)
+        top.plot(run.t, y, label=tag, **line)
         u = run.u[:, 0]
         clipped |= bool(np.any(np.abs(u) > widest))
-        bottom.step(run.t[:-1], np.clip(u, -widest, widest), where="post",
-                    **style)
+        bottom.step(run.t[:-1], np.clip(u, -widest, widest), where="post", **line)
     reference = runs[0][1]
-    top.plot(reference.t, reference.r[:, 0] * scale, color="black", linestyle=(0, (4, 3)), linewidth=1,
-             label="reference")
+    top.plot(reference.t, reference.r[:, 0] * scale, label="reference", **style.REFERENCE)
     for sign in (1, -1):
-        bottom.axhline(sign * limit, color="red", linestyle="--", linewidth=1,
+        bottom.axhline(sign * limit, color=style.LIMIT_COLOR, linestyle="--", linewidth=1,
                        label=f"actuator limit ±{limit:g} {study.input_unit}" if sign > 0 else None)
-    for i, (label, run) in enumerate(runs):
+    for label, run in runs:
         own = float(np.max(run.input_limit))
         if own != limit:  # a design the text gives its own actuator
             for sign in (1, -1):
-                bottom.axhline(sign * own, color=_color(i), linestyle=":", linewidth=1,
+                bottom.axhline(sign * own, color=style.of(label).color, linestyle=":", linewidth=1,
                                label=f"{label}: its limit ±{own:g} {study.input_unit}" if sign > 0 else None)
     top.set_ylabel(f"{case.tracked} ({unit})")
     bottom.set_ylabel(f"commanded {result.plant.input_names[0]} ({study.input_unit})")
@@ -105,7 +103,7 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
     bottom.legend(loc="upper right", fontsize=7)
-    _legend_below(fig, *top.get_legend_handles_labels(), ncol=4, hspace=0.12 if not clipped else 0.2)
+    legend_below(fig, *top.get_legend_handles_labels(), hspace=0.12 if not clipped else 0.2)
     return save(fig, path, dpi)
 
 
@@ -118,16 +116,17 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     items = list(result.envelopes.items())
     cols = min(3, len(items))
     rows = -(-len(items) // cols)
-    fig = _figure(4 * cols, 2.6 * rows + 0.6)
+    fig = figure(4 * cols, 2.6 * rows + 0.6)
     axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, squeeze=False)).ravel()
     for ax, (label, env) in zip(axes, items):
         t = env.t
-        ax.fill_between(t, env.tracked[0] * scale, env.tracked[-1] * scale, color="tab:blue", alpha=0.2,
+        color = style.of(label).color
+        ax.fill_between(t, env.tracked[0] * scale, env.tracked[-1] * scale, color=color, alpha=0.2,
                         linewidth=0, label="min–max")
-        ax.fill_between(t, env.tracked[1] * scale, env.tracked[-2] * scale, color="tab:blue", alpha=0.4,
+        ax.fill_between(t, env.tracked[1] * scale, env.tracked[-2] * scale, color=color, alpha=0.4,
                         linewidth=0, label="5–95 %")
-        ax.plot(t, env.tracked[2] * scale, color="tab:blue", linewidth=1, label="median")
-        ax.plot(t, env.reference * scale, color="black", linestyle=(0, (4, 3)), linewidth=0.8, label="reference")
+        ax.plot(t, env.tracked[2] * scale, label="median", **style.of(label).line(1.0))
+        ax.plot(t, env.reference * scale, label="reference", **style.REFERENCE)
         note = f", {env.diverged} diverged" if env.diverged else ""
         ax.set_title(f"{label} ({env.samples} samples{note})", fontsize=9)
         ax.grid(True, alpha=0.3)
@@ -164,19 +163,18 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
     if not chosen:
         return None
     omega = _frequency_grid([lp for _, lp in chosen], spec)
-    fig = _figure(9, 6.5)
+    fig = figure(9, 6.5)
     mag, phase = fig.subplots(2, 1, sharex=True)
-    for i, (label, lp) in enumerate(chosen):
+    for label, lp in chosen:
         response = lp.frequency_response(omega)
         text = label
         if checks and label in checks:
             verdict = ", ".join(f"{k}: {'met' if v else 'missed' if v is not None else 'n/a'}"
                                 for k, v in checks[label].items())
             text += f" ({verdict})" if verdict else ""
-        width = 2.2 if label == spec.design else 1.1
-        style = dict(color=_color(i), linewidth=width, linestyle=_STYLES[(i // 10) % len(_STYLES)])
-        mag.semilogx(omega, 20 * np.log10(np.abs(response)), label=text, **style)
-        phase.semilogx(omega, np.degrees(np.unwrap(np.angle(response))), **style)
+        line = style.of(label).line(2.2 if label == spec.design else 1.1)
+        mag.semilogx(omega, 20 * np.log10(np.abs(response)), label=text, **line)
+        phase.semilogx(omega, np.degrees(np.unwrap(np.angle(response))), **line)
     baseline = loops.get(spec.baseline, {}).get(spec.loop) if spec.baseline else None
     if baseline is not None:
         base = np.abs(baseline.frequency_response(omega))
@@ -215,7 +213,7 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
     phase.set_xlabel("ω (rad/s)")
     for ax in (mag, phase):
         ax.grid(True, which="both", alpha=0.3)
-    _legend_below(fig, *mag.get_legend_handles_labels(), ncol=2, top=0.94, hspace=0.12)
+    legend_below(fig, *mag.get_legend_handles_labels(), top=0.94, hspace=0.12)
     return save(fig, path, dpi)
 
 
@@ -238,7 +236,7 @@ def root_loci(result, loops: dict, path: Path, dpi: int = 110, gains: int = 300)
         return None
     cols = min(3, len(chosen))
     rows = -(-len(chosen) // cols)
-    fig = _figure(4 * cols, 3.4 * rows + 0.5)
+    fig = figure(4 * cols, 3.4 * rows + 0.5)
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
     for ax, (label, lp) in zip(axes, chosen):
         locus = np.concatenate([lp.s_plane(lp.closed_loop_poles(k)) for k in np.logspace(-2, 2, gains)])
@@ -268,14 +266,15 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     """Closed-loop poles (s = ln(z)/Ts) of every block controller and the plant's open-loop poles."""
     if not loops:
         return None
-    fig = _figure(8, 6.5)
+    fig = figure(8, 6.5)
     ax = fig.subplots()
     everything = []
-    for i, (label, found) in enumerate(loops.items()):
+    for label, found in loops.items():
         lp = found["input"]
         poles = lp.s_plane(lp.closed_loop_poles(1.0))
         everything.append((poles, lp.sample_period))
-        ax.scatter(poles.real, poles.imag, marker="x+sd^v<>p*h"[i % 11], color=_color(i), s=36, label=label)
+        look = style.of(label)
+        ax.scatter(poles.real, poles.imag, marker=look.marker, color=look.color, s=36, label=label)
     plant_poles = np.linalg.eigvals(result.plant.linearize().A)
     ax.scatter(plant_poles.real, plant_poles.imag, marker="o", facecolors="none", edgecolors="black", s=60,
                label="plant (open loop)")
@@ -288,5 +287,5 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     ax.set_ylabel("Im s (rad/s)")
     ax.set_title(f"{result.plant.title}: closed-loop poles, exact linearization at rest, s = ln(z)/Ts",
                  fontsize=10)
-    _legend_below(fig, *ax.get_legend_handles_labels(), ncol=4, top=0.94)
+    legend_below(fig, *ax.get_legend_handles_labels(), top=0.94)
     return save(fig, path, dpi)

@@ -23,8 +23,8 @@ import math
 import shutil
 import time
 import traceback
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -32,9 +32,9 @@ import pandas as pd
 import models
 import models.closed_loop
 from designs.pid import SIGMA
-from models import Block, checks, interrupts, metrics
+from models import Block, checks, interrupts, metrics, specs
 
-from . import SCENARIO_NAMES
+from . import SCENARIO_NAMES, distributed
 from .case import CaseStudy, Scenario
 
 #: Work (samples x steps x instructions of the plant's RK4 step and the controller's step) from which
@@ -373,8 +373,9 @@ def _solver_issues(result) -> float:
     return float(solver_counts(result.status)[1])
 
 
-def _use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
-             substeps: int = 10) -> bool:
+def use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
+            substeps: int = 10) -> bool:
+    """Whether to JIT-compile a Monte Carlo map of `samples` runs of `steps` (`Options.jit`, `JIT_THRESHOLD`)."""
     if options.jit != "auto":
         return bool(options.jit)
     instructions = (plant.step_function(controller.sample_period, substeps).n_instructions()
@@ -428,8 +429,8 @@ def check_resources(study: CaseStudy, options: Options, n_params: int) -> None:
 
 
 def run_study(study: CaseStudy, options: Options | None = None, *, providers: Sequence[str] | None = None,
-              controllers: Mapping | None = None, progress: Callable[[int, int, str], None] | None = None
-              ) -> StudyResult:
+              controllers: Mapping | None = None, progress: Callable[[int, int, str], None] | None = None,
+              executor=None) -> StudyResult:
     """Run every controller of `study` through its scenarios on the nonlinear plant.
 
     Parameters
@@ -439,10 +440,17 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
     providers : replace the study's provider list (``module:function`` strings)
     controllers : extra {label: controller} added after the providers' (for example your own design)
     progress : called as progress(done, total, text) after each simulation
+    executor : where the Monte Carlo of Block controllers runs: None (this process), a
+        `dask.distributed.Client` or a `studies.distributed` executor; the numbers are the same
 
     Returns
     -------
     StudyResult
+
+    Raises
+    ------
+    studies.distributed.RunFailed
+        When work sent to a Dask cluster could not complete (never noted as a failed row).
     """
     if not isinstance(study, CaseStudy):
         raise TypeError(f"study must be a CaseStudy, got {type(study).__name__} {study!r}")
@@ -454,6 +462,7 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
         raise TypeError(f"controllers must be a dict {{label: controller}}, got {type(controllers).__name__}")
     if progress is not None and not callable(progress):
         raise TypeError(f"progress must be a function progress(done, total, text), got {progress!r}")
+    executor = distributed.executor_of(executor)
     plant = models.get(study.plant)
     check_resources(study, options, plant.n_params)
     interrupts.watch()  # Ctrl-C stops the study even where CasADi swallows it
@@ -476,7 +485,6 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
         scenarios = [s for s in scenarios if not s.monte_carlo]
     xe, base = tracked_equilibrium(plant, case)
     tracked_index = plant.state_names.index(case.tracked)
-    bounds = study.state_bounds(plant.params)
 
     rows, sample_rows, runs, envelopes = [], [], {}, {}
     total, done = len(designed) * len(scenarios), 0
@@ -491,13 +499,18 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
             try:
                 if scenario.monte_carlo:
                     row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
-                                        sample_rows, envelopes, label)
+                                        sample_rows, envelopes, label, executor)
                 else:
-                    result = _simulate(truth, controller, scenario, case, options, base, study.substeps)
+                    result = simulate_scenario(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
-                    row |= metrics.run_metrics(result, case.tracked, bounds)
+                    judged = study.specs_for(scenario.name, truth.params)
+                    row |= metrics.run_metrics(result, case.tracked, judged.state_bounds)
                     row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
                             "solver_issues": _solver_issues(result)}
+                    row |= verdict_columns(specs.judge(judged, result, case.tracked, case.step, row["status"],
+                                                       measured=row))
+            except distributed.RunFailed:
+                raise
             except Exception as err:
                 if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
                     raise KeyboardInterrupt from err
@@ -505,6 +518,7 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                     raise
                 row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
                 row |= {"status": f"failed: {type(err).__name__}: {err}".splitlines()[0][:200]}
+                row |= verdict_columns(specs.Verdict(specs.FAILED, (), row["status"]))
                 notes.append(f"{label} / {scenario.name}: {row['status']}")
             elapsed = time.perf_counter() - tick
             row["wall_s"] = elapsed
@@ -532,8 +546,9 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
                        answers, truths, tuple(study.providers if providers is None else providers))
 
 
-def _simulate(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,
-              params=None):
+def simulate_scenario(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,
+                      params=None):
+    """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed."""
     noise = measurement_noise_std(plant, controller, scenario.noise) if scenario.noise else 0.0
     return models.simulate_closed_loop(
         plant, controller, scenario.reference(case, base), scenario.duration(case), params=params,
@@ -543,10 +558,10 @@ def _simulate(plant, controller, scenario: Scenario, case, options: Options, bas
 
 
 def _monte_carlo(study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes,
-                 label) -> dict:
+                 label, executor=None) -> dict:
     """The Monte Carlo row of one controller; its per-sample rows are appended to `sample_rows` (one
     DataFrame) and its envelope stored in `envelopes`. Samples are consumed as they are simulated
-    (a chunk at a time for a Block): only the tracked coordinate and the first input stay."""
+    (a chunk at a time for a Block in this process): only the tracked coordinate and the first input stay."""
     case = study
     batched = isinstance(controller, Block)
     duration = scenario.duration(case)
@@ -556,20 +571,28 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
                         f"the Monte Carlo of {label} ({count} samples of {steps} steps)", "give fewer samples (mc)")
     # The same seeded samples for every controller.
     samples = models.sample_params(plant, count, rel=scenario.rel, seed=options.seed)
-    if batched:
+    if batched and isinstance(executor, distributed.Local):
         chunks = models.monte_carlo_chunks(plant, controller, scenario.reference(case, base), duration, samples,
                                            seed=options.seed, threads=options.threads, substeps=study.substeps,
-                                           jit=_use_jit(options, plant, controller, count, steps, study.substeps))
+                                           jit=use_jit(options, plant, controller, count, steps, study.substeps))
         results = (run for chunk in chunks for run in chunk)
+    elif batched:
+        results = distributed.monte_carlo(executor, plant, controller, scenario.reference(case, base), duration,
+                                          samples, seed=options.seed, threads=options.threads,
+                                          substeps=study.substeps,
+                                          jit=use_jit(options, plant, controller, count, steps, study.substeps))
     else:
-        results = (_simulate(plant, controller, scenario, case, options, base, study.substeps, params=row)
+        results = (simulate_scenario(plant, controller, scenario, case, options, base, study.substeps, params=row)
                    for row in samples)
-    per_sample, diverged_at, tracked, inputs, step_times = [], [], [], [], []
+    per_sample, verdicts, diverged_at, tracked, inputs, step_times = [], [], [], [], [], []
     names = list(plant.params)
     counts = np.zeros(3, dtype=int)
     t = reference = None
     for result, row in zip(results, samples):
-        per_sample.append(metrics.run_metrics(result, case.tracked, study.state_bounds(dict(zip(names, row)))))
+        judged = study.specs_for(scenario.name, dict(zip(names, row)))
+        values = metrics.run_metrics(result, case.tracked, judged.state_bounds)
+        per_sample.append(values)
+        verdicts.append(specs.judge(judged, result, case.tracked, case.step, measured=values))
         if t is None:
             t, reference = np.array(result.t), np.array(result.r[:, 0])
         diverged_at.append(math.nan if result.diverged_at is None else float(result.diverged_at))
@@ -585,6 +608,8 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     for j, name in enumerate(names):
         frame.insert(2 + j, name, samples[:, j])
     frame["diverged_at_s"] = diverged_at
+    for key in ("verdict", "verdict_detail"):
+        frame[key] = [verdict_columns(v)[key] for v in verdicts]
     sample_rows.append(frame)
     diverged = [t for t in diverged_at if not math.isnan(t)]
     envelopes[label] = _envelope(t, reference, tracked, inputs, count)
@@ -595,6 +620,7 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
         status = degraded_status(*counts, what=f"steps of {count} samples") or "ok"
     out |= {"status": status, "samples": count, "diverged_samples": len(diverged),
             "diverged_at_s": min(diverged) if diverged else None}
+    out |= verdict_columns(specs.combine(verdicts))
     if not batched:
         out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate(step_times)))
         out["step_ms_max"] = 1e3 * float(np.nanmax(np.concatenate(step_times)))
@@ -602,8 +628,14 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     return out
 
 
-TABLE_COLUMNS = ("controller", "scenario", "status", *metrics.METRIC_COLUMNS, "solver_issues", "samples",
-                 "diverged_samples", "diverged_at_s", *(f"{k}_std" for k in metrics.SPREAD_COLUMNS), "kind",
+def verdict_columns(verdict: specs.Verdict) -> dict:
+    """The table's verdict columns of a `models.specs.Verdict`: its label and what it found."""
+    return {"verdict": verdict.label, "verdict_detail": verdict.detail}
+
+
+TABLE_COLUMNS = ("controller", "scenario", "status", "verdict", "verdict_detail", *metrics.METRIC_COLUMNS,
+                 "solver_issues", "samples", "diverged_samples", "diverged_at_s",
+                 *(f"{k}_std" for k in metrics.SPREAD_COLUMNS), "kind",
                  "tracked", "tracked_unit", "input_unit", "wall_s")
 
 

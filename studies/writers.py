@@ -19,8 +19,20 @@ from pathlib import Path
 
 import numpy as np
 
-from models.files import (JSON_CONVENTIONS, escape_markdown, format_number, fresh_folder, html_table,
-                          markdown_table, replace_folder, scaled, write_csv, write_json, write_text)
+from models import specs
+from models.files import (
+    JSON_CONVENTIONS,
+    escape_markdown,
+    format_number,
+    fresh_folder,
+    html_table,
+    markdown_table,
+    replace_folder,
+    scaled,
+    write_csv,
+    write_json,
+    write_text,
+)
 
 #: Columns of the study table that measure compute time: they change from run to run, so they go to
 #: timings.csv, and table.csv and monte_carlo.csv are the same bytes for the same seed and settings.
@@ -92,6 +104,7 @@ def _unit_columns(tracked_unit: str, input_unit: str) -> list:
     return [
         ("controller", "controller", format_number),
         ("scenario", "scenario", format_number),
+        ("verdict", "verdict", verdict_text),
         ("status", "status", format_number),
         ("rise_time_s", "rise (s)", scaled()),
         ("settling_time_s", "settling 2 % (s)", scaled()),
@@ -107,6 +120,43 @@ def _unit_columns(tracked_unit: str, input_unit: str) -> list:
         ("step_ms", "step (ms)", scaled()),
         ("samples", "runs", format_number),
     ]
+
+
+def verdict_text(label) -> str:
+    """A verdict label with its symbol ("✓ meets specs"); empty for a missing one."""
+    from . import style
+
+    return f"{style.verdict_symbol(label)} {label}" if isinstance(label, str) and label else "—"
+
+
+def verdict_grid(table) -> tuple[list, list]:
+    """Rows (one per controller) and columns (one per scenario) of the verdict grid of a study table."""
+    scenarios = list(dict.fromkeys(table.scenario))
+    rows = []
+    for label in dict.fromkeys(table.controller):
+        mine = table[table.controller == label].set_index("scenario")
+        rows.append({"controller": label, **{s: verdict_text(mine.loc[s, "verdict"]) if s in mine.index else "—"
+                                             for s in scenarios}})
+    columns = [("controller", "controller", format_number)] + [(s, s, format_number) for s in scenarios]
+    return rows, columns
+
+
+def not_ok(table) -> list:
+    """Rows whose status is not "ok" or whose verdict is not "meets specs", as dicts."""
+    rows = table.to_dict("records")
+    return [r for r in rows if str(r.get("status")) != "ok" or r.get("verdict") != "meets specs"]
+
+
+def specs_lines(result) -> list:
+    """One line per distinct set of specs of the study's scenarios (Markdown bullets)."""
+    study, plant = result.study, result.plant
+    scenarios = [s.name for s in study.scenarios]
+    described: dict = {}
+    for name in scenarios:
+        chosen = study.specs_for(name, plant.params)
+        described.setdefault((chosen.describe(), chosen.source), []).append(name)
+    return [f"- {', '.join(names)}: {text}" + (f" ({source})" if source else "")
+            for (text, source), names in described.items()]
 
 
 def caption(result) -> str:
@@ -184,7 +234,9 @@ def write_study(result, out: str | os.PathLike, run_id: str | None = None) -> di
 def _write_files(result, folder: Path, run_id: str) -> dict:
     import pandas as pd
 
-    from . import animation, answers as answers_module, loops as loops_module, plots
+    from . import animation, plots
+    from . import answers as answers_module
+    from . import loops as loops_module
 
     started = time.perf_counter()
     study, plant, quick = result.study, result.plant, result.options.quick
@@ -244,11 +296,17 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
         notes.append(f"no animation: the {study.plant} case has no drawing")
     elif best is not None and (best, "step") in result.runs:
         run = result.runs[(best, "step")]
-        text = (f"{best}, the lowest ITAE in the step scenario; nonlinear simulation of the text's step "
-                f"({study.source}).")
         animation.write_gif(folder / "animation.gif", study, plant, run, best, max_frames=30 if quick else 100,
                             dpi=64 if quick else 80)
-        animation.write_html(folder / "animation.html", study, plant, run, best, text, max_frames=400 if quick else 800)
+        shown = {label: r for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is None}
+        left_out = [label for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is not None]
+        steps = result.table[result.table.scenario == "step"].set_index("controller")
+        verdicts = {label: verdict_text(steps.loc[label, "verdict"]) for label in shown if label in steps.index}
+        text = (f"Nonlinear simulations of the text's step ({study.source}); first shown: {best}, the lowest ITAE. "
+                "Pick a controller, and a second one as a faint ghost; the commanded input is beside the drawing "
+                "with the actuator limit." + (f" Left out (diverged): {', '.join(left_out)}." if left_out else ""))
+        animation.write_html(folder / "animation.html", study, plant, shown, best, text,
+                             max_frames=150 if quick else 300, verdicts=verdicts)
         files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
     else:
         notes.append("no animation: no controller completed the step scenario")
@@ -336,8 +394,22 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
     study, plant = result.study, result.plant
     columns = _unit_columns(study.tracked_unit, study.input_unit)
     rows = result.table.to_dict("records")
+    grid_rows, grid_columns = verdict_grid(result.table)
+    failing = not_ok(result.table)
     parts = [f"# {plant.title}: controllers compared", "", f"Run {run_id}; settings in run.json.", "",
-             caption(result), "", *status_lines(result.table), "", markdown_table(rows, columns), DEFINITIONS, ""]
+             caption(result), "", "## Verdicts against the specs", "",
+             "Specs (`models.specs`; a series of steps is judged by its worst step, a Monte Carlo by its worst "
+             "sample):", "", *specs_lines(result), "", markdown_table(grid_rows, grid_columns)]
+    if failing:
+        parts += ["What the rows that do not meet their specs miss:", ""]
+        parts += [f"- {escape_markdown(r['controller'])} / {escape_markdown(r['scenario'])}: "
+                  f"{verdict_text(r['verdict'])}"
+                  + (f" — {escape_markdown(r['verdict_detail'])}" if isinstance(r.get("verdict_detail"), str)
+                     and r["verdict_detail"] and not str(r["verdict_detail"]).startswith("skipped") else "")
+                  for r in failing]
+        parts.append("")
+    parts += ["## How the rows ran", "", *status_lines(result.table), "",
+              "## Metrics", "", markdown_table(rows, columns), DEFINITIONS, ""]
     mc_rows = [r for r in rows if r["scenario"] == "mc"]
     if mc_rows:
         angle = study.tracked_unit == "rad"
@@ -406,9 +478,20 @@ def _cell(table, controller: str, scenario: str = "step") -> str:
     if rows.empty:
         return "—"
     row = rows.iloc[0]
-    if row.status != "ok":
-        return str(row.status)
-    return f"{format_number(row.settling_time_s, 3)} s / {format_number(row.overshoot_pct, 2)} %"
+    mark = verdict_text(row.get("verdict")).split(" ")[0] if isinstance(row.get("verdict"), str) else ""
+    if row.status != "ok" and not np.isfinite(float(row.settling_time_s)):
+        return f"{mark} {str(row.status).split(':')[0]}".strip()  # the reason is in the plant's table.md
+    return f"{mark} {format_number(row.settling_time_s, 3)} s / {format_number(row.overshoot_pct, 2)} %".strip()
+
+
+#: Verdict counts reported per plant, in this order.
+COUNTED = specs.LABELS
+
+
+def verdict_counts(table) -> dict:
+    """Rows of each verdict in `COUNTED` (0 for a table without a verdict column)."""
+    verdicts = table.verdict.astype(str) if "verdict" in table else None
+    return {k: int((verdicts == k).sum()) if verdicts is not None else 0 for k in COUNTED}
 
 
 def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> Path:
@@ -417,34 +500,37 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
     Each plant says which run wrote it (and, given `run_id`, whether that is this run) and how its
     rows ran (`studies.runner.STATUS_KINDS`), listing every row that is not "ok".
     """
-    from .runner import STATUS_KINDS
 
     out = Path(out)
     studies = _read_studies(out, names)
     labels = []
     for _, _, table in studies:
         labels += [c for c in table.controller.unique() if c not in labels]
+    from . import style
+
+    legend = ", ".join(f"{symbol} {label}" for label, (symbol, _) in style.VERDICTS.items())
     lines = ["# Summary: every controller on every plant", ""]
     if run_id is not None:
         lines += [f"Run {run_id}. A plant folder written by another run says so below.", ""]
-    lines += ["Each cell: 2 % settling time / overshoot of the text's step on the nonlinear plant (from "
-              "OUT/<plant>/table.csv; ∞: not settled by the end of the run; — : controller not provided "
-              "for that plant; otherwise the row's status).", ""]
+    lines += [f"Each cell: the verdict of the text's step against the plant's specs ({legend}), then its 2 % "
+              "settling time / overshoot on the nonlinear plant (from OUT/<plant>/table.csv; ∞: not settled by "
+              "the end of the run; — : controller not provided for that plant). Each plant's table.md says which "
+              "specs a row misses and by how much.", ""]
     columns = [("controller", "controller", format_number)] + [(n, n, format_number) for n, _, _ in studies]
     rows = [{"controller": label, **{n: _cell(t, label) for n, _, t in studies}} for label in labels]
     lines += [markdown_table(rows, columns)]
     lines += ["## Per plant", ""]
     per = [{"plant": n, "run": _run_of(info, run_id), "best": info.get("best") or "—",
-            "controllers": int(t.controller.nunique()), **status_counts(t),
+            "controllers": int(t.controller.nunique()), **verdict_counts(t),
             "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
             "settings": f"mc {info['settings']['mc']}, seed {info['settings']['seed']}"
                         + (", quick" if info["settings"]["quick"] else "")} for n, info, t in studies]
     lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
-                                   for k in ("plant", "run", "best", "controllers", *STATUS_KINDS, "time",
+                                   for k in ("plant", "run", "best", "controllers", *COUNTED, "time",
                                              "settings")])]
     for n, _, table in studies:
         if not_ok_rows(table):
-            lines += ["", f"Rows of {n} that are not ok:", ""] + status_lines(table)[1:]
+            lines += ["", f"Rows of {n} that did not run as designed:", ""] + status_lines(table)[1:]
     common = set.intersection(*(set(info["notes"]) for _, info, _ in studies)) if len(studies) > 1 else set()
     if common:
         first = studies[0][1]["notes"]
@@ -473,6 +559,8 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
     says which run wrote it and lists its rows that are not "ok" (see `write_summary`)."""
     out = Path(out)
     studies = _read_studies(out, names)
+    from . import overview
+
     body = ["<h1>Case studies: every controller on every plant</h1>",
             '<p>Tables, plots and animations from nonlinear closed-loop simulations. '
             '<a href="summary.md">summary.md</a></p>']
@@ -481,6 +569,11 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
     body.append("<ul>")
     body += [f'<li><a href="#{n}">{html.escape(info["title"])}</a></li>' for n, info, _ in studies]
     body.append("</ul>")
+    if studies:
+        body += ['<section id="overview"><h2>At a glance</h2>', overview.heat_map(studies)]
+        pictures = [("scatter", overview.scatter(studies)), ("boxplots", overview.boxplots(out, studies))]
+        body += [f'<figure id="{name}">{svg}</figure>' for name, svg in pictures if svg]
+        body.append("</section>")
     for n, info, table in studies:
         files = info["files"]
         links = " · ".join(f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
@@ -492,10 +585,13 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
         if "animation.gif" in files:
             body.append(f'<p><a href="{n}/animation.html"><img src="{n}/animation.gif" '
                         f'alt="{html.escape(info["title"])} animation"></a></p>')
+        if "verdict" in table:
+            grid_rows, grid_columns = verdict_grid(table)
+            body += ["<h3>Verdicts against the specs</h3>", html_table(grid_rows, grid_columns)]
         step_rows = table[table.scenario == "step"].to_dict("records")
         if step_rows:
             columns = _unit_columns(info["tracked_unit"], info["input_unit"])
-            body.append(html_table(step_rows, [c for c in columns if c[0] != "scenario"]))
+            body += ["<h3>The step: metrics</h3>", html_table(step_rows, [c for c in columns if c[0] != "scenario"])]
         for f in files.values():
             if f.endswith(".png"):
                 body.append(f'<figure><img src="{n}/{html.escape(f)}" alt="{html.escape(f)}" loading="lazy">'
@@ -503,6 +599,10 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
     page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Case studies</title><style>"
             "body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1100px}"
             "table{border-collapse:collapse;font-size:0.8em}td,th{border:1px solid #ccc;padding:2px 6px}"
-            "img{max-width:100%}figure{margin:1em 0}</style></head><body>\n"
+            "img{max-width:100%}figure{margin:1em 0}"
+            ".heatmap td{text-align:center;min-width:5.5em}.heatmap th{text-align:left;font-weight:normal}"
+            ".heatmap caption{caption-side:bottom;text-align:left;font-size:0.9em;padding-top:0.4em}"
+            ".swatch{display:inline-block;width:0.8em;height:0.8em;margin-right:0.4em;vertical-align:middle}"
+            ".mark{font-weight:bold}</style></head><body>\n"
             + "\n".join(body) + "\n</body></html>\n")
     return write_text(out / "index.html", page)

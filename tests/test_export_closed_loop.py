@@ -15,9 +15,9 @@ import pytest
 
 import models
 import mpc
+import studies
 from models.export import export_block
 from mpc.export import export_linear_mpc
-import studies
 from studies import providers
 
 #: Plants covering every kind twice: PID and transfer-function blocks alone (arm, uuv, the

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 import models
+import models.specs
 from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
@@ -198,6 +199,14 @@ ERRATA = (
 )
 
 
+#: Specs of every scenario. The text gives the arm none: the I.8 design's second-order target (ζ = 0.707,
+#: ω_n = 4.5 rad/s, I.8(d)) settles in 4/(ζ ω_n) = 1.3 s with 4.3 % overshoot. We ask 1.5 times that
+#: settling time for the saturating 50° step (2 s), 10 % overshoot, and a steady-state error within the
+#: 2 % settling band.
+SPECS = {"*": models.specs.Specs(
+    max_settling_time_s=2.0, max_overshoot_pct=10.0, max_ss_error_pct=2.0,
+    source="stated: 1.5 x the I.8(d) design's settling time, 10 % overshoot, 2 % error")}
+
 CASE = CaseStudy(
     plant="arm", numeral="I", tracked="theta",
     design_step=np.deg2rad(50), step=np.deg2rad(50), input_disturbance=0.2, duration=5.0,
@@ -209,5 +218,6 @@ CASE = CaseStudy(
     loops=(LOOPSHAPING,),
     classical=classical, statespace=STATESPACE, mpc=MPC,
     codesign={"arm": actuator_sizing},
+    specs=SPECS,
     drawing=draw, errata=ERRATA, trajectories=TRAJECTORIES,
 )

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 import models
+import models.specs
 from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, pid_tf, steady_state_errors
@@ -21,7 +22,7 @@ from designs.loops import cascade_blocks, outer_plant_seen, successive_loop_clos
 from designs.pid import SIGMA, linearized_input_bound
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
-from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.case import CONTROLLERS, CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum
 from studies.homework import (
     SEPARATION,
@@ -257,6 +258,13 @@ ERRATA = (
 )
 
 
+#: Specs of every scenario. The text gives none: the II.8 outer loop's target (ζ = 0.707, ω_n = 0.84 rad/s,
+#: II.8(i)) settles in 4/(ζ ω_n) = 6.8 s with 4.3 % overshoot. We ask 1.5 times that settling time (10 s),
+#: 10 % overshoot, and a steady-state error within the 2 % settling band.
+SPECS = {"*": models.specs.Specs(
+    max_settling_time_s=10.0, max_overshoot_pct=10.0, max_ss_error_pct=2.0,
+    source="stated: 1.5 x the II.8(i) outer loop's settling time, 10 % overshoot, 2 % error")}
+
 CASE = CaseStudy(
     plant="pendulum", numeral="II", tracked="z",
     design_step=2.0, step=2.0, input_disturbance=0.5, duration=20.0,
@@ -264,8 +272,11 @@ CASE = CaseStudy(
     tracked_unit="m", input_unit="N",
     # II.8(h): 2 m; II.16(c): 0.5 N; noise in m, rad: the text gives no sensors; II.11(a): m1, m2, ell, b to 5 %.
     scenarios=standard_scenarios({"z": 1e-3, "theta": 1e-3}),
+    # II.8's controlbook variant of the outer loop, after the text's controllers.
+    controllers=CONTROLLERS + ("PD (zero-cancelling filter)",),
     loops=(LOOPSHAPING,),
     cascade=("theta", "z"),  # II.6(b): F -> theta (inner), theta -> z (outer)
     classical=classical, statespace=STATESPACE, mpc=MPC,
+    specs=SPECS,
     drawing=draw, errata=ERRATA, trajectories=TRAJECTORIES,
 )

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 import models
+import models.specs
 from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
@@ -253,6 +254,13 @@ ERRATA = (
 )
 
 
+#: Specs of every scenario. The text gives none, and its III.8 outer P loop is barely damped (ζ = 0.07,
+#: III.8(i)), so its settling time (140 s) is no target: we ask 2 % settling within half the 60 s run
+#: (30 s), 10 % overshoot, and a steady-state error within the 2 % settling band, as for the other cases.
+SPECS = {"*": models.specs.Specs(
+    max_settling_time_s=30.0, max_overshoot_pct=10.0, max_ss_error_pct=2.0,
+    source="stated: settling within half the run, 10 % overshoot, 2 % error")}
+
 CASE = CaseStudy(
     plant="satellite", numeral="III", tracked="phi",
     design_step=np.deg2rad(30), step=np.deg2rad(30), input_disturbance=0.5, duration=60.0,
@@ -265,5 +273,6 @@ CASE = CaseStudy(
     cascade=("theta", "phi"),  # III.6(b): tau -> theta -> phi
     classical=classical, statespace=STATESPACE, mpc=MPC,
     codesign={"satellite": panel_stiffness},
+    specs=SPECS,
     drawing=draw, errata=ERRATA,
 )

@@ -4,10 +4,26 @@ import control
 import numpy as np
 import pytest
 
-from designs.analysis import (Loop, UnstableLoopError, band_max, check_band_ratio, check_bandwidth, check_damping,
-                              dc_gain, limit_at_zero, margins,
-                              percent_input_disturbance_below, percent_noise_above, percent_output_disturbance_below,
-                              percent_tracking_error_below, pid_tf, step_info, step_response, steady_state_errors, tf)
+from designs.analysis import (
+    Loop,
+    UnstableLoopError,
+    band_max,
+    check_band_ratio,
+    check_bandwidth,
+    check_damping,
+    dc_gain,
+    limit_at_zero,
+    margins,
+    percent_input_disturbance_below,
+    percent_noise_above,
+    percent_output_disturbance_below,
+    percent_tracking_error_below,
+    pid_tf,
+    steady_state_errors,
+    step_info,
+    step_response,
+    tf,
+)
 
 # The arm about θ = 0: θ/τ = b0/(s² + a1 s), b0 = 3/(m ℓ²), a1 = 3 b/(m ℓ²).
 B0, A1 = 3 / (0.5 * 0.3**2), 3 * 0.01 / (0.5 * 0.3**2)

@@ -5,8 +5,7 @@ import control
 import numpy as np
 import pytest
 
-from designs.discrete import (back_calculation, dirty_derivative, integrate_while_slow, saturate,
-                              trapezoid)
+from designs.discrete import back_calculation, dirty_derivative, integrate_while_slow, saturate, trapezoid
 
 TS, SIGMA = 0.01, 0.05
 

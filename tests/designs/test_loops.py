@@ -7,10 +7,18 @@ import pytest
 
 import models
 from designs.analysis import as_polynomials, tf
-from designs.loops import (FilteredBlock, cascade_blocks, cascade_plants, cascade_poles, low_frequency_model,
-                           place_pair, successive_loop_closure, zero_cancelling_design, zero_cancelling_filter)
-from designs.pid import PID
-from designs.pid import pd_design
+from designs.loops import (
+    FilteredBlock,
+    cascade_blocks,
+    cascade_plants,
+    cascade_poles,
+    low_frequency_model,
+    place_pair,
+    successive_loop_closure,
+    zero_cancelling_design,
+    zero_cancelling_filter,
+)
+from designs.pid import PID, pd_design
 
 
 def _same(G, num, den):

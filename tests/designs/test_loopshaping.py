@@ -5,9 +5,16 @@ import numpy as np
 import pytest
 
 from designs.analysis import pid_tf, tf
-from designs.loopshaping import (crossover_for_bandwidth, damping_for_phase_margin, flattening_prefilter,
-                                 improve_loop, lead_for_crossover, prototype_bandwidth, prototype_crossover,
-                                 prototype_phase_margin)
+from designs.loopshaping import (
+    crossover_for_bandwidth,
+    damping_for_phase_margin,
+    flattening_prefilter,
+    improve_loop,
+    lead_for_crossover,
+    prototype_bandwidth,
+    prototype_crossover,
+    prototype_phase_margin,
+)
 
 ARM = control.tf([66.667], [1, 0.6667, 0])
 ARM_PD = ARM * pid_tf(0.3037, 0.0, 0.0854, 0.05)

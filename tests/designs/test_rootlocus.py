@@ -5,8 +5,16 @@ import numpy as np
 import pytest
 
 from designs.analysis import Loop, as_polynomials, dc_gain, step_info, tf
-from designs.rootlocus import (damping_ratios, dominant_pair, gain_leaving_damping, integrator_evans_form,
-                               integrator_gain, lag_for_static_gain, lead_by_angle, locus)
+from designs.rootlocus import (
+    damping_ratios,
+    dominant_pair,
+    gain_leaving_damping,
+    integrator_evans_form,
+    integrator_gain,
+    lag_for_static_gain,
+    lead_by_angle,
+    locus,
+)
 
 ARM = control.tf([66.667], [1, 0.6667, 0])
 

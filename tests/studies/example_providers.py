@@ -131,3 +131,16 @@ def with_own_actuator(name: str, known: models.Plant | None = None) -> dict:
     """The LQR twice, once under the label the UUV study gives its own 250 N m actuator."""
     lqr = controllers(name, known)["LQR"]
     return {"LQR": lqr, "lead-lag (IV.11)": lqr}
+
+
+def killing_the_worker(name: str, known: models.Plant | None = None) -> dict:
+    """Kills the process it runs in when that is a Dask worker (a worker lost mid-run); else `controllers`."""
+    import os
+
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return controllers(name, known)
+    os._exit(1)

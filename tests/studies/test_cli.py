@@ -3,9 +3,11 @@
 import subprocess
 import sys
 
+import pandas as pd
 import pytest
-
 from conftest import REPO, subprocess_env
+
+import studies
 
 
 def run_cli(*args, timeout=300):
@@ -20,6 +22,12 @@ def run_cli(*args, timeout=300):
     (["arm", "--scenario", "step,ramp"], "unknown scenario 'ramp'; valid scenarios: step, steps, disturbance"),
     (["arm", "--provider", "nocolon"], "--provider needs MODULE:FUNCTION"),
     (["arm", "--jobs", "0"], "--jobs must be >= 1"),
+    (["arm", "--workers", "0"], "--workers must be >= 1"),
+    (["arm", "--workers", "2", "--scheduler", "tcp://localhost:1"], "give --workers (a local Dask cluster) or"),
+    (["arm", "pendulum", "--sweep", "m=1:2:3"], "--sweep runs one plant; name exactly one, got 2"),
+    (["pendulum", "--sweep", "m2=2:1:3"], "a sweep needs finite LOW < HIGH and N >= 2 points"),
+    (["pendulum", "--sweep", "m2"], "a sweep is PARAM=LOW:HIGH:N"),
+    (["pendulum", "--sweep", "mass=1:2:3"], "pendulum has no parameter 'mass'; its parameters are m1, m2"),
 ])
 def test_bad_arguments_exit_2_with_the_documented_message(args, message):
     done = run_cli(*args)
@@ -36,22 +44,40 @@ def test_an_unwritable_output_folder_is_refused_before_running(tmp_path):
     assert "cannot write to the output folder" in done.stderr and "not-a-folder" in done.stderr
 
 
-def test_list_names_plants_scenarios_and_what_is_provided():
+def test_list_names_plants_scenarios_and_declared_controllers_without_designing():
     done = run_cli("--list", "uuv", "--provider", "example_providers:controllers")
     assert done.returncode == 0
     assert "plants: arm, pendulum, satellite, uuv, ballbeam, crane" in done.stdout
     listed = next(line for line in done.stdout.splitlines() if line.strip().startswith("controllers:"))
-    assert listed.strip().startswith("controllers: PD,") and listed.endswith("LQR fast, LQR slow")
-    assert "controller 'LQR' already provided; the first one is kept" in done.stdout
+    assert listed.strip() == "controllers: " + ", ".join(studies.get("uuv").controllers)
+    assert "+ the controllers of example_providers:controllers, named when they are designed" in done.stdout
 
 
-def test_a_small_run_prints_answers_and_writes_the_files(tmp_path):
+def test_a_small_run_writes_the_files_and_ends_with_verdicts_and_paths(tmp_path):
     out = tmp_path / "out"
     done = run_cli("uuv", "--scenario", "step", "--mc", "0", "--out", str(out), "--quick",
                    "--provider", "example_providers:controllers")
     assert done.returncode == 0, done.stderr
-    assert "IV.5" in done.stdout and "IV.6" in done.stdout and "Errata found" in done.stdout
-    for name in ("uuv/table.csv", "uuv/table.md", "uuv/answers.json", "uuv/step.png", "uuv/animation.gif",
-                 "uuv/animation.html", "summary.md", "index.html"):
+    for name in ("uuv/table.csv", "uuv/table.md", "uuv/answers.json", "uuv/answers.md", "uuv/step.png",
+                 "uuv/animation.gif", "uuv/animation.html", "summary.md", "index.html"):
         assert (out / name).exists(), name
-    assert "wrote" in done.stderr
+    # Answers go to the files, not the console; the console names every row that misses its specs.
+    assert "IV.5" not in done.stdout and "IV.5" in (out / "uuv" / "answers.md").read_text()
+    table = pd.read_csv(out / "uuv" / "table.csv")
+    lines = done.stdout.splitlines()
+    counts = table.verdict.value_counts()
+    assert lines[0].startswith(f"uuv: {table.controller.nunique()} controllers, {len(table)} rows: ")
+    plural = {"meets specs": "meet specs", "violates": "violate"}
+    assert all(f"{n} {plural.get(label, label) if n > 1 else label}" in lines[0] for label, n in counts.items())
+    listed = "\n".join(lines[1:])
+    for row in table[table.verdict != "meets specs"].itertuples():
+        assert row.controller in listed and f"{row.verdict}:" in listed
+    assert lines[-2].startswith(f"open {out / 'index.html'}") and lines[-1].startswith("total ")
+    assert len(lines) <= 40
+
+
+def test_answers_are_printed_when_asked(tmp_path):
+    done = run_cli("uuv", "--scenario", "step", "--mc", "0", "--out", str(tmp_path / "out"), "--quick",
+                   "--answers", "--provider", "example_providers:lqr_only")
+    assert done.returncode == 0, done.stderr
+    assert "IV.5" in done.stdout and "IV.6" in done.stdout and "Errata found" in done.stdout

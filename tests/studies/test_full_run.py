@@ -4,10 +4,9 @@ import json
 
 import pandas as pd
 import pytest
+from test_cli import run_cli
 
 import studies
-
-from test_cli import run_cli
 
 PER_PLANT = ("table.csv", "table.md", "answers.json", "answers.md", "monte_carlo.csv", "loops.csv", "step.png",
              "steps.png", "disturbance.png", "noise.png", "monte_carlo.png", "root_locus.png", "poles.png",
@@ -28,9 +27,15 @@ def test_quick_run_of_all_six_studies_writes_every_file(tmp_path):
         info = json.loads((out / plant / "run.json").read_text())
         assert info["settings"]["quick"] is True and info["best"] in set(table.controller)
         numeral = info["numeral"]
-        assert f"{numeral}.5" in done.stdout and f"{numeral}.7" in done.stdout
+        answers = (out / plant / "answers.md").read_text()
+        assert f"{numeral}.5" in answers and f"{numeral}.7" in answers
+        assert f"{numeral}.5" not in done.stdout  # answers go to the files unless --answers or -v
     assert (out / "summary.md").exists() and (out / "index.html").exists()
     assert not list(out.rglob("*.tmp*"))
+    # After the progress bar: a line per plant with its rows that are not ok, the paths, the total time.
+    lines = done.stdout.splitlines()
+    assert len(lines) <= 40, done.stdout
+    assert [line.split(":")[0] for line in lines if not line.startswith(" ")][:6] == list(studies.names())
 
 
 @pytest.mark.slow

@@ -32,3 +32,32 @@ def test_bad_names_are_refused_with_the_valid_ones():
 
 def test_roman_numerals():
     assert [numeral_value(n) for n in ("I", "IV", "IX", "XIV", "XL")] == [1, 4, 9, 14, 40]
+
+
+def test_the_listing_read_from_the_case_files_agrees_with_the_imported_registry():
+    from studies import listing
+
+    assert listing.names() == studies.names()
+    for name in studies.names():
+        case, listed = studies.get(name), listing.get(name)
+        assert (listed.numeral, listed.source, listed.controllers) == (case.numeral, case.source,
+                                                                        tuple(case.controllers))
+        assert listed.scenarios == tuple(s.name for s in case.scenarios)
+
+
+def test_list_imports_neither_the_cases_nor_the_numerics():
+    """--list reads the case files' text: no CasADi, python-control or design is imported (it takes well under
+    a second instead of the seconds those imports cost)."""
+    import subprocess
+    import sys
+
+    from conftest import REPO, subprocess_env
+
+    script = ("import sys; from studies import cli; cli.main(['--list']);"
+              "print(sorted(m for m in ('casadi', 'control', 'scipy', 'models', 'designs', 'studies.cases')"
+              " if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, env=subprocess_env(), capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+    assert "pendulum: II.8(h) step 2 m" in done.stdout

@@ -75,7 +75,15 @@ def test_a_study_writes_every_file(arm_study):
     assert "Every row is a closed-loop simulation of the nonlinear" in markdown and "never a linear model" in markdown
     assert "ss error (deg)" in markdown  # angles in degrees, labelled
     lqr = result.table[(result.table.controller == "LQR") & (result.table.scenario == "step")].iloc[0]
-    assert f"| LQR | step | ok | {files.format_number(lqr.rise_time_s)} |" in markdown
+    from studies.writers import verdict_text
+
+    assert f"| LQR | step | {verdict_text(lqr.verdict)} | ok | {files.format_number(lqr.rise_time_s)} |" in markdown
+    # Verdicts first (a grid, then what each row misses), metrics second.
+    assert markdown.index("## Verdicts against the specs") < markdown.index("## Metrics")
+    grid = f"| LQR | {verdict_text(lqr.verdict)} |"
+    assert grid in markdown and markdown.index(grid) < markdown.index("## Metrics")
+    for row in result.table[result.table.verdict != "meets specs"].itertuples():
+        assert f"- {row.controller} / {row.scenario}: {verdict_text(row.verdict)}" in markdown
     assert files.format_number(math.degrees(lqr.ss_error)) in markdown
 
 

@@ -1,0 +1,271 @@
+"""Specs of a closed-loop response and the one verdict rule: does a run meet them?
+
+A `Specs` record says what a step response must do (rise time, settling
+time, overshoot, steady-state error), that the command stays within the
+actuator limit, which states must stay within bounds, where states must end
+up, and whether a sustained oscillation is allowed. `verdict` judges the
+metrics of one run (`models.metrics.run_metrics`) against them:
+
+- ``diverged`` / ``failed`` / ``skipped`` when the run's status says so;
+- ``limit cycle`` when the response oscillates without decaying (see
+  `models.metrics.oscillation`), even if nothing else is violated;
+- ``violates`` with every violated spec, its value and by how much;
+- ``meets specs`` otherwise.
+
+`combine` turns the per-sample verdicts of a Monte Carlo into one (the worst
+label, and in how many samples). Step specs are measured as `models.metrics`
+defines them (10-90 % rise, 2 % settling band, overshoot and steady-state
+error in % of the step); a series of steps is judged by its worst step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from . import metrics as metrics_module
+
+MEETS, VIOLATES, LIMIT_CYCLE, DIVERGED, FAILED, SKIPPED = (
+    "meets specs", "violates", "limit cycle", "diverged", "failed", "skipped")
+
+#: Verdict labels from best to worst; a Monte Carlo takes the worst of its samples'.
+LABELS = (MEETS, VIOLATES, LIMIT_CYCLE, DIVERGED, FAILED, SKIPPED)
+_SEVERITY = {MEETS: 0, VIOLATES: 1, LIMIT_CYCLE: 2, DIVERGED: 3, FAILED: 4, SKIPPED: -1}
+
+
+@dataclass(frozen=True)
+class Specs:
+    """What a closed-loop step response must do. Every field is optional (None: not judged).
+
+    Attributes
+    ----------
+    max_rise_time_s : s, 10-90 % rise time of the (worst) step
+    max_settling_time_s : s, time to stay within the 2 % band (`models.metrics.SETTLING_BAND`)
+    max_overshoot_pct : % of the step
+    max_ss_error_pct : steady-state error, % of the step
+    input_limit : the command must stay within the actuator limit (to `metrics.SATURATION_TOLERANCE`)
+    state_bounds : state name -> (low, high), SI units, at every sample (a crane's swing, a ball on its beam)
+    final_values : state name -> (value, tolerance), SI units: the mean over the last 5 % of the run
+    limit_cycle : a sustained oscillation (`models.metrics.oscillation`) fails the specs
+    source : where the numbers come from (the text's item, or the stated choice)
+    """
+
+    max_rise_time_s: float | None = None
+    max_settling_time_s: float | None = None
+    max_overshoot_pct: float | None = None
+    max_ss_error_pct: float | None = None
+    input_limit: bool = True
+    state_bounds: Mapping[str, tuple] = field(default_factory=dict)
+    final_values: Mapping[str, tuple] = field(default_factory=dict)
+    limit_cycle: bool = True
+    source: str = ""
+
+    def __post_init__(self):
+        for name in ("max_rise_time_s", "max_settling_time_s", "max_overshoot_pct", "max_ss_error_pct"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, (int, float)) and value >= 0 and math.isfinite(value)):
+                raise ValueError(f"Specs.{name} must be a finite number >= 0 or None, got {value!r}")
+        for state, bound in self.state_bounds.items():
+            if len(bound) != 2 or not bound[0] < bound[1]:
+                raise ValueError(f"Specs.state_bounds[{state!r}] must be (low, high) with low < high, got {bound!r}")
+        for state, target in self.final_values.items():
+            if len(target) != 2 or not target[1] > 0:
+                raise ValueError(f"Specs.final_values[{state!r}] must be (value, tolerance > 0), got {target!r}")
+
+    def with_state_bounds(self, bounds: Mapping[str, tuple]) -> Specs:
+        """These specs with more state bounds (added to, and replacing, the ones of the same state)."""
+        return replace(self, state_bounds={**self.state_bounds, **dict(bounds)}) if bounds else self
+
+    def describe(self, unit: str = "", scale: float = 1.0) -> str:
+        """The specs in one line, e.g. "rise ≤ 0.9 s, settling ≤ 3 s, overshoot ≤ 10 %"."""
+        parts = []
+        if self.max_rise_time_s is not None:
+            parts.append(f"rise ≤ {self.max_rise_time_s:g} s")
+        if self.max_settling_time_s is not None:
+            parts.append(f"settling ≤ {self.max_settling_time_s:g} s")
+        if self.max_overshoot_pct is not None:
+            parts.append(f"overshoot ≤ {self.max_overshoot_pct:g} %")
+        if self.max_ss_error_pct is not None:
+            parts.append(f"ss error ≤ {self.max_ss_error_pct:g} % of the step")
+        if self.input_limit:
+            parts.append("command within the actuator limit")
+        parts += [f"{low:g} ≤ {name} ≤ {high:g}" for name, (low, high) in self.state_bounds.items()]
+        parts += [f"{name} ends at {value:g} ± {tol:g}" for name, (value, tol) in self.final_values.items()]
+        if self.limit_cycle:
+            parts.append("no sustained oscillation")
+        return ", ".join(parts) or "none"
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One spec a run misses: its name, the measured value, the bound, and the excess over it."""
+
+    spec: str
+    value: float
+    bound: float
+    unit: str = ""
+
+    @property
+    def excess(self) -> float:
+        """value − bound, in the spec's unit (inf when the value is)."""
+        return self.value - self.bound
+
+    def __str__(self) -> str:
+        digits = 3 if f"{self.value:.3g}" != f"{self.bound:.3g}" else 5
+        value = "∞" if math.isinf(self.value) else f"{self.value:.{digits}g}"
+        unit = f" {self.unit}" if self.unit else ""
+        if self.unit == "%":
+            return f"{self.spec} {value} % > {self.bound:.3g} %{self.note}"
+        if math.isinf(self.value):
+            return f"{self.spec} ∞ > {self.bound:.3g}{unit}"
+        if self.bound == 0:
+            return f"{self.spec} {value}{unit}"
+        relative = f" (+{100 * self.excess / self.bound:.0f} %)" if self.bound > 0 else ""
+        return f"{self.spec} {value}{unit} > {self.bound:.3g}{unit}{relative}"
+
+    @property
+    def note(self) -> str:
+        return " of the step" if self.spec == "ss error" else ""
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The judgement of one run (or of a Monte Carlo's samples).
+
+    Attributes
+    ----------
+    label : one of `LABELS`
+    violations : the specs missed (for "violates" and "limit cycle")
+    detail : one line saying what, and by how much
+    """
+
+    label: str
+    violations: tuple = ()
+    detail: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.label == MEETS
+
+    def __str__(self) -> str:
+        return f"{self.label}: {self.detail}" if self.detail else self.label
+
+
+def execution(status: str) -> str:
+    """What a run's status says about its execution: "ok", "diverged", "failed", "skipped" or "degraded".
+
+    Statuses read "ok", "degraded (n)", "diverged at t = ... s", "failed: ...", "skipped: ...",
+    or for a Monte Carlo "k of n diverged (...)".
+    """
+    text = str(status).strip().lower()
+    for word in ("skipped", "failed", "diverged", "degraded"):
+        if text.startswith(word) or (word == "diverged" and " diverged" in text):
+            return word
+    return "ok"
+
+
+def check(specs: Specs, metrics: Mapping, step: float, *, excursions: Mapping[str, float] | None = None,
+          finals: Mapping[str, float] | None = None) -> list[Violation]:
+    """Every spec the metrics miss.
+
+    Parameters
+    ----------
+    metrics : the columns of `models.metrics.run_metrics` (worst case of a Monte Carlo allowed)
+    step : size of the commanded step (units of the tracked coordinate) the % specs refer to
+    excursions : state name -> excess beyond its bounds (`models.metrics.bound_excursions`)
+    finals : state name -> final value (`models.metrics.final_values`)
+    """
+    step = abs(float(step))
+    if step == 0:
+        raise ValueError("step must be nonzero: the overshoot and steady-state error specs are % of it")
+    found = []
+
+    def over(name, value, bound, unit):
+        if bound is not None and value is not None and not math.isnan(value) and value > bound:
+            found.append(Violation(name, float(value), float(bound), unit))
+
+    over("rise time", metrics.get("rise_time_s"), specs.max_rise_time_s, "s")
+    over("settling time", metrics.get("settling_time_s"), specs.max_settling_time_s, "s")
+    over("overshoot", metrics.get("overshoot_pct"), specs.max_overshoot_pct, "%")
+    ss_error = metrics.get("ss_error")
+    over("ss error", None if ss_error is None else 100 * ss_error / step, specs.max_ss_error_pct, "%")
+    if specs.input_limit:
+        peak, limit = metrics.get("peak_u"), metrics.get("u_limit")
+        if peak is not None and limit is not None and limit > 0:
+            over("peak command", peak, limit * (1 + metrics_module.SATURATION_TOLERANCE), "")
+    for name, (low, high) in specs.state_bounds.items():
+        excess = (excursions or {}).get(name)
+        if excess is None:
+            raise ValueError(f"the specs bound {name!r}; pass its excursion (models.metrics.bound_excursions)")
+        if excess > 0:
+            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0))
+    for name, (value, tolerance) in specs.final_values.items():
+        final = (finals or {}).get(name)
+        if final is None:
+            raise ValueError(f"the specs give {name!r} a final value; pass it (models.metrics.final_values)")
+        over(f"final |{name} − {value:g}|", abs(final - value), tolerance, "")
+    return found
+
+
+def verdict(specs: Specs, metrics: Mapping, step: float, status: str = "ok", *,
+            excursions: Mapping[str, float] | None = None, finals: Mapping[str, float] | None = None) -> Verdict:
+    """The one verdict rule (see the module's docstring) for one run's metrics."""
+    state = execution(status)
+    if state in ("diverged", "failed", "skipped"):
+        return Verdict({"diverged": DIVERGED, "failed": FAILED, "skipped": SKIPPED}[state], (), str(status))
+    violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals))
+    amplitude = metrics.get("oscillation_amplitude")
+    if specs.limit_cycle and amplitude is not None and np.isfinite(amplitude):
+        cycle = (f"amplitude {amplitude:.3g}, period {metrics.get('oscillation_period_s', math.nan):.3g} s"
+                 f" at the end of the run")
+        rest = "; ".join(str(v) for v in violations)
+        return Verdict(LIMIT_CYCLE, violations, cycle + (f"; {rest}" if rest else ""))
+    if violations:
+        return Verdict(VIOLATES, violations, "; ".join(str(v) for v in violations))
+    return Verdict(MEETS)
+
+
+def judge(specs: Specs, result, tracked: str, step: float, status: str | None = None,
+          measured: Mapping | None = None) -> Verdict:
+    """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
+
+    Metrics (unless given as `measured`, from `models.metrics.run_metrics`), state excursions and
+    final values are computed here with `models.metrics`; a run that diverged
+    (`result.diverged_at`) is "diverged" whatever `status` says.
+    """
+    if result.diverged_at is not None:
+        return Verdict(DIVERGED, (), f"diverged at t = {result.diverged_at:.3g} s")
+    if measured is None:
+        measured = metrics_module.run_metrics(result, tracked, specs.state_bounds)
+    excursions = metrics_module.bound_excursions(result.x, result.state_names, specs.state_bounds)
+    finals = metrics_module.final_values(result.t, result.x, result.state_names, list(specs.final_values))
+    return verdict(specs, measured, step, status or "ok", excursions=excursions, finals=finals)
+
+
+def combine(verdicts: Sequence[Verdict]) -> Verdict:
+    """One verdict for the samples of a Monte Carlo: the worst label, in how many samples, and the worst sample.
+
+    "meets specs" only when every sample does; otherwise e.g. "violates in 12 of 200 samples
+    (worst: settling time 4.1 s > 3 s (+37 %))".
+    """
+    if not verdicts:
+        return Verdict(SKIPPED, (), "no samples")
+    judged = [v for v in verdicts if v.label != SKIPPED]
+    if not judged:
+        return Verdict(SKIPPED, (), verdicts[0].detail)
+    worst = max(judged, key=lambda v: (_SEVERITY[v.label], max((_relative(x) for x in v.violations), default=0)))
+    if worst.label == MEETS:
+        return Verdict(MEETS, (), f"in all {len(verdicts)} samples" if len(verdicts) > 1 else "")
+    count = sum(v.label == worst.label for v in verdicts)
+    where = f"in {count} of {len(verdicts)} samples" if len(verdicts) > 1 else ""
+    detail = f"{where} (worst: {worst.detail})" if where and worst.detail else where or worst.detail
+    return Verdict(worst.label, worst.violations, detail)
+
+
+def _relative(violation: Violation) -> float:
+    if math.isinf(violation.value):
+        return math.inf
+    return violation.excess / violation.bound if violation.bound > 0 else violation.excess

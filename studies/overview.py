@@ -1,0 +1,246 @@
+"""The pictures at the top of index.html: every controller on every plant at a glance.
+
+- a heat map, controllers × plants, of the step's ITAE relative to the best
+  on that plant, each cell marked with its verdict (an HTML table, so its
+  labels are text);
+- per plant, settling time against overshoot of the step, one marker per
+  controller, filled where the row meets its specs (an inline SVG);
+- per plant, the Monte Carlo spread of the ITAE as box plots per controller
+  (an inline SVG).
+
+Everything is read back from the written tables (``OUT/<plant>/table.csv``
+and ``monte_carlo.csv``), so the pictures show exactly what the tables hold.
+Colours, line styles and markers come from `studies.style`.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import math
+import re
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+from matplotlib.backends.backend_svg import FigureCanvasSVG  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+
+from models import specs  # noqa: E402
+
+from . import style  # noqa: E402
+
+#: Horizontal box plots: `orientation` from matplotlib 3.10 on, `vert` before (deprecated since).
+_HORIZONTAL = ({"orientation": "horizontal"} if tuple(int(v) for v in matplotlib.__version__.split(".")[:2]) >= (3, 10)
+               else {"vert": False})
+
+#: Relative ITAE at which the heat map's colour is fully "bad" (ten times the best on the plant).
+WORST_RATIO = 10.0
+
+
+def controller_order(tables) -> list:
+    """Every controller label of the tables: the style table's order first, then others as they appear."""
+    seen = []
+    for table in tables:
+        seen += [str(c) for c in table.controller.unique() if str(c) not in seen]
+    known = [label for label in style.TABLE if label in seen]
+    return known + [label for label in seen if label not in known]
+
+
+def step_rows(table):
+    """The step scenario's rows of a study table, one per controller."""
+    return table[table.scenario == "step"].drop_duplicates("controller").set_index("controller")
+
+
+def relative_itae(table) -> dict:
+    """controller -> step ITAE divided by the smallest finite step ITAE on that plant (NaN where none)."""
+    rows = step_rows(table)
+    itae = rows.itae.astype(float)
+    finite = itae[np.isfinite(itae) & (itae > 0)]
+    best = float(finite.min()) if len(finite) else math.nan
+    return {label: float(value) / best if np.isfinite(value) and best > 0 else math.nan
+            for label, value in itae.items()}
+
+
+def _ratio_color(ratio: float) -> str:
+    """Green at 1x through yellow to red at `WORST_RATIO` x and beyond (log scale); grey without a number."""
+    if not np.isfinite(ratio):
+        return "#e8e8e8"
+    f = min(1.0, max(0.0, math.log10(ratio) / math.log10(WORST_RATIO)))
+    stops = [(0.0, (198, 239, 206)), (0.5, (255, 235, 156)), (1.0, (255, 179, 171))]
+    for (f0, c0), (f1, c1) in zip(stops, stops[1:]):
+        if f <= f1:
+            w = (f - f0) / (f1 - f0)
+            return "#" + "".join(f"{round(a + w * (b - a)):02x}" for a, b in zip(c0, c1))
+    return "#ffb3ab"
+
+
+def heat_map(studies) -> str:
+    """HTML table: rows controllers, columns plants; cell = verdict symbol and step ITAE / best ITAE on the plant.
+
+    Parameters
+    ----------
+    studies : list of (plant name, run.json dict, table DataFrame)
+    """
+    labels = controller_order([t for _, _, t in studies])
+    ratios = {name: relative_itae(table) for name, _, table in studies}
+    rows = {name: step_rows(table) for name, _, table in studies}
+    head = "".join(f'<th scope="col">{html.escape(info["title"])}</th>' for _, info, _ in studies)
+    body = []
+    for label in labels:
+        look = style.of(label)
+        cells = [f'<th scope="row"><span class="swatch" style="background:{look.color}"></span>'
+                 f'{html.escape(label)}</th>']
+        for name, _, _ in studies:
+            if label not in rows[name].index:
+                cells.append(f'<td class="absent" data-controller="{html.escape(label)}" data-plant="{name}">—</td>')
+                continue
+            row = rows[name].loc[label]
+            verdict = str(row.get("verdict", "")) if isinstance(row.get("verdict", ""), str) else ""
+            ratio = ratios[name].get(label, math.nan)
+            number = f"{ratio:.3g}×" if np.isfinite(ratio) else ""
+            detail = str(row.get("verdict_detail", "")) if isinstance(row.get("verdict_detail"), str) else ""
+            title = f"{label} on {name}: {verdict}" + (f" ({detail})" if detail else "")
+            cells.append(f'<td data-controller="{html.escape(label)}" data-plant="{name}" '
+                         f'data-verdict="{html.escape(verdict)}" title="{html.escape(title)}" '
+                         f'style="background:{_ratio_color(ratio)}"><span class="mark" '
+                         f'style="color:{style.verdict_color(verdict)}">{style.verdict_symbol(verdict)}</span> '
+                         f"{number}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    legend = " ".join(f'<span style="color:{color}">{symbol}</span> {html.escape(label)}'
+                      for label, (symbol, color) in style.VERDICTS.items())
+    return ('<table id="heatmap" class="heatmap"><caption>Step ITAE relative to the best on each plant '
+            f"(1× = best; colour from green to red at {WORST_RATIO:g}× and beyond) and the row's verdict: "
+            f"{legend}</caption><thead><tr><th></th>{head}</tr></thead><tbody>" + "".join(body)
+            + "</tbody></table>")
+
+
+def _svg(fig: Figure, salt: str) -> str:
+    """The figure as an inline SVG element: text kept as text, no date, ids salted per figure."""
+    buffer = io.StringIO()
+    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": salt}):
+        FigureCanvasSVG(fig).print_svg(buffer, metadata={"Date": None})
+    text = buffer.getvalue()
+    text = text[text.index("<svg"):]
+    return re.sub(r'<svg([^>]*?) width="[^"]*" height="[^"]*"', r'<svg\1 style="width:100%;height:auto"', text,
+                  count=1)
+
+
+def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure, list]:
+    rows = -(-count // columns)
+    fig = Figure(figsize=(width, height * rows + 1.2))
+    axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False)).ravel()
+    for ax in axes[count:]:
+        ax.set_visible(False)
+    return fig, list(axes[:count])
+
+
+def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
+    handles = [Line2D([], [], color=style.of(label).color, marker=style.of(label).marker if marker else None,
+                      linestyle="none" if marker else style.of(label).linestyle, markersize=7)  # type: ignore[arg-type]
+               for label in labels]
+    ncol = style.legend_columns(labels, fig.get_figwidth(), fontsize=8)
+    legend = fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    for i, text in enumerate(legend.get_texts()):
+        text.set_gid(f"legend-label-{i}")  # found by the browser test, and by anyone scripting the page
+    rows = -(-len(labels) // ncol)
+    fig.subplots_adjust(bottom=(0.35 + 0.22 * rows) / fig.get_figheight())
+
+
+def scatter(studies) -> str | None:
+    """Inline SVG: per plant, settling time (s) against overshoot (%) of the step for every controller.
+
+    Filled markers meet their specs, hollow ones do not; a run that never settles sits on the
+    right edge past a dashed line marked ∞; rows without numbers (skipped, failed, diverged) are left out.
+    """
+    if not studies:
+        return None
+    labels = controller_order([t for _, _, t in studies])
+    fig, axes = _grid(len(studies), 3, 13.0, 3.6)
+    for ax, (_, info, table) in zip(axes, studies):
+        rows = step_rows(table)
+        settling = rows.settling_time_s.astype(float)
+        finite = settling[np.isfinite(settling)]
+        edge = 1.15 * float(finite.max()) if len(finite) else 1.0
+        for label, row in rows.iterrows():
+            overshoot, time_ = float(row.overshoot_pct), float(row.settling_time_s)
+            if math.isnan(overshoot) or math.isnan(time_):
+                continue
+            look = style.of(str(label))
+            meets = row.get("verdict") == specs.MEETS
+            ax.plot([edge if math.isinf(time_) else time_], [overshoot], linestyle="none", marker=look.marker,
+                    markersize=8, markeredgecolor=look.color, markerfacecolor=look.color if meets else "none",
+                    markeredgewidth=1.5)
+        if len(finite) < len(settling.dropna()):
+            ax.axvline(edge / 1.15 * 1.075, color="#999", linestyle="--", linewidth=0.8)
+            ax.text(edge, ax.get_ylim()[1], "∞", ha="center", va="bottom", fontsize=9, color="#555")
+        ax.set_title(info["title"], fontsize=10)
+        ax.set_xlabel("settling time, 2 % (s)", fontsize=8)
+        ax.set_ylabel("overshoot (%)", fontsize=8)
+        ax.grid(True, alpha=0.3)
+        ax.tick_params(labelsize=8)
+    fig.suptitle("The text's step: settling time against overshoot (filled: meets its specs; hollow: misses them)",
+                 fontsize=11)
+    fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.85 / fig.get_figheight(), hspace=0.45, wspace=0.25)
+    _legend(fig, labels)
+    return _svg(fig, "scatter")
+
+
+def boxplots(out: Path, studies) -> str | None:
+    """Inline SVG: per plant, box plots of the Monte Carlo samples' ITAE per controller (diverged samples left out).
+
+    Boxes span the quartiles, whiskers 1.5 IQR, the line is the median; read from
+    ``OUT/<plant>/monte_carlo.csv``. Controllers without samples on a plant are not drawn there.
+    """
+    import pandas as pd
+
+    found = []
+    for name, info, _ in studies:
+        path = Path(out) / name / "monte_carlo.csv"
+        if path.exists():
+            samples = pd.read_csv(path)
+            if len(samples) and "itae" in samples:
+                found.append((name, info, samples))
+    if not found:
+        return None
+    labels = controller_order([s for _, _, s in found])
+    fig, axes = _grid(len(found), 2, 13.0, 4.4)
+    for ax, (name, info, samples) in zip(axes, found):
+        present = [label for label in labels if label in set(samples.controller)]
+        data, kept = [], []
+        for label in present:
+            values = samples[samples.controller == label].itae.astype(float).to_numpy()
+            values = values[np.isfinite(values)]
+            if values.size:
+                data.append(values)
+                kept.append(label)
+        if not data:
+            ax.set_visible(False)
+            continue
+        parts = ax.boxplot(data, patch_artist=True, widths=0.6, flierprops={"markersize": 3}, **_HORIZONTAL)
+        for patch, label in zip(parts["boxes"], kept):
+            look = style.of(label)
+            patch.set_facecolor(look.color)
+            patch.set_alpha(0.55)
+            patch.set_edgecolor(look.color)
+        for median in parts["medians"]:
+            median.set_color("black")
+        ax.set_yticks(range(1, len(kept) + 1), kept, fontsize=8)
+        for i, tick in enumerate(ax.get_yticklabels()):
+            tick.set_gid(f"box-label-{name}-{i}")
+        ax.invert_yaxis()
+        if max(float(np.max(v)) for v in data) > 20 * min(float(np.min(v)) for v in data if np.min(v) > 0):
+            ax.set_xscale("log")
+        unit = {"rad": "rad", "m": "m"}.get(str(info.get("tracked_unit")), str(info.get("tracked_unit")))
+        ax.set_xlabel(f"ITAE ({unit} s²), per sample", fontsize=8)
+        ax.set_title(f"{info['title']}: {int(samples.groupby('controller').size().max())} samples", fontsize=9)
+        ax.grid(True, axis="x", alpha=0.3)
+        ax.tick_params(axis="x", labelsize=8)
+    fig.suptitle("Monte Carlo on the ±5 % parameter box: spread of the step's ITAE per controller", fontsize=11)
+    fig.subplots_adjust(left=0.17, right=0.98, top=1 - 0.9 / fig.get_figheight(), bottom=0.6 / fig.get_figheight(),
+                        hspace=0.4, wspace=0.55)
+    return _svg(fig, "boxplots")

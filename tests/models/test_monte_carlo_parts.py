@@ -1,0 +1,52 @@
+"""A Monte Carlo split into parts (as `studies.distributed` sends them to other processes) is the whole one,
+and a plant survives pickling by its registry name."""
+
+import pickle
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import models
+
+
+class StateFeedback(models.Block):
+    """u = -K x + kr r, reading the full state (a test fixture, not a design)."""
+
+    def __init__(self, K, kr):
+        super().__init__(sample_period=0.01, n_state=0, n_measured=len(K), n_reference=1, n_input=1,
+                         gains={"K": np.asarray(K, dtype=float), "kr": kr}, measures="state")
+
+    def expr(self, xc, y, r, g):
+        return xc, -ca.dot(g["K"], y) + g["kr"] * r[0]
+
+
+def test_parts_with_their_first_sample_are_the_whole_monte_carlo_noise_included():
+    arm = models.get("arm")
+    block = StateFeedback([0.6, 0.05], 0.6)
+    samples = models.sample_params(arm, 9, seed=2)
+    kw = dict(noise_std=1e-3, seed=5, substeps=2)
+    whole = models.monte_carlo(arm, block, 0.3, 1.0, samples, **kw)
+    parts = [models.monte_carlo(arm, block, 0.3, 1.0, samples[a:b], first_sample=a, **kw)
+             for a, b in ((0, 4), (4, 5), (5, 9))]
+    for name in ("x", "u", "measured"):
+        np.testing.assert_array_equal(np.concatenate([getattr(p, name) for p in parts]), getattr(whole, name))
+    assert [p.first_sample for p in parts] == [0, 4, 5]
+    # Without its first_sample a later part would replay the first samples' noise.
+    replay = models.monte_carlo(arm, block, 0.3, 1.0, samples[4:5], **kw)
+    assert not np.array_equal(replay.measured, whole.measured[4:5])
+    with pytest.raises(ValueError, match="first_sample"):
+        models.monte_carlo(arm, block, 0.3, 1.0, samples, first_sample=-1, **kw)
+
+
+def test_a_plant_pickles_by_name_with_its_parameters_and_limit():
+    plant = models.get("pendulum", m1=0.3, input_limit=7.0)
+    back = pickle.loads(pickle.dumps(plant))
+    assert back.name == "pendulum" and back.params == plant.params and list(back.input_limit) == [7.0]
+    x, u = np.array([0.1, 0.2, -0.1, 0.3]), np.array([1.5])
+    np.testing.assert_array_equal(back.f(x, u), plant.f(x, u))
+
+
+def test_an_unregistered_plant_says_it_cannot_be_rebuilt(blow_up_plant):
+    with pytest.raises(TypeError, match="'blowup' is not the registered declaration"):
+        pickle.dumps(blow_up_plant)

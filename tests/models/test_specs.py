@@ -1,0 +1,135 @@
+"""The verdict rule on synthetic responses whose properties are known in closed form:
+a clean step, a limit cycle, a slow drift, a divergence, bounds and final values."""
+
+import math
+
+import numpy as np
+import pytest
+
+from models import metrics, specs
+from models.closed_loop import ClosedLoopResult, first_faults
+
+DT = 0.01
+SPECS = specs.Specs(max_rise_time_s=1.5, max_settling_time_s=4.0, max_overshoot_pct=10.0, max_ss_error_pct=2.0)
+
+
+def response(y, t=None, u=None, limit=1.0, extra=None) -> ClosedLoopResult:
+    """A recorded unit-step response as a ClosedLoopResult; divergence found by the simulators' rule."""
+    t = DT * np.arange(len(y)) if t is None else t
+    columns = [y] + ([extra] if extra is not None else [])
+    x = np.column_stack(columns)
+    u = np.zeros((len(t) - 1, 1)) if u is None else np.asarray(u, dtype=float).reshape(-1, 1)
+    first = int(first_faults(x[None], u[None])[0])
+    names = ("y",) + (("w",) if extra is not None else ())
+    return ClosedLoopResult(t=t, x=x, y=x, r=np.ones((len(t), 1)), u=u, d=np.zeros_like(u), measured=x[:-1],
+                            xc=None, step_time=np.zeros(len(t) - 1), status=None, input_limit=np.array([limit]),
+                            state_names=names, output_names=names, input_names=("u",),
+                            diverged_at=None if first < 0 else float(t[first]))
+
+
+def second_order(zeta, wn, duration=10.0):
+    t = DT * np.arange(int(round(duration / DT)) + 1)
+    wd = wn * math.sqrt(1 - zeta**2)
+    y = 1 - np.exp(-zeta * wn * t) * (np.cos(wd * t) + zeta / math.sqrt(1 - zeta**2) * np.sin(wd * t))
+    return t, y
+
+
+def test_a_clean_step_meets_specs_and_tight_specs_name_the_closed_form_overshoot():
+    zeta, wn = 0.7, 2.0
+    t, y = second_order(zeta, wn)
+    run = response(y, t)
+    assert specs.judge(SPECS, run, "y", 1.0) == specs.Verdict(specs.MEETS)
+    tight = specs.Specs(max_overshoot_pct=2.0)
+    found = specs.judge(tight, run, "y", 1.0)
+    assert found.label == specs.VIOLATES
+    (violation,) = found.violations
+    overshoot = 100 * math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2))  # 4.60 %
+    assert violation.spec == "overshoot" and violation.value == pytest.approx(overshoot, rel=1e-4)
+    assert violation.excess == pytest.approx(overshoot - 2.0, rel=1e-4)
+    assert found.detail == "overshoot 4.6 % > 2 %"
+
+
+def test_a_limit_cycle_is_labelled_with_its_amplitude_and_period():
+    t = DT * np.arange(1001)
+    amplitude, period = 0.1, 1.5
+    y = 1 - np.exp(-3 * t) + amplitude * np.sin(2 * np.pi * t / period)
+    found = specs.judge(SPECS, response(y, t), "y", 1.0)
+    assert found.label == specs.LIMIT_CYCLE
+    m = metrics.oscillation(t, y, np.ones_like(t))
+    assert m["oscillation_amplitude"] == pytest.approx(amplitude, rel=0.03)
+    assert m["oscillation_period_s"] == pytest.approx(period, rel=0.1)
+    # It never settles in the 2 % band either: both are said.
+    assert any(v.spec == "settling time" and math.isinf(v.value) for v in found.violations)
+    assert found.detail.startswith("amplitude 0.1")
+    # The same oscillation riding on a drift is still a limit cycle (the quadratic trend is removed).
+    drifting = specs.judge(SPECS, response(y + 0.05 * t, t), "y", 1.0)
+    assert drifting.label == specs.LIMIT_CYCLE
+
+
+def test_a_decaying_oscillation_and_measurement_noise_are_not_limit_cycles():
+    t, y = second_order(0.1, 3.0, duration=10.0)  # decays by e^{-0.3 * 2.5} = 0.47 between the window's halves
+    decaying = specs.judge(SPECS, response(y, t), "y", 1.0)
+    assert decaying.label == specs.VIOLATES
+    assert math.isnan(metrics.oscillation(t, y, np.ones_like(t))["oscillation_amplitude"])
+    t, y = second_order(0.7, 2.0)
+    noisy = y + np.random.default_rng(0).normal(0, 0.2 * metrics.SETTLING_BAND, len(t))
+    assert math.isnan(metrics.oscillation(t, noisy, np.ones_like(t))["oscillation_amplitude"])
+
+
+def test_a_slow_drift_violates_settling_and_steady_state_error_without_a_limit_cycle():
+    t = DT * np.arange(1001)
+    y = 1 - np.exp(-t / 0.3) + 0.01 * t  # 10 % past the command at 10 s, still moving
+    found = specs.judge(SPECS, response(y, t), "y", 1.0)
+    assert found.label == specs.VIOLATES
+    by_name = {v.spec: v for v in found.violations}
+    assert math.isinf(by_name["settling time"].value)
+    # ss error: mean of the last 5 % of y minus 1, i.e. 0.01 × mean(t over the window) (e^{-t/0.3} is gone).
+    window = t[-math.ceil(0.05 * len(t)):]
+    assert by_name["ss error"].value == pytest.approx(100 * 0.01 * window.mean(), rel=1e-6)
+
+
+def test_a_divergence_is_labelled_diverged_at_the_simulators_time():
+    t = DT * np.arange(1001)
+    y = 1e-3 * np.exp(3 * t)  # passes the simulators' 1e6 bound at ln(1e9)/3 s
+    found = specs.judge(SPECS, response(y, t), "y", 1.0)
+    assert found.label == specs.DIVERGED
+    crossing = math.log(1e9) / 3
+    assert f"t = {math.ceil(crossing / DT) * DT:.3g} s" in found.detail
+
+
+def test_state_bounds_final_values_and_the_actuator_limit():
+    t, y = second_order(0.7, 2.0)
+    swing = np.sin(t) * np.exp(-t)  # peaks at t* = π/4 (tan t* = 1)
+    peak = math.sin(math.pi / 4) * math.exp(-math.pi / 4)
+    limited = specs.Specs(state_bounds={"w": (-0.2, 0.2)}, final_values={"w": (0.0, 0.01)})
+    found = specs.judge(limited, response(y, t, extra=swing), "y", 1.0)
+    assert found.label == specs.VIOLATES
+    (bound,) = [v for v in found.violations if v.spec.startswith("w leaves")]
+    assert bound.value == pytest.approx(peak - 0.2, abs=1e-4)
+    assert not any(v.spec.startswith("final") for v in found.violations)  # below e^{-9.5} over the last 5 %
+    late = specs.Specs(final_values={"w": (0.0, 0.01)})
+    stuck = specs.judge(late, response(y, t, extra=np.full_like(t, 0.05)), "y", 1.0)
+    assert [v.spec for v in stuck.violations] == ["final |w − 0|"] and stuck.violations[0].value == pytest.approx(0.05)
+    u = np.full(len(t) - 1, 0.5)
+    u[10] = 1.5
+    over = specs.judge(specs.Specs(), response(y, t, u=u, limit=1.0), "y", 1.0)
+    assert over.label == specs.VIOLATES and over.violations[0].value == 1.5
+
+
+def test_status_words_and_monte_carlo_combination():
+    assert [specs.execution(s) for s in ("ok", "degraded (2)", "diverged at t = 3 s", "failed: boom",
+                                         "skipped: budget", "3 of 20 diverged (first at t = 1 s)")] == \
+        ["ok", "degraded", "diverged", "failed", "skipped", "diverged"]
+    assert specs.verdict(SPECS, {}, 1.0, "failed: solver").label == specs.FAILED
+    meets = specs.Verdict(specs.MEETS)
+    slow = specs.Verdict(specs.VIOLATES, (specs.Violation("settling time", 5, 4, "s"),), "settling time 5 s > 4 s")
+    slower = specs.Verdict(specs.VIOLATES, (specs.Violation("settling time", 8, 4, "s"),), "settling time 8 s > 4 s")
+    assert specs.combine([meets] * 3) == specs.Verdict(specs.MEETS, (), "in all 3 samples")
+    mixed = specs.combine([meets, slow, slower, meets])
+    assert mixed.label == specs.VIOLATES and mixed.detail == "in 2 of 4 samples (worst: settling time 8 s > 4 s)"
+    cycle = specs.Verdict(specs.LIMIT_CYCLE, (), "amplitude 0.1")
+    assert specs.combine([slow, cycle, meets]).label == specs.LIMIT_CYCLE
+    with pytest.raises(ValueError, match="max_overshoot_pct must be a finite number >= 0"):
+        specs.Specs(max_overshoot_pct=-1)
+    with pytest.raises(ValueError, match=r"state_bounds\['z'\] must be \(low, high\)"):
+        specs.Specs(state_bounds={"z": (1.0, 0.0)})
