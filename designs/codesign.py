@@ -239,7 +239,7 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
     start = np.array([plant.params[n] for n in names])
     plant_solver = ca.nlpsol("plant_only", "ipopt", {"x": p, "f": objective},
                              {"ipopt": {"print_level": 0, "sb": "yes", "tol": solve_options["tol"],
-                                        "max_iter": solve_options["max_iter"]}, "print_time": False,
+                                        "max_iter": MAX_ITER}, "print_time": False,
                               "error_on_fail": False})
     sol = plant_solver(x0=start, lbx=low, ubx=high)
     plant_status = plant_solver.stats()["return_status"]

@@ -98,6 +98,8 @@ def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_d
         assert a.converged and a.feasible, (method, a.status, a.message)
         assert a.params["b"] == pytest.approx(sampled.x[0], rel=1e-3), method
         assert a.objective == pytest.approx(sampled.fun, rel=1e-6), method
+    assert answers["nested"].status.startswith("outer: bounded Brent: Solution found")
+    assert answers["nested"].evaluations == len(answers["nested"].history) > 3
     seq = answers["sequential"]
     assert seq.converged and seq.params["b"] == pytest.approx(B_RANGE[0], abs=1e-6)
     best_k = scipy.optimize.minimize_scalar(lambda k: sampled_psi((B_RANGE[0], k), ts), bounds=K_BOUNDS,
