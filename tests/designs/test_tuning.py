@@ -351,3 +351,26 @@ def test_a_first_order_plant_tunes_without_registering_to_its_sampled_lqr_gain()
     assert float(result.gains["k"]) == pytest.approx(k_star, rel=1e-6)
     assert result.cost == pytest.approx(q * ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2),
                                         rel=1e-9)
+
+
+def test_worst_case_tuning_minimizes_the_largest_sample_cost_of_the_closed_form():
+    """Two plants b = 1 and b = 3 (the decision is one k): the epigraph solve reaches min_k max_b J_b(k),
+    with J_b(k) = q Ts (1 + ρ k²) / (1 − λ_b²) in closed form, minimized here by scipy."""
+    import scipy.optimize
+
+    plant = models.Plant(_lag)
+    ts, q, r = 0.01, 3.0, 0.5
+    rows = np.array([[1.0], [3.0]])
+
+    def closed_form(k, b):
+        phi = np.exp(-b * ts)
+        lam = phi - (1 - phi) / b * k
+        return ts * (q + r * k**2) / (1 - lam**2)
+
+    best = scipy.optimize.minimize_scalar(lambda k: max(closed_form(k, b) for b in rows[:, 0]), bounds=(0, 10),
+                                          method="bounded", options={"xatol": 1e-12})
+    result = tune(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]), samples=rows,
+                  robust="worst", cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}), tol=1e-12)
+    assert result.converged, result.message
+    assert float(result.gains["k"]) == pytest.approx(best.x, rel=1e-5)
+    assert result.cost == pytest.approx(best.fun, rel=1e-8)
