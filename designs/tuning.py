@@ -38,7 +38,7 @@ CasADi step: not measured, for that reason.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -305,7 +305,10 @@ class TuningResult:
     stages : one dict per solve: width (None for the exact loop), status, iterations,
         smoothed (the objective IPOPT saw) and exact objective at its answer
     smoothing_gap : |exact − smoothed| / |exact| at the last stage's answer (0 for "exact")
-    history : [(seconds since the call began, exact objective)] per IPOPT iteration
+    history : [(seconds since the call began, the objective IPOPT saw)] per IPOPT iteration
+        (smoothed at that stage's width)
+    iterates : the decision vector of each `history` entry (evaluate the exact objective
+        there with `TuningProblem.values`)
     """
 
     block: Block
@@ -327,17 +330,18 @@ class TuningResult:
     stages: list = field(default_factory=list)
     smoothing_gap: float = 0.0
     method: str = "smooth"
+    iterates: list = field(default_factory=list)
 
 
 class _Recorder(ca.Callback):
-    """IPOPT iteration callback keeping every iterate (and the exact objective there)."""
+    """IPOPT iteration callback keeping every iterate and the objective IPOPT saw there."""
 
-    def __init__(self, nx: int, ng: int, n_p: int, exact: Callable, progress=None, started=None):
+    def __init__(self, nx: int, ng: int, n_p: int, progress=None, started=None):
         ca.Callback.__init__(self)
-        self.progress, self.exact = progress, exact
+        self.progress = progress
         self.started = time.perf_counter() if started is None else started
         self.sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "p": n_p, "lam_p": n_p, "f": 1}
-        self.iterates: list[tuple[np.ndarray, float, float]] = []  # (x, exact f, perf_counter)
+        self.iterates: list[tuple[np.ndarray, float, float]] = []  # (x, f, perf_counter)
         self.construct("recorder", {})
 
     def get_n_in(self):
@@ -357,7 +361,7 @@ class _Recorder(ca.Callback):
 
     def eval(self, arg):
         x = np.asarray(arg[0]).ravel().copy()
-        value = self.exact(x)
+        value = float(arg[1])
         self.iterates.append((x, value, time.perf_counter()))
         if self.progress is not None:
             self.progress(len(self.iterates) - 1, value, self.iterates[-1][2] - self.started)
@@ -915,11 +919,7 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
                                  [cost_weight * problem.aggregate(per_sample) + extra_cost])
     smoothed_g = ca.Function("smoothed_constraints", [x, width], [problem.smoothed()[1] if smooth else problem.g])
 
-    def exact_value(zz):
-        value = float(exact_total(scale[:n] * zz[:n]))
-        return value if np.isfinite(value) else np.inf
-
-    recorder = _Recorder(variables.numel(), g.numel(), width.numel(), exact_value, progress, start_time)
+    recorder = _Recorder(variables.numel(), g.numel(), width.numel(), progress, start_time)
     opts = {"ipopt": {"max_iter": int(max_iter), "print_level": 0, "tol": tol, "acceptable_tol": 100 * tol,
                       "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
@@ -990,7 +990,7 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     if np.isfinite(value):
         chosen = (value, violations, final, "final")
     # Other iterates matter only when clearly better than IPOPT's answer, or when
-    # that answer is infeasible: judge them lazily, lowest exact objective first.
+    # that answer is infeasible: judge them lazily, lowest objective IPOPT saw first.
     threshold = value - 1e-6 * abs(value) if chosen and not violations else np.inf
     others = sorted(((f, scale[:n] * zz[:n], "iterate") for zz, f, _ in recorder.iterates
                      if np.isfinite(f) and f < threshold), key=lambda item: item[0])
@@ -1020,6 +1020,7 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
         iterations=iterations, wall_time=time.perf_counter() - start_time,
         decision=np.array(decision),
         history=[(stamp - start_time, f) for _, f, stamp in recorder.iterates],
+        iterates=[np.clip(scale[:n] * zz[:n], lbx, ubx) for zz, _, _ in recorder.iterates],
         converged=converged, stages=stages, smoothing_gap=float(gap), method=method)
 
 
