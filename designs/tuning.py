@@ -17,7 +17,9 @@ Saturation, conditional integration and anti-windup make the closed-loop
 cost piecewise smooth in the gains (its gradient jumps wherever a sample
 enters or leaves a limit). `tune` therefore solves a continuation of smoothed
 problems (`models.smooth`: every switch blended over a band of relative width
-w, w = 0.1, 0.01, ..., each solve warm-started from the last) and stops when
+w, w = 0.1, 0.01, ..., each solve warm-started from the last; the criteria's
+|e| is blended over w |e_0| the same way, since its kinks where e changes
+sign stall the search as much) and stops when
 IPOPT has converged on a stage whose answer no longer moves the exact
 objective (the change from the previous stage's answer is within
 `AGREEMENT`, relative) and where the exact nonsmooth loop's objective agrees
@@ -61,6 +63,8 @@ AGREEMENT = 1e-6
 CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: IPOPT iterations per solve: a safety cap, not the stopping rule (a stop here is reported).
 MAX_ITER = 3000
+#: IPOPT options of every solve (`tol` sets tol and acceptable_tol = 100 tol).
+IPOPT_OPTIONS = {"print_level": 0, "sb": "yes", "acceptable_iter": 10}
 #: IPOPT statuses of a numerical failure, retried once from the failed solve's last point.
 RETRIED = ("Error_In_Step_Computation", "Restoration_Failed", "Search_Direction_Becomes_Too_Small")
 #: IPOPT options of the continuation's later stages, which start at the last answer and multipliers.
@@ -388,6 +392,7 @@ class _Run:
     input_target: np.ndarray
     weights: dict
     label: str
+    signal_size: float = 1.0
 
 
 def _scenarios(value) -> tuple[Scenario, ...]:
@@ -566,7 +571,18 @@ class TuningProblem:
             default_target[k] = r[-1, 0]
         target = _named_vector(cost.target, plant.state_names, default_target, "target")
         input_target = _named_vector(cost.input_target, plant.input_names, np.zeros(plant.nu), "input_target")
-        return _Run(sc, specs, cost, n, t, x0, r, d, noise, k, step, target, input_target, weights, label)
+        size = 0.0  # the criterion signal's size at the start (inputs: unknown before the run)
+        if cost.kind is not None:
+            if cost.signal == "error":
+                size = abs(r[0, 0] - x0[k])
+            elif cost.signal in plant.state_names:
+                i = plant.state_names.index(cost.signal)
+                size = abs(x0[i] - target[i])
+            elif cost.signal in plant.output_names:
+                i = plant.output_names.index(cost.signal)
+                size = abs(plant.output(x0, self.samples[0])[i] - plant.output(target, self.samples[0])[i])
+        return _Run(sc, specs, cost, n, t, x0, r, d, noise, k, step, target, input_target, weights, label,
+                    float(size) if size > 0 else 1.0)
 
     def _params(self, j: int, param_index) -> ca.MX:
         p = ca.MX(ca.DM(self.samples[j]))
@@ -604,7 +620,7 @@ class TuningProblem:
                 X, _, U, _ = run(run_data.x0, xc0, run_data.r[:-1].T, run_data.noise[j].T, run_data.d.T, p, gains,
                                  *extra)
                 states = ca.horzcat(ca.DM(run_data.x0), X)   # x_0 .. x_N
-                row.append(self._cost(run_data, states, U, p))
+                row.append(self._cost(run_data, states, U, p, self.width if smooth else None))
                 tags = [t for t in (run_data.label, f"sample {j}" if m > 1 else "") if t]
                 tag = f" ({', '.join(tags)})" if tags else ""
                 if run_data.step is not None:
@@ -637,8 +653,13 @@ class TuningProblem:
         ubg = np.concatenate(upper) if upper else np.zeros(0)
         return ca.vertcat(*rows), g, u_runs, lbg, ubg, names
 
-    def _cost(self, run: _Run, states: ca.MX, U: ca.MX, p) -> ca.MX:
-        """The scenario's cost of one run: states (nx, N+1), commands U (nu, N)."""
+    def _cost(self, run: _Run, states: ca.MX, U: ca.MX, p, width=None) -> ca.MX:
+        """The scenario's cost of one run: states (nx, N+1), commands U (nu, N).
+
+        With a smoothing `width` (the continuation's), |s| of the criterion is blended over
+        width × |s_0| as well (|s_0| the criterion signal's initial size, 1 where it is zero):
+        its kinks where s changes sign are the same obstacle as a saturation's.
+        """
         plant, cost, n = self.plant, run.cost, run.n
         ts = self.block.sample_period
         X = states[:, :n]
@@ -665,7 +686,10 @@ class TuningProblem:
             if cost.kind == "ise":
                 per_sample = s**2
             else:
-                per_sample = ca.sqrt(s**2 + cost.smoothing**2)
+                floor = cost.smoothing**2
+                if width is not None:
+                    floor = floor + (width * run.signal_size) ** 2
+                per_sample = ca.sqrt(s**2 + floor)
                 if cost.kind == "itae":
                     per_sample = ca.DM(run.t[:-1]).T * per_sample
             total += ts * ca.sum2(per_sample)
@@ -785,7 +809,7 @@ def tune(plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
          cost: Cost | None = None, samples=None, robust: str = "mean", free=None, bounds=None,
          substeps: int = 10, max_iter: int = MAX_ITER, tol: float = 1e-8,
          hessian: str = "limited-memory", jit: bool = False, progress=None, method: str = "smooth",
-         widths=WIDTHS) -> TuningResult:
+         widths=WIDTHS, ipopt_options=None) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
     Parameters
@@ -804,6 +828,8 @@ def tune(plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
     method : "smooth" (continuation over `widths`, see the module docstring) or "exact"
         (one solve on the exact loop)
     widths : the continuation's relative smoothing widths, strictly decreasing
+    ipopt_options : dict of further IPOPT options (for example ``{"print_level": 5}``); they
+        override `IPOPT_OPTIONS` and the ones set from the arguments above
 
     Returns
     -------
@@ -818,7 +844,7 @@ def tune(plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
                             robust=robust, free=free, substeps=substeps)
     lbx, ubx = gain_bounds(problem, bounds)
     return solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress, method=method,
-                 widths=widths)
+                 widths=widths, ipopt_options=ipopt_options)
 
 
 def gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
@@ -863,7 +889,7 @@ def _status_converged(status: str) -> bool:
 
 def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool = False, plant_cost=None,
           tol: float = 1e-8, hessian: str = "limited-memory", progress=None, method: str = "smooth",
-          widths=WIDTHS, start=None, cost_weight: float = 1.0) -> TuningResult:
+          widths=WIDTHS, start=None, cost_weight: float = 1.0, ipopt_options=None) -> TuningResult:
     """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
 
     Parameters
@@ -873,9 +899,12 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     plant_cost : optional callable MX decision -> MX scalar added to the objective
     start : decision vector to start from (default `problem.start()`), clipped to the bounds
     cost_weight : >= 0, the closed-loop objective's weight (0: the plant cost alone, under the specs)
+    ipopt_options : as in `tune`
     max_iter, jit, tol, hessian, progress, method, widths : as in `tune`
     """
     max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
+    if ipopt_options is not None and not isinstance(ipopt_options, Mapping):
+        raise TypeError(f"ipopt_options must be a dict of IPOPT options, got {ipopt_options!r}")
     start_time = time.perf_counter()
     x = problem.decision
     n = x.numel()
@@ -920,8 +949,8 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     smoothed_g = ca.Function("smoothed_constraints", [x, width], [problem.smoothed()[1] if smooth else problem.g])
 
     recorder = _Recorder(variables.numel(), g.numel(), width.numel(), progress, start_time)
-    opts = {"ipopt": {"max_iter": int(max_iter), "print_level": 0, "tol": tol, "acceptable_tol": 100 * tol,
-                      "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
+    opts = {"ipopt": IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol,
+                                      "hessian_approximation": hessian} | dict(ipopt_options or {}),
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
     if jit:
         opts |= {"jit": True, "compiler": "shell", "jit_cleanup": True,
