@@ -249,7 +249,7 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
     lbx, ubx = gain_bounds(problem, bounds)
     tuned = solve(problem, lbx, ubx, **solve_options)
     plant_cost_value = float(cost_fn(list(values.values())))
-    converged = plant_status in STOPPED_BY_TEST[:2] and tuned.converged
+    converged = plant_status in STOPPED_BY_TEST[:2] and tuned.stopped_on_test
     return CodesignResult(
         method="sequential", params={k: float(v) for k, v in values.items()}, plant=designed, block=tuned.block,
         objective=tuned.cost + plant_cost_value, closed_loop_cost=tuned.cost, plant_cost=plant_cost_value,
@@ -381,8 +381,8 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, spec
     -------
     dict: limit (the smallest feasible limit found), block (the design at that limit),
     evaluations (number of limits tried), history [(limit, feasible)], statuses
-    [IPOPT status per tuned limit], converged (every inner tuning stopped on a
-    convergence test).
+    [IPOPT status per tuned limit], converged (every inner tuning converged or proved
+    its limit infeasible: `TuningResult.stopped_on_test`).
 
     Raises
     ------
@@ -397,7 +397,7 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, spec
         raise TypeError(f"specs must be a designs.tuning.Specs, got {type(specs).__name__}")
     if tune_options is not None and not isinstance(tune_options, Mapping):
         raise TypeError(f"tune_options must be a dict of keyword arguments for tune, got {tune_options!r}")
-    history, statuses = [], []
+    history, statuses, stopped = [], [], []
 
     def attempt(limit):
         sized = plant.with_input_limit(limit)
@@ -406,6 +406,7 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, spec
             result = tune(sized, block, scenario, specs=specs, **(tune_options or {}))
             ok, block, violations = result.feasible, result.block, result.violations
             statuses.append(result.status)
+            stopped.append(result.stopped_on_test)
         else:
             problem = TuningProblem(sized, block, scenario, specs=specs)
             violations = problem.values(problem.start())[2]
@@ -427,7 +428,7 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, spec
         else:
             low = mid
     return {"limit": best, "block": best_block, "evaluations": len(history), "history": history,
-            "statuses": statuses, "converged": all(s in STOPPED_BY_TEST for s in statuses)}
+            "statuses": statuses, "converged": all(stopped)}
 
 
 def size_actuator_simultaneous(plant: Plant, design: Callable[[Plant], Block], scenario, specs: Specs, *,

@@ -336,6 +336,11 @@ class TuningResult:
     method: str = "smooth"
     iterates: list = field(default_factory=list)
 
+    @property
+    def stopped_on_test(self) -> bool:
+        """Converged, or IPOPT proved the specs locally infeasible (its restoration converged): not a cap."""
+        return self.converged or self.status == "Infeasible_Problem_Detected"
+
 
 class _Recorder(ca.Callback):
     """IPOPT iteration callback keeping every iterate and the objective IPOPT saw there."""

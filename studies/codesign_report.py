@@ -292,7 +292,7 @@ def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float =
         tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, **options)
         result.designs["sequential"] = _sizing_design(
             "sequential", sized, tuned.block, scenario, specs, time.perf_counter() - started,
-            f"the holding limit, then the gains tuned for it: {tuned.message}", tuned.converged,
+            f"the holding limit, then the gains tuned for it: {tuned.message}", tuned.stopped_on_test,
             f"IPOPT: {tuned.status}")
     if "nested" in methods:
         started = time.perf_counter()
@@ -414,8 +414,9 @@ Columns:
   objective of (1) and (2)); positive: simultaneous better.
 - **wall time**: seconds per method on the machine that ran the command.
 - **all converged**: every optimizer behind every answer stopped on its convergence test
-  (IPOPT's tolerance, the bisection's or Brent's resolution), none at an iteration cap; each
-  answer's statuses are listed under Notes.
+  (IPOPT's tolerance with the smoothing continuation settled, or IPOPT's proof that a limit
+  cannot meet the specs; the bisection's or Brent's resolution), none at an iteration cap;
+  each answer's statuses are listed under Notes.
 """
 
 
