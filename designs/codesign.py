@@ -1,4 +1,4 @@
-"""Plant/controller co-design: plant parameters and gains decided together.
+"""Plant/controller co-design: plant parameters and gains decided together, against fair baselines.
 
 The closed loop of `designs.tuning` already takes the plant parameters as a
 symbolic input, so co-design adds the chosen parameters to the decision
@@ -7,39 +7,72 @@ vector and a plant cost to the objective:
     minimize   closed-loop cost(gains, p) + plant_cost(p)
     subject to the specs on the nonlinear closed loop, p_low <= p <= p_high
 
-- simultaneous: gains and parameters in one IPOPT problem;
-- sequential: the parameters first (with the starting controller fixed), then
-  the gains (with those parameters fixed).
+`codesign` answers it three ways, each solved to convergence:
 
-The simultaneous problem starts from the sequential answer, so on the same
-problem it is never worse. `size_actuator` finds the smallest actuator limit
-that still meets the specs, with the hand design re-derived for each limit
-(sequential) or with the gains re-tuned for each limit (simultaneous).
+- sequential (control-blind, as the co-design literature defines it): the
+  plant parameters minimize a plant-only objective (default `plant_cost`)
+  within their ranges, then the best controller for that plant is tuned;
+- nested: an outer optimizer on the plant parameters (bounded Brent for one
+  parameter, Powell for several), each of its evaluations a converged inner
+  tuning of the gains at those parameters;
+- simultaneous: gains and parameters in one IPOPT problem, started from a
+  neutral point (the middle of each range, the starting controller's gains)
+  and from the sequential answer.
+
+Actuator sizing (`size_actuator`, the smallest symmetric limit meeting the
+specs) is the same comparison for a limit: the nested method bisects on the
+limit with the gains re-tuned at each, the simultaneous one decides the limit
+as one more decision (`ActuatorLimit`, a saturation whose level is a gain).
 """
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+import scipy.optimize
 
+import models
 from models import Block, Plant
+from models.checks import boolean, integer, positive, real
 
-from .tuning import Cost, Scenario, Specs, TuningProblem, TuningResult, gain_bounds, solve
+from .tuning import (
+    MAX_ITER,
+    WIDTHS,
+    Cost,
+    Specs,
+    TuningProblem,
+    TuningResult,
+    gain_bounds,
+    solve,
+    tune,
+)
+
+METHODS = ("sequential", "nested", "simultaneous", "simultaneous from sequential")
+#: Statuses of an IPOPT solve that stopped on a convergence test (local infeasibility included).
+STOPPED_BY_TEST = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Infeasible_Problem_Detected")
+#: Most limits `size_actuator` may try (a bisection of 2^-60 relative resolution needs fewer).
+MAX_BISECTIONS = 60
 
 
 @dataclass
 class CodesignResult:
     """One co-design answer.
 
-    method : "sequential" or "simultaneous"
+    method : one of `METHODS`
     params : the chosen values of the designed plant parameters (SI)
     plant : the plant with those values;  block : the controller with its gains
-    objective : closed_loop_cost + plant_cost
-    feasible, success, message, violations : as in `TuningResult`
+    objective : closed_loop_cost + plant_cost (exact closed loop)
+    feasible, violations : as in `TuningResult`
+    converged : every optimizer this answer rests on stopped on its convergence test
+    status : the solvers' statuses in words (IPOPT's return status, the outer optimizer's)
+    message : what happened
+    evaluations : inner tunings (nested) or IPOPT solves made
+    wall_time : s
     """
 
     method: str
@@ -54,6 +87,10 @@ class CodesignResult:
     message: str
     violations: list
     wall_time: float
+    converged: bool = False
+    status: str = ""
+    evaluations: int = 1
+    history: list = field(default_factory=list)
 
 
 def _plant_cost_function(names, plant_cost):
@@ -62,114 +99,305 @@ def _plant_cost_function(names, plant_cost):
     return ca.Function("plant_cost", [p], [value])
 
 
-def _check_ranges(plant: Plant, design_params: dict) -> None:
+def check_ranges(plant: Plant, design_params) -> dict:
+    """{name: (low, high)} checked: known parameters, finite low < high, the current value inside."""
+    if not isinstance(design_params, Mapping):
+        raise TypeError(f"design_params must be a dict name -> (low, high), got {design_params!r}")
     if not design_params:
         raise ValueError("design_params is empty: name the plant parameters to co-design")
-    for name, (low, high) in design_params.items():
+    ranges = {}
+    for name, pair in design_params.items():
         if name not in plant.params:
             raise ValueError(f"{plant.name} has no parameter {name!r}; its parameters are {', '.join(plant.params)}")
+        if isinstance(pair, (str, bytes)) or not isinstance(pair, Sequence) or len(pair) != 2:
+            raise ValueError(f"design_params[{name!r}] must be a pair (low, high), got {pair!r}")
+        low, high = (real(v, f"design_params[{name!r}] bound", finite=False) for v in pair)
         if not (np.isfinite(low) and np.isfinite(high) and low < high):
             raise ValueError(f"range of {name} must be finite with low < high, got ({low}, {high})")
         plant.with_params(**{name: low})
+        plant.with_params(**{name: high})
         if not low <= plant.params[name] <= high:
             raise ValueError(f"{name} = {plant.params[name]} starts outside its range ({low}, {high})")
+        ranges[name] = (low, high)
+    return ranges
 
 
-def _run(plant, block, scenario, names, ranges, plant_cost, free, options, method, start_time):
-    """One IPOPT solve over (free gains, the named parameters)."""
-    problem = TuningProblem(plant, block, scenario, free=free, extra_params=names, **options["problem"])
-    lbx, ubx = gain_bounds(problem, options["bounds"] if free else None)
-    lbx[problem.n_gains:] = [ranges[n][0] for n in names]
-    ubx[problem.n_gains:] = [ranges[n][1] for n in names]
-    cost_fn = _plant_cost_function(names, plant_cost)
-    result: TuningResult = solve(problem, lbx, ubx, options["max_iter"], options["jit"],
-                                  plant_cost=lambda x: cost_fn(x[problem.n_gains:]), tol=options["tol"])
-    values = dict(zip(names, result.decision[problem.n_gains:]))
+def _check_common(max_iter, tol, jit, plant_cost, plant_objective):
+    max_iter = integer(max_iter, "max_iter", minimum=1)
+    tol = positive(tol, "tol")
+    jit = boolean(jit, "jit")
+    for what, fn in (("plant_cost", plant_cost), ("plant_objective", plant_objective)):
+        if fn is not None and not callable(fn):
+            raise TypeError(f"{what} must be callable dict name -> CasADi symbol -> scalar, got {fn!r}")
+    return max_iter, tol, jit
+
+
+def _answer(method, problem: TuningProblem, result: TuningResult, names, cost_fn, started, status,
+            converged, evaluations=1, extra_message="") -> CodesignResult:
+    values = dict(zip(names, (float(v) for v in result.decision[problem.n_gains:])))
     plant_cost_value = float(cost_fn(result.decision[problem.n_gains:]))
-    return CodesignResult(method=method, params=values, plant=plant.with_params(**values), block=result.block,
+    plant = problem.plant.with_params(**values)
+    return CodesignResult(method=method, params=values, plant=plant, block=result.block,
                           objective=result.cost, closed_loop_cost=result.cost - plant_cost_value,
-                          plant_cost=plant_cost_value, feasible=result.feasible, success=result.success,
-                          message=result.message, violations=result.violations,
-                          wall_time=time.perf_counter() - start_time)
+                          plant_cost=plant_cost_value, feasible=result.feasible,
+                          success=converged and result.feasible, message=extra_message + result.message,
+                          violations=result.violations, wall_time=time.perf_counter() - started,
+                          converged=converged, status=status, evaluations=evaluations, history=result.history)
 
 
-def codesign(plant: Plant, block: Block, scenario: Scenario, design_params: dict, *,
-             plant_cost: Callable | None = None, specs: Specs | None = None, cost: Cost | None = None,
-             free=None, bounds=None, samples=None, robust: str = "mean",
-             max_iter: int = 200, tol: float = 1e-8, jit: bool = False) -> dict[str, CodesignResult]:
-    """Co-design the named plant parameters with the block's gains, both ways.
+def codesign(plant: Plant, block: Block, scenarios, design_params: dict, *,
+             plant_cost: Callable | None = None, plant_objective: Callable | None = None,
+             specs: Specs | None = None, cost: Cost | None = None, free=None, bounds=None, samples=None,
+             robust: str = "mean", max_iter: int = MAX_ITER, tol: float = 1e-8, jit: bool = False,
+             methods: Sequence[str] = METHODS, nested_tol: float = 1e-3, substeps: int = 10,
+             widths=WIDTHS) -> dict[str, CodesignResult]:
+    """Co-design the named plant parameters with the block's gains: sequential, nested, simultaneous.
 
     Parameters
     ----------
-    plant : Plant, its current values are the starting point
+    plant : Plant, its current values are the plant the controller starts on
     block : Block, the starting controller (usually the hand design)
-    scenario : Scenario
+    scenarios : a `designs.tuning.Scenario` or several
     design_params : dict name -> (low, high), the parameters to decide and their ranges (SI)
-    plant_cost : callable dict name -> MX symbol -> MX scalar, the price of the plant
-        (for example ``lambda p: 0.1 * p["k"]``); default zero
-    specs, cost, free, bounds, samples, robust, max_iter, tol, jit
-        As in `designs.tuning.tune`. Parameters listed in `samples` rows are
-        overwritten by the decision for the designed names.
+    plant_cost : callable dict name -> MX symbol -> MX scalar, the price of the plant in the
+        objective (for example ``lambda p: 0.1 * p["k"]``); default zero
+    plant_objective : the sequential method's plant-only objective, same form (default
+        `plant_cost`; one of the two must be given)
+    specs, cost, free, bounds, samples, robust, max_iter, tol, jit, substeps, widths
+        As in `designs.tuning.tune`; `bounds` holds in every method. Parameters listed
+        in `samples` rows are overwritten by the decision for the designed names.
+    methods : which of `METHODS` to run (the simultaneous start from the sequential
+        answer needs "sequential")
+    nested_tol : the nested outer optimizer's tolerance on each parameter, a fraction of its range
 
     Returns
     -------
-    dict with "sequential" and "simultaneous" CodesignResult. The simultaneous
-    solve starts from the sequential answer.
+    dict method -> CodesignResult for each method run.
     """
-    _check_ranges(plant, design_params)
-    names = tuple(design_params)
-    options = {"problem": {"specs": specs, "cost": cost, "samples": samples, "robust": robust},
-               "bounds": bounds, "max_iter": max_iter, "tol": tol, "jit": jit}
-    start_time = time.perf_counter()
-    plant_first = _run(plant, block, scenario, names, design_params, plant_cost, (), options,
-                       "sequential", start_time)
-    # Second sequential stage: the gains with the chosen plant fixed (a plain tuning problem).
-    problem = TuningProblem(plant_first.plant, block, scenario, free=free, **options["problem"])
-    lbx, ubx = gain_bounds(problem, bounds)
-    tuned = solve(problem, lbx, ubx, max_iter, jit, tol=tol)
+    ranges = check_ranges(plant, design_params)
+    max_iter, tol, jit = _check_common(max_iter, tol, jit, plant_cost, plant_objective)
+    if isinstance(methods, str) or not isinstance(methods, Sequence) or not methods:
+        raise TypeError(f"methods must be a non-empty sequence of {METHODS}, got {methods!r}")
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise ValueError(f"unknown co-design method {bad}; choose from {', '.join(METHODS)}")
+    if "simultaneous from sequential" in methods and "sequential" not in methods:
+        raise ValueError("'simultaneous from sequential' needs 'sequential' among the methods")
+    nested_tol = positive(nested_tol, "nested_tol")
+    if nested_tol >= 1:
+        raise ValueError(f"nested_tol must be a fraction of the range below 1, got {nested_tol}")
+    if plant_objective is None and plant_cost is None and "sequential" in methods:
+        raise ValueError("the sequential method needs a plant-only objective: give plant_objective or plant_cost")
+    names = tuple(ranges)
+    options = {"specs": specs, "cost": cost, "samples": samples, "robust": robust, "substeps": substeps}
+    solve_options = {"max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths}
+    # Validate everything once, before any solve: the joint problem and its bounds.
+    joint = TuningProblem(plant, block, scenarios, free=free, extra_params=names, **options)
+    lbx, ubx = _joint_bounds(joint, bounds, names, ranges)
     cost_fn = _plant_cost_function(names, plant_cost)
-    fixed_cost = float(cost_fn([plant_first.params[n] for n in names]))
-    sequential = CodesignResult(
-        method="sequential", params=plant_first.params, plant=plant_first.plant, block=tuned.block,
-        objective=tuned.cost + fixed_cost, closed_loop_cost=tuned.cost, plant_cost=fixed_cost,
-        feasible=tuned.feasible, success=plant_first.success and tuned.success,
-        message=f"plant: {plant_first.message}; controller: {tuned.message}", violations=tuned.violations,
-        wall_time=time.perf_counter() - start_time)
-    start_time = time.perf_counter()
-    simultaneous = _run(sequential.plant, sequential.block, scenario, names, design_params, plant_cost, free,
-                        options, "simultaneous", start_time)
-    return {"sequential": sequential, "simultaneous": simultaneous}
+    answers = {}
+    if "sequential" in methods:
+        answers["sequential"] = _sequential(plant, block, scenarios, names, ranges, plant_objective or plant_cost,
+                                            cost_fn, free, bounds, options, solve_options)
+    if "nested" in methods:
+        answers["nested"] = _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, options,
+                                    solve_options, nested_tol)
+    if "simultaneous" in methods:
+        started = time.perf_counter()
+        neutral = joint.start()
+        neutral[joint.n_gains:] = [(ranges[n][0] + ranges[n][1]) / 2 for n in names]
+        result = solve(joint, lbx, ubx, plant_cost=lambda x: cost_fn(x[joint.n_gains:]), start=neutral,
+                       **solve_options)
+        answers["simultaneous"] = _answer("simultaneous", joint, result, names, cost_fn, started,
+                                          f"IPOPT: {result.status}", result.converged,
+                                          len(result.stages), "from the middle of the ranges: ")
+    if "simultaneous from sequential" in methods:
+        started = time.perf_counter()
+        seq = answers["sequential"]
+        problem = TuningProblem(seq.plant, seq.block, scenarios, free=free, extra_params=names, **options)
+        lb, ub = _joint_bounds(problem, bounds, names, ranges)
+        result = solve(problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains:]), **solve_options)
+        answers["simultaneous from sequential"] = _answer(
+            "simultaneous from sequential", problem, result, names, cost_fn, started, f"IPOPT: {result.status}",
+            result.converged, len(result.stages), "from the sequential answer: ")
+    return answers
 
 
-def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario: Scenario, specs: Specs, *,
+def _joint_bounds(problem: TuningProblem, bounds, names, ranges):
+    lbx, ubx = gain_bounds(problem, bounds)
+    lbx[problem.n_gains:] = [ranges[n][0] for n in names]
+    ubx[problem.n_gains:] = [ranges[n][1] for n in names]
+    return lbx, ubx
+
+
+def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, free, bounds, options, solve_options):
+    """Control-blind: the parameters from the plant-only objective, then the best controller for them."""
+    started = time.perf_counter()
+    p = ca.MX.sym("p", len(names))
+    objective = plant_only({n: p[i] for i, n in enumerate(names)})
+    low, high = np.array([ranges[n] for n in names]).T
+    start = np.array([plant.params[n] for n in names])
+    plant_solver = ca.nlpsol("plant_only", "ipopt", {"x": p, "f": objective},
+                             {"ipopt": {"print_level": 0, "sb": "yes", "tol": solve_options["tol"],
+                                        "max_iter": MAX_ITER}, "print_time": False,
+                              "error_on_fail": False})
+    sol = plant_solver(x0=start, lbx=low, ubx=high)
+    plant_status = plant_solver.stats()["return_status"]
+    values = dict(zip(names, np.clip(np.asarray(sol["x"]).ravel(), low, high)))
+    designed = plant.with_params(**values)
+    problem = TuningProblem(designed, block, scenarios, free=free, **options)
+    lbx, ubx = gain_bounds(problem, bounds)
+    tuned = solve(problem, lbx, ubx, **solve_options)
+    plant_cost_value = float(cost_fn(list(values.values())))
+    converged = plant_status in STOPPED_BY_TEST[:2] and tuned.stopped_on_test
+    return CodesignResult(
+        method="sequential", params={k: float(v) for k, v in values.items()}, plant=designed, block=tuned.block,
+        objective=tuned.cost + plant_cost_value, closed_loop_cost=tuned.cost, plant_cost=plant_cost_value,
+        feasible=tuned.feasible, success=converged and tuned.feasible,
+        message=f"plant-only objective: IPOPT {plant_status}; controller: {tuned.message}",
+        violations=tuned.violations, wall_time=time.perf_counter() - started, converged=converged,
+        status=f"plant: IPOPT: {plant_status}; controller: IPOPT: {tuned.status}", evaluations=2,
+        history=tuned.history)
+
+
+def _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, options, solve_options, nested_tol):
+    """Outer optimizer on the parameters; each evaluation a converged tuning, warm-started from the nearest."""
+    started = time.perf_counter()
+    low, high = np.array([ranges[n] for n in names]).T
+    width = high - low
+    tried: list[tuple[np.ndarray, TuningResult, float]] = []
+
+    def inner(values: np.ndarray) -> tuple[TuningResult, float]:
+        values = np.clip(values, low, high)
+        start = block
+        if tried:
+            nearest = min(tried, key=lambda item: float(np.max(np.abs(item[0] - values) / width)))
+            start = nearest[1].block
+        designed = plant.with_params(**dict(zip(names, values)))
+        problem = TuningProblem(designed, start, scenarios, free=free, **options)
+        lbx, ubx = gain_bounds(problem, bounds)
+        result = solve(problem, lbx, ubx, **solve_options)
+        value = result.cost + float(cost_fn(values))
+        if not result.feasible or not np.isfinite(value):
+            # Infeasible inner answers lose to every feasible one, and the least infeasible wins.
+            excess = problem.excess(np.asarray(problem.evaluate(result.decision)[1]).ravel()) \
+                if np.isfinite(result.cost) else np.array([np.inf])
+            worst = float(np.max(excess, initial=0.0))
+            value = 1e6 * (1.0 + abs(result.initial_cost)) * (1.0 + min(worst, 1e6))
+        tried.append((values, result, value))
+        return result, value
+
+    if len(names) == 1:
+        outer = scipy.optimize.minimize_scalar(lambda v: inner(np.atleast_1d(v))[1], bounds=(low[0], high[0]),
+                                               method="bounded",
+                                               options={"xatol": nested_tol * width[0], "maxiter": 500})
+        outer_ok, outer_text = bool(outer.success), f"bounded Brent: {outer.message}"
+    else:
+        outer = scipy.optimize.minimize(lambda v: inner(v)[1], (low + high) / 2, method="Powell",
+                                        bounds=list(zip(low, high)),
+                                        options={"xtol": nested_tol, "ftol": 1e-9, "maxiter": 500})
+        outer_ok, outer_text = bool(outer.success), f"Powell: {outer.message}"
+    values, result, _ = min(tried, key=lambda item: item[2])
+    designed = plant.with_params(**dict(zip(names, values)))
+    plant_cost_value = float(cost_fn(values))
+    converged = outer_ok and result.converged
+    return CodesignResult(
+        method="nested", params={n: float(v) for n, v in zip(names, values)}, plant=designed, block=result.block,
+        objective=result.cost + plant_cost_value, closed_loop_cost=result.cost, plant_cost=plant_cost_value,
+        feasible=result.feasible, success=converged and result.feasible,
+        message=f"{outer_text} after {len(tried)} inner tunings; at the answer: {result.message}",
+        violations=result.violations, wall_time=time.perf_counter() - started, converged=converged,
+        status=f"outer: {outer_text}; inner: IPOPT: {result.status}", evaluations=len(tried),
+        history=[(float(v[0]) if len(v) == 1 else v.tolist(), float(f)) for v, _, f in tried])
+
+
+# ----------------------------------------------------------------- actuator sizing
+class ActuatorLimit(Block):
+    """`block`, its command then saturated at ±"actuator_limit", a gain: the limit becomes a decision.
+
+    Used on a plant whose own limit is at least any value the gain takes, the
+    plant receives exactly sat(u, actuator_limit). Equivalent to `block` built
+    for that limit when `block`'s state does not depend on its own saturation
+    (no back-calculation or observer anti-windup): saturating twice is
+    saturating once at the smaller limit.
+    """
+
+    def __init__(self, block: Block, limit: float):
+        if not isinstance(block, Block):
+            raise TypeError(f"ActuatorLimit needs a models.Block, got {type(block).__name__}")
+        if "actuator_limit" in block.gains:
+            raise ValueError(f"{block.name} already has a gain named 'actuator_limit'")
+        self.block = block
+        limit = positive(limit, "limit")
+        super().__init__(sample_period=block.sample_period, n_state=block.n_state, n_measured=block.n_measured,
+                         n_reference=block.n_reference, n_input=block.n_input,
+                         gains=dict(block.gains) | {"actuator_limit": limit}, measures=block.measures,
+                         name=f"{block.name} (limit decided)")
+
+    def expr(self, xc, y, r, gains):
+        xc_next, u = self.block.expr(xc, y, r, {k: v for k, v in gains.items() if k != "actuator_limit"})
+        return xc_next, models.saturate(ca.vertcat(u), gains["actuator_limit"])
+
+    def initial_state(self, y0, r0):
+        return self.block.initial_state(y0, r0)
+
+    def with_gains(self, **gains) -> ActuatorLimit:
+        new = super().with_gains(**gains)
+        new.block = self.block.with_gains(**{k: v for k, v in new.gains.items() if k != "actuator_limit"})
+        return new
+
+
+def _check_sizing(low, high, rel_tol):
+    low = real(low, "low", finite=False)
+    high = real(high, "high", finite=False)
+    if not (np.isfinite(low) and np.isfinite(high) and 0 < low < high):
+        raise ValueError(f"need finite 0 < low < high, got low={low}, high={high}")
+    rel_tol = real(rel_tol, "rel_tol", finite=False)
+    if not (np.isfinite(rel_tol) and 0 < rel_tol < 1):
+        raise ValueError(f"rel_tol must be a fraction in (0, 1), got {rel_tol}")
+    needed = math.ceil(math.log2(max(math.log(high / low) / math.log1p(rel_tol), 1.0))) + 1
+    if needed > MAX_BISECTIONS:
+        raise ValueError(f"rel_tol = {rel_tol:g} over [{low:g}, {high:g}] needs {needed} limits, more than "
+                         f"{MAX_BISECTIONS}; give a larger rel_tol")
+    return low, high, rel_tol
+
+
+def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, specs: Specs, *,
                   low: float, high: float, retune: bool, rel_tol: float = 0.01, tune_options=None) -> dict:
     """Smallest symmetric actuator limit in [low, high] for which the specs hold (bisection).
 
     Parameters
     ----------
-    design : callable Plant -> Block, the hand design re-derived for the plant's limit
-        (for example a saturation-rule PD whose gains depend on the limit)
-    retune : False checks the hand design as designed (sequential: plant first,
-        controller by its rule); True also tunes the gains for each limit with
-        `designs.tuning.tune` (simultaneous: limit and gains decided together)
-    rel_tol : bisection stops when high / low - 1 < rel_tol
+    design : callable Plant -> Block, the design at the plant's limit (for example a
+        saturation-rule PD whose gains depend on the limit)
+    retune : False checks `design` as designed (the hand rule at each limit); True also tunes
+        the gains at each limit with `designs.tuning.tune` (the nested co-design: an outer
+        bisection on the limit, an inner converged tuning)
+    rel_tol : fraction in (0, 1); bisection stops when high / low - 1 < rel_tol (at most
+        `MAX_BISECTIONS` limits)
     tune_options : keyword arguments for `tune` when retuning (cost, bounds, ...)
 
     Returns
     -------
-    dict: limit (the smallest feasible limit found), block (the design at that
-    limit), evaluations (number of limits tried), history [(limit, feasible)].
+    dict: limit (the smallest feasible limit found), block (the design at that limit),
+    evaluations (number of limits tried), history [(limit, feasible)], statuses
+    [IPOPT status per tuned limit], converged (every inner tuning converged or proved
+    its limit infeasible: `TuningResult.stopped_on_test`).
 
     Raises
     ------
     ValueError
         When even `high` does not meet the specs (naming the violated specs).
     """
-    from .tuning import tune
-
-    if not (0 < low < high and np.isfinite(high)):
-        raise ValueError(f"need 0 < low < high, got low={low}, high={high}")
-    history = []
+    low, high, rel_tol = _check_sizing(low, high, rel_tol)
+    retune = boolean(retune, "retune")
+    if not callable(design):
+        raise TypeError(f"design must be callable Plant -> Block, got {design!r}")
+    if not isinstance(specs, Specs):
+        raise TypeError(f"specs must be a designs.tuning.Specs, got {type(specs).__name__}")
+    if tune_options is not None and not isinstance(tune_options, Mapping):
+        raise TypeError(f"tune_options must be a dict of keyword arguments for tune, got {tune_options!r}")
+    history, statuses, stopped = [], [], []
 
     def attempt(limit):
         sized = plant.with_input_limit(limit)
@@ -177,6 +405,8 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario: Scen
         if retune:
             result = tune(sized, block, scenario, specs=specs, **(tune_options or {}))
             ok, block, violations = result.feasible, result.block, result.violations
+            statuses.append(result.status)
+            stopped.append(result.stopped_on_test)
         else:
             problem = TuningProblem(sized, block, scenario, specs=specs)
             violations = problem.values(problem.start())[2]
@@ -188,11 +418,75 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario: Scen
     if not ok:
         raise ValueError(f"even the largest limit {high:g} misses the specs: " + "; ".join(violations))
     best = high
-    while high / low - 1 > rel_tol:
+    for _ in range(MAX_BISECTIONS):
+        if high / low - 1 <= rel_tol:
+            break
         mid = np.sqrt(low * high)
         ok, block, _ = attempt(mid)
         if ok:
             high, best, best_block = mid, mid, block
         else:
             low = mid
-    return {"limit": best, "block": best_block, "evaluations": len(history), "history": history}
+    return {"limit": best, "block": best_block, "evaluations": len(history), "history": history,
+            "statuses": statuses, "converged": all(stopped)}
+
+
+def size_actuator_simultaneous(plant: Plant, design: Callable[[Plant], Block], scenario, specs: Specs, *,
+                               low: float, high: float, start_limit: float, start_block: Block | None = None,
+                               free=None, bounds=None, cost_weight: float = 1e-3, max_iter: int = MAX_ITER,
+                               tol: float = 1e-8, jit: bool = False, substeps: int = 10, widths=WIDTHS) -> dict:
+    """Smallest limit and its gains in one IPOPT problem: minimize the limit subject to the specs.
+
+    The decision is (the free gains, the limit λ in [low, high]) on `ActuatorLimit(design(plant at high))`;
+    the objective is λ + cost_weight · λ₀ · J / J₀ (J the closed-loop cost, a tie-break among
+    gains that all meet the specs at the same λ; J₀, λ₀ its and the limit's start values).
+    The answer is re-built as `design(plant at λ)` with the found gains and judged on
+    that block by a fresh `TuningProblem`, so what is reported is a design at the limit.
+
+    Parameters
+    ----------
+    design : Plant -> Block, the design at the plant's limit; its state must not depend on its
+        own saturation (see `ActuatorLimit`)
+    start_limit : the limit to start from, in [low, high]
+    start_block : the gains to start from (default ``design(plant at start_limit)``)
+    free, bounds : gains to tune (default all of the design's) and their boxes
+    cost_weight : >= 0, weight of the closed-loop cost relative to the limit
+    max_iter, tol, jit, substeps, widths : as in `designs.tuning.tune`
+
+    Returns
+    -------
+    dict: limit, block (the design at the limit with the found gains), feasible, violations,
+    converged, status, message, result (the `TuningResult`).
+    """
+    low, high, _ = _check_sizing(low, high, 0.5)
+    start_limit = real(start_limit, "start_limit")
+    if not low <= start_limit <= high:
+        raise ValueError(f"start_limit = {start_limit:g} is outside [{low:g}, {high:g}]")
+    cost_weight = real(cost_weight, "cost_weight")
+    if cost_weight < 0:
+        raise ValueError(f"cost_weight must be >= 0, got {cost_weight}")
+    if not callable(design):
+        raise TypeError(f"design must be callable Plant -> Block, got {design!r}")
+    top = plant.with_input_limit(high)
+    base = design(top)
+    if start_block is not None:
+        base = base.with_gains(**{k: v for k, v in start_block.gains.items() if k in base.gains})
+    wrapped = ActuatorLimit(base, start_limit)
+    free = tuple(base.gain_names if free is None else free) + ("actuator_limit",)
+    problem = TuningProblem(top, wrapped, scenario, specs=specs, cost=Cost("itae"), free=free, substeps=substeps)
+    lbx, ubx = gain_bounds(problem, (bounds or {}) | {"actuator_limit": (low, high)})
+    index = list(problem.free).index("actuator_limit")
+    offset = sum(np.asarray(wrapped.gains[g]).size for g in problem.free[:index])
+    j0 = problem.values(problem.start())[0]
+    weight = cost_weight * start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
+    result = solve(problem, lbx, ubx, max_iter, jit, plant_cost=lambda x: x[offset], cost_weight=weight, tol=tol,
+                   widths=widths)
+    limit = float(result.decision[offset])
+    sized = plant.with_input_limit(limit)
+    gains = {k: v for k, v in result.gains.items() if k != "actuator_limit"}
+    block = design(sized).with_gains(**gains)
+    check = TuningProblem(sized, block, scenario, specs=specs, substeps=substeps)
+    _, _, violations = check.values(check.start())
+    return {"limit": limit, "block": block, "feasible": not violations, "violations": violations,
+            "converged": result.converged, "status": f"IPOPT: {result.status}", "message": result.message,
+            "result": result}

@@ -2,17 +2,45 @@
 
 The decision variables are a block's gains; the cost is a time-domain
 criterion of the nonlinear closed loop (`models.closed_loop_function`, one
-CasADi mapaccum, so its gradient is exact); the constraints are time-domain
-specs on every parameter sample. IPOPT solves it from the hand design.
+CasADi mapaccum, so its gradient is exact) over a weighted set of scenarios
+(a step, a series of steps, an input disturbance, measurement noise, a
+regulation from an initial state) and parameter samples; the constraints are
+each scenario's specs on every parameter sample. IPOPT solves it from the
+hand design.
 
-    result = tune(plant, block, Scenario(reference=0.8, duration=5.0, tracked="theta"),
+    result = tune(plant, block, [Scenario(0.8, 5.0, tracked="theta", name="step"),
+                                 Scenario(0.8, 5.0, input_disturbance=0.2, tracked="theta")],
                   specs=Specs(max_overshoot=0.05, settling_time=2.0))
-    result.block          # the tuned block; result.improvement, result.violations
+    result.block          # the tuned block; result.converged, result.status, result.violations
+
+Saturation, conditional integration and anti-windup make the closed-loop
+cost piecewise smooth in the gains (its gradient jumps wherever a sample
+enters or leaves a limit). `tune` therefore solves a continuation of smoothed
+problems (`models.smooth`: every switch blended over a band of relative width
+w, w = 0.1, 0.01, ..., each solve warm-started from the last; the criteria's
+|e| is blended over w |e_0| the same way, since its kinks where e changes
+sign stall the search as much) and stops when
+IPOPT has converged on a stage whose answer no longer moves the exact
+objective (the change from the previous stage's answer is within
+`AGREEMENT`, relative) and where the exact nonsmooth loop's objective agrees
+with the smoothed one to `AGREEMENT` with the same specs violated. The choice was
+measured (`docs/codesign.md`, "Tuning through saturation"; `benchmarks/tuning.py`) on
+the saturating 2 m pendulum step against the exact loop in single shooting,
+which stops at IPOPT's iteration limit because quasi-Newton steps stall on the
+kinks, and multiple shooting of the exact loop, which makes each interval's
+gradient local but keeps every kink, adds (n_x + n_c) variables and
+constraints per interval, and was slower to a worse cost. A complementarity
+reformulation needs each switch of each sample as a variable pair with a
+complementarity constraint, which IPOPT handles only through a relaxation
+driven to zero, the same continuation on a problem a thousand times larger,
+and needs every switch exposed by the blocks, which write them inside their
+CasADi step: not measured, for that reason.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -20,43 +48,54 @@ import numpy as np
 
 import models
 from models import Block, Plant
-from models.checks import as_matrix, positive
+from models.checks import as_matrix, as_vector, boolean, integer, positive, real, real_array
 from models.signals import sample
 
 COSTS = ("itae", "iae", "ise")
+ROBUST = ("mean", "worst")
+METHODS = ("smooth", "exact")
+HESSIANS = ("limited-memory", "exact")
+#: Relative smoothing widths of the continuation (see `models.smooth`), largest first.
+WIDTHS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+#: The continuation stops when the exact and smoothed objectives agree to this, relative.
+AGREEMENT = 1e-6
+#: IPOPT statuses that mean it converged (to `tol`, or to 100 `tol` held for 10 iterations).
+CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+#: IPOPT iterations per solve: a safety cap, not the stopping rule (a stop here is reported).
+MAX_ITER = 3000
+#: IPOPT options of every solve (`tol` sets tol and acceptable_tol = 100 tol).
+IPOPT_OPTIONS = {"print_level": 0, "sb": "yes", "acceptable_iter": 10}
+#: IPOPT statuses of a numerical failure, retried once from the failed solve's last point.
+RETRIED = ("Error_In_Step_Computation", "Restoration_Failed", "Search_Direction_Becomes_Too_Small")
+#: IPOPT options of the continuation's later stages, which start at the last answer and multipliers.
+WARM_START = {"warm_start_init_point": "yes", "mu_init": 1e-6, "warm_start_bound_push": 1e-9,
+              "warm_start_slack_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9}
 
 
-@dataclass(frozen=True)
-class Scenario:
-    """The closed-loop run a tuning problem is judged on.
-
-    reference : constant, callable t -> r, or array (N+1, 1): absolute tracked value
-    duration : s
-    x0 : initial plant state (nx,), default the plant's standard equilibrium
-    input_disturbance : constant, callable or array (N, nu), added at the plant input
-    tracked : state name of the coordinate that follows the reference (keyword only)
-    """
-
-    reference: object
-    duration: float
-    x0: np.ndarray | None = None
-    input_disturbance: object = 0.0
-    tracked: str = field(kw_only=True)
+# ----------------------------------------------------------------- records
+def _optional_time(value, what: str) -> float | None:
+    return None if value is None else positive(value, what)
 
 
 @dataclass(frozen=True)
 class Specs:
-    """Time-domain specs, enforced at every sample of every parameter sample.
+    """Time-domain specs of one scenario, enforced at every sample of every parameter sample.
 
-    max_overshoot : fraction of the step the tracked output may pass the final reference
+    max_overshoot : fraction (>= 0) of the step the tracked output may pass the final reference
     settling_time : s after which |e| <= settling_band * |step|
+    settling_band : fraction of the step, in (0, 1)
     rise_time : s by which the output has covered 90 % of the step, and stays beyond
         (sufficient for a 10-90 % rise time below it)
     max_spectral_abscissa : 1/s, bound on the closed-loop linearization's slowest mode
         at the final state, log(spectral radius) / Ts; checked at the solution, not
         enforced during the search (eigenvalues are not smooth)
-    state_bounds : dict state name -> bound, |x_i| <= bound at every sample (for example
-        a crane's swing angle)
+    state_bounds : dict state name -> bound b > 0 (|x_i| <= b) or (low, high) with low < high
+        (either may be infinite), at every sample after the start (a crane's swing angle)
+    final_values : dict state name -> (value, tolerance > 0): |x_i(t_N) − value| <= tolerance
+        at the scenario's last sample
+
+    The first three need a step (a constant reference different from the initial
+    tracked value); the others hold for any scenario.
     """
 
     max_overshoot: float | None = None
@@ -64,37 +103,193 @@ class Specs:
     settling_band: float = 0.02
     rise_time: float | None = None
     max_spectral_abscissa: float | None = None
-    state_bounds: dict = field(default_factory=dict)
+    state_bounds: Mapping = field(default_factory=dict)
+    final_values: Mapping = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.max_overshoot is not None:
+            value = real(self.max_overshoot, "max_overshoot")
+            if value < 0:
+                raise ValueError(f"max_overshoot must be a fraction >= 0, got {value}")
+        _optional_time(self.settling_time, "settling_time (s)")
+        _optional_time(self.rise_time, "rise_time (s)")
+        band = real(self.settling_band, "settling_band")
+        if not 0 < band < 1:
+            raise ValueError(f"settling_band must be a fraction in (0, 1), got {band}")
+        if self.max_spectral_abscissa is not None:
+            real(self.max_spectral_abscissa, "max_spectral_abscissa (1/s)")
+        if not isinstance(self.state_bounds, Mapping):
+            raise TypeError(f"state_bounds must be a dict state name -> bound, got {self.state_bounds!r}")
+        for name, bound in self.state_bounds.items():
+            state_bound(bound, f"state_bounds[{name!r}]")
+        if not isinstance(self.final_values, Mapping):
+            raise TypeError(f"final_values must be a dict state name -> (value, tolerance), got "
+                            f"{self.final_values!r}")
+        for name, pair in self.final_values.items():
+            final_value(pair, f"final_values[{name!r}]")
+
+    @property
+    def step_specs(self) -> tuple[str, ...]:
+        """Names of the specs set here that need a step."""
+        return tuple(name for name in ("max_overshoot", "settling_time", "rise_time")
+                     if getattr(self, name) is not None)
+
+
+def state_bound(bound, what: str) -> tuple[float, float]:
+    """(low, high) from a bound b > 0 (meaning |x| <= b) or a pair low < high (NaN refused)."""
+    arr = real_array(bound, what)
+    if arr.ndim == 0:
+        b = float(arr)
+        if not (np.isfinite(b) and b > 0):
+            raise ValueError(f"{what} must be a finite bound > 0 or a pair (low, high), got {bound!r}")
+        return -b, b
+    if arr.shape != (2,) or np.any(np.isnan(arr)) or not arr[0] < arr[1]:
+        raise ValueError(f"{what} must be a finite bound > 0 or a pair (low, high) with low < high, got {bound!r}")
+    return float(arr[0]), float(arr[1])
+
+
+def final_value(pair, what: str) -> tuple[float, float]:
+    """(value, tolerance) with a finite value and a finite tolerance > 0."""
+    arr = real_array(pair, what)
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or arr[1] <= 0:
+        raise ValueError(f"{what} must be a pair (value, tolerance > 0) of finite numbers, got {pair!r}")
+    return float(arr[0]), float(arr[1])
 
 
 @dataclass(frozen=True)
 class Cost:
-    """Σ_k w(t_k) ρ(e_k) Ts + energy_weight Σ_k u_k² Ts over k = 0..N-1.
+    """A closed-loop cost: a criterion of one signal plus quadratic terms, summed over k = 0..N-1.
 
-    kind : "itae" (w = t, ρ = |e|), "iae" (|e|) or "ise" (e²)
-    smoothing : |e| is evaluated as sqrt(e² + smoothing²) so the cost is differentiable;
-        in units of the tracked coordinate
+        J = Ts Σ_k w(t_k) ρ(s_k) + energy_weight Ts Σ_k |u_k|²
+            + Ts Σ_k [(x_k − x*)ᵀ Q (x_k − x*) + (u_k − u*)ᵀ R (u_k − u*) + (y_k − y*)ᵀ Q_y (y_k − y*)]
+            + (x_N − x*)ᵀ P (x_N − x*)
+
+    kind : "itae" (w = t, ρ = |s|), "iae" (ρ = |s|), "ise" (ρ = s²), or None for no criterion term
+    signal : what the criterion measures: "error" (reference − tracked coordinate), or the
+        name of a state, output or input (measured from its target)
+    energy_weight : weight (>= 0) on Σ u² Ts
+    smoothing : |s| is evaluated as sqrt(s² + smoothing²) so the cost is differentiable;
+        in units of the signal (> 0)
+    state_weights, output_weights, input_weights, terminal_weights : Q, Q_y, R and P: a
+        symmetric positive semidefinite matrix, a vector of its diagonal, or a dict
+        name -> weight (diagonal, the others zero); None for no term
+    target : x*, a dict state name -> value or a full state vector; default the plant's
+        standard equilibrium with the tracked coordinate at the final reference (when the
+        scenario has one); y* = h(x*)
+    input_target : u*, a dict input name -> value or a vector; default zero
     """
 
-    kind: str = "itae"
+    kind: str | None = "itae"
     energy_weight: float = 0.0
     smoothing: float = 1e-6
+    signal: str = "error"
+    state_weights: object = None
+    input_weights: object = None
+    output_weights: object = None
+    terminal_weights: object = None
+    target: object = None
+    input_target: object = None
 
     def __post_init__(self):
-        if self.kind not in COSTS:
-            raise ValueError(f"unknown cost {self.kind!r}; choose one of {', '.join(COSTS)}")
-        if not np.isfinite(self.energy_weight) or self.energy_weight < 0:
+        if self.kind is not None and self.kind not in COSTS:
+            raise ValueError(f"unknown cost {self.kind!r}; choose one of {', '.join(COSTS)} or None")
+        weight = real(self.energy_weight, "energy_weight", finite=False)
+        if not np.isfinite(weight) or weight < 0:
             raise ValueError(f"energy_weight must be finite and >= 0, got {self.energy_weight}")
+        positive(self.smoothing, "smoothing")
+        if not isinstance(self.signal, str):
+            raise TypeError(f"signal must be 'error' or a state, output or input name, got {self.signal!r}")
+        terms = (self.kind, self.state_weights, self.input_weights, self.output_weights, self.terminal_weights)
+        if all(term is None for term in terms) and weight == 0:
+            raise ValueError("the cost has no term: give kind, energy_weight or a weight matrix")
 
-    def __call__(self, t, e, u, sample_period):
-        """The cost of error samples e (1, N) and commands u (nu, N) at times t (1, N)."""
-        if self.kind == "ise":
-            per_sample = e**2
+
+def weight_matrix(weights, names: Sequence[str], what: str) -> np.ndarray:
+    """Q from a dict name -> weight, a diagonal vector or a full matrix; checked symmetric PSD."""
+    n = len(names)
+    if isinstance(weights, Mapping):
+        unknown = [k for k in weights if k not in names]
+        if unknown:
+            raise ValueError(f"{what}: no signal named {unknown}; the names are {', '.join(names)}")
+        diag = np.zeros(n)
+        for k, v in weights.items():
+            diag[list(names).index(k)] = real(v, f"{what}[{k!r}]")
+        matrix = np.diag(diag)
+    else:
+        arr = real_array(weights, what)
+        if arr.ndim == 1 and arr.size == n:
+            matrix = np.diag(arr)
+        elif arr.shape == (n, n):
+            matrix = arr
         else:
-            per_sample = ca.sqrt(e**2 + self.smoothing**2)
-            if self.kind == "itae":
-                per_sample = t * per_sample
-        return sample_period * (ca.sum2(per_sample) + self.energy_weight * ca.sum2(ca.sum1(u**2)))
+            raise ValueError(f"{what} must be a dict, {n} diagonal entries or an ({n}, {n}) matrix, "
+                             f"got shape {arr.shape}")
+    if not np.all(np.isfinite(matrix)):
+        raise ValueError(f"{what} must be finite, got {matrix.tolist()}")
+    if not np.allclose(matrix, matrix.T, rtol=1e-12, atol=0):
+        raise ValueError(f"{what} must be symmetric, got {matrix.tolist()}")
+    lowest = np.min(np.linalg.eigvalsh(matrix)) if n else 0.0
+    if lowest < -1e-12 * max(1.0, np.max(np.abs(matrix))):
+        raise ValueError(f"{what} must be positive semidefinite (lowest eigenvalue {lowest:.3g})")
+    return matrix
+
+
+def _named_vector(value, names: Sequence[str], default: np.ndarray, what: str) -> np.ndarray:
+    if value is None:
+        return np.array(default, dtype=float)
+    if isinstance(value, Mapping):
+        out = np.array(default, dtype=float)
+        for k, v in value.items():
+            if k not in names:
+                raise ValueError(f"{what}: no signal named {k!r}; the names are {', '.join(names)}")
+            out[list(names).index(k)] = real(v, f"{what}[{k!r}]")
+        return out
+    return as_vector(value, len(names), what)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One closed-loop run of a tuning problem.
+
+    reference : constant, callable t -> r, or array (N+1, n_reference): the block's reference
+        (absolute tracked value); None for a regulation (the block's reference held at zero)
+    duration : s
+    x0 : initial plant state (nx,), default the plant's standard equilibrium
+    input_disturbance : constant, callable or array (N, nu), added at the plant input
+    tracked : state name of the coordinate that follows the reference (needed by the
+        "error" signal and the step specs; keyword only)
+    noise_std : standard deviation of Gaussian measurement noise, one number or one per
+        measurement; parameter sample j draws it from the generator seeded (seed, j)
+    seed : integer >= 0, the noise seed
+    weight : > 0, the scenario's weight in the objective
+    specs, cost : this scenario's own specs and cost (default: the problem's)
+    name : label in violation messages
+    """
+
+    reference: object
+    duration: float
+    x0: np.ndarray | None = None
+    input_disturbance: object = 0.0
+    tracked: str | None = field(default=None, kw_only=True)
+    noise_std: object = field(default=0.0, kw_only=True)
+    seed: int = field(default=0, kw_only=True)
+    weight: float = field(default=1.0, kw_only=True)
+    specs: Specs | None = field(default=None, kw_only=True)
+    cost: Cost | None = field(default=None, kw_only=True)
+    name: str = field(default="", kw_only=True)
+
+    def __post_init__(self):
+        positive(self.duration, "duration (s)")
+        positive(self.weight, "scenario weight")
+        integer(self.seed, "seed", minimum=0)
+        if self.tracked is not None and not isinstance(self.tracked, str):
+            raise TypeError(f"tracked must be a state name, got {self.tracked!r}")
+        if self.specs is not None and not isinstance(self.specs, Specs):
+            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(self.specs).__name__}")
+        if self.cost is not None and not isinstance(self.cost, Cost):
+            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(self.cost).__name__}")
+        if not isinstance(self.name, str):
+            raise TypeError(f"name must be a string, got {self.name!r}")
 
 
 @dataclass
@@ -102,14 +297,22 @@ class TuningResult:
     """What `tune` found.
 
     block : the block with the tuned gains (or the best feasible point found)
-    cost, initial_cost : the tuning cost (mean or worst over the samples)
+    cost, initial_cost : the objective on the exact (nonsmooth) closed loop
     improvement : 1 − cost / initial_cost
-    feasible : every spec holds at `block`'s gains
-    success : IPOPT converged and the result is feasible
-    status : IPOPT's return status
+    feasible : every spec holds at `block`'s gains (exact loop)
+    converged : the last IPOPT solve met its tolerance (`CONVERGED`) and, with smoothing,
+        the exact and smoothed objectives agree to `AGREEMENT` at its answer
+    success : converged, feasible, and the answer is IPOPT's (not a fallback)
+    status : IPOPT's return status of the last solve
     message : one line saying what happened, including any fallback
     violations : the specs violated at the returned gains, by name
-    history : [(seconds since the call began, IPOPT's objective)] per iteration
+    stages : one dict per solve: width (None for the exact loop), status, iterations,
+        smoothed (the objective IPOPT saw) and exact objective at its answer
+    smoothing_gap : |exact − smoothed| / |exact| at the last stage's answer (0 for "exact")
+    history : [(seconds since the call began, the objective IPOPT saw)] per IPOPT iteration
+        (smoothed at that stage's width)
+    iterates : the decision vector of each `history` entry (evaluate the exact objective
+        there with `TuningProblem.values`)
     """
 
     block: Block
@@ -127,14 +330,25 @@ class TuningResult:
     wall_time: float = 0.0
     decision: np.ndarray | None = None
     history: list = field(default_factory=list)
+    converged: bool = False
+    stages: list = field(default_factory=list)
+    smoothing_gap: float = 0.0
+    method: str = "smooth"
+    iterates: list = field(default_factory=list)
+
+    @property
+    def stopped_on_test(self) -> bool:
+        """Converged, or IPOPT proved the specs locally infeasible (its restoration converged): not a cap."""
+        return self.converged or self.status == "Infeasible_Problem_Detected"
 
 
 class _Recorder(ca.Callback):
-    """IPOPT iteration callback keeping every iterate, for the best-feasible fallback."""
+    """IPOPT iteration callback keeping every iterate and the objective IPOPT saw there."""
 
-    def __init__(self, nx: int, ng: int, n_p: int, progress=None):
+    def __init__(self, nx: int, ng: int, n_p: int, progress=None, started=None):
         ca.Callback.__init__(self)
-        self.progress, self.started = progress, time.perf_counter()
+        self.progress = progress
+        self.started = time.perf_counter() if started is None else started
         self.sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "p": n_p, "lam_p": n_p, "f": 1}
         self.iterates: list[tuple[np.ndarray, float, float]] = []  # (x, f, perf_counter)
         self.construct("recorder", {})
@@ -155,10 +369,49 @@ class _Recorder(ca.Callback):
         return ca.Sparsity.dense(self.sizes[ca.nlpsol_out(i)], 1)
 
     def eval(self, arg):
-        self.iterates.append((np.asarray(arg[0]).ravel().copy(), float(arg[1]), time.perf_counter()))
+        x = np.asarray(arg[0]).ravel().copy()
+        value = float(arg[1])
+        self.iterates.append((x, value, time.perf_counter()))
         if self.progress is not None:
-            self.progress(len(self.iterates) - 1, float(arg[1]), self.iterates[-1][2] - self.started)
+            self.progress(len(self.iterates) - 1, value, self.iterates[-1][2] - self.started)
         return [0]
+
+
+# ----------------------------------------------------------------- the problem
+@dataclass
+class _Run:
+    """One scenario's numbers, ready to build: times, signals, specs and cost."""
+
+    scenario: Scenario
+    specs: Specs
+    cost: Cost
+    n: int
+    t: np.ndarray
+    x0: np.ndarray
+    r: np.ndarray
+    d: np.ndarray
+    noise: list
+    tracked_index: int | None
+    step: float | None
+    target: np.ndarray
+    input_target: np.ndarray
+    weights: dict
+    label: str
+    signal_size: float = 1.0
+
+
+def _scenarios(value) -> tuple[Scenario, ...]:
+    if isinstance(value, Scenario):
+        return (value,)
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise TypeError(f"scenarios must be a Scenario or a sequence of them, got {type(value).__name__}")
+    found = tuple(value)
+    if not found:
+        raise ValueError("scenarios is empty: give at least one Scenario")
+    bad = [type(s).__name__ for s in found if not isinstance(s, Scenario)]
+    if bad:
+        raise TypeError(f"scenarios must all be designs.tuning.Scenario, got {bad}")
+    return found
 
 
 class TuningProblem:
@@ -168,43 +421,82 @@ class TuningProblem:
     ----------
     plant : Plant, simulated with each row of `samples`
     block : Block, the starting design; its gains not in `free` stay fixed
-    scenario : Scenario
-    specs : Specs or None
-    cost : Cost
-    samples : (M, n_params) actual parameter vectors, default the plant's own
-    robust : "mean" or "worst" over the samples
+    scenarios : Scenario or a sequence of them; the objective is the weighted sum of
+        the scenarios' costs, per parameter sample
+    specs : Specs for the scenarios that have none of their own (default none)
+    cost : Cost for the scenarios that have none of their own (default ITAE of the error)
+    samples : (M, n_params) actual parameter vectors, M >= 1, default the plant's own
+    robust : "mean" or "worst" over the samples of the per-sample weighted total
     free : names of the gains to tune (default all)
     substeps : RK4 sub-steps per sample
     extra_params : names of plant parameters to decide together with the gains
         (co-design); they become decision variables after the gains
     """
 
-    def __init__(self, plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None = None,
+    def __init__(self, plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
                  cost: Cost | None = None, samples=None, robust: str = "mean", free=None,
                  substeps: int = 10, extra_params=()):
-        if robust not in ("mean", "worst"):
+        if not isinstance(plant, Plant):
+            raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__}")
+        if not isinstance(block, Block):
+            raise TypeError(f"block must be a models.Block (a controller written in CasADi), got "
+                            f"{type(block).__name__}")
+        if robust not in ROBUST:
             raise ValueError(f"robust must be 'mean' or 'worst', got {robust!r}")
-        self.plant, self.block, self.scenario = plant, block, scenario
+        if specs is not None and not isinstance(specs, Specs):
+            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(specs).__name__}")
+        if cost is not None and not isinstance(cost, Cost):
+            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(cost).__name__}")
+        self.plant, self.block = plant, block
+        self.scenarios = _scenarios(scenarios)
+        self.scenario = self.scenarios[0]
         self.specs = specs or Specs()
         self.cost = cost or Cost()
         self.robust = robust
-        self.tracked = scenario.tracked
-        if self.tracked not in plant.state_names:
-            raise ValueError(f"{plant.name} has no state {self.tracked!r}; states are {plant.state_names}")
-        self.samples = (plant.param_vector()[None] if samples is None
-                        else as_matrix(samples, plant.n_params, "samples"))
-        for row in self.samples:
-            plant.param_vector(row)
+        self.substeps = integer(substeps, "substeps", minimum=1)
+        if samples is None:
+            self.samples = plant.param_vector()[None]
+        else:
+            self.samples = as_matrix(samples, plant.n_params, "samples")
+            if self.samples.shape[0] == 0:
+                raise ValueError("samples has no rows; give at least one parameter vector")
+        for i, row in enumerate(self.samples):
+            try:
+                plant.param_vector(row)
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"samples row {i}: {err}") from None
+        if free is not None and (isinstance(free, str) or not isinstance(free, Sequence)):
+            raise TypeError(f"free must be a sequence of gain names, got {free!r}")
         self.free = tuple(block.gain_names if free is None else free)
         unknown = [g for g in self.free if g not in block.gains]
         if unknown:
             raise ValueError(f"{block.name} has no gain {unknown}; gains are {', '.join(block.gain_names)}")
+        if isinstance(extra_params, str) or not isinstance(extra_params, Sequence):
+            raise TypeError(f"extra_params must be a sequence of parameter names, got {extra_params!r}")
         self.extra_params = tuple(extra_params)
         names = list(plant.params)
         bad = [n for n in self.extra_params if n not in names]
         if bad:
             raise ValueError(f"{plant.name} has no parameter {bad}; its parameters are {', '.join(names)}")
-        self._build(substeps)
+        if not self.free and not self.extra_params:
+            raise ValueError("nothing to decide: free names no gain and there are no extra_params")
+        self.runs = [self._prepare(s, i) for i, s in enumerate(self.scenarios)]
+        self.free_index = self._free_index()
+        self.n_gains = self.free_index.size
+        self.decision = ca.MX.sym("decision", self.n_gains + len(self.extra_params))
+        self.width = ca.MX.sym("width")
+        costs, self.g, u_runs, self.lbg, self.ubg, self.constraint_names = self._build(smooth=False)
+        self.scenario_costs = costs                        # (S, M)
+        self.costs = self._per_sample(costs)               # (M, 1) weighted totals
+        self.objective = self.aggregate(self.costs)
+        self.evaluate = ca.Function("tuning_problem", [self.decision], [self.costs, self.g, ca.horzcat(*u_runs),
+                                                                        costs])
+        self._smooth = None
+        # Back-compatible single-scenario attributes.
+        first = self.runs[0]
+        self.x0, self.reference, self.n_steps = first.x0, first.r, first.n
+        self.step = first.step if first.step is not None else 0.0
+        self.tracked = first.scenario.tracked
 
     # ------------------------------------------------------------ building
     def _free_index(self) -> np.ndarray:
@@ -215,32 +507,103 @@ class TuningProblem:
             i += g.size
         return np.array(idx, dtype=int)
 
-    def _build(self, substeps: int) -> None:
-        plant, block, sc = self.plant, self.block, self.scenario
+    def _prepare(self, sc: Scenario, index: int) -> _Run:
+        plant, block = self.plant, self.block
+        label = sc.name or (f"scenario {index}" if len(self.scenarios) > 1 else "")
+        specs = sc.specs if sc.specs is not None else self.specs
+        cost = sc.cost if sc.cost is not None else self.cost
         ts = block.sample_period
-        n = int(round(positive(sc.duration, "duration (s)") / ts))
-        self.n_steps = n
+        n = int(round(sc.duration / ts))
+        if n < 1:
+            raise ValueError(f"{label or 'scenario'}: duration {sc.duration} s is shorter than one sample "
+                             f"({ts} s)")
         t = ts * np.arange(n + 1)
-        x0 = plant.equilibrium()[0] if sc.x0 is None else np.asarray(sc.x0, dtype=float)
-        r = sample(sc.reference, t, block.n_reference, "reference")
+        x0 = plant.equilibrium()[0] if sc.x0 is None else as_vector(sc.x0, plant.nx, f"{plant.name} initial state x0")
+        if sc.reference is None:
+            r = np.zeros((n + 1, block.n_reference))
+        else:
+            r = sample(sc.reference, t, block.n_reference, "reference")
         d = sample(sc.input_disturbance, t[:-1], plant.nu, "input disturbance")
-        k = plant.state_names.index(self.tracked)
-        self.step = float(r[-1, 0] - x0[k])
-        if self.step == 0 and (self.specs.max_overshoot is not None or self.specs.rise_time is not None
-                               or self.specs.settling_time is not None):
-            raise ValueError("the specs need a step: the final reference equals the initial tracked value")
-        g0 = block.gain_vector()
-        self.free_index = self._free_index()
-        self.n_gains = self.free_index.size
-        decision = ca.MX.sym("decision", self.n_gains + len(self.extra_params))
-        gains = ca.MX(ca.DM(g0))
+        n_meas = block.n_measured
+        std = real_array(sc.noise_std, "noise_std")
+        if std.ndim > 1 or std.size not in (1, n_meas) or not np.all(np.isfinite(std)) or np.any(std < 0):
+            raise ValueError(f"noise_std must be one number or {n_meas} numbers >= 0, got {sc.noise_std!r}")
+        std = np.broadcast_to(std, (n_meas,))
+        noise = [np.random.default_rng(np.random.SeedSequence([sc.seed, j])).standard_normal((n, n_meas)) * std
+                 if np.any(std) else np.zeros((n, n_meas)) for j in range(self.samples.shape[0])]
+        k = None
+        if sc.tracked is not None:
+            if sc.tracked not in plant.state_names:
+                raise ValueError(f"{plant.name} has no state {sc.tracked!r}; states are {plant.state_names}")
+            k = plant.state_names.index(sc.tracked)
+        step = None
+        if sc.reference is not None and k is not None and n_meas and block.n_reference:
+            constant = np.all(r[1:, 0] == r[-1, 0])
+            if constant and r[-1, 0] != x0[k]:
+                step = float(r[-1, 0] - x0[k])
+        where = f" ({label})" if label else ""
+        if specs.step_specs and step is None:
+            reason = ("it regulates (reference None)" if sc.reference is None else
+                      "it names no tracked state" if k is None else
+                      "its reference is not constant" if not np.all(r[1:, 0] == r[-1, 0]) else
+                      "its final reference equals the initial tracked value")
+            raise ValueError(f"{', '.join(specs.step_specs)} need a step, and the scenario{where} has none: "
+                             f"{reason}")
+        for name, when in (("settling_time", specs.settling_time), ("rise_time", specs.rise_time)):
+            if when is not None and when > t[-1]:
+                raise ValueError(f"{name} = {when:g} s is after the end of the scenario{where} ({t[-1]:g} s): "
+                                 "the spec would constrain nothing")
+        for what, table in (("state_bounds", specs.state_bounds), ("final_values", specs.final_values)):
+            for name in table:
+                if name not in plant.state_names:
+                    raise ValueError(f"{what}: {plant.name} has no state {name!r}; states are {plant.state_names}")
+        if cost.kind is not None and cost.signal == "error" and (k is None or sc.reference is None):
+            raise ValueError(f"the cost's signal 'error' needs a reference and a tracked state; the scenario"
+                             f"{where} has {'no reference' if sc.reference is None else 'no tracked state'} "
+                             "(give Cost(signal=...) a state, output or input name)")
+        signals = plant.state_names + plant.output_names + plant.input_names
+        if cost.kind is not None and cost.signal != "error" and cost.signal not in signals:
+            raise ValueError(f"the cost's signal {cost.signal!r} is not 'error' nor a state, output or input of "
+                             f"{plant.name} ({', '.join(signals)})")
+        weights = {}
+        for key, names in (("state_weights", plant.state_names), ("input_weights", plant.input_names),
+                           ("output_weights", plant.output_names), ("terminal_weights", plant.state_names)):
+            value = getattr(cost, key)
+            if value is not None:
+                weights[key] = weight_matrix(value, names, key)
+        default_target = plant.equilibrium()[0].copy()
+        if step is not None:
+            default_target[k] = r[-1, 0]
+        target = _named_vector(cost.target, plant.state_names, default_target, "target")
+        input_target = _named_vector(cost.input_target, plant.input_names, np.zeros(plant.nu), "input_target")
+        size = 0.0  # the criterion signal's size at the start (inputs: unknown before the run)
+        if cost.kind is not None:
+            if cost.signal == "error":
+                size = abs(r[0, 0] - x0[k])
+            elif cost.signal in plant.state_names:
+                i = plant.state_names.index(cost.signal)
+                size = abs(x0[i] - target[i])
+            elif cost.signal in plant.output_names:
+                i = plant.output_names.index(cost.signal)
+                size = abs(plant.output(x0, self.samples[0])[i] - plant.output(target, self.samples[0])[i])
+        return _Run(sc, specs, cost, n, t, x0, r, d, noise, k, step, target, input_target, weights, label,
+                    float(size) if size > 0 else 1.0)
+
+    def _params(self, j: int, param_index) -> ca.MX:
+        p = ca.MX(ca.DM(self.samples[j]))
+        for i, pi in enumerate(param_index):
+            p[pi] = self.decision[self.n_gains + i]
+        return p
+
+    def _build(self, smooth: bool):
+        """(scenario costs (S, M), constraints, commands, lbg, ubg, names) on the exact or smoothed loop."""
+        plant, block = self.plant, self.block
+        gains = ca.MX(ca.DM(block.gain_vector()))
         for j, i in enumerate(self.free_index):
-            gains[int(i)] = decision[j]
+            gains[int(i)] = self.decision[j]
         param_index = [list(plant.params).index(name) for name in self.extra_params]
-        run = models.closed_loop_function(plant, block, n, substeps)
         m = self.samples.shape[0]
-        costs, constraints, lower, upper, u_runs = [], [], [], [], []
-        self.constraint_names: list[tuple[str, slice]] = []
+        rows, constraints, lower, upper, u_runs, names = [], [], [], [], [], []
 
         def add(name, expr, lo, hi):
             expr = ca.vec(expr)
@@ -248,48 +611,127 @@ class TuningProblem:
             constraints.append(expr)
             lower.append(np.broadcast_to(lo, (expr.numel(),)))
             upper.append(np.broadcast_to(hi, (expr.numel(),)))
-            self.constraint_names.append((name, slice(start, start + expr.numel())))
+            names.append((name, slice(start, start + expr.numel())))
 
-        sp, amp, sign = self.specs, abs(self.step), np.sign(self.step) or 1.0
-        r_final = r[-1, 0]
-        self.x0, self.reference = x0, r
-        for i in range(m):
-            p = ca.MX(ca.DM(self.samples[i]))
-            for j, pi in enumerate(param_index):
-                p[pi] = decision[self.n_gains + j]
-            y0 = plant.output(x0, self.samples[i]) if block.measures == "outputs" else x0
-            xc0 = block.initial_state(y0, r[0])
-            X, _, U, _ = run(x0, xc0, r[:-1].T, np.zeros((block.n_measured, n)), d.T, p, gains)
-            y = X[k, :]  # tracked value after each sample, k = 1..N
-            y_cost = ca.horzcat(x0[k], y[:, :n - 1])  # k = 0..N-1
-            costs.append(self.cost(ca.DM(t[:-1]).T, ca.DM(r[:-1, 0]).T - y_cost, U, ts))
-            tag = f" (sample {i})" if m > 1 else ""
-            if sp.max_overshoot is not None:
-                add(f"overshoot <= {100 * sp.max_overshoot:g} %{tag}", sign * (y - r_final), -np.inf,
-                    sp.max_overshoot * amp)
-            if sp.settling_time is not None:
-                late = np.flatnonzero(t[1:] >= sp.settling_time)
-                if late.size:
-                    add(f"within {100 * sp.settling_band:g} % after {sp.settling_time:g} s{tag}",
-                        y[:, late] - r_final, -sp.settling_band * amp, sp.settling_band * amp)
-            if sp.rise_time is not None:
-                late = np.flatnonzero(t[1:] >= sp.rise_time)
-                if late.size:
-                    add(f"90 % of the step by {sp.rise_time:g} s{tag}", sign * (y[:, late] - x0[k]),
-                        0.9 * amp, np.inf)
-            for name, bound in sp.state_bounds.items():
-                if name not in plant.state_names:
-                    raise ValueError(f"state_bounds: {plant.name} has no state {name!r}; states are "
-                                     f"{plant.state_names}")
-                add(f"|{name}| <= {bound:g}{tag}", X[plant.state_names.index(name), :], -bound, bound)
-            u_runs.append(U)
-        self.decision = decision
-        self.costs = ca.vertcat(*costs)
-        self.g = ca.vertcat(*constraints) if constraints else ca.MX(0, 1)
-        self.lbg = np.concatenate(lower) if lower else np.zeros(0)
-        self.ubg = np.concatenate(upper) if upper else np.zeros(0)
-        self.evaluate = ca.Function("tuning_problem", [decision], [self.costs, self.g, ca.horzcat(*u_runs)])
-        self.objective = (ca.sum1(self.costs) / m) if self.robust == "mean" else ca.mmax(self.costs)
+        for run_data in self.runs:
+            sp, n, k = run_data.specs, run_data.n, run_data.tracked_index
+            run = models.closed_loop_function(plant, block, n, self.substeps, smooth=smooth)
+            extra = [self.width] if smooth else []
+            row = []
+            for j in range(m):
+                p = self._params(j, param_index)
+                y0 = plant.output(run_data.x0, self.samples[j]) if block.measures == "outputs" else run_data.x0
+                xc0 = block.initial_state(y0 + run_data.noise[j][0], run_data.r[0])
+                X, _, U, _ = run(run_data.x0, xc0, run_data.r[:-1].T, run_data.noise[j].T, run_data.d.T, p, gains,
+                                 *extra)
+                states = ca.horzcat(ca.DM(run_data.x0), X)   # x_0 .. x_N
+                row.append(self._cost(run_data, states, U, p, self.width if smooth else None))
+                tags = [t for t in (run_data.label, f"sample {j}" if m > 1 else "") if t]
+                tag = f" ({', '.join(tags)})" if tags else ""
+                if run_data.step is not None:
+                    y = X[k, :]
+                    r_final, amp, sign = run_data.r[-1, 0], abs(run_data.step), np.sign(run_data.step)
+                    t1 = run_data.t[1:]
+                    if sp.max_overshoot is not None:
+                        add(f"overshoot <= {100 * sp.max_overshoot:g} %{tag}", sign * (y - r_final), -np.inf,
+                            sp.max_overshoot * amp)
+                    if sp.settling_time is not None:
+                        late = np.flatnonzero(t1 >= sp.settling_time)
+                        add(f"within {100 * sp.settling_band:g} % after {sp.settling_time:g} s{tag}",
+                            y[:, late] - r_final, -sp.settling_band * amp, sp.settling_band * amp)
+                    if sp.rise_time is not None:
+                        late = np.flatnonzero(t1 >= sp.rise_time)
+                        add(f"90 % of the step by {sp.rise_time:g} s{tag}",
+                            sign * (y[:, late] - run_data.x0[k]), 0.9 * amp, np.inf)
+                for name, bound in sp.state_bounds.items():
+                    lo, hi = state_bound(bound, name)
+                    text = f"|{name}| <= {hi:g}" if lo == -hi else f"{lo:g} <= {name} <= {hi:g}"
+                    add(f"{text}{tag}", X[plant.state_names.index(name), :], lo, hi)
+                for name, pair in sp.final_values.items():
+                    value, tol = final_value(pair, name)
+                    add(f"{name}(t_N) = {value:g} ± {tol:g}{tag}", X[plant.state_names.index(name), -1],
+                        value - tol, value + tol)
+                u_runs.append(U)
+            rows.append(ca.horzcat(*row))
+        g = ca.vertcat(*constraints) if constraints else ca.MX(0, 1)
+        lbg = np.concatenate(lower) if lower else np.zeros(0)
+        ubg = np.concatenate(upper) if upper else np.zeros(0)
+        return ca.vertcat(*rows), g, u_runs, lbg, ubg, names
+
+    def _cost(self, run: _Run, states: ca.MX, U: ca.MX, p, width=None) -> ca.MX:
+        """The scenario's cost of one run: states (nx, N+1), commands U (nu, N).
+
+        With a smoothing `width` (the continuation's), |s| of the criterion is blended over
+        width × |s_0| as well (|s_0| the criterion signal's initial size, 1 where it is zero):
+        its kinks where s changes sign are the same obstacle as a saturation's.
+        """
+        plant, cost, n = self.plant, run.cost, run.n
+        ts = self.block.sample_period
+        X = states[:, :n]
+        total = ca.MX(0)
+        outputs = []
+
+        def output_rows():
+            if not outputs:
+                outputs.append(_outputs(plant, X, p))
+            return outputs[0]
+
+        if cost.kind is not None:
+            if cost.signal == "error":
+                s = ca.DM(run.r[:-1, 0]).T - X[run.tracked_index, :]
+            elif cost.signal in plant.state_names:
+                i = plant.state_names.index(cost.signal)
+                s = X[i, :] - run.target[i]
+            elif cost.signal in plant.output_names:
+                i = plant.output_names.index(cost.signal)
+                s = output_rows()[i, :] - float(plant.output(run.target, self.samples[0])[i])
+            else:
+                i = plant.input_names.index(cost.signal)
+                s = U[i, :] - run.input_target[i]
+            if cost.kind == "ise":
+                per_sample = s**2
+            else:
+                floor = cost.smoothing**2
+                if width is not None:
+                    floor = floor + (width * run.signal_size) ** 2
+                per_sample = ca.sqrt(s**2 + floor)
+                if cost.kind == "itae":
+                    per_sample = ca.DM(run.t[:-1]).T * per_sample
+            total += ts * ca.sum2(per_sample)
+        if cost.energy_weight:
+            total += cost.energy_weight * ts * ca.sum2(ca.sum1(U**2))
+        w = run.weights
+        if "state_weights" in w:
+            dx = X - run.target
+            total += ts * ca.sum2(ca.sum1(dx * ca.mtimes(ca.DM(w["state_weights"]), dx)))
+        if "input_weights" in w:
+            du = U - run.input_target
+            total += ts * ca.sum2(ca.sum1(du * ca.mtimes(ca.DM(w["input_weights"]), du)))
+        if "output_weights" in w:
+            dy = output_rows() - plant.output(run.target, self.samples[0])
+            total += ts * ca.sum2(ca.sum1(dy * ca.mtimes(ca.DM(w["output_weights"]), dy)))
+        if "terminal_weights" in w:
+            dn = states[:, n] - run.target
+            total += ca.dot(dn, ca.mtimes(ca.DM(w["terminal_weights"]), dn))
+        return total
+
+    def _per_sample(self, costs: ca.MX) -> ca.MX:
+        weights = ca.DM([run.scenario.weight for run in self.runs])
+        return ca.mtimes(costs.T, weights)
+
+    def aggregate(self, per_sample):
+        """The objective from per-sample totals: their mean or their largest."""
+        if self.robust == "mean":
+            return ca.sum1(per_sample) / self.samples.shape[0]
+        return ca.mmax(per_sample)
+
+    def smoothed(self) -> tuple[ca.MX, ca.MX]:
+        """(per-sample totals (M, 1), constraints) on the smoothed loop, functions of decision and `width`."""
+        if self._smooth is None:
+            costs, g, _, lbg, ubg, names = self._build(smooth=True)
+            assert [n for n, _ in names] == [n for n, _ in self.constraint_names]
+            self._smooth = (self._per_sample(costs), g)
+        return self._smooth
 
     # ------------------------------------------------------------ numbers
     def start(self) -> np.ndarray:
@@ -298,12 +740,12 @@ class TuningProblem:
         return np.concatenate([self.block.gain_vector()[self.free_index], extra])
 
     def values(self, decision) -> tuple[float, np.ndarray, list[str]]:
-        """(objective, per-sample costs, violated spec names) at a decision vector.
+        """(objective, per-sample weighted totals (M,), violated spec names) at a decision vector, exact loop.
 
         The actuator limit is checked here rather than constrained in the NLP:
         blocks saturate their own command, so it never binds during the search.
         """
-        costs, g, u = (np.asarray(v) for v in self.evaluate(decision))
+        costs, g, u, _ = (np.asarray(v) for v in self.evaluate(decision))
         costs = costs.ravel()
         obj = float(np.mean(costs)) if self.robust == "mean" else float(np.max(costs))
         violations = self.violated(g.ravel())
@@ -313,16 +755,28 @@ class TuningProblem:
                               f"(commanded up to {np.max(np.abs(u)):.4g})")
         return obj, costs, violations
 
+    def scenario_values(self, decision) -> np.ndarray:
+        """Unweighted cost of each scenario on each sample, (S, M), exact loop."""
+        return np.asarray(self.evaluate(decision)[3])
+
+    def excess(self, g: np.ndarray) -> np.ndarray:
+        """Each constraint's violation relative to 1 + |its bound| (<= 0 where it holds; inf if non-finite)."""
+        scale = 1 + np.maximum(np.abs(self.lbg), np.abs(self.ubg))
+        scale = np.where(np.isfinite(scale), scale, 1.0)
+        with np.errstate(invalid="ignore"):
+            out = np.maximum(self.lbg - g, g - self.ubg) / scale
+        return np.where(np.isfinite(g), out, np.inf)
+
     def violated(self, g: np.ndarray, tol: float = 1e-6) -> list[str]:
-        names = []
-        for name, sl in self.constraint_names:
-            scale = 1 + np.maximum(np.abs(self.lbg[sl]), np.abs(self.ubg[sl]))
-            scale = np.where(np.isfinite(scale), scale, 1.0)
-            excess = np.maximum(self.lbg[sl] - g[sl], g[sl] - self.ubg[sl]) / scale
-            if not np.all(np.isfinite(g[sl])) or np.any(excess > tol):
-                worst = np.nanmax(excess) if np.all(np.isfinite(g[sl])) else np.inf
-                names.append(f"{name} (violated by {worst:.3g} relative)")
-        return names
+        """The violated specs, each with its largest relative excess."""
+        excess = self.excess(g)
+        return [f"{name} (violated by {np.max(excess[sl]):.3g} relative)" for name, sl in self.constraint_names
+                if np.any(excess[sl] > tol)]
+
+    def violated_names(self, g: np.ndarray, tol: float = 1e-6) -> list[str]:
+        """The names of the violated specs."""
+        excess = self.excess(g)
+        return [name for name, sl in self.constraint_names if np.any(excess[sl] > tol)]
 
     def block_at(self, decision) -> Block:
         gains = self.block.gain_vector().copy()
@@ -330,24 +784,57 @@ class TuningProblem:
         return self.block.with_gains(**self.block.gains_from_vector(gains))
 
 
-def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None = None,
+def _outputs(plant: Plant, X: ca.MX, p) -> ca.MX:
+    """Plant outputs of each column of X (nx, N) with parameters p: (ny, N)."""
+    x, q = ca.MX.sym("x", plant.nx), ca.MX.sym("p", plant.n_params)
+    h = ca.Function("outputs", [x, q], [plant.casadi_h(x, q)])
+    return h.map(X.shape[1])(X, p)
+
+
+# ----------------------------------------------------------------- solving
+def _check_options(max_iter, tol, hessian, jit, progress, method, widths):
+    max_iter = integer(max_iter, "max_iter", minimum=1)
+    tol = positive(tol, "tol")
+    if hessian not in HESSIANS:
+        raise ValueError(f"hessian must be 'limited-memory' or 'exact', got {hessian!r}")
+    jit = boolean(jit, "jit")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be callable(iteration, objective, seconds) or None, got {progress!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be 'smooth' or 'exact', got {method!r}")
+    widths = real_array(widths, "widths")
+    if widths.ndim != 1 or widths.size == 0 or not np.all(np.isfinite(widths)) or np.any(widths <= 0) \
+            or np.any(np.diff(widths) >= 0):
+        raise ValueError(f"widths must be a non-empty, strictly decreasing sequence of numbers > 0, got "
+                         f"{np.asarray(widths).tolist()}")
+    return max_iter, tol, jit, tuple(float(w) for w in widths)
+
+
+def tune(plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
          cost: Cost | None = None, samples=None, robust: str = "mean", free=None, bounds=None,
-         substeps: int = 10, max_iter: int = 200, tol: float = 1e-8,
-         hessian: str = "limited-memory", jit: bool = False, progress=None) -> TuningResult:
+         substeps: int = 10, max_iter: int = MAX_ITER, tol: float = 1e-8,
+         hessian: str = "limited-memory", jit: bool = False, progress=None, method: str = "smooth",
+         widths=WIDTHS, ipopt_options=None) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
     Parameters
     ----------
-    plant, block, scenario, specs, cost, samples, robust, free, substeps
+    plant, block, scenarios, specs, cost, samples, robust, free, substeps
         As in `TuningProblem`.
     bounds : dict gain name -> (low, high), optional box bounds on the free gains
-        (scalars or arrays shaped like the gain)
-    max_iter : IPOPT iteration limit
+        (scalars or arrays shaped like the gain; ±inf for none)
+    max_iter : IPOPT iterations per solve, >= 1: a cap that is reported when hit
+        (`converged` False), never the intended stop
     tol : IPOPT's convergence tolerance (it also stops at 100 tol held for 10 iterations)
     hessian : "limited-memory" (L-BFGS, one gradient per iteration) or "exact"
         (CasADi's second derivatives; fewer iterations, each costlier)
     jit : compile the NLP's functions to machine code (pays off for long runs)
     progress : optional callable(iteration, objective, seconds) after each IPOPT iteration
+    method : "smooth" (continuation over `widths`, see the module docstring) or "exact"
+        (one solve on the exact loop)
+    widths : the continuation's relative smoothing widths, strictly decreasing
+    ipopt_options : dict of further IPOPT options (for example ``{"print_level": 5}``); they
+        override `IPOPT_OPTIONS` and the ones set from the arguments above
 
     Returns
     -------
@@ -357,79 +844,188 @@ def tune(plant: Plant, block: Block, scenario: Scenario, *, specs: Specs | None 
         returned and `message` says so; an infeasible spec set is reported
         with the violated specs named.
     """
-    problem = TuningProblem(plant, block, scenario, specs=specs, cost=cost, samples=samples,
+    max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
+    problem = TuningProblem(plant, block, scenarios, specs=specs, cost=cost, samples=samples,
                             robust=robust, free=free, substeps=substeps)
     lbx, ubx = gain_bounds(problem, bounds)
-    if hessian not in ("limited-memory", "exact"):
-        raise ValueError(f"hessian must be 'limited-memory' or 'exact', got {hessian!r}")
-    return solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress)
+    return solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress, method=method,
+                 widths=widths, ipopt_options=ipopt_options)
 
 
 def gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) decision bounds from {gain name: (low, high)} (unbounded where not given)."""
+    """(lower, upper) decision bounds from {gain name: (low, high)} (unbounded where not given).
+
+    Raises ValueError naming the gain when a bound is NaN, has the wrong shape or has low > high.
+    """
     n = problem.decision.numel()
     lbx, ubx = np.full(n, -np.inf), np.full(n, np.inf)
-    if not bounds:
+    if bounds is None:
         return lbx, ubx
+    if not isinstance(bounds, Mapping):
+        raise TypeError(f"bounds must be a dict gain name -> (low, high), got {bounds!r}")
     offsets, i = {}, 0
     for name, g in problem.block.gains.items():
         if name in problem.free:
             offsets[name] = (i, g)
             i += g.size
-    for name, (lo, hi) in bounds.items():
+    for name, pair in bounds.items():
         if name not in offsets:
             raise ValueError(f"bounds given for {name!r}, which is not a free gain ({', '.join(problem.free)})")
+        if isinstance(pair, (str, bytes)) or not isinstance(pair, Sequence) or len(pair) != 2:
+            raise ValueError(f"bounds[{name!r}] must be a pair (low, high), got {pair!r}")
         start, g = offsets[name]
-        lbx[start:start + g.size] = np.broadcast_to(lo, g.shape).ravel(order="F")
-        ubx[start:start + g.size] = np.broadcast_to(hi, g.shape).ravel(order="F")
+        try:
+            lo = np.broadcast_to(real_array(pair[0], f"bounds[{name!r}] low"), g.shape).ravel(order="F")
+            hi = np.broadcast_to(real_array(pair[1], f"bounds[{name!r}] high"), g.shape).ravel(order="F")
+        except ValueError:
+            raise ValueError(f"bounds[{name!r}] must be numbers or arrays shaped like the gain {g.shape}, "
+                             f"got {pair!r}") from None
+        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
+            raise ValueError(f"bounds[{name!r}] must not be NaN, got {pair!r}")
+        if np.any(lo > hi):
+            raise ValueError(f"bounds[{name!r}] has low > high: {pair!r}")
+        lbx[start:start + g.size], ubx[start:start + g.size] = lo, hi
     return lbx, ubx
 
 
-def solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost=None,
-           tol: float = 1e-8, hessian: str = "limited-memory", progress=None) -> TuningResult:
-    """IPOPT on the problem's objective (+ plant_cost(decision)), with the fallback logic."""
+def _status_converged(status: str) -> bool:
+    return status in CONVERGED
+
+
+def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool = False, plant_cost=None,
+          tol: float = 1e-8, hessian: str = "limited-memory", progress=None, method: str = "smooth",
+          widths=WIDTHS, start=None, cost_weight: float = 1.0, ipopt_options=None) -> TuningResult:
+    """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
+
+    Parameters
+    ----------
+    problem : TuningProblem
+    lbx, ubx : decision bounds (n_decision,)
+    plant_cost : optional callable MX decision -> MX scalar added to the objective
+    start : decision vector to start from (default `problem.start()`), clipped to the bounds
+    cost_weight : >= 0, the closed-loop objective's weight (0: the plant cost alone, under the specs)
+    ipopt_options : as in `tune`
+    max_iter, jit, tol, hessian, progress, method, widths : as in `tune`
+    """
+    max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
+    if ipopt_options is not None and not isinstance(ipopt_options, Mapping):
+        raise TypeError(f"ipopt_options must be a dict of IPOPT options, got {ipopt_options!r}")
     start_time = time.perf_counter()
     x = problem.decision
-    objective = problem.objective if plant_cost is None else problem.objective + plant_cost(x)
-    start = np.clip(problem.start(), lbx, ubx)
+    n = x.numel()
+    lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
+    start = np.clip(problem.start() if start is None else as_vector(start, n, "start"), lbx, ubx)
+    cost_weight = real(cost_weight, "cost_weight")
+    if cost_weight < 0:
+        raise ValueError(f"cost_weight must be >= 0, got {cost_weight}")
+    extra_cost = ca.MX(0) if plant_cost is None else plant_cost(x)
+    exact_total = ca.Function("total", [x], [cost_weight * problem.objective + extra_cost])
     # IPOPT works on z = x / scale with each decision scaled by its own start, so
     # gains of different magnitudes (a crane cascade's 0.2 outer and 8000 inner)
     # all move on the order of one; a zero start takes 1e-3 of the largest.
     magnitude = np.abs(start)
     floor = 1e-3 * np.max(magnitude) if np.any(magnitude > 0) else 1.0
     scale = np.where(magnitude > 0, magnitude, floor)
-    z = ca.MX.sym("z", x.numel())
-    f_of_x = ca.Function("objective", [x], [objective])
-    g_of_x = ca.Function("constraints", [x], [problem.g])
-    recorder = _Recorder(x.numel(), problem.g.numel(), 0, progress)
-    opts = {"ipopt": {"max_iter": int(max_iter), "print_level": 0, "tol": tol, "acceptable_tol": 100 * tol,
-                      "acceptable_iter": 10, "hessian_approximation": hessian, "sb": "yes"},
+    smooth = method == "smooth"
+    per_sample, g = problem.smoothed() if smooth else (problem.costs, problem.g)
+    width = problem.width if smooth else ca.MX.sym("unused", 0)
+    lbg, ubg = problem.lbg, problem.ubg
+    worst = problem.robust == "worst"
+    m = problem.samples.shape[0]
+    if worst:
+        # Epigraph: minimize τ subject to every sample's total <= τ (max is not smooth).
+        tau = ca.MX.sym("tau")
+        variables = ca.vertcat(x, tau)
+        objective = cost_weight * tau + extra_cost
+        g = ca.vertcat(g, per_sample - tau)
+        lbg, ubg = np.concatenate([lbg, np.full(m, -np.inf)]), np.concatenate([ubg, np.zeros(m)])
+        tau0 = float(ca.mmax(ca.Function("c", [x, width], [per_sample])(start, widths[0] if smooth else [])))
+        start_z = np.concatenate([start, [tau0]])
+        scale = np.concatenate([scale, [max(abs(tau0), 1e-12)]])
+        lbz, ubz = np.concatenate([lbx, [-np.inf]]), np.concatenate([ubx, [np.inf]])
+    else:
+        variables, objective = x, cost_weight * problem.aggregate(per_sample) + extra_cost
+        start_z, lbz, ubz = start, lbx, ubx
+    z = ca.MX.sym("z", variables.numel())
+    f_of = ca.Function("objective", [variables, width], [objective])
+    g_of = ca.Function("constraints", [variables, width], [g])
+    smoothed_total = ca.Function("smoothed_total", [x, width],
+                                 [cost_weight * problem.aggregate(per_sample) + extra_cost])
+    smoothed_g = ca.Function("smoothed_constraints", [x, width], [problem.smoothed()[1] if smooth else problem.g])
+
+    recorder = _Recorder(variables.numel(), g.numel(), width.numel(), progress, start_time)
+    opts = {"ipopt": IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol,
+                                      "hessian_approximation": hessian} | dict(ipopt_options or {}),
             "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
-    nlp = {"x": z, "f": f_of_x(scale * z), "g": g_of_x(scale * z)}
+    nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
     # Compiled without a shell and cached (models.compile); CasADi's virtual machine when impossible.
     build = models.compile.jit_nlpsol if jit else ca.nlpsol
     solver = build("tuning", "ipopt", nlp, opts)
-    sol = solver(x0=start / scale, lbx=lbx / scale, ubx=ubx / scale, lbg=problem.lbg, ubg=problem.ubg)
-    stats = solver.stats()
-    status = stats["return_status"]
-    total = ca.Function("total", [x], [objective])
+    # Later stages start at the last answer and its multipliers, with the barrier already small.
+    warm_opts = dict(opts, ipopt=dict(opts["ipopt"], **WARM_START))
+    warm_solver = build("tuning_warm", "ipopt", nlp, warm_opts) if smooth and len(widths) > 1 else None
+    z_now = start_z / scale
+    multipliers = {}
+    stages, iterations = [], 0
+    status, gap, settled = "not solved", 0.0, not smooth or len(widths) == 1
+    for w in (widths if smooth else (None,)):
+        stage_iterations = 0
+        for attempt in range(2):
+            # A numerical failure (not an iteration cap) is retried once from its last point, cold:
+            # a fresh quasi-Newton memory often gets past it.
+            this = warm_solver if multipliers and attempt == 0 else solver
+            sol = this(x0=z_now, lbx=lbz / scale, ubx=ubz / scale, lbg=lbg, ubg=ubg, p=[] if w is None else w,
+                       **(multipliers if this is warm_solver else {}))
+            stats = this.stats()
+            status = stats["return_status"]
+            stage_iterations += int(stats.get("iter_count", 0))
+            z_now = np.asarray(sol["x"]).ravel()
+            multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+            if status not in RETRIED:
+                break
+        iterations += stage_iterations
+        decision = np.clip(scale[:n] * z_now[:n], lbx, ubx)
+        exact = float(exact_total(decision))
+        seen = float(smoothed_total(decision, [] if w is None else w))
+        gap = abs(exact - seen) / max(abs(exact), 1e-300) if np.isfinite(exact) and np.isfinite(seen) else np.inf
+        same = True
+        if smooth and problem.g.numel():
+            g_exact = np.asarray(problem.evaluate(decision)[1]).ravel()
+            g_smooth = np.asarray(smoothed_g(decision, w)).ravel()
+            same = problem.violated_names(g_exact) == problem.violated_names(g_smooth)
+        if stages and np.isfinite(exact):
+            settled = abs(stages[-1]["exact"] - exact) <= AGREEMENT * abs(exact)
+        stages.append({"width": w, "status": status, "iterations": stage_iterations,
+                       "smoothed": seen, "exact": exact, "gap": gap})
+        if not np.isfinite(exact) or not _status_converged(status):
+            break  # a stage that did not converge ends the continuation: reported, not hidden
+        if gap <= AGREEMENT and same and settled:
+            break
+    converged = _status_converged(status) and gap <= AGREEMENT and settled
+    final = np.clip(scale[:n] * z_now[:n], lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
 
     def judge(decision):
-        value = float(total(decision))
+        value = float(exact_total(decision))
         violations = problem.values(decision)[2] + _spectral_violation(problem, decision)
         return value, violations
 
-    final = np.clip(scale * np.asarray(sol["x"]).ravel(), lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
     initial_cost, _ = judge(start)
     message = f"IPOPT: {status}"
+    if smooth:
+        message += (f"; smoothing continuation in {len(stages)} stage{'s' if len(stages) > 1 else ''} down to "
+                    f"width {stages[-1]['width']:g}, exact and smoothed objectives agree to {gap:.1e}")
+        if gap > AGREEMENT:
+            message += f" (not within {AGREEMENT:g})"
+        if not settled:
+            message += "; the exact objective still changed at the last width"
     chosen = None
     value, violations = judge(final)
     if np.isfinite(value):
         chosen = (value, violations, final, "final")
     # Other iterates matter only when clearly better than IPOPT's answer, or when
-    # that answer is infeasible: judge them lazily, lowest recorded objective first.
+    # that answer is infeasible: judge them lazily, lowest objective IPOPT saw first.
     threshold = value - 1e-6 * abs(value) if chosen and not violations else np.inf
-    others = sorted(((f, scale * z, "iterate") for z, f, _ in recorder.iterates
+    others = sorted(((f, scale[:n] * zz[:n], "iterate") for zz, f, _ in recorder.iterates
                      if np.isfinite(f) and f < threshold), key=lambda item: item[0])
     others.append((initial_cost, start, "start"))
     for _, cand, label in others:
@@ -452,11 +1048,13 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int, jit: bool, plant_cost
         initial_gains={k: v.copy() for k, v in problem.block.gains.items()},
         cost=float(value), initial_cost=initial_cost,
         improvement=1 - float(value) / initial_cost if initial_cost else 0.0,
-        feasible=not violations, success=bool(stats["success"]) and label == "final" and not violations,
+        feasible=not violations, success=converged and label == "final" and not violations,
         status=status, message=message, violations=list(violations),
-        iterations=int(stats.get("iter_count", 0)), wall_time=time.perf_counter() - start_time,
+        iterations=iterations, wall_time=time.perf_counter() - start_time,
         decision=np.array(decision),
-        history=[(stamp - start_time, value) for _, value, stamp in recorder.iterates])
+        history=[(stamp - start_time, f) for _, f, stamp in recorder.iterates],
+        iterates=[np.clip(scale[:n] * zz[:n], lbx, ubx) for zz, _, _ in recorder.iterates],
+        converged=converged, stages=stages, smoothing_gap=float(gap), method=method)
 
 
 def closed_loop_spectral_abscissa(plant: Plant, block: Block, x, xc, r, params=None, substeps: int = 10) -> float:
@@ -478,16 +1076,24 @@ def closed_loop_spectral_abscissa(plant: Plant, block: Block, x, xc, r, params=N
 
 
 def _spectral_violation(problem: TuningProblem, decision) -> list[str]:
-    bound = problem.specs.max_spectral_abscissa
-    if bound is None:
-        return []
-    block = problem.block_at(decision)
-    run = models.simulate_closed_loop(problem.plant, block, problem.reference, problem.scenario.duration,
-                                      x0=problem.x0, params=problem.samples[0],
-                                      input_disturbance=problem.scenario.input_disturbance,
-                                      allow_divergence=True)
-    if run.diverged_at is not None:
-        return [f"spectral abscissa <= {bound:g} 1/s (the closed loop diverged at t = {run.diverged_at:.3g} s)"]
-    alpha = closed_loop_spectral_abscissa(problem.plant, block, run.x[-1], run.xc[-1], run.r[-1],
-                                          problem.samples[0])
-    return [] if alpha <= bound else [f"spectral abscissa <= {bound:g} 1/s (got {alpha:.3g} 1/s)"]
+    found = []
+    block = None
+    for run in problem.runs:
+        bound = run.specs.max_spectral_abscissa
+        if bound is None:
+            continue
+        block = block or problem.block_at(decision)
+        sc = run.scenario
+        where = f" ({run.label})" if run.label else ""
+        res = models.simulate_closed_loop(problem.plant, block, run.r, sc.duration, x0=run.x0,
+                                          params=problem.samples[0], input_disturbance=run.d,
+                                          substeps=problem.substeps, allow_divergence=True)
+        if res.diverged_at is not None:
+            found.append(f"spectral abscissa <= {bound:g} 1/s{where} (the closed loop diverged at "
+                         f"t = {res.diverged_at:.3g} s)")
+            continue
+        alpha = closed_loop_spectral_abscissa(problem.plant, block, res.x[-1], res.xc[-1], res.r[-1],
+                                              problem.samples[0], problem.substeps)
+        if alpha > bound:
+            found.append(f"spectral abscissa <= {bound:g} 1/s{where} (got {alpha:.3g} 1/s)")
+    return found

@@ -45,6 +45,7 @@ from .compile import jit as compile_jit
 from .plant import Plant
 from .signals import sample
 from .simulate import DIVERGENCE_BOUND, output_call
+from .smooth import smoothed
 
 #: Working memory, in bytes, of one chunk of a Monte Carlo batch (CasADi's
 #: output buffers and the noise of the chunk's samples). Results do not depend
@@ -185,24 +186,30 @@ def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray
 
 
 def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps: int = 10,
-                         jit: bool = False) -> ca.Function:
+                         jit: bool = False, smooth: bool = False) -> ca.Function:
     """The whole run as one CasADi Function, differentiable in the gains and parameters.
 
     Signature ``(x0, xc0, R, noise, D, p, gains) -> (X, XC, U, measured)`` with
     R (n_reference, N), noise (n_measured, N), D (nu, N); X (nx, N) and XC
     (n_state, N) the states after each sample, U (nu, N) the commands.
     The plant receives `saturate(U)`, which keeps a NaN command NaN.
-    Cached on the plant per (controller, N, substeps, jit); `jit` compiles it
-    to machine code (see `models.compile`).
+    Cached on the plant per (controller, N, substeps, jit, smooth); `jit`
+    compiles it to machine code (see `models.compile`). `smooth` blends every
+    switch of one closed-loop step (the saturations, the controller's
+    conditional integration) over a band set by one more input, "width"
+    (relative, > 0), with `models.smooth.smoothed`: a smooth run for
+    gradient-based tuning, equal to the exact one wherever no sample falls in
+    a band.
     """
     if not isinstance(plant, Plant):
         raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
     n_steps = integer(n_steps, "n_steps", minimum=1)
     substeps = integer(substeps, "substeps", minimum=1)
-    jit = boolean(jit, "jit")
+    jit, smooth = boolean(jit, "jit"), boolean(smooth, "smooth")
     if not isinstance(controller, Block):
         raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
     key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
+    key += ("smooth",) if smooth else ()
     cache = plant.function_cache
     if key in cache:
         return cache[key][1]
@@ -222,15 +229,19 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     xc_next, u = controller.casadi_step(xc, meas, r, g)
     x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
     one = ca.Function("closed_loop_step", [s, r, noise, d, p, g], [ca.vertcat(x_next, xc_next), u, meas])
+    if smooth:
+        one = smoothed(one)
     run = one.mapaccum("closed_loop_run", n_steps)
     x0, xc0 = ca.MX.sym("x0", nx), ca.MX.sym("xc0", nc)
     R = ca.MX.sym("R", controller.n_reference, n_steps)
     Nz = ca.MX.sym("noise", controller.n_measured, n_steps)
     D = ca.MX.sym("D", plant.nu, n_steps)
     P, G = ca.MX.sym("p", plant.n_params), ca.MX.sym("gains", g.numel())
-    S, U, M = run(ca.vertcat(x0, xc0), R, Nz, D, P, G)
-    fun = ca.Function("closed_loop", [x0, xc0, R, Nz, D, P, G], [S[:nx, :], S[nx:, :], U, M],
-                      ["x0", "xc0", "R", "noise", "D", "p", "gains"], ["X", "XC", "U", "measured"])
+    inputs, names = [x0, xc0, R, Nz, D, P, G], ["x0", "xc0", "R", "noise", "D", "p", "gains"]
+    if smooth:
+        inputs, names = inputs + [ca.MX.sym("width")], names + ["width"]
+    S, U, M = run(ca.vertcat(x0, xc0), *inputs[2:])
+    fun = ca.Function("closed_loop", inputs, [S[:nx, :], S[nx:, :], U, M], names, ["X", "XC", "U", "measured"])
     # Holding the step Function keeps its id from being reused while cached.
     if jit:
         fun = compile_jit(fun)

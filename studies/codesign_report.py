@@ -1,14 +1,21 @@
-"""The co-design report runner: each case's co-design problems, sequential versus simultaneous.
+"""The co-design report runner: each case's co-design problems, solved three ways, each converged.
 
-Each problem is solved twice, both times only with `designs.codesign` and
-`designs.tuning` (IPOPT through the compiled nonlinear closed loop):
+Every problem is answered with `designs.codesign` and `designs.tuning` only
+(IPOPT through the compiled nonlinear closed loop):
 
-* sequential: the plant first, then the controller (for actuator sizing, the
-  text's hand rule re-derived at each limit; for a plant parameter,
-  `codesign`'s plant-then-gains answer);
-* simultaneous: plant and gains decided together (for actuator sizing, the
-  gains re-tuned at each limit; for a plant parameter, `codesign`'s joint
-  answer, which starts from the sequential one).
+1. sequential (control-blind, as the co-design literature defines it): the
+   plant from a plant-only objective (actuator sizing: the smallest limit that
+   holds the target at rest; a plant parameter: its price alone), then the best
+   controller for that plant (a converged tuning);
+2. nested: an outer optimizer on the plant (actuator sizing: bisection on the
+   limit; a plant parameter: bounded Brent), each evaluation a converged tuning;
+3. simultaneous: plant and gains in one IPOPT problem, started from a neutral
+   point (the middle of the range, the hand design's gains) and from (1).
+
+The report states the gain of the better simultaneous answer over the better
+of (1) and (2) among the feasible ones, each answer's solver status, and the
+wall times. The text's hand rule re-derived at each limit (the actuator
+sizing of the text's procedure) is kept as a note.
 
 The problems live in the case files (``CASE.codesign``: key -> function
 returning a `CaseResult`): actuator sizing for the arm, UUV and ball on beam
@@ -16,8 +23,10 @@ returning a `CaseResult`): actuator sizing for the arm, UUV and ball on beam
 satellite's panel stiffness (`codesign_case`).
 
 ``python -m studies.codesign_report [--out FILE] [--only KEY ...]`` runs them
-(5–7 minutes on one shared core, two thirds of it the crane and the satellite)
-and writes the Markdown report docs/codesign.md.
+(an hour or more on a shared core, most of it the nested method on the crane
+and the satellite) and writes the Markdown report docs/codesign.md. The
+document is built from sections (`SECTIONS`: header, table, notes), so other
+co-design reports can be appended to it.
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 import models
-from designs.codesign import codesign, size_actuator
+from designs.codesign import codesign, size_actuator, size_actuator_simultaneous
 from designs.pid import PID, max_equilibrium_input
 from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
 from models import files
@@ -41,6 +50,8 @@ from . import cases
 from .case import CaseStudy
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign.md"
+#: The methods of every problem, in table order.
+METHODS = ("sequential", "nested", "simultaneous", "simultaneous from sequential")
 
 
 # ----------------------------------------------------------------- records
@@ -48,7 +59,7 @@ DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign.md"
 class Design:
     """One method's answer to one problem.
 
-    method : "sequential" or "simultaneous"
+    method : one of `METHODS`
     value : the designed plant value, in the problem's `unit`
     objective : what the problem minimizes: the limit itself (actuator sizing)
         or closed_loop_cost + plant_cost (crane, satellite)
@@ -62,6 +73,8 @@ class Design:
         overshoot (fraction of the step), peak_input (units of u), and max_abs_<state>
         for each bounded state (rad)
     wall_time : s spent by this method
+    converged : every optimizer the answer rests on stopped on its convergence test
+    status : the solvers' statuses (IPOPT's return status, the outer optimizer's)
     message : what the optimizer said
     gains : the controller's gains, name -> list
     plant, block : the designed plant and controller (for re-simulation; not printed)
@@ -80,11 +93,13 @@ class Design:
     gains: dict
     plant: models.Plant = field(repr=False)
     block: models.Block = field(repr=False)
+    converged: bool = False
+    status: str = ""
 
 
 @dataclass
 class CaseResult:
-    """Sequential versus simultaneous answers to one co-design problem.
+    """The answers of every method to one co-design problem.
 
     key : short name used by the CLI ("arm", "crane", ...)
     problem : one line for the table
@@ -93,9 +108,7 @@ class CaseResult:
     text_value : its value in the text
     objective : what is minimized, in words
     scenario, specs, cost : the closed-loop run every design is judged on
-    sequential, simultaneous : Design
-    sequential_retuned : Design or None; crane and satellite only: the sequential plant with
-        its gains tuned for as many more iterations as the simultaneous solve gets
+    designs : method -> Design, for the `METHODS` run
     notes : choices made, in words
     """
 
@@ -109,22 +122,26 @@ class CaseResult:
     scenario: Scenario = field(repr=False)
     specs: Specs = field(repr=False)
     cost: Cost = field(repr=False)
-    sequential: Design = None
-    simultaneous: Design = None
-    sequential_retuned: Design | None = None
+    designs: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 
-    @property
-    def improvement(self) -> float:
-        """1 − simultaneous objective / sequential objective (positive: simultaneous better)."""
-        return 1.0 - self.simultaneous.objective / self.sequential.objective
+    def best(self, methods) -> Design | None:
+        """The feasible design of lowest objective among `methods`, None when none is feasible."""
+        found = [self.designs[m] for m in methods if m in self.designs and self.designs[m].feasible]
+        return min(found, key=lambda d: d.objective) if found else None
 
     @property
-    def improvement_over_retuned(self) -> float | None:
-        """1 − simultaneous objective / sequential re-tuned objective, None without a re-tune."""
-        if self.sequential_retuned is None:
+    def gain(self) -> float | None:
+        """1 − best simultaneous objective / best of sequential and nested (feasible ones); None if either lacks one."""
+        sim = self.best(("simultaneous", "simultaneous from sequential"))
+        base = self.best(("sequential", "nested"))
+        if sim is None or base is None:
             return None
-        return 1.0 - self.simultaneous.objective / self.sequential_retuned.objective
+        return 1.0 - sim.objective / base.objective
+
+    @property
+    def converged(self) -> bool:
+        return all(d.converged for d in self.designs.values())
 
 
 # ----------------------------------------------------------------- fresh evaluation
@@ -173,10 +190,6 @@ def _listed(gains: dict) -> dict:
 
 
 # ----------------------------------------------------------------- actuator sizing
-#: Overshoot allowed where the text gives none (arm I.8, ball on beam V.8): about that of ζ = 0.707.
-SIZING_OVERSHOOT = 0.05
-#: IPOPT iterations per limit when re-tuning.
-SIZING_MAX_ITER = 40
 #: Bisection stops when high / low − 1 < this.
 SIZING_REL_TOL = 0.01
 
@@ -188,26 +201,30 @@ class ActuatorSizing:
     Attributes
     ----------
     text_limit : the actuator limit in the text (units of u)
-    search_range : (low, high) of the sequential bisection: low where the hand rule still designs,
-        high where it meets the spec
+    high : the largest limit considered (units of u); every method searches up to it
+    hand_range : (low, high) where the text's rule still designs (its bisection, a note)
     duration : s of each sizing run (long enough to see the response settle)
     parameter : what is sized, in words ("torque limit")
-    hand_design : known Plant -> Block, the text's design re-derived at the plant's limit (sequential)
-    retune_start : known Plant -> Block, the start of the gains re-tuned at each limit (simultaneous)
-    specs : Specs every limit is judged on; None measures the hand design at the text's limit (its rise
-        time, and at least `SIZING_OVERSHOOT` overshoot)
+    hand_design : known Plant -> Block, the text's design re-derived at the plant's limit
+        (the text's procedure, reported as a note)
+    retune_start : known Plant -> Block, the controller tuned at each limit, starting from
+        the hand design's gains at the text's limit; its state must not depend on its own
+        saturation (the simultaneous method decides the limit as a gain, see
+        `designs.codesign.ActuatorLimit`)
+    specs : Specs every limit is judged on, independent of any design (the text's or a stated requirement)
     specs_origin : where `specs` come from, in words
     free : gains re-tuned (default all)
     """
 
     text_limit: float
-    search_range: tuple
+    high: float
+    hand_range: tuple
     duration: float
     parameter: str
     hand_design: Callable[[models.Plant], models.Block]
     retune_start: Callable[[models.Plant], models.Block]
-    specs: Specs | None = None
-    specs_origin: str = ""
+    specs: Specs
+    specs_origin: str
     free: tuple | None = None
 
 
@@ -223,23 +240,6 @@ def sizing_scenario(case: CaseStudy, sizing: ActuatorSizing) -> Scenario:
     return step_scenario(models.get(case.plant), case.tracked, case.step, sizing.duration)
 
 
-def sizing_specs(case: CaseStudy, sizing: ActuatorSizing) -> tuple[Specs, str]:
-    """The spec every limit is judged on, and how it was obtained.
-
-    The sizing's own specs, or: rise time = what the hand design reaches at the
-    text's limit (first sample after which it stays beyond 90 % of the step),
-    overshoot ≤ `SIZING_OVERSHOOT` (or the hand design's, if larger).
-    """
-    if sizing.specs is not None:
-        return sizing.specs, sizing.specs_origin
-    plant = models.get(case.plant).with_input_limit(sizing.text_limit)
-    got = measure(plant, sizing.hand_design(plant), sizing_scenario(case, sizing), Specs())
-    specs = Specs(rise_time=got["rise_time_s"], max_overshoot=max(SIZING_OVERSHOOT, got["overshoot"]))
-    return specs, (f"the hand PD at the text's {sizing.text_limit:g} {case.input_unit}: "
-                   f"rise time {got['rise_time_s']:.3g} s, overshoot {100 * got['overshoot']:.2g} % "
-                   f"(allowed {100 * specs.max_overshoot:g} %)")
-
-
 def holding_limit(case: CaseStudy, sizing: ActuatorSizing) -> float:
     """Largest equilibrium input along the step, units of u: no smaller limit can hold the target."""
     plant = models.get(case.plant)
@@ -249,114 +249,128 @@ def holding_limit(case: CaseStudy, sizing: ActuatorSizing) -> float:
     return value
 
 
-def _sizing_design(method, plant, block, scenario, specs, wall_time, message) -> Design:
+def _sizing_design(method, plant, block, scenario, specs, wall_time, message, converged, status) -> Design:
     itae, violations = evaluate(plant, block, scenario, specs, Cost("itae"))
     limit = float(plant.input_limit[0])
     return Design(method=method, value=limit, objective=limit, closed_loop_cost=itae, plant_cost=limit,
                   feasible=not violations, violations=violations, measured=measure(plant, block, scenario, specs),
-                  wall_time=wall_time, message=message, gains=_listed(block.gains), plant=plant, block=block)
+                  wall_time=wall_time, message=message, gains=_listed(block.gains), plant=plant, block=block,
+                  converged=converged, status=status)
 
 
-def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, max_iter: int = SIZING_MAX_ITER,
-                    rel_tol: float = SIZING_REL_TOL) -> CaseResult:
-    """Smallest actuator limit meeting the spec: hand rule (sequential) versus re-tuned gains (simultaneous).
+def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float = SIZING_REL_TOL,
+                    methods=METHODS, tune_options=None) -> CaseResult:
+    """Smallest actuator limit meeting the specs, three ways (see the module docstring).
 
-    Sequential: bisection over `sizing.search_range` with the hand design re-derived
-    at each limit. Simultaneous: bisection between `holding_limit` (no lower limit
-    can hold the target) and the sequential answer, with the re-tuning start's gains
-    tuned at each limit (ITAE, `designs.tuning.tune`). The objective is the limit itself.
+    The limit is searched in [holding limit, `sizing.high`]: no smaller limit holds the
+    target at rest. The objective is the limit itself; the ITAE is reported.
 
     Parameters
     ----------
     case, sizing : the case and its `ActuatorSizing`
-    max_iter : IPOPT iterations per limit when re-tuning
-    rel_tol : relative resolution of the bisection on the limit
+    rel_tol : relative resolution of the bisections on the limit
+    methods : which of `METHODS` to run
+    tune_options : keyword arguments for every `designs.tuning.tune` call (max_iter, ...)
     """
     plant = models.get(case.plant)
     scenario = sizing_scenario(case, sizing)
-    specs, origin = sizing_specs(case, sizing)
+    specs = sizing.specs
     unit = case.input_unit
+    floor = holding_limit(case, sizing)
+    options = {"free": sizing.free} | dict(tune_options or {})
     result = CaseResult(
         key=case.plant, problem=f"actuator sizing: {case.plant}", plant=case.plant, parameter=sizing.parameter,
         unit=unit, text_value=sizing.text_limit, objective="smallest limit meeting the specs", scenario=scenario,
         specs=specs, cost=Cost("itae"),
-        notes=[f"spec: {origin}", f"step {case.step:.4g} from the standard equilibrium, "
-               f"{scenario.duration:g} s run"])
-    low, high = sizing.search_range
-    started = time.perf_counter()
-    seq = size_actuator(plant, sizing.hand_design, scenario, specs, low=low, high=high, retune=False,
-                        rel_tol=rel_tol)
-    seq_time = time.perf_counter() - started
-    seq_plant = plant.with_input_limit(seq["limit"])
-    result.sequential = _sizing_design("sequential", seq_plant, seq["block"], scenario, specs, seq_time,
-                                       f"bisection over [{low:g}, {high:g}], {seq['evaluations']} limits tried")
-    floor = holding_limit(case, sizing)
-    started = time.perf_counter()
-    try:
-        sim = size_actuator(plant, sizing.retune_start, scenario, specs, low=floor, high=seq["limit"], retune=True,
-                            rel_tol=rel_tol, tune_options={"max_iter": max_iter, "free": sizing.free})
-        sim_plant, sim_block = plant.with_input_limit(sim["limit"]), sim["block"]
-        message = (f"bisection over [{floor:.4g}, {seq['limit']:.4g}] (holding limit, sequential answer), "
-                   f"{sim['evaluations']} limits tuned")
-    except ValueError as err:  # even the sequential limit was not met after re-tuning
-        sim_plant, sim_block = seq_plant, seq["block"]
-        message = f"re-tuning failed at the sequential limit: {err}"
-    result.simultaneous = _sizing_design("simultaneous", sim_plant, sim_block, scenario, specs,
-                                         time.perf_counter() - started, message)
-    text_plant = plant.with_input_limit(sizing.text_limit)
-    hand = measure(text_plant, sizing.hand_design(text_plant), scenario, specs)
-    result.notes += [f"holding limit (largest equilibrium input along the step): {floor:.4g} {unit}",
-                     f"hand design at the text's {sizing.text_limit:g} {unit}: rise time "
-                     f"{hand['rise_time_s']:.3g} s, peak |u| {hand['peak_input']:.4g} {unit}"]
+        notes=[f"spec: {sizing.specs_origin}", f"step {case.step:.4g} from the standard equilibrium, "
+               f"{scenario.duration:g} s run; limits searched in [{floor:.4g}, {sizing.high:g}] {unit}",
+               f"plant-only objective of the sequential method: the smallest limit that holds the target at rest "
+               f"(the largest equilibrium input along the step, {floor:.4g} {unit})"])
+    if "sequential" in methods:
+        started = time.perf_counter()
+        sized = plant.with_input_limit(floor)
+        tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, **options)
+        result.designs["sequential"] = _sizing_design(
+            "sequential", sized, tuned.block, scenario, specs, time.perf_counter() - started,
+            f"the holding limit, then the gains tuned for it: {tuned.message}", tuned.stopped_on_test,
+            f"IPOPT: {tuned.status}")
+    if "nested" in methods:
+        started = time.perf_counter()
+        try:
+            nested = size_actuator(plant, sizing.retune_start, scenario, specs, low=floor, high=sizing.high,
+                                   retune=True, rel_tol=rel_tol, tune_options=options)
+            counts = {s: nested["statuses"].count(s) for s in dict.fromkeys(nested["statuses"])}
+            status = "bisection to rel_tol {:g}; inner IPOPT: {}".format(
+                rel_tol, ", ".join(f"{s} x{c}" for s, c in counts.items()))
+            result.designs["nested"] = _sizing_design(
+                "nested", plant.with_input_limit(nested["limit"]), nested["block"], scenario, specs,
+                time.perf_counter() - started, f"bisection over [{floor:.4g}, {sizing.high:g}], "
+                f"{nested['evaluations']} limits tuned", nested["converged"], status)
+        except ValueError as err:
+            result.notes.append(f"nested: {err}")
+    for method in ("simultaneous", "simultaneous from sequential"):
+        if method not in methods:
+            continue
+        started = time.perf_counter()
+        if method == "simultaneous":
+            start_limit, start_block = (floor + sizing.high) / 2, None
+        else:
+            seq = result.designs["sequential"]
+            start_limit, start_block = seq.value, seq.block
+        sim = size_actuator_simultaneous(
+            plant, sizing.retune_start, scenario, specs, low=floor, high=sizing.high, start_limit=start_limit,
+            start_block=start_block, free=sizing.free,
+            **{k: v for k, v in (tune_options or {}).items() if k in ("max_iter", "tol", "jit", "widths")})
+        where = ("from the middle of the range and the hand gains" if start_block is None else
+                 "from the sequential answer")
+        result.designs[method] = _sizing_design(
+            method, plant.with_input_limit(sim["limit"]), sim["block"], scenario, specs,
+            time.perf_counter() - started, f"{where}: {sim['message']}", sim["converged"], sim["status"])
+    result.notes.append(_hand_rule_note(case, sizing, plant, scenario, specs, rel_tol))
     return result
 
 
+def _hand_rule_note(case, sizing, plant, scenario, specs, rel_tol) -> str:
+    """The text's procedure for comparison: the hand rule re-derived at each limit, bisection."""
+    text_plant = plant.with_input_limit(sizing.text_limit)
+    hand = measure(text_plant, sizing.hand_design(text_plant), scenario, specs)
+    low, high = sizing.hand_range
+    try:
+        rule = size_actuator(plant, sizing.hand_design, scenario, specs, low=low, high=high, retune=False,
+                             rel_tol=rel_tol)
+        found = f"the smallest limit at which it meets the specs is {rule['limit']:.4g} {case.input_unit}"
+    except ValueError as err:
+        found = f"re-derived at each limit up to {high:g} {case.input_unit} it never meets the specs ({err})"
+    return (f"hand design (the text's rule) at the text's {sizing.text_limit:g} {case.input_unit}: rise time "
+            f"{hand['rise_time_s']:.3g} s, overshoot {100 * hand['overshoot']:.2g} %, peak |u| "
+            f"{hand['peak_input']:.4g} {case.input_unit}; {found}")
+
+
 # ----------------------------------------------------------------- plant + controller (codesign)
-#: IPOPT iterations per solve (codesign makes three: plant, gains, both).
-CODESIGN_MAX_ITER = 40
-
-
-def _codesign_design(method, res, name, result: CaseResult) -> Design:
-    return Design(method=method, value=float(res.params[name]), objective=res.objective,
+def _codesign_design(res, name, result: CaseResult) -> Design:
+    return Design(method=res.method, value=float(res.params[name]), objective=res.objective,
                   closed_loop_cost=res.closed_loop_cost, plant_cost=res.plant_cost, feasible=res.feasible,
                   violations=list(res.violations),
                   measured=measure(res.plant, res.block, result.scenario, result.specs), wall_time=res.wall_time,
-                  message=res.message, gains=_listed(res.block.gains), plant=res.plant, block=res.block)
+                  message=res.message, gains=_listed(res.block.gains), plant=res.plant, block=res.block,
+                  converged=res.converged, status=res.status)
 
 
-def codesign_case(result: CaseResult, plant, block, name, low, high, plant_cost, max_iter, jit) -> CaseResult:
-    """Fill `result` with `codesign`'s two answers (its own numbers, plus a fresh `measure`).
+def codesign_case(result: CaseResult, plant, block, name, low, high, plant_cost, *, methods=METHODS,
+                  tune_options=None) -> CaseResult:
+    """Fill `result` with `designs.codesign.codesign`'s answers (its own numbers, plus a fresh `measure`).
 
     `name` is the plant parameter decided within [low, high], `plant_cost` its price
-    (dict name -> value or CasADi symbol -> objective units).
-
-    Also fills `sequential_retuned`: the sequential plant with its gains tuned
-    for another `max_iter` iterations, from the sequential gains and from the
-    simultaneous gains, whichever ends better. The simultaneous solve continues
-    from the sequential answer, so this separates what deciding the plant too
-    brings from what more iterations (or a better start for the gains) bring.
+    (dict name -> value or CasADi symbol -> objective units), which is also the
+    sequential method's plant-only objective. `tune_options` go to every solve
+    (max_iter, jit, tol, ...).
     """
     answers = codesign(plant, block, result.scenario, {name: (low, high)}, plant_cost=plant_cost,
-                       specs=result.specs, cost=result.cost, max_iter=max_iter, jit=jit)
-    result.sequential = _codesign_design("sequential", answers["sequential"], name, result)
-    result.simultaneous = _codesign_design("simultaneous", answers["simultaneous"], name, result)
-    seq = result.sequential
-    started = time.perf_counter()
-    tries = []
-    for label, start in (("sequential", seq.block), ("simultaneous", result.simultaneous.block)):
-        more = tune(seq.plant, start, result.scenario, specs=result.specs, cost=result.cost, max_iter=max_iter,
-                    jit=jit)
-        tries.append((not more.feasible, more.cost, label, more))
-    _, _, label, more = min(tries, key=lambda item: item[:2])
-    others = "; ".join(f"from the {lab} gains: {_number(m.cost)}{'' if m.feasible else ' (infeasible)'}"
-                       for _, _, lab, m in tries)
-    result.sequential_retuned = Design(
-        method="sequential, re-tuned", value=seq.value, objective=more.cost + seq.plant_cost,
-        closed_loop_cost=more.cost, plant_cost=seq.plant_cost, feasible=more.feasible,
-        violations=list(more.violations), measured=measure(seq.plant, more.block, result.scenario, result.specs),
-        wall_time=time.perf_counter() - started,
-        message=f"best of two re-tunes ({others}), from the {label} gains: {more.message}",
-        gains=_listed(more.block.gains), plant=seq.plant, block=more.block)
+                       specs=result.specs, cost=result.cost, methods=tuple(methods), **(tune_options or {}))
+    for method, answer in answers.items():
+        result.designs[method] = _codesign_design(answer, name, result)
+    result.notes.append(f"plant-only objective of the sequential method: the plant's price alone, minimized "
+                        f"over [{low:g}, {high:g}]")
     return result
 
 
@@ -369,35 +383,40 @@ def problems() -> dict[str, Callable[[], CaseResult]]:
 
 
 # ----------------------------------------------------------------- report
-COLUMNS = ("problem", "designed parameter", "text", "sequential value", "sequential objective",
-           "simultaneous value", "simultaneous objective", "improvement", "sequential re-tuned objective",
-           "improvement over re-tuned", "wall time seq / sim (s)")
+COLUMNS = ("problem", "designed parameter", "text", "(1) sequential", "(2) nested", "(3) simultaneous",
+           "(3) from (1)", "gain of (3) over (1), (2)", "wall time (1) / (2) / (3) / (3) from (1) (s)",
+           "all converged")
 
-HEADER = """# Co-design: sequential versus simultaneous
+HEADER = """# Co-design: sequential, nested and simultaneous
 
 Generated by `{command}` (do not edit by hand).
 
-Each problem is solved twice with `designs.codesign` / `designs.tuning`:
-*sequential* decides the plant first and the controller after it, *simultaneous*
-decides both together (see each case's co-design problems in `studies/cases/<name>.py`).
+Each problem is solved with `designs.codesign` / `designs.tuning`, every method to
+convergence (see each case's co-design problem in `studies/cases/<name>.py`):
+
+1. **sequential**, control-blind as the co-design literature defines it: the plant from a
+   plant-only objective (actuator sizing: the smallest limit that holds the target at rest;
+   a plant parameter: its price alone), then the best controller for that plant;
+2. **nested**: an outer optimizer on the plant (bisection on the limit; bounded Brent on a
+   parameter), each of its evaluations a converged tuning of the gains;
+3. **simultaneous**: plant and gains in one IPOPT problem, from a neutral start (the middle
+   of the range, the hand design's gains) and, in "(3) from (1)", from the sequential answer.
 
 Columns:
 
 - **designed parameter**: the plant parameter decided, with its unit; **text**: its value in the text.
-- **sequential / simultaneous value**: the value each method chose.
-- **sequential / simultaneous objective**: what the problem minimizes. Actuator sizing: the
-  smallest limit meeting the specs (the value itself); the sequential method re-derives the
-  text's hand design at each limit, the simultaneous one re-tunes the gains at each limit.
-  Crane and satellite: ITAE of the tracked coordinate plus the plant's price (m s² for the
-  crane, rad s² for the satellite); `codesign`'s plant-then-gains versus joint answer.
-  "(infeasible)" marks an answer that misses a spec.
-- **improvement**: 1 − simultaneous objective / sequential objective.
-- **sequential re-tuned objective**: crane and satellite only, the sequential plant with its gains
-  tuned for as many more IPOPT iterations as the simultaneous solve gets (it starts from the
-  sequential answer), from the sequential and from the simultaneous gains, the better of the two;
-  **improvement over re-tuned**: 1 − simultaneous / re-tuned objective, what choosing the plant
-  together with the gains brings beyond more tuning.
+- **(1) ... (3) from (1)**: each method's value of the parameter and, after "→", its objective.
+  Actuator sizing: the smallest limit meeting the specs (the value itself); crane and
+  satellite: ITAE of the tracked coordinate plus the plant's price (m s² for the crane, rad s²
+  for the satellite). "(infeasible)" marks an answer that misses a spec (judged on a fresh
+  evaluation of the exact loop).
+- **gain of (3) over (1), (2)**: 1 − (better feasible simultaneous objective) / (better feasible
+  objective of (1) and (2)); positive: simultaneous better.
 - **wall time**: seconds per method on the machine that ran the command.
+- **all converged**: every optimizer behind every answer stopped on its convergence test
+  (IPOPT's tolerance with the smoothing continuation settled, or IPOPT's proof that a limit
+  cannot meet the specs; the bisection's or Brent's resolution), none at an iteration cap;
+  each answer's statuses are listed under Notes.
 """
 
 
@@ -405,42 +424,57 @@ def _number(value: float) -> str:
     return f"{value:.4g}"
 
 
-def _objective(design: Design | None) -> str:
+def _cell(design: Design | None) -> str:
     if design is None:
         return "—"
-    return _number(design.objective) + ("" if design.feasible else " (infeasible)")
+    return f"{_number(design.value)} → {_number(design.objective)}" + ("" if design.feasible else " (infeasible)")
 
 
 def table(results: list[CaseResult]) -> str:
     """The Markdown table of `COLUMNS`, one row per result."""
     rows = []
     for r in results:
-        seq, sim = r.sequential, r.simultaneous
-        over = r.improvement_over_retuned
-        cells = [r.problem, f"{r.parameter} ({r.unit})", _number(r.text_value), _number(seq.value), _objective(seq),
-                 _number(sim.value), _objective(sim), f"{100 * r.improvement:.1f} %", _objective(r.sequential_retuned),
-                 "—" if over is None else f"{100 * over:.1f} %", f"{seq.wall_time:.1f} / {sim.wall_time:.1f}"]
+        d = r.designs
+        gain = r.gain
+        times = " / ".join(f"{d[m].wall_time:.0f}" if m in d else "—" for m in METHODS)
+        cells = [r.problem, f"{r.parameter} ({r.unit})", _number(r.text_value),
+                 *(_cell(d.get(m)) for m in METHODS),
+                 "—" if gain is None else f"{100 * gain:.1f} %", times, "yes" if r.converged else "no"]
         rows.append(dict(zip(COLUMNS, cells)))
     return files.markdown_table(rows, [(c, c, str) for c in COLUMNS], literal=False)
 
 
-def report(results: list[CaseResult], command: str) -> str:
-    """The whole Markdown document: header, table, and each problem's notes and specs."""
-    parts = [HEADER.format(command=command), "\n", table(results), "\n## Notes\n"]
+def notes(results: list[CaseResult]) -> str:
+    """Each problem's notes, then one line per answer: its numbers, statuses and message."""
+    parts = ["## Notes\n"]
     for r in results:
         parts.append(f"\n**{r.problem}** ({r.objective}):\n")
         for note in r.notes:
             parts.append(f"- {note}\n")
-        for d in (r.sequential, r.simultaneous, r.sequential_retuned):
+        for method in METHODS:
+            d = r.designs.get(method)
             if d is None:
                 continue
             m = d.measured
             extra = "".join(f", {k} {v:.3g}" for k, v in m.items() if k.startswith("max_abs_"))
-            parts.append(f"- {d.method}: {r.parameter} = {_number(d.value)} {r.unit}, "
+            violated = "" if d.feasible else f"; violates {'; '.join(d.violations)}"
+            parts.append(f"- {method}: {r.parameter} = {_number(d.value)} {r.unit}, "
                          f"ITAE {_number(d.closed_loop_cost)}, rise time {m['rise_time_s']:.3g} s, "
                          f"overshoot {100 * m['overshoot']:.2g} %, "
-                         f"peak |u| {_number(m['peak_input'])}{extra}; {d.message}\n")
+                         f"peak |u| {_number(m['peak_input'])}{extra}{violated}; status: {d.status}; "
+                         f"{d.message}\n")
     return "".join(parts)
+
+
+#: The document's sections in order: each a callable (results, command) -> Markdown.
+SECTIONS = (lambda results, command: HEADER.format(command=command),
+            lambda results, command: "\n" + table(results) + "\n",
+            lambda results, command: notes(results))
+
+
+def report(results: list[CaseResult], command: str, sections=SECTIONS) -> str:
+    """The whole Markdown document: the `sections` in order (header, table, notes by default)."""
+    return "".join(section(results, command) for section in sections)
 
 
 def main(argv=None) -> int:
@@ -456,15 +490,16 @@ def main(argv=None) -> int:
         started = time.perf_counter()
         r = found[key]()
         results.append(r)
-        print(f"sequential {_number(r.sequential.value)}, simultaneous {_number(r.simultaneous.value)} {r.unit} "
-              f"({time.perf_counter() - started:.0f} s)", flush=True)
+        values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
+        print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s)", flush=True)
     command = "python -m studies.codesign_report" + ("" if args.only is None else " --only " + " ".join(keys))
     text = report(results, command)
     print(table(results))
     files.write_text(args.out, text)
     print(f"wrote {args.out}")
-    return 0
+    return 0 if all(r.converged for r in results) else 1
 
 
 if __name__ == "__main__":
     sys.exit(main())
+

@@ -233,15 +233,17 @@ def hoist_cost(params: dict):
     return HOIST_PRICE * crane["m"] * crane["g"] * (CABLE_RANGE[1] - params["ell"])
 
 
-def cable_transfer(*, max_iter: int | None = None, jit: bool = True, duration: float = TRANSFER_DURATION):
-    """crane1's cable length ℓ (m) with the text's VI.14 state feedback, 10 m transfer, sequential vs simultaneous.
+def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFER_DURATION):
+    """crane1's cable length ℓ (m) with the text's VI.14 state feedback, 10 m transfer, three ways.
 
     Objective: ITAE of the trolley position x (m s²) over `duration` s plus
     `hoist_cost` (a shorter cable hangs the load higher, which costs hoisting
-    work). Spec: |θ| ≤ `SWING_BOUND` rad all along the transfer; the hand design
+    work); the control-blind sequential method takes the hoisting cost alone.
+    Spec: |θ| ≤ `SWING_BOUND` rad all along the transfer; the hand design
     swings 0.15 rad at ℓ = 10 m and 0.18 rad at 5 m, so it is feasible over the
-    whole range and the plant-first stage starts feasible. Uses crane1: the
-    two-load crane doubles the state and cost of every solve.
+    whole range. Uses crane1: the two-load crane doubles the state and cost of
+    every solve. `methods` (default all of `studies.codesign_report.METHODS`)
+    and `tune_options` (max_iter, jit, ...; JIT by default) go to `codesign_case`.
     """
     from studies import codesign_report as cr
     from studies.homework import statespace_controllers
@@ -257,8 +259,8 @@ def cable_transfer(*, max_iter: int | None = None, jit: bool = True, duration: f
                f"{duration:g} s run",
                f"plant cost {HOIST_PRICE:g} m s²/J × m g (ℓ_max − ℓ), ℓ in [{CABLE_RANGE[0]:g}, "
                f"{CABLE_RANGE[1]:g}] m"])
-    return cr.codesign_case(result, plant, block, "ell", *CABLE_RANGE, hoist_cost,
-                            cr.CODESIGN_MAX_ITER if max_iter is None else max_iter, jit)
+    return cr.codesign_case(result, plant, block, "ell", *CABLE_RANGE, hoist_cost, methods=methods or cr.METHODS,
+                            tune_options={"jit": True} | dict(tune_options or {}))
 
 
 # ----------------------------------------------------------------- trajectory optimization: the 10 m transfer

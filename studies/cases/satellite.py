@@ -173,13 +173,16 @@ def stiffness_cost(params: dict):
     return STIFFNESS_PRICE * params["k"]
 
 
-def panel_stiffness(*, max_iter: int | None = None, jit: bool = True, duration: float = STIFFNESS_DURATION):
-    """The panel stiffness k (N m/rad) with the pole-placement state feedback (III.15), sequential vs simultaneous.
+def panel_stiffness(*, methods=None, tune_options=None, duration: float = STIFFNESS_DURATION):
+    """The panel stiffness k (N m/rad) with the pole-placement state feedback (III.15), three ways.
 
     Objective: ITAE of the panel angle φ (rad s²) on the text's 30 deg step plus
-    `stiffness_cost` (a stiffer panel is heavier and dearer). Specs: overshoot
-    ≤ 5 % and 2 % settling by 23 s, which the hand design meets at the text's
-    k = 0.15 N m/rad (4.4 %, 22 s).
+    `stiffness_cost` (a stiffer panel is heavier and dearer); the control-blind
+    sequential method takes the stiffness cost alone. Specs: overshoot ≤ 5 % and
+    2 % settling by 23 s, which the hand design meets at the text's k = 0.15
+    N m/rad (4.4 %, 22 s). `methods` (default all of
+    `studies.codesign_report.METHODS`) and `tune_options` (max_iter, jit, ...;
+    JIT by default) go to `codesign_case`.
     """
     from studies import codesign_report as cr
     from studies.homework import statespace_controllers
@@ -195,7 +198,7 @@ def panel_stiffness(*, max_iter: int | None = None, jit: bool = True, duration: 
                f"plant cost {STIFFNESS_PRICE:g} rad s² per N m/rad × k, k in "
                f"[{STIFFNESS_RANGE[0]:g}, {STIFFNESS_RANGE[1]:g}] N m/rad"])
     return cr.codesign_case(result, plant, block, "k", *STIFFNESS_RANGE, stiffness_cost,
-                            cr.CODESIGN_MAX_ITER if max_iter is None else max_iter, jit)
+                            methods=methods or cr.METHODS, tune_options={"jit": True} | dict(tune_options or {}))
 
 
 # ----------------------------------------------------------------- drawing

@@ -1,11 +1,128 @@
-"""Co-design: simultaneous never worse than sequential; actuator sizing checked by simulation."""
+"""Co-design against the closed form of the classic first-order problem, fresh evaluations and simulations."""
 
 import numpy as np
 import pytest
+import scipy.optimize
 
 import models
-from designs.codesign import codesign, size_actuator
+from designs.codesign import ActuatorLimit, codesign, size_actuator, size_actuator_simultaneous
 from designs.tuning import Cost, Scenario, Specs, TuningProblem
+
+Q, R, W = 1.0, 1.0, 0.5
+B_RANGE, K_BOUNDS = (0.1, 2.0), (0.0, 10.0)
+
+
+@models.declare(name="lag_b", title="x' = -b x + u", coordinates=(), inputs=("u",), first_order=("x",),
+                params=(models.Param("b", 1.0, "1/s"),), input_limit=1e6, register=False)
+def _lag(q, dq, u, p, s):
+    return models.Physics(rates={"x": -p.b * s.x + u.u}, outputs={"x": s.x})
+
+
+class Proportional(models.Block):
+    """u = −k x (reads the state, no reference)."""
+
+    def __init__(self, k, sample_period):
+        super().__init__(sample_period=sample_period, n_state=0, n_measured=1, n_reference=0, n_input=1,
+                         gains={"k": k}, measures="state")
+
+    def expr(self, xc, y, r, g):
+        return xc, -g["k"] * y[0]
+
+
+def continuous_optimum():
+    """argmin of Ψ(b, k) = (q + r k²) / (2 (b + k)) + w b, by hand.
+
+    For fixed b, dΨ/dk = 0 gives k = √(b² + q/r) − b and Ψ*(b) = r (√(b² + q/r) − b) + w b;
+    dΨ*/db = 0 gives b/√(b² + q/r) = 1 − w/r. With q = r = 1, w = 1/2: b = k = 1/√3, Ψ = √3/2.
+    """
+    c = 1 - W / R
+    b = c * np.sqrt(Q / R) / np.sqrt(1 - c**2)
+    k = np.sqrt(b**2 + Q / R) - b
+    return b, k, (Q + R * k**2) / (2 * (b + k)) + W * b
+
+
+def sampled_psi(v, ts):
+    """Ψ at v = (b, k) of the sampled loop: x⁺ = φ x + γ u (ZOH), Σ_k Ts (q x_k² + r u_k²) from x0 = 1, + w b."""
+    b, k = v
+    phi = np.exp(-b * ts)
+    lam = phi - (1 - phi) / b * k
+    return ts * (Q + R * k**2) / (1 - lam**2) + W * b
+
+
+def _problem(ts, duration=20.0):
+    plant = models.Plant(_lag)
+    scenario = Scenario(reference=None, duration=duration, x0=[1.0], name="regulation from x = 1")
+    cost = Cost(kind=None, state_weights={"x": Q}, input_weights={"u": R})
+    return plant, Proportional(1.0, ts), scenario, cost
+
+
+def test_first_order_codesign_converges_to_the_closed_form_optimum_as_the_sample_period_shrinks():
+    """Ψ = ∫ (q x² + r u²) dt / x0² + w b, the plant declared first order, regulated from x0 = 1.
+
+    At each Ts the simultaneous answer is the optimum of the sampled problem (its closed form minimized by
+    scipy), and its distance to the continuous optimum shrinks in proportion to Ts.
+    """
+    b_star, k_star, psi_star = continuous_optimum()
+    assert b_star == pytest.approx(1 / np.sqrt(3)) and k_star == pytest.approx(1 / np.sqrt(3))
+    errors = []
+    periods = (0.08, 0.04, 0.02, 0.01)
+    for ts in periods:
+        plant, block, scenario, cost = _problem(ts)
+        answer = codesign(plant, block, scenario, {"b": B_RANGE}, plant_cost=lambda p: W * p["b"], cost=cost,
+                          bounds={"k": K_BOUNDS}, methods=("simultaneous",), tol=1e-10)["simultaneous"]
+        assert answer.converged and answer.feasible, answer.message
+        b, k = answer.params["b"], float(answer.block.gains["k"])
+        sampled = scipy.optimize.minimize(sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead",
+                                          options={"xatol": 1e-10, "fatol": 1e-14})
+        sampled_psi_at = sampled_psi(sampled.x, ts)
+        np.testing.assert_allclose([b, k], sampled.x, rtol=1e-4)
+        assert answer.objective == pytest.approx(sampled_psi_at, rel=1e-7)
+        errors.append(max(abs(b - b_star), abs(k - k_star), abs(answer.objective - psi_star)))
+    # First order in Ts: halving it about halves the error.
+    ratios = np.array(errors[1:]) / np.array(errors[:-1])
+    np.testing.assert_allclose(ratios, 0.5, atol=0.05)
+    assert errors[-1] < 0.01
+
+
+def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_does_not():
+    """Nested and both simultaneous starts agree on the sampled optimum; the control-blind sequential plant
+    (its price alone: the cheapest b) with its best k is worse, as the closed form says."""
+    ts = 0.1
+    plant, block, scenario, cost = _problem(ts)
+    answers = codesign(plant, block, scenario, {"b": B_RANGE}, plant_cost=lambda p: W * p["b"], cost=cost,
+                       bounds={"k": K_BOUNDS}, tol=1e-10, nested_tol=1e-5)
+    sampled = scipy.optimize.minimize(sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead",
+                                      options={"xatol": 1e-10, "fatol": 1e-14})
+    for method in ("nested", "simultaneous", "simultaneous from sequential"):
+        a = answers[method]
+        assert a.converged and a.feasible, (method, a.status, a.message)
+        assert a.params["b"] == pytest.approx(sampled.x[0], rel=1e-3), method
+        assert a.objective == pytest.approx(sampled.fun, rel=1e-6), method
+    assert answers["nested"].status.startswith("outer: bounded Brent: Solution found")
+    assert answers["nested"].evaluations == len(answers["nested"].history) > 3
+    seq = answers["sequential"]
+    assert seq.converged and seq.params["b"] == pytest.approx(B_RANGE[0], abs=1e-6)
+    best_k = scipy.optimize.minimize_scalar(lambda k: sampled_psi((B_RANGE[0], k), ts), bounds=K_BOUNDS,
+                                            method="bounded", options={"xatol": 1e-10})
+    assert float(seq.block.gains["k"]) == pytest.approx(best_k.x, rel=1e-4)
+    assert seq.objective == pytest.approx(best_k.fun, rel=1e-7) and seq.objective > 1.01 * sampled.fun
+    # Each reported objective is what a fresh problem on the designed plant gives.
+    for a in answers.values():
+        fresh = TuningProblem(a.plant, a.block, scenario, cost=cost)
+        assert a.closed_loop_cost == pytest.approx(fresh.values(fresh.start())[0], rel=1e-12)
+        assert a.plant_cost == pytest.approx(W * a.params["b"], rel=1e-12)
+        assert "Maximum_Iterations" not in a.status
+
+
+def test_gain_bounds_hold_in_every_method_when_free_is_left_at_its_default():
+    """Issue 12: with free=None the simultaneous solve dropped the bounds (seen: k <= 1, answer 1.30)."""
+    plant, block, scenario, cost = _problem(0.1)
+    answers = codesign(plant, block, scenario, {"b": B_RANGE}, plant_cost=lambda p: W * p["b"], cost=cost,
+                       bounds={"k": (0.0, 0.3)}, free=None, nested_tol=1e-3)
+    for method, a in answers.items():
+        assert float(a.block.gains["k"]) <= 0.3 + 1e-9, method
+    # The bound is active: the unbounded optimum has k = 0.57.
+    assert float(answers["simultaneous"].block.gains["k"]) == pytest.approx(0.3, abs=1e-6)
 
 
 class RollPD(models.Block):
@@ -20,22 +137,20 @@ class RollPD(models.Block):
         return xc, models.saturate(g["kp"] * (r[0] - y[0]) - g["kd"] * y[1], self.limit)
 
 
-def test_simultaneous_is_never_worse_than_sequential():
+@pytest.mark.slow
+def test_uuv_buoyancy_offset_simultaneous_from_sequential_is_never_worse():
     """UUV roll: the centre-of-buoyancy offset L (its ballast costs 200 per metre) with a PD."""
     uuv = models.get("uuv")
-    results = codesign(uuv, RollPD(uuv.input_limit[0]),
-                       Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi"),
-                       {"L": (0.01, 0.2)}, plant_cost=lambda p: 200 * p["L"] * 1e-3,
-                       cost=Cost("itae"), specs=Specs(max_overshoot=0.05),
-                       bounds={"kp": (0, 500), "kd": (0, 500)}, max_iter=100)
-    seq, sim = results["sequential"], results["simultaneous"]
+    scenario = Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi")
+    results = codesign(uuv, RollPD(uuv.input_limit[0]), scenario, {"L": (0.01, 0.2)},
+                       plant_cost=lambda p: 200 * p["L"] * 1e-3, cost=Cost("itae"), specs=Specs(max_overshoot=0.05),
+                       bounds={"kp": (0, 500), "kd": (0, 500)},
+                       methods=("sequential", "simultaneous from sequential"))
+    seq, sim = results["sequential"], results["simultaneous from sequential"]
     assert seq.feasible and sim.feasible, (seq.message, sim.message)
     assert sim.objective <= seq.objective * (1 + 1e-9)
-    # Both objectives are what they claim: re-evaluate each design on its plant independently.
     for res in (seq, sim):
-        problem = TuningProblem(res.plant, res.block,
-                                Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi"),
-                                cost=Cost("itae"), specs=Specs(max_overshoot=0.05))
+        problem = TuningProblem(res.plant, res.block, scenario, cost=Cost("itae"), specs=Specs(max_overshoot=0.05))
         value, _, violations = problem.values(problem.start())
         assert value == pytest.approx(res.closed_loop_cost, rel=1e-9) and not violations
         assert res.plant_cost == pytest.approx(0.2 * res.params["L"], rel=1e-12)
@@ -54,6 +169,15 @@ def _arm_saturation_pd(plant):
     return ArmPD(plant, kp=kp, kd=kd)
 
 
+def _meets(arm, limit, block):
+    plant = arm.with_input_limit(limit)
+    res = models.simulate_closed_loop(plant, block, np.deg2rad(50), 3.0)
+    assert np.max(np.abs(res.u)) <= limit * (1 + 1e-12)
+    theta = res.state("theta")
+    risen = np.flatnonzero(res.t >= 0.8)
+    return bool(np.all(theta[risen] >= 0.9 * np.deg2rad(50)) and np.max(theta) <= 1.05 * np.deg2rad(50))
+
+
 def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
@@ -61,31 +185,39 @@ def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
     sized = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0, retune=False,
                           rel_tol=0.01)
     limit = sized["limit"]
-
-    def meets(value):
-        plant = arm.with_input_limit(value)
-        res = models.simulate_closed_loop(plant, _arm_saturation_pd(plant), np.deg2rad(50), 3.0)
-        assert np.max(np.abs(res.u)) <= value
-        theta = res.state("theta")
-        risen = np.flatnonzero(res.t >= 0.8)
-        return np.all(theta[risen] >= 0.9 * np.deg2rad(50)) and np.max(theta) <= 1.05 * np.deg2rad(50)
-
-    assert meets(limit) and not meets(limit / 1.02)
-    retuned = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0, retune=True,
-                            rel_tol=0.01, tune_options={"bounds": {"kp": (0, 5), "kd": (0, 1)}, "max_iter": 60})
-    assert retuned["limit"] <= limit * 1.01
+    smaller = arm.with_input_limit(limit / 1.02)
+    assert _meets(arm, limit, sized["block"]) and not _meets(arm, limit / 1.02, _arm_saturation_pd(smaller))
+    assert sized["evaluations"] <= 10 and sized["statuses"] == []
 
 
-def test_codesign_bad_input():
-    uuv = models.get("uuv")
-    block = RollPD(50.0)
-    scenario = Scenario(reference=0.5, duration=1.0, tracked="phi")
-    with pytest.raises(ValueError, match="uuv has no parameter 'Lx'"):
-        codesign(uuv, block, scenario, {"Lx": (0, 1)})
-    with pytest.raises(ValueError, match="starts outside its range"):
-        codesign(uuv, block, scenario, {"L": (0.1, 0.2)})
-    with pytest.raises(ValueError, match="design_params is empty"):
-        codesign(uuv, block, scenario, {})
-    with pytest.raises(ValueError, match="even the largest limit 1 misses the specs"):
-        size_actuator(uuv, lambda p: RollPD(p.input_limit[0]), scenario, Specs(rise_time=0.1), low=0.5,
-                      high=1.0, retune=False)
+def test_a_decided_limit_is_the_same_loop_as_a_block_built_for_it():
+    """ActuatorLimit(block at 3 N m) on a 3 N m plant = the block built for 0.9 N m on a 0.9 N m plant."""
+    arm = models.get("arm")
+    top, small = arm.with_input_limit(3.0), arm.with_input_limit(0.9)
+    from tests.designs.test_tuning import ArmPD
+    wrapped = ActuatorLimit(ArmPD(top, kp=2.0, kd=0.2), 0.9)
+    assert wrapped.gains["actuator_limit"] == 0.9 and wrapped.gain_names[-1] == "actuator_limit"
+    direct = ArmPD(small, kp=2.0, kd=0.2)
+    a = models.simulate_closed_loop(top, wrapped, np.deg2rad(50), 2.0)
+    b = models.simulate_closed_loop(small, direct, np.deg2rad(50), 2.0)
+    np.testing.assert_array_equal(a.x, b.x)
+    assert np.max(np.abs(a.u)) == 0.9
+    retuned = wrapped.with_gains(kp=3.0, actuator_limit=0.8)
+    assert retuned.block.gains["kp"] == 3.0 and "actuator_limit" not in retuned.block.gains
+
+
+@pytest.mark.slow
+def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
+    arm = models.get("arm")
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    specs = Specs(rise_time=0.8, max_overshoot=0.05)
+    bounds = {"kp": (0, 5), "kd": (0, 1)}
+    nested = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, retune=True,
+                           rel_tol=0.01, tune_options={"bounds": bounds})
+    assert nested["converged"] and all(s in ("Solve_Succeeded", "Solved_To_Acceptable_Level",
+                                             "Infeasible_Problem_Detected") for s in nested["statuses"])
+    sim = size_actuator_simultaneous(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0,
+                                     start_limit=1.5, bounds=bounds)
+    assert sim["converged"] and sim["feasible"], sim["message"]
+    assert sim["limit"] <= nested["limit"] * 1.01
+    assert _meets(arm, sim["limit"], sim["block"]) and _meets(arm, nested["limit"], nested["block"])

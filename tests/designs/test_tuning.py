@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import models
-from designs.tuning import Cost, Scenario, Specs, TuningProblem, closed_loop_spectral_abscissa, tune
+from designs.tuning import AGREEMENT, Cost, Scenario, Specs, TuningProblem, closed_loop_spectral_abscissa, tune
+from models import metrics
 
 
 @models.declare(name="cart_velocity", title="m v' = u - b v", coordinates=("s",), inputs=("u",),
@@ -110,11 +111,12 @@ def test_infeasible_specs_are_named(arm):
     assert "infeasible" in result.message
 
 
-def test_iteration_limit_returns_the_best_feasible_point(arm):
+def test_iteration_limit_returns_the_best_feasible_point_and_says_it_did_not_converge(arm):
     calls = []
     result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
                   specs=Specs(max_overshoot=0.05), max_iter=2, progress=lambda *a: calls.append(a))
     assert result.status == "Maximum_Iterations_Exceeded"
+    assert not result.converged and len(result.stages) == 1  # the continuation stops at a stage that did not converge
     assert [c[0] for c in calls] == list(range(len(result.history))) == [0, 1, 2]
     assert [c[1] for c in calls] == [value for _, value in result.history]
     assert result.feasible and not result.success
@@ -148,7 +150,7 @@ def test_spectral_abscissa_of_a_linear_loop_equals_its_eigenvalues():
 @pytest.mark.parametrize("kwargs,message", [
     ({"free": ["kq"]}, "has no gain"),
     ({"robust": "median"}, "robust must be"),
-    ({"scenario": Scenario(reference=0.5, duration=1.0, tracked="phi")}, "arm has no state 'phi'"),
+    ({"scenarios": Scenario(reference=0.5, duration=1.0, tracked="phi")}, "arm has no state 'phi'"),
     ({"cost": "itae"}, None),
 ])
 def test_bad_tuning_input(arm, kwargs, message):
@@ -157,7 +159,7 @@ def test_bad_tuning_input(arm, kwargs, message):
             Cost("l1")
         return
     with pytest.raises(ValueError, match=message):
-        TuningProblem(arm, ArmPD(arm), **({"scenario": Scenario(reference=0.5, duration=1.0, tracked="theta")}
+        TuningProblem(arm, ArmPD(arm), **({"scenarios": Scenario(reference=0.5, duration=1.0, tracked="theta")}
                                           | kwargs))
 
 
@@ -174,3 +176,201 @@ def test_a_violated_spec_reports_its_excess_from_a_fresh_simulation(arm):
     reported = float(violation.split("violated by ")[1].split(" ")[0])
     # g = peak − r against bound·step; unbounded below, so the relative scale is 1.
     assert reported == pytest.approx((overshoot - bound) * reference, rel=1e-3)
+
+
+# ----------------------------------------------------------------- through saturation
+def _itae_by_simulation(plant, block, reference, duration, energy_weight=0.0, **kwargs):
+    """ITAE (+ energy) of a fresh `simulate_closed_loop` run, in numpy: Ts Σ t_k |r − θ_k| over k = 0..N-1."""
+    run = models.simulate_closed_loop(plant, block, reference, duration, **kwargs)
+    ts = block.sample_period
+    e = run.r[:-1, 0] - run.x[:-1, 0]
+    return ts * (np.sum(run.t[:-1] * np.sqrt(e**2 + 1e-12)) + energy_weight * np.sum(run.u**2)), run
+
+
+def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agree(arm):
+    """The arm's PD, whose command sits at the 1 N m limit for the first samples: the continuation converges,
+    and at its answer the exact loop (a fresh numpy simulation) and the smoothed loop (last width) cost the same."""
+    block = ArmPD(arm)
+    target = np.deg2rad(50)
+    scenario = Scenario(reference=target, duration=3.0, tracked="theta")
+    result = tune(arm, block, scenario, cost=Cost("itae", energy_weight=0.01), specs=Specs(max_overshoot=0.02),
+                  bounds={"kp": (0, 5.0), "kd": (0, 1.0)})
+    assert result.method == "smooth" and result.converged and result.status == "Solve_Succeeded", result.message
+    assert result.feasible and result.cost < result.initial_cost
+    exact, run = _itae_by_simulation(arm, result.block, target, 3.0, energy_weight=0.01, substeps=10)
+    assert np.sum(np.abs(run.u[:, 0]) >= arm.input_limit[0] - 1e-12) >= 20  # it saturates for 20 samples or more
+    width = result.stages[-1]["width"]
+    problem = TuningProblem(arm, block, scenario, cost=Cost("itae", energy_weight=0.01))
+    smoothed = ca.Function("smoothed", [problem.decision, problem.width],
+                           [problem.aggregate(problem.smoothed()[0])])(result.decision, width)
+    assert float(smoothed) == pytest.approx(exact, rel=AGREEMENT)
+    assert result.cost == pytest.approx(exact, rel=1e-9)
+    # Stopped because the last two widths gave the same exact cost, not because the widths ran out.
+    assert len(result.stages) >= 2
+    assert result.stages[-1]["exact"] == pytest.approx(result.stages[-2]["exact"], rel=AGREEMENT)
+    assert all(stage["status"] == "Solve_Succeeded" for stage in result.stages)
+
+
+def test_smoothed_gradient_equals_central_differences(arm):
+    problem = TuningProblem(arm, ArmPD(arm, kp=2.0), Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"))
+    per_sample, _ = problem.smoothed()
+    value = problem.aggregate(per_sample)
+    f = ca.Function("f", [problem.decision, problem.width], [value, ca.gradient(value, problem.decision)])
+    point, width = problem.start(), 0.05
+    exact = np.asarray(f(point, width)[1]).ravel()
+    h = 1e-6 * np.abs(point)
+    fd = [(float(f(point + h[i] * e, width)[0]) - float(f(point - h[i] * e, width)[0])) / (2 * h[i])
+          for i, e in enumerate(np.eye(point.size))]
+    np.testing.assert_allclose(exact, fd, rtol=1e-5)
+
+
+# ----------------------------------------------------------------- several scenarios
+def _step_and_disturbance(target, **fields):
+    return [Scenario(reference=target, duration=3.0, tracked="theta", name="step", **fields),
+            Scenario(reference=target, duration=3.0, input_disturbance=0.2, tracked="theta", name="disturbance",
+                     weight=2.0, **fields)]
+
+
+def test_several_scenarios_sum_their_weighted_costs_per_sample(arm):
+    block = ArmPD(arm)
+    target = np.deg2rad(50)
+    corners = models.corner_params(arm)
+    both = TuningProblem(arm, block, _step_and_disturbance(target), samples=corners)
+    alone = [TuningProblem(arm, block, s, samples=corners) for s in _step_and_disturbance(target)]
+    objective, per_sample, _ = both.values(both.start())
+    parts = [p.scenario_values(p.start())[0] for p in alone]  # unweighted, one row each
+    np.testing.assert_allclose(per_sample, parts[0] + 2.0 * parts[1], rtol=1e-12)
+    assert objective == pytest.approx(np.mean(parts[0] + 2.0 * parts[1]), rel=1e-12)
+    np.testing.assert_allclose(both.scenario_values(both.start()), np.vstack(parts), rtol=1e-12)
+    # The disturbance run is a different run: its cost differs from the step's.
+    assert not np.allclose(parts[0], parts[1])
+
+
+def _two_steps():
+    """The 50° step that saturates the arm's motor and a 20° step that does not."""
+    return [Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta", name="large step"),
+            Scenario(reference=np.deg2rad(20), duration=3.0, tracked="theta", name="small step", weight=2.0)]
+
+
+def _step_figures(plant, block, scenario):
+    run = models.simulate_closed_loop(plant, block, scenario.reference, scenario.duration)
+    m = metrics.step_metrics(run.t, run.state("theta"), initial=0.0, target=scenario.reference)
+    return m["overshoot_pct"] / 100, m["settling_time_s"]
+
+
+def test_multi_scenario_tuning_is_never_worse_than_the_hand_design_on_any_scenarios_spec(arm):
+    """Each scenario's specs are the hand design's own overshoot and settling time there; tuning on both
+    steps beats the hand cost without giving either figure away on either (checked by fresh simulations)."""
+    block = ArmPD(arm, kp=0.6, kd=0.12)
+    plain = _two_steps()
+    hand = {s.name: _step_figures(arm, block, s) for s in plain}
+    assert all(np.isfinite(settle) for _, settle in hand.values())
+    scenarios = [Scenario(s.reference, s.duration, tracked="theta", name=s.name, weight=s.weight,
+                          specs=Specs(max_overshoot=hand[s.name][0], settling_time=hand[s.name][1]))
+                 for s in plain]
+    result = tune(arm, block, scenarios, cost=Cost("itae", energy_weight=0.01),
+                  bounds={"kp": (0.06, 6.0), "kd": (0.012, 1.2)})
+    assert result.converged and result.feasible, result.message
+    assert result.cost < 0.9 * result.initial_cost
+    for s in plain:
+        overshoot, settle = _step_figures(arm, result.block, s)
+        assert overshoot <= hand[s.name][0] + 1e-6, s.name
+        assert settle <= hand[s.name][1] + block.sample_period, s.name
+
+
+# ----------------------------------------------------------------- general costs and regulation
+def test_quadratic_cost_terminal_and_output_terms_equal_a_numpy_sum_over_a_fresh_run(arm):
+    block = ArmPD(arm)
+    target = np.deg2rad(30)
+    cost = Cost(kind=None, state_weights=np.array([[2.0, 0.3], [0.3, 0.5]]), input_weights={"tau": 0.7},
+                output_weights=[1.5], terminal_weights={"dtheta": 4.0}, input_target={"tau": 0.4})
+    problem = TuningProblem(arm, block, Scenario(reference=target, duration=2.0, tracked="theta"), cost=cost)
+    run = models.simulate_closed_loop(arm, block, target, 2.0, substeps=10)
+    ts = block.sample_period
+    dx = run.x[:-1] - np.array([target, 0.0])  # default target: the equilibrium with θ at the final reference
+    Q = np.array([[2.0, 0.3], [0.3, 0.5]])
+    expected = ts * (np.einsum("ki,ij,kj->", dx, Q, dx) + 0.7 * np.sum((run.u[:, 0] - 0.4) ** 2)
+                     + 1.5 * np.sum((run.y[:-1, 0] - target) ** 2)) + 4.0 * run.x[-1, 1] ** 2
+    assert problem.values(problem.start())[0] == pytest.approx(expected, rel=1e-10)
+
+
+def test_criterion_of_any_signal_and_regulation_from_an_initial_state(arm):
+    """IAE of the rate dθ/dt and ISE of the input while the arm regulates back to rest from θ = 0.3 rad."""
+    xe, ue = arm.equilibrium()
+    block = ArmPD(arm)
+    scenario = Scenario(reference=None, duration=2.0, x0=[0.3, 0.0], tracked="theta", name="regulation")
+    run = models.simulate_closed_loop(arm, block, 0.0, 2.0, x0=[0.3, 0.0], substeps=10)
+    ts = block.sample_period
+    iae = TuningProblem(arm, block, scenario, cost=Cost("iae", signal="dtheta"))
+    assert iae.values(iae.start())[0] == pytest.approx(ts * np.sum(np.sqrt(run.x[:-1, 1] ** 2 + 1e-12)), rel=1e-10)
+    ise = TuningProblem(arm, block, scenario, cost=Cost("ise", signal="tau", input_target={"tau": ue[0]}))
+    assert ise.values(ise.start())[0] == pytest.approx(ts * np.sum((run.u[:, 0] - ue[0]) ** 2), rel=1e-10)
+    # Specs on any state of a regulation: a bound and a final value, checked against the run.
+    bound = float(np.max(np.abs(run.x[1:, 1])))
+    holds = TuningProblem(arm, block, scenario, cost=Cost("iae", signal="theta"),
+                          specs=Specs(state_bounds={"dtheta": 1.01 * bound}, final_values={"theta": (0.0, 0.05)}))
+    assert holds.values(holds.start())[2] == [] and abs(run.x[-1, 0]) < 0.05
+    assert run.x[1:, 1].min() == -bound  # it swings back with a negative rate
+    fails = TuningProblem(arm, block, scenario, cost=Cost("iae", signal="theta"),
+                          specs=Specs(state_bounds={"dtheta": (-0.5 * bound, np.inf)}))
+    (violation,) = fails.values(fails.start())[2]
+    assert violation.startswith(f"{-0.5 * bound:g} <= dtheta <= inf (regulation)")
+
+
+@models.declare(name="lag", title="x' = -b x + u", coordinates=(), inputs=("u",), first_order=("x",),
+                params=(models.Param("b", 2.0, "1/s"),), input_limit=1e6, register=False)
+def _lag(q, dq, u, p, s):
+    return models.Physics(rates={"x": -p.b * s.x + u.u}, outputs={"x": s.x})
+
+
+class Proportional(models.Block):
+    """u = −k x on a one-state plant (reads the state, no reference)."""
+
+    def __init__(self, k, sample_period=0.01):
+        super().__init__(sample_period=sample_period, n_state=0, n_measured=1, n_reference=0, n_input=1,
+                         gains={"k": k}, measures="state")
+
+    def expr(self, xc, y, r, g):
+        return xc, -g["k"] * y[0]
+
+
+def test_a_first_order_plant_tunes_without_registering_to_its_sampled_lqr_gain():
+    """ẋ = −b x + u with ZOH at Ts: x⁺ = φ x + γ u; J = Ts Σ (q x² + r u²) from x0 = 1 is minimized by the
+    k of the closed form in `test_tuner_finds_the_closed_form_optimum_of_a_first_order_loop`."""
+    plant = models.Plant(_lag)
+    assert "lag" not in models.names()
+    b, ts, q, r = 2.0, 0.01, 3.0, 0.5
+    phi = np.exp(-b * ts)
+    gamma = (1 - phi) / b
+    rho = r / q
+    lin = rho * (1 - phi**2) + gamma**2
+    k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
+    result = tune(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]),
+                  cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}), tol=1e-12)
+    assert result.converged and result.success, result.message
+    assert float(result.gains["k"]) == pytest.approx(k_star, rel=1e-6)
+    assert result.cost == pytest.approx(q * ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2),
+                                        rel=1e-9)
+
+
+def test_worst_case_tuning_minimizes_the_largest_sample_cost_of_the_closed_form():
+    """Two plants b = 1 and b = 3 (the decision is one k): the epigraph solve reaches min_k max_b J_b(k),
+    with J_b(k) = q Ts (1 + ρ k²) / (1 − λ_b²) in closed form, minimized here by scipy."""
+    import scipy.optimize
+
+    plant = models.Plant(_lag)
+    ts, q, r = 0.01, 3.0, 0.5
+    rows = np.array([[1.0], [3.0]])
+
+    def closed_form(k, b):
+        phi = np.exp(-b * ts)
+        lam = phi - (1 - phi) / b * k
+        return ts * (q + r * k**2) / (1 - lam**2)
+
+    best = scipy.optimize.minimize_scalar(lambda k: max(closed_form(k, b) for b in rows[:, 0]), bounds=(0, 10),
+                                          method="bounded", options={"xatol": 1e-12})
+    result = tune(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]), samples=rows,
+                  robust="worst", cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}), tol=1e-12)
+    assert result.converged, result.message
+    assert float(result.gains["k"]) == pytest.approx(best.x, rel=1e-5)
+    assert result.cost == pytest.approx(best.fun, rel=1e-8)
