@@ -160,6 +160,8 @@ def _scenarios(values, p: argparse.ArgumentParser):
     if not values:
         return None
     names = [n.strip() for v in values for n in v.split(",") if n.strip()]
+    if not names:
+        p.error(f"--scenario names no scenario; valid scenarios: {', '.join(SCENARIO_NAMES)}")
     unknown = [n for n in names if n not in SCENARIO_NAMES]
     if unknown:
         p.error(f"unknown scenario {unknown[0]!r}; valid scenarios: {', '.join(SCENARIO_NAMES)}")
@@ -240,15 +242,24 @@ def not_ok_lines(table, width: int = 118) -> list:
     """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".
 
     Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
-    scenarios, so the list stays short while naming every (controller, scenario).
+    scenarios, so the list stays short while naming every (controller, scenario). A row that did not
+    run as designed says so beside its verdict: "violates (degraded)".
     """
+    from .runner import status_kind
+
     scenarios = list(dict.fromkeys(table.scenario))
     groups: dict = {}
     for row in table.to_dict("records"):
         verdict, status = str(row.get("verdict")), str(row.get("status"))
         if verdict == "meets specs" and status == "ok":
             continue
-        key = verdict if verdict != "meets specs" else status.split(":")[0]
+        kind = status_kind(status)
+        if verdict == "meets specs":
+            key = kind
+        elif kind == "ok" or verdict.startswith(kind):
+            key = verdict
+        else:
+            key = f"{verdict} ({kind})"
         groups.setdefault(key, {}).setdefault(row["controller"], []).append(row["scenario"])
     lines = []
     for key, by_controller in groups.items():
@@ -548,7 +559,7 @@ def main(argv=None) -> int:
     where = (f"on Dask ({args.scheduler or f'{args.workers} local workers'})" if dask
              else f"with {jobs} job{'s' if jobs > 1 else ''}")
     lines = closing_lines(finished, args.out, args.verbose)
-    lines.append(f"wrote run {run_id}; total {time.perf_counter() - started:.1f} s {where}")
+    lines.append(f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
     if missing:
         lines.append(f"python -m studies: ran without {len(missing)} missing provider(s): " + "; ".join(missing))
     not_ok = sum(done["not_ok_rows"] for done in finished)

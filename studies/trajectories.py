@@ -126,11 +126,14 @@ class TrajectoryProblem:
 # ---------------------------------------------------------------------------- results
 @dataclass
 class Motion:
-    """A motion sampled for plots and the animation: t (M+1,), x (M+1, nx), r (M+1, 1) the marked target."""
+    """A motion sampled for plots and the animation: t (M+1,), x (M+1, nx), r (M+1, 1) the marked target,
+    u (M, nu) the input held over each sample, input_limit (nu,) the actuator's limit."""
 
     t: np.ndarray
     x: np.ndarray
     r: np.ndarray
+    u: np.ndarray
+    input_limit: np.ndarray
 
 
 @dataclass
@@ -238,7 +241,8 @@ def motion(solution, target: float, step: float = 0.01) -> Motion:
     """The optimized motion every `step` s (the collocation polynomial or the shooting interpolant)."""
     count = max(2, int(math.ceil(solution.final_time / step)))
     t = np.linspace(0.0, solution.final_time, count + 1)
-    return Motion(t, solution.state_at(t), np.full((t.size, 1), float(target)))
+    return Motion(t, solution.state_at(t), np.full((t.size, 1), float(target)), solution.input_at(t[:-1]),
+                  np.asarray(solution.plant.input_limit, dtype=float))
 
 
 def _bryson(plant: models.Plant, tracking: Tracking) -> tuple[np.ndarray, np.ndarray]:
@@ -612,7 +616,7 @@ def write_files(result: CaseTrajectories, folder: Path) -> dict:
             gif, page = f"trajectory_{key}.gif", f"trajectory_{key}.html"
             animation.write_gif(folder / gif, result.case, result.plant, run, label, max_frames=30 if quick else 100,
                                 dpi=64 if quick else 80)
-            animation.write_html(folder / page, result.case, result.plant, run, label, caption,
+            animation.write_html(folder / page, result.case, result.plant, {label: run}, label, caption,
                                  max_frames=300 if quick else 600)
             files |= {gif: gif, page: page}
     for key, tracked in result.tracking.items():

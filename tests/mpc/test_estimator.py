@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import models
+import studies
 from mpc.estimator import DisturbanceObserver, SteadyStateTarget
 
 
@@ -23,7 +24,7 @@ def test_observer_recovers_a_constant_input_disturbance_on_the_exact_model():
     np.testing.assert_allclose(x_hat, x, atol=1e-9)
 
 
-@pytest.mark.parametrize("name", models.names())
+@pytest.mark.parametrize("name", studies.names())
 def test_default_estimators_are_stable(name, build_mpc):
     controller = build_mpc("linear", name)
     radius = np.max(np.abs(np.linalg.eigvals(controller.observer.error_dynamics())))

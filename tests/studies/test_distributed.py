@@ -56,7 +56,7 @@ def test_a_monte_carlo_on_two_workers_is_the_one_process_monte_carlo(client, pen
 
 
 def test_a_study_on_dask_writes_the_same_table(client, tmp_path):
-    kwargs = dict(providers=(EXAMPLE,), scenarios=["step", "mc"], mc=40, mc_python=1, seed=3, quick=True)
+    kwargs = dict(providers=(EXAMPLE,), scenarios=["step", "mc"], mc=40, seed=3, quick=True)
     here = studies.run("arm", **kwargs)
     there = studies.run("arm", executor=client, **kwargs)
     columns = ["controller", "scenario", "status", "verdict", "verdict_detail", "rise_time_s", "settling_time_s",

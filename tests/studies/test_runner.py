@@ -96,8 +96,10 @@ def test_python_controllers_run_every_scenario_on_as_many_samples_and_report_sol
     result = runner.run_study(study, options)
     table = result.table.set_index(["controller", "scenario"])
     assert table.loc[("linear MPC", "mc"), "samples"] == table.loc[("LQR", "mc"), "samples"] == 4
-    assert (result.table.status == "ok").all()
-    # The example controller reports "max_iter_reached" on every 50th step: 10 of 500.
+    # The example controller reports "max_iter_reached" on every 50th step: 10 of 500, 40 of 2000.
+    assert table.loc[("linear MPC", "step"), "status"] == "degraded: solver failed on 10 of 500 steps"
+    assert table.loc[("linear MPC", "mc"), "status"] == "degraded: solver failed on 40 of 2000 steps of 4 samples"
+    assert (result.table[result.table.controller != "linear MPC"].status == "ok").all()
     assert table.loc[("linear MPC", "step"), "solver_issues"] == 10
     assert math.isnan(table.loc[("LQR", "step"), "solver_issues"])
 
