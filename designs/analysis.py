@@ -455,6 +455,8 @@ def check_phase_margin(L, minimum_deg: float | None = None, target_deg: float | 
         return SpecCheck(f"phase margin about {target_deg:g} deg (±{tolerance_deg:g})",
                          bool(abs(m["pm_deg"] - target_deg) <= tolerance_deg), m["pm_deg"], target_deg,
                          m["gain_crossover"])
+    if minimum_deg is None:
+        raise ValueError("check_phase_margin needs minimum_deg or target_deg; got neither")
     return SpecCheck(f"phase margin >= {minimum_deg:g} deg", bool(m["pm_deg"] >= minimum_deg), m["pm_deg"],
                      minimum_deg, m["gain_crossover"])
 
