@@ -146,6 +146,9 @@ def loopshaped(L0, spec: LoopSpec, phase_margin_deg: float = 60.0):
     -------
     (shaped, prefilter record, new closed loop T): see `designs.loopshaping`.
     """
+    if spec.low_frequency is None or spec.high_frequency is None:
+        raise ValueError(f"loopshaped needs the bands of {spec.item}: low_frequency and high_frequency, got "
+                         f"{spec.low_frequency} and {spec.high_frequency}")
     shaped = improve_loop(L0, low_frequency=spec.low_frequency, low_factor=spec.factor,
                           high_frequency=spec.high_frequency, high_factor=spec.factor,
                           phase_margin_deg=phase_margin_deg)
