@@ -15,7 +15,9 @@ from __future__ import annotations
 import html
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -224,7 +226,7 @@ def _rounded(value, digits: int = 4):
     return value
 
 
-def write_html(path: Path, case, plant, runs, selected: str | None = None, caption: str = "",
+def write_html(path: Path, case, plant, runs: Mapping[str, Any], selected: str | None = None, caption: str = "",
                max_frames: int = 300, verdicts: dict | None = None) -> Path:
     """A self-contained HTML page (inline SVG and script) animating the runs of several controllers.
 
