@@ -167,7 +167,8 @@ def caption(result) -> str:
     text = (f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
             "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
             f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
-            "period, the actuator clipped at its limit), never a linear model alone. The simulated plant has the text's nominal parameters; "
+            "period, the actuator clipped at its limit), never a linear model alone. "
+            "The simulated plant has the text's nominal parameters; "
             f"the controllers are designed from the model known to them, with {uncertain} "
             f"{100 * study.known_rel:+g} %.")
     if mc is not None:
