@@ -161,13 +161,13 @@ class Loop:
     name: str = ""
 
     @classmethod
-    def unity(cls, plant, controller, name: str = "") -> "Loop":
+    def unity(cls, plant, controller, name: str = "") -> Loop:
         """Error feedback u = C (r − y): C_r = C_y = C."""
         return cls(_as_tf(plant), _as_tf(controller), _as_tf(controller), name)
 
     @classmethod
     def pid(cls, plant, kp: float, ki: float = 0.0, kd: float = 0.0, *, sigma: float | None = None,
-            derivative_on: str = "measurement", prefilter=None, name: str = "") -> "Loop":
+            derivative_on: str = "measurement", prefilter=None, name: str = "") -> Loop:
         """PID with the derivative on the measurement (the text's choice) or on the error.
 
         With `prefilter` F(s), the reference path is F·C_r.
@@ -455,6 +455,8 @@ def check_phase_margin(L, minimum_deg: float | None = None, target_deg: float | 
         return SpecCheck(f"phase margin about {target_deg:g} deg (±{tolerance_deg:g})",
                          bool(abs(m["pm_deg"] - target_deg) <= tolerance_deg), m["pm_deg"], target_deg,
                          m["gain_crossover"])
+    if minimum_deg is None:
+        raise ValueError("check_phase_margin needs minimum_deg or target_deg; got neither")
     return SpecCheck(f"phase margin >= {minimum_deg:g} deg", bool(m["pm_deg"] >= minimum_deg), m["pm_deg"],
                      minimum_deg, m["gain_crossover"])
 

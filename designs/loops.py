@@ -19,6 +19,7 @@ DC gain K_DC. Textbooks often assume K_DC = 1; we use the computed value
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Generic, Literal, TypeVar
 
 import casadi as ca
 import control
@@ -65,7 +66,7 @@ class CascadePlants:
     inner_coordinate: str
     outer_coordinate: str
     input: str
-    linearization: LinearModel = field(repr=False, default=None)
+    linearization: LinearModel = field(repr=False)
 
 
 def cascade_plants(known: models.Plant, inner: str, outer: str, lin: LinearModel | None = None) -> CascadePlants:
@@ -240,7 +241,20 @@ def separation_for(design, target: float, low: float, high: float, what: str = "
 
 
 @dataclass(frozen=True)
-class SuccessiveLoopClosure:
+class PlacedPD:
+    """Gains of a PD placed by the root locus (`place_pair`), usable as the outer design of a
+    `SuccessiveLoopClosure` in `cascade_blocks`."""
+
+    kp: float
+    kd: float
+
+
+#: The outer loop's design: a saturation-rule PDDesign, or gains placed by the root locus.
+OuterDesign = TypeVar("OuterDesign", bound=PDDesign | PlacedPD)
+
+
+@dataclass(frozen=True)
+class SuccessiveLoopClosure(Generic[OuterDesign]):
     """A two-loop design: inner PD on the inner coordinate, outer loop on K_DC·G_outer.
 
     Attributes
@@ -249,7 +263,7 @@ class SuccessiveLoopClosure:
     inner : PDDesign of the inner loop
     inner_dc_gain : K_DC of the inner closed loop
     outer_model : the plant the outer loop was designed on
-    outer : PDDesign of the outer loop (for a root-locus placement, any record with kp and kd)
+    outer : PDDesign of the outer loop (for a root-locus placement, its PlacedPD gains)
     outer_dc_gain : DC gain of the outer closed loop on its design model
     separation : ω_n,inner / ω_n,outer
     inner_limit : bound on the inner reference (the outer block's saturation), rad
@@ -261,7 +275,7 @@ class SuccessiveLoopClosure:
     inner: PDDesign
     inner_dc_gain: float
     outer_model: control.TransferFunction
-    outer: PDDesign
+    outer: OuterDesign
     outer_dc_gain: float
     separation: float
     inner_limit: float
@@ -282,7 +296,7 @@ def successive_loop_closure(known: models.Plant, inner: str, outer: str, *, inne
                             zeta_outer: float = 0.707, outer_derivative: bool = True,
                             outer_model: str = "exact", inner_step: float | None = None,
                             inner_step_range: tuple = (1e-4, np.pi / 2), lin: LinearModel | None = None,
-                            feedforward_gradient=None) -> SuccessiveLoopClosure:
+                            feedforward_gradient=None) -> SuccessiveLoopClosure[PDDesign]:
     """The text's .8 two-loop design by saturation rules, with bandwidth separation.
 
     Inner loop: k_p,θ = ±`inner_bound`/A_θ, ω_n,θ and k_d,θ from ζ_θ. Outer
@@ -359,7 +373,8 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
                    outer_coordinate: str | None = None, ki: float | None = None,
                    inner_ki: float | None = None,
                    anti_windup: str = "back_calculation", rate_limit: float | None = None,
-                   outer_derivative_on: str = "measurement", outer_limit: float | None = "inner_step",
+                   outer_derivative_on: str = "measurement",
+                   outer_limit: float | Literal["inner_step"] | None = "inner_step",
                    outer_limit_about: str | None = None,
                    feedforward: bool = False, sample_period: float = SAMPLE_PERIOD, sigma: float = SIGMA,
                    name: str = "PD") -> models.Cascade:
@@ -383,7 +398,7 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
     inner_coordinate = inner_coordinate or slc.plants.inner_coordinate
     outer_coordinate = outer_coordinate or slc.plants.outer_coordinate
     limit = slc.inner_limit if outer_limit == "inner_step" else outer_limit
-    outer_block = PID(known, outer_coordinate, kp=slc.outer.kp, kd=slc.outer.kd, ki=ki,
+    outer_block: models.Block = PID(known, outer_coordinate, kp=slc.outer.kp, kd=slc.outer.kd, ki=ki,
                       derivative_on=outer_derivative_on, anti_windup=anti_windup if ki is not None else "none",
                       rate_limit=rate_limit, output_limit=limit, limit_about=outer_limit_about,
                       sample_period=sample_period, sigma=sigma,
@@ -430,7 +445,7 @@ class FilteredBlock(models.Block):
 
 
 def zero_cancelling_design(slc: SuccessiveLoopClosure, *, separation: float = 10.0,
-                           zeta_outer: float = 0.707) -> SuccessiveLoopClosure:
+                           zeta_outer: float = 0.707) -> SuccessiveLoopClosure[PDDesign]:
     """Redesign the outer loop of `slc` with the zero-cancelling filter (the controlbook's pendulum).
 
     F(s) cancels the outer plant's stable zeros and K_DC; the PD then acts on
@@ -448,15 +463,6 @@ def zero_cancelling_design(slc: SuccessiveLoopClosure, *, separation: float = 10
                                  outer_model=reduced, outer=outer, outer_dc_gain=outer.dc_gain,
                                  separation=slc.inner.wn / outer.wn, inner_limit=slc.inner_limit,
                                  full_poles=poles, outer_filter=filt)
-
-
-@dataclass(frozen=True)
-class PlacedPD:
-    """Gains of a PD placed by the root locus (`place_pair`), usable as the outer design of a
-    `SuccessiveLoopClosure` in `cascade_blocks`."""
-
-    kp: float
-    kd: float
 
 
 def outer_plant_seen(inner_loop, G_outer) -> control.TransferFunction:

@@ -124,6 +124,7 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
         else:
             if n1 != 0:
                 raise ValueError("with a plant zero (n1 != 0) give wn, not kp")
+            assert kp is not None  # exactly one of kp and wn is given (checked above)
             stiffness = a0 + n0 * kp
             if stiffness <= 0:
                 raise ValueError(f"kp = {kp:.4g} does not stabilize the plant: need a0 + n0 kp > 0, that is "
@@ -133,6 +134,7 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
     else:
         kd = 0.0
         if kp is None:
+            assert wn is not None  # exactly one of kp and wn is given (checked above)
             kp = (wn**2 - a0) / n0
         stiffness, damping = a0 + n0 * kp, a1 + n1 * kp
         if stiffness <= 0 or damping <= 0:

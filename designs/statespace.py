@@ -29,10 +29,29 @@ import scipy.linalg
 import scipy.optimize
 import scipy.signal
 
-from models.lqr import (augment_disturbance, bryson_weights, controllability_matrix, dkalman, dlqr, finite_matrix, format_values,
-                        kalman, lqr, message_prefix, observability_matrix, require_controllable, require_detectable,
-                        require_observable, require_stabilizable, riccati_residual, square_matrix, state_input_pair,
-                        state_output_pair, uncontrollable_modes, unobservable_modes)
+from models.lqr import (
+    augment_disturbance,
+    bryson_weights,
+    controllability_matrix,
+    dkalman,
+    dlqr,
+    finite_matrix,
+    format_values,
+    kalman,
+    lqr,
+    message_prefix,
+    observability_matrix,
+    require_controllable,
+    require_detectable,
+    require_observable,
+    require_stabilizable,
+    riccati_residual,
+    square_matrix,
+    state_input_pair,
+    state_output_pair,
+    uncontrollable_modes,
+    unobservable_modes,
+)
 
 __all__ = [
     "controllability_matrix", "observability_matrix", "uncontrollable_modes", "unobservable_modes",
@@ -74,7 +93,7 @@ def normalized_rise_time(damping_ratio: float) -> float:
     if not 0 < zeta < 1:
         raise ValueError(f"damping_ratio must be in (0, 1), got {zeta}")
     peak = np.pi / np.sqrt(1 - zeta**2)  # the response rises monotonically up to its first peak
-    crossing = [scipy.optimize.brentq(lambda tau: _step_response_normalized(tau, zeta) - level,
+    crossing = [scipy.optimize.brentq(lambda tau, level=level: _step_response_normalized(tau, zeta) - level,
                                       0.0, peak, xtol=1e-14) for level in (0.1, 0.9)]
     return crossing[1] - crossing[0]
 
@@ -114,7 +133,8 @@ def _checked_poles(poles, n: int, n_inputs: int, what: str) -> np.ndarray:
     complex_ones = poles[np.abs(poles.imag) > 0]
     if not np.allclose(np.sort_complex(complex_ones), np.sort_complex(complex_ones.conj()),
                        rtol=1e-12, atol=1e-12):
-        raise ValueError(f"{message_prefix(what)}complex poles must come in conjugate pairs, got {format_values(poles)}")
+        raise ValueError(f"{message_prefix(what)}complex poles must come in conjugate pairs, "
+                         f"got {format_values(poles)}")
     for p in poles:
         count = int(np.sum(np.abs(poles - p) <= 1e-9 * max(1.0, abs(p))))
         if count > n_inputs:
@@ -228,7 +248,7 @@ def reference_gain(A, B, K, C_r) -> np.ndarray:
     if np.linalg.cond(closed) > 1e12:
         raise ValueError("A − B K is singular (a closed-loop pole at s = 0): no reference gain")
     dc = (C_r @ np.linalg.solve(closed, B)).item()
-    if abs(dc) < 1e-12 * max(1.0, np.linalg.norm(B)):
+    if abs(dc) < 1e-12 * max(1.0, float(np.linalg.norm(B))):
         raise ValueError("the closed loop has zero DC gain from u to the tracked output")
     return np.array([-1.0 / dc])
 

@@ -108,6 +108,7 @@ class _PlanFollower:
 
     measures = "outputs"
     n_reference = 1
+    _rate_per_sample: np.ndarray | None  # (nu,) largest input change per sample, None when unlimited
 
     def _setup_common(self, known: Plant, sample_period: float, horizon: int, tracked: str, name: str):
         if not isinstance(known, Plant):
@@ -283,6 +284,7 @@ class LinearMPC(_PlanFollower):
                     raise KeyboardInterrupt from err
                 fault = f"solver raised {type(err).__name__}: {err}"
         if solution is None:
+            assert fault is not None  # the solve was skipped or raised
             solution = QPSolution(np.full_like(plan, np.nan), np.zeros((self.horizon, self.problem.n_soft)), False,
                                   fault)
         new_plan, u, fallback, excess, success, status = self._follow(solution.inputs + self._ue, solution.success,

@@ -169,6 +169,7 @@ class CondensedDaqpSolver:
     """
 
     name = "daqp"
+    _set_up: bool  # DAQP has the matrices (set by `reset` and the first solve)
 
     def __init__(self, problem: MPCProblem, iteration_limit: int = 1000):
         self.problem = problem

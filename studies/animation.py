@@ -15,13 +15,16 @@ from __future__ import annotations
 import html
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
 matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
+from matplotlib.artist import Artist  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
@@ -156,7 +159,7 @@ def write_gif(path: Path, case, plant, run, label: str, max_frames: int = 100, d
     height = min(5.0, max(2.2, 5.0 * aspect)) + 0.7
     fig = Figure(figsize=(5.0, height))
     canvas = FigureCanvasAgg(fig)
-    ax = fig.add_axes([0.02, 0.02, 0.96, 1 - 0.75 / height])
+    ax = fig.add_axes((0.02, 0.02, 0.96, 1 - 0.75 / height))
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal", adjustable="box")
@@ -179,8 +182,9 @@ def write_gif(path: Path, case, plant, run, label: str, max_frames: int = 100, d
     return path
 
 
-def _artist(ax, prim: dict, dpi: int):
+def _artist(ax, prim: dict, dpi: int) -> Artist:
     width = prim.get("w", 1.0) * 72 / dpi
+    artist: Artist
     if prim["k"] == "line":
         points = np.array(prim["p"])
         artist = Line2D(points[:, 0], points[:, 1], color=prim["c"], linewidth=width,
@@ -222,7 +226,7 @@ def _rounded(value, digits: int = 4):
     return value
 
 
-def write_html(path: Path, case, plant, runs, selected: str | None = None, caption: str = "",
+def write_html(path: Path, case, plant, runs: Mapping[str, Any], selected: str | None = None, caption: str = "",
                max_frames: int = 300, verdicts: dict | None = None) -> Path:
     """A self-contained HTML page (inline SVG and script) animating the runs of several controllers.
 

@@ -39,7 +39,7 @@ from designs import statespace_design as ssd
 from designs.analysis import Loop, steady_state_errors
 from designs.loops import SuccessiveLoopClosure
 from designs.loopshaping import flattening_prefilter, improve_loop
-from designs.pid import PID, SIGMA
+from designs.pid import PID, SIGMA, PDDesign
 from designs.rootlocus import integrator_gain
 from models.files import to_jsonable
 
@@ -146,6 +146,9 @@ def loopshaped(L0, spec: LoopSpec, phase_margin_deg: float = 60.0):
     -------
     (shaped, prefilter record, new closed loop T): see `designs.loopshaping`.
     """
+    if spec.low_frequency is None or spec.high_frequency is None:
+        raise ValueError(f"loopshaped needs the bands of {spec.item}: low_frequency and high_frequency, got "
+                         f"{spec.low_frequency} and {spec.high_frequency}")
     shaped = improve_loop(L0, low_frequency=spec.low_frequency, low_factor=spec.factor,
                           high_frequency=spec.high_frequency, high_factor=spec.factor,
                           phase_margin_deg=phase_margin_deg)
@@ -170,7 +173,7 @@ def loopshaping_record(shaped, pre, T_new) -> dict:
                   specs=spec_records(specs))
 
 
-def cascade_records(prefix: str, slc: SuccessiveLoopClosure, bound: dict, letters: Mapping[str, str]) -> dict:
+def cascade_records(prefix: str, slc: SuccessiveLoopClosure[PDDesign], bound: dict, letters: Mapping[str, str]) -> dict:
     """The .8 records of a successive-loop design; `letters` maps each record to its homework letter.
 
     Keys of `letters`: inner_tf, bound, kp_inner, wn_inner, poles_inner, outer_tf, kp_outer,

@@ -103,7 +103,8 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
     bottom.legend(loc="upper right", fontsize=7)
-    legend_below(fig, *top.get_legend_handles_labels(), hspace=0.12 if not clipped else 0.2)
+    handles, labels = top.get_legend_handles_labels()
+    legend_below(fig, handles, labels, hspace=0.12 if not clipped else 0.2)
     return save(fig, path, dpi)
 
 
@@ -213,7 +214,8 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
     phase.set_xlabel("ω (rad/s)")
     for ax in (mag, phase):
         ax.grid(True, which="both", alpha=0.3)
-    legend_below(fig, *mag.get_legend_handles_labels(), top=0.94, hspace=0.12)
+    handles, labels = mag.get_legend_handles_labels()
+    legend_below(fig, handles, labels, top=0.94, hspace=0.12)
     return save(fig, path, dpi)
 
 
@@ -287,5 +289,6 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     ax.set_ylabel("Im s (rad/s)")
     ax.set_title(f"{result.plant.title}: closed-loop poles, exact linearization at rest, s = ln(z)/Ts",
                  fontsize=10)
-    legend_below(fig, *ax.get_legend_handles_labels(), top=0.94)
+    handles, labels = ax.get_legend_handles_labels()
+    legend_below(fig, handles, labels, top=0.94)
     return save(fig, path, dpi)

@@ -78,7 +78,7 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
     ----------
     grid : the parameter of the true plant and its values (`Grid.parse("m1=0.2:0.4:5")`)
     scenario : a scenario of the study that is not the Monte Carlo
-    options : seed, threads, jit, budget of controllers that are not Blocks, strict (see `runner.Options`)
+    options : seed, threads, jit, strict (see `runner.Options`)
     executor : None, a `dask.distributed.Client` or a `studies.distributed` executor for the Blocks' grids
 
     Returns
@@ -128,10 +128,10 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
         except distributed.RunFailed:
             raise
         except Exception as err:  # one controller's failure leaves the others' points
+            if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
+                raise KeyboardInterrupt from err
             if options.strict:
                 raise
-            if interrupts.is_interrupt(err):
-                raise KeyboardInterrupt from err
             status = f"failed: {type(err).__name__}: {err}".splitlines()[0]
             rows += [{"controller": label, grid.param: value, "status": status[:200],
                       **runner.verdict_columns(specs.Verdict(specs.FAILED, (), status[:200])),

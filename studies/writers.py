@@ -167,7 +167,8 @@ def caption(result) -> str:
     text = (f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
             "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
             f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
-            "period, the actuator clipped at its limit), never a linear model alone. The simulated plant has the text's nominal parameters; "
+            "period, the actuator clipped at its limit), never a linear model alone. "
+            "The simulated plant has the text's nominal parameters; "
             f"the controllers are designed from the model known to them, with {uncertain} "
             f"{100 * study.known_rel:+g} %.")
     if mc is not None:
@@ -301,12 +302,12 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
         shown = {label: r for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is None}
         left_out = [label for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is not None]
         steps = result.table[result.table.scenario == "step"].set_index("controller")
-        verdicts = {label: verdict_text(steps.loc[label, "verdict"]) for label in shown if label in steps.index}
+        step_verdicts = {label: verdict_text(steps.loc[label, "verdict"]) for label in shown if label in steps.index}
         text = (f"Nonlinear simulations of the text's step ({study.source}); first shown: {best}, the lowest ITAE. "
                 "Pick a controller, and a second one as a faint ghost; the commanded input is beside the drawing "
                 "with the actuator limit." + (f" Left out (diverged): {', '.join(left_out)}." if left_out else ""))
         animation.write_html(folder / "animation.html", study, plant, shown, best, text,
-                             max_frames=150 if quick else 300, verdicts=verdicts)
+                             max_frames=150 if quick else 300, verdicts=step_verdicts)
         files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
     else:
         notes.append("no animation: no controller completed the step scenario")

@@ -18,7 +18,7 @@ from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
-from designs.pid import SIGMA, linearized_input_bound, pd_saturation
+from designs.pid import PID, SIGMA, linearized_input_bound, pd_saturation
 from designs.tuning import Specs
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem
 from studies import drawing as d
@@ -116,11 +116,13 @@ MPC = MPCSettings(0.01, 50, (100.0, 0.1), 1.0, notes="50 samples = 0.5 s, severa
 
 
 # ----------------------------------------------------------------- co-design: the smallest motor
-def sizing_hand_design(known: models.Plant) -> models.Block:
+def sizing_hand_design(known: models.Plant) -> PID:
     """I.8's saturation-rule PD re-derived for `known`'s torque limit (needs it above the 0.735 N m gravity torque)."""
     from studies.homework import classical_design
 
-    return classical_design(CASE, known).controllers["PD"]
+    block = classical_design(CASE, known).controllers["PD"]
+    assert isinstance(block, PID)  # `classical` builds the arm's PD as one PID block
+    return block
 
 
 def sizing_start(known: models.Plant) -> models.Block:

@@ -27,7 +27,7 @@ from designs.loopshaping import (
     low_frequency_sign,
     prototype_phase_margin,
 )
-from designs.pid import SIGMA, linearized_input_bound
+from designs.pid import PID, SIGMA, linearized_input_bound
 from designs.rootlocus import dominant_pair, lead_by_angle
 from designs.tuning import Specs
 from mpc import MPCSettings, SoftSpec
@@ -198,12 +198,14 @@ MPC = MPCSettings(
 
 
 # ----------------------------------------------------------------- co-design: the smallest actuator
-def sizing_hand_design(known: models.Plant) -> models.Block:
+def sizing_hand_design(known: models.Plant) -> models.Cascade:
     """V.8's saturation-rule PD cascade re-derived for `known`'s force limit (above the 13.23 N equilibrium
     force with the ball at the beam's end)."""
     from studies.homework import classical_design
 
-    return classical_design(CASE, known).controllers["PD"]
+    block = classical_design(CASE, known).controllers["PD"]
+    assert isinstance(block, models.Cascade)  # `classical` builds the PD as a cascade of two PID blocks
+    return block
 
 
 def sizing_start(known: models.Plant) -> models.Block:
@@ -216,6 +218,7 @@ def sizing_start(known: models.Plant) -> models.Block:
     from studies.codesign_report import pid_at
 
     block = sizing_hand_design(known.with_input_limit(15.0))
+    assert isinstance(block.inner, PID)
     return models.Cascade(block.outer, pid_at(block.inner, known, float(known.input_limit[0])), name=block.name)
 
 

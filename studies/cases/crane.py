@@ -11,6 +11,7 @@ crane1 is a design model of this case, not a study of its own.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import control
 import numpy as np
@@ -94,7 +95,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
     rl = integrator(G_out, outer["kp"], outer["kd"], OUTER["zeta"], derivative_on="error")
     outer_pid = Loop.pid(G_out, outer["kp"], rl["ki"], outer["kd"], derivative_on="error")
     pair = [p for p in outer["poles"] if p.imag > 0][0]
-    a = {}
+    a: dict[str, Any] = {}  # homework item -> its record, and a note
     a["VI.8(b)"] = record(**tf_record(plants.inner, "plant_"), **tf_record(inner.closed_loop, "closed_loop_"),
                           dropped_coupling=plants.dropped)
     a["VI.8(c)"] = record(kp=inner.kp, kd=inner.kd, wn=inner.wn, zeta=inner.zeta, rise_time=rise_time,
@@ -140,7 +141,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
                                 outer=PlacedPD(outer["kp"], outer["kd"]),
                                 outer_dc_gain=dc_gain(outer_pd.reference_to_output()),
                                 separation=inner.wn / OUTER["wn"], inner_limit=inner_limit, full_poles=full)
-    kw = dict(inner_coordinate=inner_name, outer_derivative_on="error")
+    kw: dict[str, Any] = dict(inner_coordinate=inner_name, outer_derivative_on="error")
     blocks = {
         "PD": cascade_blocks(known, slc, name="PD", **kw),
         "PID": cascade_blocks(known, slc, ki=rl["ki"], name="PID", **kw),

@@ -56,7 +56,8 @@ LEAD_LAG_SPECS = dict(rise_time=0.9, settling_time=3.0, overshoot_percent=10.0, 
 #: IV.8(c) gives ζ = 0.7.
 ZETA_UUV = 0.7
 #: IV.13: crossover about 2 rad/s (rise time about 1 s), phase margin at least 60 deg.
-LOOPSHAPING = LoopSpec("IV.13", "input", baseline=None, crossover=2.0, phase_margin=60.0)
+CROSSOVER, PHASE_MARGIN = 2.0, 60.0
+LOOPSHAPING = LoopSpec("IV.13", "input", baseline=None, crossover=CROSSOVER, phase_margin=PHASE_MARGIN)
 #: IV.13(d) notch: the text's zero damping, and our pole damping.
 NOTCH_ZETA_ZERO, NOTCH_ZETA_POLE = 0.05, 0.7
 
@@ -112,12 +113,12 @@ def classical(known: models.Plant) -> ClassicalDesign:
                                               feedforward="reference", name="lead-lag + feedforward (IV.11(e))")
     a["IV.11(e)"] = record(feedforward="m g L sin(phi_d) of the known plant", specs=nonlinear(feedforward_block))
     # IV.13: PI, lead, notch, double lead at the crossover.
-    wc = LOOPSHAPING.crossover
+    wc = CROSSOVER
     integ = an.tf([1.0], [1.0, 0.0])
     a["IV.13(a)"] = record(crossover_target=wc, pm_deg=180.0 + phase_at(integ * G, wc))
     pi = proportional_integral(wc / 10)
     a["IV.13(b)"] = record(crossover_target=wc, pi_zero=wc / 10, pm_deg=180.0 + phase_at(pi * G, wc))
-    lead_pi = lead_for_crossover(pi * G, wc, LOOPSHAPING.phase_margin)
+    lead_pi = lead_for_crossover(pi * G, wc, PHASE_MARGIN)
     C_c = lead_pi.controller * pi
     T_c = Loop.unity(G, C_c).reference_to_output()
     a["IV.13(c)"] = record(lead_zero=lead_pi.zero, lead_pole=lead_pi.pole, gain=lead_pi.gain,
@@ -129,13 +130,13 @@ def classical(known: models.Plant) -> ClassicalDesign:
     N = notch(omega_notch, NOTCH_ZETA_ZERO, NOTCH_ZETA_POLE)
     a["IV.13(d)"] = record(notch_frequency=omega_notch, zeta_zero=NOTCH_ZETA_ZERO, zeta_pole=NOTCH_ZETA_POLE,
                            pm_deg=180.0 + phase_at(N * integ * G, wc))
-    lead_n = lead_for_crossover(N * integ * G, wc, LOOPSHAPING.phase_margin)
+    lead_n = lead_for_crossover(N * integ * G, wc, PHASE_MARGIN)
     C_e = lead_n.controller * N * integ
     loop_e = Loop.unity(G, C_e)
     T_e = loop_e.reference_to_output()
     # The notch cancels the lightly damped mode instead of damping it: it stays in the closed loop.
     checks = [an.check_stable(loop_e), an.check_crossover(G * C_e, wc),
-              an.check_phase_margin(G * C_e, LOOPSHAPING.phase_margin), an.check_damping(loop_e, 0.1)]
+              an.check_phase_margin(G * C_e, PHASE_MARGIN), an.check_damping(loop_e, 0.1)]
     checks += an.check_step(T_e, overshoot_percent=10.0, steady_state_error_percent=1e-9)
     a["IV.13(e)"] = record(lead_count=lead_n.count, lead_zero=lead_n.zero, lead_pole=lead_n.pole, gain=lead_n.gain,
                            **tf_record(C_e, "C_"), **margin_record(G * C_e, ""),
