@@ -1,0 +1,360 @@
+"""The designer's page: a Bokeh server application around `studies.designer.Designer`.
+
+Why Bokeh: its server keeps one Python session per browser tab and sends only
+changed data over a WebSocket, so a gain change is one Python callback that
+calls `Designer.update` and replaces the columns of a few data sources; its
+sliders, text inputs, selects and buttons are widgets of the same document,
+and its JavaScript (BokehJS) ships inside the Python package and is served by
+the same server, so the page works offline with no code of ours in JavaScript
+beyond the download of Export. It runs on Tornado, which the project already
+has. Dash would add Flask, Plotly and a callback graph for the same result;
+Panel is a layer over Bokeh that this page does not need; a hand-written
+Starlette page would need its own widgets and plotting glue.
+
+`serve(...)` binds 127.0.0.1 (a free port by default) and prints the URL.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+from collections.abc import Callable
+
+import numpy as np
+from bokeh.layouts import column, row
+from bokeh.models import (
+    Button,
+    ColumnDataSource,
+    CustomJS,
+    Div,
+    Select,
+    Slider,
+    Span,
+    TextInput,
+)
+from bokeh.plotting import figure
+
+from models import specs
+from studies import style
+from studies.plots import tracked_scale
+
+from . import Designer, GainControl, Update
+
+WIDTH = 560
+HEIGHT = 230
+
+#: What the Export button downloads: the JSON the server put into the hidden Div named "export".
+DOWNLOAD = """
+const text = cb_obj.text;
+if (!text) { return; }
+const blob = new Blob([text], {type: "application/json"});
+const link = document.createElement("a");
+link.href = URL.createObjectURL(blob);
+link.download = JSON.parse(text).file;
+document.body.appendChild(link);
+link.click();
+link.remove();
+"""
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """NaN where not finite (BokehJS leaves a gap there; inf would stretch the axes)."""
+    values = np.asarray(values, dtype=float).copy()
+    values[~np.isfinite(values)] = np.nan
+    return values
+
+
+class Page:
+    """The widgets, figures and data sources of one browser tab, bound to one `Designer`.
+
+    Every model the tests read has a name: sources "response", "input", "bode", "locus", "poles",
+    "spec_low", "spec_high"; divs "verdict", "margins", "tune_status", "export", "gain_error:KEY";
+    inputs "gain:KEY" (text) and "slider:KEY".
+    """
+
+    def __init__(self, designers: Callable[[str], Designer], labels: list[str], label: str):
+        self.designers = designers
+        self.labels = labels
+        self.values: dict[str, float] = {}
+        self.tuning = False
+        self.busy = False  # set while the page itself moves a widget: its callbacks then do nothing
+        self.scenario = "step"
+        self.title = Div(text="", name="title")
+        self.controller = Select(title="controller", options=labels, value=label, name="controller", width=260)
+        self.scenario_select = Select(title="scenario", options=[], value="step", name="scenario", width=260)
+        self.gains = column(name="gains")
+        self.tune_button = Button(label="Tune", name="tune", button_type="primary", width=80)
+        self.reset_button = Button(label="Reset", name="reset", width=80)
+        self.export_button = Button(label="Export", name="export_button", width=80)
+        self.tune_status = Div(text="", name="tune_status", width=260)
+        self.export_data = Div(text="", name="export", visible=False)
+        self.export_data.js_on_change("text", CustomJS(code=DOWNLOAD))
+        self.verdict = Div(text="", name="verdict", width=WIDTH)
+        self.margins = Div(text="", name="margins", width=WIDTH)
+        self.sources = {name: ColumnDataSource(name=name, data=data) for name, data in {
+            "response": {"t": [], "y": [], "r": []}, "input": {"t": [], "u": []},
+            "bode": {"omega": [], "magnitude_db": [], "phase_deg": []}, "locus": {"re": [], "im": []},
+            "poles": {"re": [], "im": []}, "spec_low": {"omega": [], "db": []},
+            "spec_high": {"omega": [], "db": []}}.items()}
+        self.limit_spans = (Span(dimension="width", line_dash="dashed", line_color="#cf222e"),
+                            Span(dimension="width", line_dash="dashed", line_color="#cf222e"))
+        self.crossover_span = Span(dimension="height", line_dash="dotted", line_color="#8250df", visible=False)
+        self.phase_span = Span(dimension="width", line_dash="dotted", line_color="#8250df", visible=False)
+        self.controller.on_change("value", lambda attr, old, new: self.load(new))
+        self.scenario_select.on_change("value", self._on_scenario)
+        self.tune_button.on_click(self._on_tune)
+        self.reset_button.on_click(self._on_reset)
+        self.export_button.on_click(self._on_export)
+        self.figures = self._figures()
+        self.layout = row(
+            column(self.title, self.controller, self.scenario_select, self.gains,
+                   row(self.tune_button, self.reset_button, self.export_button), self.tune_status,
+                   self.export_data, width=300),
+            column(self.verdict, self.figures["response"], self.figures["input"], self.margins),
+            column(self.figures["magnitude"], self.figures["phase"], self.figures["locus"]))
+        self.load(label)
+
+    # ------------------------------------------------------------- layout
+    def _figures(self) -> dict:
+        s = self.sources
+        response = figure(width=WIDTH, height=HEIGHT, title="step response of the nonlinear plant",
+                          x_axis_label="t (s)", name="response_figure")
+        response.line("t", "r", source=s["response"], line_dash="dashed", color="#6e7781", legend_label="reference")
+        response.line("t", "y", source=s["response"], line_width=2, color="#0969da", legend_label="response")
+        response.legend.location = "bottom_right"
+        inputs = figure(width=WIDTH, height=HEIGHT - 50, title="commanded input (dashed: actuator limit)",
+                        x_axis_label="t (s)", x_range=response.x_range, name="input_figure")
+        inputs.line("t", "u", source=s["input"], line_width=1.5, color="#1a7f37")
+        inputs.renderers.extend(self.limit_spans)
+        magnitude = figure(width=WIDTH, height=HEIGHT, x_axis_type="log", title="loop gain |L| (dB)",
+                           name="magnitude_figure")
+        magnitude.line("omega", "magnitude_db", source=s["bode"], line_width=2, color="#0969da")
+        magnitude.line("omega", "db", source=s["spec_low"], line_dash="dashed", color="#cf222e",
+                       legend_label="spec: at least")
+        magnitude.line("omega", "db", source=s["spec_high"], line_dash="dashed", color="#bf8700",
+                       legend_label="spec: at most")
+        magnitude.renderers.extend([self.crossover_span, Span(dimension="width", location=0, line_color="#6e7781")])
+        magnitude.legend.location = "bottom_left"
+        phase = figure(width=WIDTH, height=HEIGHT - 50, x_axis_type="log", x_range=magnitude.x_range,
+                       title="phase of L (deg)", x_axis_label="ω (rad/s)", name="phase_figure")
+        phase.line("omega", "phase_deg", source=s["bode"], line_width=2, color="#0969da")
+        phase.renderers.extend([self.phase_span, Span(dimension="width", location=-180, line_color="#6e7781")])
+        locus = figure(width=WIDTH, height=HEIGHT + 40, title="root locus (s-plane; x: closed-loop poles)",
+                       x_axis_label="Re s (1/s)", y_axis_label="Im s (rad/s)", name="locus_figure")
+        locus.scatter("re", "im", source=s["locus"], size=2, color="#6e7781")
+        locus.scatter("re", "im", source=s["poles"], marker="x", size=12, line_width=2, color="#cf222e")
+        locus.renderers.append(Span(dimension="height", location=0, line_color="#6e7781"))
+        return {"response": response, "input": inputs, "magnitude": magnitude, "phase": phase, "locus": locus}
+
+    def _gain_row(self, c: GainControl):
+        slider = Slider(start=c.log_low, end=c.log_high, value=math.log10(abs(c.design)),
+                        step=(c.log_high - c.log_low) / 400, title=f"{c.key} (log10 |value|)", show_value=False,
+                        name=f"slider:{c.key}", width=150)
+        text = TextInput(value=f"{c.design:.6g}", name=f"gain:{c.key}", width=100, title=c.key)
+        error = Div(text="", name=f"gain_error:{c.key}", styles={"color": "#cf222e"}, width=260)
+        slider.on_change("value_throttled", lambda attr, old, new: self._on_slider(c, new))
+        text.on_change("value", lambda attr, old, new: self._on_text(c, new))
+        return column(row(text, slider), error), slider, text, error
+
+    # ------------------------------------------------------------- loading a controller
+    def load(self, label: str) -> None:
+        """Show controller `label` at its design."""
+        self.designer = self.designers(label)
+        d = self.designer
+        self.scale, self.unit = tracked_scale(d.case.tracked_unit)
+        self.title.text = f"<h3>{d.case.plant}: {label}</h3>"
+        self.busy = True
+        self.scenario_select.options = list(d.scenarios)
+        if self.scenario not in d.scenarios:
+            self.scenario = next(iter(d.scenarios))
+        self.scenario_select.value = self.scenario
+        self.busy = False
+        self.rows = {c.key: self._gain_row(c) for c in d.controls}
+        self.gains.children = [r[0] for r in self.rows.values()]
+        self.figures["response"].yaxis.axis_label = f"{d.case.tracked} ({self.unit})"
+        self.figures["input"].yaxis.axis_label = f"u ({d.case.input_unit})"
+        self.values = d.design_values()
+        self.refresh()
+
+    # ------------------------------------------------------------- callbacks
+    def _on_slider(self, c: GainControl, exponent: float) -> None:
+        if self.busy:
+            return
+        value = c.from_log(exponent)
+        self._set_widgets(c, value)
+        self.values[c.key] = value
+        self.refresh()
+
+    def _on_text(self, c: GainControl, text: str) -> None:
+        if self.busy:
+            return
+        _, _, field, error = self.rows[c.key]
+        try:
+            value = c.parse(text)
+        except ValueError as err:
+            error.text = str(err)
+            self._set_widgets(c, self.values[c.key])  # the control keeps the value in force
+            return
+        error.text = ""
+        self._set_widgets(c, value)
+        self.values[c.key] = value
+        self.refresh()
+
+    def _set_widgets(self, c: GainControl, value: float) -> None:
+        _, slider, text, _ = self.rows[c.key]
+        self.busy = True
+        try:
+            slider.value = min(max(math.log10(abs(value)), c.log_low), c.log_high)
+            text.value = f"{value:.6g}" if float(f"{value:.6g}") == value else repr(value)
+        finally:
+            self.busy = False
+
+    def _on_scenario(self, attr, old, new) -> None:
+        if self.busy:
+            return
+        self.scenario = new
+        self.refresh()
+
+    def _on_reset(self) -> None:
+        for c in self.designer.controls:
+            self._set_widgets(c, c.design)
+            self.rows[c.key][3].text = ""
+        self.values = self.designer.design_values()
+        self.refresh()
+
+    def _on_export(self) -> None:
+        d = self.designer
+        data = d.export(self.values) | {"file": f"{d.case.plant}_{d.label}_gains.json".replace(" ", "_")}
+        self.export_data.text = json.dumps(data, indent=1)
+
+    def _on_tune(self) -> None:
+        if self.tuning:
+            return
+        self.tuning = True
+        self.tune_button.disabled = True
+        self.tune_status.text = "tuning ..."
+        doc, designer, values, scenario = self.layout.document, self.designer, dict(self.values), self.scenario
+
+        def progress(iteration, objective, seconds):
+            if iteration % 5 == 0:
+                doc.add_next_tick_callback(lambda: setattr(
+                    self.tune_status, "text", f"tuning: iteration {iteration}, ITAE {objective:.4g} ({seconds:.0f} s)"))
+
+        def work():
+            try:
+                result, tuned = designer.tune(values, scenario, progress=progress)
+                message = (f"tuned: ITAE {result.initial_cost:.4g} -> {result.cost:.4g} "
+                           f"({result.status}); {result.message}")
+            except Exception as err:  # reported on the page; the server goes on
+                tuned, message = None, f"tuning failed: {type(err).__name__}: {err}".splitlines()[0]
+            doc.add_next_tick_callback(lambda: self._tuned(designer, tuned, message))
+
+        threading.Thread(target=work, name="designer-tune", daemon=True).start()
+
+    def _tuned(self, designer: Designer, tuned: dict | None, message: str) -> None:
+        self.tuning = False
+        self.tune_button.disabled = False
+        self.tune_status.text = message
+        if tuned is None or designer is not self.designer:
+            return
+        for c in designer.controls:
+            self._set_widgets(c, tuned[c.key])
+        self.values = dict(tuned)
+        self.refresh()
+
+    # ------------------------------------------------------------- drawing an update
+    def refresh(self) -> None:
+        """Run `Designer.update` for the values in force and draw it; an error is shown, never raised."""
+        try:
+            update = self.designer.update(self.values, self.scenario)
+        except Exception as err:  # the server never dies on a request
+            self.verdict.text = f"<b style='color:#cf222e'>{type(err).__name__}: {err}</b>"
+            return
+        self.draw(update)
+
+    def draw(self, u: Update) -> None:
+        s = self.sources
+        keep = np.ones(len(u.t), dtype=bool) if not u.diverged else u.t <= float(u.status.split("= ")[1].split()[0])
+        s["response"].data = {"t": u.t[keep], "y": _finite(u.tracked[keep] * self.scale),
+                              "r": u.reference[keep] * self.scale}
+        keep_u = keep[:-1]
+        s["input"].data = {"t": u.t[:-1][keep_u], "u": _finite(u.u[keep_u])}
+        self.limit_spans[0].location, self.limit_spans[1].location = u.input_limit, -u.input_limit
+        label = specs.DIVERGED if u.diverged else u.verdict.label
+        color = style.verdict_color(label)
+        self.verdict.text = (f"<b style='color:{color}'>{u.verdict_text()}</b>"
+                             f" <span style='color:#6e7781'>({1e3 * u.seconds:.0f} ms)</span>")
+        s["bode"].data = {"omega": u.omega, "magnitude_db": _finite(u.magnitude_db), "phase_deg": _finite(u.phase_deg)}
+        s["locus"].data = {"re": _finite(u.locus.real.ravel()), "im": _finite(u.locus.imag.ravel())}
+        s["poles"].data = {"re": _finite(u.poles.real), "im": _finite(u.poles.imag)}
+        spec = u.loop_specs[0] if u.loop_specs else {}
+        for band in ("low", "high"):
+            omega, db = spec.get(band, ((), ()))
+            s[f"spec_{band}"].data = {"omega": np.asarray(omega, dtype=float), "db": _finite(np.asarray(db))}
+        self.crossover_span.visible = bool(spec.get("crossover"))
+        if spec.get("crossover"):
+            self.crossover_span.location = spec["crossover"]
+        self.phase_span.visible = bool(spec.get("phase_margin"))
+        if spec.get("phase_margin"):
+            self.phase_span.location = -180 + spec["phase_margin"]
+        self.margins.text = _margins_text(u, spec)
+
+
+def _margins_text(u: Update, spec: dict) -> str:
+    if not u.margins:
+        return "<i>" + "; ".join(u.notes) + "</i>"
+    m = u.margins
+    text = (f"{u.loop} loop: gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s, "
+            f"phase margin {m['phase_margin_deg']:.3g}° at {m['gain_crossover_rad_s']:.3g} rad/s")
+    unstable = int(np.sum(u.poles.real > 0))
+    text += f"; {unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
+    if spec:
+        checks = ", ".join(f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
+                           for name, ok in spec["checks"].items())
+        text += f"<br>loopshaping specs ({spec['item']}): {checks}"
+    return text
+
+
+def application(designers: Callable[[str], Designer], labels: list[str], label: str):
+    """A Bokeh `Application` whose every session is a `Page` of controller `label`."""
+    from bokeh.application import Application
+    from bokeh.application.handlers import FunctionHandler
+
+    def make(doc):
+        page = Page(designers, labels, label)
+        doc.add_root(page.layout)
+        doc.title = f"designer: {page.designer.case.plant}"
+
+    return Application(FunctionHandler(make))
+
+
+def serve(designers: Callable[[str], Designer], labels: list[str], label: str, port: int = 0,
+          ready: Callable[[str], None] | None = None) -> None:
+    """Serve the page on 127.0.0.1:`port` (0: a free port) until interrupted; print its URL.
+
+    `ready(url)` is called once the server listens (default: print the URL).
+    """
+    from bokeh.server.server import BaseServer
+    from bokeh.server.tornado import BokehTornado
+    from bokeh.server.util import bind_sockets
+    from tornado.httpserver import HTTPServer
+    from tornado.ioloop import IOLoop
+
+    # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
+    sockets, port = bind_sockets("127.0.0.1", port)
+    tornado_app = BokehTornado({"/": application(designers, labels, label)},
+                               extra_websocket_origins=[f"127.0.0.1:{port}", f"localhost:{port}"])
+    http = HTTPServer(tornado_app)
+    http.add_sockets(sockets)
+    loop = IOLoop.current()
+    server = BaseServer(loop, tornado_app, http)
+    server.start()
+    url = f"http://127.0.0.1:{port}/"
+    (ready or (lambda u: print(f"designer running at {u} (Ctrl-C stops it)", flush=True)))(url)
+    try:
+        loop.start()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
