@@ -329,7 +329,7 @@ class Designer:
         self.notes: list[str] = []
         if spec is not None and spec.baseline is not None and isinstance(baseline, Block):
             try:
-                self.baseline_loop = self._loop_gain(baseline, self._run(baseline, "step"))
+                self.baseline_loop = self.loop_gain(baseline, self.simulate(baseline, "step"))
             except Exception as err:  # the relative specs need it; the rest of the page does not
                 self.notes.append(f"no baseline loop ({type(err).__name__}: {err})")
         frequencies = np.logspace(math.log10(LOWEST_FREQUENCY), math.log10(0.999 * math.pi / block.sample_period),
@@ -375,11 +375,13 @@ class Designer:
             raise ValueError(f"scenario must be one of {', '.join(self.scenarios)}, got {name!r}")
         return self.scenarios[name]
 
-    def _run(self, block: Block, scenario: str):
+    def simulate(self, block: Block, scenario: str):
+        """The run of `block` on `scenario` as the study tables run it (a `models.ClosedLoopResult`;
+        `diverged_at` set instead of raising)."""
         return runner.simulate_scenario(self.plant, block, self.scenario(scenario), self.case, self.options,
                                         self.base, self.case.substeps)
 
-    def _operating_point(self, block: Block, run) -> loops.OperatingPoint:
+    def operating_point(self, block: Block, run) -> loops.OperatingPoint:
         """Where the loop is linearized: the end of the run, or the equilibrium at the final reference
         when the run diverged (the locus then shows why)."""
         if run.diverged_at is None:
@@ -389,8 +391,9 @@ class Designer:
         y = self.plant.output(x) if block.measures == "outputs" else x
         return loops.OperatingPoint(x, u, np.asarray(block.initial_state(y, r), dtype=float), r, 0.0)
 
-    def _loop_gain(self, block: Block, run) -> loops.LoopGain:
-        return loops.loop(self.plant, block, self._operating_point(block, run), self.which, self.label)
+    def loop_gain(self, block: Block, run) -> loops.LoopGain:
+        """The loop gain of `block` about `operating_point`, broken where the case's loopshaping spec says."""
+        return loops.loop(self.plant, block, self.operating_point(block, run), self.which, self.label)
 
     def update(self, values: Mapping[str, float] | None = None, scenario: str = "step") -> Update:
         """Run the nonlinear loop with `values` (control key -> value; the others at the design) on
@@ -405,7 +408,7 @@ class Designer:
         block = self.block_for(values)
         gains = {c.key: float(np.asarray(block.gains[c.gain])[c.index]) for c in self.controls}
         with self.lock:  # CasADi Functions cached on the plant are not safe to call from two threads
-            run = self._run(block, scenario)
+            run = self.simulate(block, scenario)
             status = run_status(run)
             judged = self.case.specs_for(scenario, self.plant.params)
             measured = metrics.run_metrics(run, self.case.tracked, judged.state_bounds)
@@ -420,7 +423,7 @@ class Designer:
         return out
 
     def _analyse(self, block: Block, run, out: Update) -> None:
-        design = self._loop_gain(block, run)
+        design = self.loop_gain(block, run)
         response = design.frequency_response(self.omega)
         out.loop = self.which
         out.omega = self.omega
