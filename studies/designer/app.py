@@ -206,7 +206,7 @@ class Page:
         self.busy = True
         try:
             slider.value = min(max(math.log10(abs(value)), c.log_low), c.log_high)
-            text.value = f"{value:.6g}" if float(f"{value:.6g}") == value else repr(value)
+            text.value = f"{value:.6g}"  # shown to 6 digits; the value in force is the exact one
         finally:
             self.busy = False
 
