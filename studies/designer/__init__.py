@@ -181,6 +181,7 @@ class Update:
         with their bounds as curves: {"item", "checks", "low" (omega, |L| bound dB), "high" (...)}
     notes : what could not be computed and why
     seconds : wall time of the update, s
+    run : the `models.ClosedLoopResult` itself (for the animation)
     """
 
     gains: dict
@@ -203,6 +204,7 @@ class Update:
     loop_specs: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     seconds: float = 0.0
+    run: object = None
 
     @property
     def diverged(self) -> bool:
@@ -414,7 +416,7 @@ class Designer:
             measured = metrics.run_metrics(run, self.case.tracked, judged.state_bounds)
             verdict = specs.judge(judged, run, self.case.tracked, self.case.step, status, measured=measured)
             out = Update(gains, scenario, run.t, run.x[:, self.tracked_index], run.r[:, 0], run.u[:, 0],
-                         float(self.plant.input_limit[0]), status, verdict, measured)
+                         float(self.plant.input_limit[0]), status, verdict, measured, run=run)
             try:
                 self._analyse(block, run, out)
             except Exception as err:  # the linear analysis is a plot; the run and the verdict stand

@@ -28,6 +28,7 @@ from bokeh.models import (
     ColumnDataSource,
     CustomJS,
     Div,
+    Range1d,
     Select,
     Slider,
     Span,
@@ -36,13 +37,15 @@ from bokeh.models import (
 from bokeh.plotting import figure
 
 from models import specs
-from studies import style
+from studies import animation, style
 from studies.plots import tracked_scale
 
 from . import Designer, GainControl, Update
 
 WIDTH = 560
 HEIGHT = 230
+#: The animation plays in real time, one frame every FRAME_SECONDS.
+FRAME_SECONDS = 0.05
 
 #: What the Export button downloads: the JSON the server put into the hidden Div named "export".
 DOWNLOAD = """
@@ -92,7 +95,12 @@ class Page:
         self.export_data.js_on_change("text", CustomJS(code=DOWNLOAD))
         self.verdict = Div(text="", name="verdict", width=WIDTH)
         self.margins = Div(text="", name="margins", width=WIDTH)
+        scene = {"xs": [], "ys": [], "color": [], "width": []}
         self.sources = {name: ColumnDataSource(name=name, data=data) for name, data in {
+            "scene_lines": dict(scene), "scene_dashed": dict(scene), "scene_polygons": {"xs": [], "ys": [], "fill": [],
+                                                                                       "color": []},
+            "scene_circles": {"x": [], "y": [], "r": [], "fill": [], "color": []},
+            "scene_text": {"x": [], "y": [], "text": [], "color": []},
             "response": {"t": [], "y": [], "r": []}, "input": {"t": [], "u": []},
             "bode": {"omega": [], "magnitude_db": [], "phase_deg": []}, "locus": {"re": [], "im": []},
             "poles": {"re": [], "im": []}, "spec_low": {"omega": [], "db": []},
@@ -107,10 +115,18 @@ class Page:
         self.reset_button.on_click(self._on_reset)
         self.export_button.on_click(self._on_export)
         self.figures = self._figures()
+        self.run = None
+        self.playing = None
+        self.anim_time = Slider(start=0, end=1, value=0, step=0.01, title="t (s)", name="anim_time", width=210)
+        self.play_button = Button(label="Play", name="play", width=70)
+        self.readout = Div(text="", name="readout", width=290)
+        self.anim_time.on_change("value", lambda attr, old, new: self.draw_frame())
+        self.play_button.on_click(self._on_play)
         self.layout = row(
             column(self.title, self.controller, self.scenario_select, self.gains,
                    row(self.tune_button, self.reset_button, self.export_button), self.tune_status,
-                   self.export_data, width=300),
+                   self.export_data, self.figures["scene"], row(self.play_button, self.anim_time), self.readout,
+                   width=300),
             column(self.verdict, self.figures["response"], self.figures["input"], self.margins),
             column(self.figures["magnitude"], self.figures["phase"], self.figures["locus"]))
         self.load(label)
@@ -145,7 +161,18 @@ class Page:
         locus.scatter("re", "im", source=s["locus"], size=2, color="#6e7781")
         locus.scatter("re", "im", source=s["poles"], marker="x", size=12, line_width=2, color="#cf222e")
         locus.renderers.append(Span(dimension="height", location=0, line_color="#6e7781"))
-        return {"response": response, "input": inputs, "magnitude": magnitude, "phase": phase, "locus": locus}
+        scene = figure(width=290, height=290, match_aspect=True, title="the run, animated", name="scene_figure",
+                       x_range=Range1d(-1, 1), y_range=Range1d(-1, 1))
+        scene.patches("xs", "ys", source=s["scene_polygons"], fill_color="fill", line_color="color")
+        scene.multi_line("xs", "ys", source=s["scene_lines"], line_color="color", line_width="width")
+        scene.multi_line("xs", "ys", source=s["scene_dashed"], line_color="color", line_width="width",
+                         line_dash="dashed")
+        scene.circle("x", "y", radius="r", source=s["scene_circles"], fill_color="fill", line_color="color")
+        scene.text("x", "y", text="text", source=s["scene_text"], text_color="color", text_align="center",
+                   text_baseline="middle", text_font_size="12px")
+        scene.grid.visible = False
+        return {"response": response, "input": inputs, "magnitude": magnitude, "phase": phase, "locus": locus,
+                "scene": scene}
 
     def _gain_row(self, c: GainControl):
         slider = Slider(start=c.log_low, end=c.log_high, value=math.log10(abs(c.design)),
@@ -299,6 +326,84 @@ class Page:
         if spec.get("phase_margin"):
             self.phase_span.location = -180 + spec["phase_margin"]
         self.margins.text = _margins_text(u, spec)
+        self.show_run(u)
+
+    # ------------------------------------------------------------- the animation
+    def show_run(self, u: Update) -> None:
+        """Animate `u`'s run: the time slider spans it (up to a divergence), the view holds every frame."""
+        case = self.designer.case
+        self.figures["scene"].visible = case.drawing is not None
+        if case.drawing is None or u.run is None:
+            self.run = None
+            return
+        run = u.run
+        last = len(run.t) - 1 if not u.diverged else max(0, int(np.searchsorted(run.t, run.diverged_at)) - 1)
+        self.run, self.last = run, last
+        index = np.unique(np.linspace(0, last, 25).astype(int))
+        shapes = [animation.draw(case, self.designer.plant, run.x[k], run.r[k, 0]) for k in index
+                  if np.all(np.isfinite(run.x[k]))]
+        xmin, xmax, ymin, ymax = animation.view(shapes)
+        scene = self.figures["scene"]
+        side = max(xmax - xmin, ymax - ymin)
+        cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
+        scene.x_range.start, scene.x_range.end = cx - side / 2, cx + side / 2
+        scene.y_range.start, scene.y_range.end = cy - side / 2, cy + side / 2
+        self.busy = True
+        self.anim_time.end = float(run.t[last]) if last else 1.0
+        self.anim_time.step = float(run.t[1] - run.t[0])
+        self.anim_time.value = min(self.anim_time.value, self.anim_time.end)
+        self.busy = False
+        self.draw_frame()
+
+    def frame_index(self) -> int:
+        """The run's sample at the time slider's value."""
+        return int(min(self.last, np.argmin(np.abs(self.run.t - self.anim_time.value))))
+
+    def draw_frame(self) -> None:
+        """Draw the run's state at the time slider's value with the case's drawing (`studies.animation.draw`)."""
+        if self.run is None or self.busy:
+            return
+        k = self.frame_index()
+        run, plant = self.run, self.designer.plant
+        shapes = animation.draw(self.designer.case, plant, run.x[k], run.r[k, 0])
+        s = self.sources
+        for name, dashed in (("scene_lines", False), ("scene_dashed", True)):
+            lines = [p for p in shapes if p["k"] == "line" and bool(p["d"]) == dashed]
+            s[name].data = {"xs": [[q[0] for q in p["p"]] for p in lines],
+                            "ys": [[q[1] for q in p["p"]] for p in lines], "color": [p["c"] for p in lines],
+                            "width": [p["w"] for p in lines]}
+        polygons = [p for p in shapes if p["k"] == "poly"]
+        s["scene_polygons"].data = {"xs": [[q[0] for q in p["p"]] for p in polygons],
+                                    "ys": [[q[1] for q in p["p"]] for p in polygons],
+                                    "fill": [p["f"] for p in polygons], "color": [p["c"] for p in polygons]}
+        circles = [p for p in shapes if p["k"] == "circle"]
+        s["scene_circles"].data = {"x": [p["p"][0] for p in circles], "y": [p["p"][1] for p in circles],
+                                   "r": [p["r"] for p in circles], "fill": [p["f"] for p in circles],
+                                   "color": [p["c"] for p in circles]}
+        texts = [p for p in shapes if p["k"] == "text"]
+        s["scene_text"].data = {"x": [p["p"][0] for p in texts], "y": [p["p"][1] for p in texts],
+                                "text": [p["s"] for p in texts], "color": [p["c"] for p in texts]}
+        tracked = run.x[k, self.designer.tracked_index] * self.scale
+        self.readout.text = f"t = {run.t[k]:.2f} s: {self.designer.case.tracked} = {tracked:.4g} {self.unit}"
+
+    def _on_play(self) -> None:
+        doc = self.layout.document
+        if self.playing is not None:
+            doc.remove_periodic_callback(self.playing)
+            self.playing, self.play_button.label = None, "Play"
+            return
+        if self.run is None:
+            return
+        if self.anim_time.value >= self.anim_time.end:
+            self.anim_time.value = 0.0
+
+        def advance():
+            if self.run is None or self.anim_time.value >= self.anim_time.end:
+                self._on_play()
+                return
+            self.anim_time.value = min(self.anim_time.end, self.anim_time.value + FRAME_SECONDS)
+
+        self.playing, self.play_button.label = doc.add_periodic_callback(advance, int(1e3 * FRAME_SECONDS)), "Pause"
 
 
 def _margins_text(u: Update, spec: dict) -> str:

@@ -201,7 +201,7 @@ def server():
 
 @pytest.mark.slow  # about 20 s: the server designs the arm's controllers, then Tune runs
 def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, arm, tmp_path):
-    browser.driver.set_window_size(1480, 900)
+    browser.driver.set_window_size(1480, 1120)
     browser.open(server)
     wait_for(browser, "window.Bokeh && Bokeh.documents.length && "
                       "Bokeh.documents[0].get_model_by_name('response').get_length() > 0")
@@ -255,6 +255,17 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
 
     click(browser, "reset")
     wait_for(browser, f"Bokeh.documents[0].get_model_by_name('gain:kd').value === '{arm.block.gains['kd']:.6g}'")
+
+    # The animation draws the design's run where the simulation put it: the rod's tip at ℓ (cos θ, sin θ).
+    run, ell = independent_run(arm), models.get("arm").params["ell"]
+    for when in (0.3, 1.0, 4.0):
+        read(browser, f"D.get_model_by_name('anim_time').value = {when}; 0")
+        wait_for(browser, f"Bokeh.documents[0].get_model_by_name('readout').text.startsWith('t = {when:.2f} s')")
+        rods = read(browser, "const L = D.get_model_by_name('scene_lines').data; "
+                             "Array.from(L.width).map((w, i) => [w, Array.from(L.xs[i]), Array.from(L.ys[i])])")
+        (tip,) = [(xs[-1], ys[-1]) for width, xs, ys in rods if width == 8]
+        theta = run.x[int(np.argmin(np.abs(run.t - when))), 0]
+        np.testing.assert_allclose(tip, ell * np.array([math.cos(theta), math.sin(theta)]), rtol=1e-9, atol=1e-12)
 
     browser.driver.save_screenshot(str(tmp_path / "designer.png"))
     if os.environ.get("DESIGNER_SCREENSHOT"):
