@@ -54,7 +54,7 @@ import models  # noqa: E402
 from models import Block, Cascade, metrics, specs  # noqa: E402
 
 from .. import loops, runner  # noqa: E402
-from ..case import CaseStudy, LoopSpec, Scenario  # noqa: E402
+from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, Scenario  # noqa: E402
 
 #: Each gain element ranges over [value / RANGE, value * RANGE] (sign kept).
 RANGE = 10.0
@@ -68,6 +68,9 @@ SPEC_POINTS = 120
 LOCUS_GAINS = np.logspace(-2, 2, 121)
 #: Providers the designer does not ask: their controllers are not Blocks (an MPC has no gains to move).
 SKIPPED_PROVIDERS = ("studies.providers:mpc",)
+#: Plants of the optional Monte Carlo envelope, and the quantiles it draws.
+ENVELOPE_SAMPLES = 20
+ENVELOPE_QUANTILES = (0.0, 0.05, 0.5, 0.95, 1.0)
 #: Scenarios the designer offers: the case's, without the Monte Carlo.
 SCENARIOS = ("step", "steps", "disturbance", "noise")
 
@@ -439,6 +442,34 @@ class Designer:
         out.poles = s_plane(design.closed_loop_poles(1.0), design.sample_period)
         if self.loop_spec is not None:
             out.loop_specs = [loop_spec_curves(self.loop_spec, design, self.baseline_loop, out.margins, self.omega)]
+
+    def envelope(self, values: Mapping[str, float] | None = None, scenario: str = "step",
+                 samples: int = ENVELOPE_SAMPLES, seed: int = 0) -> dict:
+        """The tracked coordinate over `samples` plants with the uncertain parameters uniform within the
+        case's Monte Carlo spread (±5 %), as one batched run (`models.monte_carlo`).
+
+        Returns
+        -------
+        dict: t (N+1,) s; quantiles (0, 0.05, 0.5, 0.95, 1); tracked (5, N+1) over the samples that did not
+        diverge (NaN when all did); samples, diverged (counts)
+        """
+        block = self.block_for(values)
+        chosen = self.scenario(scenario)
+        spread = next((s.rel for s in self.case.scenarios if s.monte_carlo), KNOWN_ERROR)
+        params = models.sample_params(self.plant, samples, rel=spread, seed=seed)
+        noise = runner.measurement_noise_std(self.plant, block, chosen.noise) if chosen.noise else 0.0
+        with self.lock:
+            batch = models.monte_carlo(self.plant, block, chosen.reference(self.case, self.base),
+                                       chosen.duration(self.case), params, substeps=self.case.substeps,
+                                       input_disturbance=self.case.input_disturbance if chosen.input_disturbance
+                                       else 0.0, noise_std=noise, seed=seed, threads=2)
+        kept = np.isnan(batch.diverged_at)
+        tracked = batch.x[kept, :, self.tracked_index]
+        quantiles = ENVELOPE_QUANTILES
+        bands = (np.quantile(tracked, quantiles, axis=0) if len(tracked)
+                 else np.full((len(quantiles), len(batch.t)), np.nan))
+        return {"t": batch.t, "quantiles": quantiles, "tracked": bands, "samples": samples,
+                "diverged": int(np.sum(~kept))}
 
     # ------------------------------------------------------------- tune and export
     def tune(self, values: Mapping[str, float] | None = None, scenario: str = "step", *, max_iter: int = 100,

@@ -25,6 +25,7 @@ import numpy as np
 from bokeh.layouts import column, row
 from bokeh.models import (
     Button,
+    Checkbox,
     ColumnDataSource,
     CustomJS,
     Div,
@@ -73,7 +74,7 @@ class Page:
 
     Every model the tests read has a name: sources "response", "input", "bode", "locus", "poles",
     "spec_low", "spec_high"; divs "verdict", "margins", "tune_status", "export", "gain_error:KEY";
-    inputs "gain:KEY" (text) and "slider:KEY".
+    inputs "gain:KEY" (text) and "slider:KEY"; the checkbox "envelope_box"; sources also "envelope" and "scene_*".
     """
 
     def __init__(self, designers: Callable[[str], Designer], labels: list[str], label: str):
@@ -87,6 +88,8 @@ class Page:
         self.controller = Select(title="controller", options=labels, value=label, name="controller", width=260)
         self.scenario_select = Select(title="scenario", options=[], value="step", name="scenario", width=260)
         self.gains = column(name="gains")
+        self.envelope = Checkbox(label="±5 % Monte Carlo envelope", name="envelope_box", active=False)
+        self.envelope.on_change("active", lambda attr, old, new: self.refresh())
         self.tune_button = Button(label="Tune", name="tune", button_type="primary", width=80)
         self.reset_button = Button(label="Reset", name="reset", width=80)
         self.export_button = Button(label="Export", name="export_button", width=80)
@@ -101,7 +104,8 @@ class Page:
                                                                                        "color": []},
             "scene_circles": {"x": [], "y": [], "r": [], "fill": [], "color": []},
             "scene_text": {"x": [], "y": [], "text": [], "color": []},
-            "response": {"t": [], "y": [], "r": []}, "input": {"t": [], "u": []},
+            "response": {"t": [], "y": [], "r": []},
+            "envelope": {"t": [], "min": [], "low": [], "high": [], "max": []}, "input": {"t": [], "u": []},
             "bode": {"omega": [], "magnitude_db": [], "phase_deg": []}, "locus": {"re": [], "im": []},
             "poles": {"re": [], "im": []}, "spec_low": {"omega": [], "db": []},
             "spec_high": {"omega": [], "db": []}}.items()}
@@ -123,7 +127,7 @@ class Page:
         self.anim_time.on_change("value", lambda attr, old, new: self.draw_frame())
         self.play_button.on_click(self._on_play)
         self.layout = row(
-            column(self.title, self.controller, self.scenario_select, self.gains,
+            column(self.title, self.controller, self.scenario_select, self.envelope, self.gains,
                    row(self.tune_button, self.reset_button, self.export_button), self.tune_status,
                    self.export_data, self.figures["scene"], row(self.play_button, self.anim_time), self.readout,
                    width=300),
@@ -136,6 +140,8 @@ class Page:
         s = self.sources
         response = figure(width=WIDTH, height=HEIGHT, title="step response of the nonlinear plant",
                           x_axis_label="t (s)", name="response_figure")
+        response.varea("t", "min", "max", source=s["envelope"], fill_color="#0969da", fill_alpha=0.12)
+        response.varea("t", "low", "high", source=s["envelope"], fill_color="#0969da", fill_alpha=0.25)
         response.line("t", "r", source=s["response"], line_dash="dashed", color="#6e7781", legend_label="reference")
         response.line("t", "y", source=s["response"], line_width=2, color="#0969da", legend_label="response")
         response.legend.location = "bottom_right"
@@ -299,6 +305,24 @@ class Page:
             self.verdict.text = f"<b style='color:#cf222e'>{type(err).__name__}: {err}</b>"
             return
         self.draw(update)
+        self.draw_envelope()
+
+    def draw_envelope(self) -> None:
+        """The Monte Carlo envelope of the values in force when its box is ticked (else nothing)."""
+        empty = {"t": [], "min": [], "low": [], "high": [], "max": []}
+        if not self.envelope.active:
+            self.sources["envelope"].data = empty
+            return
+        try:
+            e = self.designer.envelope(self.values, self.scenario)
+        except Exception as err:  # shown, never raised
+            self.sources["envelope"].data = empty
+            self.margins.text += f"<br><i>no Monte Carlo envelope: {type(err).__name__}: {err}</i>"
+            return
+        y = _finite(e["tracked"] * self.scale)
+        self.sources["envelope"].data = {"t": e["t"], "min": y[0], "low": y[1], "high": y[3], "max": y[4]}
+        self.margins.text += (f"<br>Monte Carlo envelope: {e['samples']} plants (shaded: all, and 5-95 %), "
+                              f"{e['diverged']} diverged")
 
     def draw(self, u: Update) -> None:
         s = self.sources

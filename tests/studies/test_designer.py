@@ -139,6 +139,18 @@ def test_an_unstable_gain_says_diverged_at_the_time_simulate_closed_loop_finds()
     assert np.any(update.poles.real > 0)
 
 
+def test_the_monte_carlo_envelope_is_the_quantiles_of_runs_on_the_same_samples(arm):
+    envelope = arm.envelope({"kd": 0.2}, samples=6, seed=3)
+    plant = models.get("arm")
+    params = models.sample_params(plant, 6, rel=0.05, seed=3)
+    block = arm.block.with_gains(kd=0.2)
+    runs = [models.simulate_closed_loop(plant, block, lambda t: arm.base + arm.case.step, arm.case.duration,
+                                        params=p, substeps=arm.case.substeps) for p in params]
+    expected = np.quantile([r.x[:, 0] for r in runs], designer.ENVELOPE_QUANTILES, axis=0)
+    np.testing.assert_allclose(envelope["tracked"], expected, rtol=1e-9, atol=1e-12)
+    assert envelope["diverged"] == 0 and np.ptp(expected[:, -1]) > 1e-3  # the samples differ
+
+
 def test_export_gives_the_gains_in_force_and_the_c_step(arm):
     data = arm.export({"kd": 0.2})
     assert data["gains"] == {"kp": float(arm.block.gains["kp"]), "kd": 0.2}
@@ -255,6 +267,12 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
 
     click(browser, "reset")
     wait_for(browser, f"Bokeh.documents[0].get_model_by_name('gain:kd').value === '{arm.block.gains['kd']:.6g}'")
+
+    read(browser, "D.get_model_by_name('envelope_box').active = true; 0")
+    wait_for(browser, "Bokeh.documents[0].get_model_by_name('envelope').get_length() > 0")
+    low = read(browser, "Array.from(D.get_model_by_name('envelope').data.min)")
+    high = read(browser, "Array.from(D.get_model_by_name('envelope').data.max)")
+    assert all(a <= b for a, b in zip(low, high)) and max(b - a for a, b in zip(low, high)) > 0
 
     # The animation draws the design's run where the simulation put it: the rod's tip at ℓ (cos θ, sin θ).
     run, ell = independent_run(arm), models.get("arm").params["ell"]
