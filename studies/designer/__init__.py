@@ -304,17 +304,25 @@ class Designer:
     plant : the simulated plant (default the case's plant with the text's parameters, with the
         controller's own actuator where the case gives it one)
     baseline : the block the case's relative loopshaping specs refer to, or None
+    poles, placement : for a pole-placement design, its desired poles (rad/s; conjugate pairs) and the
+        function poles -> block that designs it (`pole_placement`); the poles then get controls
+        (`pole_controls`) and `place` redesigns the gains from them
     """
 
     def __init__(self, case: CaseStudy, block: Block, label: str | None = None, *, plant: models.Plant | None = None,
-                 baseline: Block | None = None):
+                 baseline: Block | None = None, poles=None, placement: Callable[[np.ndarray], Block] | None = None):
         if not isinstance(case, CaseStudy):
             raise TypeError(f"case must be a studies CaseStudy, got {type(case).__name__} {case!r}")
         if not isinstance(block, Block):
             raise TypeError(f"block must be a models.Block (a controller with gains), got {type(block).__name__}")
         self.case = case
-        self.block = block
+        self.block = self.text_block = block
         self.label = label or block.name
+        if (poles is None) != (placement is None):
+            raise ValueError("give both poles and placement (the function that designs from them), or neither")
+        self.text_poles = None if poles is None else np.asarray(poles, dtype=complex)
+        self.placement = placement
+        self.pole_controls = pole_controls(self.text_poles) if poles is not None else ()
         base_plant = models.get(case.plant) if plant is None else plant
         self.plant = case.truth(base_plant, self.label) if plant is None else plant
         self.controls = gain_controls(block)
@@ -357,7 +365,39 @@ class Designer:
             raise ValueError(f"{case.plant} has no controller {label!r} with gains; choose from "
                              f"{', '.join(designed)}")
         baseline = next((designed.get(s.baseline) for s in case.loops if s.baseline), None)
-        return cls(case, designed[label], label, baseline=baseline)
+        return cls(case, designed[label], label, baseline=baseline, **pole_placement(case, label))
+
+    # ------------------------------------------------------------- pole placement
+    def poles_for(self, values: Mapping[str, float] | None = None) -> np.ndarray:
+        """The desired poles with `values` (pole control key -> value; the others at the text's), checked."""
+        if self.text_poles is None:
+            raise ValueError(f"{self.label} is not a pole-placement design: it has no poles to place")
+        by_key = {c.key: c for c in self.pole_controls}
+        poles = self.text_poles.copy()
+        for key, value in (values or {}).items():
+            if key not in by_key:
+                raise ValueError(f"{self.label} has no pole control {key!r}; controls are {', '.join(by_key)}")
+            c = by_key[key]
+            j, part = c.index
+            v = c.parse(value)
+            for i in pole_indices(self.text_poles, j):
+                pole = poles[i]
+                sign = 1.0 if self.text_poles[i].imag >= 0 else -1.0
+                poles[i] = complex(v, pole.imag) if part == 0 else complex(pole.real, sign * v)
+        return poles
+
+    def place(self, values: Mapping[str, float] | None = None) -> Block:
+        """Redesign from the desired poles `values` (pole control key -> value; None: the text's design).
+
+        The redesigned gains become the design the gain controls range about (`controls`); the block's
+        structure, and so its compiled closed loop, stays the same. Returns the new design.
+        """
+        poles = self.poles_for(values)
+        designed = self.placement(poles) if values else self.text_block
+        with self.lock:
+            self.block = self.text_block.with_gains(**designed.gains)
+            self.controls = gain_controls(self.block)
+        return self.block
 
     def _which_loop(self) -> str:
         for spec in self.case.loops:
@@ -497,9 +537,11 @@ class Designer:
                 if c.gain == name:
                     low[c.index], high[c.index] = c.low, c.high
             bounds[name] = (low, high)
-        with self.lock:
-            result = tuning.tune(self.plant, start, [chosen], cost=tuning.Cost("itae"), bounds=bounds,
-                                 substeps=self.case.substeps, max_iter=max_iter, progress=progress)
+        # A copy of the plant, with Function caches of its own: the page's updates go on in the server's thread
+        # while this one tunes, and a cached Function must not be called from two threads at once.
+        plant = self.plant.with_input_limit(self.plant.input_limit)
+        result = tuning.tune(plant, start, [chosen], cost=tuning.Cost("itae"), bounds=bounds,
+                             substeps=self.case.substeps, max_iter=max_iter, progress=progress)
         tuned = {c.key: float(np.clip(np.asarray(result.gains[c.gain], dtype=float)[c.index], c.low, c.high))
                  for c in self.controls}
         return result, tuned
@@ -516,6 +558,66 @@ class Designer:
         except export.UnsupportedExport as err:
             out["c_note"] = str(err)
         return out
+
+
+def pole_controls(poles) -> tuple[GainControl, ...]:
+    """Controls of desired poles (rad/s): one per real pole ("p1"), two per conjugate pair ("p2.re" and
+    "p2.im", the upper pole's), each over `RANGE` times its value either way, sign kept (so a pole stays
+    in the left half plane and a pair stays complex); poles numbered as `pole_indices` groups them."""
+    poles = np.asarray(poles, dtype=complex)
+    out = []
+    for j, group in enumerate(pole_groups(poles)):
+        pole = poles[group[0]]
+        parts = [(0, pole.real, f"p{j + 1}")] if pole.imag == 0 else \
+            [(0, pole.real, f"p{j + 1}.re"), (1, abs(pole.imag), f"p{j + 1}.im")]
+        for part, value, key in parts:
+            if value == 0:
+                continue
+            low, high = sorted((value / RANGE, value * RANGE))
+            out.append(GainControl(key, "poles", (j, part), float(value), low, high))
+    return tuple(out)
+
+
+def pole_groups(poles) -> list[list[int]]:
+    """Indices of `poles` grouped as real poles and conjugate pairs, in order of first appearance."""
+    poles = np.asarray(poles, dtype=complex)
+    groups, used = [], set()
+    for i, pole in enumerate(poles):
+        if i in used:
+            continue
+        group = [i]
+        if pole.imag != 0:
+            mates = [k for k in range(len(poles)) if k not in used and k != i
+                     and abs(poles[k] - np.conj(pole)) <= 1e-9 * max(1.0, abs(pole))]
+            if not mates:
+                raise ValueError(f"pole {pole} has no complex conjugate among {poles}")
+            group.append(mates[0])
+        used.update(group)
+        groups.append(group)
+    return groups
+
+
+def pole_indices(poles, j: int) -> list[int]:
+    """Indices of the pole (or conjugate pair) numbered j by `pole_groups`."""
+    return pole_groups(poles)[j]
+
+
+def pole_placement(case: CaseStudy, label: str) -> dict:
+    """{"poles", "placement"} for the case's state-space design `label` (its desired poles, and the
+    function redesigning it from other poles with `studies.homework.statespace_controllers`, from the
+    model known to the controller); {} for any other controller."""
+    from designs import statespace_design as ssd
+
+    from .. import homework
+
+    if case.statespace is None or label not in ssd.LABELS:
+        return {}
+    known = case.known_plant()
+
+    def placement(poles):
+        return homework.statespace_controllers(case, known, poles=np.asarray(poles))[label]
+
+    return {"poles": np.asarray(case.statespace.poles(known), dtype=complex), "placement": placement}
 
 
 def s_plane(z: np.ndarray, sample_period: float) -> np.ndarray:

@@ -22,7 +22,7 @@ def main(argv=None) -> int:
     if not 0 <= args.port <= 65535:
         parser.error(f"--port must be in 0..65535, got {args.port}")
 
-    from . import Designer, designed_blocks
+    from . import Designer, designed_blocks, pole_placement
     from .app import serve
 
     print(f"designing the {args.plant} controllers ...", flush=True)
@@ -34,12 +34,10 @@ def main(argv=None) -> int:
     if label not in blocks:
         parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(blocks)}")
     baseline = next((blocks.get(s.baseline) for s in case.loops if s.baseline), None)
-    made: dict = {}
 
     def designer(name: str) -> Designer:
-        if name not in made:
-            made[name] = Designer(case, blocks[name], name, baseline=baseline)
-        return made[name]
+        # One per page and controller: placing poles changes a designer's design.
+        return Designer(case, blocks[name], name, baseline=baseline, **pole_placement(case, name))
 
     serve(designer, list(blocks), label, port=args.port)
     return 0

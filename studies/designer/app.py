@@ -88,6 +88,10 @@ class Page:
         self.controller = Select(title="controller", options=labels, value=label, name="controller", width=260)
         self.scenario_select = Select(title="scenario", options=[], value="step", name="scenario", width=260)
         self.gains = column(name="gains")
+        self.pool: dict = {}  # (kind, key) -> the row of widgets of that control, kept across designs
+        self.rows: dict = {}  # the rows shown
+        self.poles_header = Div(text="<b>desired poles</b> (rad/s; each change redesigns the gains)")
+        self.gains_header = Div(text="<b>gains</b>")
         self.envelope = Checkbox(label="±5 % Monte Carlo envelope", name="envelope_box", active=False)
         self.envelope.on_change("active", lambda attr, old, new: self.refresh())
         self.tune_button = Button(label="Tune", name="tune", button_type="primary", width=80)
@@ -180,14 +184,18 @@ class Page:
         return {"response": response, "input": inputs, "magnitude": magnitude, "phase": phase, "locus": locus,
                 "scene": scene}
 
-    def _gain_row(self, c: GainControl):
+    def _row(self, kind: str, c: GainControl):
+        """Slider, typed value and message of a gain ("gain") or desired pole ("pole") control."""
+        names = {"gain": ("gain", "slider", "gain_error"), "pole": ("pole", "pole_slider", "pole_error")}[kind]
         slider = Slider(start=c.log_low, end=c.log_high, value=math.log10(abs(c.design)),
                         step=(c.log_high - c.log_low) / 400, title=f"{c.key} (log10 |value|)", show_value=False,
-                        name=f"slider:{c.key}", width=150)
-        text = TextInput(value=f"{c.design:.6g}", name=f"gain:{c.key}", width=100, title=c.key)
-        error = Div(text="", name=f"gain_error:{c.key}", styles={"color": "#cf222e"}, width=260)
-        slider.on_change("value_throttled", lambda attr, old, new: self._on_slider(c, new))
-        text.on_change("value", lambda attr, old, new: self._on_text(c, new))
+                        name=f"{names[1]}:{c.key}", width=150)
+        text = TextInput(value=f"{c.design:.6g}", name=f"{names[0]}:{c.key}", width=100, title=c.key)
+        error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260)
+        # The control is looked up when the widget changes: a pole change redesigns the gains' ranges.
+        key = c.key
+        slider.on_change("value_throttled", lambda attr, old, new: self._on_slider(kind, self._control(kind, key), new))
+        text.on_change("value", lambda attr, old, new: self._on_text(kind, self._control(kind, key), new))
         return column(row(text, slider), error), slider, text, error
 
     # ------------------------------------------------------------- loading a controller
@@ -203,39 +211,80 @@ class Page:
             self.scenario = next(iter(d.scenarios))
         self.scenario_select.value = self.scenario
         self.busy = False
-        self.rows = {c.key: self._gain_row(c) for c in d.controls}
-        self.gains.children = [r[0] for r in self.rows.values()]
+        self.pole_values = {c.key: c.design for c in d.pole_controls}
+        self.rows = {}
+        for c in d.pole_controls:
+            self._widgets("pole", c)
+        self._show_gains()
         self.figures["response"].yaxis.axis_label = f"{d.case.tracked} ({self.unit})"
         self.figures["input"].yaxis.axis_label = f"u ({d.case.input_unit})"
-        self.values = d.design_values()
         self.refresh()
+
+    def _control(self, kind: str, key: str) -> GainControl:
+        controls = self.designer.controls if kind == "gain" else self.designer.pole_controls
+        return next(c for c in controls if c.key == key)
+
+    def _widgets(self, kind: str, c: GainControl):
+        """The row of control `c`, at its design: made once per name and kept (a Bokeh document holds
+        one model per name), its range and value set anew."""
+        key = (kind, c.key)
+        if key not in self.pool:
+            self.pool[key] = self._row(kind, c)
+        _, slider, text, error = self.pool[key]
+        self.busy = True
+        slider.update(start=c.log_low, end=c.log_high, step=(c.log_high - c.log_low) / 400)
+        self.busy = False
+        self.rows[key] = self.pool[key]
+        self._set_widgets(kind, c, c.design)
+        error.text = ""
+        return self.pool[key]
+
+    def _show_gains(self) -> None:
+        """Gain controls about the designer's current design (after a pole change: the new design)."""
+        d = self.designer
+        self.rows = {k: v for k, v in self.rows.items() if k[0] == "pole"}
+        gains = [self._widgets("gain", c)[0] for c in d.controls]
+        poles = [r[0] for k, r in self.rows.items() if k[0] == "pole"]
+        header = [self.poles_header, *poles, self.gains_header] if poles else []
+        self.gains.children = header + gains
+        self.values = d.design_values()
 
     # ------------------------------------------------------------- callbacks
-    def _on_slider(self, c: GainControl, exponent: float) -> None:
+    def _on_slider(self, kind: str, c: GainControl, exponent: float) -> None:
         if self.busy:
             return
-        value = c.from_log(exponent)
-        self._set_widgets(c, value)
-        self.values[c.key] = value
-        self.refresh()
+        self._accept(kind, c, c.from_log(exponent))
 
-    def _on_text(self, c: GainControl, text: str) -> None:
+    def _on_text(self, kind: str, c: GainControl, text: str) -> None:
         if self.busy:
             return
-        _, _, field, error = self.rows[c.key]
+        error = self.rows[(kind, c.key)][3]
         try:
             value = c.parse(text)
         except ValueError as err:
             error.text = str(err)
-            self._set_widgets(c, self.values[c.key])  # the control keeps the value in force
+            in_force = self.values if kind == "gain" else self.pole_values
+            self._set_widgets(kind, c, in_force[c.key])  # the control keeps the value in force
             return
         error.text = ""
-        self._set_widgets(c, value)
-        self.values[c.key] = value
+        self._accept(kind, c, value)
+
+    def _accept(self, kind: str, c: GainControl, value: float) -> None:
+        self._set_widgets(kind, c, value)
+        if kind == "gain":
+            self.values[c.key] = value
+        else:
+            self.pole_values[c.key] = value
+            try:
+                self.designer.place(self.pole_values)
+            except Exception as err:  # a placement that fails is shown, never raised
+                self.rows[(kind, c.key)][3].text = f"no design: {type(err).__name__}: {err}".splitlines()[0]
+                return
+            self._show_gains()
         self.refresh()
 
-    def _set_widgets(self, c: GainControl, value: float) -> None:
-        _, slider, text, _ = self.rows[c.key]
+    def _set_widgets(self, kind: str, c: GainControl, value: float) -> None:
+        _, slider, text, _ = self.rows[(kind, c.key)]
         self.busy = True
         try:
             slider.value = min(max(math.log10(abs(value)), c.log_low), c.log_high)
@@ -250,10 +299,13 @@ class Page:
         self.refresh()
 
     def _on_reset(self) -> None:
-        for c in self.designer.controls:
-            self._set_widgets(c, c.design)
-            self.rows[c.key][3].text = ""
-        self.values = self.designer.design_values()
+        d = self.designer
+        if d.pole_controls:
+            d.place(None)
+            for c in d.pole_controls:
+                self._widgets("pole", c)
+            self.pole_values = {c.key: c.design for c in d.pole_controls}
+        self._show_gains()
         self.refresh()
 
     def _on_export(self) -> None:
@@ -292,7 +344,7 @@ class Page:
         if tuned is None or designer is not self.designer:
             return
         for c in designer.controls:
-            self._set_widgets(c, tuned[c.key])
+            self._set_widgets("gain", c, tuned[c.key])
         self.values = dict(tuned)
         self.refresh()
 

@@ -151,6 +151,26 @@ def test_the_monte_carlo_envelope_is_the_quantiles_of_runs_on_the_same_samples(a
     assert envelope["diverged"] == 0 and np.ptp(expected[:, -1]) > 1e-3  # the samples differ
 
 
+def test_placed_poles_are_the_eigenvalues_of_the_known_linear_loop_and_the_run_uses_their_gains():
+    session = designer.Designer.for_case("arm", "pole placement")
+    assert [c.key for c in session.pole_controls] == ["p1.re", "p1.im"]
+    block = session.place({"p1.re": -4.0, "p1.im": 3.0})
+    lin = session.case.known_plant().linearize()
+    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(lin.A - lin.B @ block.gains["K"])),
+                               [-4 - 3j, -4 + 3j], rtol=1e-9)
+    # The gain controls now range about the new design, and the run uses it.
+    (k0,) = [c for c in session.controls if c.key == "K[0,0]"]
+    assert k0.design == pytest.approx(float(block.gains["K"][0, 0]))
+    update = session.update()
+    run = models.simulate_closed_loop(models.get("arm"), block, lambda t: session.base + session.case.step,
+                                      session.case.duration, substeps=session.case.substeps)
+    np.testing.assert_allclose(update.tracked, run.x[:, 0], rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match=re.escape("p1.re: 4 is outside the allowed range")):
+        session.place({"p1.re": 4.0})
+    session.place(None)
+    assert session.block.gains["K"] == pytest.approx(session.text_block.gains["K"])
+
+
 def test_export_gives_the_gains_in_force_and_the_c_step(arm):
     data = arm.export({"kd": 0.2})
     assert data["gains"] == {"kp": float(arm.block.gains["kp"]), "kd": 0.2}
