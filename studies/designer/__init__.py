@@ -635,6 +635,31 @@ def _case(name: str) -> CaseStudy:
     return studies.get(name)
 
 
+_DESIGNED: dict = {}
+
+
+def catalog(name: str) -> tuple[list[str], Callable[[str], Designer]]:
+    """The case `name`'s controllers with gains (designed once per process, `designed_blocks`) and a function
+    label -> a new `Designer` of that controller (one per page: placing poles changes a designer's design).
+
+    Raises ValueError when the case has no controller with gains.
+    """
+    case = _case(name)
+    if name not in _DESIGNED:
+        _DESIGNED[name] = designed_blocks(case)
+    blocks = _DESIGNED[name]
+    if not blocks:
+        raise ValueError(f"{name} has no controller with gains")
+    baseline = next((blocks.get(s.baseline) for s in case.loops if s.baseline), None)
+
+    def make(label: str) -> Designer:
+        if label not in blocks:
+            raise ValueError(f"{name} has no controller {label!r} with gains; choose from {', '.join(blocks)}")
+        return Designer(case, blocks[label], label, baseline=baseline, **pole_placement(case, label))
+
+    return list(blocks), make
+
+
 def designed_blocks(name: str | CaseStudy) -> dict:
     """{label: Block} of the case's controllers with gains, designed as `studies.runner` designs them
     (from `CaseStudy.known_plant`), without the providers in `SKIPPED_PROVIDERS`."""

@@ -22,24 +22,18 @@ def main(argv=None) -> int:
     if not 0 <= args.port <= 65535:
         parser.error(f"--port must be in 0..65535, got {args.port}")
 
-    from . import Designer, designed_blocks, pole_placement
+    from . import catalog
     from .app import serve
 
     print(f"designing the {args.plant} controllers ...", flush=True)
-    case = studies.get(args.plant)
-    blocks = designed_blocks(case)
-    if not blocks:
-        parser.error(f"{args.plant} has no controller with gains")
-    label = args.controller or next(iter(blocks))
-    if label not in blocks:
-        parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(blocks)}")
-    baseline = next((blocks.get(s.baseline) for s in case.loops if s.baseline), None)
-
-    def designer(name: str) -> Designer:
-        # One per page and controller: placing poles changes a designer's design.
-        return Designer(case, blocks[name], name, baseline=baseline, **pole_placement(case, name))
-
-    serve(designer, list(blocks), label, port=args.port)
+    try:
+        labels, _ = catalog(args.plant)
+    except ValueError as err:
+        parser.error(str(err))
+    label = args.controller or labels[0]
+    if label not in labels:
+        parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(labels)}")
+    serve(catalog, list(studies.names()), args.plant, label, port=args.port)
     return 0
 
 

@@ -43,6 +43,9 @@ from studies.plots import tracked_scale
 
 from . import Designer, GainControl, Update
 
+#: plant name -> (controller labels, label -> a new `Designer`): see `studies.designer.catalog`.
+Catalog = Callable[[str], tuple[list[str], Callable[[str], Designer]]]
+
 WIDTH = 560
 HEIGHT = 230
 #: The animation plays in real time, one frame every FRAME_SECONDS.
@@ -77,9 +80,12 @@ class Page:
     inputs "gain:KEY" (text) and "slider:KEY"; the checkbox "envelope_box"; sources also "envelope" and "scene_*".
     """
 
-    def __init__(self, designers: Callable[[str], Designer], labels: list[str], label: str):
-        self.designers = designers
-        self.labels = labels
+    def __init__(self, catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
+        self.catalog = catalog
+        labels, self.designers = catalog(plant)
+        label = labels[0] if label is None else label
+        self.plant = Select(title="plant", options=plants, value=plant, name="plant", width=260)
+        self.plant.on_change("value", lambda attr, old, new: self._on_plant(old, new))
         self.values: dict[str, float] = {}
         self.tuning = False
         self.busy = False  # set while the page itself moves a widget: its callbacks then do nothing
@@ -117,7 +123,7 @@ class Page:
                             Span(dimension="width", line_dash="dashed", line_color="#cf222e"))
         self.crossover_span = Span(dimension="height", line_dash="dotted", line_color="#8250df", visible=False)
         self.phase_span = Span(dimension="width", line_dash="dotted", line_color="#8250df", visible=False)
-        self.controller.on_change("value", lambda attr, old, new: self.load(new))
+        self.controller.on_change("value", lambda attr, old, new: self._on_controller(old, new))
         self.scenario_select.on_change("value", self._on_scenario)
         self.tune_button.on_click(self._on_tune)
         self.reset_button.on_click(self._on_reset)
@@ -131,7 +137,7 @@ class Page:
         self.anim_time.on_change("value", lambda attr, old, new: self.draw_frame())
         self.play_button.on_click(self._on_play)
         self.layout = row(
-            column(self.title, self.controller, self.scenario_select, self.envelope, self.gains,
+            column(self.title, self.plant, self.controller, self.scenario_select, self.envelope, self.gains,
                    row(self.tune_button, self.reset_button, self.export_button), self.tune_status,
                    self.export_data, self.figures["scene"], row(self.play_button, self.anim_time), self.readout,
                    width=300),
@@ -250,6 +256,50 @@ class Page:
         self.values = d.design_values()
 
     # ------------------------------------------------------------- callbacks
+    def _on_plant(self, old: str, new: str) -> None:
+        """Design the controllers of plant `new` in a thread (seconds), then show its first controller."""
+        if self.busy:
+            return
+        doc = self.layout.document
+        self.verdict.text = f"<i>designing the {new} controllers ...</i>"
+        self.plant.disabled = True
+
+        def work():
+            try:
+                found = self.catalog(new)
+                error = None
+            except Exception as err:  # shown, never raised
+                found, error = None, f"{new}: {type(err).__name__}: {err}".splitlines()[0]
+            doc.add_next_tick_callback(lambda: self._designed(old, new, found, error))
+
+        threading.Thread(target=work, name="designer-design", daemon=True).start()
+
+    def _designed(self, old: str, new: str, found, error: str | None) -> None:
+        self.plant.disabled = False
+        if found is None:
+            self.verdict.text = f"<b style='color:#cf222e'>{error}</b>"
+            self.busy = True
+            self.plant.value = old
+            self.busy = False
+            return
+        labels, self.designers = found
+        self.busy = True
+        self.controller.options = list(labels)
+        self.controller.value = labels[0]
+        self.busy = False
+        self.load(labels[0])
+
+    def _on_controller(self, old: str, new: str) -> None:
+        if self.busy:
+            return
+        try:
+            self.load(new)
+        except Exception as err:  # shown, never raised; the controller shown stays
+            self.verdict.text = f"<b style='color:#cf222e'>{new}: {type(err).__name__}: {err}</b>"
+            self.busy = True
+            self.controller.value = old
+            self.busy = False
+
     def _on_slider(self, kind: str, c: GainControl, exponent: float) -> None:
         if self.busy:
             return
@@ -310,7 +360,11 @@ class Page:
 
     def _on_export(self) -> None:
         d = self.designer
-        data = d.export(self.values) | {"file": f"{d.case.plant}_{d.label}_gains.json".replace(" ", "_")}
+        try:
+            data = d.export(self.values) | {"file": f"{d.case.plant}_{d.label}_gains.json".replace(" ", "_")}
+        except Exception as err:  # shown, never raised
+            self.tune_status.text = f"export failed: {type(err).__name__}: {err}".splitlines()[0]
+            return
         self.export_data.text = json.dumps(data, indent=1)
 
     def _on_tune(self) -> None:
@@ -486,8 +540,11 @@ def _margins_text(u: Update, spec: dict) -> str:
     if not u.margins:
         return "<i>" + "; ".join(u.notes) + "</i>"
     m = u.margins
-    text = (f"{u.loop} loop: gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s, "
-            f"phase margin {m['phase_margin_deg']:.3g}° at {m['gain_crossover_rad_s']:.3g} rad/s")
+    gain = (f"gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s"
+            if math.isfinite(m["gain_margin_db"]) else "no gain margin (the phase does not cross -180°)")
+    phase = (f"phase margin {m['phase_margin_deg']:.3g}° at {m['gain_crossover_rad_s']:.3g} rad/s"
+             if math.isfinite(m["phase_margin_deg"]) else "no phase margin (|L| does not cross 1)")
+    text = f"{u.loop} loop: {gain}, {phase}"
     unstable = int(np.sum(u.poles.real > 0))
     text += f"; {unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
     if spec:
@@ -497,24 +554,29 @@ def _margins_text(u: Update, spec: dict) -> str:
     return text
 
 
-def application(designers: Callable[[str], Designer], labels: list[str], label: str):
-    """A Bokeh `Application` whose every session is a `Page` of controller `label`."""
+def application(catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
+    """A Bokeh `Application` whose every session is a `Page` of `plant`'s controller `label` (default its first)."""
     from bokeh.application import Application
     from bokeh.application.handlers import FunctionHandler
 
     def make(doc):
-        page = Page(designers, labels, label)
+        page = Page(catalog, plants, plant, label)
         doc.add_root(page.layout)
         doc.title = f"designer: {page.designer.case.plant}"
 
     return Application(FunctionHandler(make))
 
 
-def serve(designers: Callable[[str], Designer], labels: list[str], label: str, port: int = 0,
+def serve(catalog: Catalog, plants: list[str], plant: str, label: str | None = None, port: int = 0,
           ready: Callable[[str], None] | None = None) -> None:
     """Serve the page on 127.0.0.1:`port` (0: a free port) until interrupted; print its URL.
 
-    `ready(url)` is called once the server listens (default: print the URL).
+    Parameters
+    ----------
+    catalog : plant name -> (controller labels, label -> `Designer`), as `studies.designer.catalog`;
+        a user's own gives its own plant and blocks
+    plants : the plant picker's names;  plant, label : what the page opens with
+    ready : called with the URL once the server listens (default: print it)
     """
     from bokeh.server.server import BaseServer
     from bokeh.server.tornado import BokehTornado
@@ -524,7 +586,7 @@ def serve(designers: Callable[[str], Designer], labels: list[str], label: str, p
 
     # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
     sockets, port = bind_sockets("127.0.0.1", port)
-    tornado_app = BokehTornado({"/": application(designers, labels, label)},
+    tornado_app = BokehTornado({"/": application(catalog, plants, plant, label)},
                                extra_websocket_origins=[f"127.0.0.1:{port}", f"localhost:{port}"])
     http = HTTPServer(tornado_app)
     http.add_sockets(sockets)

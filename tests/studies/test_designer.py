@@ -189,6 +189,18 @@ def test_tune_is_at_least_as_good_as_its_start_on_an_independent_run(arm):
         assert c.low <= tuned[c.key] <= c.high
 
 
+def test_the_command_refuses_an_unknown_plant_or_controller_naming_the_choices(capsys):
+    from studies.designer.__main__ import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(["nowhere"])
+    assert stop.value.code == 2
+    assert "unknown plant 'nowhere'; choose from arm" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["arm", "no such controller"])
+    assert "arm has no controller 'no such controller' with gains; choose from PD, PID" in capsys.readouterr().err
+
+
 # ---------------------------------------------------------------------------- the page
 def read(browser, expression: str):
     return browser.evaluate(f"const D = Bokeh.documents[0]; {expression}")
@@ -308,5 +320,11 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
     browser.driver.save_screenshot(str(tmp_path / "designer.png"))
     if os.environ.get("DESIGNER_SCREENSHOT"):
         browser.driver.save_screenshot(os.environ["DESIGNER_SCREENSHOT"])
+
+    # Another plant: its controllers are designed, its first one shown and run.
+    read(browser, "D.get_model_by_name('plant').value = 'uuv'; 0")
+    wait_for(browser, "Bokeh.documents[0].get_model_by_name('title').text.includes('uuv: PD')", timeout=120)
+    wait_for(browser, "Bokeh.documents[0].get_model_by_name('response').data.t.length === 1001")
+    assert "PID" in read(browser, "D.get_model_by_name('controller').options")
     assert browser.errors() == []
     print(f"page updated {1e3 * page_seconds:.0f} ms after the typed gain (polled every 50 ms)")
