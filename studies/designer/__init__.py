@@ -47,6 +47,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 # The update's small dense linear algebra (a 5 x 5 matrix exponential) takes 15 ms instead of 0.1 ms when
 # OpenBLAS spreads it over threads on a loaded 2-core machine; it only takes effect when numpy is not
@@ -212,7 +213,7 @@ class Update:
     loop_specs: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     seconds: float = 0.0
-    run: object = None
+    run: models.ClosedLoopResult | None = None
 
     @property
     def diverged(self) -> bool:
@@ -285,7 +286,8 @@ def loop_spec_curves(spec: LoopSpec, design: loops.LoopGain, baseline: loops.Loo
         checks["crossover"] = bool(np.isfinite(wc) and spec.crossover / 1.5 <= wc <= spec.crossover * 1.5)
     if spec.phase_margin is not None:
         checks["phase_margin"] = bool(margins["phase_margin_deg"] >= spec.phase_margin)
-    curves = {"item": spec.item, "checks": checks, "crossover": spec.crossover, "phase_margin": spec.phase_margin}
+    curves: dict[str, Any] = {"item": spec.item, "checks": checks, "crossover": spec.crossover,
+                              "phase_margin": spec.phase_margin}
     if baseline is not None:
         base_db = 20 * np.log10(np.abs(baseline.frequency_response(omega)))
         shift = 20 * math.log10(spec.factor)
@@ -398,7 +400,7 @@ class Designer:
         structure, and so its compiled closed loop, stays the same. Returns the new design.
         """
         poles = self.poles_for(values)
-        designed = self.placement(poles) if values else self.text_block
+        designed = self.placement(poles) if values and self.placement is not None else self.text_block
         with self.lock:
             self.block = self.text_block.with_gains(**designed.gains)
             self.controls = gain_controls(self.block)

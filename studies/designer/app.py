@@ -20,6 +20,7 @@ import json
 import math
 import threading
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from bokeh.layouts import column, row
@@ -37,6 +38,7 @@ from bokeh.models import (
 )
 from bokeh.plotting import figure
 
+import models
 from models import specs
 from studies import animation, style
 from studies.plots import tracked_scale
@@ -108,7 +110,7 @@ class Page:
         self.export_data.js_on_change("text", CustomJS(code=DOWNLOAD))
         self.verdict = Div(text="", name="verdict", width=WIDTH)
         self.margins = Div(text="", name="margins", width=WIDTH)
-        scene = {"xs": [], "ys": [], "color": [], "width": []}
+        scene: dict[str, list] = {"xs": [], "ys": [], "color": [], "width": []}
         self.sources = {name: ColumnDataSource(name=name, data=data) for name, data in {
             "scene_lines": dict(scene), "scene_dashed": dict(scene), "scene_polygons": {"xs": [], "ys": [], "fill": [],
                                                                                        "color": []},
@@ -129,8 +131,9 @@ class Page:
         self.reset_button.on_click(self._on_reset)
         self.export_button.on_click(self._on_export)
         self.figures = self._figures()
-        self.run = None
-        self.playing = None
+        self.run: models.ClosedLoopResult | None = None
+        self.last = 0
+        self.playing: Any = None  # the periodic callback while the animation plays
         self.anim_time = Slider(start=0, end=1, value=0, step=0.01, title="t (s)", name="anim_time", width=210)
         self.play_button = Button(label="Play", name="play", width=70)
         self.readout = Div(text="", name="readout", width=290)
@@ -178,7 +181,7 @@ class Page:
         locus.scatter("re", "im", source=s["poles"], marker="x", size=12, line_width=2, color="#cf222e")
         locus.renderers.append(Span(dimension="height", location=0, line_color="#6e7781"))
         scene = figure(width=290, height=290, match_aspect=True, title="the run, animated", name="scene_figure",
-                       x_range=Range1d(-1, 1), y_range=Range1d(-1, 1))
+                       x_range=Range1d(start=-1, end=1), y_range=Range1d(start=-1, end=1))
         scene.patches("xs", "ys", source=s["scene_polygons"], fill_color="fill", line_color="color")
         scene.multi_line("xs", "ys", source=s["scene_lines"], line_color="color", line_width="width")
         scene.multi_line("xs", "ys", source=s["scene_dashed"], line_color="color", line_width="width",
@@ -415,7 +418,7 @@ class Page:
 
     def draw_envelope(self) -> None:
         """The Monte Carlo envelope of the values in force when its box is ticked (else nothing)."""
-        empty = {"t": [], "min": [], "low": [], "high": [], "max": []}
+        empty: dict[str, list] = {"t": [], "min": [], "low": [], "high": [], "max": []}
         if not self.envelope.active:
             self.sources["envelope"].data = empty
             return
@@ -467,7 +470,7 @@ class Page:
             self.run = None
             return
         run = u.run
-        last = len(run.t) - 1 if not u.diverged else max(0, int(np.searchsorted(run.t, run.diverged_at)) - 1)
+        last = len(run.t) - 1 if run.diverged_at is None else max(0, int(np.searchsorted(run.t, run.diverged_at)) - 1)
         self.run, self.last = run, last
         index = np.unique(np.linspace(0, last, 25).astype(int))
         shapes = [animation.draw(case, self.designer.plant, run.x[k], run.r[k, 0]) for k in index
@@ -485,16 +488,16 @@ class Page:
         self.busy = False
         self.draw_frame()
 
-    def frame_index(self) -> int:
+    def frame_index(self, run: models.ClosedLoopResult) -> int:
         """The run's sample at the time slider's value."""
-        return int(min(self.last, np.argmin(np.abs(self.run.t - self.anim_time.value))))
+        return min(self.last, int(np.argmin(np.abs(run.t - self.anim_time.value))))
 
     def draw_frame(self) -> None:
         """Draw the run's state at the time slider's value with the case's drawing (`studies.animation.draw`)."""
         if self.run is None or self.busy:
             return
-        k = self.frame_index()
         run, plant = self.run, self.designer.plant
+        k = self.frame_index(run)
         shapes = animation.draw(self.designer.case, plant, run.x[k], run.r[k, 0])
         s = self.sources
         for name, dashed in (("scene_lines", False), ("scene_dashed", True)):
@@ -518,6 +521,8 @@ class Page:
 
     def _on_play(self) -> None:
         doc = self.layout.document
+        if doc is None:
+            return
         if self.playing is not None:
             doc.remove_periodic_callback(self.playing)
             self.playing, self.play_button.label = None, "Play"
