@@ -91,6 +91,7 @@ class Page:
         self.values: dict[str, float] = {}
         self.tuning = False
         self.busy = False  # set while the page itself moves a widget: its callbacks then do nothing
+        self.pending = False  # a redraw is scheduled for the gains a slider drag set
         self.scenario = "step"
         self.title = Div(text="", name="title")
         self.controller = Select(title="controller", options=labels, value=label, name="controller", width=260)
@@ -203,7 +204,13 @@ class Page:
         error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260)
         # The control is looked up when the widget changes: a pole change redesigns the gains' ranges.
         key = c.key
-        slider.on_change("value_throttled", lambda attr, old, new: self._on_slider(kind, self._control(kind, key), new))
+        # A gain follows its slider while it is dragged (updates coalesced, `_dragged`); a pole, whose every
+        # value is a redesign, when it is let go.
+        if kind == "gain":
+            slider.on_change("value", lambda attr, old, new: self._dragged(self._control(kind, key), new))
+        else:
+            slider.on_change("value_throttled", lambda attr, old, new: self._on_slider(kind, self._control(kind, key),
+                                                                                       new))
         text.on_change("value", lambda attr, old, new: self._on_text(kind, self._control(kind, key), new))
         return column(row(text, slider), error), slider, text, error
 
@@ -302,6 +309,29 @@ class Page:
             self.busy = True
             self.controller.value = old
             self.busy = False
+
+    def _dragged(self, c: GainControl, exponent: float) -> None:
+        """A gain slider moved: take the value now, redraw once the messages already queued are read (one
+        update for a burst of drag events, not one each)."""
+        if self.busy:
+            return
+        value = c.from_log(exponent)
+        _, _, text, error = self.rows[("gain", c.key)]
+        self.busy = True
+        text.value = f"{value:.6g}"
+        self.busy = False
+        error.text = ""
+        self.values[c.key] = value
+        doc = self.layout.document
+        if doc is None:
+            self.refresh()
+        elif not self.pending:
+            self.pending = True
+            doc.add_next_tick_callback(self._refresh_pending)
+
+    def _refresh_pending(self) -> None:
+        self.pending = False
+        self.refresh()
 
     def _on_slider(self, kind: str, c: GainControl, exponent: float) -> None:
         if self.busy:

@@ -317,6 +317,19 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
         theta = run.x[int(np.argmin(np.abs(run.t - when))), 0]
         np.testing.assert_allclose(tip, ell * np.array([math.cos(theta), math.sin(theta)]), rtol=1e-9, atol=1e-12)
 
+    # A drag: the slider's value moves in many steps; the page ends at the last one's response.
+    (kp,) = [c for c in arm.controls if c.key == "kp"]
+    exponents = np.linspace(math.log10(kp.design), math.log10(kp.design) + 0.5, 12)
+    read(browser, f"const s = D.get_model_by_name('slider:kp'); {json.dumps(list(exponents))}"
+                  ".forEach(e => {{ s.value = e }}); 0")
+    dragged = kp.from_log(float(exponents[-1]))
+    wait_for(browser, f"Bokeh.documents[0].get_model_by_name('gain:kp').value === '{dragged:.6g}'")
+    run = independent_run(arm, kp=dragged)
+    wait_for(browser, f"Math.abs(Bokeh.documents[0].get_model_by_name('response').data.y[150] - "
+                      f"{float(run.x[150, 0] * scale)!r}) < 1e-9")
+    y = read(browser, "Array.from(D.get_model_by_name('response').data.y)")
+    np.testing.assert_allclose(np.asarray(y) / scale, run.x[:, 0], rtol=1e-9, atol=1e-12)
+
     browser.driver.save_screenshot(str(tmp_path / "designer.png"))
     if os.environ.get("DESIGNER_SCREENSHOT"):
         browser.driver.save_screenshot(os.environ["DESIGNER_SCREENSHOT"])
