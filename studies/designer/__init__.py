@@ -77,6 +77,9 @@ SKIPPED_PROVIDERS = ("studies.providers:mpc",)
 #: Plants of the optional Monte Carlo envelope, and the quantiles it draws.
 ENVELOPE_SAMPLES = 20
 ENVELOPE_QUANTILES = (0.0, 0.05, 0.5, 0.95, 1.0)
+#: The state-space designs whose gains come from the desired poles (`studies.homework.StateSpaceChoices.poles`);
+#: the LQR designs come from weights instead.
+POLE_LABELS = ("pole placement", "pole placement + integrator", "observer-based", "disturbance observer")
 #: Scenarios the designer offers: the case's, without the Monte Carlo.
 SCENARIOS = ("step", "steps", "disturbance", "noise")
 
@@ -580,7 +583,7 @@ def pole_controls(poles) -> tuple[GainControl, ...]:
         for part, value, key in parts:
             if value == 0:
                 continue
-            low, high = sorted((value / RANGE, value * RANGE))
+            low, high = sorted((float(value) / RANGE, float(value) * RANGE))
             out.append(GainControl(key, "poles", (j, part), float(value), low, high))
     return tuple(out)
 
@@ -613,11 +616,9 @@ def pole_placement(case: CaseStudy, label: str) -> dict:
     """{"poles", "placement"} for the case's state-space design `label` (its desired poles, and the
     function redesigning it from other poles with `studies.homework.statespace_controllers`, from the
     model known to the controller); {} for any other controller."""
-    from designs import statespace_design as ssd
-
     from .. import homework
 
-    if case.statespace is None or label not in ssd.LABELS:
+    if case.statespace is None or label not in POLE_LABELS:
         return {}
     known = case.known_plant()
 

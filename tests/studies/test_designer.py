@@ -169,6 +169,10 @@ def test_placed_poles_are_the_eigenvalues_of_the_known_linear_loop_and_the_run_u
         session.place({"p1.re": 4.0})
     session.place(None)
     assert session.block.gains["K"] == pytest.approx(session.text_block.gains["K"])
+    # The LQR comes from weights, not poles: no pole controls.
+    labels, make = designer.catalog("arm")
+    assert "LQR" in labels and make("LQR").pole_controls == ()
+    assert make("observer-based").pole_controls
 
 
 def test_export_gives_the_gains_in_force_and_the_c_step(arm):
