@@ -1,0 +1,41 @@
+"""``python -m studies.designer [PLANT] [CONTROLLER]``: serve the control designer on 127.0.0.1."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def main(argv=None) -> int:
+    import studies
+
+    parser = argparse.ArgumentParser(prog="python -m studies.designer",
+                                     description="Move a gain, see the nonlinear response, the verdict and the loop.")
+    parser.add_argument("plant", nargs="?", default="arm",
+                        help=f"case study (default arm): {', '.join(studies.names())}")
+    parser.add_argument("controller", nargs="?", default=None,
+                        help="controller label, e.g. PD (default the case's first controller with gains)")
+    parser.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default 0: a free port)")
+    args = parser.parse_args(argv)
+    if args.plant not in studies.names():
+        parser.error(f"unknown plant {args.plant!r}; choose from {', '.join(studies.names())}")
+    if not 0 <= args.port <= 65535:
+        parser.error(f"--port must be in 0..65535, got {args.port}")
+
+    from . import catalog
+    from .app import serve
+
+    print(f"designing the {args.plant} controllers ...", flush=True)
+    try:
+        labels, _ = catalog(args.plant)
+    except ValueError as err:
+        parser.error(str(err))
+    label = args.controller or labels[0]
+    if label not in labels:
+        parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(labels)}")
+    serve(catalog, list(studies.names()), args.plant, label, port=args.port)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
