@@ -22,6 +22,7 @@ import casadi as ca
 import numpy as np
 
 from .checks import as_vector, boolean, integer, positive, real, real_array
+from .integrators import rk4
 from .lagrangian import EquationsOfMotion, euler_lagrange
 from .linear import LinearModel
 
@@ -663,14 +664,7 @@ class Plant:
             x = ca.SX.sym("x", self.nx)
             u = ca.SX.sym("u", self.nu)
             p = ca.SX.sym("p", self.n_params)
-            h = sample_period / int(substeps)
-            xs = x
-            for _ in range(int(substeps)):
-                k1 = self.casadi_f(xs, u, p)
-                k2 = self.casadi_f(xs + h / 2 * k1, u, p)
-                k3 = self.casadi_f(xs + h / 2 * k2, u, p)
-                k4 = self.casadi_f(xs + h * k3, u, p)
-                xs = xs + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            xs = rk4(lambda xs, t: self.casadi_f(xs, u, p), x, sample_period, int(substeps))
             # Common subexpressions repeat across the unrolled stages.
             self.function_cache[key] = ca.Function("rk4", [x, u, p], [ca.cse(xs)], ["x", "u", "p"], ["x_next"])
         return self.function_cache[key]
