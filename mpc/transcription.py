@@ -55,8 +55,26 @@ def _mesh(mesh, intervals: int) -> tuple | None:
     return tuple(arr)
 
 
+class _Meshed:
+    """The mesh of a transcription's frozen dataclass: `intervals`, or `mesh` (N + 1 fractions of T)."""
+
+    intervals: int
+    mesh: tuple | None
+
+    def _check_mesh(self) -> None:
+        if self.mesh is not None:
+            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
+        object.__setattr__(self, "intervals", _intervals(self.intervals))
+        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+
+    @property
+    def fractions(self) -> np.ndarray:
+        """Mesh points as fractions of T, (N+1,)."""
+        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
+
+
 @dataclass(frozen=True)
-class Collocation:
+class Collocation(_Meshed):
     """Direct collocation on N intervals with `degree` points per interval (1-5).
 
     points : "radau" (stiffly accurate, includes the interval's end) or "legendre" (Gauss)
@@ -70,27 +88,19 @@ class Collocation:
     mesh: tuple | None = None
 
     def __post_init__(self):
-        if self.mesh is not None:
-            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
-        object.__setattr__(self, "intervals", _intervals(self.intervals))
-        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+        self._check_mesh()
         if isinstance(self.degree, bool) or int(self.degree) != self.degree or not 1 <= self.degree <= MAX_DEGREE:
             raise ValueError(f"degree must be an integer from 1 to {MAX_DEGREE}, got {self.degree}")
         object.__setattr__(self, "degree", int(self.degree))
         if self.points not in POINTS:
             raise ValueError(f"points must be one of {', '.join(POINTS)}, got {self.points!r}")
 
-    @property
-    def fractions(self) -> np.ndarray:
-        """Mesh points as fractions of T, (N+1,)."""
-        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
-
     def with_mesh(self, fractions) -> Collocation:
         return Collocation(degree=self.degree, points=self.points, mesh=tuple(fractions))
 
 
 @dataclass(frozen=True)
-class MultipleShooting:
+class MultipleShooting(_Meshed):
     """Multiple shooting with the plant's RK4 map: `substeps` RK4 steps per interval, N intervals."""
 
     intervals: int = 50
@@ -98,18 +108,10 @@ class MultipleShooting:
     mesh: tuple | None = None
 
     def __post_init__(self):
-        if self.mesh is not None:
-            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
-        object.__setattr__(self, "intervals", _intervals(self.intervals))
-        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+        self._check_mesh()
         if isinstance(self.substeps, bool) or int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1, got {self.substeps}")
         object.__setattr__(self, "substeps", int(self.substeps))
-
-    @property
-    def fractions(self) -> np.ndarray:
-        """Mesh points as fractions of T, (N+1,)."""
-        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
 
     def with_mesh(self, fractions) -> MultipleShooting:
         return MultipleShooting(substeps=self.substeps, mesh=tuple(fractions))
