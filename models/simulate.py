@@ -265,5 +265,5 @@ def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.nd
     except RuntimeError as err:
         raise SimulationError(f"{plant.name}: the collocation Newton solve over "
                               f"{n * sample_period:.4g} s did not converge") from err
-    blocks = np.asarray(sol).reshape(nx, degree * n, order="F")
-    return blocks[:, degree - 1::degree].T
+    solved = np.asarray(sol).reshape(nx, degree * n, order="F")
+    return solved[:, degree - 1::degree].T

@@ -108,6 +108,7 @@ class _PlanFollower:
 
     measures = "outputs"
     n_reference = 1
+    _rate_per_sample: np.ndarray | None  # largest input change per sample, (nu,)
 
     def _setup_common(self, known: Plant, sample_period: float, horizon: int, tracked: str, name: str):
         if not isinstance(known, Plant):
@@ -284,7 +285,7 @@ class LinearMPC(_PlanFollower):
                 fault = f"solver raised {type(err).__name__}: {err}"
         if solution is None:
             solution = QPSolution(np.full_like(plan, np.nan), np.zeros((self.horizon, self.problem.n_soft)), False,
-                                  fault)
+                                  fault or "no solution")  # fault is set whenever no solution was returned
         new_plan, u, fallback, excess, success, status = self._follow(solution.inputs + self._ue, solution.success,
                                                                       solution.status, plan)
         ns = self.problem.n_soft

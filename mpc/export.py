@@ -70,16 +70,24 @@ def constraints(qp: CondensedQP) -> dict[str, np.ndarray]:
     c_k is the unit vector of variable `variable[k]` when `row[k]` < 0, else row `row[k]`.
     """
     row, variable, sign, b0, bm = [], [], [], [], []
+
+    def add(r: int, v: int, s: float, constant: float, matrix: np.ndarray) -> None:
+        row.append(r)
+        variable.append(v)
+        sign.append(s)
+        b0.append(constant)
+        bm.append(matrix)
+
     zero = np.zeros(qp.n_parameters)
     for i in range(qp.n):
         for s, bound in ((1.0, qp.lower[i]), (-1.0, qp.upper[i])):
             if abs(bound) < INFINITY:
-                row.append(-1), variable.append(i), sign.append(s), b0.append(s * bound), bm.append(zero)
+                add(-1, i, s, s * bound, zero)
     for j in range(qp.rows.shape[0]):
         for s, constant, matrix in ((1.0, qp.row_lower_constant[j], qp.row_lower_matrix[j]),
                                     (-1.0, qp.row_upper_constant[j], qp.row_upper_matrix[j])):
             if abs(constant) < INFINITY:
-                row.append(j), variable.append(-1), sign.append(s), b0.append(s * constant), bm.append(s * matrix)
+                add(j, -1, s, s * constant, s * matrix)
     return {"row": np.array(row, dtype=int), "variable": np.array(variable, dtype=int), "sign": np.array(sign),
             "b0": np.array(b0), "bm": np.array(bm).reshape(len(b0), qp.n_parameters)}
 

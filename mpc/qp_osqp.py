@@ -69,7 +69,8 @@ class OsqpSolver:
         dyn_x = sparse.kron(eye(N + 1), -eye(nx)) + sparse.kron(sparse.eye(N + 1, k=-1), problem.A)
         dyn_u = sparse.kron(sparse.vstack([sparse.csc_matrix((1, N)), eye(N)]), problem.B)
         blocks = [[dyn_x, dyn_u, sparse.csc_matrix((self.n_states, self.n_slacks))]]
-        lower, upper = [None], [None]  # the dynamics' bounds are set per sample
+        # The dynamics' rows first; their bounds are set per sample.
+        lower, upper = [np.zeros(self.n_states)], [np.zeros(self.n_states)]
         blocks.append([None, eye(self.n_inputs), None])
         lower.append(np.tile(problem.input_lower, N))
         upper.append(np.tile(problem.input_upper, N))
@@ -90,7 +91,6 @@ class OsqpSolver:
             lower.append(np.tile(-problem.rate_limit, N))
             upper.append(np.tile(problem.rate_limit, N))
         self.A = sparse.bmat(blocks, format="csc")
-        lower[0] = upper[0] = np.zeros(self.n_states)
         self.lower, self.upper = np.concatenate(lower), np.concatenate(upper)
         self._rate_start = self.A.shape[0] - self.n_inputs if problem.rate_limit is not None else None
         self.q = np.zeros(self.A.shape[1])

@@ -8,6 +8,7 @@ tested against it: same first input to 1e-5.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import cvxpy as cp
 import numpy as np
@@ -94,16 +95,17 @@ class CvxpySolver:
         self.problem = problem
         self.parametrized = parametrized
         self.solver = solver
-        tight = dict(tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12, tol_ktratio=1e-10, max_iter=500)
+        tight: dict[str, Any] = dict(tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12, tol_ktratio=1e-10,
+                                     max_iter=500)
         self.solver_options = (tight if solver == "CLARABEL" else {}) | dict(solver_options or {})
         # cvxpy's C++ canonicalization does not take every expression here; choose the
         # SciPy one up front instead of a warning on each solve.
         self.solver_options.setdefault("canon_backend", cp.SCIPY_CANON_BACKEND)
         if parametrized:
             nx, nu = problem.nx, problem.nu
-            self.parameters = QPParameters(cp.Parameter(nx, name="x0"), cp.Parameter(nu, name="d"),
-                                           cp.Parameter(nx, name="x_s"), cp.Parameter(nu, name="u_s"),
-                                           cp.Parameter(nu, name="u_prev"))
+            # One cvxpy Parameter per field of QPParameters, in its order.
+            self.parameters = (cp.Parameter(nx, name="x0"), cp.Parameter(nu, name="d"), cp.Parameter(nx, name="x_s"),
+                               cp.Parameter(nu, name="u_s"), cp.Parameter(nu, name="u_prev"))
             self._cvx, self._u, self._s = mpc_problem(problem, *self.parameters)
 
     def solve(self, params: QPParameters) -> QPSolution:
