@@ -78,7 +78,7 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
     ----------
     grid : the parameter of the true plant and its values (`Grid.parse("m1=0.2:0.4:5")`)
     scenario : a scenario of the study that is not the Monte Carlo
-    options : seed, threads, jit, budget of controllers that are not Blocks, strict (see `runner.Options`)
+    options : seed, threads, jit, strict (see `runner.Options`)
     executor : None, a `dask.distributed.Client` or a `studies.distributed` executor for the Blocks' grids
 
     Returns
@@ -116,9 +116,7 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
                     input_disturbance=study.input_disturbance if chosen.input_disturbance else 0.0,
                     jit=runner.use_jit(options, truth, controller, len(samples), steps, study.substeps)))
             else:
-                budgeted = (runner.Budgeted(controller, options.python_budget) if options.python_budget is not None
-                            else controller)
-                results = [runner.simulate_scenario(truth, budgeted, chosen, study, options, base, study.substeps,
+                results = [runner.simulate_scenario(truth, controller, chosen, study, options, base, study.substeps,
                                                     params=row) for row in samples]
             for value, row, result in zip(grid.values, samples, results):
                 judged = study.specs_for(chosen.name, dict(zip(names, row)))
@@ -132,10 +130,9 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
         except Exception as err:  # one controller's failure leaves the others' points
             if options.strict:
                 raise
-            status = f"{'skipped' if isinstance(err, runner.BudgetExceeded) else 'failed'}: {err}".splitlines()[0]
-            label_of = specs.SKIPPED if status.startswith("skipped") else specs.FAILED
+            status = f"failed: {err}".splitlines()[0]
             rows += [{"controller": label, grid.param: value, "status": status[:200],
-                      **runner.verdict_columns(specs.Verdict(label_of, (), status[:200])),
+                      **runner.verdict_columns(specs.Verdict(specs.FAILED, (), status[:200])),
                       **dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)} for value in grid.values]
             notes.append(f"{label}: {status[:200]}")
         if progress:
