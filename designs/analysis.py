@@ -450,11 +450,14 @@ def check_band_ratio(new, old, low: float, high: float, factor: float, what: str
 def check_phase_margin(L, minimum_deg: float | None = None, target_deg: float | None = None,
                        tolerance_deg: float = 5.0) -> SpecCheck:
     """PM ≥ `minimum_deg`, or |PM − target| ≤ tolerance when `target_deg` is given."""
+    if minimum_deg is None and target_deg is None:
+        raise ValueError("check_phase_margin needs minimum_deg or target_deg (deg), got neither")
     m = margins(L)
     if target_deg is not None:
         return SpecCheck(f"phase margin about {target_deg:g} deg (±{tolerance_deg:g})",
                          bool(abs(m["pm_deg"] - target_deg) <= tolerance_deg), m["pm_deg"], target_deg,
                          m["gain_crossover"])
+    assert minimum_deg is not None
     return SpecCheck(f"phase margin >= {minimum_deg:g} deg", bool(m["pm_deg"] >= minimum_deg), m["pm_deg"],
                      minimum_deg, m["gain_crossover"])
 

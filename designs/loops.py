@@ -56,6 +56,7 @@ class CascadePlants:
     inner_full : inner coordinate / input with every coupling kept
     dropped : state name -> coefficient of that state in the inner row's acceleration
     inner_coordinate, outer_coordinate, input : names
+    linearization : the plant's linearization they come from
     """
 
     inner: control.TransferFunction
@@ -65,7 +66,7 @@ class CascadePlants:
     inner_coordinate: str
     outer_coordinate: str
     input: str
-    linearization: LinearModel = field(repr=False, default=None)
+    linearization: LinearModel = field(repr=False)
 
 
 def cascade_plants(known: models.Plant, inner: str, outer: str, lin: LinearModel | None = None) -> CascadePlants:
@@ -359,7 +360,7 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
                    outer_coordinate: str | None = None, ki: float | None = None,
                    inner_ki: float | None = None,
                    anti_windup: str = "back_calculation", rate_limit: float | None = None,
-                   outer_derivative_on: str = "measurement", outer_limit: float | None = "inner_step",
+                   outer_derivative_on: str = "measurement", outer_limit: float | str | None = "inner_step",
                    outer_limit_about: str | None = None,
                    feedforward: bool = False, sample_period: float = SAMPLE_PERIOD, sigma: float = SIGMA,
                    name: str = "PD") -> models.Cascade:
@@ -382,8 +383,10 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
     """
     inner_coordinate = inner_coordinate or slc.plants.inner_coordinate
     outer_coordinate = outer_coordinate or slc.plants.outer_coordinate
-    limit = slc.inner_limit if outer_limit == "inner_step" else outer_limit
-    outer_block = PID(known, outer_coordinate, kp=slc.outer.kp, kd=slc.outer.kd, ki=ki,
+    if isinstance(outer_limit, str) and outer_limit != "inner_step":
+        raise ValueError(f"outer_limit must be a number, None or 'inner_step', got {outer_limit!r}")
+    limit = slc.inner_limit if isinstance(outer_limit, str) else outer_limit
+    outer_block: models.Block = PID(known, outer_coordinate, kp=slc.outer.kp, kd=slc.outer.kd, ki=ki,
                       derivative_on=outer_derivative_on, anti_windup=anti_windup if ki is not None else "none",
                       rate_limit=rate_limit, output_limit=limit, limit_about=outer_limit_about,
                       sample_period=sample_period, sigma=sigma,

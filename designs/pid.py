@@ -122,6 +122,7 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
             matrix = np.array([[n0, -wn**2 * n1], [n1, n0 - 2 * zeta * wn * n1]])
             kp, kd = np.linalg.solve(matrix, [wn**2 - a0, 2 * zeta * wn - a1])
         else:
+            assert kp is not None  # exactly one of kp and wn, checked above
             if n1 != 0:
                 raise ValueError("with a plant zero (n1 != 0) give wn, not kp")
             stiffness = a0 + n0 * kp
@@ -133,6 +134,7 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
     else:
         kd = 0.0
         if kp is None:
+            assert wn is not None  # exactly one of kp and wn, checked above
             kp = (wn**2 - a0) / n0
         stiffness, damping = a0 + n0 * kp, a1 + n1 * kp
         if stiffness <= 0 or damping <= 0:

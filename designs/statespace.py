@@ -228,7 +228,7 @@ def reference_gain(A, B, K, C_r) -> np.ndarray:
     if np.linalg.cond(closed) > 1e12:
         raise ValueError("A − B K is singular (a closed-loop pole at s = 0): no reference gain")
     dc = (C_r @ np.linalg.solve(closed, B)).item()
-    if abs(dc) < 1e-12 * max(1.0, np.linalg.norm(B)):
+    if abs(dc) < 1e-12 * max(1.0, float(np.linalg.norm(B))):
         raise ValueError("the closed loop has zero DC gain from u to the tracked output")
     return np.array([-1.0 / dc])
 

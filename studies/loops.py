@@ -174,6 +174,7 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
         B = np.vstack([Bd, np.zeros((nc, Bd.shape[1]))])
         C = -np.hstack([k.Dy @ Cm, k.Cc])
         return LoopGain(label or block.name, which, A, B, C, block.sample_period)
+    assert isinstance(block, Cascade)  # checked above for the inner and outer loops
     no = block.outer.n_state
     xo, xi = point.xc[:no], point.xc[no:]
     outer = linearize_block(block.outer, xo, meas, point.r)
@@ -256,7 +257,7 @@ def spec_check(design: LoopGain, spec, baseline: LoopGain | None = None, points:
     dict name -> bool or None (None: the spec cannot be checked, e.g. no baseline)
     """
     nyquist = np.pi / design.sample_period
-    result = {}
+    result: dict[str, bool | None] = {}
     if spec.low_frequency is not None:
         if baseline is None:
             result["low_frequency"] = None
