@@ -8,9 +8,16 @@ import models
 from studies import animation, style
 
 
-@pytest.mark.parametrize("name, expected", [("theta", (180 / math.pi, "deg")), ("dphi", (180 / math.pi, "deg/s")),
-                                            ("theta2", (180 / math.pi, "deg")), ("z", (1.0, "m")),
-                                            ("dx", (1.0, "m/s"))])
+@pytest.mark.parametrize(
+    "name, expected",
+    [
+        ("theta", (180 / math.pi, "deg")),
+        ("dphi", (180 / math.pi, "deg/s")),
+        ("theta2", (180 / math.pi, "deg")),
+        ("z", (1.0, "m")),
+        ("dx", (1.0, "m/s")),
+    ],
+)
 def test_angles_show_in_degrees_and_lengths_in_metres(name, expected):
     assert style.display_unit(name) == expected
 
