@@ -70,25 +70,20 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
 import warnings
 
-# Run as a script, this file's folder is sys.path[0] and "import mpc" would find this
-# file instead of the package; drop the folder so the package is imported.
-_HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
+import casadi as ca
+import numpy as np
+from _path import HERE as _HERE  # before our packages: drops this folder from sys.path (see _path.py)
 
-import casadi as ca  # noqa: E402
-import numpy as np  # noqa: E402
-
-import models  # noqa: E402
-import mpc  # noqa: E402
-import studies  # noqa: E402
-from models.compile import CompilationError  # noqa: E402
-from mpc.export import export_linear_mpc  # noqa: E402
-from mpc.reference_cvxpy import CvxpySolver  # noqa: E402
+import models
+import mpc
+import studies
+from models.compile import CompilationError
+from mpc.export import export_linear_mpc
+from mpc.reference_cvxpy import CvxpySolver
 
 PATHS = {
     "a": "cvxpy, rebuilt every step",

@@ -32,23 +32,17 @@ Usage: python benchmarks/ocp.py [--intervals 100] [--control-intervals 20] [--re
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
-# Run as a script, this file's folder is sys.path[0] and "import mpc" would find benchmarks/mpc.py;
-# drop the folder so the package is imported.
-_HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
+import _path  # noqa: F401  (before our packages: drops this folder from sys.path)
+import casadi as ca
+import numpy as np
 
-import casadi as ca  # noqa: E402
-import numpy as np  # noqa: E402
-
-import models  # noqa: E402
-import mpc  # noqa: E402
-from models.compile import NumpyCall  # noqa: E402
-from models.files import write_json  # noqa: E402
-from mpc.transcription import collocation_coefficients  # noqa: E402
+import models
+import mpc
+from models.compile import NumpyCall
+from models.files import write_json
+from mpc.transcription import collocation_coefficients
 
 FINAL_TIME, FORCE_LIMIT, TRAVEL = 4.0, 5.0, 0.5
 START = np.array([0.0, np.pi, 0.0, 0.0])

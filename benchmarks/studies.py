@@ -49,19 +49,15 @@ import threading
 import time
 from pathlib import Path
 
-# Run as a script, this file's folder is sys.path[0] and "import studies" would find this
-# file instead of the package; drop the folder so the package is imported.
-_HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
+import _path  # noqa: F401  (before our packages: drops this folder from sys.path)
+import control
+import numpy as np
 
-import control  # noqa: E402
-import numpy as np  # noqa: E402
-
-import models  # noqa: E402
-import studies  # noqa: E402
-from designs.statespace_blocks import StateFeedback  # noqa: E402
-from models.files import write_json  # noqa: E402
-from studies import providers  # noqa: E402
+import models
+import studies
+from designs.statespace_blocks import StateFeedback
+from models.files import write_json
+from studies import providers
 
 PLANT, SAMPLE_PERIOD, DURATION, SUBSTEPS, THREADS, REL = "pendulum", 0.01, 20.0, 2, 2, 0.05
 

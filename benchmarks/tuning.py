@@ -33,23 +33,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 import time
 
-# Run as a script, this file's folder is sys.path[0], where benchmarks/mpc.py would shadow the mpc
-# package the case studies import; drop the folder.
-_HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [entry for entry in sys.path if os.path.abspath(entry or os.curdir) != _HERE]
+import _path  # noqa: F401  (before our packages: drops this folder from sys.path)
+import casadi as ca
+import numpy as np
+import scipy.optimize
 
-import casadi as ca  # noqa: E402
-import numpy as np  # noqa: E402
-import scipy.optimize  # noqa: E402
-
-import models  # noqa: E402
-import studies  # noqa: E402
-from designs.tuning import Cost, Scenario, TuningProblem, tune  # noqa: E402
-from studies.homework import statespace_controllers  # noqa: E402
+import models
+import studies
+from designs.tuning import Cost, Scenario, TuningProblem, tune
+from studies.homework import statespace_controllers
 
 PLANT, LABEL, DURATION = "pendulum", "pole placement + integrator", 10.0
 COST = Cost("itae", energy_weight=1e-3)

@@ -214,6 +214,7 @@ class Cascade(Block):
 
     def with_gains(self, **gains) -> Cascade:
         new = super().with_gains(**gains)
+        assert isinstance(new, Cascade)  # Block.with_gains copies the instance
         new.outer = self.outer.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("outer.")})
         new.inner = self.inner.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("inner.")})
         return new

@@ -216,7 +216,7 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
 
     command = compiler()
     identity = _compiler_identity(tuple(command)) if command else None
-    if identity is None:
+    if command is None or identity is None:
         unavailable("compiler", "no C compiler found (set CC, or put cc or gcc on the PATH)" if command is None
                     else f"the C compiler {command[0]!r} does not run")
         return None
@@ -340,11 +340,11 @@ class NumpyCall:
                                  f"values, got shape {arr.shape}")
             flat = np.ascontiguousarray(arr.reshape(rows, cols).ravel(order="F"))
             keep.append(flat)
-            self._buffer.set_arg(i, memoryview(flat))
+            self._buffer.set_arg(i, memoryview(flat))  # type: ignore[call-arg, arg-type]  # (pointer, size) from the view
         outs = []
         for i, (rows, cols) in enumerate(self._out_sizes):
             out = np.empty((cols, rows))
             outs.append(out)
-            self._buffer.set_res(i, memoryview(out))
+            self._buffer.set_res(i, memoryview(out))  # type: ignore[call-arg, arg-type]  # (pointer, size) from the view
         self._trigger()
         return [o.T for o in outs]

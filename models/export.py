@@ -193,6 +193,7 @@ class ExportedC:
             When no library can be built (no compiler, no cache, compiler errors).
         """
         library = compiling.build_library(self.files(), flags, fallback=False)
+        assert library is not None  # fallback=False raises instead of returning None
         return CompiledController(self, library, initial_state)
 
 

@@ -111,7 +111,7 @@ def solve_spd(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
                 if (k, j) in a:
                     a[(i, j)] = a.get((i, j), 0) - factor * a[(k, j)]
             b[i] = b[i] - factor * b[k]
-    v = [None] * n
+    v: list[ca.SX] = [ca.SX(0)] * n  # filled in reverse elimination order
     for pos in reversed(range(n)):
         k = order[pos]
         later = [j for j in order[pos + 1:] if (k, j) in a]

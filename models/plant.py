@@ -22,6 +22,7 @@ import casadi as ca
 import numpy as np
 
 from .checks import as_vector, boolean, integer, positive, real, real_array
+from .integrators import rk4
 from .lagrangian import EquationsOfMotion, euler_lagrange
 from .linear import LinearModel
 
@@ -54,8 +55,8 @@ class Physics:
     A purely first-order plant gives only `rates` and `outputs`.
     """
 
-    kinetic: ca.SX = 0
-    potential: ca.SX = 0
+    kinetic: ca.SX | float = 0
+    potential: ca.SX | float = 0
     forces: Sequence = ()
     outputs: Mapping[str, ca.SX] = field(default_factory=dict)
     rates: Mapping[str, ca.SX] | Sequence = field(default_factory=dict)
@@ -202,7 +203,7 @@ def declaration(name: str) -> Declaration:
     return _REGISTRY[name]
 
 
-_SYMBOLIC_CACHE: dict[str, _Symbolic] = {}
+_SYMBOLIC_CACHE: dict[str, tuple[Declaration, _Symbolic]] = {}
 
 
 class _Symbolic:
@@ -349,7 +350,7 @@ def _check_mass_matrix(decl: Declaration, mass_matrix: ca.SX, q: ca.SX, p: ca.SX
     nominal = np.array([pp.value for pp in decl.params], dtype=float)
     rng = np.random.default_rng(0)
     points = [np.zeros(q.numel())] + [rng.uniform(-1.0, 1.0, q.numel()) for _ in range(2)]
-    singular = []
+    singular: list[np.ndarray] = []  # per configuration, the velocity direction without kinetic energy
     for point in points:
         matrix = np.asarray(fun(point, nominal), dtype=float)
         if not np.all(np.isfinite(matrix)):
@@ -359,8 +360,9 @@ def _check_mass_matrix(decl: Declaration, mass_matrix: ca.SX, q: ca.SX, p: ca.SX
         if eig[0] < -1e-12 * scale:
             raise ValueError(f"{decl.name}: the mass matrix is not positive definite at q = {point.round(3)} "
                              f"(eigenvalue {eig[0]:.3g}): the kinetic energy is negative for some velocities")
-        singular.append(vectors[:, 0] if eig[0] <= 1e-12 * scale else None)
-    if all(v is not None for v in singular):
+        if eig[0] <= 1e-12 * scale:
+            singular.append(vectors[:, 0])
+    if len(singular) == len(points):
         combo = " + ".join(f"{c:.3g} d{n}" for c, n in zip(singular[0], decl.coordinates) if abs(c) > 1e-9)
         raise ValueError(f"{decl.name}: the mass matrix is singular: the velocity combination {combo} has "
                          "no kinetic energy, so the accelerations are undetermined")
@@ -663,14 +665,7 @@ class Plant:
             x = ca.SX.sym("x", self.nx)
             u = ca.SX.sym("u", self.nu)
             p = ca.SX.sym("p", self.n_params)
-            h = sample_period / int(substeps)
-            xs = x
-            for _ in range(int(substeps)):
-                k1 = self.casadi_f(xs, u, p)
-                k2 = self.casadi_f(xs + h / 2 * k1, u, p)
-                k3 = self.casadi_f(xs + h / 2 * k2, u, p)
-                k4 = self.casadi_f(xs + h * k3, u, p)
-                xs = xs + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            xs = rk4(lambda xs, t: self.casadi_f(xs, u, p), x, sample_period, int(substeps))
             # Common subexpressions repeat across the unrolled stages.
             self.function_cache[key] = ca.Function("rk4", [x, u, p], [ca.cse(xs)], ["x", "u", "p"], ["x_next"])
         return self.function_cache[key]

@@ -195,6 +195,21 @@ def _adaptive(plant, x0, u, p, sample_period, rtol, atol) -> np.ndarray:
     return out
 
 
+def lagrange_basis(nodes, s) -> tuple[np.ndarray, np.ndarray]:
+    """Values and derivatives of the Lagrange polynomials through `nodes` at `s`, each (len(s), len(nodes)).
+
+    The one construction of collocation polynomials: the Radau simulator here, and the
+    transcriptions, dense output and mesh refinement of `mpc`.
+    """
+    nodes, s = np.asarray(nodes, dtype=float), np.atleast_1d(np.asarray(s, dtype=float))
+    values, derivs = np.empty((s.size, nodes.size)), np.empty((s.size, nodes.size))
+    for r in range(nodes.size):
+        others = np.delete(nodes, r)
+        poly = np.poly1d(np.poly(others)) / np.prod(nodes[r] - others)
+        values[:, r], derivs[:, r] = poly(s), np.polyder(poly)(s)
+    return values, derivs
+
+
 def radau_matrices(degree: int) -> tuple[np.ndarray, np.ndarray]:
     """Collocation nodes and differentiation matrix of Radau IIA of `degree` points.
 
@@ -208,12 +223,8 @@ def radau_matrices(degree: int) -> tuple[np.ndarray, np.ndarray]:
     if degree not in COLLOCATION_DEGREES:
         raise ValueError(f"degree must be an integer from 1 to {COLLOCATION_DEGREES[-1]} (Radau points), got {degree}")
     tau = np.array([0.0] + ca.collocation_points(degree, "radau"))
-    deriv = np.empty((degree + 1, degree))
-    for node in range(degree + 1):
-        others = np.delete(tau, node)
-        poly = np.poly1d(np.poly(others)) / np.prod(tau[node] - others)
-        deriv[node] = np.polyder(poly)(tau[1:])
-    return tau, deriv
+    _, deriv = lagrange_basis(tau, tau[1:])
+    return tau, deriv.T.copy()
 
 
 def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.ndarray:
@@ -254,5 +265,5 @@ def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.nd
     except RuntimeError as err:
         raise SimulationError(f"{plant.name}: the collocation Newton solve over "
                               f"{n * sample_period:.4g} s did not converge") from err
-    blocks = np.asarray(sol).reshape(nx, degree * n, order="F")
-    return blocks[:, degree - 1::degree].T
+    solved = np.asarray(sol).reshape(nx, degree * n, order="F")
+    return solved[:, degree - 1::degree].T

@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from models.simulate import lagrange_basis
+
 from .ocp_solution import OCPSolution
-from .transcription import Collocation, lagrange_basis
+from .transcription import Collocation
 
 
 def collocation_defects(solution: OCPSolution) -> np.ndarray:

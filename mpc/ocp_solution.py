@@ -16,8 +16,9 @@ import numpy as np
 
 import models
 from models import Plant
+from models.simulate import lagrange_basis
 
-from .transcription import Transcription, lagrange_basis
+from .transcription import Transcription
 
 
 def resimulate(plant: Plant, t, x0, u, params=None, *, method: str = "adaptive", rtol: float = 1e-10,

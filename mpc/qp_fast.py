@@ -191,6 +191,7 @@ class CondensedDaqpSolver:
         self._row_upper = self.bupper[qp.n:]
         self._row_lower = self.blower[qp.n:]
         self._shapes = ((N, nu), (N, ns))
+        self._set_up: bool = False  # whether DAQP holds this QP's matrices (reset() starts over)
         self.reset()
 
     def _update_vectors(self, params: QPParameters) -> None:

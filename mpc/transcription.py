@@ -32,6 +32,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from models.integrators import rk4
+from models.simulate import lagrange_basis, radau_matrices
+
 POINTS = ("legendre", "radau")
 MAX_DEGREE = 5
 
@@ -52,8 +55,26 @@ def _mesh(mesh, intervals: int) -> tuple | None:
     return tuple(arr)
 
 
+class _Meshed:
+    """The mesh of a transcription's frozen dataclass: `intervals`, or `mesh` (N + 1 fractions of T)."""
+
+    intervals: int
+    mesh: tuple | None
+
+    def _check_mesh(self) -> None:
+        if self.mesh is not None:
+            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
+        object.__setattr__(self, "intervals", _intervals(self.intervals))
+        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+
+    @property
+    def fractions(self) -> np.ndarray:
+        """Mesh points as fractions of T, (N+1,)."""
+        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
+
+
 @dataclass(frozen=True)
-class Collocation:
+class Collocation(_Meshed):
     """Direct collocation on N intervals with `degree` points per interval (1-5).
 
     points : "radau" (stiffly accurate, includes the interval's end) or "legendre" (Gauss)
@@ -67,27 +88,19 @@ class Collocation:
     mesh: tuple | None = None
 
     def __post_init__(self):
-        if self.mesh is not None:
-            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
-        object.__setattr__(self, "intervals", _intervals(self.intervals))
-        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+        self._check_mesh()
         if isinstance(self.degree, bool) or int(self.degree) != self.degree or not 1 <= self.degree <= MAX_DEGREE:
             raise ValueError(f"degree must be an integer from 1 to {MAX_DEGREE}, got {self.degree}")
         object.__setattr__(self, "degree", int(self.degree))
         if self.points not in POINTS:
             raise ValueError(f"points must be one of {', '.join(POINTS)}, got {self.points!r}")
 
-    @property
-    def fractions(self) -> np.ndarray:
-        """Mesh points as fractions of T, (N+1,)."""
-        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
-
     def with_mesh(self, fractions) -> Collocation:
         return Collocation(degree=self.degree, points=self.points, mesh=tuple(fractions))
 
 
 @dataclass(frozen=True)
-class MultipleShooting:
+class MultipleShooting(_Meshed):
     """Multiple shooting with the plant's RK4 map: `substeps` RK4 steps per interval, N intervals."""
 
     intervals: int = 50
@@ -95,18 +108,10 @@ class MultipleShooting:
     mesh: tuple | None = None
 
     def __post_init__(self):
-        if self.mesh is not None:
-            object.__setattr__(self, "intervals", len(np.asarray(self.mesh).reshape(-1)) - 1)
-        object.__setattr__(self, "intervals", _intervals(self.intervals))
-        object.__setattr__(self, "mesh", _mesh(self.mesh, self.intervals))
+        self._check_mesh()
         if isinstance(self.substeps, bool) or int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1, got {self.substeps}")
         object.__setattr__(self, "substeps", int(self.substeps))
-
-    @property
-    def fractions(self) -> np.ndarray:
-        """Mesh points as fractions of T, (N+1,)."""
-        return np.linspace(0, 1, self.intervals + 1) if self.mesh is None else np.array(self.mesh)
 
     def with_mesh(self, fractions) -> MultipleShooting:
         return MultipleShooting(substeps=self.substeps, mesh=tuple(fractions))
@@ -126,30 +131,19 @@ class CollocationCoefficients:
     quadrature: np.ndarray
 
 
-def lagrange_basis(nodes, s) -> tuple[np.ndarray, np.ndarray]:
-    """Values and derivatives of the Lagrange polynomials through `nodes` at `s`, each (len(s), len(nodes))."""
-    nodes, s = np.asarray(nodes, dtype=float), np.atleast_1d(np.asarray(s, dtype=float))
-    values, derivs = np.empty((s.size, nodes.size)), np.empty((s.size, nodes.size))
-    for r in range(nodes.size):
-        others = np.delete(nodes, r)
-        poly = np.poly1d(np.poly(others)) / np.prod(nodes[r] - others)
-        values[:, r], derivs[:, r] = poly(s), np.polyder(poly)(s)
-    return values, derivs
-
-
 def collocation_coefficients(degree: int, points: str) -> CollocationCoefficients:
     """Coefficients of the collocation equations for `degree` Legendre or Radau points."""
     Collocation(degree=degree, points=points)  # validates
-    tau = np.array([0.0] + ca.collocation_points(degree, points))
-    _, derivs = lagrange_basis(tau, tau[1:])
+    if points == "radau":
+        tau, derivative = radau_matrices(degree)  # the Radau simulator's own coefficients
+    else:
+        tau = np.array([0.0] + ca.collocation_points(degree, points))
+        derivative = lagrange_basis(tau, tau[1:])[1].T.copy()
     values_at_one, _ = lagrange_basis(tau, [1.0])
-    weights = np.empty(degree)
-    for j in range(degree):
-        others = np.delete(tau[1:], j)
-        poly = np.poly1d(np.poly(others)) / np.prod(tau[j + 1] - others)
-        antiderivative = np.polyint(poly)
-        weights[j] = antiderivative(1.0) - antiderivative(0.0)
-    return CollocationCoefficients(tau, derivs.T.copy(), values_at_one[0], weights)
+    # The interpolatory quadrature on the points, sum_j w_j tau_j^k = 1/(k+1) for k < d (then exact to degree
+    # 2d - 1 on Gauss points, 2d - 2 on Radau points).
+    weights = np.linalg.solve(np.vander(tau[1:], increasing=True).T, 1.0 / np.arange(1, degree + 1))
+    return CollocationCoefficients(tau, derivative, values_at_one[0], weights)
 
 
 @dataclass(frozen=True)
@@ -556,25 +550,22 @@ def rk4_interval(plant, integrands: ca.Function, substeps: int) -> ca.Function:
 
     integrands : Function (x, u, c, t, p, T, user parameters...) -> L (nL,)
     Returns the Function (x, u, u_plant, c, t0, h, p, T, user parameters...) -> (x after h,
-    ∫ L dt over h): `substeps` steps of the arithmetic of `Plant.step_function` with the plant
-    fed u_plant, h an input so the final time may be free and the mesh non-uniform.
+    ∫ L dt over h): `substeps` steps of `models.integrators.rk4` (as `Plant.step_function`) with the
+    plant fed u_plant, h an input so the final time may be free and the mesh non-uniform.
     """
     x, u, fed = ca.SX.sym("x", plant.nx), ca.SX.sym("u", plant.nu), ca.SX.sym("u_plant", plant.nu)
     c = ca.SX.sym("c", integrands.size1_in(2))
     t0, h, p, T = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("p", plant.n_params), ca.SX.sym("T")
     user_names = [integrands.name_in(i) for i in range(6, integrands.n_in())]
     user = [ca.SX.sym(name, integrands.size1_in(6 + i)) for i, name in enumerate(user_names)]
-    rate = lambda xs, ts: (plant.casadi_f(xs, fed, p), integrands(xs, u, c, ts, p, T, *user))
-    dt = h / substeps
-    xs, q = x, ca.SX.zeros(integrands.size1_out(0))
-    for i in range(substeps):
-        ts = t0 + i * dt
-        k1, l1 = rate(xs, ts)
-        k2, l2 = rate(xs + dt / 2 * k1, ts + dt / 2)
-        k3, l3 = rate(xs + dt / 2 * k2, ts + dt / 2)
-        k4, l4 = rate(xs + dt * k3, ts + dt)
-        xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        q = q + dt / 6 * (l1 + 2 * l2 + 2 * l3 + l4)
+    nx = plant.nx
+
+    def rate(z, t):  # the state and the running integrals together; the integrands read the state only
+        xs = z[:nx]
+        return ca.vertcat(plant.casadi_f(xs, fed, p), integrands(xs, u, c, t, p, T, *user))
+
+    z = rk4(rate, ca.vertcat(x, ca.SX.zeros(integrands.size1_out(0))), h, substeps, t0)
+    xs, q = z[:nx], z[nx:]
     return ca.Function("rk4_interval", [x, u, fed, c, t0, h, p, T, *user], [ca.cse(xs), ca.cse(q)],
                        ["x", "u", "u_plant", "c", "t0", "h", "p", "T", *user_names],
                        ["x_next", "integrals"])

@@ -100,15 +100,16 @@ def frames(case, plant, run, max_frames: int) -> tuple[np.ndarray, list, list]:
         if not np.all(np.isfinite(run.x[k])):
             break
         shapes.append(draw(case, plant, run.x[k], run.r[k, 0]))
-        readouts.append(_readout(plant, run.x[k], run.r[k, 0]))
+        readouts.append(readout(plant, run.x[k]))
     return times[:len(shapes)], shapes, readouts
 
 
-def _readout(plant, x, reference) -> str:
+def readout(plant, x) -> str:
+    """The coordinates of state `x` as the page prints them: "z = 0.123 m, theta = 45.0 deg"."""
     parts = []
     for name, value in zip(plant.coordinate_names, x[:plant.nq]):
-        angle = name.startswith(("theta", "phi"))
-        parts.append(f"{name} = {math.degrees(value):.1f} deg" if angle else f"{name} = {value:.3f} m")
+        scale, unit = style.display_unit(name)
+        parts.append(f"{name} = {value * scale:.{1 if style.is_angle(name) else 3}f} {unit}")
     return ", ".join(parts)
 
 

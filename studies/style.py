@@ -4,14 +4,29 @@ The case studies' controllers have fixed, distinct entries (no two share a
 colour); any other label (a user's controller) gets one picked from its name
 by a stable hash, so it too looks the same on every plot of every plant.
 Verdicts have their own symbols and colours for tables, heat maps and scatters.
+States are shown in the units of `display_unit`: angles in degrees, lengths in metres.
 """
 
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass
 
 from models import specs
+
+
+def is_angle(name: str) -> bool:
+    """Whether a coordinate of the case plants is an angle (θ…, φ…), drawn and printed in degrees."""
+    return name.startswith(("theta", "phi"))
+
+
+def display_unit(name: str) -> tuple[float, str]:
+    """(factor, unit) to show a state of the case plants: angles in deg, lengths in m, their rates per s."""
+    rate = name.startswith("d") and len(name) > 1
+    base = name[1:] if rate else name
+    scale, unit = (180 / math.pi, "deg") if is_angle(base) else (1.0, "m")
+    return scale, unit + ("/s" if rate else "")
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,8 @@ import numpy as np
 
 import models
 
+from .style import display_unit
+
 #: Largest state defect per interval (SI units of the state) for a solution to count as verified: the
 #: optimal input held on each interval and re-simulated with CVODES from the optimized state there.
 DEFECT_TOLERANCE = 1e-3
@@ -127,7 +129,7 @@ class TrajectoryProblem:
 @dataclass
 class Motion:
     """A motion sampled for plots and the animation: t (M+1,), x (M+1, nx), r (M+1, 1) the marked target,
-    u (M, nu) the input held over each sample, input_limit (nu,) the actuator's limit."""
+    u (M, nu) the input held on [t_k, t_k+1), input_limit (nu,) the actuator's (the page draws both)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -193,19 +195,6 @@ class CaseTrajectories:
 
 
 # ---------------------------------------------------------------------------- solving
-def is_angle(name: str) -> bool:
-    """Whether a coordinate of the case plants is an angle (θ…, φ…), drawn and printed in degrees."""
-    return name.startswith(("theta", "phi"))
-
-
-def display_unit(name: str) -> tuple[float, str]:
-    """(factor, unit) to show a state of the case plants: angles in deg, lengths in m, their rates per s."""
-    rate = name.startswith("d") and len(name) > 1
-    base = name[1:] if rate else name
-    scale, unit = (180 / math.pi, "deg") if is_angle(base) else (1.0, "m")
-    return scale, unit + ("/s" if rate else "")
-
-
 def describe(transcription) -> str:
     """The transcription in words: "Radau collocation, degree 3, N = 100"."""
     if hasattr(transcription, "degree"):
@@ -237,12 +226,12 @@ def problem_row(plant: models.Plant, solved: SolvedTrajectory) -> dict:
     return row
 
 
-def motion(solution, target: float, step: float = 0.01) -> Motion:
+def motion(solution, target: float, input_limit, step: float = 0.01) -> Motion:
     """The optimized motion every `step` s (the collocation polynomial or the shooting interpolant)."""
     count = max(2, int(math.ceil(solution.final_time / step)))
     t = np.linspace(0.0, solution.final_time, count + 1)
     return Motion(t, solution.state_at(t), np.full((t.size, 1), float(target)), solution.input_at(t[:-1]),
-                  np.asarray(solution.plant.input_limit, dtype=float))
+                  np.asarray(input_limit, dtype=float))
 
 
 def _bryson(plant: models.Plant, tracking: Tracking) -> tuple[np.ndarray, np.ndarray]:
@@ -476,7 +465,7 @@ def plot_problem(result: CaseTrajectories, solved: SolvedTrajectory, path: Path,
 
     plant, s = result.plant, solved.solution
     fig, axes = _figure(8, 1.7 * (plant.nq + 1) + 0.8, plant.nq + 1)
-    dense = motion(s, 0.0, step=s.final_time / 600)
+    dense = motion(s, 0.0, plant.input_limit, step=s.final_time / 600)
     for ax, name in zip(axes, plant.coordinate_names):
         scale, unit = display_unit(name)
         index = plant.state_names.index(name)
@@ -509,7 +498,7 @@ def plot_tracking(result: CaseTrajectories, problem: TrajectoryProblem, tracked:
     plant = result.plant
     fig, axes = _figure(8, 1.7 * (plant.nq + 1) + 0.8, plant.nq + 1)
     planned = tracked.planned
-    dense = motion(planned, 0.0, step=planned.final_time / 600)
+    dense = motion(planned, 0.0, plant.input_limit, step=planned.final_time / 600)
     runs = list(tracked.samples) if tracked.samples is not None else []
     for ax, name in zip(axes, plant.coordinate_names):
         scale, unit = display_unit(name)
@@ -609,7 +598,7 @@ def write_files(result: CaseTrajectories, folder: Path) -> dict:
         name = f"trajectory_{key}.png"
         files[name] = plot_problem(result, solved, folder / name, dpi).name
         if result.case.drawing is not None:
-            run = motion(solved.solution, _target(result, solved.solution))
+            run = motion(solved.solution, _target(result, solved.solution), result.plant.input_limit)
             label = solved.problem.title
             caption = (f"{label}: the optimized motion (collocation interpolant, nonlinear model), "
                        f"T = {solved.solution.final_time:.4g} s.")

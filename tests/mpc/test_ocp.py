@@ -244,10 +244,19 @@ def test_radau_coefficients_match_the_simulators():
     coefficients = collocation_coefficients(3, "radau")
     np.testing.assert_allclose(coefficients.tau, tau, atol=1e-14)
     np.testing.assert_allclose(coefficients.derivative, deriv, atol=1e-12)
-    # Gauss weights integrate polynomials of degree 2d - 1 exactly.
-    gauss = collocation_coefficients(3, "legendre")
-    for power in range(6):
-        assert gauss.quadrature @ gauss.tau[1:] ** power == pytest.approx(1 / (power + 1), abs=1e-14)
+
+
+@pytest.mark.parametrize("points", ["radau", "legendre"])
+@pytest.mark.parametrize("degree", [1, 2, 3, 5])
+def test_collocation_coefficients_differentiate_and_integrate_polynomials_exactly(points, degree):
+    c = collocation_coefficients(degree, points)
+    exact_to = 2 * degree - 1 if points == "legendre" else 2 * degree - 2
+    for power in range(exact_to + 1):  # ∫₀¹ τ^k dτ = 1/(k+1)
+        assert c.quadrature @ c.tau[1:] ** power == pytest.approx(1 / (power + 1), abs=1e-13)
+    for power in range(degree + 1):  # d/dτ τ^k = k τ^(k-1) at the points; τ^k at 1 is 1
+        np.testing.assert_allclose(c.tau**power @ c.derivative, power * c.tau[1:] ** max(power - 1, 0) * (power > 0),
+                                   atol=1e-11)
+        assert c.tau**power @ c.continuity == pytest.approx(1.0, abs=1e-12)
 
 
 # --------------------------------------------------------------------------- solution and check
