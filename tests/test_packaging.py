@@ -90,14 +90,15 @@ def test_each_package_ships_its_py_typed_marker(package):
 
 
 def test_the_packages_import_only_declared_distributions():
-    # Dask is optional (--workers, --scheduler) and imported lazily; it is the "dask" extra.
-    allowed = declared(["dask"])
+    # Dask is optional (--workers, --scheduler) and imported lazily: the "dask" extra; the designer's
+    # web server (studies.designer) is the "designer" extra.
+    allowed = declared(["dask", "designer"])
     missing = {m: distributions(m) for m in third_party(imported_modules(PACKAGES)) if not distributions(m) & allowed}
     assert not missing, f"imported but not declared in [project] dependencies: {missing}"
 
 
 def test_the_tests_and_examples_import_only_declared_distributions():
-    allowed = declared(["dev", "dask"])
+    allowed = declared(["dev", "dask", "designer"])
     modules = third_party(imported_modules(["tests", "examples"])) - {
         "case_designs",
         "example_providers",
