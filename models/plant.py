@@ -54,8 +54,8 @@ class Physics:
     A purely first-order plant gives only `rates` and `outputs`.
     """
 
-    kinetic: ca.SX = 0
-    potential: ca.SX = 0
+    kinetic: ca.SX | float = 0
+    potential: ca.SX | float = 0
     forces: Sequence = ()
     outputs: Mapping[str, ca.SX] = field(default_factory=dict)
     rates: Mapping[str, ca.SX] | Sequence = field(default_factory=dict)
@@ -202,7 +202,7 @@ def declaration(name: str) -> Declaration:
     return _REGISTRY[name]
 
 
-_SYMBOLIC_CACHE: dict[str, _Symbolic] = {}
+_SYMBOLIC_CACHE: dict[str, tuple[Declaration, _Symbolic]] = {}
 
 
 class _Symbolic:
@@ -360,8 +360,9 @@ def _check_mass_matrix(decl: Declaration, mass_matrix: ca.SX, q: ca.SX, p: ca.SX
             raise ValueError(f"{decl.name}: the mass matrix is not positive definite at q = {point.round(3)} "
                              f"(eigenvalue {eig[0]:.3g}): the kinetic energy is negative for some velocities")
         singular.append(vectors[:, 0] if eig[0] <= 1e-12 * scale else None)
-    if all(v is not None for v in singular):
-        combo = " + ".join(f"{c:.3g} d{n}" for c, n in zip(singular[0], decl.coordinates) if abs(c) > 1e-9)
+    first = singular[0]
+    if first is not None and all(v is not None for v in singular):
+        combo = " + ".join(f"{c:.3g} d{n}" for c, n in zip(first, decl.coordinates) if abs(c) > 1e-9)
         raise ValueError(f"{decl.name}: the mass matrix is singular: the velocity combination {combo} has "
                          "no kinetic energy, so the accelerations are undetermined")
 
