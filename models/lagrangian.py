@@ -111,9 +111,9 @@ def solve_spd(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
                 if (k, j) in a:
                     a[(i, j)] = a.get((i, j), 0) - factor * a[(k, j)]
             b[i] = b[i] - factor * b[k]
-    v = [None] * n
+    v: dict[int, ca.SX] = {}
     for pos in reversed(range(n)):
         k = order[pos]
         later = [j for j in order[pos + 1:] if (k, j) in a]
         v[k] = (b[k] - sum((a[(k, j)] * v[j] for j in later), ca.SX(0))) / a[(k, k)]
-    return ca.vertcat(*v)
+    return ca.vertcat(*(v[k] for k in range(n)))
