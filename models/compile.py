@@ -215,10 +215,12 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
         _warn_once(kind, message)
 
     command = compiler()
-    identity = _compiler_identity(tuple(command)) if command else None
+    if not command:
+        unavailable("compiler", "no C compiler found (set CC, or put cc or gcc on the PATH)")
+        return None
+    identity = _compiler_identity(tuple(command))
     if identity is None:
-        unavailable("compiler", "no C compiler found (set CC, or put cc or gcc on the PATH)" if command is None
-                    else f"the C compiler {command[0]!r} does not run")
+        unavailable("compiler", f"the C compiler {command[0]!r} does not run")
         return None
     cache = cache_directory()
     problem = _private_directory(cache)
@@ -340,11 +342,13 @@ class NumpyCall:
                                  f"values, got shape {arr.shape}")
             flat = np.ascontiguousarray(arr.reshape(rows, cols).ravel(order="F"))
             keep.append(flat)
-            self._buffer.set_arg(i, memoryview(flat))
+            # The binding reads the size from the buffer (CasADi's stub wrongly demands a `size`
+            # argument), and numpy declares ndarray a Buffer only for Python >= 3.12.
+            self._buffer.set_arg(i, memoryview(flat))  # type: ignore[call-arg, arg-type]
         outs = []
         for i, (rows, cols) in enumerate(self._out_sizes):
             out = np.empty((cols, rows))
             outs.append(out)
-            self._buffer.set_res(i, memoryview(out))
+            self._buffer.set_res(i, memoryview(out))  # type: ignore[call-arg, arg-type]  # as set_arg above
         self._trigger()
         return [o.T for o in outs]
