@@ -42,6 +42,7 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, overload
 
 import casadi as ca
 import numpy as np
@@ -179,6 +180,10 @@ def _warn_once(kind: str, message: str) -> None:
 
 
 # ---------------------------------------------------------------------------- building libraries
+@overload
+def build_library(files: dict[str, str], flags=..., *, fallback: Literal[False]) -> Path: ...
+@overload
+def build_library(files: dict[str, str], flags=..., *, fallback: bool = ...) -> Path | None: ...
 def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) -> Path | None:
     """A shared library of C sources, from the cache or compiled into it.
 
