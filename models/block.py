@@ -14,7 +14,7 @@ import abc
 import copy
 from collections.abc import Mapping
 from functools import cached_property
-from typing import Protocol, runtime_checkable
+from typing import Protocol, Self, runtime_checkable
 
 import casadi as ca
 import numpy as np
@@ -129,7 +129,7 @@ class Block(abc.ABC):
             i += g.size
         return out
 
-    def with_gains(self, **gains) -> Block:
+    def with_gains(self, **gains) -> Self:
         """A copy with some gains replaced (same shapes); shares the compiled step."""
         unknown = set(gains) - set(self.gains)
         if unknown:
