@@ -23,6 +23,7 @@ import shutil
 import sys
 import textwrap
 import time
+from typing import Any
 
 from . import SCENARIO_NAMES, listing
 
@@ -338,7 +339,8 @@ def check_resources(plants, settings: dict) -> None:
     from . import get, runner
 
     keys = ("scenarios", "mc", "seed")
-    options = runner.Options(**{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items() if k in keys})
+    chosen: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in settings.items() if k in keys}
+    options = runner.Options(**chosen)
     for name in plants:
         study = get(name)
         runner.check_resources(study, options, models.get(study.plant).n_params)

@@ -58,7 +58,7 @@ class Options:
     quick : smaller defaults for plots and animations (the CLI also lowers mc)
     """
 
-    scenarios: tuple | None = None
+    scenarios: Sequence[str] | None = None
     mc: int = 200
     seed: int = 0
     threads: int = 2

@@ -24,18 +24,11 @@ from typing import Any
 
 import numpy as np
 from bokeh.layouts import column, row
-from bokeh.models import (
-    Button,
-    Checkbox,
-    ColumnDataSource,
-    CustomJS,
-    Div,
-    Range1d,
-    Select,
-    Slider,
-    Span,
-    TextInput,
-)
+
+# From their defining modules: bokeh.models re-exports them dynamically, which type checkers cannot follow.
+from bokeh.models import ColumnDataSource, CustomJS, Range1d
+from bokeh.models.annotations import Span
+from bokeh.models.widgets import Button, Checkbox, Div, Select, Slider, TextInput
 from bokeh.plotting import figure
 
 import models
@@ -86,7 +79,7 @@ class Page:
         self.catalog = catalog
         labels, self.designers = catalog(plant)
         label = labels[0] if label is None else label
-        self.plant = Select(title="plant", options=plants, value=plant, name="plant", width=260)
+        self.plant = Select(title="plant", options=list[str | tuple[Any, str]](plants), value=plant, name="plant", width=260)
         self.plant.on_change("value", lambda attr, old, new: self._on_plant(old, new))
         self.values: dict[str, float] = {}
         self.tuning = False
@@ -94,7 +87,7 @@ class Page:
         self.pending = False  # a redraw is scheduled for the gains a slider drag set
         self.scenario = "step"
         self.title = Div(text="", name="title")
-        self.controller = Select(title="controller", options=labels, value=label, name="controller", width=260)
+        self.controller = Select(title="controller", options=list[str | tuple[Any, str]](labels), value=label, name="controller", width=260)
         self.scenario_select = Select(title="scenario", options=[], value="step", name="scenario", width=260)
         self.gains = column(name="gains")
         self.pool: dict = {}  # (kind, key) -> the row of widgets of that control, kept across designs
