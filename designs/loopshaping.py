@@ -24,8 +24,20 @@ import control
 import numpy as np
 import scipy.optimize
 
-from .analysis import (Loop, SpecCheck, as_polynomials, band_max, check_band_ratio, check_bandwidth, check_crossover,
-                       check_phase_margin, check_stable, margins, tf, zeros_at_origin)
+from .analysis import (
+    Loop,
+    SpecCheck,
+    as_polynomials,
+    band_max,
+    check_band_ratio,
+    check_bandwidth,
+    check_crossover,
+    check_phase_margin,
+    check_stable,
+    margins,
+    tf,
+    zeros_at_origin,
+)
 from .filters import lag, lead, lead_ratio, low_pass
 
 __all__ = ["prototype_crossover", "prototype_bandwidth", "prototype_phase_margin", "damping_for_phase_margin",
@@ -246,12 +258,12 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
         lead_high = _response(design.controller, w_high) * lag_response(w_high, lag_gain)
         lead_low = _response(design.controller, w_low) * lowpass_response(w_low, corner)
 
-        def noise_ratio(corner_):
+        def noise_ratio(corner_, lead_high=lead_high):
             # T_new/T_old = C (1 + L0)/(1 + L0 C); the largest above ω_high.
             c = lead_high * lowpass_response(w_high, corner_)
             return np.max(np.abs(c * (1 + L0_high) / (1 + L0_high * c)))
 
-        def tracking_gain(gain_):
+        def tracking_gain(gain_, lead_low=lead_low):
             # S_old/S_new = |1 + L0 C|/|1 + L0|; the smallest below ω_low.
             c = lead_low * lag_response(w_low, gain_)
             return np.min(np.abs((1 + L0_low * c) / (1 + L0_low)))
@@ -263,7 +275,7 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
         elif noise_ratio(hi) <= target:
             new_corner = hi
         else:
-            new_corner = scipy.optimize.brentq(lambda w: noise_ratio(w) - target, lo, hi, xtol=1e-12 * hi)
+            new_corner = scipy.optimize.brentq(lambda w, target=target: noise_ratio(w) - target, lo, hi, xtol=1e-12 * hi)
         need = low_factor * margin
         if tracking_gain(1.0 + 1e-9) >= need:
             new_gain = 1.0 + 1e-9
@@ -278,7 +290,7 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
                     continue
                 new_gain = m_hi  # unreachable: the spec check below reports it
             else:
-                new_gain = scipy.optimize.brentq(lambda m: tracking_gain(m) - need, 1.0 + 1e-9, m_hi, xtol=1e-12)
+                new_gain = scipy.optimize.brentq(lambda m, need=need: tracking_gain(m) - need, 1.0 + 1e-9, m_hi, xtol=1e-12)
         converged = abs(new_corner - corner) <= 1e-9 * corner and abs(new_gain - lag_gain) <= 1e-9 * lag_gain
         corner, lag_gain = float(new_corner), float(new_gain)
         if converged:

@@ -84,7 +84,7 @@ class TrackingModel:
     _discrete: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
-    def from_plant(cls, plant: models.Plant, tracked: str) -> "TrackingModel":
+    def from_plant(cls, plant: models.Plant, tracked: str) -> TrackingModel:
         """Linearize `plant` at its standard equilibrium; `tracked` names the coordinate that follows r."""
         if tracked not in plant.coordinate_names:
             raise ValueError(f"{plant.name} has no coordinate {tracked!r}; coordinates are "

@@ -47,15 +47,15 @@ def test_power_balance(name):
     for x, u in _random_points(plant, rng):
         dq = x[plant.nq:]
         power = {
-            "arm": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
-            "pendulum": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
-            "satellite": lambda: u[0] * dq[0] - p["b"] * (dq[1] - dq[0]) ** 2,
-            "uuv": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
+            "arm": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
+            "pendulum": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
+            "satellite": lambda u, dq: u[0] * dq[0] - p["b"] * (dq[1] - dq[0]) ** 2,
+            "uuv": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
             # The tip moves at ell * dtheta normal to the beam, along F.
-            "ballbeam": lambda: u[0] * p["ell"] * dq[1],
-            "crane": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
-            "crane1": lambda: (u[0] - p["b"] * dq[0]) * dq[0],
-        }[name]()
+            "ballbeam": lambda u, dq: u[0] * p["ell"] * dq[1],
+            "crane": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
+            "crane1": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
+        }[name](u, dq)
         h = 1e-6
         xdot = plant.f(x, u)
         dE = (plant.energy(x + h * xdot) - plant.energy(x - h * xdot)) / (2 * h)

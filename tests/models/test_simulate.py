@@ -78,7 +78,8 @@ def test_radau_differentiation_is_exact_for_polynomials():
 @pytest.mark.parametrize("method", ["rk4", "adaptive"])
 def test_divergence_names_the_time(method, blow_up_plant):
     plant = blow_up_plant
-    with pytest.raises(models.SimulationError, match=r"blowup: .*(diverged at|failed on the segment starting at) t = 0\.9"):
+    message = r"blowup: .*(diverged at|failed on the segment starting at) t = 0\.9"
+    with pytest.raises(models.SimulationError, match=message):
         simulate(plant, [1.0, 0.0], np.zeros((200, 1)), 0.01, method=method)
     assert "blowup" not in models.names()
 

@@ -266,7 +266,7 @@ def test_controllers_have_the_labels_and_rebuild_from_gains(name):
     expected = set(homework.LABELS) | extra.get(name, set())
     assert set(blocks) == expected
     plant = models.get(name)
-    for label, block in blocks.items():
+    for block in blocks.values():
         assert block.n_measured == plant.ny and block.n_reference == 1 and block.n_input == 1
         rebuilt = block.with_gains(**block.gains)
         y = plant.output(plant.equilibrium()[0]) + 0.01
