@@ -42,6 +42,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -491,7 +492,7 @@ class TuningProblem:
         self.objective = self.aggregate(self.costs)
         self.evaluate = ca.Function("tuning_problem", [self.decision], [self.costs, self.g, ca.horzcat(*u_runs),
                                                                         costs])
-        self._smooth = None
+        self._smooth: tuple[ca.MX, ca.MX] | None = None
         # Back-compatible single-scenario attributes.
         first = self.runs[0]
         self.x0, self.reference, self.n_steps = first.x0, first.r, first.n
@@ -500,7 +501,8 @@ class TuningProblem:
 
     # ------------------------------------------------------------ building
     def _free_index(self) -> np.ndarray:
-        idx, i = [], 0
+        idx: list[int] = []
+        i = 0
         for name, g in self.block.gains.items():
             if name in self.free:
                 idx.extend(range(i, i + g.size))
@@ -603,7 +605,12 @@ class TuningProblem:
             gains[int(i)] = self.decision[j]
         param_index = [list(plant.params).index(name) for name in self.extra_params]
         m = self.samples.shape[0]
-        rows, constraints, lower, upper, u_runs, names = [], [], [], [], [], []
+        rows: list[ca.MX] = []
+        constraints: list[ca.MX] = []
+        lower: list[np.ndarray] = []
+        upper: list[np.ndarray] = []
+        u_runs: list[ca.MX] = []
+        names: list[tuple[str, slice]] = []
 
         def add(name, expr, lo, hi):
             expr = ca.vec(expr)
@@ -629,6 +636,7 @@ class TuningProblem:
                 tags = [t for t in (run_data.label, f"sample {j}" if m > 1 else "") if t]
                 tag = f" ({', '.join(tags)})" if tags else ""
                 if run_data.step is not None:
+                    assert k is not None, "a step scenario has a tracked state (checked in _prepare)"
                     y = X[k, :]
                     r_final, amp, sign = run_data.r[-1, 0], abs(run_data.step), np.sign(run_data.step)
                     t1 = run_data.t[1:]
@@ -669,7 +677,7 @@ class TuningProblem:
         ts = self.block.sample_period
         X = states[:, :n]
         total = ca.MX(0)
-        outputs = []
+        outputs: list[ca.MX] = []
 
         def output_rows():
             if not outputs:
@@ -678,7 +686,9 @@ class TuningProblem:
 
         if cost.kind is not None:
             if cost.signal == "error":
-                s = ca.DM(run.r[:-1, 0]).T - X[run.tracked_index, :]
+                k = run.tracked_index
+                assert k is not None, "the 'error' signal needs a tracked state (checked in _prepare)"
+                s = ca.DM(run.r[:-1, 0]).T - X[k, :]
             elif cost.signal in plant.state_names:
                 i = plant.state_names.index(cost.signal)
                 s = X[i, :] - run.target[i]
@@ -954,9 +964,10 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     smoothed_g = ca.Function("smoothed_constraints", [x, width], [problem.smoothed()[1] if smooth else problem.g])
 
     recorder = _Recorder(variables.numel(), g.numel(), width.numel(), progress, start_time)
-    opts = {"ipopt": IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol,
-                                      "hessian_approximation": hessian} | dict(ipopt_options or {}),
-            "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
+    ipopt: dict[str, Any] = IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol,
+                                             "hessian_approximation": hessian} | dict(ipopt_options or {})
+    opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "iteration_callback": recorder,
+                            "error_on_fail": False}
     nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
     # Compiled without a shell and cached (models.compile); CasADi's virtual machine when impossible.
     build = models.compile.jit_nlpsol if jit else ca.nlpsol
@@ -965,15 +976,21 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     warm_opts = dict(opts, ipopt=dict(opts["ipopt"], **WARM_START))
     warm_solver = build("tuning_warm", "ipopt", nlp, warm_opts) if smooth and len(widths) > 1 else None
     z_now = start_z / scale
-    multipliers = {}
-    stages, iterations = [], 0
+    multipliers: dict[str, ca.DM] = {}
+    stages: list[dict[str, Any]] = []
+    iterations = 0
     status, gap, settled = "not solved", 0.0, not smooth or len(widths) == 1
     for w in (widths if smooth else (None,)):
         stage_iterations = 0
         for attempt in range(2):
             # A numerical failure (not an iteration cap) is retried once from its last point, cold:
             # a fresh quasi-Newton memory often gets past it.
-            this = warm_solver if multipliers and attempt == 0 else solver
+            if multipliers and attempt == 0:
+                # Multipliers exist only from a second width on, where the warm solver was built.
+                assert warm_solver is not None
+                this = warm_solver
+            else:
+                this = solver
             sol = this(x0=z_now, lbx=lbz / scale, ubx=ubz / scale, lbg=lbg, ubg=ubg, p=[] if w is None else w,
                        **(multipliers if this is warm_solver else {}))
             stats = this.stats()
@@ -991,7 +1008,7 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
         same = True
         if smooth and problem.g.numel():
             g_exact = np.asarray(problem.evaluate(decision)[1]).ravel()
-            g_smooth = np.asarray(smoothed_g(decision, w)).ravel()
+            g_smooth = np.asarray(smoothed_g(decision, [] if w is None else w)).ravel()
             same = problem.violated_names(g_exact) == problem.violated_names(g_smooth)
         if stages and np.isfinite(exact):
             settled = abs(stages[-1]["exact"] - exact) <= AGREEMENT * abs(exact)
@@ -1092,6 +1109,7 @@ def _spectral_violation(problem: TuningProblem, decision) -> list[str]:
             found.append(f"spectral abscissa <= {bound:g} 1/s{where} (the closed loop diverged at "
                          f"t = {res.diverged_at:.3g} s)")
             continue
+        assert res.xc is not None, "a Block controller's states are recorded"
         alpha = closed_loop_spectral_abscissa(problem.plant, block, res.x[-1], res.xc[-1], res.r[-1],
                                               problem.samples[0], problem.substeps)
         if alpha > bound:
