@@ -134,6 +134,7 @@ def _check_common(max_iter, tol, jit, plant_cost, plant_objective):
 
 def _answer(method, problem: TuningProblem, result: TuningResult, names, cost_fn, started, status,
             converged, evaluations=1, extra_message="") -> CodesignResult:
+    assert result.decision is not None, "tuning.solve always returns its decision vector"
     values = dict(zip(names, (float(v) for v in result.decision[problem.n_gains:])))
     plant_cost_value = float(cost_fn(result.decision[problem.n_gains:]))
     plant = problem.plant.with_params(**values)
@@ -280,6 +281,7 @@ def _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, optio
         value = result.cost + float(cost_fn(values))
         if not result.feasible or not np.isfinite(value):
             # Infeasible inner answers lose to every feasible one, and the least infeasible wins.
+            assert result.decision is not None, "tuning.solve always returns its decision vector"
             excess = problem.excess(np.asarray(problem.evaluate(result.decision)[1]).ravel()) \
                 if np.isfinite(result.cost) else np.array([np.inf])
             worst = float(np.max(excess, initial=0.0))
@@ -481,6 +483,7 @@ def size_actuator_simultaneous(plant: Plant, design: Callable[[Plant], Block], s
     weight = cost_weight * start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
     result = solve(problem, lbx, ubx, max_iter, jit, plant_cost=lambda x: x[offset], cost_weight=weight, tol=tol,
                    widths=widths)
+    assert result.decision is not None, "tuning.solve always returns its decision vector"
     limit = float(result.decision[offset])
     sized = plant.with_input_limit(limit)
     gains = {k: v for k, v in result.gains.items() if k != "actuator_limit"}
