@@ -130,11 +130,14 @@ def worst_step(case: CaseStudy, block, params, name: str = "disturbance") -> dic
     """Worst overshoot (fraction) and 2 % settling time (s) of `block` on scenario `name` over `params` rows."""
     plant, sc = models.get(case.plant), scenario(case, name)
     k = plant.state_names.index(case.tracked)
+    # `scenario` starts at the equilibrium and steps to one constant reference.
+    x0, target = sc.x0, sc.reference
+    assert x0 is not None and isinstance(target, float), "scenario() gives an x0 and a constant reference"
     worst = {"overshoot": 0.0, "settling_time_s": 0.0}
     for p in params:
         run = models.simulate_closed_loop(plant, block, sc.reference, sc.duration, x0=sc.x0, params=p,
                                           input_disturbance=sc.input_disturbance, substeps=SUBSTEPS)
-        m = metrics.step_metrics(run.t, run.x[:, k], initial=sc.x0[k], target=sc.reference)
+        m = metrics.step_metrics(run.t, run.x[:, k], initial=x0[k], target=target)
         worst["overshoot"] = max(worst["overshoot"], m["overshoot_pct"] / 100)
         worst["settling_time_s"] = max(worst["settling_time_s"], m["settling_time_s"])
     return worst
@@ -167,6 +170,7 @@ def gain_bounds(block) -> dict:
 
 def with_margin(specs: Specs) -> Specs:
     """The specs tuning enforces on its few samples: tighter, so that fresh samples still meet `specs`."""
+    assert specs.max_overshoot is not None, "measured_specs always sets max_overshoot"
     return Specs(max_overshoot=MARGIN * specs.max_overshoot, settling_band=specs.settling_band,
                  settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time,
                  max_spectral_abscissa=specs.max_spectral_abscissa)
