@@ -37,6 +37,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -160,10 +161,13 @@ def measure(plant: models.Plant, block: models.Block, scenario: Scenario, specs:
         peak_input : max |u| (units of u); max_abs_<name> for each state in specs.state_bounds
     """
     k = plant.state_names.index(scenario.tracked)
+    reference = scenario.reference
+    if not isinstance(reference, (int, float)):
+        raise TypeError(f"measure needs a constant step reference, got {reference!r}")
     x0 = plant.equilibrium()[0] if scenario.x0 is None else np.asarray(scenario.x0, dtype=float)
     run = models.simulate_closed_loop(plant, block, scenario.reference, scenario.duration, x0=x0,
                                       input_disturbance=scenario.input_disturbance, allow_divergence=True)
-    step = float(scenario.reference) - x0[k]
+    step = float(reference) - x0[k]
     y = np.sign(step) * (run.x[1:, k] - x0[k]) / abs(step)  # fraction of the step, samples 1..N
     below = np.flatnonzero(y < 0.9)
     if below.size == 0:
@@ -244,6 +248,7 @@ def holding_limit(case: CaseStudy, sizing: ActuatorSizing) -> float:
     """Largest equilibrium input along the step, units of u: no smaller limit can hold the target."""
     plant = models.get(case.plant)
     scenario = sizing_scenario(case, sizing)
+    assert scenario.x0 is not None, "step_scenario starts at the standard equilibrium"
     start = scenario.x0[plant.state_names.index(case.tracked)]
     value, _ = max_equilibrium_input(plant, {case.tracked: tuple(sorted((start, scenario.reference)))})
     return value
@@ -277,7 +282,7 @@ def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float =
     specs = sizing.specs
     unit = case.input_unit
     floor = holding_limit(case, sizing)
-    options = {"free": sizing.free} | dict(tune_options or {})
+    options: dict[str, Any] = {"free": sizing.free} | dict(tune_options or {})
     result = CaseResult(
         key=case.plant, problem=f"actuator sizing: {case.plant}", plant=case.plant, parameter=sizing.parameter,
         unit=unit, text_value=sizing.text_limit, objective="smallest limit meeting the specs", scenario=scenario,
@@ -376,7 +381,7 @@ def codesign_case(result: CaseResult, plant, block, name, low, high, plant_cost,
 
 def problems() -> dict[str, Callable[[], CaseResult]]:
     """CLI key -> function running the problem, over the registered cases in their order."""
-    found = {}
+    found: dict[str, Callable[[], CaseResult]] = {}
     for name in cases.names():
         found |= dict(cases.get(name).codesign)
     return found
