@@ -172,13 +172,24 @@ def main(problem_path: str, result_path: str) -> None:
                 internal.append(float(np.ravel(solver.get_stats("time_tot"))[0]))
             first.append(u0.tolist())
             status.append(int(code))
-        result = {"available": True, "wrapper": wrapper, "build_s": build_s, "step_ms": [1e3 * t for t in times],
-                  "time_tot_ms": [1e3 * t for t in internal], "first_moves": first, "status": status,
-                  "casadi_version": ca.__version__, "nx": nx, "nu": nu}
+        result = {
+            "available": True,
+            "wrapper": wrapper,
+            "build_s": build_s,
+            "step_ms": [1e3 * t for t in times],
+            "time_tot_ms": [1e3 * t for t in internal],
+            "first_moves": first,
+            "status": status,
+            "casadi_version": ca.__version__,
+            "nx": nx,
+            "nu": nu,
+        }
     except Exception as err:
         where = traceback.extract_tb(err.__traceback__)[-1]
-        result = {"available": False, "reason": f"{type(err).__name__}: {err} (at {os.path.basename(where.filename)}:"
-                                                f"{where.lineno})"[:2000]}
+        result = {
+            "available": False,
+            "reason": f"{type(err).__name__}: {err} (at {os.path.basename(where.filename)}:{where.lineno})"[:2000],
+        }
     finally:
         shutil.rmtree(work, ignore_errors=True)
     with open(result_path, "w") as handle:

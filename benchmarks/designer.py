@@ -57,10 +57,17 @@ def bench(name: str, label: str, repeat: int) -> dict:
     loop = session.loop_gain(block, run)
     fast = [timed(lambda: designer.loop_margins(loop, session.omega)) for _ in range(20)]
     slow = [timed(loop.margins) for _ in range(5)]
-    return {"plant": name, "controller": label, "updates": repeat, "first_update_ms": 1e3 * first_call,
-            "median_ms": 1e3 * statistics.median(times), "p90_ms": 1e3 * float(np.quantile(times, 0.9)),
-            "margins_ms": 1e3 * statistics.median(fast), "python_control_margins_ms": 1e3 * statistics.median(slow),
-            "margins_ratio": statistics.median(slow) / statistics.median(fast)}
+    return {
+        "plant": name,
+        "controller": label,
+        "updates": repeat,
+        "first_update_ms": 1e3 * first_call,
+        "median_ms": 1e3 * statistics.median(times),
+        "p90_ms": 1e3 * float(np.quantile(times, 0.9)),
+        "margins_ms": 1e3 * statistics.median(fast),
+        "python_control_margins_ms": 1e3 * statistics.median(slow),
+        "margins_ratio": statistics.median(slow) / statistics.median(fast),
+    }
 
 
 def main(argv=None) -> int:
@@ -71,14 +78,22 @@ def main(argv=None) -> int:
     if args.repeat < 1:
         parser.error(f"--repeat must be >= 1, got {args.repeat}")
     rows = [bench(name, label, args.repeat) for name, label in CASES]
-    print(f"{'plant':10s} {'controller':10s} {'median ms':>10s} {'p90 ms':>8s} {'first ms':>9s} "
-          f"{'margins ms':>11s} {'python-control ms':>18s} {'ratio':>7s}")
+    print(
+        f"{'plant':10s} {'controller':10s} {'median ms':>10s} {'p90 ms':>8s} {'first ms':>9s} "
+        f"{'margins ms':>11s} {'python-control ms':>18s} {'ratio':>7s}"
+    )
     for r in rows:
-        print(f"{r['plant']:10s} {r['controller']:10s} {r['median_ms']:10.1f} {r['p90_ms']:8.1f} "
-              f"{r['first_update_ms']:9.0f} {r['margins_ms']:11.2f} {r['python_control_margins_ms']:18.1f} "
-              f"{r['margins_ratio']:6.0f}x")
-    figures = {"repeat": args.repeat, "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
-               "load_average": os.getloadavg(), "cases": rows}
+        print(
+            f"{r['plant']:10s} {r['controller']:10s} {r['median_ms']:10.1f} {r['p90_ms']:8.1f} "
+            f"{r['first_update_ms']:9.0f} {r['margins_ms']:11.2f} {r['python_control_margins_ms']:18.1f} "
+            f"{r['margins_ratio']:6.0f}x"
+        )
+    figures = {
+        "repeat": args.repeat,
+        "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+        "load_average": os.getloadavg(),
+        "cases": rows,
+    }
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(figures, fh, indent=2)

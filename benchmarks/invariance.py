@@ -26,7 +26,7 @@ TIMING = ("wall_s", "step_ms", "step_ms_max")
 #: Changes made on purpose, by (plant, answers item): why.
 KNOWN = {
     ("pendulum", "errata"): "the II.8/III.8/V.8 erratum names `studies.homework.SEPARATION`, not the deleted "
-                            "`designs.classical`",
+    "`designs.classical`",
     ("satellite", "errata"): "as pendulum",
     ("ballbeam", "errata"): "as pendulum",
 }
@@ -56,14 +56,17 @@ def compare_tables(old: pd.DataFrame, new: pd.DataFrame, rtol: float, plant: str
     key = ["controller", "scenario"]
     merged = old.merge(new, on=key, how="outer", suffixes=("_old", "_new"), indicator=True)
     for _, row in merged[merged["_merge"] != "both"].iterrows():
-        out.append(f"{plant}/table.csv {row.controller}/{row.scenario}: only in "
-                   f"{'baseline' if row['_merge'] == 'left_only' else 'new'}")
+        out.append(
+            f"{plant}/table.csv {row.controller}/{row.scenario}: only in "
+            f"{'baseline' if row['_merge'] == 'left_only' else 'new'}"
+        )
     both = merged[merged["_merge"] == "both"]
     columns = [c for c in old.columns if c not in key and c not in TIMING]
     for _, row in both.iterrows():
         optimizing = row["kind_old"] == "python"
-        budget_cut = any(str(row[f"status_{s}"]).startswith(("skipped: over its budget", "skipped: needs"))
-                         for s in ("old", "new"))
+        budget_cut = any(
+            str(row[f"status_{s}"]).startswith(("skipped: over its budget", "skipped: needs")) for s in ("old", "new")
+        )
         for c in columns:
             a, b = row[f"{c}_old"], row[f"{c}_new"]
             if optimizing and (c == "status" or budget_cut):

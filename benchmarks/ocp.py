@@ -79,9 +79,18 @@ def ours(plant, method, guess) -> dict:
     built = time.perf_counter()
     solution = solver.solve(guess=guess)
     done = time.perf_counter()
-    return {"build_s": built - started, "solve_s": done - built, "total_s": done - started,
-            "objective": solution.objective, "success": solution.success, "status": solution.status,
-            "iterations": solution.iterations, "t": solution.t, "states": solution.states, "inputs": solution.inputs}
+    return {
+        "build_s": built - started,
+        "solve_s": done - built,
+        "total_s": done - started,
+        "objective": solution.objective,
+        "success": solution.success,
+        "status": solution.status,
+        "iterations": solution.iterations,
+        "t": solution.t,
+        "states": solution.states,
+        "inputs": solution.inputs,
+    }
 
 
 def hand_written(plant, intervals: int, guess) -> dict:
@@ -123,10 +132,18 @@ def hand_written(plant, intervals: int, guess) -> dict:
         solution, success = opti.debug, False
     done = time.perf_counter()
     stats = opti.stats()
-    return {"build_s": built - started, "solve_s": done - built, "total_s": done - started,
-            "objective": float(solution.value(cost)), "success": success, "status": stats["return_status"],
-            "iterations": int(stats["iter_count"]), "t": t, "states": np.asarray(solution.value(X)).T,
-            "inputs": np.asarray(solution.value(U)).reshape(-1, 1)}
+    return {
+        "build_s": built - started,
+        "solve_s": done - built,
+        "total_s": done - started,
+        "objective": float(solution.value(cost)),
+        "success": success,
+        "status": stats["return_status"],
+        "iterations": int(stats["iter_count"]),
+        "t": t,
+        "states": np.asarray(solution.value(X)).T,
+        "inputs": np.asarray(solution.value(U)).reshape(-1, 1),
+    }
 
 
 def python_control(plant, intervals: int) -> dict:
@@ -136,23 +153,44 @@ def python_control(plant, intervals: int) -> dict:
     started = time.perf_counter()
     p = plant.param_vector()
     f = NumpyCall(plant.casadi_f)
-    system = ct.nlsys(lambda t, x, u, params: f(x, u, p)[0].ravel(), None, inputs=1, states=4, outputs=4,
-                      name="pendulum")
+    system = ct.nlsys(
+        lambda t, x, u, params: f(x, u, p)[0].ravel(), None, inputs=1, states=4, outputs=4, name="pendulum"
+    )
     t = np.linspace(0, FINAL_TIME, intervals + 1)
     guess = guess_trajectory(plant, intervals)
     guess_force = 2 * np.sin(2 * np.pi * t / FINAL_TIME)
-    constraints = [ct.optimal.input_range_constraint(system, [-FORCE_LIMIT], [FORCE_LIMIT]),
-                   ct.optimal.state_range_constraint(system, [-TRAVEL, -np.inf, -np.inf, -np.inf],
-                                                     [TRAVEL, np.inf, np.inf, np.inf])]
+    constraints = [
+        ct.optimal.input_range_constraint(system, [-FORCE_LIMIT], [FORCE_LIMIT]),
+        ct.optimal.state_range_constraint(
+            system, [-TRAVEL, -np.inf, -np.inf, -np.inf], [TRAVEL, np.inf, np.inf, np.inf]
+        ),
+    ]
     terminal = [(LinearConstraint, np.hstack([np.eye(4), np.zeros((4, 1))]), np.zeros(4), np.zeros(4))]
-    result = ct.optimal.solve_ocp(system, t, START, lambda x, u: u[0] ** 2, constraints,
-                                  terminal_constraints=terminal, initial_guess=(guess.x.T, guess_force[None, :]),
-                                  trajectory_method="collocation", print_summary=False)
+    result = ct.optimal.solve_ocp(
+        system,
+        t,
+        START,
+        lambda x, u: u[0] ** 2,
+        constraints,
+        terminal_constraints=terminal,
+        initial_guess=(guess.x.T, guess_force[None, :]),
+        trajectory_method="collocation",
+        print_summary=False,
+    )
     done = time.perf_counter()
-    return {"build_s": float("nan"), "solve_s": done - started, "total_s": done - started,
-            "objective": float(result.cost), "success": bool(result.success), "status": str(result.message),
-            "iterations": int(getattr(result, "nit", 0) or 0), "t": t, "states": np.asarray(result.states).T,
-            "inputs": np.asarray(result.inputs).reshape(-1, 1), "piecewise_linear": True}
+    return {
+        "build_s": float("nan"),
+        "solve_s": done - started,
+        "total_s": done - started,
+        "objective": float(result.cost),
+        "success": bool(result.success),
+        "status": str(result.message),
+        "iterations": int(getattr(result, "nit", 0) or 0),
+        "t": t,
+        "states": np.asarray(result.states).T,
+        "inputs": np.asarray(result.inputs).reshape(-1, 1),
+        "piecewise_linear": True,
+    }
 
 
 def input_cost(row) -> float:
@@ -171,12 +209,17 @@ def defects(plant, row, substeps: int = 20) -> tuple[float, float]:
         check = mpc.verify_trajectory(plant, t, states, u)
         return check.max_defect, check.max_interval_defect
     fractions = (np.arange(substeps) + 0.5) / substeps
-    fine_t = np.concatenate([t[k] + (t[k + 1] - t[k]) * np.arange(substeps) / substeps for k in range(len(t) - 1)]
-                            + [t[-1:]])
+    fine_t = np.concatenate(
+        [t[k] + (t[k + 1] - t[k]) * np.arange(substeps) / substeps for k in range(len(t) - 1)] + [t[-1:]]
+    )
     held = np.concatenate([u[k, 0] + (u[k + 1, 0] - u[k, 0]) * fractions for k in range(len(t) - 1)])[:, None]
     whole = mpc.resimulate(plant, fine_t, states[0], held)[::substeps]
-    local = [mpc.resimulate(plant, fine_t[k * substeps:(k + 1) * substeps + 1], states[k],
-                            held[k * substeps:(k + 1) * substeps])[-1] for k in range(len(t) - 1)]
+    local = [
+        mpc.resimulate(
+            plant, fine_t[k * substeps : (k + 1) * substeps + 1], states[k], held[k * substeps : (k + 1) * substeps]
+        )[-1]
+        for k in range(len(t) - 1)
+    ]
     return float(np.max(np.abs(whole - states))), float(np.max(np.abs(np.array(local) - states[1:])))
 
 
@@ -207,12 +250,16 @@ def main(argv=None):
     if not args.skip_python_control:
         rows["d"] = python_control(plant, args.control_intervals) | {"intervals": args.control_intervals}
         small = guess_trajectory(plant, args.control_intervals)
-        same_n = [ours(plant, mpc.Collocation(intervals=args.control_intervals, degree=DEGREE), small)
-                  for _ in range(args.repeat)]
-        rows["a_d"] = dict(same_n[-1]) | {"intervals": args.control_intervals,
-                                          "total_s": float(np.median([r["total_s"] for r in same_n])),
-                                          "build_s": float(np.median([r["build_s"] for r in same_n])),
-                                          "solve_s": float(np.median([r["solve_s"] for r in same_n]))}
+        same_n = [
+            ours(plant, mpc.Collocation(intervals=args.control_intervals, degree=DEGREE), small)
+            for _ in range(args.repeat)
+        ]
+        rows["a_d"] = dict(same_n[-1]) | {
+            "intervals": args.control_intervals,
+            "total_s": float(np.median([r["total_s"] for r in same_n])),
+            "build_s": float(np.median([r["build_s"] for r in same_n])),
+            "solve_s": float(np.median([r["solve_s"] for r in same_n])),
+        }
 
     for row in rows.values():
         row["input_cost"] = input_cost(row)
@@ -221,34 +268,52 @@ def main(argv=None):
         row["max_travel"] = float(np.max(np.abs(row["states"][:, 0])))
 
     base = rows["a"]["total_s"]
-    print(f"Pendulum swing-up: minimum ∫F² dt, T = {FINAL_TIME} s, |F| <= {FORCE_LIMIT} N, |z| <= {TRAVEL} m; "
-          f"median of {args.repeat} runs for (a)-(c)")
-    header = (f"{'path':36s} {'N':>4s} {'build s':>8s} {'solve s':>8s} {'total s':>8s} {'/ (a)':>7s} "
-              f"{'objective':>10s} {'∫F² input':>10s} {'iter':>5s} {'defect':>9s} {'interval':>9s} status")
+    print(
+        f"Pendulum swing-up: minimum ∫F² dt, T = {FINAL_TIME} s, |F| <= {FORCE_LIMIT} N, |z| <= {TRAVEL} m; "
+        f"median of {args.repeat} runs for (a)-(c)"
+    )
+    header = (
+        f"{'path':36s} {'N':>4s} {'build s':>8s} {'solve s':>8s} {'total s':>8s} {'/ (a)':>7s} "
+        f"{'objective':>10s} {'∫F² input':>10s} {'iter':>5s} {'defect':>9s} {'interval':>9s} status"
+    )
     print(header)
     for key, row in rows.items():
         label = f"({key}) {PATHS[key]}"
-        print(f"{label:36s} {row['intervals']:4d} {row['build_s']:8.3f} {row['solve_s']:8.3f} {row['total_s']:8.3f} "
-              f"{row['total_s'] / base:7.2f} {row['objective']:10.4f} {row['input_cost']:10.4f} "
-              f"{row['iterations']:5d} {row['defect']:9.2e} {row['interval_defect']:9.2e} {row['status'][:40]}")
+        print(
+            f"{label:36s} {row['intervals']:4d} {row['build_s']:8.3f} {row['solve_s']:8.3f} {row['total_s']:8.3f} "
+            f"{row['total_s'] / base:7.2f} {row['objective']:10.4f} {row['input_cost']:10.4f} "
+            f"{row['iterations']:5d} {row['defect']:9.2e} {row['interval_defect']:9.2e} {row['status'][:40]}"
+        )
     solved = [row["input_cost"] for key, row in rows.items() if row["success"] and key != "a_d"]
     best = min(solved)
     figures = {
-        "problem": {"final_time_s": FINAL_TIME, "force_limit_N": FORCE_LIMIT, "travel_m": TRAVEL,
-                    "start": START.tolist(), "degree": DEGREE},
+        "problem": {
+            "final_time_s": FINAL_TIME,
+            "force_limit_N": FORCE_LIMIT,
+            "travel_m": TRAVEL,
+            "start": START.tolist(),
+            "degree": DEGREE,
+        },
         "repeat": args.repeat,
-        "paths": {key: {k: v for k, v in row.items() if k not in ("t", "states", "inputs")} | {"label": PATHS[key]}
-                  for key, row in rows.items()},
+        "paths": {
+            key: {k: v for k, v in row.items() if k not in ("t", "states", "inputs")} | {"label": PATHS[key]}
+            for key, row in rows.items()
+        },
         "objective_a_over_best": rows["a"]["input_cost"] / best,
         "time_a_over_c": rows["a"]["total_s"] / rows["c"]["total_s"],
     }
-    print(f"(a) ∫F² / best converged = {figures['objective_a_over_best']:.4f} (target <= 1.01); "
-          f"time (a) / (c) = {figures['time_a_over_c']:.2f} (target <= 1.5)", end="")
+    print(
+        f"(a) ∫F² / best converged = {figures['objective_a_over_best']:.4f} (target <= 1.01); "
+        f"time (a) / (c) = {figures['time_a_over_c']:.2f} (target <= 1.5)",
+        end="",
+    )
     if "d" in rows:
         figures["time_d_over_a"] = rows["d"]["total_s"] / rows["a"]["total_s"]
         figures["time_d_over_a_same_intervals"] = rows["d"]["total_s"] / rows["a_d"]["total_s"]
-        print(f"; time (d) / (a) = {figures['time_d_over_a']:.1f} (target >= 10), "
-              f"{figures['time_d_over_a_same_intervals']:.1f} at (d)'s N")
+        print(
+            f"; time (d) / (a) = {figures['time_d_over_a']:.1f} (target >= 10), "
+            f"{figures['time_d_over_a_same_intervals']:.1f} at (d)'s N"
+        )
     else:
         print()
     if args.json:

@@ -71,8 +71,12 @@ def bench(name, repeat):
     compiled_ms = median_ms(lambda: run(True), repeat)
     vm_ms = median_ms(lambda: run(False), max(3, repeat // 4))
     return {
-        "compiled_ms": compiled_ms, "vm_ms": vm_ms, "python_ms": python_ms,
-        "ratio": python_ms / compiled_ms, "ratio_vm": python_ms / vm_ms, "compile_s": compile_s,
+        "compiled_ms": compiled_ms,
+        "vm_ms": vm_ms,
+        "python_ms": python_ms,
+        "ratio": python_ms / compiled_ms,
+        "ratio_vm": python_ms / vm_ms,
+        "compile_s": compile_s,
         "max_state_diff": float(max(np.max(np.abs(compiled.x - reference)), np.max(np.abs(vm.x - reference)))),
     }
 
@@ -86,12 +90,16 @@ def main(argv=None):
     if args.repeat < 1:
         parser.error("--repeat must be >= 1")
     results = {}
-    print(f"{'plant':10s} {'compiled ms':>12s} {'vm ms':>8s} {'python ms':>10s} {'ratio':>8s} "
-          f"{'ratio vm':>9s} {'compile s':>10s} {'max |dx|':>9s}")
+    print(
+        f"{'plant':10s} {'compiled ms':>12s} {'vm ms':>8s} {'python ms':>10s} {'ratio':>8s} "
+        f"{'ratio vm':>9s} {'compile s':>10s} {'max |dx|':>9s}"
+    )
     for name in args.plants:
         r = results[name] = bench(name, args.repeat)
-        print(f"{name:10s} {r['compiled_ms']:12.2f} {r['vm_ms']:8.2f} {r['python_ms']:10.0f} {r['ratio']:8.0f} "
-              f"{r['ratio_vm']:9.0f} {r['compile_s']:10.2f} {r['max_state_diff']:9.1e}")
+        print(
+            f"{name:10s} {r['compiled_ms']:12.2f} {r['vm_ms']:8.2f} {r['python_ms']:10.0f} {r['ratio']:8.0f} "
+            f"{r['ratio_vm']:9.0f} {r['compile_s']:10.2f} {r['max_state_diff']:9.1e}"
+        )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(results, fh, indent=2)

@@ -59,8 +59,10 @@ def problem_data(step):
     low = np.where(start > 0, start / 3, 3 * start)
     high = np.where(start > 0, 3 * start, start / 3)
     low[start == 0], high[start == 0] = -1.0, 1.0
-    bounds = {name: (low[sl].reshape(block.gains[name].shape), high[sl].reshape(block.gains[name].shape))
-              for name, sl in _slices(block).items()}
+    bounds = {
+        name: (low[sl].reshape(block.gains[name].shape), high[sl].reshape(block.gains[name].shape))
+        for name, sl in _slices(block).items()
+    }
     return plant, block, scenario, bounds, low, high
 
 
@@ -119,27 +121,40 @@ def run_multiple_shooting(plant, block, scenario, low, high):
     states, commands, gaps = [], [], []
     for i in range(SEGMENTS):
         s = ca.DM(np.concatenate([x0, xc0])) if i == 0 else nodes[:, i - 1]
-        X, XC, U, _ = run(s[:nx], s[nx:], r[:, i * length:(i + 1) * length], np.zeros((block.n_measured, length)),
-                          np.zeros((plant.nu, length)), plant.param_vector(), gains)
+        X, XC, U, _ = run(
+            s[:nx],
+            s[nx:],
+            r[:, i * length : (i + 1) * length],
+            np.zeros((block.n_measured, length)),
+            np.zeros((plant.nu, length)),
+            plant.param_vector(),
+            gains,
+        )
         states.append(X)
         commands.append(U)
         if i < SEGMENTS - 1:
             gaps.append(ca.vertcat(X[:, -1], XC[:, -1]) - nodes[:, i])
     X, U = ca.horzcat(*states), ca.horzcat(*commands)
     t = block.sample_period * np.arange(n)
-    e = ca.DM(r[0]).T - ca.horzcat(x0[problem.runs[0].tracked_index], X[problem.runs[0].tracked_index, :n - 1])
-    cost = block.sample_period * (ca.sum2(ca.DM(t).T * ca.sqrt(e**2 + COST.smoothing**2))
-                                  + COST.energy_weight * ca.sum2(ca.sum1(U**2)))
+    e = ca.DM(r[0]).T - ca.horzcat(x0[problem.runs[0].tracked_index], X[problem.runs[0].tracked_index, : n - 1])
+    cost = block.sample_period * (
+        ca.sum2(ca.DM(t).T * ca.sqrt(e**2 + COST.smoothing**2)) + COST.energy_weight * ca.sum2(ca.sum1(U**2))
+    )
     sim = models.simulate_closed_loop(plant, block, problem.reference, DURATION, x0=x0)
-    node0 = np.array([np.concatenate([sim.x[(i + 1) * length], sim.xc[(i + 1) * length]])
-                      for i in range(SEGMENTS - 1)]).T
+    node0 = np.array(
+        [np.concatenate([sim.x[(i + 1) * length], sim.xc[(i + 1) * length]]) for i in range(SEGMENTS - 1)]
+    ).T
     start = problem.start()
-    scale = np.concatenate([np.where(start != 0, np.abs(start), 1.0),
-                            np.repeat(np.maximum(np.max(np.abs(node0), axis=1), 1e-2), SEGMENTS - 1)])
+    scale = np.concatenate(
+        [
+            np.where(start != 0, np.abs(start), 1.0),
+            np.repeat(np.maximum(np.max(np.abs(node0), axis=1), 1e-2), SEGMENTS - 1),
+        ]
+    )
     z = ca.MX.sym("z", scale.size)
     decision = scale * z
     split = ca.Function("split", [gains, nodes], [cost, ca.vertcat(*gaps)])
-    f, g = split(decision[:start.size], ca.reshape(decision[start.size:], nx + nc, SEGMENTS - 1))
+    f, g = split(decision[: start.size], ca.reshape(decision[start.size :], nx + nc, SEGMENTS - 1))
     history = []
 
     class Record(ca.Callback):
@@ -154,29 +169,59 @@ def run_multiple_shooting(plant, block, scenario, low, high):
             return 1
 
         def get_sparsity_in(self, i):
-            size = {"x": scale.size, "lam_x": scale.size, "g": g.numel(), "lam_g": g.numel(), "p": 0,
-                    "lam_p": 0, "f": 1}[ca.nlpsol_out(i)]
+            size = {
+                "x": scale.size,
+                "lam_x": scale.size,
+                "g": g.numel(),
+                "lam_g": g.numel(),
+                "p": 0,
+                "lam_p": 0,
+                "f": 1,
+            }[ca.nlpsol_out(i)]
             return ca.Sparsity.dense(size, 1)
 
         def eval(self, arg):
-            history.append((time.perf_counter() - started,
-                            float(exact(scale[:start.size] * np.asarray(arg[0]).ravel()[:start.size]))))
+            history.append(
+                (
+                    time.perf_counter() - started,
+                    float(exact(scale[: start.size] * np.asarray(arg[0]).ravel()[: start.size])),
+                )
+            )
             return [0]
 
     record = Record()
-    solver = ca.nlpsol("multiple_shooting", "ipopt", {"x": z, "f": f, "g": g},
-                       {"ipopt": {"max_iter": ALTERNATIVE_MAX_ITER, "print_level": 0, "tol": 1e-8,
-                                  "acceptable_tol": 1e-6, "acceptable_iter": 10,
-                                  "hessian_approximation": "limited-memory", "sb": "yes"},
-                        "print_time": False, "error_on_fail": False, "iteration_callback": record})
+    solver = ca.nlpsol(
+        "multiple_shooting",
+        "ipopt",
+        {"x": z, "f": f, "g": g},
+        {
+            "ipopt": {
+                "max_iter": ALTERNATIVE_MAX_ITER,
+                "print_level": 0,
+                "tol": 1e-8,
+                "acceptable_tol": 1e-6,
+                "acceptable_iter": 10,
+                "hessian_approximation": "limited-memory",
+                "sb": "yes",
+            },
+            "print_time": False,
+            "error_on_fail": False,
+            "iteration_callback": record,
+        },
+    )
     lb = np.concatenate([low, np.full(node0.size, -np.inf)]) / scale
     ub = np.concatenate([high, np.full(node0.size, np.inf)]) / scale
     z0 = np.concatenate([start, node0.ravel(order="F")]) / scale
     sol = solver(x0=z0, lbx=lb, ubx=ub, lbg=0, ubg=0)
     stats = solver.stats()
-    gains_found = np.clip(scale[:start.size] * np.asarray(sol["x"]).ravel()[:start.size], low, high)
-    return (time.perf_counter() - started, float(exact(gains_found)), stats["return_status"],
-            int(stats["iter_count"]), history)
+    gains_found = np.clip(scale[: start.size] * np.asarray(sol["x"]).ravel()[: start.size], low, high)
+    return (
+        time.perf_counter() - started,
+        float(exact(gains_found)),
+        stats["return_status"],
+        int(stats["iter_count"]),
+        history,
+    )
 
 
 def run_nelder_mead(plant, block, scenario, low, high, max_evaluations):
@@ -189,10 +234,13 @@ def run_nelder_mead(plant, block, scenario, low, high, max_evaluations):
         evaluations[0] += 1
         return float(objective(x))
 
-    result = scipy.optimize.minimize(value, problem.start(), method="Nelder-Mead",
-                                     bounds=list(zip(low, high)),
-                                     options={"maxfev": max_evaluations, "xatol": 1e-8, "fatol": 1e-10,
-                                              "adaptive": True})
+    result = scipy.optimize.minimize(
+        value,
+        problem.start(),
+        method="Nelder-Mead",
+        bounds=list(zip(low, high)),
+        options={"maxfev": max_evaluations, "xatol": 1e-8, "fatol": 1e-10, "adaptive": True},
+    )
     return time.perf_counter() - start, result, evaluations[0]
 
 
@@ -206,63 +254,93 @@ def compare(step, max_evaluations, alternatives=False):
     # Iterate times count from the solve; add the problem's construction, which Nelder-Mead's time includes.
     grad_s = reached + (grad_total_s - grad.wall_time) if reached is not None else grad_total_s
     out = {
-        "step_m": step, "initial_cost": grad.initial_cost,
-        "gradient_s": grad_s, "gradient_total_s": grad_total_s, "gradient_cost": grad.cost,
-        "gradient_iterations": grad.iterations, "gradient_status": grad.status,
-        "gradient_converged": grad.converged, "gradient_stages": grad.stages,
+        "step_m": step,
+        "initial_cost": grad.initial_cost,
+        "gradient_s": grad_s,
+        "gradient_total_s": grad_total_s,
+        "gradient_cost": grad.cost,
+        "gradient_iterations": grad.iterations,
+        "gradient_status": grad.status,
+        "gradient_converged": grad.converged,
+        "gradient_stages": grad.stages,
         "gradient_reached_nelder_mead_cost": reached is not None,
-        "nelder_mead_s": nm_s, "nelder_mead_cost": target, "nelder_mead_evaluations": nm_evals,
-        "nelder_mead_message": str(nm.message), "speedup": nm_s / grad_s,
+        "nelder_mead_s": nm_s,
+        "nelder_mead_cost": target,
+        "nelder_mead_evaluations": nm_evals,
+        "nelder_mead_message": str(nm.message),
+        "speedup": nm_s / grad_s,
     }
     if alternatives:
         total, exact = run_gradient(plant, block, scenario, bounds, method="exact", max_iter=ALTERNATIVE_MAX_ITER)
         hit = exact_time_to_reach(exact, exact_problem, target)
-        out["exact_loop"] = {"s": hit + (total - exact.wall_time) if hit is not None else total, "total_s": total,
-                             "cost": exact.cost, "status": exact.status, "iterations": exact.iterations,
-                             "reached_nelder_mead_cost": hit is not None}
+        out["exact_loop"] = {
+            "s": hit + (total - exact.wall_time) if hit is not None else total,
+            "total_s": total,
+            "cost": exact.cost,
+            "status": exact.status,
+            "iterations": exact.iterations,
+            "reached_nelder_mead_cost": hit is not None,
+        }
         total, cost, status, iterations, history = run_multiple_shooting(plant, block, scenario, low, high)
         hit = time_to_reach(history, target)
-        out["multiple_shooting"] = {"s": hit if hit is not None else total, "total_s": total, "cost": cost,
-                                    "status": status, "iterations": iterations,
-                                    "reached_nelder_mead_cost": hit is not None}
+        out["multiple_shooting"] = {
+            "s": hit if hit is not None else total,
+            "total_s": total,
+            "cost": cost,
+            "status": status,
+            "iterations": iterations,
+            "reached_nelder_mead_cost": hit is not None,
+        }
     return out
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--json", metavar="PATH", help="write gradient_s, gradient_cost, nelder_mead_s, "
-                        "nelder_mead_cost, speedup (of the first problem) and every problem's figures")
+    parser.add_argument(
+        "--json",
+        metavar="PATH",
+        help="write gradient_s, gradient_cost, nelder_mead_s, "
+        "nelder_mead_cost, speedup (of the first problem) and every problem's figures",
+    )
     parser.add_argument("--max-evaluations", type=int, default=20000, help="Nelder-Mead's evaluation budget")
     parser.add_argument("--problems", nargs="+", default=list(STEPS), choices=list(STEPS))
-    parser.add_argument("--compare", action="store_true",
-                        help="also time IPOPT on the exact loop, single and multiple shooting")
+    parser.add_argument(
+        "--compare", action="store_true", help="also time IPOPT on the exact loop, single and multiple shooting"
+    )
     args = parser.parse_args(argv)
     if args.max_evaluations < 1:
         parser.error("--max-evaluations must be >= 1")
     block = statespace_controllers(studies.get(PLANT))[LABEL]
-    print(f"{PLANT} '{LABEL}', {block.gain_vector().size} gains, {DURATION:g} s, "
-          f"ITAE + {COST.energy_weight:g} energy")
+    print(f"{PLANT} '{LABEL}', {block.gain_vector().size} gains, {DURATION:g} s, ITAE + {COST.energy_weight:g} energy")
     print(f"{'problem':17s} {'method':18s} {'wall s':>8s} {'cost':>12s}  notes")
     problems = {}
     for name in args.problems:
         r = problems[name] = compare(STEPS[name], args.max_evaluations, args.compare)
         label = f"{name} ({r['step_m']:g} m)"
-        print(f"{label:17s} {'nelder-mead':18s} {r['nelder_mead_s']:8.2f} {r['nelder_mead_cost']:12.8g}  "
-              f"{r['nelder_mead_evaluations']} evaluations: {r['nelder_mead_message']}")
-        print(f"{'':17s} {'gradient':18s} {r['gradient_s']:8.2f} {r['gradient_cost']:12.8g}  IPOPT "
-              f"{r['gradient_status']} (converged: {r['gradient_converged']}), {len(r['gradient_stages'])} "
-              f"smoothing stages, {r['gradient_iterations']} iterations, {r['gradient_total_s']:.2f} s in all; "
-              f"reached Nelder-Mead's cost: {r['gradient_reached_nelder_mead_cost']}")
+        print(
+            f"{label:17s} {'nelder-mead':18s} {r['nelder_mead_s']:8.2f} {r['nelder_mead_cost']:12.8g}  "
+            f"{r['nelder_mead_evaluations']} evaluations: {r['nelder_mead_message']}"
+        )
+        print(
+            f"{'':17s} {'gradient':18s} {r['gradient_s']:8.2f} {r['gradient_cost']:12.8g}  IPOPT "
+            f"{r['gradient_status']} (converged: {r['gradient_converged']}), {len(r['gradient_stages'])} "
+            f"smoothing stages, {r['gradient_iterations']} iterations, {r['gradient_total_s']:.2f} s in all; "
+            f"reached Nelder-Mead's cost: {r['gradient_reached_nelder_mead_cost']}"
+        )
         for key, title in (("exact_loop", "exact loop"), ("multiple_shooting", "multiple shooting")):
             if key in r:
                 a = r[key]
-                print(f"{'':17s} {title:18s} {a['s']:8.2f} {a['cost']:12.8g}  IPOPT {a['status']}, "
-                      f"{a['iterations']} iterations, {a['total_s']:.2f} s in all; reached Nelder-Mead's cost: "
-                      f"{a['reached_nelder_mead_cost']}")
+                print(
+                    f"{'':17s} {title:18s} {a['s']:8.2f} {a['cost']:12.8g}  IPOPT {a['status']}, "
+                    f"{a['iterations']} iterations, {a['total_s']:.2f} s in all; reached Nelder-Mead's cost: "
+                    f"{a['reached_nelder_mead_cost']}"
+                )
         print(f"{'':17s} speedup to Nelder-Mead's cost: {r['speedup']:.1f}x")
     first = problems[args.problems[0]]
-    figures = {k: first[k] for k in ("gradient_s", "gradient_cost", "nelder_mead_s", "nelder_mead_cost",
-                                     "speedup")} | {"problem": args.problems[0], "problems": problems}
+    figures = {k: first[k] for k in ("gradient_s", "gradient_cost", "nelder_mead_s", "nelder_mead_cost", "speedup")} | {
+        "problem": args.problems[0],
+        "problems": problems,
+    }
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(figures, fh, indent=2)

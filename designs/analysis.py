@@ -26,14 +26,40 @@ import control
 import numpy as np
 import scipy.optimize
 
-__all__ = ["Loop", "UnstableLoopError", "SpecCheck", "polynomial", "poly_add", "poly_sub", "poly_mul",
-           "zeros_at_origin", "as_polynomials", "tf", "pid_tf", "limit_at_zero",
-           "dc_gain", "steady_state_errors", "band_max", "percent_tracking_error_below",
-           "percent_input_disturbance_below", "percent_output_disturbance_below", "percent_noise_above",
-           "margins", "bode_data", "step_info", "step_response", "check_band_ratio", "check_phase_margin",
-           "check_crossover",
-           "check_step", "step_checks", "check_step_nonlinear", "check_stable", "check_damping",
-           "check_bandwidth"]
+__all__ = [
+    "Loop",
+    "UnstableLoopError",
+    "SpecCheck",
+    "polynomial",
+    "poly_add",
+    "poly_sub",
+    "poly_mul",
+    "zeros_at_origin",
+    "as_polynomials",
+    "tf",
+    "pid_tf",
+    "limit_at_zero",
+    "dc_gain",
+    "steady_state_errors",
+    "band_max",
+    "percent_tracking_error_below",
+    "percent_input_disturbance_below",
+    "percent_output_disturbance_below",
+    "percent_noise_above",
+    "margins",
+    "bode_data",
+    "step_info",
+    "step_response",
+    "check_band_ratio",
+    "check_phase_margin",
+    "check_crossover",
+    "check_step",
+    "step_checks",
+    "check_step_nonlinear",
+    "check_stable",
+    "check_damping",
+    "check_bandwidth",
+]
 
 #: Coefficients below this fraction of their polynomial's largest count as exact zeros.
 ZERO_TOL = 1e-12
@@ -50,7 +76,7 @@ def polynomial(coeffs) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"polynomial coefficients must be finite, got {arr}")
     nonzero = np.flatnonzero(arr)
-    return arr[nonzero[0]:] if nonzero.size else np.zeros(1)
+    return arr[nonzero[0] :] if nonzero.size else np.zeros(1)
 
 
 def poly_add(a, b) -> np.ndarray:
@@ -166,8 +192,18 @@ class Loop:
         return cls(_as_tf(plant), _as_tf(controller), _as_tf(controller), name)
 
     @classmethod
-    def pid(cls, plant, kp: float, ki: float = 0.0, kd: float = 0.0, *, sigma: float | None = None,
-            derivative_on: str = "measurement", prefilter=None, name: str = "") -> Loop:
+    def pid(
+        cls,
+        plant,
+        kp: float,
+        ki: float = 0.0,
+        kd: float = 0.0,
+        *,
+        sigma: float | None = None,
+        derivative_on: str = "measurement",
+        prefilter=None,
+        name: str = "",
+    ) -> Loop:
         """PID with the derivative on the measurement (the text's choice) or on the error.
 
         With `prefilter` F(s), the reference path is F·C_r.
@@ -256,9 +292,11 @@ class Loop:
         poles = self.poles()
         bad = poles[poles.real >= 0]
         if bad.size:
-            raise UnstableLoopError(f"{self.name or 'closed loop'} is not stable (poles "
-                                    f"{np.array2string(bad, precision=4)} in the closed right half plane): "
-                                    f"{what} does not exist")
+            raise UnstableLoopError(
+                f"{self.name or 'closed loop'} is not stable (poles "
+                f"{np.array2string(bad, precision=4)} in the closed right half plane): "
+                f"{what} does not exist"
+            )
 
 
 def _as_tf(G) -> control.TransferFunction:
@@ -304,10 +342,12 @@ def steady_state_errors(loop: Loop) -> dict:
     """
     loop.require_stable("a steady-state error")
     num, den = as_polynomials(loop.reference_to_error())
-    return {"type": zeros_at_origin(num),
-            "ess_step": limit_at_zero(num, den, 0),
-            "ess_ramp": limit_at_zero(num, den, 1),
-            "ess_parabola": limit_at_zero(num, den, 2)}
+    return {
+        "type": zeros_at_origin(num),
+        "ess_step": limit_at_zero(num, den, 0),
+        "ess_ramp": limit_at_zero(num, den, 1),
+        "ess_parabola": limit_at_zero(num, den, 2),
+    }
 
 
 # ----------------------------------------------------------------- frequency
@@ -342,9 +382,12 @@ def band_max(G, low: float, high: float, points_per_decade: int = 400) -> tuple[
     value, where = float(mags[best]), float(grid[best])
     if 0 < best < grid.size - 1:
         # Refine an interior peak between its grid neighbours.
-        res = scipy.optimize.minimize_scalar(lambda lw: -_magnitude(G, 10.0**lw), method="bounded",
-                                             bounds=(np.log10(grid[best - 1]), np.log10(grid[best + 1])),
-                                             options={"xatol": 1e-12})
+        res = scipy.optimize.minimize_scalar(
+            lambda lw: -_magnitude(G, 10.0**lw),
+            method="bounded",
+            bounds=(np.log10(grid[best - 1]), np.log10(grid[best + 1])),
+            options={"xatol": 1e-12},
+        )
         if -res.fun > value:
             value, where = float(-res.fun), float(10.0**res.x)
     if low == 0:
@@ -398,8 +441,13 @@ def margins(L) -> dict:
         warnings.filterwarnings("ignore", message="stability_margins: Falling back", category=UserWarning)
         gm, pm, _, w_pc, w_gc, _ = control.stability_margins(L)
     gm = float(gm)
-    return {"gm": gm, "gm_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float(np.inf),
-            "pm_deg": float(pm), "phase_crossover": float(w_pc), "gain_crossover": float(w_gc)}
+    return {
+        "gm": gm,
+        "gm_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float(np.inf),
+        "pm_deg": float(pm),
+        "phase_crossover": float(w_pc),
+        "gain_crossover": float(w_gc),
+    }
 
 
 def bode_data(G, omega) -> dict:
@@ -442,30 +490,50 @@ def check_band_ratio(new, old, low: float, high: float, factor: float, what: str
     ratio = tf(poly_mul(num_n, den_o), poly_mul(den_n, num_o))
     worst, where = band_max(ratio, low, high)
     band = f"below {high:g} rad/s" if low == 0 else f"above {low:g} rad/s"
-    return SpecCheck(f"{what} {band} improved {factor:g}x", bool(worst <= 1.0 / factor + 1e-12),
-                     float(1.0 / worst) if worst > 0 else float(np.inf), float(factor), where,
-                     "value: smallest improvement factor old/new in the band")
+    return SpecCheck(
+        f"{what} {band} improved {factor:g}x",
+        bool(worst <= 1.0 / factor + 1e-12),
+        float(1.0 / worst) if worst > 0 else float(np.inf),
+        float(factor),
+        where,
+        "value: smallest improvement factor old/new in the band",
+    )
 
 
-def check_phase_margin(L, minimum_deg: float | None = None, target_deg: float | None = None,
-                       tolerance_deg: float = 5.0) -> SpecCheck:
+def check_phase_margin(
+    L, minimum_deg: float | None = None, target_deg: float | None = None, tolerance_deg: float = 5.0
+) -> SpecCheck:
     """PM ≥ `minimum_deg`, or |PM − target| ≤ tolerance when `target_deg` is given."""
     m = margins(L)
     if target_deg is not None:
-        return SpecCheck(f"phase margin about {target_deg:g} deg (±{tolerance_deg:g})",
-                         bool(abs(m["pm_deg"] - target_deg) <= tolerance_deg), m["pm_deg"], target_deg,
-                         m["gain_crossover"])
+        return SpecCheck(
+            f"phase margin about {target_deg:g} deg (±{tolerance_deg:g})",
+            bool(abs(m["pm_deg"] - target_deg) <= tolerance_deg),
+            m["pm_deg"],
+            target_deg,
+            m["gain_crossover"],
+        )
     if minimum_deg is None:
         raise ValueError("check_phase_margin needs minimum_deg or target_deg; got neither")
-    return SpecCheck(f"phase margin >= {minimum_deg:g} deg", bool(m["pm_deg"] >= minimum_deg), m["pm_deg"],
-                     minimum_deg, m["gain_crossover"])
+    return SpecCheck(
+        f"phase margin >= {minimum_deg:g} deg",
+        bool(m["pm_deg"] >= minimum_deg),
+        m["pm_deg"],
+        minimum_deg,
+        m["gain_crossover"],
+    )
 
 
 def check_crossover(L, omega: float, rel_tol: float = 0.05) -> SpecCheck:
     """Gain crossover within `rel_tol` of `omega` rad/s."""
     w = margins(L)["gain_crossover"]
-    return SpecCheck(f"crossover at {omega:g} rad/s (±{100 * rel_tol:g} %)",
-                     bool(np.isfinite(w) and abs(w - omega) <= rel_tol * omega), w, omega, w)
+    return SpecCheck(
+        f"crossover at {omega:g} rad/s (±{100 * rel_tol:g} %)",
+        bool(np.isfinite(w) and abs(w - omega) <= rel_tol * omega),
+        w,
+        omega,
+        w,
+    )
 
 
 def check_damping(loop: Loop, zeta_min: float) -> SpecCheck:
@@ -478,8 +546,12 @@ def check_damping(loop: Loop, zeta_min: float) -> SpecCheck:
 def check_bandwidth(T, bandwidth: float, rel_tol: float = 0.2) -> SpecCheck:
     """Closed-loop −3 dB bandwidth of T (1/√2 of its DC gain) within `rel_tol` of `bandwidth` rad/s."""
     value = float(control.bandwidth(T, 20 * np.log10(1 / np.sqrt(2))))
-    return SpecCheck(f"closed-loop bandwidth about {bandwidth:g} rad/s (±{100 * rel_tol:g} %)",
-                     bool(abs(value - bandwidth) <= rel_tol * bandwidth), value, bandwidth)
+    return SpecCheck(
+        f"closed-loop bandwidth about {bandwidth:g} rad/s (±{100 * rel_tol:g} %)",
+        bool(abs(value - bandwidth) <= rel_tol * bandwidth),
+        value,
+        bandwidth,
+    )
 
 
 def check_stable(loop: Loop) -> SpecCheck:
@@ -521,30 +593,52 @@ def step_info(T, settling_threshold: float = 0.02) -> dict:
         raise UnstableLoopError(f"step response of an unstable system (poles {poles})")
     end = min(10.0 / np.min(-poles.real), 1e5)
     times = np.linspace(0.0, end, 20001)
-    return control.step_info(step_response(T, times), T=times, yfinal=dc_gain(T),
-                             SettlingTimeThreshold=settling_threshold)
+    return control.step_info(
+        step_response(T, times), T=times, yfinal=dc_gain(T), SettlingTimeThreshold=settling_threshold
+    )
 
 
-def check_step(T, *, amplitude: float = 1.0, rise_time: float | None = None,
-               settling_time: float | None = None, overshoot_percent: float | None = None,
-               steady_state_error_percent: float | None = None, reference_dc: float = 1.0,
-               settling_threshold: float = 0.02) -> list[SpecCheck]:
+def check_step(
+    T,
+    *,
+    amplitude: float = 1.0,
+    rise_time: float | None = None,
+    settling_time: float | None = None,
+    overshoot_percent: float | None = None,
+    steady_state_error_percent: float | None = None,
+    reference_dc: float = 1.0,
+    settling_threshold: float = 0.02,
+) -> list[SpecCheck]:
     """Step-response specs of a closed loop T (reference → output), python-control's step_info.
 
     Rise time 10–90 %, settling to `settling_threshold` of the final value,
     overshoot relative to the final value, steady-state error relative to
     the commanded value (`reference_dc` = 1 for a unit-gain goal).
     """
-    return step_checks(step_info(T, settling_threshold), dc_gain(T), reference_dc=reference_dc,
-                       rise_time=rise_time, settling_time=settling_time, overshoot_percent=overshoot_percent,
-                       steady_state_error_percent=steady_state_error_percent,
-                       settling_threshold=settling_threshold)
+    return step_checks(
+        step_info(T, settling_threshold),
+        dc_gain(T),
+        reference_dc=reference_dc,
+        rise_time=rise_time,
+        settling_time=settling_time,
+        overshoot_percent=overshoot_percent,
+        steady_state_error_percent=steady_state_error_percent,
+        settling_threshold=settling_threshold,
+    )
 
 
-def step_checks(info: dict, final: float, *, reference_dc: float = 1.0, rise_time: float | None = None,
-                settling_time: float | None = None, overshoot_percent: float | None = None,
-                steady_state_error_percent: float | None = None, settling_threshold: float = 0.02,
-                label_suffix: str = "") -> list[SpecCheck]:
+def step_checks(
+    info: dict,
+    final: float,
+    *,
+    reference_dc: float = 1.0,
+    rise_time: float | None = None,
+    settling_time: float | None = None,
+    overshoot_percent: float | None = None,
+    steady_state_error_percent: float | None = None,
+    settling_threshold: float = 0.02,
+    label_suffix: str = "",
+) -> list[SpecCheck]:
     """The step specs asked for, judged on a `control.step_info` result and the final value.
 
     The one place that turns step-response numbers into `SpecCheck`s, for a
@@ -553,23 +647,45 @@ def step_checks(info: dict, final: float, *, reference_dc: float = 1.0, rise_tim
     """
     out = []
     if rise_time is not None:
-        out.append(SpecCheck(f"rise time < {rise_time:g} s{label_suffix}", info["RiseTime"] < rise_time,
-                             info["RiseTime"], rise_time))
+        out.append(
+            SpecCheck(
+                f"rise time < {rise_time:g} s{label_suffix}", info["RiseTime"] < rise_time, info["RiseTime"], rise_time
+            )
+        )
     if settling_time is not None:
-        out.append(SpecCheck(f"settling time ({100 * settling_threshold:g} %) < {settling_time:g} s{label_suffix}",
-                             info["SettlingTime"] < settling_time, info["SettlingTime"], settling_time))
+        out.append(
+            SpecCheck(
+                f"settling time ({100 * settling_threshold:g} %) < {settling_time:g} s{label_suffix}",
+                info["SettlingTime"] < settling_time,
+                info["SettlingTime"],
+                settling_time,
+            )
+        )
     if overshoot_percent is not None:
-        out.append(SpecCheck(f"overshoot < {overshoot_percent:g} %{label_suffix}",
-                             info["Overshoot"] < overshoot_percent, info["Overshoot"], overshoot_percent))
+        out.append(
+            SpecCheck(
+                f"overshoot < {overshoot_percent:g} %{label_suffix}",
+                info["Overshoot"] < overshoot_percent,
+                info["Overshoot"],
+                overshoot_percent,
+            )
+        )
     if steady_state_error_percent is not None:
         err = 100 * abs(reference_dc - final) / abs(reference_dc)
-        out.append(SpecCheck(f"steady-state error < {steady_state_error_percent:g} %{label_suffix}",
-                             err < steady_state_error_percent, err, steady_state_error_percent))
+        out.append(
+            SpecCheck(
+                f"steady-state error < {steady_state_error_percent:g} %{label_suffix}",
+                err < steady_state_error_percent,
+                err,
+                steady_state_error_percent,
+            )
+        )
     return out
 
 
-def check_step_nonlinear(plant, block, step: float, tracked: str, *, duration: float = 10.0,
-                         threshold: float = 0.02, **specs) -> list[SpecCheck]:
+def check_step_nonlinear(
+    plant, block, step: float, tracked: str, *, duration: float = 10.0, threshold: float = 0.02, **specs
+) -> list[SpecCheck]:
     """Step specs of the nonlinear closed loop (one `models.simulate_closed_loop` run), and the actuator.
 
     The loop starts at the plant's standard equilibrium and the reference steps
@@ -586,6 +702,12 @@ def check_step_nonlinear(plant, block, step: float, tracked: str, *, duration: f
     info = control.step_info(y, T=res.t, yfinal=y[-1], SettlingTimeThreshold=threshold)
     checks = step_checks(info, y[-1], settling_threshold=threshold, label_suffix=" (nonlinear)", **specs)
     peak = float(np.max(np.abs(res.u)))
-    checks.append(SpecCheck(f"command within the {plant.input_limit[0]:g} actuator limit",
-                            peak <= plant.input_limit[0] * (1 + 1e-12), peak, float(plant.input_limit[0])))
+    checks.append(
+        SpecCheck(
+            f"command within the {plant.input_limit[0]:g} actuator limit",
+            peak <= plant.input_limit[0] * (1 + 1e-12),
+            peak,
+            float(plant.input_limit[0]),
+        )
+    )
     return checks

@@ -132,26 +132,64 @@ def _check_common(max_iter, tol, jit, plant_cost, plant_objective):
     return max_iter, tol, jit
 
 
-def _answer(method, problem: TuningProblem, result: TuningResult, names, cost_fn, started, status,
-            converged, evaluations=1, extra_message="") -> CodesignResult:
+def _answer(
+    method,
+    problem: TuningProblem,
+    result: TuningResult,
+    names,
+    cost_fn,
+    started,
+    status,
+    converged,
+    evaluations=1,
+    extra_message="",
+) -> CodesignResult:
     assert result.decision is not None, "tuning.solve always returns its decision vector"
-    values = dict(zip(names, (float(v) for v in result.decision[problem.n_gains:])))
-    plant_cost_value = float(cost_fn(result.decision[problem.n_gains:]))
+    values = dict(zip(names, (float(v) for v in result.decision[problem.n_gains :])))
+    plant_cost_value = float(cost_fn(result.decision[problem.n_gains :]))
     plant = problem.plant.with_params(**values)
-    return CodesignResult(method=method, params=values, plant=plant, block=result.block,
-                          objective=result.cost, closed_loop_cost=result.cost - plant_cost_value,
-                          plant_cost=plant_cost_value, feasible=result.feasible,
-                          success=converged and result.feasible, message=extra_message + result.message,
-                          violations=result.violations, wall_time=time.perf_counter() - started,
-                          converged=converged, status=status, evaluations=evaluations, history=result.history)
+    return CodesignResult(
+        method=method,
+        params=values,
+        plant=plant,
+        block=result.block,
+        objective=result.cost,
+        closed_loop_cost=result.cost - plant_cost_value,
+        plant_cost=plant_cost_value,
+        feasible=result.feasible,
+        success=converged and result.feasible,
+        message=extra_message + result.message,
+        violations=result.violations,
+        wall_time=time.perf_counter() - started,
+        converged=converged,
+        status=status,
+        evaluations=evaluations,
+        history=result.history,
+    )
 
 
-def codesign(plant: Plant, block: Block, scenarios, design_params: dict, *,
-             plant_cost: Callable | None = None, plant_objective: Callable | None = None,
-             specs: Specs | None = None, cost: Cost | None = None, free=None, bounds=None, samples=None,
-             robust: str = "mean", max_iter: int = MAX_ITER, tol: float = 1e-8, jit: bool = False,
-             methods: Sequence[str] = METHODS, nested_tol: float = 1e-3, substeps: int = 10,
-             widths=WIDTHS) -> dict[str, CodesignResult]:
+def codesign(
+    plant: Plant,
+    block: Block,
+    scenarios,
+    design_params: dict,
+    *,
+    plant_cost: Callable | None = None,
+    plant_objective: Callable | None = None,
+    specs: Specs | None = None,
+    cost: Cost | None = None,
+    free=None,
+    bounds=None,
+    samples=None,
+    robust: str = "mean",
+    max_iter: int = MAX_ITER,
+    tol: float = 1e-8,
+    jit: bool = False,
+    methods: Sequence[str] = METHODS,
+    nested_tol: float = 1e-3,
+    substeps: int = 10,
+    widths=WIDTHS,
+) -> dict[str, CodesignResult]:
     """Co-design the named plant parameters with the block's gains: sequential, nested, simultaneous.
 
     Parameters
@@ -198,36 +236,67 @@ def codesign(plant: Plant, block: Block, scenarios, design_params: dict, *,
     cost_fn = _plant_cost_function(names, plant_cost)
     answers = {}
     if "sequential" in methods:
-        answers["sequential"] = _sequential(plant, block, scenarios, names, ranges, plant_objective or plant_cost,
-                                            cost_fn, free, bounds, options, solve_options)
+        answers["sequential"] = _sequential(
+            plant,
+            block,
+            scenarios,
+            names,
+            ranges,
+            plant_objective or plant_cost,
+            cost_fn,
+            free,
+            bounds,
+            options,
+            solve_options,
+        )
     if "nested" in methods:
-        answers["nested"] = _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, options,
-                                    solve_options, nested_tol)
+        answers["nested"] = _nested(
+            plant, block, scenarios, names, ranges, cost_fn, free, bounds, options, solve_options, nested_tol
+        )
     if "simultaneous" in methods:
         started = time.perf_counter()
         neutral = joint.start()
-        neutral[joint.n_gains:] = [(ranges[n][0] + ranges[n][1]) / 2 for n in names]
-        result = solve(joint, lbx, ubx, plant_cost=lambda x: cost_fn(x[joint.n_gains:]), start=neutral,
-                       **solve_options)
-        answers["simultaneous"] = _answer("simultaneous", joint, result, names, cost_fn, started,
-                                          f"IPOPT: {result.status}", result.converged,
-                                          len(result.stages), "from the middle of the ranges: ")
+        neutral[joint.n_gains :] = [(ranges[n][0] + ranges[n][1]) / 2 for n in names]
+        result = solve(
+            joint, lbx, ubx, plant_cost=lambda x: cost_fn(x[joint.n_gains :]), start=neutral, **solve_options
+        )
+        answers["simultaneous"] = _answer(
+            "simultaneous",
+            joint,
+            result,
+            names,
+            cost_fn,
+            started,
+            f"IPOPT: {result.status}",
+            result.converged,
+            len(result.stages),
+            "from the middle of the ranges: ",
+        )
     if "simultaneous from sequential" in methods:
         started = time.perf_counter()
         seq = answers["sequential"]
         problem = TuningProblem(seq.plant, seq.block, scenarios, free=free, extra_params=names, **options)
         lb, ub = _joint_bounds(problem, bounds, names, ranges)
-        result = solve(problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains:]), **solve_options)
+        result = solve(problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains :]), **solve_options)
         answers["simultaneous from sequential"] = _answer(
-            "simultaneous from sequential", problem, result, names, cost_fn, started, f"IPOPT: {result.status}",
-            result.converged, len(result.stages), "from the sequential answer: ")
+            "simultaneous from sequential",
+            problem,
+            result,
+            names,
+            cost_fn,
+            started,
+            f"IPOPT: {result.status}",
+            result.converged,
+            len(result.stages),
+            "from the sequential answer: ",
+        )
     return answers
 
 
 def _joint_bounds(problem: TuningProblem, bounds, names, ranges):
     lbx, ubx = gain_bounds(problem, bounds)
-    lbx[problem.n_gains:] = [ranges[n][0] for n in names]
-    ubx[problem.n_gains:] = [ranges[n][1] for n in names]
+    lbx[problem.n_gains :] = [ranges[n][0] for n in names]
+    ubx[problem.n_gains :] = [ranges[n][1] for n in names]
     return lbx, ubx
 
 
@@ -238,10 +307,16 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
     objective = plant_only({n: p[i] for i, n in enumerate(names)})
     low, high = np.array([ranges[n] for n in names]).T
     start = np.array([plant.params[n] for n in names])
-    plant_solver = ca.nlpsol("plant_only", "ipopt", {"x": p, "f": objective},
-                             {"ipopt": {"print_level": 0, "sb": "yes", "tol": solve_options["tol"],
-                                        "max_iter": MAX_ITER}, "print_time": False,
-                              "error_on_fail": False})
+    plant_solver = ca.nlpsol(
+        "plant_only",
+        "ipopt",
+        {"x": p, "f": objective},
+        {
+            "ipopt": {"print_level": 0, "sb": "yes", "tol": solve_options["tol"], "max_iter": MAX_ITER},
+            "print_time": False,
+            "error_on_fail": False,
+        },
+    )
     sol = plant_solver(x0=start, lbx=low, ubx=high)
     plant_status = plant_solver.stats()["return_status"]
     values = dict(zip(names, np.clip(np.asarray(sol["x"]).ravel(), low, high)))
@@ -252,13 +327,23 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
     plant_cost_value = float(cost_fn(list(values.values())))
     converged = plant_status in STOPPED_BY_TEST[:2] and tuned.stopped_on_test
     return CodesignResult(
-        method="sequential", params={k: float(v) for k, v in values.items()}, plant=designed, block=tuned.block,
-        objective=tuned.cost + plant_cost_value, closed_loop_cost=tuned.cost, plant_cost=plant_cost_value,
-        feasible=tuned.feasible, success=converged and tuned.feasible,
+        method="sequential",
+        params={k: float(v) for k, v in values.items()},
+        plant=designed,
+        block=tuned.block,
+        objective=tuned.cost + plant_cost_value,
+        closed_loop_cost=tuned.cost,
+        plant_cost=plant_cost_value,
+        feasible=tuned.feasible,
+        success=converged and tuned.feasible,
         message=f"plant-only objective: IPOPT {plant_status}; controller: {tuned.message}",
-        violations=tuned.violations, wall_time=time.perf_counter() - started, converged=converged,
-        status=f"plant: IPOPT: {plant_status}; controller: IPOPT: {tuned.status}", evaluations=2,
-        history=tuned.history)
+        violations=tuned.violations,
+        wall_time=time.perf_counter() - started,
+        converged=converged,
+        status=f"plant: IPOPT: {plant_status}; controller: IPOPT: {tuned.status}",
+        evaluations=2,
+        history=tuned.history,
+    )
 
 
 def _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, options, solve_options, nested_tol):
@@ -282,35 +367,55 @@ def _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, optio
         if not result.feasible or not np.isfinite(value):
             # Infeasible inner answers lose to every feasible one, and the least infeasible wins.
             assert result.decision is not None, "tuning.solve always returns its decision vector"
-            excess = problem.excess(np.asarray(problem.evaluate(result.decision)[1]).ravel()) \
-                if np.isfinite(result.cost) else np.array([np.inf])
+            excess = (
+                problem.excess(np.asarray(problem.evaluate(result.decision)[1]).ravel())
+                if np.isfinite(result.cost)
+                else np.array([np.inf])
+            )
             worst = float(np.max(excess, initial=0.0))
             value = 1e6 * (1.0 + abs(result.initial_cost)) * (1.0 + min(worst, 1e6))
         tried.append((values, result, value))
         return result, value
 
     if len(names) == 1:
-        outer = scipy.optimize.minimize_scalar(lambda v: inner(np.atleast_1d(v))[1], bounds=(low[0], high[0]),
-                                               method="bounded",
-                                               options={"xatol": nested_tol * width[0], "maxiter": 500})
+        outer = scipy.optimize.minimize_scalar(
+            lambda v: inner(np.atleast_1d(v))[1],
+            bounds=(low[0], high[0]),
+            method="bounded",
+            options={"xatol": nested_tol * width[0], "maxiter": 500},
+        )
         outer_ok, outer_text = bool(outer.success), f"bounded Brent: {outer.message}"
     else:
-        outer = scipy.optimize.minimize(lambda v: inner(v)[1], (low + high) / 2, method="Powell",
-                                        bounds=list(zip(low, high)),
-                                        options={"xtol": nested_tol, "ftol": 1e-9, "maxiter": 500})
+        outer = scipy.optimize.minimize(
+            lambda v: inner(v)[1],
+            (low + high) / 2,
+            method="Powell",
+            bounds=list(zip(low, high)),
+            options={"xtol": nested_tol, "ftol": 1e-9, "maxiter": 500},
+        )
         outer_ok, outer_text = bool(outer.success), f"Powell: {outer.message}"
     values, result, _ = min(tried, key=lambda item: item[2])
     designed = plant.with_params(**dict(zip(names, values)))
     plant_cost_value = float(cost_fn(values))
     converged = outer_ok and result.converged
     return CodesignResult(
-        method="nested", params={n: float(v) for n, v in zip(names, values)}, plant=designed, block=result.block,
-        objective=result.cost + plant_cost_value, closed_loop_cost=result.cost, plant_cost=plant_cost_value,
-        feasible=result.feasible, success=converged and result.feasible,
+        method="nested",
+        params={n: float(v) for n, v in zip(names, values)},
+        plant=designed,
+        block=result.block,
+        objective=result.cost + plant_cost_value,
+        closed_loop_cost=result.cost,
+        plant_cost=plant_cost_value,
+        feasible=result.feasible,
+        success=converged and result.feasible,
         message=f"{outer_text} after {len(tried)} inner tunings; at the answer: {result.message}",
-        violations=result.violations, wall_time=time.perf_counter() - started, converged=converged,
-        status=f"outer: {outer_text}; inner: IPOPT: {result.status}", evaluations=len(tried),
-        history=[(float(v[0]) if len(v) == 1 else v.tolist(), float(f)) for v, _, f in tried])
+        violations=result.violations,
+        wall_time=time.perf_counter() - started,
+        converged=converged,
+        status=f"outer: {outer_text}; inner: IPOPT: {result.status}",
+        evaluations=len(tried),
+        history=[(float(v[0]) if len(v) == 1 else v.tolist(), float(f)) for v, _, f in tried],
+    )
 
 
 # ----------------------------------------------------------------- actuator sizing
@@ -331,10 +436,16 @@ class ActuatorLimit(Block):
             raise ValueError(f"{block.name} already has a gain named 'actuator_limit'")
         self.block = block
         limit = positive(limit, "limit")
-        super().__init__(sample_period=block.sample_period, n_state=block.n_state, n_measured=block.n_measured,
-                         n_reference=block.n_reference, n_input=block.n_input,
-                         gains=dict(block.gains) | {"actuator_limit": limit}, measures=block.measures,
-                         name=f"{block.name} (limit decided)")
+        super().__init__(
+            sample_period=block.sample_period,
+            n_state=block.n_state,
+            n_measured=block.n_measured,
+            n_reference=block.n_reference,
+            n_input=block.n_input,
+            gains=dict(block.gains) | {"actuator_limit": limit},
+            measures=block.measures,
+            name=f"{block.name} (limit decided)",
+        )
 
     def expr(self, xc, y, r, gains):
         xc_next, u = self.block.expr(xc, y, r, {k: v for k, v in gains.items() if k != "actuator_limit"})
@@ -359,13 +470,25 @@ def _check_sizing(low, high, rel_tol):
         raise ValueError(f"rel_tol must be a fraction in (0, 1), got {rel_tol}")
     needed = math.ceil(math.log2(max(math.log(high / low) / math.log1p(rel_tol), 1.0))) + 1
     if needed > MAX_BISECTIONS:
-        raise ValueError(f"rel_tol = {rel_tol:g} over [{low:g}, {high:g}] needs {needed} limits, more than "
-                         f"{MAX_BISECTIONS}; give a larger rel_tol")
+        raise ValueError(
+            f"rel_tol = {rel_tol:g} over [{low:g}, {high:g}] needs {needed} limits, more than "
+            f"{MAX_BISECTIONS}; give a larger rel_tol"
+        )
     return low, high, rel_tol
 
 
-def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, specs: Specs, *,
-                  low: float, high: float, retune: bool, rel_tol: float = 0.01, tune_options=None) -> dict:
+def size_actuator(
+    plant: Plant,
+    design: Callable[[Plant], Block],
+    scenario,
+    specs: Specs,
+    *,
+    low: float,
+    high: float,
+    retune: bool,
+    rel_tol: float = 0.01,
+    tune_options=None,
+) -> dict:
     """Smallest symmetric actuator limit in [low, high] for which the specs hold (bisection).
 
     Parameters
@@ -429,14 +552,35 @@ def size_actuator(plant: Plant, design: Callable[[Plant], Block], scenario, spec
             high, best, best_block = mid, mid, block
         else:
             low = mid
-    return {"limit": best, "block": best_block, "evaluations": len(history), "history": history,
-            "statuses": statuses, "converged": all(stopped)}
+    return {
+        "limit": best,
+        "block": best_block,
+        "evaluations": len(history),
+        "history": history,
+        "statuses": statuses,
+        "converged": all(stopped),
+    }
 
 
-def size_actuator_simultaneous(plant: Plant, design: Callable[[Plant], Block], scenario, specs: Specs, *,
-                               low: float, high: float, start_limit: float, start_block: Block | None = None,
-                               free=None, bounds=None, cost_weight: float = 1e-3, max_iter: int = MAX_ITER,
-                               tol: float = 1e-8, jit: bool = False, substeps: int = 10, widths=WIDTHS) -> dict:
+def size_actuator_simultaneous(
+    plant: Plant,
+    design: Callable[[Plant], Block],
+    scenario,
+    specs: Specs,
+    *,
+    low: float,
+    high: float,
+    start_limit: float,
+    start_block: Block | None = None,
+    free=None,
+    bounds=None,
+    cost_weight: float = 1e-3,
+    max_iter: int = MAX_ITER,
+    tol: float = 1e-8,
+    jit: bool = False,
+    substeps: int = 10,
+    widths=WIDTHS,
+) -> dict:
     """Smallest limit and its gains in one IPOPT problem: minimize the limit subject to the specs.
 
     The decision is (the free gains, the limit λ in [low, high]) on `ActuatorLimit(design(plant at high))`;
@@ -481,8 +625,9 @@ def size_actuator_simultaneous(plant: Plant, design: Callable[[Plant], Block], s
     offset = sum(np.asarray(wrapped.gains[g]).size for g in problem.free[:index])
     j0 = problem.values(problem.start())[0]
     weight = cost_weight * start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
-    result = solve(problem, lbx, ubx, max_iter, jit, plant_cost=lambda x: x[offset], cost_weight=weight, tol=tol,
-                   widths=widths)
+    result = solve(
+        problem, lbx, ubx, max_iter, jit, plant_cost=lambda x: x[offset], cost_weight=weight, tol=tol, widths=widths
+    )
     assert result.decision is not None, "tuning.solve always returns its decision vector"
     limit = float(result.decision[offset])
     sized = plant.with_input_limit(limit)
@@ -490,6 +635,13 @@ def size_actuator_simultaneous(plant: Plant, design: Callable[[Plant], Block], s
     block = design(sized).with_gains(**gains)
     check = TuningProblem(sized, block, scenario, specs=specs, substeps=substeps)
     _, _, violations = check.values(check.start())
-    return {"limit": limit, "block": block, "feasible": not violations, "violations": violations,
-            "converged": result.converged, "status": f"IPOPT: {result.status}", "message": result.message,
-            "result": result}
+    return {
+        "limit": limit,
+        "block": block,
+        "feasible": not violations,
+        "violations": violations,
+        "converged": result.converged,
+        "status": f"IPOPT: {result.status}",
+        "message": result.message,
+        "result": result,
+    }

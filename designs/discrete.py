@@ -11,8 +11,14 @@ import casadi as ca
 
 from models import saturate
 
-__all__ = ["saturate", "trapezoid", "dirty_derivative_coefficient", "dirty_derivative",
-           "back_calculation", "integrate_while_slow"]
+__all__ = [
+    "saturate",
+    "trapezoid",
+    "dirty_derivative_coefficient",
+    "dirty_derivative",
+    "back_calculation",
+    "integrate_while_slow",
+]
 
 
 def trapezoid(integral, error_prev, error, sample_period: float):

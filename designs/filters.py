@@ -29,9 +29,19 @@ from .analysis import as_polynomials, tf
 from .discrete import saturate
 from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
 
-__all__ = ["lead", "lag", "proportional_integral", "notch", "low_pass", "prefilter", "lead_ratio",
-           "tustin_matrix", "padded_coefficients", "TustinSection",
-           "TransferFunctionBlock"]
+__all__ = [
+    "lead",
+    "lag",
+    "proportional_integral",
+    "notch",
+    "low_pass",
+    "prefilter",
+    "lead_ratio",
+    "tustin_matrix",
+    "padded_coefficients",
+    "TustinSection",
+    "TransferFunctionBlock",
+]
 
 
 # ----------------------------------------------------------------- builders
@@ -113,8 +123,7 @@ def padded_coefficients(G, what: str) -> tuple[np.ndarray, np.ndarray]:
     """(num, den) of a proper G(s), num padded with leading zeros to den's length; `what` names G in errors."""
     num, den = as_polynomials(G)
     if num.size > den.size:
-        raise ValueError(f"{what} is not causal: numerator degree {num.size - 1} > denominator degree "
-                         f"{den.size - 1}")
+        raise ValueError(f"{what} is not causal: numerator degree {num.size - 1} > denominator degree {den.size - 1}")
     return np.pad(num, (den.size - num.size, 0)), den
 
 
@@ -138,8 +147,9 @@ class TustinSection:
     def expr(self, state, signal, num, den):
         b, a = self.coefficients(num, den)
         out = b[0] * signal + (state[0] if self.order else 0)
-        nxt = [(state[i + 1] if i + 1 < self.order else 0) + b[i + 1] * signal - a[i + 1] * out
-               for i in range(self.order)]
+        nxt = [
+            (state[i + 1] if i + 1 < self.order else 0) + b[i + 1] * signal - a[i + 1] * out for i in range(self.order)
+        ]
         return (ca.vertcat(*nxt) if self.order else ca.SX(0, 1)), out
 
     def tracking_gain(self, den, pole: float):
@@ -193,10 +203,21 @@ class TransferFunctionBlock(models.Block):
     at rest at the first reference, the controller at zero.
     """
 
-    def __init__(self, known: models.Plant, coordinate: str, controller, *, prefilter=None,
-                 sample_period: float = SAMPLE_PERIOD, output_limit: float | None = None,
-                 feedforward: bool | str = False, anti_windup: str = "observer", tracking_pole: float = 0.9,
-                 limit_about: str | None = None, name: str = "C(s)"):
+    def __init__(
+        self,
+        known: models.Plant,
+        coordinate: str,
+        controller,
+        *,
+        prefilter=None,
+        sample_period: float = SAMPLE_PERIOD,
+        output_limit: float | None = None,
+        feedforward: bool | str = False,
+        anti_windup: str = "observer",
+        tracking_pole: float = 0.9,
+        limit_about: str | None = None,
+        name: str = "C(s)",
+    ):
         if anti_windup not in ("observer", "none"):
             raise ValueError(f"anti_windup must be 'observer' or 'none', got {anti_windup!r}")
         if not 0 <= tracking_pole < 1:
@@ -228,9 +249,16 @@ class TransferFunctionBlock(models.Block):
             self._feedforward = reference_feedforward(known, coordinate)
         n_prefilter = self._prefilter.order if self._prefilter else 0
         self._n_prefilter = n_prefilter
-        super().__init__(sample_period=sample_period, n_state=n_prefilter + self._controller.order,
-                         n_measured=known.ny, n_reference=1, n_input=1, gains=gains, measures="outputs",
-                         name=name)
+        super().__init__(
+            sample_period=sample_period,
+            n_state=n_prefilter + self._controller.order,
+            n_measured=known.ny,
+            n_reference=1,
+            n_input=1,
+            gains=gains,
+            measures="outputs",
+            name=name,
+        )
 
     def transfer_function(self) -> control.TransferFunction:
         """C(s) with the current gains."""
@@ -239,8 +267,7 @@ class TransferFunctionBlock(models.Block):
     def expr(self, xc, y, r, gains):
         npf = self._n_prefilter
         if self._prefilter is not None:
-            xf_next, r_filtered = self._prefilter.expr(xc[:npf], r[0], gains["prefilter_num"],
-                                                       gains["prefilter_den"])
+            xf_next, r_filtered = self._prefilter.expr(xc[:npf], r[0], gains["prefilter_num"], gains["prefilter_den"])
         else:
             xf_next, r_filtered = ca.SX(0, 1), r[0]
         error = r_filtered - self._read(y)
@@ -262,7 +289,10 @@ class TransferFunctionBlock(models.Block):
     def initial_state(self, y0, r0) -> np.ndarray:
         parts = []
         if self._prefilter is not None:
-            parts.append(self._prefilter.steady_state(float(np.ravel(r0)[0]), self.gains["prefilter_num"],
-                                                      self.gains["prefilter_den"]))
+            parts.append(
+                self._prefilter.steady_state(
+                    float(np.ravel(r0)[0]), self.gains["prefilter_num"], self.gains["prefilter_den"]
+                )
+            )
         parts.append(np.zeros(self._controller.order))
         return np.concatenate(parts)

@@ -38,8 +38,10 @@ class Shaper:
         times = np.asarray(self.times, dtype=float).reshape(-1)
         amplitudes = np.asarray(self.amplitudes, dtype=float).reshape(-1)
         if times.size != amplitudes.size or times.size == 0:
-            raise ValueError(f"times and amplitudes must have the same number (>= 1) of entries, got "
-                             f"{times.size} and {amplitudes.size}")
+            raise ValueError(
+                f"times and amplitudes must have the same number (>= 1) of entries, got "
+                f"{times.size} and {amplitudes.size}"
+            )
         if not (np.all(np.isfinite(times)) and times[0] == 0 and np.all(np.diff(times) >= 0)):
             raise ValueError(f"times must be finite, start at 0 s and not decrease, got {times}")
         if not (np.all(amplitudes > 0) and abs(amplitudes.sum() - 1) < 1e-12):

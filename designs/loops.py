@@ -33,10 +33,24 @@ from .analysis import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_
 from .filters import TustinSection, padded_coefficients
 from .pid import PID, SAMPLE_PERIOD, SIGMA, PDDesign, pd_design, pd_saturation, second_order_coefficients
 
-__all__ = ["CascadePlants", "cascade_plants", "coordinate_model", "low_frequency_model",
-           "zero_cancelling_filter", "place_pair", "cascade_poles", "SuccessiveLoopClosure",
-           "separation_for", "successive_loop_closure", "cascade_blocks", "FilteredBlock",
-           "zero_cancelling_design", "outer_plant_seen", "coupling_tf", "PlacedPD"]
+__all__ = [
+    "CascadePlants",
+    "cascade_plants",
+    "coordinate_model",
+    "low_frequency_model",
+    "zero_cancelling_filter",
+    "place_pair",
+    "cascade_poles",
+    "SuccessiveLoopClosure",
+    "separation_for",
+    "successive_loop_closure",
+    "cascade_blocks",
+    "FilteredBlock",
+    "zero_cancelling_design",
+    "outer_plant_seen",
+    "coupling_tf",
+    "PlacedPD",
+]
 
 
 def coordinate_model(lin: LinearModel) -> LinearModel:
@@ -92,11 +106,13 @@ def cascade_plants(known: models.Plant, inner: str, outer: str, lin: LinearModel
     row = nq + i
     stiffness, damping, gain = lin.A[row, i], lin.A[row, nq + i], lin.B[row, 0]
     if gain == 0:
-        raise ValueError(f"{known.name}: the input does not act on {inner}'s acceleration; choose another "
-                         "inner coordinate")
+        raise ValueError(
+            f"{known.name}: the input does not act on {inner}'s acceleration; choose another inner coordinate"
+        )
     inner_tf = tf([gain], [1.0, -damping, -stiffness])
-    dropped = {lin.state_names[j]: float(lin.A[row, j]) for j in range(lin.nx)
-               if j not in (i, nq + i) and lin.A[row, j] != 0}
+    dropped = {
+        lin.state_names[j]: float(lin.A[row, j]) for j in range(lin.nx) if j not in (i, nq + i) and lin.A[row, j] != 0
+    }
     coords = coordinate_model(lin)
     inner_full = coords.tf(inner, lin.input_names[0])
     outer_full = coords.tf(outer, lin.input_names[0])
@@ -108,9 +124,16 @@ def cascade_plants(known: models.Plant, inner: str, outer: str, lin: LinearModel
     if common:
         num, den = num[:-common], den[:-common]
     num, den = _reduce(num, den)
-    return CascadePlants(inner=inner_tf, outer=tf(num / den[0], den / den[0]), inner_full=inner_full,
-                         dropped=dropped, inner_coordinate=inner, outer_coordinate=outer,
-                         input=lin.input_names[0], linearization=lin)
+    return CascadePlants(
+        inner=inner_tf,
+        outer=tf(num / den[0], den / den[0]),
+        inner_full=inner_full,
+        dropped=dropped,
+        inner_coordinate=inner,
+        outer_coordinate=outer,
+        input=lin.input_names[0],
+        linearization=lin,
+    )
 
 
 def _reduce(num, den, tol: float = 1e-8):
@@ -126,8 +149,7 @@ def _reduce(num, den, tol: float = 1e-8):
             kept_num.append(z)
     if len(kept_num) == len(num_roots):
         return num, den
-    return (chop(num[0] * np.real(np.poly(kept_num)), 1e-12),
-            chop(den[0] * np.real(np.poly(den_roots)), 1e-12))
+    return (chop(num[0] * np.real(np.poly(kept_num)), 1e-12), chop(den[0] * np.real(np.poly(den_roots)), 1e-12))
 
 
 def low_frequency_model(G) -> control.TransferFunction:
@@ -189,8 +211,15 @@ def place_pair(L0, wn: float, zeta: float) -> dict:
     return {"kp": float(kp), "kd": float(kd), "poles": poles[np.argsort(poles.real)]}
 
 
-def cascade_poles(lin: LinearModel, inner: str, outer: str, inner_gains: tuple, outer_gains: tuple,
-                  outer_filter=None, feedforward_gradient=None) -> np.ndarray:
+def cascade_poles(
+    lin: LinearModel,
+    inner: str,
+    outer: str,
+    inner_gains: tuple,
+    outer_gains: tuple,
+    outer_filter=None,
+    feedforward_gradient=None,
+) -> np.ndarray:
     """Closed-loop poles of the full linearization under ideal PD cascade control.
 
     u = u_e(q) + k_pi (θ_d − θ) − k_di θ̇ and θ_d = F(s)[k_po (r − z) − k_do ż]
@@ -235,8 +264,10 @@ def separation_for(design, target: float, low: float, high: float, what: str = "
     """
     f_low, f_high = design(low) - target, design(high) - target
     if np.sign(f_low) == np.sign(f_high):
-        raise ValueError(f"no {what} in [{low:g}, {high:g}] gives a bandwidth separation of {target:g} "
-                         f"(ratio runs from {f_low + target:.3g} to {f_high + target:.3g})")
+        raise ValueError(
+            f"no {what} in [{low:g}, {high:g}] gives a bandwidth separation of {target:g} "
+            f"(ratio runs from {f_low + target:.3g} to {f_high + target:.3g})"
+        )
     return float(scipy.optimize.brentq(lambda a: design(a) - target, low, high, xtol=1e-12))
 
 
@@ -291,12 +322,23 @@ def _outer_design(model, *, outer_step, inner_step, zeta_outer, derivative):
     return PDDesign(**{**design.__dict__, "step": outer_step, "input_bound": inner_step})
 
 
-def successive_loop_closure(known: models.Plant, inner: str, outer: str, *, inner_bound: float,
-                            outer_step: float, separation: float = 10.0, zeta_inner: float = 0.707,
-                            zeta_outer: float = 0.707, outer_derivative: bool = True,
-                            outer_model: str = "exact", inner_step: float | None = None,
-                            inner_step_range: tuple = (1e-4, np.pi / 2), lin: LinearModel | None = None,
-                            feedforward_gradient=None) -> SuccessiveLoopClosure[PDDesign]:
+def successive_loop_closure(
+    known: models.Plant,
+    inner: str,
+    outer: str,
+    *,
+    inner_bound: float,
+    outer_step: float,
+    separation: float = 10.0,
+    zeta_inner: float = 0.707,
+    zeta_outer: float = 0.707,
+    outer_derivative: bool = True,
+    outer_model: str = "exact",
+    inner_step: float | None = None,
+    inner_step_range: tuple = (1e-4, np.pi / 2),
+    lin: LinearModel | None = None,
+    feedforward_gradient=None,
+) -> SuccessiveLoopClosure[PDDesign]:
     """The text's .8 two-loop design by saturation rules, with bandwidth separation.
 
     Inner loop: k_p,θ = ±`inner_bound`/A_θ, ω_n,θ and k_d,θ from ζ_θ. Outer
@@ -331,29 +373,45 @@ def successive_loop_closure(known: models.Plant, inner: str, outer: str, *, inne
     def build(a_inner):
         inner_design = pd_saturation(plants.inner, input_bound=inner_bound, step=a_inner, zeta=zeta_inner)
         model = inner_design.dc_gain * model_of(plants.outer)
-        outer_design = _outer_design(model, outer_step=outer_step, inner_step=a_inner,
-                                     zeta_outer=zeta_outer, derivative=outer_derivative)
+        outer_design = _outer_design(
+            model, outer_step=outer_step, inner_step=a_inner, zeta_outer=zeta_outer, derivative=outer_derivative
+        )
         return inner_design, model, outer_design
 
     if inner_step is None:
+
         def ratio(a):
             try:
                 i, _, o = build(a)
             except ValueError:
                 return np.inf  # inner loop not stabilized: A_θ too large for the bound
             return i.wn / o.wn
+
         lo, hi = inner_step_range
         # A_θ beyond which the saturation-rule k_p no longer stabilizes: search below it.
         if not np.isfinite(ratio(hi)):
             hi = _stable_edge(ratio, lo, hi)
         inner_step = separation_for(ratio, separation, lo, hi, "inner step A_theta (rad)")
     inner_design, model, outer_design = build(inner_step)
-    poles = cascade_poles(plants.linearization, inner, outer, (inner_design.kp, inner_design.kd),
-                          (outer_design.kp, outer_design.kd), feedforward_gradient=feedforward_gradient)
-    return SuccessiveLoopClosure(plants=plants, inner=inner_design, inner_dc_gain=inner_design.dc_gain,
-                                 outer_model=model, outer=outer_design, outer_dc_gain=outer_design.dc_gain,
-                                 separation=inner_design.wn / outer_design.wn, inner_limit=float(inner_step),
-                                 full_poles=poles)
+    poles = cascade_poles(
+        plants.linearization,
+        inner,
+        outer,
+        (inner_design.kp, inner_design.kd),
+        (outer_design.kp, outer_design.kd),
+        feedforward_gradient=feedforward_gradient,
+    )
+    return SuccessiveLoopClosure(
+        plants=plants,
+        inner=inner_design,
+        inner_dc_gain=inner_design.dc_gain,
+        outer_model=model,
+        outer=outer_design,
+        outer_dc_gain=outer_design.dc_gain,
+        separation=inner_design.wn / outer_design.wn,
+        inner_limit=float(inner_step),
+        full_poles=poles,
+    )
 
 
 def _stable_edge(ratio, lo, hi, iterations: int = 200) -> float:
@@ -369,15 +427,24 @@ def _stable_edge(ratio, lo, hi, iterations: int = 200) -> float:
     return lo
 
 
-def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coordinate: str | None = None,
-                   outer_coordinate: str | None = None, ki: float | None = None,
-                   inner_ki: float | None = None,
-                   anti_windup: str = "back_calculation", rate_limit: float | None = None,
-                   outer_derivative_on: str = "measurement",
-                   outer_limit: float | Literal["inner_step"] | None = "inner_step",
-                   outer_limit_about: str | None = None,
-                   feedforward: bool = False, sample_period: float = SAMPLE_PERIOD, sigma: float = SIGMA,
-                   name: str = "PD") -> models.Cascade:
+def cascade_blocks(
+    known: models.Plant,
+    slc: SuccessiveLoopClosure,
+    *,
+    inner_coordinate: str | None = None,
+    outer_coordinate: str | None = None,
+    ki: float | None = None,
+    inner_ki: float | None = None,
+    anti_windup: str = "back_calculation",
+    rate_limit: float | None = None,
+    outer_derivative_on: str = "measurement",
+    outer_limit: float | Literal["inner_step"] | None = "inner_step",
+    outer_limit_about: str | None = None,
+    feedforward: bool = False,
+    sample_period: float = SAMPLE_PERIOD,
+    sigma: float = SIGMA,
+    name: str = "PD",
+) -> models.Cascade:
     """The two PID blocks of a successive-loop-closure design, composed by `models.Cascade`.
 
     Parameters
@@ -398,18 +465,38 @@ def cascade_blocks(known: models.Plant, slc: SuccessiveLoopClosure, *, inner_coo
     inner_coordinate = inner_coordinate or slc.plants.inner_coordinate
     outer_coordinate = outer_coordinate or slc.plants.outer_coordinate
     limit = slc.inner_limit if outer_limit == "inner_step" else outer_limit
-    outer_block: models.Block = PID(known, outer_coordinate, kp=slc.outer.kp, kd=slc.outer.kd, ki=ki,
-                      derivative_on=outer_derivative_on, anti_windup=anti_windup if ki is not None else "none",
-                      rate_limit=rate_limit, output_limit=limit, limit_about=outer_limit_about,
-                      sample_period=sample_period, sigma=sigma,
-                      name=f"{name} outer ({outer_coordinate})")
+    outer_block: models.Block = PID(
+        known,
+        outer_coordinate,
+        kp=slc.outer.kp,
+        kd=slc.outer.kd,
+        ki=ki,
+        derivative_on=outer_derivative_on,
+        anti_windup=anti_windup if ki is not None else "none",
+        rate_limit=rate_limit,
+        output_limit=limit,
+        limit_about=outer_limit_about,
+        sample_period=sample_period,
+        sigma=sigma,
+        name=f"{name} outer ({outer_coordinate})",
+    )
     if slc.outer_filter is not None:
-        outer_block = FilteredBlock(outer_block, slc.outer_filter, name=f"{name} outer ({outer_coordinate}), "
-                                                                         "zero-cancelling filter")
-    inner_block = PID(known, inner_coordinate, kp=slc.inner.kp, kd=slc.inner.kd, ki=inner_ki,
-                      anti_windup="none" if anti_windup == "none" else "back_calculation",
-                      output_limit=float(known.input_limit[0]), feedforward=feedforward,
-                      sample_period=sample_period, sigma=sigma, name=f"{name} inner ({inner_coordinate})")
+        outer_block = FilteredBlock(
+            outer_block, slc.outer_filter, name=f"{name} outer ({outer_coordinate}), zero-cancelling filter"
+        )
+    inner_block = PID(
+        known,
+        inner_coordinate,
+        kp=slc.inner.kp,
+        kd=slc.inner.kd,
+        ki=inner_ki,
+        anti_windup="none" if anti_windup == "none" else "back_calculation",
+        output_limit=float(known.input_limit[0]),
+        feedforward=feedforward,
+        sample_period=sample_period,
+        sigma=sigma,
+        name=f"{name} inner ({inner_coordinate})",
+    )
     return models.Cascade(outer_block, inner_block, name=name)
 
 
@@ -426,9 +513,16 @@ class FilteredBlock(models.Block):
         self.block = block
         self._section = TustinSection(den.size - 1, block.sample_period)
         gains = dict(block.gains) | {"filter_num": num, "filter_den": den}
-        super().__init__(sample_period=block.sample_period, n_state=block.n_state + self._section.order,
-                         n_measured=block.n_measured, n_reference=block.n_reference, n_input=block.n_input,
-                         gains=gains, measures=block.measures, name=name or f"F(s)·{block.name}")
+        super().__init__(
+            sample_period=block.sample_period,
+            n_state=block.n_state + self._section.order,
+            n_measured=block.n_measured,
+            n_reference=block.n_reference,
+            n_input=block.n_input,
+            gains=gains,
+            measures=block.measures,
+            name=name or f"F(s)·{block.name}",
+        )
 
     def expr(self, xc, y, r, gains):
         nb = self.block.n_state
@@ -444,8 +538,9 @@ class FilteredBlock(models.Block):
         return np.concatenate([xb, xf])
 
 
-def zero_cancelling_design(slc: SuccessiveLoopClosure, *, separation: float = 10.0,
-                           zeta_outer: float = 0.707) -> SuccessiveLoopClosure[PDDesign]:
+def zero_cancelling_design(
+    slc: SuccessiveLoopClosure, *, separation: float = 10.0, zeta_outer: float = 0.707
+) -> SuccessiveLoopClosure[PDDesign]:
     """Redesign the outer loop of `slc` with the zero-cancelling filter (the controlbook's pendulum).
 
     F(s) cancels the outer plant's stable zeros and K_DC; the PD then acts on
@@ -457,12 +552,26 @@ def zero_cancelling_design(slc: SuccessiveLoopClosure, *, separation: float = 10
     num, den = _reduce(*(as_polynomials(slc.inner_dc_gain * filt * slc.plants.outer)))
     reduced = tf(num, den)
     outer = pd_design(reduced, wn=slc.inner.wn / separation, zeta=zeta_outer)
-    poles = cascade_poles(slc.plants.linearization, slc.plants.inner_coordinate, slc.plants.outer_coordinate,
-                          (slc.inner.kp, slc.inner.kd), (outer.kp, outer.kd), outer_filter=filt)
-    return SuccessiveLoopClosure(plants=slc.plants, inner=slc.inner, inner_dc_gain=slc.inner_dc_gain,
-                                 outer_model=reduced, outer=outer, outer_dc_gain=outer.dc_gain,
-                                 separation=slc.inner.wn / outer.wn, inner_limit=slc.inner_limit,
-                                 full_poles=poles, outer_filter=filt)
+    poles = cascade_poles(
+        slc.plants.linearization,
+        slc.plants.inner_coordinate,
+        slc.plants.outer_coordinate,
+        (slc.inner.kp, slc.inner.kd),
+        (outer.kp, outer.kd),
+        outer_filter=filt,
+    )
+    return SuccessiveLoopClosure(
+        plants=slc.plants,
+        inner=slc.inner,
+        inner_dc_gain=slc.inner_dc_gain,
+        outer_model=reduced,
+        outer=outer,
+        outer_dc_gain=outer.dc_gain,
+        separation=slc.inner.wn / outer.wn,
+        inner_limit=slc.inner_limit,
+        full_poles=poles,
+        outer_filter=filt,
+    )
 
 
 def outer_plant_seen(inner_loop, G_outer) -> control.TransferFunction:

@@ -40,9 +40,21 @@ from .analysis import (
 )
 from .filters import lag, lead, lead_ratio, low_pass
 
-__all__ = ["prototype_crossover", "prototype_bandwidth", "prototype_phase_margin", "damping_for_phase_margin",
-           "crossover_for_bandwidth", "lead_for_crossover", "LeadDesign", "improve_loop", "LoopshapingResult",
-           "flattening_prefilter", "phase_at", "low_frequency_sign", "frequency_design_checks"]
+__all__ = [
+    "prototype_crossover",
+    "prototype_bandwidth",
+    "prototype_phase_margin",
+    "damping_for_phase_margin",
+    "crossover_for_bandwidth",
+    "lead_for_crossover",
+    "LeadDesign",
+    "improve_loop",
+    "LoopshapingResult",
+    "flattening_prefilter",
+    "phase_at",
+    "low_frequency_sign",
+    "frequency_design_checks",
+]
 
 
 # ----------------------------------------------------------------- prototype relations
@@ -129,8 +141,9 @@ class LeadDesign:
     phase_margin_deg: float
 
 
-def lead_for_crossover(L0, crossover: float, phase_margin_deg: float, max_phase_per_lead: float = 65.0,
-                       extra_deg: float = 0.0) -> LeadDesign:
+def lead_for_crossover(
+    L0, crossover: float, phase_margin_deg: float, max_phase_per_lead: float = 65.0, extra_deg: float = 0.0
+) -> LeadDesign:
     """Gain and lead(s) so that K·lead·L0 crosses over at `crossover` with the given phase margin.
 
     The lead is centred at the crossover (maximum phase there); phase above
@@ -145,8 +158,10 @@ def lead_for_crossover(L0, crossover: float, phase_margin_deg: float, max_phase_
         raise ValueError(f"crossover must be > 0 rad/s, got {crossover}")
     poles = np.roots(as_polynomials(L0)[1])
     if np.any(poles.real > 1e-9):
-        raise ValueError(f"lead_for_crossover needs a loop without right-half-plane poles (got {poles}); "
-                         "stabilize the plant first (e.g. an inner PD loop)")
+        raise ValueError(
+            f"lead_for_crossover needs a loop without right-half-plane poles (got {poles}); "
+            "stabilize the plant first (e.g. an inner PD loop)"
+        )
     # The controller takes the sign of the plant's low-frequency gain (negative for −g/s²).
     sign = low_frequency_sign(L0)
     L0 = sign * L0
@@ -160,15 +175,23 @@ def lead_for_crossover(L0, crossover: float, phase_margin_deg: float, max_phase_
         count = 1 if needed <= max_phase_per_lead else 2
         per = needed / count
         if per >= 89.0:
-            raise ValueError(f"the loop needs {needed:.1f} deg of lead at {crossover:g} rad/s; more than two "
-                             "leads would be needed")
+            raise ValueError(
+                f"the loop needs {needed:.1f} deg of lead at {crossover:g} rad/s; more than two leads would be needed"
+            )
         comp = lead(crossover, per) ** count
     num, den = as_polynomials(comp * L0)
     gain = 1.0 / abs(np.polyval(num, 1j * crossover) / np.polyval(den, 1j * crossover))
     alpha = lead_ratio(per) if count else 1.0
-    return LeadDesign(controller=comp * (sign * gain), gain=float(sign * gain), lead_phase_deg=float(max(needed, 0.0)),
-                      count=count, zero=float(crossover / np.sqrt(alpha)), pole=float(crossover * np.sqrt(alpha)),
-                      crossover=float(crossover), phase_margin_deg=float(phase_margin_deg))
+    return LeadDesign(
+        controller=comp * (sign * gain),
+        gain=float(sign * gain),
+        lead_phase_deg=float(max(needed, 0.0)),
+        count=count,
+        zero=float(crossover / np.sqrt(alpha)),
+        pole=float(crossover * np.sqrt(alpha)),
+        crossover=float(crossover),
+        phase_margin_deg=float(phase_margin_deg),
+    )
 
 
 # ----------------------------------------------------------------- .14 loopshaping
@@ -200,10 +223,21 @@ class LoopshapingResult:
         return all(s.met for s in self.specs)
 
 
-def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency: float, high_factor: float,
-                 phase_margin_deg: float = 60.0, phase_tolerance_deg: float = 5.0, crossover: float | None = None,
-                 lowpass_order: int = 2, lag_zero_ratio: float = 10.0, margin: float = 1.05,
-                 iterations: int = 60) -> LoopshapingResult:
+def improve_loop(
+    L0,
+    *,
+    low_frequency: float,
+    low_factor: float,
+    high_frequency: float,
+    high_factor: float,
+    phase_margin_deg: float = 60.0,
+    phase_tolerance_deg: float = 5.0,
+    crossover: float | None = None,
+    lowpass_order: int = 2,
+    lag_zero_ratio: float = 10.0,
+    margin: float = 1.05,
+    iterations: int = 60,
+) -> LoopshapingResult:
     """The .14 design: lag for low frequencies, low-pass for noise, lead for the phase margin.
 
     Parameters
@@ -234,8 +268,9 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
     if not np.isfinite(wc):
         raise ValueError("the baseline loop has no gain crossover; give `crossover`")
     if not low_frequency < wc < high_frequency:
-        raise ValueError(f"need low_frequency < crossover < high_frequency, got {low_frequency:g}, {wc:g}, "
-                         f"{high_frequency:g} rad/s")
+        raise ValueError(
+            f"need low_frequency < crossover < high_frequency, got {low_frequency:g}, {wc:g}, {high_frequency:g} rad/s"
+        )
     lag_zero = wc / lag_zero_ratio
     floor = low_frequency * np.sqrt(low_factor**2 - 1) * 1.5
     lag_zero = max(lag_zero, floor)  # a lag zero below this cannot give the factor at ω_low
@@ -275,7 +310,9 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
         elif noise_ratio(hi) <= target:
             new_corner = hi
         else:
-            new_corner = scipy.optimize.brentq(lambda w, target=target: noise_ratio(w) - target, lo, hi, xtol=1e-12 * hi)
+            new_corner = scipy.optimize.brentq(
+                lambda w, target=target: noise_ratio(w) - target, lo, hi, xtol=1e-12 * hi
+            )
         need = low_factor * margin
         if tracking_gain(1.0 + 1e-9) >= need:
             new_gain = 1.0 + 1e-9
@@ -290,7 +327,9 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
                     continue
                 new_gain = m_hi  # unreachable: the spec check below reports it
             else:
-                new_gain = scipy.optimize.brentq(lambda m, need=need: tracking_gain(m) - need, 1.0 + 1e-9, m_hi, xtol=1e-12)
+                new_gain = scipy.optimize.brentq(
+                    lambda m, need=need: tracking_gain(m) - need, 1.0 + 1e-9, m_hi, xtol=1e-12
+                )
         converged = abs(new_corner - corner) <= 1e-9 * corner and abs(new_gain - lag_gain) <= 1e-9 * lag_gain
         corner, lag_gain = float(new_corner), float(new_gain)
         if converged:
@@ -303,9 +342,18 @@ def improve_loop(L0, *, low_frequency: float, low_factor: float, high_frequency:
     specs = loop_improvement_specs(L0, L, low_frequency, low_factor, high_frequency, high_factor)
     specs.append(check_phase_margin(L, target_deg=phase_margin_deg, tolerance_deg=phase_tolerance_deg))
     specs.append(check_crossover(L, wc))
-    return LoopshapingResult(controller=comp, baseline=L0, loop=L, lag_zero=float(lag_zero), lag_gain=lag_gain,
-                             lowpass_corner=corner, lowpass_order=int(lowpass_order),
-                             lead_phase_deg=design.lead_phase_deg, gain=design.gain, specs=specs)
+    return LoopshapingResult(
+        controller=comp,
+        baseline=L0,
+        loop=L,
+        lag_zero=float(lag_zero),
+        lag_gain=lag_gain,
+        lowpass_corner=corner,
+        lowpass_order=int(lowpass_order),
+        lead_phase_deg=design.lead_phase_deg,
+        gain=design.gain,
+        specs=specs,
+    )
 
 
 def _response(G, omega) -> np.ndarray:
@@ -322,11 +370,20 @@ def loop_improvement_specs(L0, L, low_frequency, low_factor, high_frequency, hig
     noise reaches the output through T = L/(1 + L).
     """
     old, new = Loop.unity(L0, 1.0, "baseline"), Loop.unity(L, 1.0, "loopshaped")
-    return [check_stable(new),
-            check_band_ratio(new.output_disturbance_to_output(), old.output_disturbance_to_output(),
-                             0.0, low_frequency, low_factor, "tracking and disturbance rejection"),
-            check_band_ratio(new.noise_to_output(), old.noise_to_output(), high_frequency, np.inf,
-                             high_factor, "noise attenuation")]
+    return [
+        check_stable(new),
+        check_band_ratio(
+            new.output_disturbance_to_output(),
+            old.output_disturbance_to_output(),
+            0.0,
+            low_frequency,
+            low_factor,
+            "tracking and disturbance rejection",
+        ),
+        check_band_ratio(
+            new.noise_to_output(), old.noise_to_output(), high_frequency, np.inf, high_factor, "noise attenuation"
+        ),
+    ]
 
 
 def flattening_prefilter(T, tolerance: float = 0.01, order: int = 1) -> dict:
@@ -344,22 +401,33 @@ def flattening_prefilter(T, tolerance: float = 0.01, order: int = 1) -> dict:
         return band_max(low_pass(w, order) * T, 0.0, np.inf)[0] - bound
 
     if peak_before <= bound:
-        return {"prefilter": tf([1.0], [1.0]), "corner": float(np.inf), "peak_before": peak_before,
-                "peak_after": peak_before}
+        return {
+            "prefilter": tf([1.0], [1.0]),
+            "corner": float(np.inf),
+            "peak_before": peak_before,
+            "peak_after": peak_before,
+        }
     lo, hi = 1e-6, 1e6
     if excess(lo) > 0:
         raise ValueError("no first-order prefilter flattens this closed loop")
     corner = scipy.optimize.brentq(excess, lo, hi, xtol=1e-9)
     corner *= 1 - 1e-6  # stay on the flat side of the bound
     F = low_pass(corner, order)
-    return {"prefilter": F, "corner": float(corner), "peak_before": float(peak_before),
-            "peak_after": float(band_max(F * T, 0.0, np.inf)[0])}
+    return {
+        "prefilter": F,
+        "corner": float(corner),
+        "peak_before": float(peak_before),
+        "peak_after": float(band_max(F * T, 0.0, np.inf)[0]),
+    }
 
 
 def frequency_design_checks(loop: Loop, crossover: float, pm_deg: float, bandwidth: float) -> list[SpecCheck]:
     """A frequency-response design's requirements: stable, crossover and phase margin as designed
     (±1 deg), closed-loop bandwidth as asked."""
     L = loop.loop_gain()
-    return [check_stable(loop), check_crossover(L, crossover),
-            check_phase_margin(L, target_deg=pm_deg, tolerance_deg=1.0),
-            check_bandwidth(loop.reference_to_output(), bandwidth)]
+    return [
+        check_stable(loop),
+        check_crossover(L, crossover),
+        check_phase_margin(L, target_deg=pm_deg, tolerance_deg=1.0),
+        check_bandwidth(loop.reference_to_output(), bandwidth),
+    ]

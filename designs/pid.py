@@ -29,9 +29,20 @@ from models.checks import positive
 from .analysis import as_polynomials, dc_gain, tf
 from .discrete import back_calculation, dirty_derivative, integrate_while_slow, saturate, trapezoid
 
-__all__ = ["PDDesign", "second_order_coefficients", "pd_design", "pd_saturation", "max_equilibrium_input",
-           "linearized_input_bound", "coordinate_reader", "equilibrium_feedforward", "reference_feedforward", "PID",
-           "SIGMA", "SAMPLE_PERIOD"]
+__all__ = [
+    "PDDesign",
+    "second_order_coefficients",
+    "pd_design",
+    "pd_saturation",
+    "max_equilibrium_input",
+    "linearized_input_bound",
+    "coordinate_reader",
+    "equilibrium_feedforward",
+    "reference_feedforward",
+    "PID",
+    "SIGMA",
+    "SAMPLE_PERIOD",
+]
 
 #: The text's dirty-derivative time constant (".11: dirty derivative gain τ = 0.05"), s.
 SIGMA = 0.05
@@ -82,12 +93,19 @@ class PDDesign:
     input_bound: float = float("nan")
 
     def as_dict(self) -> dict:
-        return {"kp": self.kp, "kd": self.kd, "wn": self.wn, "zeta": self.zeta, "poles": self.poles,
-                "dc_gain": self.dc_gain}
+        return {
+            "kp": self.kp,
+            "kd": self.kd,
+            "wn": self.wn,
+            "zeta": self.zeta,
+            "poles": self.poles,
+            "dc_gain": self.dc_gain,
+        }
 
 
-def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: float | None = None,
-              derivative: bool = True) -> PDDesign:
+def pd_design(
+    plant, *, zeta: float | None = None, kp: float | None = None, wn: float | None = None, derivative: bool = True
+) -> PDDesign:
     """Match the closed loop of a PD (or P) loop to s² + 2ζω_n s + ω_n².
 
     Give either `kp` (the saturation rule; ω_n follows) or `wn` (k_p
@@ -119,7 +137,7 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
         if wn is not None:
             wn = positive(wn, "wn (rad/s)")
             # (a0 + n0 kp) = wn² (1 + n1 kd) and (a1 + n1 kp + n0 kd) = 2ζwn (1 + n1 kd): linear in (kp, kd).
-            matrix = np.array([[n0, -wn**2 * n1], [n1, n0 - 2 * zeta * wn * n1]])
+            matrix = np.array([[n0, -(wn**2) * n1], [n1, n0 - 2 * zeta * wn * n1]])
             kp, kd = np.linalg.solve(matrix, [wn**2 - a0, 2 * zeta * wn - a1])
         else:
             if n1 != 0:
@@ -127,8 +145,10 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
             assert kp is not None  # exactly one of kp and wn is given (checked above)
             stiffness = a0 + n0 * kp
             if stiffness <= 0:
-                raise ValueError(f"kp = {kp:.4g} does not stabilize the plant: need a0 + n0 kp > 0, that is "
-                                 f"kp {'>' if n0 > 0 else '<'} {-a0 / n0:.4g}; reduce the step or raise the bound")
+                raise ValueError(
+                    f"kp = {kp:.4g} does not stabilize the plant: need a0 + n0 kp > 0, that is "
+                    f"kp {'>' if n0 > 0 else '<'} {-a0 / n0:.4g}; reduce the step or raise the bound"
+                )
             wn = float(np.sqrt(stiffness))
             kd = (2 * zeta * wn - a1) / n0
     else:
@@ -148,8 +168,16 @@ def pd_design(plant, *, zeta: float | None = None, kp: float | None = None, wn: 
     if lead <= 0 or np.any(roots.real >= 0):
         raise ValueError(f"the PD loop is not stable: poles {roots}")
     closed = tf([n1 * kp, n0 * kp], char)
-    return PDDesign(kp=kp, kd=kd, wn=float(wn), zeta=float(zeta), poles=roots[np.argsort(roots.imag)],
-                    dc_gain=dc_gain(closed), plant=plant, closed_loop=closed)
+    return PDDesign(
+        kp=kp,
+        kd=kd,
+        wn=float(wn),
+        zeta=float(zeta),
+        poles=roots[np.argsort(roots.imag)],
+        dc_gain=dc_gain(closed),
+        plant=plant,
+        closed_loop=closed,
+    )
 
 
 def pd_saturation(plant, *, input_bound: float, step: float, zeta: float) -> PDDesign:
@@ -186,9 +214,9 @@ def max_equilibrium_input(known: models.Plant, ranges: dict) -> tuple[float, dic
     -------
     (value, q) : the largest magnitude of the (first) input and the configuration where it occurs
     """
-    q0 = dict(zip(known.coordinate_names, known.equilibrium()[0][:known.nq]))
+    q0 = dict(zip(known.coordinate_names, known.equilibrium()[0][: known.nq]))
     if not ranges:
-        return float(abs(known.equilibrium_input(known.equilibrium()[0][:known.nq])[0])), {}
+        return float(abs(known.equilibrium_input(known.equilibrium()[0][: known.nq])[0])), {}
     for name in ranges:
         if name not in q0:
             raise ValueError(f"{known.name} has no coordinate {name!r}; coordinates are {known.coordinate_names}")
@@ -219,8 +247,7 @@ def max_equilibrium_input(known: models.Plant, ranges: dict) -> tuple[float, dic
     mapped = known.casadi_equilibrium_input.map(grid.shape[0])
     values = np.abs(np.asarray(mapped(qs.T, p))[0])
     best = grid[int(np.argmax(values))]
-    refined = scipy.optimize.minimize(lambda v: -magnitude(v), best, bounds=list(zip(lows, highs)),
-                                      method="L-BFGS-B")
+    refined = scipy.optimize.minimize(lambda v: -magnitude(v), best, bounds=list(zip(lows, highs)), method="L-BFGS-B")
     if -refined.fun > values.max():
         best = refined.x
     return float(magnitude(best)), dict(zip(names, map(float, best)))
@@ -239,8 +266,10 @@ def linearized_input_bound(known: models.Plant, ranges: dict) -> dict:
     u_max = float(known.input_limit[0])
     ue_max, where = max_equilibrium_input(known, ranges)
     if ue_max >= u_max:
-        raise ValueError(f"{known.name}: the equilibrium input {ue_max:.4g} at {where} reaches the actuator "
-                         f"limit {u_max:g}; nothing is left for feedback")
+        raise ValueError(
+            f"{known.name}: the equilibrium input {ue_max:.4g} at {where} reaches the actuator "
+            f"limit {u_max:g}; nothing is left for feedback"
+        )
     return {"input_limit": u_max, "max_equilibrium_input": ue_max, "at": where, "bound": u_max - ue_max}
 
 
@@ -248,8 +277,7 @@ def linearized_input_bound(known: models.Plant, ranges: dict) -> dict:
 def coordinate_reader(known: models.Plant, coordinate: str):
     """y ↦ q_coordinate from the plant's outputs (the satellite's φ = y0 + y1), as a CasADi map."""
     if coordinate not in known.coordinate_names:
-        raise ValueError(f"{known.name} has no coordinate {coordinate!r}; coordinates are "
-                         f"{known.coordinate_names}")
+        raise ValueError(f"{known.name} has no coordinate {coordinate!r}; coordinates are {known.coordinate_names}")
     index = known.coordinate_names.index(coordinate)
     configuration = known.casadi_configuration
     p = ca.DM(known.param_vector())
@@ -276,10 +304,9 @@ def reference_feedforward(known: models.Plant, coordinate: str):
     torque at the desired roll angle).
     """
     if coordinate not in known.coordinate_names:
-        raise ValueError(f"{known.name} has no coordinate {coordinate!r}; coordinates are "
-                         f"{known.coordinate_names}")
+        raise ValueError(f"{known.name} has no coordinate {coordinate!r}; coordinates are {known.coordinate_names}")
     index = known.coordinate_names.index(coordinate)
-    q0 = ca.DM(known.equilibrium()[0][:known.nq])
+    q0 = ca.DM(known.equilibrium()[0][: known.nq])
     unit = ca.DM.zeros(known.nq)
     unit[index] = 1
     static = known.casadi_equilibrium_input
@@ -320,11 +347,24 @@ class PID(models.Block):
     State x_c = (e_prev, y_prev, ẏ estimate[, integral]).
     """
 
-    def __init__(self, known: models.Plant, coordinate: str, *, kp: float, kd: float = 0.0,
-                 ki: float | None = None, sample_period: float = SAMPLE_PERIOD, sigma: float = SIGMA,
-                 derivative_on: str = "measurement", anti_windup: str = "back_calculation",
-                 rate_limit: float | None = None, output_limit: float | None = None,
-                 feedforward: bool = False, limit_about: str | None = None, name: str = "PID"):
+    def __init__(
+        self,
+        known: models.Plant,
+        coordinate: str,
+        *,
+        kp: float,
+        kd: float = 0.0,
+        ki: float | None = None,
+        sample_period: float = SAMPLE_PERIOD,
+        sigma: float = SIGMA,
+        derivative_on: str = "measurement",
+        anti_windup: str = "back_calculation",
+        rate_limit: float | None = None,
+        output_limit: float | None = None,
+        feedforward: bool = False,
+        limit_about: str | None = None,
+        name: str = "PID",
+    ):
         if derivative_on not in ("measurement", "error"):
             raise ValueError(f"derivative_on must be 'measurement' or 'error', got {derivative_on!r}")
         if anti_windup not in ANTI_WINDUP:
@@ -346,8 +386,16 @@ class PID(models.Block):
         self.limit_about = limit_about
         self._read_center = coordinate_reader(known, limit_about) if limit_about is not None else None
         gains = {"kp": kp, "kd": kd} | ({"ki": ki} if ki is not None else {})
-        super().__init__(sample_period=sample_period, n_state=3 + self.has_integrator, n_measured=known.ny,
-                         n_reference=1, n_input=1, gains=gains, measures="outputs", name=name)
+        super().__init__(
+            sample_period=sample_period,
+            n_state=3 + self.has_integrator,
+            n_measured=known.ny,
+            n_reference=1,
+            n_input=1,
+            gains=gains,
+            measures="outputs",
+            name=name,
+        )
 
     def expr(self, xc, y, r, gains):
         ts = self.sample_period

@@ -15,9 +15,19 @@ import numpy as np
 
 from .analysis import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
 
-__all__ = ["evans_form", "integrator_evans_form", "locus", "damping_ratios", "gain_leaving_damping",
-           "integrator_gain", "LeadLagDesign", "lead_by_angle", "lag_for_static_gain", "dominant_pair",
-           "lead_lag_for_static_gain"]
+__all__ = [
+    "evans_form",
+    "integrator_evans_form",
+    "locus",
+    "damping_ratios",
+    "gain_leaving_damping",
+    "integrator_gain",
+    "LeadLagDesign",
+    "lead_by_angle",
+    "lag_for_static_gain",
+    "dominant_pair",
+    "lead_lag_for_static_gain",
+]
 
 
 def evans_form(char_base, char_gain) -> control.TransferFunction:
@@ -68,10 +78,12 @@ def gain_leaving_damping(L, zeta_min: float, sign: float = 1.0) -> float:
     num, den = as_polynomials(L)
     angle = np.pi - np.arccos(zeta_min)
     direction = np.exp(1j * angle)
+
     # D(ω d) and N(ω d) as polynomials in ω: coefficient of ω^k gets d^k.
     def on_ray(p):
         n = p.size - 1
         return p * direction ** np.arange(n, -1, -1)
+
     d_ray, n_ray = on_ray(den), on_ray(num)
     # k real  <=>  Im(D conj(N)) = 0.
     cross = np.polymul(d_ray, np.conj(n_ray)).imag
@@ -90,8 +102,14 @@ def gain_leaving_damping(L, zeta_min: float, sign: float = 1.0) -> float:
     return float(min(signed, key=abs)) if signed else float(np.sign(sign) * np.inf)
 
 
-def integrator_gain(plant, kp: float, kd: float, zeta_min: float, overshoot_allowance: float | None = 10.0,
-                    derivative_on: str = "measurement") -> dict:
+def integrator_gain(
+    plant,
+    kp: float,
+    kd: float,
+    zeta_min: float,
+    overshoot_allowance: float | None = 10.0,
+    derivative_on: str = "measurement",
+) -> dict:
     """The .10 choice of k_i along its root locus.
 
     "Choose k_i sufficiently large to drive the error to zero as quickly as
@@ -144,8 +162,15 @@ def integrator_gain(plant, kp: float, kd: float, zeta_min: float, overshoot_allo
                 lo = mid
         ki = lo * ki_damping
     poles = locus(L, [ki])[0]
-    return {"ki": float(ki), "evans": L, "poles": poles[np.argsort(poles.real)], "zeta_min": zeta_min,
-            "ki_damping": float(ki_damping), "overshoot_pd": float(os_pd), "overshoot_pid": float(overshoot(ki))}
+    return {
+        "ki": float(ki),
+        "evans": L,
+        "poles": poles[np.argsort(poles.real)],
+        "zeta_min": zeta_min,
+        "ki_damping": float(ki_damping),
+        "overshoot_pd": float(os_pd),
+        "overshoot_pid": float(overshoot(ki)),
+    }
 
 
 def dominant_pair(wn: float, zeta: float) -> complex:
@@ -209,8 +234,10 @@ def lead_by_angle(plant, target: complex, zero: float) -> LeadLagDesign:
     needed = np.angle(g) + np.angle(s + zero) + np.pi
     needed = (needed + np.pi) % (2 * np.pi) - np.pi
     if not 0 < needed < np.pi:
-        raise ValueError(f"with the zero at -{zero:g} the pole would need an angle of {np.degrees(needed):.1f} deg; "
-                         "move the zero or add a second lead")
+        raise ValueError(
+            f"with the zero at -{zero:g} the pole would need an angle of {np.degrees(needed):.1f} deg; "
+            "move the zero or add a second lead"
+        )
     pole = s.imag / np.tan(needed) - s.real
     if pole <= 0:
         raise ValueError(f"the lead pole comes out at {-pole:.4g} (right half plane); move the zero")
@@ -232,12 +259,19 @@ def lag_for_static_gain(design: LeadLagDesign, plant, static_gain: float, zero: 
     ratio = static_gain / current
     if ratio <= 1:
         return design
-    return LeadLagDesign(gain=design.gain, lead_zero=design.lead_zero, lead_pole=design.lead_pole,
-                         target=design.target, lag_zero=float(zero), lag_pole=float(zero / ratio))
+    return LeadLagDesign(
+        gain=design.gain,
+        lead_zero=design.lead_zero,
+        lead_pole=design.lead_pole,
+        target=design.target,
+        lag_zero=float(zero),
+        lag_pole=float(zero / ratio),
+    )
 
 
-def lead_lag_for_static_gain(plant, wn: float, zeta: float, lead_zero: float, lag_zero: float,
-                             static_gain: float) -> tuple[LeadLagDesign, LeadLagDesign]:
+def lead_lag_for_static_gain(
+    plant, wn: float, zeta: float, lead_zero: float, lag_zero: float, static_gain: float
+) -> tuple[LeadLagDesign, LeadLagDesign]:
     """A lead placing the dominant pair (ω_n, ζ) by the angle condition, and a lag raising K_p.
 
     The lag is fixed first and the lead is placed on G·lag, so the lag's phase

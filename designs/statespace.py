@@ -54,13 +54,34 @@ from models.lqr import (
 )
 
 __all__ = [
-    "controllability_matrix", "observability_matrix", "uncontrollable_modes", "unobservable_modes",
-    "require_controllable", "require_observable", "require_stabilizable", "require_detectable",
-    "second_order_poles", "second_order_from_specs", "normalized_rise_time", "place",
-    "pole_mismatch", "reference_gain", "reference_steady_state", "augment_integrator",
-    "split_integral_gain", "augment_disturbance", "inner_outer_poles", "bryson_tracking_weights",
-    "observer_gain", "discrete_observer_gain",
-    "current_estimator_gain", "bryson_weights", "lqr", "dlqr", "kalman", "dkalman",
+    "controllability_matrix",
+    "observability_matrix",
+    "uncontrollable_modes",
+    "unobservable_modes",
+    "require_controllable",
+    "require_observable",
+    "require_stabilizable",
+    "require_detectable",
+    "second_order_poles",
+    "second_order_from_specs",
+    "normalized_rise_time",
+    "place",
+    "pole_mismatch",
+    "reference_gain",
+    "reference_steady_state",
+    "augment_integrator",
+    "split_integral_gain",
+    "augment_disturbance",
+    "inner_outer_poles",
+    "bryson_tracking_weights",
+    "observer_gain",
+    "discrete_observer_gain",
+    "current_estimator_gain",
+    "bryson_weights",
+    "lqr",
+    "dlqr",
+    "kalman",
+    "dkalman",
     "riccati_residual",
 ]
 
@@ -93,8 +114,12 @@ def normalized_rise_time(damping_ratio: float) -> float:
     if not 0 < zeta < 1:
         raise ValueError(f"damping_ratio must be in (0, 1), got {zeta}")
     peak = np.pi / np.sqrt(1 - zeta**2)  # the response rises monotonically up to its first peak
-    crossing = [scipy.optimize.brentq(lambda tau, level=level: _step_response_normalized(tau, zeta) - level,
-                                      0.0, peak, xtol=1e-14) for level in (0.1, 0.9)]
+    crossing = [
+        scipy.optimize.brentq(
+            lambda tau, level=level: _step_response_normalized(tau, zeta) - level, 0.0, peak, xtol=1e-14
+        )
+        for level in (0.1, 0.9)
+    ]
     return crossing[1] - crossing[0]
 
 
@@ -131,16 +156,18 @@ def _checked_poles(poles, n: int, n_inputs: int, what: str) -> np.ndarray:
     if not np.all(np.isfinite(poles)):
         raise ValueError(f"{message_prefix(what)}the requested poles are not finite: {format_values(poles)}")
     complex_ones = poles[np.abs(poles.imag) > 0]
-    if not np.allclose(np.sort_complex(complex_ones), np.sort_complex(complex_ones.conj()),
-                       rtol=1e-12, atol=1e-12):
-        raise ValueError(f"{message_prefix(what)}complex poles must come in conjugate pairs, "
-                         f"got {format_values(poles)}")
+    if not np.allclose(np.sort_complex(complex_ones), np.sort_complex(complex_ones.conj()), rtol=1e-12, atol=1e-12):
+        raise ValueError(
+            f"{message_prefix(what)}complex poles must come in conjugate pairs, got {format_values(poles)}"
+        )
     for p in poles:
         count = int(np.sum(np.abs(poles - p) <= 1e-9 * max(1.0, abs(p))))
         if count > n_inputs:
-            raise ValueError(f"{message_prefix(what)}the pole {format_values([p])} is requested {count} times but the "
-                             f"system has {n_inputs} independent input(s); a pole can be placed at most "
-                             f"rank(B) times: spread the repeated poles slightly")
+            raise ValueError(
+                f"{message_prefix(what)}the pole {format_values([p])} is requested {count} times but the "
+                f"system has {n_inputs} independent input(s); a pole can be placed at most "
+                f"rank(B) times: spread the repeated poles slightly"
+            )
     return poles
 
 
@@ -190,8 +217,10 @@ def place(A, B, poles, what: str = "") -> np.ndarray:
     K = np.asarray(K, dtype=float).reshape(B.shape[1], A.shape[0])
     miss = pole_mismatch(np.linalg.eigvals(A - B @ K), poles)
     if miss > 1e-6 * max(1.0, float(np.max(np.abs(poles)))):
-        raise ValueError(f"{message_prefix(what)}pole placement is ill-conditioned: eig(A − B K) misses the "
-                         f"requested poles by {miss:.3g}")
+        raise ValueError(
+            f"{message_prefix(what)}pole placement is ill-conditioned: eig(A − B K) misses the "
+            f"requested poles by {miss:.3g}"
+        )
     return K
 
 
@@ -211,12 +240,15 @@ def reference_steady_state(A, B, C_r) -> tuple[np.ndarray, np.ndarray]:
     C_r = finite_matrix(C_r, "C_r")
     n = A.shape[0]
     if B.shape[1] != 1 or C_r.shape != (1, n):
-        raise ValueError(f"reference_steady_state needs one input and one tracked output row C_r of "
-                         f"{n} entries; got B {B.shape}, C_r {C_r.shape}")
+        raise ValueError(
+            f"reference_steady_state needs one input and one tracked output row C_r of "
+            f"{n} entries; got B {B.shape}, C_r {C_r.shape}"
+        )
     system = np.block([[A, B], [C_r, np.zeros((1, 1))]])
     if np.linalg.cond(system) > 1e12:
-        raise ValueError("the tracked output has a transmission zero at s = 0: no rest state holds "
-                         "it at a nonzero reference")
+        raise ValueError(
+            "the tracked output has a transmission zero at s = 0: no rest state holds it at a nonzero reference"
+        )
     sol = np.linalg.solve(system, np.concatenate([np.zeros(n), [1.0]]))
     return sol[:n], sol[n:]
 
@@ -242,8 +274,9 @@ def reference_gain(A, B, K, C_r) -> np.ndarray:
     K = finite_matrix(K, "K")
     C_r = finite_matrix(C_r, "C_r")
     if K.shape != (B.shape[1], A.shape[0]) or C_r.shape != (1, A.shape[0]) or B.shape[1] != 1:
-        raise ValueError(f"reference_gain needs B (nx, 1), K (1, nx), C_r (1, nx); got {B.shape}, "
-                         f"{K.shape}, {C_r.shape}")
+        raise ValueError(
+            f"reference_gain needs B (nx, 1), K (1, nx), C_r (1, nx); got {B.shape}, {K.shape}, {C_r.shape}"
+        )
     closed = A - B @ K
     if np.linalg.cond(closed) > 1e12:
         raise ValueError("A − B K is singular (a closed-loop pole at s = 0): no reference gain")
@@ -278,8 +311,15 @@ def split_integral_gain(K_augmented, n_states: int) -> tuple[np.ndarray, np.ndar
     return K_augmented[:, :n_states].copy(), -K_augmented[:, n_states].copy()
 
 
-def inner_outer_poles(linear, inner_state: int, input_room: float, angle_step: float, damping_ratio: float,
-                      separation: float, what: str = "") -> np.ndarray:
+def inner_outer_poles(
+    linear,
+    inner_state: int,
+    input_room: float,
+    angle_step: float,
+    damping_ratio: float,
+    separation: float,
+    what: str = "",
+) -> np.ndarray:
     """The .8 successive-loop rule as state-feedback poles (rad/s), (4,).
 
     From the inner coordinate's row q̈_i = a q_i + b u + … of the linearization:
@@ -302,14 +342,17 @@ def inner_outer_poles(linear, inner_state: int, input_room: float, angle_step: f
     a, b = linear.A[nq + inner_state, inner_state], linear.B[nq + inner_state, 0]
     wn_sq = abs(b) * input_room / angle_step - a
     if wn_sq <= 0:
-        raise ValueError(f"{message_prefix(what)}a step of {angle_step:.3g} rad saturating the input cannot "
-                         f"stabilize the inner loop (ωₙ² = {wn_sq:.3g}); choose a smaller angle step")
+        raise ValueError(
+            f"{message_prefix(what)}a step of {angle_step:.3g} rad saturating the input cannot "
+            f"stabilize the inner loop (ωₙ² = {wn_sq:.3g}); choose a smaller angle step"
+        )
     wn = np.sqrt(wn_sq)
     return np.concatenate([second_order_poles(wn, damping_ratio), second_order_poles(wn / separation, damping_ratio)])
 
 
-def bryson_tracking_weights(state_names, maxima: dict, integral_max: float,
-                            input_room: float) -> tuple[np.ndarray, np.ndarray]:
+def bryson_tracking_weights(
+    state_names, maxima: dict, integral_max: float, input_room: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Bryson's rule for the integrator-augmented state (x, x_I) and one input.
 
     `maxima` gives the largest acceptable excursion per state name (SI; states not
@@ -343,8 +386,10 @@ def discrete_observer_gain(A_d, C, poles_z, what: str = "") -> np.ndarray:
     """
     poles_z = np.atleast_1d(np.asarray(poles_z, dtype=complex))
     if np.any(np.abs(poles_z) >= 1):
-        raise ValueError(f"{message_prefix(what)}discrete observer poles must lie inside the unit circle, "
-                         f"got {format_values(poles_z)}")
+        raise ValueError(
+            f"{message_prefix(what)}discrete observer poles must lie inside the unit circle, "
+            f"got {format_values(poles_z)}"
+        )
     return observer_gain(A_d, C, poles_z, what)
 
 

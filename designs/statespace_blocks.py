@@ -87,8 +87,9 @@ class TrackingModel:
     def from_plant(cls, plant: models.Plant, tracked: str) -> TrackingModel:
         """Linearize `plant` at its standard equilibrium; `tracked` names the coordinate that follows r."""
         if tracked not in plant.coordinate_names:
-            raise ValueError(f"{plant.name} has no coordinate {tracked!r}; coordinates are "
-                             f"{', '.join(plant.coordinate_names)}")
+            raise ValueError(
+                f"{plant.name} has no coordinate {tracked!r}; coordinates are {', '.join(plant.coordinate_names)}"
+            )
         if plant.nu != 1:
             raise ValueError(f"{plant.name}: the state-space blocks handle one input, got {plant.nu}")
         linear = plant.linearize()
@@ -96,7 +97,7 @@ class TrackingModel:
         C_r = np.zeros((1, plant.nx))
         C_r[0, index] = 1.0
         N_x, N_u = reference_steady_state(linear.A, linear.B, C_r)
-        G = plant.equilibrium_input_jacobian(linear.xe[:plant.nq])
+        G = plant.equilibrium_input_jacobian(linear.xe[: plant.nq])
         return cls(plant, linear, tracked, index, C_r, N_x, N_u, G)
 
     @property
@@ -176,7 +177,9 @@ class _TrackingBlock(models.Block):
         """(integrator state next, u saturated, u_e + u_nl) from the state (estimate) x̃."""
         model = self.model
         r_tilde = r[0] - model.tracked_equilibrium
-        u_static = model.linear.ue + model.nonlinear_input(x_tilde[:model.plant.nq] + model.linear.xe[:model.plant.nq])
+        u_static = model.linear.ue + model.nonlinear_input(
+            x_tilde[: model.plant.nq] + model.linear.xe[: model.plant.nq]
+        )
         u_lin = -ca.mtimes(gains["K"], x_tilde) + gains["kr"] * r_tilde - extra
         if not self.has_integrator:
             return ca.SX(0, 1), saturate(u_static + u_lin, self.limit), u_static
@@ -212,12 +215,28 @@ class StateFeedback(_TrackingBlock):
     State x_c: (x_I, e_prev) with an integrator, else empty.
     """
 
-    def __init__(self, model: TrackingModel, K, kr, ki=None, *, sample_period: float,
-                 rate_limit: float | None = None, name: str = "state feedback"):
+    def __init__(
+        self,
+        model: TrackingModel,
+        K,
+        kr,
+        ki=None,
+        *,
+        sample_period: float,
+        rate_limit: float | None = None,
+        name: str = "state feedback",
+    ):
         gains = self._setup(model, K, kr, ki, rate_limit)
-        super().__init__(sample_period=sample_period, n_state=self.n_integrator_states,
-                         n_measured=model.nx, n_reference=1, n_input=1, gains=gains,
-                         measures="state", name=name)
+        super().__init__(
+            sample_period=sample_period,
+            n_state=self.n_integrator_states,
+            n_measured=model.nx,
+            n_reference=1,
+            n_input=1,
+            gains=gains,
+            measures="state",
+            name=name,
+        )
 
     def expr(self, xc, y, r, gains):
         x_tilde = y - self.model.linear.xe
@@ -252,9 +271,20 @@ class ObserverFeedback(_TrackingBlock):
         When the observer error dynamics A_d − A_d M C are not stable at Ts.
     """
 
-    def __init__(self, model: TrackingModel, K, kr, observer_gain, ki=None, *, sample_period: float,
-                 measured_outputs=None, disturbance_observer: bool = False,
-                 rate_limit: float | None = None, name: str = "observer-based"):
+    def __init__(
+        self,
+        model: TrackingModel,
+        K,
+        kr,
+        observer_gain,
+        ki=None,
+        *,
+        sample_period: float,
+        measured_outputs=None,
+        disturbance_observer: bool = False,
+        rate_limit: float | None = None,
+        name: str = "observer-based",
+    ):
         gains = self._setup(model, K, kr, ki, rate_limit)
         self.rows = model.output_rows(measured_outputs)
         self.measured_outputs = tuple(model.linear.output_names[i] for i in self.rows)
@@ -269,20 +299,29 @@ class ObserverFeedback(_TrackingBlock):
         M = np.asarray(observer_gain, dtype=float).reshape(nx + nd, len(self.rows))
         error_poles = np.linalg.eigvals(A_o - A_o @ M @ C_o)
         if np.any(np.abs(error_poles) >= 1):
-            raise ValueError(f"{model.name}: the observer error dynamics are unstable at Ts = "
-                             f"{sample_period} s (|z| up to {np.max(np.abs(error_poles)):.4g})")
+            raise ValueError(
+                f"{model.name}: the observer error dynamics are unstable at Ts = "
+                f"{sample_period} s (|z| up to {np.max(np.abs(error_poles)):.4g})"
+            )
         self.A_o, self.B_o, self.C_o, self.M = A_o, B_o, C_o, M
         self.error_poles = error_poles
-        super().__init__(sample_period=sample_period, n_state=self.n_estimate + self.n_integrator_states,
-                         n_measured=model.linear.ny, n_reference=1, n_input=1, gains=gains,
-                         measures="outputs", name=name)
+        super().__init__(
+            sample_period=sample_period,
+            n_state=self.n_estimate + self.n_integrator_states,
+            n_measured=model.linear.ny,
+            n_reference=1,
+            n_input=1,
+            gains=gains,
+            measures="outputs",
+            name=name,
+        )
 
     def expr(self, xc, y, r, gains):
         model, n = self.model, self.n_estimate
         prior = xc[:n]
         y_tilde = y[self.rows] - model.linear.ye[self.rows]
         estimate = prior + ca.mtimes(ca.DM(self.M), y_tilde - ca.mtimes(ca.DM(self.C_o), prior))
-        x_hat = estimate[:model.nx]
+        x_hat = estimate[: model.nx]
         d_hat = estimate[model.nx] if self.disturbance_observer else 0
         y_r = model.tracked_from_outputs(y) if self.has_integrator else 0
         int_next, u, u_static = self._command(xc[n:], x_hat, y_r, r, gains, extra=d_hat)
@@ -294,13 +333,13 @@ class ObserverFeedback(_TrackingBlock):
         model = self.model
         q0 = np.asarray(model.plant.casadi_configuration(y0, model.plant.param_vector())).ravel()
         prior = np.zeros(self.n_estimate)
-        prior[:model.plant.nq] = q0 - model.linear.xe[:model.plant.nq]
+        prior[: model.plant.nq] = q0 - model.linear.xe[: model.plant.nq]
         return np.concatenate([prior, self._integrator_initial(float(q0[model.tracked_state]), r0)])
 
     def state_estimate(self, xc) -> np.ndarray:
         """Absolute state estimates x_e + x̄ from controller states xc (N, n_state) -> (N, nx)."""
         xc = np.atleast_2d(xc)
-        return xc[:, :self.model.nx] + self.model.linear.xe
+        return xc[:, : self.model.nx] + self.model.linear.xe
 
     def disturbance_estimate(self, xc) -> np.ndarray:
         """d̄ over time from controller states xc (N, n_state) -> (N,)."""

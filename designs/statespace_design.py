@@ -36,8 +36,14 @@ from designs.statespace_blocks import ObserverFeedback, StateFeedback, TrackingM
 __all__ = ["StateSpaceDesign", "design", "controllers", "kalman_noise", "LABELS", "MEASUREMENT_NOISE"]
 
 #: Controller labels of `controllers`.
-LABELS = ("pole placement", "pole placement + integrator", "observer-based", "disturbance observer",
-          "LQR", "LQR + Kalman")
+LABELS = (
+    "pole placement",
+    "pole placement + integrator",
+    "observer-based",
+    "disturbance observer",
+    "LQR",
+    "LQR + Kalman",
+)
 
 #: Measurement noise of the Kalman filter's model, m or rad, standard deviation per sample.
 MEASUREMENT_NOISE = 1e-3
@@ -123,8 +129,10 @@ def _sampled_poles(model: TrackingModel, K, Ts, what) -> np.ndarray:
     disc = model.discrete(Ts)
     z = np.linalg.eigvals(disc.A - disc.B @ np.atleast_2d(K))
     if np.any(np.abs(z) >= 1):
-        raise ValueError(f"{what}: the continuous gain is unstable when sampled at Ts = {Ts} s "
-                         f"(|z| up to {np.max(np.abs(z)):.4g}); slow the poles or sample faster")
+        raise ValueError(
+            f"{what}: the continuous gain is unstable when sampled at Ts = {Ts} s "
+            f"(|z| up to {np.max(np.abs(z)):.4g}); slow the poles or sample faster"
+        )
     return z
 
 
@@ -145,11 +153,24 @@ def _discrete_observer(model, rows, poles, Ts, disturbance: bool, what):
     return ss.discrete_observer_gain(A, C, poles_z, what), poles_z
 
 
-def design(known: models.Plant, tracked: str, *, poles, Q, R, sample_period: float,
-           observer_sample_period: float | None = None, integrator_pole: float | None = None,
-           observer_poles=None, observer_speedup: float = 5.0, observer_outputs=None,
-           observer_uses_integrator: bool = False, disturbance_pole: float | None = None,
-           kalman_speedup: float = 5.0, measurement_noise: float = MEASUREMENT_NOISE) -> StateSpaceDesign:
+def design(
+    known: models.Plant,
+    tracked: str,
+    *,
+    poles,
+    Q,
+    R,
+    sample_period: float,
+    observer_sample_period: float | None = None,
+    integrator_pole: float | None = None,
+    observer_poles=None,
+    observer_speedup: float = 5.0,
+    observer_outputs=None,
+    observer_uses_integrator: bool = False,
+    disturbance_pole: float | None = None,
+    kalman_speedup: float = 5.0,
+    measurement_noise: float = MEASUREMENT_NOISE,
+) -> StateSpaceDesign:
     """All state-space designs of `known` (the plant the controller believes) about its standard equilibrium.
 
     Parameters
@@ -196,7 +217,7 @@ def design(known: models.Plant, tracked: str, *, poles, Q, R, sample_period: flo
     K_int, ki = ss.split_integral_gain(ss.place(A_I, B_I, np.append(poles, p_int), name), nx)
     _sampled_poles(model, K_int, Ts, f"{name} (state feedback part of the integrator design)")
 
-    obs_poles = (observer_speedup * poles if observer_poles is None else np.asarray(observer_poles, dtype=complex))
+    obs_poles = observer_speedup * poles if observer_poles is None else np.asarray(observer_poles, dtype=complex)
     L = ss.observer_gain(A, C_used, obs_poles, name)
     L_d, obs_z = _discrete_observer(model, rows, obs_poles, Ts_obs, False, name)
     K_obs = K_int if observer_uses_integrator else K
@@ -208,8 +229,9 @@ def design(known: models.Plant, tracked: str, *, poles, Q, R, sample_period: flo
     L_dob = ss.observer_gain(A_d, C_d, dob_poles, f"{name} with a disturbance state")
     L_dob_d, dob_z = _discrete_observer(model, rows, dob_poles, Ts, True, name)
     # u = −K x̂ + k_r r − d̂ cancels d̂ in the model: x̂' = (A − B K − L_x C) x̂ + …, d̂' = L_d (y − C x̂).
-    dob_controller = np.linalg.eigvals(np.block([[A - B @ K, np.zeros((nx, 1))], [np.zeros((1, nx + 1))]])
-                                       - L_dob @ C_d)
+    dob_controller = np.linalg.eigvals(
+        np.block([[A - B @ K, np.zeros((nx, 1))], [np.zeros((1, nx + 1))]]) - L_dob @ C_d
+    )
 
     Q = np.asarray(Q, dtype=float)
     R = np.atleast_2d(np.asarray(R, dtype=float))
@@ -230,24 +252,55 @@ def design(known: models.Plant, tracked: str, *, poles, Q, R, sample_period: flo
     kalman_z = np.linalg.eigvals(disc.A - L_kf @ lin.C)
 
     return StateSpaceDesign(
-        plant=name, model=model, sample_period=Ts, observer_sample_period=Ts_obs,
-        controllability_rank=rank_c, observability_rank=rank_o,
-        poles=poles, K=K, kr=kr, poles_sampled_z=sampled,
-        integrator_pole=p_int, K_integral=K_int, ki=float(ki[0]),
-        observer_outputs=outputs, observer_uses_integrator=bool(observer_uses_integrator),
-        observer_poles=obs_poles, L=L, observer_poles_z=obs_z, L_discrete=L_d,
+        plant=name,
+        model=model,
+        sample_period=Ts,
+        observer_sample_period=Ts_obs,
+        controllability_rank=rank_c,
+        observability_rank=rank_o,
+        poles=poles,
+        K=K,
+        kr=kr,
+        poles_sampled_z=sampled,
+        integrator_pole=p_int,
+        K_integral=K_int,
+        ki=float(ki[0]),
+        observer_outputs=outputs,
+        observer_uses_integrator=bool(observer_uses_integrator),
+        observer_poles=obs_poles,
+        L=L,
+        observer_poles_z=obs_z,
+        L_discrete=L_d,
         controller_poles=controller_poles,
-        disturbance_observer_poles=dob_poles, L_disturbance=L_dob, disturbance_observer_poles_z=dob_z,
-        L_disturbance_discrete=L_dob_d, disturbance_controller_poles=dob_controller,
-        Q=Q, R=R, K_lqr=K_lqr, ki_lqr=float(ki_lqr[0]), P_lqr=P, lqr_poles=lqr_poles,
-        K_lqr_plain=K_lqr_plain, kr_lqr_plain=kr_lqr_plain,
-        K_dlqr=K_dlqr, dlqr_poles_z=dlqr_z, kalman_W=W, kalman_V=V, L_kalman=L_kf,
+        disturbance_observer_poles=dob_poles,
+        L_disturbance=L_dob,
+        disturbance_observer_poles_z=dob_z,
+        L_disturbance_discrete=L_dob_d,
+        disturbance_controller_poles=dob_controller,
+        Q=Q,
+        R=R,
+        K_lqr=K_lqr,
+        ki_lqr=float(ki_lqr[0]),
+        P_lqr=P,
+        lqr_poles=lqr_poles,
+        K_lqr_plain=K_lqr_plain,
+        kr_lqr_plain=kr_lqr_plain,
+        K_dlqr=K_dlqr,
+        dlqr_poles_z=dlqr_z,
+        kalman_W=W,
+        kalman_V=V,
+        L_kalman=L_kf,
         kalman_poles_z=kalman_z,
     )
 
 
-def kalman_noise(model: TrackingModel, sample_period: float, n_outputs: int, bandwidth: float,
-                 measurement_noise: float = MEASUREMENT_NOISE) -> tuple[np.ndarray, np.ndarray]:
+def kalman_noise(
+    model: TrackingModel,
+    sample_period: float,
+    n_outputs: int,
+    bandwidth: float,
+    measurement_noise: float = MEASUREMENT_NOISE,
+) -> tuple[np.ndarray, np.ndarray]:
     """Covariances (W (nx, nx), V (ny, ny)) of the Kalman filter's noise model per sample.
 
     Measurement noise σ_y = `measurement_noise` on each output; generalized
@@ -283,15 +336,31 @@ def controllers(d: StateSpaceDesign) -> dict:
     outputs = d.observer_outputs
     return {
         "pole placement": StateFeedback(model, d.K, d.kr, sample_period=Ts, name="pole placement"),
-        "pole placement + integrator": StateFeedback(model, d.K_integral, 0.0, d.ki, sample_period=Ts,
-                                                     name="pole placement + integrator"),
-        "observer-based": ObserverFeedback(model, K_obs, kr_obs, current(d.L_discrete, d.observer_sample_period, False),
-                                           ki_obs, sample_period=d.observer_sample_period,
-                                           measured_outputs=outputs, name="observer-based"),
-        "disturbance observer": ObserverFeedback(model, d.K, d.kr, current(d.L_disturbance_discrete, Ts, True),
-                                                 sample_period=Ts, measured_outputs=outputs,
-                                                 disturbance_observer=True, name="disturbance observer"),
+        "pole placement + integrator": StateFeedback(
+            model, d.K_integral, 0.0, d.ki, sample_period=Ts, name="pole placement + integrator"
+        ),
+        "observer-based": ObserverFeedback(
+            model,
+            K_obs,
+            kr_obs,
+            current(d.L_discrete, d.observer_sample_period, False),
+            ki_obs,
+            sample_period=d.observer_sample_period,
+            measured_outputs=outputs,
+            name="observer-based",
+        ),
+        "disturbance observer": ObserverFeedback(
+            model,
+            d.K,
+            d.kr,
+            current(d.L_disturbance_discrete, Ts, True),
+            sample_period=Ts,
+            measured_outputs=outputs,
+            disturbance_observer=True,
+            name="disturbance observer",
+        ),
         "LQR": StateFeedback(model, d.K_lqr, 0.0, d.ki_lqr, sample_period=Ts, name="LQR"),
-        "LQR + Kalman": ObserverFeedback(model, d.K_lqr, 0.0, current(d.L_kalman, Ts, False), d.ki_lqr,
-                                         sample_period=Ts, name="LQR + Kalman"),
+        "LQR + Kalman": ObserverFeedback(
+            model, d.K_lqr, 0.0, current(d.L_kalman, Ts, False), d.ki_lqr, sample_period=Ts, name="LQR + Kalman"
+        ),
     }

@@ -35,8 +35,9 @@ __all__ = ["TrajectoryTracker", "TrajectoryTracking", "linearize_along", "tvlqr_
 REST_TOLERANCE = 1e-6
 
 
-def linearize_along(plant: models.Plant, sample_period: float, states, inputs, substeps: int = 2
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def linearize_along(
+    plant: models.Plant, sample_period: float, states, inputs, substeps: int = 2
+) -> tuple[np.ndarray, np.ndarray]:
     """Jacobians of the plant's RK4 step over `sample_period` s along a trajectory.
 
     Parameters
@@ -57,7 +58,7 @@ def linearize_along(plant: models.Plant, sample_period: float, states, inputs, s
     x_next = step(x, u, plant.param_vector())
     jacobians = ca.Function("step_jacobians", [x, u], [ca.jacobian(x_next, x), ca.jacobian(x_next, u)])
     batch = jacobians.map(inputs.shape[0])
-    A, B = batch(states[:inputs.shape[0]].T, inputs.T)
+    A, B = batch(states[: inputs.shape[0]].T, inputs.T)
     nx, nu = plant.nx, plant.nu
     As = np.asarray(A, dtype=float).reshape(nx, -1, nx).transpose(1, 0, 2)  # [A_0 | A_1 | ...]
     Bs = np.asarray(B, dtype=float).reshape(nx, -1, nu).transpose(1, 0, 2)
@@ -74,14 +75,21 @@ class TrajectoryTracker(models.Block):
     def __init__(self, plant: models.Plant, sample_period: float, name: str = "time-varying LQR"):
         self.limit = np.asarray(plant.input_limit, dtype=float)
         self.nx, self.nu = plant.nx, plant.nu
-        super().__init__(sample_period=sample_period, n_state=0, n_measured=plant.nx,
-                         n_reference=plant.nx + plant.nu + plant.nu * plant.nx, n_input=plant.nu, gains={},
-                         measures="state", name=name)
+        super().__init__(
+            sample_period=sample_period,
+            n_state=0,
+            n_measured=plant.nx,
+            n_reference=plant.nx + plant.nu + plant.nu * plant.nx,
+            n_input=plant.nu,
+            gains={},
+            measures="state",
+            name=name,
+        )
 
     def expr(self, xc, y, r, gains):
         nx, nu = self.nx, self.nu
-        x_ref, u_ff = r[:nx], r[nx:nx + nu]
-        gain = ca.reshape(r[nx + nu:], nx, nu).T  # row by row
+        x_ref, u_ff = r[:nx], r[nx : nx + nu]
+        gain = ca.reshape(r[nx + nu :], nx, nu).T  # row by row
         u = u_ff - gain @ (y - x_ref)
         return ca.SX(0, 1), models.saturate(u, ca.DM(self.limit))
 
@@ -127,16 +135,25 @@ class TrajectoryTracking:
         nu, nx = self.final_gain.shape
         out = np.empty((steps + 1, nx + nu + nu * nx))
         out[:K, :nx] = self.states[:K]
-        out[:K, nx:nx + nu] = self.inputs
-        out[:K, nx + nu:] = self.gains.reshape(K, nu * nx)
+        out[:K, nx : nx + nu] = self.inputs
+        out[:K, nx + nu :] = self.gains.reshape(K, nu * nx)
         out[K:, :nx] = self.states[K]
-        out[K:, nx:nx + nu] = self.final_input
-        out[K:, nx + nu:] = self.final_gain.reshape(nu * nx)
+        out[K:, nx : nx + nu] = self.final_input
+        out[K:, nx + nu :] = self.final_gain.reshape(nu * nx)
         return out
 
 
-def tvlqr_tracking(known: models.Plant, sample_period: float, states, inputs, Q, R, *, substeps: int = 2,
-                   name: str = "time-varying LQR") -> TrajectoryTracking:
+def tvlqr_tracking(
+    known: models.Plant,
+    sample_period: float,
+    states,
+    inputs,
+    Q,
+    R,
+    *,
+    substeps: int = 2,
+    name: str = "time-varying LQR",
+) -> TrajectoryTracking:
     """Design the time-varying LQR along (states, inputs) on the known plant.
 
     Parameters
@@ -160,13 +177,14 @@ def tvlqr_tracking(known: models.Plant, sample_period: float, states, inputs, Q,
     if states.shape[0] != inputs.shape[0] + 1:
         raise ValueError(f"states: need one row more than inputs ({inputs.shape[0] + 1}), got {states.shape[0]}")
     end = states[-1]
-    final_input = known.equilibrium_input(end[:known.nq])
+    final_input = known.equilibrium_input(end[: known.nq])
     drift = np.asarray(known.casadi_f(end, final_input, known.param_vector()), dtype=float).ravel()
     if np.max(np.abs(drift)) > REST_TOLERANCE:
-        raise ValueError(f"states: the trajectory must end at rest for the LQR to hold it; at its end "
-                         f"|f(x, u_e)| = {np.max(np.abs(drift)):.3g} > {REST_TOLERANCE:g}")
-    As, Bs = linearize_along(known, sample_period, np.vstack([states, end]), np.vstack([inputs, final_input]),
-                             substeps)
+        raise ValueError(
+            f"states: the trajectory must end at rest for the LQR to hold it; at its end "
+            f"|f(x, u_e)| = {np.max(np.abs(drift)):.3g} > {REST_TOLERANCE:g}"
+        )
+    As, Bs = linearize_along(known, sample_period, np.vstack([states, end]), np.vstack([inputs, final_input]), substeps)
     final_gain, final_weight = dlqr(As[-1], Bs[-1], Q, R, f"{name} at the trajectory's end")
     gains, costs = dlqr_time_varying(As[:-1], Bs[:-1], Q, R, final_weight, name)
     block = TrajectoryTracker(known, sample_period, name)

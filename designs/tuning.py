@@ -69,8 +69,13 @@ IPOPT_OPTIONS = {"print_level": 0, "sb": "yes", "acceptable_iter": 10}
 #: IPOPT statuses of a numerical failure, retried once from the failed solve's last point.
 RETRIED = ("Error_In_Step_Computation", "Restoration_Failed", "Search_Direction_Becomes_Too_Small")
 #: IPOPT options of the continuation's later stages, which start at the last answer and multipliers.
-WARM_START = {"warm_start_init_point": "yes", "mu_init": 1e-6, "warm_start_bound_push": 1e-9,
-              "warm_start_slack_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9}
+WARM_START = {
+    "warm_start_init_point": "yes",
+    "mu_init": 1e-6,
+    "warm_start_bound_push": 1e-9,
+    "warm_start_slack_bound_push": 1e-9,
+    "warm_start_mult_bound_push": 1e-9,
+}
 
 
 # ----------------------------------------------------------------- records
@@ -124,16 +129,16 @@ class Specs:
         for name, bound in self.state_bounds.items():
             state_bound(bound, f"state_bounds[{name!r}]")
         if not isinstance(self.final_values, Mapping):
-            raise TypeError(f"final_values must be a dict state name -> (value, tolerance), got "
-                            f"{self.final_values!r}")
+            raise TypeError(f"final_values must be a dict state name -> (value, tolerance), got {self.final_values!r}")
         for name, pair in self.final_values.items():
             final_value(pair, f"final_values[{name!r}]")
 
     @property
     def step_specs(self) -> tuple[str, ...]:
         """Names of the specs set here that need a step."""
-        return tuple(name for name in ("max_overshoot", "settling_time", "rise_time")
-                     if getattr(self, name) is not None)
+        return tuple(
+            name for name in ("max_overshoot", "settling_time", "rise_time") if getattr(self, name) is not None
+        )
 
 
 def state_bound(bound, what: str) -> tuple[float, float]:
@@ -223,8 +228,9 @@ def weight_matrix(weights, names: Sequence[str], what: str) -> np.ndarray:
         elif arr.shape == (n, n):
             matrix = arr
         else:
-            raise ValueError(f"{what} must be a dict, {n} diagonal entries or an ({n}, {n}) matrix, "
-                             f"got shape {arr.shape}")
+            raise ValueError(
+                f"{what} must be a dict, {n} diagonal entries or an ({n}, {n}) matrix, got shape {arr.shape}"
+            )
     if not np.all(np.isfinite(matrix)):
         raise ValueError(f"{what} must be finite, got {matrix.tolist()}")
     if not np.allclose(matrix, matrix.T, rtol=1e-12, atol=0):
@@ -434,14 +440,26 @@ class TuningProblem:
         (co-design); they become decision variables after the gains
     """
 
-    def __init__(self, plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
-                 cost: Cost | None = None, samples=None, robust: str = "mean", free=None,
-                 substeps: int = 10, extra_params=()):
+    def __init__(
+        self,
+        plant: Plant,
+        block: Block,
+        scenarios,
+        *,
+        specs: Specs | None = None,
+        cost: Cost | None = None,
+        samples=None,
+        robust: str = "mean",
+        free=None,
+        substeps: int = 10,
+        extra_params=(),
+    ):
         if not isinstance(plant, Plant):
             raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__}")
         if not isinstance(block, Block):
-            raise TypeError(f"block must be a models.Block (a controller written in CasADi), got "
-                            f"{type(block).__name__}")
+            raise TypeError(
+                f"block must be a models.Block (a controller written in CasADi), got {type(block).__name__}"
+            )
         if robust not in ROBUST:
             raise ValueError(f"robust must be 'mean' or 'worst', got {robust!r}")
         if specs is not None and not isinstance(specs, Specs):
@@ -487,11 +505,10 @@ class TuningProblem:
         self.decision = ca.MX.sym("decision", self.n_gains + len(self.extra_params))
         self.width = ca.MX.sym("width")
         costs, self.g, u_runs, self.lbg, self.ubg, self.constraint_names = self._build(smooth=False)
-        self.scenario_costs = costs                        # (S, M)
-        self.costs = self._per_sample(costs)               # (M, 1) weighted totals
+        self.scenario_costs = costs  # (S, M)
+        self.costs = self._per_sample(costs)  # (M, 1) weighted totals
         self.objective = self.aggregate(self.costs)
-        self.evaluate = ca.Function("tuning_problem", [self.decision], [self.costs, self.g, ca.horzcat(*u_runs),
-                                                                        costs])
+        self.evaluate = ca.Function("tuning_problem", [self.decision], [self.costs, self.g, ca.horzcat(*u_runs), costs])
         self._smooth: tuple[ca.MX, ca.MX] | None = None
         # Back-compatible single-scenario attributes.
         first = self.runs[0]
@@ -517,8 +534,7 @@ class TuningProblem:
         ts = block.sample_period
         n = int(round(sc.duration / ts))
         if n < 1:
-            raise ValueError(f"{label or 'scenario'}: duration {sc.duration} s is shorter than one sample "
-                             f"({ts} s)")
+            raise ValueError(f"{label or 'scenario'}: duration {sc.duration} s is shorter than one sample ({ts} s)")
         t = ts * np.arange(n + 1)
         x0 = plant.equilibrium()[0] if sc.x0 is None else as_vector(sc.x0, plant.nx, f"{plant.name} initial state x0")
         if sc.reference is None:
@@ -531,8 +547,12 @@ class TuningProblem:
         if std.ndim > 1 or std.size not in (1, n_meas) or not np.all(np.isfinite(std)) or np.any(std < 0):
             raise ValueError(f"noise_std must be one number or {n_meas} numbers >= 0, got {sc.noise_std!r}")
         std = np.broadcast_to(std, (n_meas,))
-        noise = [np.random.default_rng(np.random.SeedSequence([sc.seed, j])).standard_normal((n, n_meas)) * std
-                 if np.any(std) else np.zeros((n, n_meas)) for j in range(self.samples.shape[0])]
+        noise = [
+            np.random.default_rng(np.random.SeedSequence([sc.seed, j])).standard_normal((n, n_meas)) * std
+            if np.any(std)
+            else np.zeros((n, n_meas))
+            for j in range(self.samples.shape[0])
+        ]
         k = None
         if sc.tracked is not None:
             if sc.tracked not in plant.state_names:
@@ -545,31 +565,45 @@ class TuningProblem:
                 step = float(r[-1, 0] - x0[k])
         where = f" ({label})" if label else ""
         if specs.step_specs and step is None:
-            reason = ("it regulates (reference None)" if sc.reference is None else
-                      "it names no tracked state" if k is None else
-                      "its reference is not constant" if not np.all(r[1:, 0] == r[-1, 0]) else
-                      "its final reference equals the initial tracked value")
-            raise ValueError(f"{', '.join(specs.step_specs)} need a step, and the scenario{where} has none: "
-                             f"{reason}")
+            reason = (
+                "it regulates (reference None)"
+                if sc.reference is None
+                else "it names no tracked state"
+                if k is None
+                else "its reference is not constant"
+                if not np.all(r[1:, 0] == r[-1, 0])
+                else "its final reference equals the initial tracked value"
+            )
+            raise ValueError(f"{', '.join(specs.step_specs)} need a step, and the scenario{where} has none: {reason}")
         for name, when in (("settling_time", specs.settling_time), ("rise_time", specs.rise_time)):
             if when is not None and when > t[-1]:
-                raise ValueError(f"{name} = {when:g} s is after the end of the scenario{where} ({t[-1]:g} s): "
-                                 "the spec would constrain nothing")
+                raise ValueError(
+                    f"{name} = {when:g} s is after the end of the scenario{where} ({t[-1]:g} s): "
+                    "the spec would constrain nothing"
+                )
         for what, table in (("state_bounds", specs.state_bounds), ("final_values", specs.final_values)):
             for name in table:
                 if name not in plant.state_names:
                     raise ValueError(f"{what}: {plant.name} has no state {name!r}; states are {plant.state_names}")
         if cost.kind is not None and cost.signal == "error" and (k is None or sc.reference is None):
-            raise ValueError(f"the cost's signal 'error' needs a reference and a tracked state; the scenario"
-                             f"{where} has {'no reference' if sc.reference is None else 'no tracked state'} "
-                             "(give Cost(signal=...) a state, output or input name)")
+            raise ValueError(
+                f"the cost's signal 'error' needs a reference and a tracked state; the scenario"
+                f"{where} has {'no reference' if sc.reference is None else 'no tracked state'} "
+                "(give Cost(signal=...) a state, output or input name)"
+            )
         signals = plant.state_names + plant.output_names + plant.input_names
         if cost.kind is not None and cost.signal != "error" and cost.signal not in signals:
-            raise ValueError(f"the cost's signal {cost.signal!r} is not 'error' nor a state, output or input of "
-                             f"{plant.name} ({', '.join(signals)})")
+            raise ValueError(
+                f"the cost's signal {cost.signal!r} is not 'error' nor a state, output or input of "
+                f"{plant.name} ({', '.join(signals)})"
+            )
         weights = {}
-        for key, names in (("state_weights", plant.state_names), ("input_weights", plant.input_names),
-                           ("output_weights", plant.output_names), ("terminal_weights", plant.state_names)):
+        for key, names in (
+            ("state_weights", plant.state_names),
+            ("input_weights", plant.input_names),
+            ("output_weights", plant.output_names),
+            ("terminal_weights", plant.state_names),
+        ):
             value = getattr(cost, key)
             if value is not None:
                 weights[key] = weight_matrix(value, names, key)
@@ -588,8 +622,24 @@ class TuningProblem:
             elif cost.signal in plant.output_names:
                 i = plant.output_names.index(cost.signal)
                 size = abs(plant.output(x0, self.samples[0])[i] - plant.output(target, self.samples[0])[i])
-        return _Run(sc, specs, cost, n, t, x0, r, d, noise, k, step, target, input_target, weights, label,
-                    float(size) if size > 0 else 1.0)
+        return _Run(
+            sc,
+            specs,
+            cost,
+            n,
+            t,
+            x0,
+            r,
+            d,
+            noise,
+            k,
+            step,
+            target,
+            input_target,
+            weights,
+            label,
+            float(size) if size > 0 else 1.0,
+        )
 
     def _params(self, j: int, param_index) -> ca.MX:
         p = ca.MX(ca.DM(self.samples[j]))
@@ -629,9 +679,10 @@ class TuningProblem:
                 p = self._params(j, param_index)
                 y0 = plant.output(run_data.x0, self.samples[j]) if block.measures == "outputs" else run_data.x0
                 xc0 = block.initial_state(y0 + run_data.noise[j][0], run_data.r[0])
-                X, _, U, _ = run(run_data.x0, xc0, run_data.r[:-1].T, run_data.noise[j].T, run_data.d.T, p, gains,
-                                 *extra)
-                states = ca.horzcat(ca.DM(run_data.x0), X)   # x_0 .. x_N
+                X, _, U, _ = run(
+                    run_data.x0, xc0, run_data.r[:-1].T, run_data.noise[j].T, run_data.d.T, p, gains, *extra
+                )
+                states = ca.horzcat(ca.DM(run_data.x0), X)  # x_0 .. x_N
                 row.append(self._cost(run_data, states, U, p, self.width if smooth else None))
                 tags = [t for t in (run_data.label, f"sample {j}" if m > 1 else "") if t]
                 tag = f" ({', '.join(tags)})" if tags else ""
@@ -641,24 +692,40 @@ class TuningProblem:
                     r_final, amp, sign = run_data.r[-1, 0], abs(run_data.step), np.sign(run_data.step)
                     t1 = run_data.t[1:]
                     if sp.max_overshoot is not None:
-                        add(f"overshoot <= {100 * sp.max_overshoot:g} %{tag}", sign * (y - r_final), -np.inf,
-                            sp.max_overshoot * amp)
+                        add(
+                            f"overshoot <= {100 * sp.max_overshoot:g} %{tag}",
+                            sign * (y - r_final),
+                            -np.inf,
+                            sp.max_overshoot * amp,
+                        )
                     if sp.settling_time is not None:
                         late = np.flatnonzero(t1 >= sp.settling_time)
-                        add(f"within {100 * sp.settling_band:g} % after {sp.settling_time:g} s{tag}",
-                            y[:, late] - r_final, -sp.settling_band * amp, sp.settling_band * amp)
+                        add(
+                            f"within {100 * sp.settling_band:g} % after {sp.settling_time:g} s{tag}",
+                            y[:, late] - r_final,
+                            -sp.settling_band * amp,
+                            sp.settling_band * amp,
+                        )
                     if sp.rise_time is not None:
                         late = np.flatnonzero(t1 >= sp.rise_time)
-                        add(f"90 % of the step by {sp.rise_time:g} s{tag}",
-                            sign * (y[:, late] - run_data.x0[k]), 0.9 * amp, np.inf)
+                        add(
+                            f"90 % of the step by {sp.rise_time:g} s{tag}",
+                            sign * (y[:, late] - run_data.x0[k]),
+                            0.9 * amp,
+                            np.inf,
+                        )
                 for name, bound in sp.state_bounds.items():
                     lo, hi = state_bound(bound, name)
                     text = f"|{name}| <= {hi:g}" if lo == -hi else f"{lo:g} <= {name} <= {hi:g}"
                     add(f"{text}{tag}", X[plant.state_names.index(name), :], lo, hi)
                 for name, pair in sp.final_values.items():
                     value, tol = final_value(pair, name)
-                    add(f"{name}(t_N) = {value:g} ± {tol:g}{tag}", X[plant.state_names.index(name), -1],
-                        value - tol, value + tol)
+                    add(
+                        f"{name}(t_N) = {value:g} ± {tol:g}{tag}",
+                        X[plant.state_names.index(name), -1],
+                        value - tol,
+                        value + tol,
+                    )
                 u_runs.append(U)
             rows.append(ca.horzcat(*row))
         g = ca.vertcat(*constraints) if constraints else ca.MX(0, 1)
@@ -761,8 +828,10 @@ class TuningProblem:
         violations = self.violated(g.ravel())
         limit = self.plant.input_limit[:, None]
         if not np.all(np.abs(u) <= limit):
-            violations.append(f"|u| <= {', '.join(f'{v:g}' for v in self.plant.input_limit)} "
-                              f"(commanded up to {np.max(np.abs(u)):.4g})")
+            violations.append(
+                f"|u| <= {', '.join(f'{v:g}' for v in self.plant.input_limit)} "
+                f"(commanded up to {np.max(np.abs(u)):.4g})"
+            )
         return obj, costs, violations
 
     def scenario_values(self, decision) -> np.ndarray:
@@ -780,8 +849,11 @@ class TuningProblem:
     def violated(self, g: np.ndarray, tol: float = 1e-6) -> list[str]:
         """The violated specs, each with its largest relative excess."""
         excess = self.excess(g)
-        return [f"{name} (violated by {np.max(excess[sl]):.3g} relative)" for name, sl in self.constraint_names
-                if np.any(excess[sl] > tol)]
+        return [
+            f"{name} (violated by {np.max(excess[sl]):.3g} relative)"
+            for name, sl in self.constraint_names
+            if np.any(excess[sl] > tol)
+        ]
 
     def violated_names(self, g: np.ndarray, tol: float = 1e-6) -> list[str]:
         """The names of the violated specs."""
@@ -790,7 +862,7 @@ class TuningProblem:
 
     def block_at(self, decision) -> Block:
         gains = self.block.gain_vector().copy()
-        gains[self.free_index] = np.asarray(decision)[:self.n_gains]
+        gains[self.free_index] = np.asarray(decision)[: self.n_gains]
         return self.block.with_gains(**self.block.gains_from_vector(gains))
 
 
@@ -813,18 +885,41 @@ def _check_options(max_iter, tol, hessian, jit, progress, method, widths):
     if method not in METHODS:
         raise ValueError(f"method must be 'smooth' or 'exact', got {method!r}")
     widths = real_array(widths, "widths")
-    if widths.ndim != 1 or widths.size == 0 or not np.all(np.isfinite(widths)) or np.any(widths <= 0) \
-            or np.any(np.diff(widths) >= 0):
-        raise ValueError(f"widths must be a non-empty, strictly decreasing sequence of numbers > 0, got "
-                         f"{np.asarray(widths).tolist()}")
+    if (
+        widths.ndim != 1
+        or widths.size == 0
+        or not np.all(np.isfinite(widths))
+        or np.any(widths <= 0)
+        or np.any(np.diff(widths) >= 0)
+    ):
+        raise ValueError(
+            f"widths must be a non-empty, strictly decreasing sequence of numbers > 0, got "
+            f"{np.asarray(widths).tolist()}"
+        )
     return max_iter, tol, jit, tuple(float(w) for w in widths)
 
 
-def tune(plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
-         cost: Cost | None = None, samples=None, robust: str = "mean", free=None, bounds=None,
-         substeps: int = 10, max_iter: int = MAX_ITER, tol: float = 1e-8,
-         hessian: str = "limited-memory", jit: bool = False, progress=None, method: str = "smooth",
-         widths=WIDTHS, ipopt_options=None) -> TuningResult:
+def tune(
+    plant: Plant,
+    block: Block,
+    scenarios,
+    *,
+    specs: Specs | None = None,
+    cost: Cost | None = None,
+    samples=None,
+    robust: str = "mean",
+    free=None,
+    bounds=None,
+    substeps: int = 10,
+    max_iter: int = MAX_ITER,
+    tol: float = 1e-8,
+    hessian: str = "limited-memory",
+    jit: bool = False,
+    progress=None,
+    method: str = "smooth",
+    widths=WIDTHS,
+    ipopt_options=None,
+) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
     Parameters
@@ -855,11 +950,23 @@ def tune(plant: Plant, block: Block, scenarios, *, specs: Specs | None = None,
         with the violated specs named.
     """
     max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
-    problem = TuningProblem(plant, block, scenarios, specs=specs, cost=cost, samples=samples,
-                            robust=robust, free=free, substeps=substeps)
+    problem = TuningProblem(
+        plant, block, scenarios, specs=specs, cost=cost, samples=samples, robust=robust, free=free, substeps=substeps
+    )
     lbx, ubx = gain_bounds(problem, bounds)
-    return solve(problem, lbx, ubx, max_iter, jit, tol=tol, hessian=hessian, progress=progress, method=method,
-                 widths=widths, ipopt_options=ipopt_options)
+    return solve(
+        problem,
+        lbx,
+        ubx,
+        max_iter,
+        jit,
+        tol=tol,
+        hessian=hessian,
+        progress=progress,
+        method=method,
+        widths=widths,
+        ipopt_options=ipopt_options,
+    )
 
 
 def gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]:
@@ -888,13 +995,14 @@ def gain_bounds(problem: TuningProblem, bounds) -> tuple[np.ndarray, np.ndarray]
             lo = np.broadcast_to(real_array(pair[0], f"bounds[{name!r}] low"), g.shape).ravel(order="F")
             hi = np.broadcast_to(real_array(pair[1], f"bounds[{name!r}] high"), g.shape).ravel(order="F")
         except ValueError:
-            raise ValueError(f"bounds[{name!r}] must be numbers or arrays shaped like the gain {g.shape}, "
-                             f"got {pair!r}") from None
+            raise ValueError(
+                f"bounds[{name!r}] must be numbers or arrays shaped like the gain {g.shape}, got {pair!r}"
+            ) from None
         if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
             raise ValueError(f"bounds[{name!r}] must not be NaN, got {pair!r}")
         if np.any(lo > hi):
             raise ValueError(f"bounds[{name!r}] has low > high: {pair!r}")
-        lbx[start:start + g.size], ubx[start:start + g.size] = lo, hi
+        lbx[start : start + g.size], ubx[start : start + g.size] = lo, hi
     return lbx, ubx
 
 
@@ -902,9 +1010,22 @@ def _status_converged(status: str) -> bool:
     return status in CONVERGED
 
 
-def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool = False, plant_cost=None,
-          tol: float = 1e-8, hessian: str = "limited-memory", progress=None, method: str = "smooth",
-          widths=WIDTHS, start=None, cost_weight: float = 1.0, ipopt_options=None) -> TuningResult:
+def solve(
+    problem: TuningProblem,
+    lbx,
+    ubx,
+    max_iter: int = MAX_ITER,
+    jit: bool = False,
+    plant_cost=None,
+    tol: float = 1e-8,
+    hessian: str = "limited-memory",
+    progress=None,
+    method: str = "smooth",
+    widths=WIDTHS,
+    start=None,
+    cost_weight: float = 1.0,
+    ipopt_options=None,
+) -> TuningResult:
     """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
 
     Parameters
@@ -959,15 +1080,18 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     z = ca.MX.sym("z", variables.numel())
     f_of = ca.Function("objective", [variables, width], [objective])
     g_of = ca.Function("constraints", [variables, width], [g])
-    smoothed_total = ca.Function("smoothed_total", [x, width],
-                                 [cost_weight * problem.aggregate(per_sample) + extra_cost])
+    smoothed_total = ca.Function(
+        "smoothed_total", [x, width], [cost_weight * problem.aggregate(per_sample) + extra_cost]
+    )
     smoothed_g = ca.Function("smoothed_constraints", [x, width], [problem.smoothed()[1] if smooth else problem.g])
 
     recorder = _Recorder(variables.numel(), g.numel(), width.numel(), progress, start_time)
-    ipopt: dict[str, Any] = IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol,
-                                             "hessian_approximation": hessian} | dict(ipopt_options or {})
-    opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "iteration_callback": recorder,
-                            "error_on_fail": False}
+    ipopt: dict[str, Any] = (
+        IPOPT_OPTIONS
+        | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol, "hessian_approximation": hessian}
+        | dict(ipopt_options or {})
+    )
+    opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
     nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
     # Compiled without a shell and cached (models.compile); CasADi's virtual machine when impossible.
     build = models.compile.jit_nlpsol if jit else ca.nlpsol
@@ -980,7 +1104,7 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     stages: list[dict[str, Any]] = []
     iterations = 0
     status, gap, settled = "not solved", 0.0, not smooth or len(widths) == 1
-    for w in (widths if smooth else (None,)):
+    for w in widths if smooth else (None,):
         stage_iterations = 0
         for attempt in range(2):
             # A numerical failure (not an iteration cap) is retried once from its last point, cold:
@@ -991,8 +1115,15 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
                 this = warm_solver
             else:
                 this = solver
-            sol = this(x0=z_now, lbx=lbz / scale, ubx=ubz / scale, lbg=lbg, ubg=ubg, p=[] if w is None else w,
-                       **(multipliers if this is warm_solver else {}))
+            sol = this(
+                x0=z_now,
+                lbx=lbz / scale,
+                ubx=ubz / scale,
+                lbg=lbg,
+                ubg=ubg,
+                p=[] if w is None else w,
+                **(multipliers if this is warm_solver else {}),
+            )
             stats = this.stats()
             status = stats["return_status"]
             stage_iterations += int(stats.get("iter_count", 0))
@@ -1012,8 +1143,9 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
             same = problem.violated_names(g_exact) == problem.violated_names(g_smooth)
         if stages and np.isfinite(exact):
             settled = abs(stages[-1]["exact"] - exact) <= AGREEMENT * abs(exact)
-        stages.append({"width": w, "status": status, "iterations": stage_iterations,
-                       "smoothed": seen, "exact": exact, "gap": gap})
+        stages.append(
+            {"width": w, "status": status, "iterations": stage_iterations, "smoothed": seen, "exact": exact, "gap": gap}
+        )
         if not np.isfinite(exact) or not _status_converged(status):
             break  # a stage that did not converge ends the continuation: reported, not hidden
         if gap <= AGREEMENT and same and settled:
@@ -1029,8 +1161,10 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     initial_cost, _ = judge(start)
     message = f"IPOPT: {status}"
     if smooth:
-        message += (f"; smoothing continuation in {len(stages)} stage{'s' if len(stages) > 1 else ''} down to "
-                    f"width {stages[-1]['width']:g}, exact and smoothed objectives agree to {gap:.1e}")
+        message += (
+            f"; smoothing continuation in {len(stages)} stage{'s' if len(stages) > 1 else ''} down to "
+            f"width {stages[-1]['width']:g}, exact and smoothed objectives agree to {gap:.1e}"
+        )
         if gap > AGREEMENT:
             message += f" (not within {AGREEMENT:g})"
         if not settled:
@@ -1042,8 +1176,10 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     # Other iterates matter only when clearly better than IPOPT's answer, or when
     # that answer is infeasible: judge them lazily, lowest objective IPOPT saw first.
     threshold = value - 1e-6 * abs(value) if chosen and not violations else np.inf
-    others = sorted(((f, scale[:n] * zz[:n], "iterate") for zz, f, _ in recorder.iterates
-                     if np.isfinite(f) and f < threshold), key=lambda item: item[0])
+    others = sorted(
+        ((f, scale[:n] * zz[:n], "iterate") for zz, f, _ in recorder.iterates if np.isfinite(f) and f < threshold),
+        key=lambda item: item[0],
+    )
     others.append((initial_cost, start, "start"))
     for _, cand, label in others:
         cand = np.clip(cand, lbx, ubx)
@@ -1061,17 +1197,27 @@ def solve(problem: TuningProblem, lbx, ubx, max_iter: int = MAX_ITER, jit: bool 
     value, violations, decision, label = chosen
     block = problem.block_at(decision)
     return TuningResult(
-        block=block, gains={k: v.copy() for k, v in block.gains.items()},
+        block=block,
+        gains={k: v.copy() for k, v in block.gains.items()},
         initial_gains={k: v.copy() for k, v in problem.block.gains.items()},
-        cost=float(value), initial_cost=initial_cost,
+        cost=float(value),
+        initial_cost=initial_cost,
         improvement=1 - float(value) / initial_cost if initial_cost else 0.0,
-        feasible=not violations, success=converged and label == "final" and not violations,
-        status=status, message=message, violations=list(violations),
-        iterations=iterations, wall_time=time.perf_counter() - start_time,
+        feasible=not violations,
+        success=converged and label == "final" and not violations,
+        status=status,
+        message=message,
+        violations=list(violations),
+        iterations=iterations,
+        wall_time=time.perf_counter() - start_time,
         decision=np.array(decision),
         history=[(stamp - start_time, f) for _, f, stamp in recorder.iterates],
         iterates=[np.clip(scale[:n] * zz[:n], lbx, ubx) for zz, _, _ in recorder.iterates],
-        converged=converged, stages=stages, smoothing_gap=float(gap), method=method)
+        converged=converged,
+        stages=stages,
+        smoothing_gap=float(gap),
+        method=method,
+    )
 
 
 def closed_loop_spectral_abscissa(plant: Plant, block: Block, x, xc, r, params=None, substeps: int = 10) -> float:
@@ -1082,7 +1228,7 @@ def closed_loop_spectral_abscissa(plant: Plant, block: Block, x, xc, r, params=N
     """
     s = ca.SX.sym("s", plant.nx + block.n_state)
     p = plant.param_vector(params)
-    xs, xcs = s[:plant.nx], s[plant.nx:]
+    xs, xcs = s[: plant.nx], s[plant.nx :]
     y = plant.casadi_h(xs, p) if block.measures == "outputs" else xs
     xc_next, u = block.casadi_step(xcs, y, np.atleast_1d(r), block.gain_vector())
     u = ca.fmin(ca.fmax(u, -plant.input_limit), plant.input_limit)
@@ -1102,16 +1248,26 @@ def _spectral_violation(problem: TuningProblem, decision) -> list[str]:
         block = block or problem.block_at(decision)
         sc = run.scenario
         where = f" ({run.label})" if run.label else ""
-        res = models.simulate_closed_loop(problem.plant, block, run.r, sc.duration, x0=run.x0,
-                                          params=problem.samples[0], input_disturbance=run.d,
-                                          substeps=problem.substeps, allow_divergence=True)
+        res = models.simulate_closed_loop(
+            problem.plant,
+            block,
+            run.r,
+            sc.duration,
+            x0=run.x0,
+            params=problem.samples[0],
+            input_disturbance=run.d,
+            substeps=problem.substeps,
+            allow_divergence=True,
+        )
         if res.diverged_at is not None:
-            found.append(f"spectral abscissa <= {bound:g} 1/s{where} (the closed loop diverged at "
-                         f"t = {res.diverged_at:.3g} s)")
+            found.append(
+                f"spectral abscissa <= {bound:g} 1/s{where} (the closed loop diverged at t = {res.diverged_at:.3g} s)"
+            )
             continue
         assert res.xc is not None, "a Block controller's states are recorded"
-        alpha = closed_loop_spectral_abscissa(problem.plant, block, res.x[-1], res.xc[-1], res.r[-1],
-                                              problem.samples[0], problem.substeps)
+        alpha = closed_loop_spectral_abscissa(
+            problem.plant, block, res.x[-1], res.xc[-1], res.r[-1], problem.samples[0], problem.substeps
+        )
         if alpha > bound:
             found.append(f"spectral abscissa <= {bound:g} 1/s{where} (got {alpha:.3g} 1/s)")
     return found

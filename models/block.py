@@ -74,9 +74,18 @@ class Block(abc.ABC):
     name : str
     """
 
-    def __init__(self, *, sample_period: float, n_state: int, n_measured: int, n_reference: int,
-                 n_input: int, gains: Mapping[str, float | np.ndarray], measures: str = "outputs",
-                 name: str = ""):
+    def __init__(
+        self,
+        *,
+        sample_period: float,
+        n_state: int,
+        n_measured: int,
+        n_reference: int,
+        n_input: int,
+        gains: Mapping[str, float | np.ndarray],
+        measures: str = "outputs",
+        name: str = "",
+    ):
         self.name = name or type(self).__name__
         if not isinstance(self.name, str):
             raise TypeError(f"a block's name must be a string, got {name!r}")
@@ -125,7 +134,7 @@ class Block(abc.ABC):
         vector = as_vector(vector, self.gain_vector().size, f"{self.name} gain vector")
         out, i = {}, 0
         for k, g in self.gains.items():
-            out[k] = vector[i:i + g.size].reshape(g.shape, order="F")
+            out[k] = vector[i : i + g.size].reshape(g.shape, order="F")
             i += g.size
         return out
 
@@ -147,7 +156,7 @@ class Block(abc.ABC):
         """Split a symbolic gain vector into a dict of symbols shaped like the gains."""
         out, i = {}, 0
         for k, g in self.gains.items():
-            piece = vector[i:i + g.size]
+            piece = vector[i : i + g.size]
             out[k] = ca.reshape(piece, g.shape[0], g.shape[1]) if g.ndim == 2 else piece
             i += g.size
         return out
@@ -161,8 +170,7 @@ class Block(abc.ABC):
         g = ca.SX.sym("gains", self.gain_vector().size)
         xc_next, u = self.expr(xc, y, r, self.symbolic_gains(g))
         xc_next = ca.vertcat(xc_next) if self.n_state else ca.SX(0, 1)
-        return ca.Function("step", [xc, y, r, g], [xc_next, ca.vertcat(u)],
-                           ["xc", "y", "r", "gains"], ["xc_next", "u"])
+        return ca.Function("step", [xc, y, r, g], [xc_next, ca.vertcat(u)], ["xc", "y", "r", "gains"], ["xc_next", "u"])
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
         """One numeric step with the current gains: (x_c_next (n_state,), u (n_input,))."""
@@ -185,19 +193,30 @@ class Cascade(Block):
             if not isinstance(block, Block):
                 raise TypeError(f"{name}: the {role} controller must be a models.Block, got {type(block).__name__}")
         if outer.sample_period != inner.sample_period:
-            raise ValueError(f"outer and inner blocks need the same sample period, got "
-                             f"{outer.sample_period} and {inner.sample_period} s")
+            raise ValueError(
+                f"outer and inner blocks need the same sample period, got "
+                f"{outer.sample_period} and {inner.sample_period} s"
+            )
         if outer.n_input != inner.n_reference:
-            raise ValueError(f"the outer block's output ({outer.n_input}) must match the inner "
-                             f"block's reference ({inner.n_reference})")
+            raise ValueError(
+                f"the outer block's output ({outer.n_input}) must match the inner "
+                f"block's reference ({inner.n_reference})"
+            )
         if (outer.n_measured, outer.measures) != (inner.n_measured, inner.measures):
             raise ValueError("outer and inner blocks must read the same measurement vector")
         self.outer, self.inner = outer, inner
         gains = {f"outer.{k}": v for k, v in outer.gains.items()}
         gains |= {f"inner.{k}": v for k, v in inner.gains.items()}
-        super().__init__(sample_period=inner.sample_period, n_state=outer.n_state + inner.n_state,
-                         n_measured=inner.n_measured, n_reference=outer.n_reference,
-                         n_input=inner.n_input, gains=gains, measures=inner.measures, name=name)
+        super().__init__(
+            sample_period=inner.sample_period,
+            n_state=outer.n_state + inner.n_state,
+            n_measured=inner.n_measured,
+            n_reference=outer.n_reference,
+            n_input=inner.n_input,
+            gains=gains,
+            measures=inner.measures,
+            name=name,
+        )
 
     def expr(self, xc, y, r, gains):
         no = self.outer.n_state

@@ -17,11 +17,19 @@ def _damping(value: float, unit: str) -> Param:
 
 
 @declare(
-    name="arm", title="Single link robot arm (case study I)",
-    coordinates=("theta",), inputs=("tau",),
-    params=(Param("m", 0.5, "kg", "arm mass"), Param("ell", 0.3, "m", "arm length"),
-            Param("g", 9.8, "m/s^2", "gravity"), _damping(0.01, "N m s/rad")),
-    input_limit=1.0, operating_point=lambda p: {"theta": 0.0}, uncertain=("m", "ell"),
+    name="arm",
+    title="Single link robot arm (case study I)",
+    coordinates=("theta",),
+    inputs=("tau",),
+    params=(
+        Param("m", 0.5, "kg", "arm mass"),
+        Param("ell", 0.3, "m", "arm length"),
+        Param("g", 9.8, "m/s^2", "gravity"),
+        _damping(0.01, "N m s/rad"),
+    ),
+    input_limit=1.0,
+    operating_point=lambda p: {"theta": 0.0},
+    uncertain=("m", "ell"),
 )
 def arm(q, dq, u, p):
     """Uniform rod of mass m, length ell, pivoted at one end; theta from level."""
@@ -35,12 +43,19 @@ def arm(q, dq, u, p):
 
 
 @declare(
-    name="pendulum", title="Pendulum on a cart (case study II)",
-    coordinates=("z", "theta"), inputs=("F",),
-    params=(Param("m1", 0.25, "kg", "bob (point) mass"), Param("m2", 1.0, "kg", "cart mass"),
-            Param("ell", 0.5, "m", "massless rod length"), Param("g", 9.8, "m/s^2", "gravity"),
-            _damping(0.05, "N s/m")),
-    input_limit=5.0, operating_point=lambda p: {"z": 0.0, "theta": 0.0},
+    name="pendulum",
+    title="Pendulum on a cart (case study II)",
+    coordinates=("z", "theta"),
+    inputs=("F",),
+    params=(
+        Param("m1", 0.25, "kg", "bob (point) mass"),
+        Param("m2", 1.0, "kg", "cart mass"),
+        Param("ell", 0.5, "m", "massless rod length"),
+        Param("g", 9.8, "m/s^2", "gravity"),
+        _damping(0.05, "N s/m"),
+    ),
+    input_limit=5.0,
+    operating_point=lambda p: {"z": 0.0, "theta": 0.0},
     uncertain=("m1", "m2", "ell", "b"),
 )
 def pendulum(q, dq, u, p):
@@ -56,11 +71,18 @@ def pendulum(q, dq, u, p):
 
 
 @declare(
-    name="satellite", title="Satellite with flexible panels (case study III)",
-    coordinates=("theta", "phi"), inputs=("tau",),
-    params=(Param("Js", 5.0, "kg m^2", "body inertia"), Param("Jp", 1.0, "kg m^2", "panel inertia"),
-            Param("k", 0.15, "N m/rad", "panel stiffness"), _damping(0.05, "N m s/rad")),
-    input_limit=5.0, operating_point=lambda p: {"theta": 0.0, "phi": 0.0},
+    name="satellite",
+    title="Satellite with flexible panels (case study III)",
+    coordinates=("theta", "phi"),
+    inputs=("tau",),
+    params=(
+        Param("Js", 5.0, "kg m^2", "body inertia"),
+        Param("Jp", 1.0, "kg m^2", "panel inertia"),
+        Param("k", 0.15, "N m/rad", "panel stiffness"),
+        _damping(0.05, "N m s/rad"),
+    ),
+    input_limit=5.0,
+    operating_point=lambda p: {"theta": 0.0, "phi": 0.0},
     uncertain=("Js", "Jp", "k", "b"),
 )
 def satellite(q, dq, u, p):
@@ -75,12 +97,20 @@ def satellite(q, dq, u, p):
 
 
 @declare(
-    name="uuv", title="UUV roll (case study IV)",
-    coordinates=("phi",), inputs=("tau",),
-    params=(Param("J", 45.0, "kg m^2", "roll inertia"), Param("m", 200.0, "kg", "mass"),
-            Param("L", 0.03, "m", "centre of mass to centre of buoyancy"),
-            _damping(5.0, "N m s/rad"), Param("g", 9.81, "m/s^2", "gravity")),
-    input_limit=50.0, operating_point=lambda p: {"phi": 0.0}, uncertain=("m", "b", "L"),
+    name="uuv",
+    title="UUV roll (case study IV)",
+    coordinates=("phi",),
+    inputs=("tau",),
+    params=(
+        Param("J", 45.0, "kg m^2", "roll inertia"),
+        Param("m", 200.0, "kg", "mass"),
+        Param("L", 0.03, "m", "centre of mass to centre of buoyancy"),
+        _damping(5.0, "N m s/rad"),
+        Param("g", 9.81, "m/s^2", "gravity"),
+    ),
+    input_limit=50.0,
+    operating_point=lambda p: {"phi": 0.0},
+    uncertain=("m", "b", "L"),
 )
 def uuv(q, dq, u, p):
     """Roll phi; the gravity-buoyancy couple m g L sin(phi) restores it."""
@@ -93,11 +123,19 @@ def uuv(q, dq, u, p):
 
 
 @declare(
-    name="ballbeam", title="Ball on beam (case study V)",
-    coordinates=("z", "theta"), inputs=("F",),
-    params=(Param("m1", 0.35, "kg", "ball (point) mass"), Param("m2", 2.0, "kg", "beam mass"),
-            Param("ell", 0.5, "m", "beam length"), Param("g", 9.8, "m/s^2", "gravity")),
-    input_limit=15.0, operating_point=lambda p: {"z": p.ell / 2}, uncertain=("m1", "m2", "ell"),
+    name="ballbeam",
+    title="Ball on beam (case study V)",
+    coordinates=("z", "theta"),
+    inputs=("F",),
+    params=(
+        Param("m1", 0.35, "kg", "ball (point) mass"),
+        Param("m2", 2.0, "kg", "beam mass"),
+        Param("ell", 0.5, "m", "beam length"),
+        Param("g", 9.8, "m/s^2", "gravity"),
+    ),
+    input_limit=15.0,
+    operating_point=lambda p: {"z": p.ell / 2},
+    uncertain=("m1", "m2", "ell"),
 )
 def ballbeam(q, dq, u, p):
     """Ball at z along a uniform beam pivoted at one end; F at the tip, normal to the beam."""
@@ -118,13 +156,21 @@ CRANE_FORCE_LIMIT = 5000.0
 
 
 @declare(
-    name="crane", title="Gantry crane with two slung loads (case study VI)",
-    coordinates=("x", "theta1", "theta2"), inputs=("F",),
-    params=(Param("mc", 1500.0, "kg", "car mass"), Param("m1", 500.0, "kg", "load 1 mass"),
-            Param("m2", 200.0, "kg", "load 2 mass"), _damping(200.0, "N s/m"),
-            Param("ell1", 10.0, "m", "cable 1 length"), Param("ell2", 24.0, "m", "cable 2 length"),
-            Param("g", 9.81, "m/s^2", "gravity")),
-    input_limit=CRANE_FORCE_LIMIT, operating_point=lambda p: {"x": 0.0, "theta1": 0.0, "theta2": 0.0},
+    name="crane",
+    title="Gantry crane with two slung loads (case study VI)",
+    coordinates=("x", "theta1", "theta2"),
+    inputs=("F",),
+    params=(
+        Param("mc", 1500.0, "kg", "car mass"),
+        Param("m1", 500.0, "kg", "load 1 mass"),
+        Param("m2", 200.0, "kg", "load 2 mass"),
+        _damping(200.0, "N s/m"),
+        Param("ell1", 10.0, "m", "cable 1 length"),
+        Param("ell2", 24.0, "m", "cable 2 length"),
+        Param("g", 9.81, "m/s^2", "gravity"),
+    ),
+    input_limit=CRANE_FORCE_LIMIT,
+    operating_point=lambda p: {"x": 0.0, "theta1": 0.0, "theta2": 0.0},
     uncertain=("mc", "m1", "m2", "b", "ell1", "ell2"),
 )
 def crane(q, dq, u, p):
@@ -135,19 +181,27 @@ def crane(q, dq, u, p):
         kinetic += m * ((dq.x + ell * cos(th) * dth) ** 2 + (ell * sin(th) * dth) ** 2) / 2
         potential += -m * p.g * ell * cos(th)
     return Physics(
-        kinetic=kinetic, potential=potential,
+        kinetic=kinetic,
+        potential=potential,
         forces=[u.F - p.b * dq.x, 0, 0],
         outputs={"x": q.x, "theta1": q.theta1, "theta2": q.theta2},
     )
 
 
 @declare(
-    name="crane1", title="Gantry crane with one slung load (case study VI.8)",
-    coordinates=("x", "theta"), inputs=("F",),
-    params=(Param("mc", 1500.0, "kg", "car mass"), Param("m", 500.0, "kg", "load mass"),
-            Param("ell", 10.0, "m", "cable length"), _damping(200.0, "N s/m"),
-            Param("g", 9.81, "m/s^2", "gravity")),
-    input_limit=CRANE_FORCE_LIMIT, operating_point=lambda p: {"x": 0.0, "theta": 0.0},
+    name="crane1",
+    title="Gantry crane with one slung load (case study VI.8)",
+    coordinates=("x", "theta"),
+    inputs=("F",),
+    params=(
+        Param("mc", 1500.0, "kg", "car mass"),
+        Param("m", 500.0, "kg", "load mass"),
+        Param("ell", 10.0, "m", "cable length"),
+        _damping(200.0, "N s/m"),
+        Param("g", 9.81, "m/s^2", "gravity"),
+    ),
+    input_limit=CRANE_FORCE_LIMIT,
+    operating_point=lambda p: {"x": 0.0, "theta": 0.0},
     uncertain=("mc", "m", "ell", "b"),
 )
 def crane1(q, dq, u, p):

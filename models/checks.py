@@ -169,7 +169,8 @@ def check_memory(nbytes: float, what: str, hint: str = "") -> None:
     if nbytes > MEMORY_LIMIT_BYTES:
         raise ResourceLimitError(
             f"{what} needs about {format_bytes(nbytes)}, above the limit of {format_bytes(MEMORY_LIMIT_BYTES)} "
-            f"(models.checks.MEMORY_LIMIT_BYTES){'; ' + hint if hint else ''}")
+            f"(models.checks.MEMORY_LIMIT_BYTES){'; ' + hint if hint else ''}"
+        )
 
 
 def first_divergence(x: np.ndarray, bound: float) -> int | None:

@@ -104,8 +104,9 @@ def compiler() -> list[str] | None:
 def _compiler_identity(command: tuple[str, ...]) -> str | None:
     """The compiler's ``--version`` banner (part of the cache key), None when it does not run."""
     try:
-        done = subprocess.run([*command, "--version"], check=True, capture_output=True, text=True,
-                              stdin=subprocess.DEVNULL, timeout=60)
+        done = subprocess.run(
+            [*command, "--version"], check=True, capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return done.stdout.strip()
@@ -174,8 +175,11 @@ def _warn_once(kind: str, message: str) -> None:
     STATS.fallbacks += 1
     if kind not in _WARNED:
         _WARNED.add(kind)
-        warnings.warn(f"{message}; running CasADi's virtual machine instead (same results, slower). "
-                      "This warning is shown once.", CompilationUnavailable, stacklevel=4)
+        warnings.warn(
+            f"{message}; running CasADi's virtual machine instead (same results, slower). This warning is shown once.",
+            CompilationUnavailable,
+            stacklevel=4,
+        )
 
 
 # ---------------------------------------------------------------------------- building libraries
@@ -217,8 +221,12 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
     command = compiler()
     identity = _compiler_identity(tuple(command)) if command else None
     if command is None or identity is None:
-        unavailable("compiler", "no C compiler found (set CC, or put cc or gcc on the PATH)" if command is None
-                    else f"the C compiler {command[0]!r} does not run")
+        unavailable(
+            "compiler",
+            "no C compiler found (set CC, or put cc or gcc on the PATH)"
+            if command is None
+            else f"the C compiler {command[0]!r} does not run",
+        )
         return None
     cache = cache_directory()
     problem = _private_directory(cache)
@@ -243,14 +251,23 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
                 Path(build, name).write_text(text, encoding="utf-8")
             output = Path(build, "library.so")
             STATS.compiled += 1
-            subprocess.run([*command, *flags, *LIBRARY_FLAGS, "-o", str(output), *sources, "-lm"],
-                           check=True, cwd=build, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+            subprocess.run(
+                [*command, *flags, *LIBRARY_FLAGS, "-o", str(output), *sources, "-lm"],
+                check=True,
+                cwd=build,
+                capture_output=True,
+                text=True,
+                stdin=subprocess.DEVNULL,
+            )
             os.replace(output, library)
     except subprocess.CalledProcessError as err:
-        lines = [line for line in (err.stderr or "").splitlines() if "error" in line.lower()] or \
-            (err.stderr or "").splitlines()
-        unavailable("failed", f"compiling with {command[0]!r} failed (exit {err.returncode}): "
-                              f"{' | '.join(lines[:3]) or 'no message'}")
+        lines = [line for line in (err.stderr or "").splitlines() if "error" in line.lower()] or (
+            err.stderr or ""
+        ).splitlines()
+        unavailable(
+            "failed",
+            f"compiling with {command[0]!r} failed (exit {err.returncode}): {' | '.join(lines[:3]) or 'no message'}",
+        )
         return None
     except OSError as err:
         unavailable("cache", f"cannot build in the cache directory {str(cache)!r}: {err.strerror or err}")
@@ -336,8 +353,9 @@ class NumpyCall:
         for i, (arg, (rows, cols)) in enumerate(zip(args, self._in_sizes)):
             arr = np.asarray(arg, dtype=float)
             if arr.size != rows * cols:
-                raise ValueError(f"{self.fun.name()}: input {self.fun.name_in(i)} needs {rows}x{cols} "
-                                 f"values, got shape {arr.shape}")
+                raise ValueError(
+                    f"{self.fun.name()}: input {self.fun.name_in(i)} needs {rows}x{cols} values, got shape {arr.shape}"
+                )
             flat = np.ascontiguousarray(arr.reshape(rows, cols).ravel(order="F"))
             keep.append(flat)
             self._buffer.set_arg(i, memoryview(flat))  # type: ignore[call-arg, arg-type]  # (pointer, size) from the view

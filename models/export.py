@@ -35,9 +35,11 @@ from .block import Block
 from .files import write_text
 
 #: C keywords a controller name must not be.
-C_KEYWORDS = frozenset("""auto break case char const continue default do double else enum extern float for goto if
+C_KEYWORDS = frozenset(
+    """auto break case char const continue default do double else enum extern float for goto if
 inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
-volatile while""".split())
+volatile while""".split()
+)
 #: Flags the tests and `ExportedC.load` compile exported controllers with.
 LOAD_FLAGS = ("-O2", "-std=c99")
 
@@ -48,10 +50,16 @@ class UnsupportedExport(ValueError):
 
 def c_name(name: str) -> str:
     """`name` if it is a usable C identifier prefix, else ValueError naming it."""
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*", name) \
-            or len(name) > 48 or name in C_KEYWORDS:
-        raise ValueError(f"name must be a C identifier prefix (a letter, then letters, digits and single "
-                         f"underscores, at most 48 characters, not a C keyword), got {name!r}")
+    if (
+        not isinstance(name, str)
+        or not re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*", name)
+        or len(name) > 48
+        or name in C_KEYWORDS
+    ):
+        raise ValueError(
+            f"name must be a C identifier prefix (a letter, then letters, digits and single "
+            f"underscores, at most 48 characters, not a C keyword), got {name!r}"
+        )
     return name
 
 
@@ -72,7 +80,7 @@ def c_array(name: str, values, kind: str = "double", storage: str = "static cons
     else:
         items = [str(int(v)) for v in arr]
     items = items or ["0"]
-    lines = [", ".join(items[i:i + 6]) for i in range(0, len(items), 6)]
+    lines = [", ".join(items[i : i + 6]) for i in range(0, len(items), 6)]
     body = ",\n    ".join(lines)
     return f"{storage} {kind} {name}[{len(items)}] = {{\n    {body}\n}};\n"
 
@@ -90,20 +98,26 @@ def generated_code(functions: list[ca.Function], prefix: str) -> str:
         try:
             generator.add(fun)
         except RuntimeError as err:
-            raise UnsupportedExport(f"CasADi cannot generate C for {fun.name()}: "
-                                    f"{str(err).strip().splitlines()[-1]}") from None
+            raise UnsupportedExport(
+                f"CasADi cannot generate C for {fun.name()}: {str(err).strip().splitlines()[-1]}"
+            ) from None
     code = generator.dump()
     allocating = sorted({call for call in ("malloc(", "calloc(", "realloc(", "free(") if call in code})
     if allocating:
-        raise UnsupportedExport(f"the generated C of {', '.join(f.name() for f in functions)} allocates memory "
-                                f"({', '.join(allocating)})")
+        raise UnsupportedExport(
+            f"the generated C of {', '.join(f.name() for f in functions)} allocates memory ({', '.join(allocating)})"
+        )
     return code
 
 
 def work_sizes(fun: ca.Function) -> dict[str, int]:
     """CasADi's work array sizes of `fun` (argument and result pointers, integers, reals), each >= 1."""
-    return {"arg": max(1, fun.sz_arg()), "res": max(1, fun.sz_res()), "iw": max(1, fun.sz_iw()),
-            "w": max(1, fun.sz_w())}
+    return {
+        "arg": max(1, fun.sz_arg()),
+        "res": max(1, fun.sz_res()),
+        "iw": max(1, fun.sz_iw()),
+        "w": max(1, fun.sz_w()),
+    }
 
 
 def block_kernel(block: Block, name: str) -> ca.Function:
@@ -120,17 +134,24 @@ def block_kernel(block: Block, name: str) -> ca.Function:
         try:
             step = step.expand()
         except RuntimeError as err:
-            raise UnsupportedExport(f"{block.name}: its step calls something that is not plain arithmetic "
-                                    f"({str(err).strip().splitlines()[-1]}); only CasADi expressions can be "
-                                    "exported") from None
+            raise UnsupportedExport(
+                f"{block.name}: its step calls something that is not plain arithmetic "
+                f"({str(err).strip().splitlines()[-1]}); only CasADi expressions can be "
+                "exported"
+            ) from None
     if step.has_free():
         raise UnsupportedExport(f"{block.name}: its step has free symbols {step.get_free()}")
     # What expand could not inline stays a call; only CasADi's own expression graphs become plain C.
-    calls = [f"{f.name()} ({f.class_name()})" for f in step.find_functions()
-             if f.class_name() not in ("SXFunction", "MXFunction")]
+    calls = [
+        f"{f.name()} ({f.class_name()})"
+        for f in step.find_functions()
+        if f.class_name() not in ("SXFunction", "MXFunction")
+    ]
     if calls:
-        raise UnsupportedExport(f"{block.name}: its step calls something that is not plain arithmetic: "
-                                f"{', '.join(calls)}; only CasADi expressions can be exported")
+        raise UnsupportedExport(
+            f"{block.name}: its step calls something that is not plain arithmetic: "
+            f"{', '.join(calls)}; only CasADi expressions can be exported"
+        )
     xc = ca.SX.sym("xc", block.n_state)
     y = ca.SX.sym("y", block.n_measured)
     r = ca.SX.sym("r", block.n_reference)
@@ -197,12 +218,21 @@ class ExportedC:
         return CompiledController(self, library, initial_state)
 
 
-def _header(name: str, described: str, sizes: dict, members: list[str], declarations: list[str],
-            defines: dict | None = None) -> str:
+def _header(
+    name: str, described: str, sizes: dict, members: list[str], declarations: list[str], defines: dict | None = None
+) -> str:
     guard = f"{name.upper()}_H"
-    lines = [f"/* {name}.h: {described}",
-             " * Exported by codesign-control. Fixed sizes, no allocation; see models.export and mpc.export. */",
-             f"#ifndef {guard}", f"#define {guard}", "", "#ifdef __cplusplus", 'extern "C" {', "#endif", ""]
+    lines = [
+        f"/* {name}.h: {described}",
+        " * Exported by codesign-control. Fixed sizes, no allocation; see models.export and mpc.export. */",
+        f"#ifndef {guard}",
+        f"#define {guard}",
+        "",
+        "#ifdef __cplusplus",
+        'extern "C" {',
+        "#endif",
+        "",
+    ]
     for key, value in sizes.items():
         lines.append(f"#define {name.upper()}_{key} {value}")
     for key, value in (defines or {}).items():
@@ -235,71 +265,106 @@ def export_block(block: Block, name: str, *, initial_measurement=None, initial_r
     if not isinstance(block, Block):
         kind = type(block).__name__
         hint = " (use mpc.export.export_linear_mpc)" if kind == "LinearMPC" else ""
-        raise UnsupportedExport(f"{getattr(block, 'name', kind)}: only models.Block controllers are exported "
-                                f"here; {kind} is not one{hint}")
+        raise UnsupportedExport(
+            f"{getattr(block, 'name', kind)}: only models.Block controllers are exported here; {kind} is not one{hint}"
+        )
     kernel = block_kernel(block, name)
     work = work_sizes(kernel)
-    y0 = np.zeros(block.n_measured) if initial_measurement is None else \
-        np.asarray(initial_measurement, dtype=float).reshape(block.n_measured)
-    r0 = np.zeros(block.n_reference) if initial_reference is None else \
-        np.asarray(initial_reference, dtype=float).reshape(block.n_reference)
+    y0 = (
+        np.zeros(block.n_measured)
+        if initial_measurement is None
+        else np.asarray(initial_measurement, dtype=float).reshape(block.n_measured)
+    )
+    r0 = (
+        np.zeros(block.n_reference)
+        if initial_reference is None
+        else np.asarray(initial_reference, dtype=float).reshape(block.n_reference)
+    )
     xc0 = np.asarray(block.initial_state(y0, r0), dtype=float).reshape(block.n_state)
     upper = name.upper()
     n_store = max(1, block.n_state)
     signal = "the plant's outputs" if block.measures == "outputs" else "the plant's full state"
     header = _header(
-        name, f"controller '{block.name}' ({type(block).__module__}.{type(block).__name__}).",
-        {"N_STATE": block.n_state, "N_MEASURED": block.n_measured, "N_REFERENCE": block.n_reference,
-         "N_INPUT": block.n_input},
-        [f"double xc[{n_store}];  /* controller state x_c ({block.n_state} values) */",
-         f"double work[{work['w']}];  /* CasADi's work arrays */",
-         f"long long int iwork[{work['iw']}];"],
-        [f"/* x_c of the Python block at its first sample for y0 = {np.array2string(y0, separator=', ')}, "
-         f"r0 = {np.array2string(r0, separator=', ')}. */",
-         f"extern const double {upper}_INITIAL_STATE[{n_store}];",
-         "",
-         f"/* Set the controller state x_c ({upper}_N_STATE values). */",
-         f"void {name}_set_state({name}_state *state, const double *xc);",
-         "/* Copy the controller state x_c out. */",
-         f"void {name}_get_state(const {name}_state *state, double *xc);",
-         f"/* One sample, every {upper}_SAMPLE_PERIOD s: y ({upper}_N_MEASURED values, {signal}),",
-         f" * r ({upper}_N_REFERENCE values) -> u ({upper}_N_INPUT values, saturated as the block does).",
-         " * Returns 0, or CasADi's non-zero evaluation flag (then u and the state are unchanged). */",
-         f"int {name}_step({name}_state *state, const double *y, const double *r, double *u);",
-         f"/* sizeof({name}_state), for loaders. */",
-         f"unsigned long {name}_state_size(void);"],
-        {"SAMPLE_PERIOD": c_number(block.sample_period)})
-    source = "\n".join([
-        f"/* {name}.c: controller '{block.name}', generated by codesign-control (models.export). */",
-        f'#include "{name}.h"', "",
-        generated_code([kernel], f"{name}_casadi"),
-        c_array(f"{upper}_INITIAL_STATE", xc0 if block.n_state else [0.0], storage="const"),
-        f"void {name}_set_state({name}_state *state, const double *xc) {{",
-        "    int i;",
-        f"    for (i = 0; i < {block.n_state}; ++i) state->xc[i] = xc[i];",
-        "}", "",
-        f"void {name}_get_state(const {name}_state *state, double *xc) {{",
-        "    int i;",
-        f"    for (i = 0; i < {block.n_state}; ++i) xc[i] = state->xc[i];",
-        "}", "",
-        f"int {name}_step({name}_state *state, const double *y, const double *r, double *u) {{",
-        f"    const casadi_real *arg[{work['arg']}];",
-        f"    casadi_real *res[{work['res']}];",
-        f"    double xc_next[{n_store}], u_next[{block.n_input}];",
-        "    int i, flag;",
-        "    arg[0] = state->xc; arg[1] = y; arg[2] = r;",
-        "    res[0] = xc_next; res[1] = u_next;",
-        f"    flag = {name}_kernel(arg, res, state->iwork, state->work, 0);",
-        "    if (flag) return flag;",
-        f"    for (i = 0; i < {block.n_state}; ++i) state->xc[i] = xc_next[i];",
-        f"    for (i = 0; i < {block.n_input}; ++i) u[i] = u_next[i];",
-        "    return 0;",
-        "}", "",
-        f"unsigned long {name}_state_size(void) {{ return (unsigned long) sizeof({name}_state); }}", ""])
-    return ExportedC(name=name, controller=block.name, header=header, source=source, n_state=block.n_state,
-                     n_measured=block.n_measured, n_reference=block.n_reference, n_input=block.n_input,
-                     sample_period=block.sample_period, measures=block.measures, initial_state=xc0,
-                     status_codes={0: "ok"})
+        name,
+        f"controller '{block.name}' ({type(block).__module__}.{type(block).__name__}).",
+        {
+            "N_STATE": block.n_state,
+            "N_MEASURED": block.n_measured,
+            "N_REFERENCE": block.n_reference,
+            "N_INPUT": block.n_input,
+        },
+        [
+            f"double xc[{n_store}];  /* controller state x_c ({block.n_state} values) */",
+            f"double work[{work['w']}];  /* CasADi's work arrays */",
+            f"long long int iwork[{work['iw']}];",
+        ],
+        [
+            f"/* x_c of the Python block at its first sample for y0 = {np.array2string(y0, separator=', ')}, "
+            f"r0 = {np.array2string(r0, separator=', ')}. */",
+            f"extern const double {upper}_INITIAL_STATE[{n_store}];",
+            "",
+            f"/* Set the controller state x_c ({upper}_N_STATE values). */",
+            f"void {name}_set_state({name}_state *state, const double *xc);",
+            "/* Copy the controller state x_c out. */",
+            f"void {name}_get_state(const {name}_state *state, double *xc);",
+            f"/* One sample, every {upper}_SAMPLE_PERIOD s: y ({upper}_N_MEASURED values, {signal}),",
+            f" * r ({upper}_N_REFERENCE values) -> u ({upper}_N_INPUT values, saturated as the block does).",
+            " * Returns 0, or CasADi's non-zero evaluation flag (then u and the state are unchanged). */",
+            f"int {name}_step({name}_state *state, const double *y, const double *r, double *u);",
+            f"/* sizeof({name}_state), for loaders. */",
+            f"unsigned long {name}_state_size(void);",
+        ],
+        {"SAMPLE_PERIOD": c_number(block.sample_period)},
+    )
+    source = "\n".join(
+        [
+            f"/* {name}.c: controller '{block.name}', generated by codesign-control (models.export). */",
+            f'#include "{name}.h"',
+            "",
+            generated_code([kernel], f"{name}_casadi"),
+            c_array(f"{upper}_INITIAL_STATE", xc0 if block.n_state else [0.0], storage="const"),
+            f"void {name}_set_state({name}_state *state, const double *xc) {{",
+            "    int i;",
+            f"    for (i = 0; i < {block.n_state}; ++i) state->xc[i] = xc[i];",
+            "}",
+            "",
+            f"void {name}_get_state(const {name}_state *state, double *xc) {{",
+            "    int i;",
+            f"    for (i = 0; i < {block.n_state}; ++i) xc[i] = state->xc[i];",
+            "}",
+            "",
+            f"int {name}_step({name}_state *state, const double *y, const double *r, double *u) {{",
+            f"    const casadi_real *arg[{work['arg']}];",
+            f"    casadi_real *res[{work['res']}];",
+            f"    double xc_next[{n_store}], u_next[{block.n_input}];",
+            "    int i, flag;",
+            "    arg[0] = state->xc; arg[1] = y; arg[2] = r;",
+            "    res[0] = xc_next; res[1] = u_next;",
+            f"    flag = {name}_kernel(arg, res, state->iwork, state->work, 0);",
+            "    if (flag) return flag;",
+            f"    for (i = 0; i < {block.n_state}; ++i) state->xc[i] = xc_next[i];",
+            f"    for (i = 0; i < {block.n_input}; ++i) u[i] = u_next[i];",
+            "    return 0;",
+            "}",
+            "",
+            f"unsigned long {name}_state_size(void) {{ return (unsigned long) sizeof({name}_state); }}",
+            "",
+        ]
+    )
+    return ExportedC(
+        name=name,
+        controller=block.name,
+        header=header,
+        source=source,
+        n_state=block.n_state,
+        n_measured=block.n_measured,
+        n_reference=block.n_reference,
+        n_input=block.n_input,
+        sample_period=block.sample_period,
+        measures=block.measures,
+        initial_state=xc0,
+        status_codes={0: "ok"},
+    )
 
 
 class CompiledController:
@@ -345,10 +410,11 @@ class CompiledController:
         if self._init is not None:
             code = self._init(ctypes.addressof(self._memory), y0.ctypes.data, r0.ctypes.data)
             if code:
-                raise ValueError(f"{self.name}: init returned {code} "
-                                 f"({self.exported.status_codes.get(code, 'unknown code')})")
+                raise ValueError(
+                    f"{self.name}: init returned {code} ({self.exported.status_codes.get(code, 'unknown code')})"
+                )
             self._get(ctypes.addressof(self._memory), self._xc.ctypes.data)
-            return self._xc[:self.n_state].copy()
+            return self._xc[: self.n_state].copy()
         if self._initial_state is not None:
             return np.asarray(self._initial_state(y0, r0), dtype=float).reshape(self.n_state)
         return np.asarray(self.exported.initial_state, dtype=float).copy()
@@ -363,10 +429,12 @@ class CompiledController:
         u = np.zeros(self.exported.n_input)
         self._code = int(self._step(memory, y.ctypes.data, r.ctypes.data, u.ctypes.data))
         self._get(memory, self._xc.ctypes.data)
-        return self._xc[:self.n_state].copy(), u
+        return self._xc[: self.n_state].copy(), u
 
     def step_info(self) -> dict:
         """The last step's status code and its meaning."""
-        return {"code": self._code, "status": self.exported.status_codes.get(self._code, "unknown code"),
-                "success": self._code == 0}
-
+        return {
+            "code": self._code,
+            "status": self.exported.status_codes.get(self._code, "unknown code"),
+            "success": self._code == 0,
+        }

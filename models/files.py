@@ -30,8 +30,10 @@ from typing import Any
 
 import numpy as np
 
-JSON_CONVENTIONS = ("SI units, angles in rad; complex numbers as [re, im]; non-finite numbers as the strings "
-                    "'inf', '-inf', 'nan'; transfer functions as {num, den} in descending powers")
+JSON_CONVENTIONS = (
+    "SI units, angles in rad; complex numbers as [re, im]; non-finite numbers as the strings "
+    "'inf', '-inf', 'nan'; transfer functions as {num, den} in descending powers"
+)
 
 
 # ---------------------------------------------------------------------------- atomic files
@@ -45,8 +47,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}",
-                                   dir=path.parent)
+    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
     os.close(handle)
     tmp_path = Path(tmp)
     try:
@@ -178,8 +179,11 @@ def _lti_as_dict(value) -> dict | None:
     import control
 
     if isinstance(value, control.TransferFunction) and value.issiso():
-        return {"num": np.ravel(value.num[0][0]), "den": np.ravel(value.den[0][0]),
-                **({"dt": value.dt} if value.dt else {})}
+        return {
+            "num": np.ravel(value.num[0][0]),
+            "den": np.ravel(value.den[0][0]),
+            **({"dt": value.dt} if value.dt else {}),
+        }
     if isinstance(value, control.StateSpace):
         return {"A": value.A, "B": value.B, "C": value.C, "D": value.D, **({"dt": value.dt} if value.dt else {})}
     return None
@@ -240,8 +244,10 @@ def _escape_cell(text: str) -> str:
 def html_table(rows: Sequence[Mapping], columns: Sequence[Column]) -> str:
     """The same table as HTML."""
     head = "".join(f"<th>{html.escape(h)}</th>" for _, h, _ in columns)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(fmt(row.get(key)))}</td>" for key, _, fmt in columns)
-                   + "</tr>" for row in rows)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(fmt(row.get(key)))}</td>" for key, _, fmt in columns) + "</tr>"
+        for row in rows
+    )
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
@@ -270,10 +276,12 @@ def fill_template(template: str, values: Mapping[str, str]) -> str:
 
 def scaled(scale: float = 1.0, digits: int = 4) -> Callable[[Any], str]:
     """A cell formatter multiplying numbers by `scale` (for example rad -> deg) first."""
+
     def fmt(value):
         if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
             return format_number(float(value) * scale, digits)
         return format_number(value, digits)
+
     return fmt
 
 

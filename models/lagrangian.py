@@ -39,8 +39,9 @@ class EquationsOfMotion:
     accel: ca.SX
 
 
-def euler_lagrange(q: ca.SX, dq: ca.SX, kinetic: ca.SX, potential: ca.SX, forces,
-                   coordinate_names=None) -> EquationsOfMotion:
+def euler_lagrange(
+    q: ca.SX, dq: ca.SX, kinetic: ca.SX, potential: ca.SX, forces, coordinate_names=None
+) -> EquationsOfMotion:
     """Derive the equations of motion from the energies and generalized forces.
 
     Parameters
@@ -74,9 +75,11 @@ def euler_lagrange(q: ca.SX, dq: ca.SX, kinetic: ca.SX, potential: ca.SX, forces
     mass_matrix, momentum = ca.hessian(kinetic, dq)
     for k in range(nq):
         if ca.SX(mass_matrix[k, k]).is_zero():
-            raise ValueError(f"the kinetic energy has no term in the velocity of coordinate {names[k]!r} "
-                             "(zero mass-matrix diagonal), so its acceleration is undetermined; give it "
-                             "kinetic energy or declare it as a first-order state")
+            raise ValueError(
+                f"the kinetic energy has no term in the velocity of coordinate {names[k]!r} "
+                "(zero mass-matrix diagonal), so its acceleration is undetermined; give it "
+                "kinetic energy or declare it as a first-order state"
+            )
     coriolis = ca.jtimes(momentum, q, dq) - ca.gradient(kinetic, q)
     gravity = ca.gradient(potential, q)
     accel = solve_spd(mass_matrix, forces - coriolis - gravity)
@@ -114,6 +117,6 @@ def solve_spd(matrix: ca.SX, rhs: ca.SX) -> ca.SX:
     v: list[ca.SX] = [ca.SX(0)] * n  # filled in reverse elimination order
     for pos in reversed(range(n)):
         k = order[pos]
-        later = [j for j in order[pos + 1:] if (k, j) in a]
+        later = [j for j in order[pos + 1 :] if (k, j) in a]
         v[k] = (b[k] - sum((a[(k, j)] * v[j] for j in later), ca.SX(0))) / a[(k, k)]
     return ca.vertcat(*v)

@@ -49,8 +49,10 @@ class LinearModel:
         for key, shape in want.items():
             value = real_array(getattr(self, key), f"{who}: {key}")
             if value.shape != shape or min(shape) < 0:
-                raise ValueError(f"{who}: {key} must have shape {shape} (nx = {nx}, nu = {nu}, ny = {ny} from "
-                                 f"A, B, C), got {value.shape}")
+                raise ValueError(
+                    f"{who}: {key} must have shape {shape} (nx = {nx}, nu = {nu}, ny = {ny} from "
+                    f"A, B, C), got {value.shape}"
+                )
             if not np.all(np.isfinite(value)):
                 raise ValueError(f"{who}: {key} has non-finite entries")
         for key, size in (("state_names", nx), ("input_names", nu), ("output_names", ny)):
@@ -85,9 +87,17 @@ class LinearModel:
     def ss(self) -> control.StateSpace:
         """python-control state space with named signals (discrete when sampled)."""
         dt = 0 if self.sample_period is None else self.sample_period
-        return control.ss(self.A, self.B, self.C, self.D, dt, name=self.name or None,
-                          states=list(self.state_names), inputs=list(self.input_names),
-                          outputs=list(self.output_names))
+        return control.ss(
+            self.A,
+            self.B,
+            self.C,
+            self.D,
+            dt,
+            name=self.name or None,
+            states=list(self.state_names),
+            inputs=list(self.input_names),
+            outputs=list(self.output_names),
+        )
 
     def tf(self, output: str | None = None, input: str | None = None) -> control.TransferFunction:
         """Transfer function(s); with `output`/`input` names, the single SISO entry.
@@ -132,7 +142,7 @@ def chop(coeffs: np.ndarray, rel: float = 1e-9) -> np.ndarray:
     scale = np.max(np.abs(coeffs)) if coeffs.size else 0.0
     out = np.where(np.abs(coeffs) <= rel * scale, 0.0, coeffs)
     nonzero = np.flatnonzero(out)
-    return out[nonzero[0]:] if nonzero.size else np.zeros(1)
+    return out[nonzero[0] :] if nonzero.size else np.zeros(1)
 
 
 def polynomial_string(coeffs, var: str = "s", digits: int = 4) -> str:

@@ -13,9 +13,21 @@ import numpy as np
 import scipy.linalg
 
 __all__ = [
-    "controllability_matrix", "observability_matrix", "uncontrollable_modes", "unobservable_modes",
-    "require_controllable", "require_observable", "require_stabilizable", "require_detectable",
-    "bryson_weights", "riccati_residual", "lqr", "dlqr", "dlqr_time_varying", "kalman", "dkalman",
+    "controllability_matrix",
+    "observability_matrix",
+    "uncontrollable_modes",
+    "unobservable_modes",
+    "require_controllable",
+    "require_observable",
+    "require_stabilizable",
+    "require_detectable",
+    "bryson_weights",
+    "riccati_residual",
+    "lqr",
+    "dlqr",
+    "dlqr_time_varying",
+    "kalman",
+    "dkalman",
 ]
 
 
@@ -62,7 +74,7 @@ def state_output_pair(A, C) -> tuple[np.ndarray, np.ndarray]:
 
 
 def message_prefix(what: str) -> str:
-    """"what: " for error messages, or nothing."""
+    """ "what: " for error messages, or nothing."""
     return f"{what}: " if what else ""
 
 
@@ -149,8 +161,10 @@ def require_controllable(A, B, what: str = "") -> int:
     modes = uncontrollable_modes(A, B)
     rank = int(np.linalg.matrix_rank(controllability_matrix(A, B)))
     if modes.size:
-        raise ValueError(f"{message_prefix(what)}(A, B) is not controllable: the input cannot move the "
-                         f"mode(s) at s = {format_values(modes)} (controllability matrix rank {rank} < {A.shape[0]})")
+        raise ValueError(
+            f"{message_prefix(what)}(A, B) is not controllable: the input cannot move the "
+            f"mode(s) at s = {format_values(modes)} (controllability matrix rank {rank} < {A.shape[0]})"
+        )
     return A.shape[0]
 
 
@@ -165,8 +179,10 @@ def require_observable(A, C, what: str = "") -> int:
     modes = unobservable_modes(A, C)
     rank = int(np.linalg.matrix_rank(observability_matrix(A, C)))
     if modes.size:
-        raise ValueError(f"{message_prefix(what)}(A, C) is not observable: the output does not see the "
-                         f"mode(s) at s = {format_values(modes)} (observability matrix rank {rank} < {A.shape[0]})")
+        raise ValueError(
+            f"{message_prefix(what)}(A, C) is not observable: the output does not see the "
+            f"mode(s) at s = {format_values(modes)} (observability matrix rank {rank} < {A.shape[0]})"
+        )
     return A.shape[0]
 
 
@@ -185,8 +201,10 @@ def require_stabilizable(A, B, what: str = "", discrete: bool = False) -> None:
     bad = _unstable(uncontrollable_modes(A, B), discrete)
     if bad.size:
         where = "|z| >= 1" if discrete else "Re s >= 0"
-        raise ValueError(f"{message_prefix(what)}(A, B) is not stabilizable: uncontrollable mode(s) with "
-                         f"{where} at {format_values(bad)}")
+        raise ValueError(
+            f"{message_prefix(what)}(A, B) is not stabilizable: uncontrollable mode(s) with "
+            f"{where} at {format_values(bad)}"
+        )
 
 
 def require_detectable(A, C, what: str = "", discrete: bool = False) -> None:
@@ -195,8 +213,9 @@ def require_detectable(A, C, what: str = "", discrete: bool = False) -> None:
     bad = _unstable(unobservable_modes(A, C), discrete)
     if bad.size:
         where = "|z| >= 1" if discrete else "Re s >= 0"
-        raise ValueError(f"{message_prefix(what)}(A, C) is not detectable: unobservable mode(s) with "
-                         f"{where} at {format_values(bad)}")
+        raise ValueError(
+            f"{message_prefix(what)}(A, C) is not detectable: unobservable mode(s) with {where} at {format_values(bad)}"
+        )
 
 
 # ------------------------------------------------------------------- LQR
@@ -265,8 +284,10 @@ def _riccati_checked(A, B, Q, R, P, K, discrete: bool, what: str) -> None:
     closed = np.linalg.eigvals(A - B @ K)
     stable = np.all(np.abs(closed) < 1) if discrete else np.all(closed.real < 0)
     if not (np.all(np.isfinite(P)) and res < 1e-8 and stable):
-        raise ValueError(f"{message_prefix(what)}the Riccati solve failed: relative residual {res:.3g}, "
-                         f"closed-loop poles {format_values(closed)}")
+        raise ValueError(
+            f"{message_prefix(what)}the Riccati solve failed: relative residual {res:.3g}, "
+            f"closed-loop poles {format_values(closed)}"
+        )
 
 
 def lqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
@@ -324,8 +345,7 @@ def dlqr(A, B, Q=None, R=None, what: str = "") -> tuple[np.ndarray, np.ndarray]:
     A, B = state_input_pair(A, B)
     Q, R = _weights(A, B, Q, R, what)
     require_stabilizable(A, B, what, discrete=True)
-    require_detectable(A, _weight_root(Q), f"{what} with the weight Q" if what else "weight Q",
-                       discrete=True)
+    require_detectable(A, _weight_root(Q), f"{what} with the weight Q" if what else "weight Q", discrete=True)
     P = scipy.linalg.solve_discrete_are(A, B, Q, R)
     P = (P + P.T) / 2
     K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
@@ -368,8 +388,9 @@ def dlqr_time_varying(As, Bs, Q, R, final_weight, what: str = "") -> tuple[np.nd
     Q, R = _weights(As[0], Bs[0], Q, R, what)
     final = finite_matrix(final_weight, "final_weight")
     if final.shape != (n, n) or not np.allclose(final, final.T, rtol=1e-10, atol=1e-14 * np.abs(final).max(initial=0)):
-        raise ValueError(f"{message_prefix(what)}final_weight must be a symmetric ({n}, {n}) matrix, got shape "
-                         f"{final.shape}")
+        raise ValueError(
+            f"{message_prefix(what)}final_weight must be a symmetric ({n}, {n}) matrix, got shape {final.shape}"
+        )
     if np.min(np.linalg.eigvalsh(final)) < -1e-12 * max(1.0, np.abs(final).max()):
         raise ValueError(f"{message_prefix(what)}final_weight must be positive semidefinite")
     gains = np.empty((steps, Bs.shape[2], n))

@@ -36,13 +36,26 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 #: Columns of a study table that are metrics, in order.
-METRIC_COLUMNS = ("rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae", "itae", "peak_u",
-                  "u_limit", "saturated_frac", "energy", "violation", "step_ms", "step_ms_max",
-                  "oscillation_amplitude", "oscillation_period_s")
+METRIC_COLUMNS = (
+    "rise_time_s",
+    "settling_time_s",
+    "overshoot_pct",
+    "ss_error",
+    "iae",
+    "itae",
+    "peak_u",
+    "u_limit",
+    "saturated_frac",
+    "energy",
+    "violation",
+    "step_ms",
+    "step_ms_max",
+    "oscillation_amplitude",
+    "oscillation_period_s",
+)
 
 #: Metrics whose Monte Carlo spread (standard deviation) is reported as ``<name>_std``.
-SPREAD_COLUMNS = ("rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae", "itae", "peak_u",
-                  "energy")
+SPREAD_COLUMNS = ("rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae", "itae", "peak_u", "energy")
 
 #: Relative tolerance for counting a command as at the actuator limit.
 SATURATION_TOLERANCE = 1e-3
@@ -80,8 +93,16 @@ def first_crossing(t: np.ndarray, y: np.ndarray, level: float, direction: float)
     return float(t[k - 1] + (t[k] - t[k - 1]) * (level - y0) / (y1 - y0))
 
 
-def step_metrics(t, y, *, initial: float, target: float, band: float = SETTLING_BAND,
-                 rise_limits: tuple = (0.1, 0.9), final_window: float = 0.05) -> dict:
+def step_metrics(
+    t,
+    y,
+    *,
+    initial: float,
+    target: float,
+    band: float = SETTLING_BAND,
+    rise_limits: tuple = (0.1, 0.9),
+    final_window: float = 0.05,
+) -> dict:
     """Rise time, settling time, overshoot and steady-state error of one step.
 
     Parameters
@@ -130,8 +151,13 @@ def step_metrics(t, y, *, initial: float, target: float, band: float = SETTLING_
     overshoot = max(0.0, 100.0 * excursion[peak] / abs(size))
     n_final = max(1, int(math.ceil(final_window * len(y))))
     ss_error = abs(target - float(np.mean(y[-n_final:])))
-    return {"rise_time_s": float(rise), "settling_time_s": float(settling), "overshoot_pct": float(overshoot),
-            "ss_error": ss_error, "peak_time_s": float(t[peak] - start)}
+    return {
+        "rise_time_s": float(rise),
+        "settling_time_s": float(settling),
+        "overshoot_pct": float(overshoot),
+        "ss_error": ss_error,
+        "peak_time_s": float(t[peak] - start),
+    }
 
 
 def reference_changes(r: np.ndarray) -> np.ndarray:
@@ -210,9 +236,13 @@ def input_metrics(t, u, limit) -> dict:
     magnitude = np.abs(u)
     at_limit = np.any(magnitude >= limit * (1 - SATURATION_TOLERANCE), axis=1)
     delivered = np.clip(u, -limit, limit)
-    return {"peak_u": float(np.max(magnitude)), "u_limit": float(np.max(limit)),
-            "saturated_frac": float(np.mean(at_limit)), "energy": float(np.sum(delivered**2 * dt)),
-            "input_violation": float(max(0.0, np.max((magnitude - limit) / limit)))}
+    return {
+        "peak_u": float(np.max(magnitude)),
+        "u_limit": float(np.max(limit)),
+        "saturated_frac": float(np.mean(at_limit)),
+        "energy": float(np.sum(delivered**2 * dt)),
+        "input_violation": float(max(0.0, np.max((magnitude - limit) / limit))),
+    }
 
 
 def bound_excursions(x: np.ndarray, state_names: Sequence[str], bounds: Mapping[str, tuple]) -> dict:
@@ -244,8 +274,9 @@ def bound_violation(x: np.ndarray, state_names: Sequence[str], bounds: Mapping[s
     return max([excess[name] / (high - low) for name, (low, high) in bounds.items()], default=0.0)
 
 
-def final_values(t: np.ndarray, x: np.ndarray, state_names: Sequence[str], names: Sequence[str],
-                 final_window: float = 0.05) -> dict:
+def final_values(
+    t: np.ndarray, x: np.ndarray, state_names: Sequence[str], names: Sequence[str], final_window: float = 0.05
+) -> dict:
     """Mean of each named state over the last `final_window` fraction of the run (as ss_error's window)."""
     n_final = max(1, int(math.ceil(final_window * len(t))))
     return {name: float(np.mean(x[-n_final:, list(state_names).index(name)])) for name in names}
@@ -299,8 +330,7 @@ def oscillation(t, y, r, band: float = SETTLING_BAND, step: float | None = None)
     amplitude = [(float(np.max(p)) - float(np.min(p))) / 2 for p in (first, second)]
     crossings = [_crossings(p, threshold / 4) for p in (first, second)]
     total = _crossings(residual, threshold / 4)
-    if (total < 4 or min(crossings) < 2 or amplitude[1] <= threshold
-            or amplitude[1] < SUSTAINED_RATIO * amplitude[0]):
+    if total < 4 or min(crossings) < 2 or amplitude[1] <= threshold or amplitude[1] < SUSTAINED_RATIO * amplitude[0]:
         return none
     return {"oscillation_amplitude": amplitude[1], "oscillation_period_s": 2 * float(tw[-1] - tw[0]) / total}
 

@@ -79,9 +79,20 @@ class Declaration:
 _REGISTRY: dict[str, Declaration] = {}
 
 
-def declare(*, name: str, title: str, coordinates, inputs, params, input_limit,
-            operating_point: Callable | None = None, uncertain=(), first_order=(), register: bool = True,
-            replace: bool = False):
+def declare(
+    *,
+    name: str,
+    title: str,
+    coordinates,
+    inputs,
+    params,
+    input_limit,
+    operating_point: Callable | None = None,
+    uncertain=(),
+    first_order=(),
+    register: bool = True,
+    replace: bool = False,
+):
     """Decorator turning `physics(q, dq, u, p) -> Physics` into a plant declaration.
 
     Parameters
@@ -128,13 +139,25 @@ def declare(*, name: str, title: str, coordinates, inputs, params, input_limit,
     def wrap(physics: Callable) -> Declaration:
         if not callable(physics):
             raise TypeError(f"{name}: declare(...) decorates a physics function, got {physics!r}")
-        decl = Declaration(name, title, coordinates, inputs, params, limit, physics,
-                           operating_point or (lambda p: {}), uncertain, first_order)
+        decl = Declaration(
+            name,
+            title,
+            coordinates,
+            inputs,
+            params,
+            limit,
+            physics,
+            operating_point or (lambda p: {}),
+            uncertain,
+            first_order,
+        )
         _check_declaration(decl)
         if register:
             if name in _REGISTRY and not replace:
-                raise ValueError(f"a plant named {name!r} is already registered ({_REGISTRY[name].title}); "
-                                 "pass replace=True to replace it, or register=False for a plant of your own")
+                raise ValueError(
+                    f"a plant named {name!r} is already registered ({_REGISTRY[name].title}); "
+                    "pass replace=True to replace it, or register=False for a plant of your own"
+                )
             _REGISTRY[name] = decl
         return decl
 
@@ -162,8 +185,7 @@ def _limit_vector(value, size: int, what: str, inputs) -> np.ndarray:
     if arr.ndim == 0:
         arr = np.full(size, float(arr))
     elif arr.shape != (size,):
-        raise ValueError(f"{what} must be one number for every input or one per input {tuple(inputs)}, "
-                         f"got {value!r}")
+        raise ValueError(f"{what} must be one number for every input or one per input {tuple(inputs)}, got {value!r}")
     for entry in arr:
         if not np.isfinite(entry) or entry <= 0:
             raise ValueError(f"{what} must be finite and > 0, got {entry:g}")
@@ -173,8 +195,12 @@ def _limit_vector(value, size: int, what: str, inputs) -> np.ndarray:
 def _check_declaration(decl: Declaration) -> None:
     names = [p.name for p in decl.params]
     states = decl.coordinates + tuple("d" + c for c in decl.coordinates) + decl.first_order
-    for group, what in ((decl.coordinates, "coordinate"), (decl.inputs, "input"), (names, "parameter"),
-                        (states, "state")):
+    for group, what in (
+        (decl.coordinates, "coordinate"),
+        (decl.inputs, "input"),
+        (names, "parameter"),
+        (states, "state"),
+    ):
         if len(set(group)) != len(group):
             raise ValueError(f"{decl.name}: repeated {what} name in {group}")
     if not states:
@@ -186,8 +212,10 @@ def _check_declaration(decl: Declaration) -> None:
         _check_name(p.name, f"{decl.name}: Param name")
         value = real(p.value, f"{decl.name}: Param {p.name} value", finite=False)
         if not np.isfinite(value) or value < 0 or (p.positive and value == 0):
-            raise ValueError(f"{decl.name}: Param {p.name} ({p.unit}) must be finite and "
-                             f"{'> 0' if p.positive else '>= 0'}, got {value}")
+            raise ValueError(
+                f"{decl.name}: Param {p.name} ({p.unit}) must be finite and "
+                f"{'> 0' if p.positive else '>= 0'}, got {value}"
+            )
 
 
 def names() -> list[str]:
@@ -217,8 +245,12 @@ class _Symbolic:
         p = ca.SX.sym("p", len(decl.params))
         s = ca.SX.sym("s", ns)
         ns_ = lambda vec, keys: SimpleNamespace(**{k: vec[i] for i, k in enumerate(keys)})
-        spaces = [ns_(q, decl.coordinates), ns_(dq, decl.coordinates), ns_(u, decl.inputs),
-                  ns_(p, [pp.name for pp in decl.params])]
+        spaces = [
+            ns_(q, decl.coordinates),
+            ns_(dq, decl.coordinates),
+            ns_(u, decl.inputs),
+            ns_(p, [pp.name for pp in decl.params]),
+        ]
         if ns:
             spaces.append(ns_(s, decl.first_order))
         phys = decl.physics(*spaces)
@@ -226,11 +258,15 @@ class _Symbolic:
         self.output_names = tuple(outputs)
         y = ca.vertcat(*outputs.values()) if outputs else ca.SX(0, 1)
         if ca.depends_on(y, u):
-            raise ValueError(f"{decl.name}: outputs must not depend on the inputs "
-                             f"({', '.join(n for n, e in outputs.items() if ca.depends_on(e, u))} do)")
+            raise ValueError(
+                f"{decl.name}: outputs must not depend on the inputs "
+                f"({', '.join(n for n, e in outputs.items() if ca.depends_on(e, u))} do)"
+            )
         if ns and ca.depends_on(kinetic, s):
-            raise ValueError(f"{decl.name}: the kinetic energy must not depend on the first-order states "
-                             f"{decl.first_order} (the Euler-Lagrange derivation would miss their rates)")
+            raise ValueError(
+                f"{decl.name}: the kinetic energy must not depend on the first-order states "
+                f"{decl.first_order} (the Euler-Lagrange derivation would miss their rates)"
+            )
         try:
             self.eom: EquationsOfMotion = euler_lagrange(q, dq, kinetic, potential, forces, decl.coordinates)
         except ValueError as err:
@@ -242,9 +278,13 @@ class _Symbolic:
         self.f = ca.Function("f", [x, u, p], [xdot], ["x", "u", "p"], ["xdot"])
         self.h = ca.Function("h", [x, p], [y], ["x", "p"], ["y"])
         self.energy = ca.Function("energy", [x, p], [kinetic + potential], ["x", "p"], ["E"])
-        self.jacobians = ca.Function("jacobians", [x, u, p],
-                                     [ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x)],
-                                     ["x", "u", "p"], ["A", "B", "C"])
+        self.jacobians = ca.Function(
+            "jacobians",
+            [x, u, p],
+            [ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x)],
+            ["x", "u", "p"],
+            ["A", "B", "C"],
+        )
         # Configuration from the outputs that depend on q alone, when those are
         # linear in q and determine it.
         rows = [i for i in range(y.numel()) if not ca.depends_on(y[i], ca.vertcat(dq, s))]
@@ -287,8 +327,7 @@ def _scalar_expression(value, what: str) -> ca.SX:
     elif isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
         expr = ca.SX(float(value))
     else:
-        raise TypeError(f"{what} must be a CasADi SX expression or a number, got {type(value).__name__} "
-                        f"{value!r}")
+        raise TypeError(f"{what} must be a CasADi SX expression or a number, got {type(value).__name__} {value!r}")
     if expr.shape != (1, 1):
         raise ValueError(f"{what} must be one scalar expression, got shape {expr.shape}")
     return expr
@@ -306,13 +345,18 @@ def _checked_physics(decl: Declaration, phys) -> tuple:
     if isinstance(raw_forces, ca.SX):
         raw_forces = [raw_forces[i] for i in range(raw_forces.numel())]
     if isinstance(raw_forces, (str, Mapping)) or not isinstance(raw_forces, (list, tuple)):
-        raise TypeError(f"{decl.name}: Physics.forces must be a list with one generalized force per "
-                        f"coordinate {decl.coordinates}, got {phys.forces!r}")
+        raise TypeError(
+            f"{decl.name}: Physics.forces must be a list with one generalized force per "
+            f"coordinate {decl.coordinates}, got {phys.forces!r}"
+        )
     if len(raw_forces) != nq:
-        raise ValueError(f"{decl.name}: Physics.forces needs one generalized force per coordinate "
-                         f"{decl.coordinates} ({nq}), got {len(raw_forces)}")
-    forces = [_scalar_expression(f, f"{decl.name}: generalized force of {c!r}")
-              for f, c in zip(raw_forces, decl.coordinates)]
+        raise ValueError(
+            f"{decl.name}: Physics.forces needs one generalized force per coordinate "
+            f"{decl.coordinates} ({nq}), got {len(raw_forces)}"
+        )
+    forces = [
+        _scalar_expression(f, f"{decl.name}: generalized force of {c!r}") for f, c in zip(raw_forces, decl.coordinates)
+    ]
     if not isinstance(phys.outputs, Mapping):
         raise TypeError(f"{decl.name}: Physics.outputs must be a mapping name -> expression, got {phys.outputs!r}")
     outputs = {}
@@ -322,19 +366,26 @@ def _checked_physics(decl: Declaration, phys) -> tuple:
     raw_rates = phys.rates
     if isinstance(raw_rates, Mapping):
         if set(raw_rates) != set(decl.first_order):
-            raise ValueError(f"{decl.name}: Physics.rates must give one equation per first-order state "
-                             f"{decl.first_order}, got {tuple(raw_rates)}")
+            raise ValueError(
+                f"{decl.name}: Physics.rates must give one equation per first-order state "
+                f"{decl.first_order}, got {tuple(raw_rates)}"
+            )
         raw_rates = [raw_rates[k] for k in decl.first_order]
     elif isinstance(raw_rates, ca.SX):
         raw_rates = [raw_rates[i] for i in range(raw_rates.numel())]
     elif isinstance(raw_rates, str) or not isinstance(raw_rates, (list, tuple)):
-        raise TypeError(f"{decl.name}: Physics.rates must map each first-order state to its derivative, "
-                        f"got {phys.rates!r}")
+        raise TypeError(
+            f"{decl.name}: Physics.rates must map each first-order state to its derivative, got {phys.rates!r}"
+        )
     if len(raw_rates) != ns:
-        raise ValueError(f"{decl.name}: Physics.rates needs one equation per first-order state "
-                         f"{decl.first_order} ({ns}), got {len(raw_rates)}")
-    rates = [_scalar_expression(r, f"{decl.name}: first-order equation of {k!r}")
-             for r, k in zip(raw_rates, decl.first_order)]
+        raise ValueError(
+            f"{decl.name}: Physics.rates needs one equation per first-order state "
+            f"{decl.first_order} ({ns}), got {len(raw_rates)}"
+        )
+    rates = [
+        _scalar_expression(r, f"{decl.name}: first-order equation of {k!r}")
+        for r, k in zip(raw_rates, decl.first_order)
+    ]
     return kinetic, potential, forces, outputs, ca.vertcat(*rates) if rates else ca.SX(0, 1)
 
 
@@ -358,14 +409,18 @@ def _check_mass_matrix(decl: Declaration, mass_matrix: ca.SX, q: ca.SX, p: ca.SX
         eig, vectors = np.linalg.eigh((matrix + matrix.T) / 2)
         scale = max(np.max(np.abs(eig)), np.finfo(float).tiny)
         if eig[0] < -1e-12 * scale:
-            raise ValueError(f"{decl.name}: the mass matrix is not positive definite at q = {point.round(3)} "
-                             f"(eigenvalue {eig[0]:.3g}): the kinetic energy is negative for some velocities")
+            raise ValueError(
+                f"{decl.name}: the mass matrix is not positive definite at q = {point.round(3)} "
+                f"(eigenvalue {eig[0]:.3g}): the kinetic energy is negative for some velocities"
+            )
         if eig[0] <= 1e-12 * scale:
             singular.append(vectors[:, 0])
     if len(singular) == len(points):
         combo = " + ".join(f"{c:.3g} d{n}" for c, n in zip(singular[0], decl.coordinates) if abs(c) > 1e-9)
-        raise ValueError(f"{decl.name}: the mass matrix is singular: the velocity combination {combo} has "
-                         "no kinetic energy, so the accelerations are undetermined")
+        raise ValueError(
+            f"{decl.name}: the mass matrix is singular: the velocity combination {combo} has "
+            "no kinetic energy, so the accelerations are undetermined"
+        )
 
 
 class Plant:
@@ -386,8 +441,7 @@ class Plant:
     casadi_h : casadi.Function (x, p) -> y
     """
 
-    def __init__(self, decl: Declaration, params: Mapping[str, float] | None = None,
-                 input_limit=None):
+    def __init__(self, decl: Declaration, params: Mapping[str, float] | None = None, input_limit=None):
         if not isinstance(decl, Declaration):
             raise TypeError(f"Plant needs a declaration made by models.declare, got {type(decl).__name__} {decl!r}")
         if params is not None and not isinstance(params, Mapping):
@@ -417,8 +471,10 @@ class Plant:
     def __reduce__(self):
         # Pickled by name (for worker processes, e.g. Dask): the receiver rebuilds it from its own registry.
         if _REGISTRY.get(self.name) is not self.declaration:
-            raise TypeError(f"the plant {self.name!r} is not the registered declaration of that name, so another "
-                            "process cannot rebuild it; declare it with register=True in an importable module")
+            raise TypeError(
+                f"the plant {self.name!r} is not the registered declaration of that name, so another "
+                "process cannot rebuild it; declare it with register=True in an importable module"
+            )
         return (registered_plant, (self.name, dict(self.params), self.input_limit.tolist()))
 
     # ----------------------------------------------------------------- sizes
@@ -485,14 +541,12 @@ class Plant:
         out = {}
         for key, value in values.items():
             if key not in info:
-                raise ValueError(f"{self.name} has no parameter {key!r}; its parameters are "
-                                 f"{', '.join(info)}")
+                raise ValueError(f"{self.name} has no parameter {key!r}; its parameters are {', '.join(info)}")
             pinfo = info[key]
             value = real(value, f"{self.name}: parameter {key} ({pinfo.unit})", finite=False)
             if not np.isfinite(value) or value < 0 or (pinfo.positive and value == 0):
                 need = "> 0" if pinfo.positive else ">= 0"
-                raise ValueError(f"{self.name}: parameter {key} ({pinfo.unit}) must be finite and "
-                                 f"{need}, got {value}")
+                raise ValueError(f"{self.name}: parameter {key} ({pinfo.unit}) must be finite and {need}, got {value}")
             out[key] = value
         return out
 
@@ -520,13 +574,14 @@ class Plant:
         `equilibrium` for a checked solve.
         """
         if self._sym.static_input is None:
-            raise ValueError(f"{self.name}: the input enters the forces nonlinearly; "
-                             "use equilibrium() instead")
+            raise ValueError(f"{self.name}: the input enters the forces nonlinearly; use equilibrium() instead")
         q = as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
         ue = np.asarray(self._sym.static_input(q, self.param_vector(params))).ravel()
         if not np.all(np.isfinite(ue)):
-            raise ValueError(f"{self.name}: no unique input holds the plant at rest at q = {q} (the static "
-                             "balance is singular there); use equilibrium() instead")
+            raise ValueError(
+                f"{self.name}: no unique input holds the plant at rest at q = {q} (the static "
+                "balance is singular there); use equilibrium() instead"
+            )
         return ue
 
     @property
@@ -537,8 +592,9 @@ class Plant:
         studies: the satellite measures phi - theta, so phi = y[0] + y[1]).
         """
         if self._sym.configuration is None:
-            raise ValueError(f"{self.name}: the outputs {self.output_names} do not determine the "
-                             "configuration linearly")
+            raise ValueError(
+                f"{self.name}: the outputs {self.output_names} do not determine the configuration linearly"
+            )
         return self._sym.configuration
 
     def equilibrium_input_jacobian(self, q=None, params=None) -> np.ndarray:
@@ -546,15 +602,20 @@ class Plant:
 
         The ball on beam's m1 g / ell on z; zero where gravity does not load the input.
         """
-        q = self.equilibrium(params=params)[0][:self.nq] if q is None else \
-            as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
+        q = (
+            self.equilibrium(params=params)[0][: self.nq]
+            if q is None
+            else as_vector(q, self.nq, f"{self.name} configuration {self.coordinate_names}")
+        )
         qs = ca.SX.sym("q", self.nq)
         p = self.param_vector(params)
         jac = ca.Function("equilibrium_input_jacobian", [qs], [ca.jacobian(self.casadi_equilibrium_input(qs, p), qs)])
         value = np.asarray(jac(q), dtype=float).reshape(self.nu, self.nq)
         if not np.all(np.isfinite(value)):
-            raise ValueError(f"{self.name}: the equilibrium input has no finite derivative at q = {q} (the static "
-                             "balance is singular there)")
+            raise ValueError(
+                f"{self.name}: the equilibrium input has no finite derivative at q = {q} (the static "
+                "balance is singular there)"
+            )
         return value
 
     @property
@@ -595,15 +656,19 @@ class Plant:
         for key, value in fixed.items():
             if key not in unknown_names:
                 first_order = f", first-order states {self.first_order_names}" if self.first_order_names else ""
-                raise ValueError(f"{self.name}: cannot fix {key!r}; choose among coordinates "
-                                 f"{self.coordinate_names}{first_order} and inputs {self.input_names}")
+                raise ValueError(
+                    f"{self.name}: cannot fix {key!r}; choose among coordinates "
+                    f"{self.coordinate_names}{first_order} and inputs {self.input_names}"
+                )
             if not np.isfinite(real(value, f"{self.name}: fixed value {key}", finite=False)):
                 raise ValueError(f"{self.name}: fixed value {key}={value} is not finite")
         free = np.array([n not in fixed for n in unknown_names])
         if not free.any():
             given = ", ".join(f"{k}={v:g}" for k, v in fixed.items())
-            raise ValueError(f"{self.name}: equilibrium({given}) fixes every coordinate and input, leaving "
-                             "nothing to solve for; leave at least one free (to test a point, evaluate f(x, u))")
+            raise ValueError(
+                f"{self.name}: equilibrium({given}) fixes every coordinate and input, leaving "
+                "nothing to solve for; leave at least one free (to test a point, evaluate f(x, u))"
+            )
         z = np.array([float(fixed.get(n, 0.0)) for n in unknown_names])
         for _ in range(60):
             res, jac = (np.asarray(v) for v in self._sym.static(z, p))
@@ -617,13 +682,18 @@ class Plant:
         res = np.asarray(self._sym.static(z, p)[0]).ravel()
         if not np.all(np.isfinite(z)) or not np.all(np.isfinite(res)) or np.max(np.abs(res)) > tol:
             worst = int(np.argmax(np.abs(np.nan_to_num(res, nan=np.inf))))
-            what = (f"the acceleration of {self.coordinate_names[worst]}" if worst < self.nq
-                    else f"the rate of {self.first_order_names[worst - self.nq]}")
+            what = (
+                f"the acceleration of {self.coordinate_names[worst]}"
+                if worst < self.nq
+                else f"the rate of {self.first_order_names[worst - self.nq]}"
+            )
             given = ", ".join(f"{k}={v:g}" for k, v in fixed.items())
-            raise ValueError(f"{self.name}: no equilibrium with {given}: {what} "
-                             f"cannot vanish (residual {np.max(np.abs(res)):.3g} after Gauss-Newton)")
+            raise ValueError(
+                f"{self.name}: no equilibrium with {given}: {what} "
+                f"cannot vanish (residual {np.max(np.abs(res)):.3g} after Gauss-Newton)"
+            )
         nqs = self.nq + self.n_first_order
-        return np.concatenate([z[:self.nq], np.zeros(self.nq), z[self.nq:nqs]]), z[nqs:]
+        return np.concatenate([z[: self.nq], np.zeros(self.nq), z[self.nq : nqs]]), z[nqs:]
 
     def linearize(self, xe=None, ue=None, params=None, check: bool = True) -> LinearModel:
         """Exact Jacobian linearization about (xe, ue).
@@ -643,13 +713,24 @@ class Plant:
         if check:
             res = np.max(np.abs(self.f(xe, ue, p)))
             if res > 1e-8:
-                raise ValueError(f"{self.name}: (xe, ue) is not an equilibrium (|f| = {res:.3g}); "
-                                 "pass check=False to linearize anyway")
+                raise ValueError(
+                    f"{self.name}: (xe, ue) is not an equilibrium (|f| = {res:.3g}); "
+                    "pass check=False to linearize anyway"
+                )
         A, B, C = (np.asarray(m, dtype=float) for m in self._sym.jacobians(xe, ue, p))
-        return LinearModel(A=A, B=B, C=C, D=np.zeros((self.ny, self.nu)), xe=xe, ue=ue,
-                           ye=self.output(xe, p), state_names=self.state_names,
-                           input_names=self.input_names, output_names=self.output_names,
-                           name=self.name)
+        return LinearModel(
+            A=A,
+            B=B,
+            C=C,
+            D=np.zeros((self.ny, self.nu)),
+            xe=xe,
+            ue=ue,
+            ye=self.output(xe, p),
+            state_names=self.state_names,
+            input_names=self.input_names,
+            output_names=self.output_names,
+            name=self.name,
+        )
 
     # ------------------------------------------------------------ simulation
     def step_function(self, sample_period: float, substeps: int = 10) -> ca.Function:

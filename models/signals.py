@@ -68,8 +68,10 @@ def sample(signal, t: np.ndarray, width: int, what: str) -> np.ndarray:
     if values.shape == (len(t), 1) and width > 1:
         values = np.broadcast_to(values, (len(t), width))
     if values.shape != (len(t), width):
-        raise ValueError(f"{what} must be a constant, {width} values, or an array of shape "
-                         f"({len(t)}, {width}); got shape {values.shape}")
+        raise ValueError(
+            f"{what} must be a constant, {width} values, or an array of shape "
+            f"({len(t)}, {width}); got shape {values.shape}"
+        )
     if not np.all(np.isfinite(values)):
         k = int(np.flatnonzero(~np.all(np.isfinite(values), axis=1))[0])
         raise ValueError(f"{what} is not finite at t = {t[k]:.4g} s")

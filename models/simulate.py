@@ -67,9 +67,20 @@ class Trajectory:
         return self.x[:, self.state_names.index(name)]
 
 
-def simulate(plant: Plant, x0, u, sample_period: float, *, method: str = "rk4",
-             params=None, substeps: int = 10, degree: int = 3,
-             rtol: float = 1e-12, atol: float = 1e-12, jit: bool = False) -> Trajectory:
+def simulate(
+    plant: Plant,
+    x0,
+    u,
+    sample_period: float,
+    *,
+    method: str = "rk4",
+    params=None,
+    substeps: int = 10,
+    degree: int = 3,
+    rtol: float = 1e-12,
+    atol: float = 1e-12,
+    jit: bool = False,
+) -> Trajectory:
     """Simulate `plant` from `x0` under the input sequence `u` held for `sample_period` s each.
 
     Parameters
@@ -108,8 +119,11 @@ def simulate(plant: Plant, x0, u, sample_period: float, *, method: str = "rk4",
     jit = boolean(jit, "jit")
     p = plant.param_vector(params)
     n = u.shape[0]
-    check_memory(_simulation_bytes(plant.nx, n, method, degree),
-                 f"simulate ({method}) of {plant.name} over {n} samples", "simulate a shorter input sequence")
+    check_memory(
+        _simulation_bytes(plant.nx, n, method, degree),
+        f"simulate ({method}) of {plant.name} over {n} samples",
+        "simulate a shorter input sequence",
+    )
     if method == "rk4":
         x = _rk4_run(plant, sample_period, substeps, n, jit)(x0, u.T, p)[0].T
     elif method == "adaptive":
@@ -154,8 +168,10 @@ def check_trajectory(name: str, t: np.ndarray, x: np.ndarray) -> None:
     """Raise SimulationError naming the time at which `x` stopped being finite and bounded."""
     k = first_divergence(x, DIVERGENCE_BOUND)
     if k is not None:
-        raise SimulationError(f"{name}: simulation diverged at t = {t[k]:.4g} s "
-                              f"(state left |x| <= {DIVERGENCE_BOUND:g} or became non-finite)")
+        raise SimulationError(
+            f"{name}: simulation diverged at t = {t[k]:.4g} s "
+            f"(state left |x| <= {DIVERGENCE_BOUND:g} or became non-finite)"
+        )
 
 
 def _rk4_run(plant: Plant, sample_period: float, substeps: int, n: int, jit: bool = False) -> NumpyCall:
@@ -176,10 +192,15 @@ def _adaptive(plant, x0, u, p, sample_period, rtol, atol) -> np.ndarray:
     if key not in cache:
         x = ca.SX.sym("x", plant.nx)
         up = ca.SX.sym("up", plant.nu + plant.n_params)
-        ode = plant.casadi_f(x, up[:plant.nu], up[plant.nu:])
-        cache[key] = ca.integrator("cvodes", "cvodes", {"x": x, "p": up, "ode": ode}, 0.0, sample_period,
-                                   {"abstol": atol, "reltol": rtol, "max_num_steps": 100000,
-                                    "error_on_fail": True})
+        ode = plant.casadi_f(x, up[: plant.nu], up[plant.nu :])
+        cache[key] = ca.integrator(
+            "cvodes",
+            "cvodes",
+            {"x": x, "p": up, "ode": ode},
+            0.0,
+            sample_period,
+            {"abstol": atol, "reltol": rtol, "max_num_steps": 100000, "error_on_fail": True},
+        )
     integrator = cache[key]
     out = np.empty((u.shape[0], plant.nx))
     xk = x0
@@ -187,11 +208,13 @@ def _adaptive(plant, x0, u, p, sample_period, rtol, atol) -> np.ndarray:
         try:
             xk = np.asarray(integrator(x0=xk, p=np.concatenate([uk, p]))["xf"]).ravel()
         except RuntimeError as err:
-            raise SimulationError(f"{plant.name}: CVODES failed on the segment starting at "
-                                  f"t = {k * sample_period:.4g} s: {str(err).splitlines()[-1]}") from err
+            raise SimulationError(
+                f"{plant.name}: CVODES failed on the segment starting at "
+                f"t = {k * sample_period:.4g} s: {str(err).splitlines()[-1]}"
+            ) from err
         out[k] = xk
         if first_divergence(xk[None], DIVERGENCE_BOUND) is not None:
-            check_trajectory(plant.name, sample_period * np.arange(k + 2), np.vstack([out[:k + 1], xk]))
+            check_trajectory(plant.name, sample_period * np.arange(k + 2), np.vstack([out[: k + 1], xk]))
     return out
 
 
@@ -239,20 +262,18 @@ def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.nd
         uk = ca.SX.sym("u", plant.nu)
         pk = ca.SX.sym("p", plant.n_params)
         nodes = ca.horzcat(start, states)
-        residual = ca.vertcat(*[nodes @ deriv[:, j] - h * plant.casadi_f(states[:, j], uk, pk)
-                                for j in range(degree)])
+        residual = ca.vertcat(*[nodes @ deriv[:, j] - h * plant.casadi_f(states[:, j], uk, pk) for j in range(degree)])
         interval = ca.Function("radau_interval", [start, states, uk, pk], [residual])
         unknowns = ca.MX.sym("X", nx * degree * n)
         x0_mx = ca.MX.sym("x0", nx)
         u_mx = ca.MX.sym("U", plant.nu, n)
         p_mx = ca.MX.sym("p", plant.n_params)
         blocks = ca.reshape(unknowns, nx, degree * n)
-        ends = blocks[:, degree - 1::degree]
-        starts = ca.horzcat(x0_mx, ends[:, :n - 1])
+        ends = blocks[:, degree - 1 :: degree]
+        starts = ca.horzcat(x0_mx, ends[:, : n - 1])
         res = interval.map(n)(starts, blocks, u_mx, p_mx)
         g = ca.Function("radau_residual", [unknowns, ca.vertcat(x0_mx, ca.vec(u_mx), p_mx)], [ca.vec(res)])
-        cache[key] = ca.rootfinder("radau", "newton", g, {"abstol": tol, "max_iter": 50,
-                                                          "error_on_fail": True})
+        cache[key] = ca.rootfinder("radau", "newton", g, {"abstol": tol, "max_iter": 50, "error_on_fail": True})
     solver = cache[key]
     # Newton starts from an RK4 run held constant over each interval; the
     # answer is the collocation solution whatever the start, once converged.
@@ -263,7 +284,8 @@ def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.nd
     try:
         sol = solver(ca.vec(guess), np.concatenate([x0, u.ravel(), p]))
     except RuntimeError as err:
-        raise SimulationError(f"{plant.name}: the collocation Newton solve over "
-                              f"{n * sample_period:.4g} s did not converge") from err
+        raise SimulationError(
+            f"{plant.name}: the collocation Newton solve over {n * sample_period:.4g} s did not converge"
+        ) from err
     solved = np.asarray(sol).reshape(nx, degree * n, order="F")
-    return solved[:, degree - 1::degree].T
+    return solved[:, degree - 1 :: degree].T

@@ -103,11 +103,14 @@ def smoothed(fun: ca.Function, name: str | None = None) -> ca.Function:
         elif len(args) == 2:
             work[out[0]] = ca.SX.binary(op, work[args[0]], work[args[1]])
         else:
-            raise TypeError(f"smoothed: {fun.name()} has an instruction with operation {op} "
-                            f"and {len(args)} arguments, which it cannot rewrite")
+            raise TypeError(
+                f"smoothed: {fun.name()} has an instruction with operation {op} "
+                f"and {len(args)} arguments, which it cannot rewrite"
+            )
     results = []
     for i in range(fun.n_out()):
         sp = fun.sparsity_out(i)
         results.append(ca.SX(sp, ca.vertcat(*outputs[i])) if outputs[i] else ca.SX(sp))
-    return ca.Function(name or fun.name() + "_smoothed", [*inputs, width], results,
-                       [*fun.name_in(), "width"], fun.name_out())
+    return ca.Function(
+        name or fun.name() + "_smoothed", [*inputs, width], results, [*fun.name_in(), "width"], fun.name_out()
+    )

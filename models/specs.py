@@ -29,7 +29,13 @@ import numpy as np
 from . import metrics as metrics_module
 
 MEETS, VIOLATES, LIMIT_CYCLE, DIVERGED, FAILED, SKIPPED = (
-    "meets specs", "violates", "limit cycle", "diverged", "failed", "skipped")
+    "meets specs",
+    "violates",
+    "limit cycle",
+    "diverged",
+    "failed",
+    "skipped",
+)
 
 #: Verdict labels from best to worst; a Monte Carlo takes the worst of its samples'.
 LABELS = (MEETS, VIOLATES, LIMIT_CYCLE, DIVERGED, FAILED, SKIPPED)
@@ -167,8 +173,14 @@ def execution(status: str) -> str:
     return "ok"
 
 
-def check(specs: Specs, metrics: Mapping, step: float, *, excursions: Mapping[str, float] | None = None,
-          finals: Mapping[str, float] | None = None) -> list[Violation]:
+def check(
+    specs: Specs,
+    metrics: Mapping,
+    step: float,
+    *,
+    excursions: Mapping[str, float] | None = None,
+    finals: Mapping[str, float] | None = None,
+) -> list[Violation]:
     """Every spec the metrics miss.
 
     Parameters
@@ -210,8 +222,15 @@ def check(specs: Specs, metrics: Mapping, step: float, *, excursions: Mapping[st
     return found
 
 
-def verdict(specs: Specs, metrics: Mapping, step: float, status: str = "ok", *,
-            excursions: Mapping[str, float] | None = None, finals: Mapping[str, float] | None = None) -> Verdict:
+def verdict(
+    specs: Specs,
+    metrics: Mapping,
+    step: float,
+    status: str = "ok",
+    *,
+    excursions: Mapping[str, float] | None = None,
+    finals: Mapping[str, float] | None = None,
+) -> Verdict:
     """The one verdict rule (see the module's docstring) for one run's metrics."""
     state = execution(status)
     if state in ("diverged", "failed", "skipped"):
@@ -219,8 +238,10 @@ def verdict(specs: Specs, metrics: Mapping, step: float, status: str = "ok", *,
     violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals))
     amplitude = metrics.get("oscillation_amplitude")
     if specs.limit_cycle and amplitude is not None and np.isfinite(amplitude):
-        cycle = (f"amplitude {amplitude:.3g}, period {metrics.get('oscillation_period_s', math.nan):.3g} s"
-                 f" at the end of the run")
+        cycle = (
+            f"amplitude {amplitude:.3g}, period {metrics.get('oscillation_period_s', math.nan):.3g} s"
+            f" at the end of the run"
+        )
         rest = "; ".join(str(v) for v in violations)
         return Verdict(LIMIT_CYCLE, violations, cycle + (f"; {rest}" if rest else ""))
     if violations:
@@ -228,8 +249,9 @@ def verdict(specs: Specs, metrics: Mapping, step: float, status: str = "ok", *,
     return Verdict(MEETS)
 
 
-def judge(specs: Specs, result, tracked: str, step: float, status: str | None = None,
-          measured: Mapping | None = None) -> Verdict:
+def judge(
+    specs: Specs, result, tracked: str, step: float, status: str | None = None, measured: Mapping | None = None
+) -> Verdict:
     """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
 
     Metrics (unless given as `measured`, from `models.metrics.run_metrics`), state excursions and

@@ -23,16 +23,35 @@ from .lagrangian import euler_lagrange
 from .plant import Declaration, Plant
 
 _UNARY = {
-    ca.OP_NEG: lambda a: -a, ca.OP_SIN: sympy.sin, ca.OP_COS: sympy.cos, ca.OP_TAN: sympy.tan,
-    ca.OP_EXP: sympy.exp, ca.OP_LOG: sympy.log, ca.OP_SQRT: sympy.sqrt, ca.OP_SQ: lambda a: a**2,
-    ca.OP_TWICE: lambda a: 2 * a, ca.OP_INV: lambda a: 1 / a, ca.OP_FABS: sympy.Abs,
-    ca.OP_ASIN: sympy.asin, ca.OP_ACOS: sympy.acos, ca.OP_ATAN: sympy.atan, ca.OP_SINH: sympy.sinh,
-    ca.OP_COSH: sympy.cosh, ca.OP_TANH: sympy.tanh, ca.OP_SIGN: sympy.sign,
+    ca.OP_NEG: lambda a: -a,
+    ca.OP_SIN: sympy.sin,
+    ca.OP_COS: sympy.cos,
+    ca.OP_TAN: sympy.tan,
+    ca.OP_EXP: sympy.exp,
+    ca.OP_LOG: sympy.log,
+    ca.OP_SQRT: sympy.sqrt,
+    ca.OP_SQ: lambda a: a**2,
+    ca.OP_TWICE: lambda a: 2 * a,
+    ca.OP_INV: lambda a: 1 / a,
+    ca.OP_FABS: sympy.Abs,
+    ca.OP_ASIN: sympy.asin,
+    ca.OP_ACOS: sympy.acos,
+    ca.OP_ATAN: sympy.atan,
+    ca.OP_SINH: sympy.sinh,
+    ca.OP_COSH: sympy.cosh,
+    ca.OP_TANH: sympy.tanh,
+    ca.OP_SIGN: sympy.sign,
 }
 _BINARY = {
-    ca.OP_ADD: lambda a, b: a + b, ca.OP_SUB: lambda a, b: a - b, ca.OP_MUL: lambda a, b: a * b,
-    ca.OP_DIV: lambda a, b: a / b, ca.OP_POW: lambda a, b: a**b, ca.OP_CONSTPOW: lambda a, b: a**b,
-    ca.OP_ATAN2: sympy.atan2, ca.OP_FMIN: sympy.Min, ca.OP_FMAX: sympy.Max,
+    ca.OP_ADD: lambda a, b: a + b,
+    ca.OP_SUB: lambda a, b: a - b,
+    ca.OP_MUL: lambda a, b: a * b,
+    ca.OP_DIV: lambda a, b: a / b,
+    ca.OP_POW: lambda a, b: a**b,
+    ca.OP_CONSTPOW: lambda a, b: a**b,
+    ca.OP_ATAN2: sympy.atan2,
+    ca.OP_FMIN: sympy.Min,
+    ca.OP_FMAX: sympy.Max,
 }
 
 
@@ -92,7 +111,7 @@ def latex_name(name: str, dots: int = 0) -> str:
     if index:
         text += f"_{{{index}}}"
     if dots:
-        text = ("\\" + "d" * dots + "ot{" + text + "}")
+        text = "\\" + "d" * dots + "ot{" + text + "}"
     return text
 
 
@@ -116,8 +135,9 @@ class DeclarationSymbols:
         self.u = ca.vertcat(*[ca.SX.sym(n) for n in decl.inputs])
         self.p = ca.vertcat(*[ca.SX.sym(n) for n in names])
         ns = lambda vec, keys: SimpleNamespace(**{k: vec[i] for i, k in enumerate(keys)})
-        self.physics = decl.physics(ns(self.q, decl.coordinates), ns(self.dq, decl.coordinates),
-                                    ns(self.u, decl.inputs), ns(self.p, names))
+        self.physics = decl.physics(
+            ns(self.q, decl.coordinates), ns(self.dq, decl.coordinates), ns(self.u, decl.inputs), ns(self.p, names)
+        )
         self.symbols: dict[str, sympy.Symbol] = {}
         self.latex_names: dict[sympy.Symbol, str] = {}
         for prefix, dots in (("", 0), ("d", 1), ("dd", 2)):
@@ -158,8 +178,10 @@ def equations_of_motion(plant: Plant | Declaration) -> list[sympy.Eq]:
     eom = euler_lagrange(named.q, named.dq, phys.kinetic, phys.potential, phys.forces)
     equations = []
     for i in range(named.q.numel()):
-        lhs = sum((named.sympy(eom.mass_matrix[i, j]) * named.sympy(named.ddq[j])
-                   for j in range(named.q.numel())), sympy.Integer(0))
+        lhs = sum(
+            (named.sympy(eom.mass_matrix[i, j]) * named.sympy(named.ddq[j]) for j in range(named.q.numel())),
+            sympy.Integer(0),
+        )
         rhs = named.sympy(eom.forces[i] - eom.coriolis[i] - eom.gravity[i])
         equations.append(sympy.Eq(sympy.simplify(lhs), sympy.simplify(rhs)))
     return equations

@@ -58,8 +58,9 @@ def corner_params(plant: Plant, rel: float = 0.05, names=None) -> np.ndarray:
     """All 2^k corners nominal·(1 ± rel) of the named parameters, (2^k, n_params)."""
     rel = _relative(rel)
     idx = _indices(plant, names)
-    check_memory(8.0 * 2.0 ** len(idx) * plant.n_params,
-                 f"corner_params of {len(idx)} parameters (2^{len(idx)} corners)")
+    check_memory(
+        8.0 * 2.0 ** len(idx) * plant.n_params, f"corner_params of {len(idx)} parameters (2^{len(idx)} corners)"
+    )
     base = plant.param_vector()
     rows = []
     for signs in itertools.product((-1.0, 1.0), repeat=len(idx)):

@@ -56,9 +56,11 @@ class DisturbanceObserver:
         if not all(np.all(np.isfinite(m)) for m in (A, B, C)):
             raise ValueError("A, B and C must be finite")
         stds = {}
-        for name, value, n in (("input_noise_std", input_noise_std, nu),
-                               ("disturbance_step_std", disturbance_step_std, nu),
-                               ("measurement_std", measurement_std, ny)):
+        for name, value, n in (
+            ("input_noise_std", input_noise_std, nu),
+            ("disturbance_step_std", disturbance_step_std, nu),
+            ("measurement_std", measurement_std, ny),
+        ):
             arr = real_array(value, name)
             if arr.size not in (1, n):
                 raise ValueError(f"{name} must be a number or {n} numbers, got shape {arr.shape}")
@@ -69,8 +71,10 @@ class DisturbanceObserver:
         self.A_aug, self.B_aug, self.C_aug = augment_disturbance(A, B, C, discrete=True)
         hidden = [z for z in unobservable_modes(self.A_aug, self.C_aug) if abs(z) >= 1 - 1e-9]
         if hidden:
-            raise ValueError(f"the input disturbance (or a mode at z = {hidden[0]:.4g}) is not observable from the "
-                             "outputs; offset-free estimation needs rank [[A − I, B], [C, 0]] = nx + nu")
+            raise ValueError(
+                f"the input disturbance (or a mode at z = {hidden[0]:.4g}) is not observable from the "
+                "outputs; offset-free estimation needs rank [[A − I, B], [C, 0]] = nx + nu"
+            )
         Bw = B * stds["input_noise_std"]
         process = scipy.linalg.block_diag(Bw @ Bw.T, np.diag(stds["disturbance_step_std"] ** 2))
         # A floor on every state keeps the Riccati equation's solution unique and stabilizing.
@@ -84,7 +88,7 @@ class DisturbanceObserver:
     def correct(self, x_pred, d_pred, innovation) -> tuple[np.ndarray, np.ndarray]:
         """Measurement update from the innovation ỹ − C x̂_{k|k−1}: (x̂_{k|k}, d̂_{k|k})."""
         step = self.gain @ innovation
-        return x_pred + step[:self.nx], d_pred + step[self.nx:]
+        return x_pred + step[: self.nx], d_pred + step[self.nx :]
 
     def update(self, predicted, measured) -> np.ndarray:
         """`correct` on the stacked estimate: (x̂, d̂)_{k|k} (nx + nu,) from (x̂, d̂)_{k|k−1} and ỹ_k."""
@@ -118,11 +122,13 @@ class SteadyStateTarget:
             raise ValueError(f"need as many tracked coordinates as inputs: H must be ({nu}, {nx}), got {H.shape}")
         system = np.block([[A - np.eye(nx), B], [H, np.zeros((nu, nu))]])
         if np.linalg.cond(system) > 1e12:
-            raise ValueError("the tracked coordinates cannot be held at a steady state: "
-                             "[[A − I, B], [H, 0]] is singular (a zero at z = 1)")
+            raise ValueError(
+                "the tracked coordinates cannot be held at a steady state: "
+                "[[A − I, B], [H, 0]] is singular (a zero at z = 1)"
+            )
         solution = np.linalg.solve(system, np.vstack([np.zeros((nx, nu)), np.eye(nu)]))
-        self.state_per_reference = solution[:nx]   # x_s = S_x r
-        self.input_per_reference = solution[nx:]   # v_s = S_v r
+        self.state_per_reference = solution[:nx]  # x_s = S_x r
+        self.input_per_reference = solution[nx:]  # v_s = S_v r
         self.nx, self.nu = nx, nu
 
     def __call__(self, reference, disturbance) -> tuple[np.ndarray, np.ndarray]:

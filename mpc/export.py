@@ -50,9 +50,16 @@ from .linear import INFINITY
 from .qp_fast import CondensedQP, condense
 
 #: Status codes of ``name_step`` (and ``name_init``, ``name_solve_qp``); a non-finite command adds 16.
-STATUS = {0: "optimal", 1: "non-finite measurement", 2: "non-finite estimate", 3: "QP infeasible",
-          4: "QP iteration limit", 5: "QP degenerate active set", 6: "non-finite solution",
-          7: "non-finite reference"}
+STATUS = {
+    0: "optimal",
+    1: "non-finite measurement",
+    2: "non-finite estimate",
+    3: "QP infeasible",
+    4: "QP iteration limit",
+    5: "QP degenerate active set",
+    6: "non-finite solution",
+    7: "non-finite reference",
+}
 NONFINITE_COMMAND = 16
 #: A constraint counts as violated below -TOLERANCE (1 + |bound|), in the scaled variables.
 TOLERANCE = 1e-12
@@ -76,13 +83,20 @@ def constraints(qp: CondensedQP) -> dict[str, np.ndarray]:
             if abs(bound) < INFINITY:
                 entries.append((-1, i, s, s * bound, zero))
     for j in range(qp.rows.shape[0]):
-        for s, constant, matrix in ((1.0, qp.row_lower_constant[j], qp.row_lower_matrix[j]),
-                                    (-1.0, qp.row_upper_constant[j], qp.row_upper_matrix[j])):
+        for s, constant, matrix in (
+            (1.0, qp.row_lower_constant[j], qp.row_lower_matrix[j]),
+            (-1.0, qp.row_upper_constant[j], qp.row_upper_matrix[j]),
+        ):
             if abs(constant) < INFINITY:
                 entries.append((j, -1, s, s * constant, s * matrix))
     row, variable, sign, b0, bm = ([entry[k] for entry in entries] for k in range(5))
-    return {"row": np.array(row, dtype=int), "variable": np.array(variable, dtype=int), "sign": np.array(sign),
-            "b0": np.array(b0), "bm": np.array(bm).reshape(len(b0), qp.n_parameters)}
+    return {
+        "row": np.array(row, dtype=int),
+        "variable": np.array(variable, dtype=int),
+        "sign": np.array(sign),
+        "b0": np.array(b0),
+        "bm": np.array(bm).reshape(len(b0), qp.n_parameters),
+    }
 
 
 def slack_start(qp: CondensedQP, table: dict, J0: np.ndarray) -> dict[str, np.ndarray]:
@@ -92,14 +106,25 @@ def slack_start(qp: CondensedQP, table: dict, J0: np.ndarray) -> dict[str, np.nd
     variable : their variables;  r : R's diagonal (J0's slack diagonal);  multiplier : f at the slacks.
     """
     slacks = np.arange(qp.n_inputs, qp.n)
-    lower_bound = {int(v): k for k, (row, v, sign) in enumerate(zip(table["row"], table["variable"], table["sign"]))
-                   if row < 0 and sign > 0}
-    if np.any(qp.H[:qp.n_inputs, qp.n_inputs:]) or np.any(qp.H[qp.n_inputs:, qp.n_inputs:] - np.diag(np.diag(
-            qp.H[qp.n_inputs:, qp.n_inputs:]))) or np.any(qp.lower[slacks] != 0) or np.any(qp.f[slacks] < 0):
+    lower_bound = {
+        int(v): k
+        for k, (row, v, sign) in enumerate(zip(table["row"], table["variable"], table["sign"]))
+        if row < 0 and sign > 0
+    }
+    if (
+        np.any(qp.H[: qp.n_inputs, qp.n_inputs :])
+        or np.any(qp.H[qp.n_inputs :, qp.n_inputs :] - np.diag(np.diag(qp.H[qp.n_inputs :, qp.n_inputs :])))
+        or np.any(qp.lower[slacks] != 0)
+        or np.any(qp.f[slacks] < 0)
+    ):
         raise UnsupportedExport("the QP's slacks are not separate with bounds s >= 0 and weights >= 0")
-    return {"column": np.concatenate([slacks, np.arange(qp.n_inputs)]).astype(int),
-            "active": np.array([lower_bound[int(v)] for v in slacks], dtype=int),
-            "variable": slacks, "r": np.diag(J0)[slacks], "multiplier": qp.f[slacks]}
+    return {
+        "column": np.concatenate([slacks, np.arange(qp.n_inputs)]).astype(int),
+        "active": np.array([lower_bound[int(v)] for v in slacks], dtype=int),
+        "variable": slacks,
+        "r": np.diag(J0)[slacks],
+        "multiplier": qp.f[slacks],
+    }
 
 
 def init_kernel(controller: LinearMPC, name: str) -> ca.Function:
@@ -126,13 +151,20 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
     name = c_name(name)
     if not isinstance(controller, LinearMPC):
         kind = type(controller).__name__
-        raise UnsupportedExport(f"{getattr(controller, 'name', kind)}: only mpc.LinearMPC is exported here; "
-                                f"{kind} is not one" + (" (its SQP over the plant's equations has no C export; "
-                                                        "export a LinearMPC or a Block)"
-                                                        if kind == "NonlinearMPC" else ""))
+        raise UnsupportedExport(
+            f"{getattr(controller, 'name', kind)}: only mpc.LinearMPC is exported here; "
+            f"{kind} is not one"
+            + (
+                " (its SQP over the plant's equations has no C export; export a LinearMPC or a Block)"
+                if kind == "NonlinearMPC"
+                else ""
+            )
+        )
     if controller.n_reference != controller.plant.nu:
-        raise UnsupportedExport(f"{controller.name}: the export tracks as many coordinates as inputs; "
-                                f"reference {controller.n_reference}, inputs {controller.plant.nu}")
+        raise UnsupportedExport(
+            f"{controller.name}: the export tracks as many coordinates as inputs; "
+            f"reference {controller.n_reference}, inputs {controller.plant.nu}"
+        )
     qp = condense(controller.problem)
     table = constraints(qp)
     plant, model, observer, target = controller.plant, controller.model, controller.observer, controller.target
@@ -144,50 +176,112 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
     J0 = scipy.linalg.solve_triangular(L, np.eye(qp.n), lower=True).T
     H_inverse = J0 @ J0.T
     start = slack_start(qp, table, J0)
-    sizes = dict(NX=nx, NU=nu, NY=ny, NE=nx + nu, NH=N, NI=N * nu, NZ=qp.n, NP=qp.n_parameters,
-                 NSTART=len(start["active"]),
-                 NM=max(1, qp.rows.shape[0]), NC=max(1, len(table["b0"])), NCON=len(table["b0"]),
-                 NSTATE=nx + nu + N * nu)
+    sizes = dict(
+        NX=nx,
+        NU=nu,
+        NY=ny,
+        NE=nx + nu,
+        NH=N,
+        NI=N * nu,
+        NZ=qp.n,
+        NP=qp.n_parameters,
+        NSTART=len(start["active"]),
+        NM=max(1, qp.rows.shape[0]),
+        NC=max(1, len(table["b0"])),
+        NCON=len(table["b0"]),
+        NSTATE=nx + nu + N * nu,
+    )
     rate = controller.problem.rate_limit  # per sample
-    data = "".join([
-        c_array("A_AUG", observer.A_aug), c_array("B_AUG", np.vstack([model.B, np.zeros((nu, nu))])),
-        c_array("GAIN", observer.gain), c_array("C_AUG", observer.C_aug),
-        c_array("YE", model.ye), c_array("UE", model.ue),
-        c_array("S_X", target.state_per_reference), c_array("S_V", target.input_per_reference),
-        c_array("LIMIT", controller.input_limit),
-        c_array("RATE", rate if rate is not None else np.zeros(nu)),
-        c_array("SCALE", qp.scale), c_array("J0", J0),
-        c_array("Z_P", -H_inverse @ qp.F), c_array("Z_F", -H_inverse @ qp.f),
-        c_array("ROWS", qp.rows if qp.rows.size else [0.0]),
-        c_array("CON_ROW", table["row"], kind="int"), c_array("CON_VARIABLE", table["variable"], kind="int"),
-        c_array("CON_SIGN", table["sign"]), c_array("CON_B0", table["b0"]), c_array("CON_BM", table["bm"]),
-        c_array("START_COLUMN", start["column"], kind="int"), c_array("START_ACTIVE", start["active"], kind="int"),
-        c_array("START_VARIABLE", start["variable"], kind="int"), c_array("START_R", start["r"]),
-        c_array("START_MULTIPLIER", start["multiplier"]),
-    ])
+    data = "".join(
+        [
+            c_array("A_AUG", observer.A_aug),
+            c_array("B_AUG", np.vstack([model.B, np.zeros((nu, nu))])),
+            c_array("GAIN", observer.gain),
+            c_array("C_AUG", observer.C_aug),
+            c_array("YE", model.ye),
+            c_array("UE", model.ue),
+            c_array("S_X", target.state_per_reference),
+            c_array("S_V", target.input_per_reference),
+            c_array("LIMIT", controller.input_limit),
+            c_array("RATE", rate if rate is not None else np.zeros(nu)),
+            c_array("SCALE", qp.scale),
+            c_array("J0", J0),
+            c_array("Z_P", -H_inverse @ qp.F),
+            c_array("Z_F", -H_inverse @ qp.f),
+            c_array("ROWS", qp.rows if qp.rows.size else [0.0]),
+            c_array("CON_ROW", table["row"], kind="int"),
+            c_array("CON_VARIABLE", table["variable"], kind="int"),
+            c_array("CON_SIGN", table["sign"]),
+            c_array("CON_B0", table["b0"]),
+            c_array("CON_BM", table["bm"]),
+            c_array("START_COLUMN", start["column"], kind="int"),
+            c_array("START_ACTIVE", start["active"], kind="int"),
+            c_array("START_VARIABLE", start["variable"], kind="int"),
+            c_array("START_R", start["r"]),
+            c_array("START_MULTIPLIER", start["multiplier"]),
+        ]
+    )
     upper = name.upper()
     header = _HEADER.substitute(
-        p=name, P=upper, controller=controller.name, nx=nx, nu=nu, ny=ny, N=N, nz=qp.n,
-        sizes="\n".join(f"#define {upper}_{key} {value}" for key, value in (
-            ("N_STATE", sizes["NSTATE"]), ("N_MEASURED", ny), ("N_REFERENCE", nu), ("N_INPUT", nu),
-            ("N_DECISIONS", qp.n), ("N_PARAMETERS", qp.n_parameters), ("N_CONSTRAINTS", sizes["NC"]))),
-        sample_period=c_number(controller.sample_period), outputs=", ".join(plant.output_names),
-        statuses="\n".join(f"#define {upper}_{text.upper().replace(' ', '_').replace('-', '')} {code}"
-                           for code, text in STATUS.items()) + f"\n#define {upper}_NONFINITE_COMMAND "
-                                                               f"{NONFINITE_COMMAND}",
-        work_w=work["w"], work_iw=work["iw"])
+        p=name,
+        P=upper,
+        controller=controller.name,
+        nx=nx,
+        nu=nu,
+        ny=ny,
+        N=N,
+        nz=qp.n,
+        sizes="\n".join(
+            f"#define {upper}_{key} {value}"
+            for key, value in (
+                ("N_STATE", sizes["NSTATE"]),
+                ("N_MEASURED", ny),
+                ("N_REFERENCE", nu),
+                ("N_INPUT", nu),
+                ("N_DECISIONS", qp.n),
+                ("N_PARAMETERS", qp.n_parameters),
+                ("N_CONSTRAINTS", sizes["NC"]),
+            )
+        ),
+        sample_period=c_number(controller.sample_period),
+        outputs=", ".join(plant.output_names),
+        statuses="\n".join(
+            f"#define {upper}_{text.upper().replace(' ', '_').replace('-', '')} {code}" for code, text in STATUS.items()
+        )
+        + f"\n#define {upper}_NONFINITE_COMMAND "
+        f"{NONFINITE_COMMAND}",
+        work_w=work["w"],
+        work_iw=work["iw"],
+    )
     source = _SOURCE.substitute(
-        p=name, P=upper, controller=controller.name,
+        p=name,
+        P=upper,
+        controller=controller.name,
         sizes="".join(f"#define {key} {value}\n" for key, value in sizes.items()),
-        casadi=generated_code([init], f"{name}_casadi"), data=data,
-        reference_offset=c_number(model.xe[controller.tracked_index]), has_rate=int(rate is not None),
-        tolerance=c_number(TOLERANCE), work_arg=work["arg"], work_res=work["res"],
-        max_iterations=10 * (qp.n + sizes["NC"]), nonfinite_command=NONFINITE_COMMAND)
-    return ExportedC(name=name, controller=controller.name, header=header, source=source,
-                     n_state=sizes["NSTATE"], n_measured=ny, n_reference=nu, n_input=nu,
-                     sample_period=controller.sample_period, measures="outputs", has_init=True,
-                     status_codes={code: status_text(code) for code in
-                                   list(STATUS) + [c | NONFINITE_COMMAND for c in STATUS]})
+        casadi=generated_code([init], f"{name}_casadi"),
+        data=data,
+        reference_offset=c_number(model.xe[controller.tracked_index]),
+        has_rate=int(rate is not None),
+        tolerance=c_number(TOLERANCE),
+        work_arg=work["arg"],
+        work_res=work["res"],
+        max_iterations=10 * (qp.n + sizes["NC"]),
+        nonfinite_command=NONFINITE_COMMAND,
+    )
+    return ExportedC(
+        name=name,
+        controller=controller.name,
+        header=header,
+        source=source,
+        n_state=sizes["NSTATE"],
+        n_measured=ny,
+        n_reference=nu,
+        n_input=nu,
+        sample_period=controller.sample_period,
+        measures="outputs",
+        has_init=True,
+        status_codes={code: status_text(code) for code in list(STATUS) + [c | NONFINITE_COMMAND for c in STATUS]},
+    )
 
 
 _HEADER = string.Template("""/* ${p}.h: linear MPC '${controller}' exported by codesign-control (mpc.export).

@@ -68,8 +68,18 @@ class SoftBound:
     quadratic_weight: float
 
     @classmethod
-    def on(cls, plant: Plant, combination: dict, lower: float, upper: float, *, scale: float | None = None,
-           linear_weight: float = 1e3, quadratic_weight: float = 1e1, name: str | None = None) -> SoftBound:
+    def on(
+        cls,
+        plant: Plant,
+        combination: dict,
+        lower: float,
+        upper: float,
+        *,
+        scale: float | None = None,
+        linear_weight: float = 1e3,
+        quadratic_weight: float = 1e1,
+        name: str | None = None,
+    ) -> SoftBound:
         """A bound on a linear combination of named states, e.g. ``{"phi": 1, "theta": -1}``.
 
         Parameters
@@ -83,8 +93,10 @@ class SoftBound:
             w = linear_weight / scale, ρ = quadratic_weight / scale².
         """
         if not isinstance(combination, Mapping):
-            raise TypeError(f"soft bound {name!r}: combination must be a mapping state name -> coefficient, "
-                            f"got {type(combination).__name__} {combination!r}")
+            raise TypeError(
+                f"soft bound {name!r}: combination must be a mapping state name -> coefficient, "
+                f"got {type(combination).__name__} {combination!r}"
+            )
         if not combination:
             raise ValueError(f"soft bound {name!r}: combination is empty; give state name -> coefficient")
         label = name or " ".join(_term(coef, state) for state, coef in combination.items())
@@ -94,8 +106,9 @@ class SoftBound:
                 raise ValueError(f"{plant.name} has no state {state!r}; states are {', '.join(plant.state_names)}")
             row[plant.state_names.index(state)] = real_array(coef, f"soft bound {label!r}: coefficient of {state}")
         if not np.any(row) or not np.all(np.isfinite(row)):
-            raise ValueError(f"soft bound {label!r}: the combination {combination!r} needs finite coefficients, "
-                             "not all zero")
+            raise ValueError(
+                f"soft bound {label!r}: the combination {combination!r} needs finite coefficients, not all zero"
+            )
         lower = float(real_array(lower, f"soft bound {label!r}: lower"))
         upper = float(real_array(upper, f"soft bound {label!r}: upper"))
         if np.isnan(lower) or np.isnan(upper):
@@ -104,12 +117,15 @@ class SoftBound:
             raise ValueError(f"soft bound {label!r}: lower {lower} > upper {upper}; need lower <= upper")
         if not (np.isfinite(lower) or np.isfinite(upper)):
             raise ValueError(f"soft bound {label!r} has no finite side (lower {lower}, upper {upper})")
-        for weight, value, strict in (("linear_weight", linear_weight, False), ("quadratic_weight", quadratic_weight,
-                                                                                True)):
+        for weight, value, strict in (
+            ("linear_weight", linear_weight, False),
+            ("quadratic_weight", quadratic_weight, True),
+        ):
             value = float(real_array(value, f"soft bound {label!r}: {weight}"))
             if not np.isfinite(value) or value < 0 or (strict and value == 0):
-                raise ValueError(f"soft bound {label!r}: {weight} must be finite and {'> 0' if strict else '>= 0'}, "
-                                 f"got {value}")
+                raise ValueError(
+                    f"soft bound {label!r}: {weight} must be finite and {'> 0' if strict else '>= 0'}, got {value}"
+                )
         if scale is None:
             finite = [b for b in (lower, upper) if np.isfinite(b)]
             scale = (upper - lower) / 2 if len(finite) == 2 else (abs(finite[0]) if finite and finite[0] else 1.0)
@@ -226,9 +242,25 @@ class MPCProblem:
         <= 0, soft bounds with lower > upper, or no stabilizing Riccati solution.
     """
 
-    def __init__(self, A, B, state_weight, input_weight, horizon: int, input_lower, input_upper, *,
-                 rate_limit=None, soft_rows=None, soft_lower=None, soft_upper=None, soft_linear_weight=None,
-                 soft_quadratic_weight=None, terminal_weight=None, soft_names=None):
+    def __init__(
+        self,
+        A,
+        B,
+        state_weight,
+        input_weight,
+        horizon: int,
+        input_lower,
+        input_upper,
+        *,
+        rate_limit=None,
+        soft_rows=None,
+        soft_lower=None,
+        soft_upper=None,
+        soft_linear_weight=None,
+        soft_quadratic_weight=None,
+        terminal_weight=None,
+        soft_names=None,
+    ):
         A = np.atleast_2d(np.asarray(A, dtype=float))
         B = np.asarray(B, dtype=float)
         B = B.reshape(-1, 1) if B.ndim == 1 else B
@@ -249,8 +281,10 @@ class MPCProblem:
         self.input_lower = self._vector(input_lower, nu, "input_lower")
         self.input_upper = self._vector(input_upper, nu, "input_upper")
         if np.any(self.input_lower > self.input_upper):
-            raise ValueError(f"the hard input bounds are infeasible: input_lower {self.input_lower} > "
-                             f"input_upper {self.input_upper} (is the operating point's input beyond the limit?)")
+            raise ValueError(
+                f"the hard input bounds are infeasible: input_lower {self.input_lower} > "
+                f"input_upper {self.input_upper} (is the operating point's input beyond the limit?)"
+            )
         if rate_limit is None:
             self.rate_limit = None
         else:
@@ -303,11 +337,13 @@ class MPCProblem:
             if self.soft_lower[i] == -np.inf and self.soft_upper[i] == np.inf:
                 raise ValueError(f"soft bound {name!r} has no finite side")
             if not np.isfinite(self.soft_linear_weight[i]) or self.soft_linear_weight[i] < 0:
-                raise ValueError(f"soft bound {name!r}: linear weight must be finite and >= 0, "
-                                 f"got {self.soft_linear_weight[i]}")
+                raise ValueError(
+                    f"soft bound {name!r}: linear weight must be finite and >= 0, got {self.soft_linear_weight[i]}"
+                )
             if not np.isfinite(self.soft_quadratic_weight[i]) or self.soft_quadratic_weight[i] <= 0:
-                raise ValueError(f"soft bound {name!r}: quadratic weight must be finite and > 0, "
-                                 f"got {self.soft_quadratic_weight[i]}")
+                raise ValueError(
+                    f"soft bound {name!r}: quadratic weight must be finite and > 0, got {self.soft_quadratic_weight[i]}"
+                )
 
     @property
     def n_soft(self) -> int:
@@ -325,7 +361,7 @@ class MPCProblem:
         impulse = [p @ self.B for p in powers[:N]]  # A^i B
         for k in range(1, N + 1):
             for j in range(k):
-                Gamma[(k - 1) * nx:k * nx, j * nu:(j + 1) * nu] = impulse[k - 1 - j]
+                Gamma[(k - 1) * nx : k * nx, j * nu : (j + 1) * nu] = impulse[k - 1 - j]
         return Phi, Gamma
 
     def simulate(self, x0, inputs, disturbance) -> np.ndarray:
@@ -354,8 +390,17 @@ class MPCProblem:
         return np.maximum(0.0, np.maximum(self.soft_lower - g, g - self.soft_upper))
 
 
-def problem_from_model(model: LinearModel, state_weight, input_weight, horizon: int, input_limit, *,
-                       rate_limit=None, soft_bounds=(), terminal_weight=None) -> MPCProblem:
+def problem_from_model(
+    model: LinearModel,
+    state_weight,
+    input_weight,
+    horizon: int,
+    input_limit,
+    *,
+    rate_limit=None,
+    soft_bounds=(),
+    terminal_weight=None,
+) -> MPCProblem:
     """The MPC problem of a discrete `LinearModel` (from `Plant.linearize(...).discretize(Ts)`).
 
     Parameters
@@ -377,14 +422,27 @@ def problem_from_model(model: LinearModel, state_weight, input_weight, horizon: 
     if np.any(~np.isfinite(limit)) or np.any(limit <= 0):
         raise ValueError(f"input_limit must be finite and > 0, got {limit}")
     if np.any(np.abs(model.ue) > limit):
-        raise ValueError(f"{model.name}: the operating point's input {model.ue} is beyond the actuator limit "
-                         f"{limit}; no admissible input holds it")
+        raise ValueError(
+            f"{model.name}: the operating point's input {model.ue} is beyond the actuator limit "
+            f"{limit}; no admissible input holds it"
+        )
     soft = tuple(soft_bounds)
     rows = np.array([b.row for b in soft]).reshape(len(soft), model.nx)
     offset = rows @ model.xe
     return MPCProblem(
-        model.A, model.B, state_weight, input_weight, horizon, -limit - model.ue, limit - model.ue,
-        rate_limit=rate_limit, soft_rows=rows,
-        soft_lower=np.array([b.lower for b in soft]) - offset, soft_upper=np.array([b.upper for b in soft]) - offset,
-        soft_linear_weight=[b.linear_weight for b in soft], soft_quadratic_weight=[b.quadratic_weight for b in soft],
-        terminal_weight=terminal_weight, soft_names=[b.name for b in soft])
+        model.A,
+        model.B,
+        state_weight,
+        input_weight,
+        horizon,
+        -limit - model.ue,
+        limit - model.ue,
+        rate_limit=rate_limit,
+        soft_rows=rows,
+        soft_lower=np.array([b.lower for b in soft]) - offset,
+        soft_upper=np.array([b.upper for b in soft]) - offset,
+        soft_linear_weight=[b.linear_weight for b in soft],
+        soft_quadratic_weight=[b.quadratic_weight for b in soft],
+        terminal_weight=terminal_weight,
+        soft_names=[b.name for b in soft],
+    )

@@ -48,8 +48,9 @@ def collocation_defects(solution: OCPSolution) -> np.ndarray:
     return defects
 
 
-def solve_refined(ocp, transcription, tolerance: float, max_refinements: int, solver_options: dict,
-                  solve_options: dict) -> OCPSolution:
+def solve_refined(
+    ocp, transcription, tolerance: float, max_refinements: int, solver_options: dict, solve_options: dict
+) -> OCPSolution:
     """Solve `ocp`, halving intervals with a collocation defect above `tolerance`; see the module docstring.
 
     The returned solution's `refinement` lists (intervals, largest defect) per round.
@@ -77,6 +78,8 @@ def solve_refined(ocp, transcription, tolerance: float, max_refinements: int, so
         method = method.with_mesh(np.sort(np.concatenate([mesh, middles[split]])))
         solution = ocp.solver(method, **solver_options).solve(guess=solution, **warm)
     if solution.success and history[-1][1] > tolerance:
-        solution.status += (f"; mesh refinement stopped after {len(history) - 1} rounds with a defect of "
-                            f"{history[-1][1]:.3g} > {tolerance:g}")
+        solution.status += (
+            f"; mesh refinement stopped after {len(history) - 1} rounds with a defect of "
+            f"{history[-1][1]:.3g} > {tolerance:g}"
+        )
     return solution

@@ -53,8 +53,9 @@ class FreeTime:
         if not np.isfinite(lower) or lower <= 0:
             raise ValueError(f"final_time: FreeTime lower bound must be finite and > 0 s, got {self.lower}")
         if not np.isfinite(upper) or upper <= lower:
-            raise ValueError(f"final_time: FreeTime upper bound must be finite and > lower = {lower} s, "
-                             f"got {self.upper}")
+            raise ValueError(
+                f"final_time: FreeTime upper bound must be finite and > lower = {lower} s, got {self.upper}"
+            )
         guess = (lower + upper) / 2 if self.guess is None else float(self.guess)
         if not lower <= guess <= upper:
             raise ValueError(f"final_time: FreeTime guess must lie in [{lower}, {upper}] s, got {self.guess}")
@@ -209,10 +210,14 @@ class OptimalControlProblem:
         self.c = Names("control", owner, [], [])
         self.controls: dict[str, tuple[float, float]] = {}
         self.control_vector = ca.SX(0, 1)
-        self.state_start, self.state_end = ca.vertcat(*sym(plant.state_names, "(0)")), \
-            ca.vertcat(*sym(plant.state_names, "(T)"))
-        self.input_start, self.input_end = ca.vertcat(*sym(plant.input_names, "(0)")), \
-            ca.vertcat(*sym(plant.input_names, "(T)"))
+        self.state_start, self.state_end = (
+            ca.vertcat(*sym(plant.state_names, "(0)")),
+            ca.vertcat(*sym(plant.state_names, "(T)")),
+        )
+        self.input_start, self.input_end = (
+            ca.vertcat(*sym(plant.input_names, "(0)")),
+            ca.vertcat(*sym(plant.input_names, "(T)")),
+        )
         next_states, previous_inputs = sym(plant.state_names, "(k+1)"), sym(plant.input_names, "(k-1)")
         self.state_next, self.input_previous = ca.vertcat(*next_states), ca.vertcat(*previous_inputs)
         self.x_next = Names("state at the interval's end", owner, plant.state_names, next_states)
@@ -229,14 +234,26 @@ class OptimalControlProblem:
 
     # ------------------------------------------------------------------ symbols
     def __repr__(self) -> str:
-        horizon = (f"T free in [{self.free_time.lower:g}, {self.free_time.upper:g}] s" if self.free_time
-                   else f"T = {self.fixed_final_time:g} s")
-        return (f"OptimalControlProblem({self.plant.name}, {horizon}, {len(self.constraints)} constraints, "
-                f"chosen {list(self.chosen) or 'none'})")
+        horizon = (
+            f"T free in [{self.free_time.lower:g}, {self.free_time.upper:g}] s"
+            if self.free_time
+            else f"T = {self.fixed_final_time:g} s"
+        )
+        return (
+            f"OptimalControlProblem({self.plant.name}, {horizon}, {len(self.constraints)} constraints, "
+            f"chosen {list(self.chosen) or 'none'})"
+        )
 
     def _taken(self, name: str) -> bool:
-        return (name in self.parameters or name in self.controls or name in ("T", "t") or name in self.x
-                or name in self.u or name in self.p or name in self.y)
+        return (
+            name in self.parameters
+            or name in self.controls
+            or name in ("T", "t")
+            or name in self.x
+            or name in self.u
+            or name in self.p
+            or name in self.y
+        )
 
     def parameter(self, name: str, size: int = 1, value=None) -> ca.SX:
         """A value given at solve time (a reference, an initial state), `size` entries.
@@ -279,12 +296,15 @@ class OptimalControlProblem:
         """
         expression = _sx(expression, "plant_input(...)")
         if expression.numel() != self.plant.nu:
-            raise ValueError(f"plant_input(...) needs {self.plant.nu} entries (one per input), "
-                             f"got {expression.numel()}")
-        if ca.depends_on(expression, ca.vertcat(self.state, self.t, self.final_time, self._point_symbols,
-                                                self._interval_symbols)):
-            raise ValueError("plant_input(...) may depend on u, the controls, p and parameters only "
-                             "(it is held on each interval)")
+            raise ValueError(
+                f"plant_input(...) needs {self.plant.nu} entries (one per input), got {expression.numel()}"
+            )
+        if ca.depends_on(
+            expression, ca.vertcat(self.state, self.t, self.final_time, self._point_symbols, self._interval_symbols)
+        ):
+            raise ValueError(
+                "plant_input(...) may depend on u, the controls, p and parameters only (it is held on each interval)"
+            )
         self.fed_input = ca.vec(expression)
 
     def choose(self, name: str, lower: float, upper: float, guess: float | None = None) -> ca.SX:
@@ -314,8 +334,10 @@ class OptimalControlProblem:
         known = set(self.x) | set(self.u) | set(self.controls) | set(self.p)
         for name, value in values.items():
             if name not in known:
-                raise UnknownNameError(f"{self.plant.name} has no state, input, control or parameter {name!r} "
-                                       f"to scale; choose among {', '.join(sorted(known))}")
+                raise UnknownNameError(
+                    f"{self.plant.name} has no state, input, control or parameter {name!r} "
+                    f"to scale; choose among {', '.join(sorted(known))}"
+                )
             value = float(value)
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"scale {name}: must be finite and > 0, got {value}")
@@ -329,8 +351,15 @@ class OptimalControlProblem:
     @property
     def _point_symbols(self) -> ca.SX:
         acc = [a.symbol for a in self.accumulated]
-        return ca.vertcat(self.state_start, self.state_end, self.input_start, self.input_end,
-                          self.control_start, self.control_end, *acc)
+        return ca.vertcat(
+            self.state_start,
+            self.state_end,
+            self.input_start,
+            self.input_end,
+            self.control_start,
+            self.control_end,
+            *acc,
+        )
 
     @property
     def _interval_symbols(self) -> ca.SX:
@@ -339,11 +368,14 @@ class OptimalControlProblem:
     def _check_path(self, expression, what: str) -> ca.SX:
         expression = _sx(expression, what)
         if ca.depends_on(expression, self._point_symbols):
-            raise ValueError(f"{what} must be an expression along the path (of x, u, y, t), "
-                             "not of at_start/at_end values or integrals")
+            raise ValueError(
+                f"{what} must be an expression along the path (of x, u, y, t), "
+                "not of at_start/at_end values or integrals"
+            )
         if ca.depends_on(expression, self._interval_symbols):
-            raise ValueError(f"{what} cannot use x_next or u_previous: they belong in subject_to(...) "
-                             "(constraints on each interval)")
+            raise ValueError(
+                f"{what} cannot use x_next or u_previous: they belong in subject_to(...) (constraints on each interval)"
+            )
         return expression
 
     def input_before(self, value) -> None:
@@ -358,8 +390,9 @@ class OptimalControlProblem:
             value = ca.repmat(value, self.plant.nu, 1)
         if value.numel() != self.plant.nu:
             raise ValueError(f"input_before(...) needs {self.plant.nu} entries (one per input), got {value.numel()}")
-        decisions = ca.vertcat(self._path_symbols, self._point_symbols, self._interval_symbols,
-                               self.param_vector, self.final_time)
+        decisions = ca.vertcat(
+            self._path_symbols, self._point_symbols, self._interval_symbols, self.param_vector, self.final_time
+        )
         if ca.depends_on(value, decisions):
             raise ValueError("input_before(...) must be a number or an expression of parameter values")
         self.input_before_start = ca.vec(value)
@@ -367,14 +400,18 @@ class OptimalControlProblem:
     def at_start(self, expression) -> ca.SX:
         """`expression` of (x, u, t) evaluated at t = 0 (u: the first interval's input)."""
         expression = self._check_path(expression, "at_start(...)")
-        return ca.substitute(expression, self._path_symbols,
-                             ca.vertcat(self.state_start, self.input_start, self.control_start, 0))
+        return ca.substitute(
+            expression, self._path_symbols, ca.vertcat(self.state_start, self.input_start, self.control_start, 0)
+        )
 
     def at_end(self, expression) -> ca.SX:
         """`expression` of (x, u, t) evaluated at t = T (u: the last interval's input)."""
         expression = self._check_path(expression, "at_end(...)")
-        return ca.substitute(expression, self._path_symbols,
-                             ca.vertcat(self.state_end, self.input_end, self.control_end, self.final_time))
+        return ca.substitute(
+            expression,
+            self._path_symbols,
+            ca.vertcat(self.state_end, self.input_end, self.control_end, self.final_time),
+        )
 
     def integral(self, integrand) -> ca.SX:
         """∫₀ᵀ integrand(x, u, p, t) dt, as a symbol for `minimize` and `subject_to`.
@@ -410,16 +447,19 @@ class OptimalControlProblem:
         if objective.numel() != 1:
             raise ValueError(f"the objective must be a scalar, got shape {objective.shape}")
         if ca.depends_on(objective, ca.vertcat(self._path_symbols, self._interval_symbols)):
-            raise ValueError("the objective depends on the path (x, u, y or t): wrap that part in "
-                             "ocp.integral(...), ocp.sum(...), ocp.at_start(...) or ocp.at_end(...)")
+            raise ValueError(
+                "the objective depends on the path (x, u, y or t): wrap that part in "
+                "ocp.integral(...), ocp.sum(...), ocp.at_start(...) or ocp.at_end(...)"
+            )
         self.objective = objective
 
     def maximize(self, objective) -> None:
         """Set the objective to maximize (minimizes its negative; the reported objective is that negative)."""
         self.minimize(-_sx(objective, "the objective"))
 
-    def subject_to(self, constraint, *, label: str | None = None, include_start: bool = True,
-                   include_end: bool = True) -> None:
+    def subject_to(
+        self, constraint, *, label: str | None = None, include_start: bool = True, include_end: bool = True
+    ) -> None:
         """Add constraints: an SX relation (``==``, ``<=``, ``>=``, elementwise on vectors),
         an `ocp.bounded(lo, e, hi)`, or a list of them.
 
@@ -438,21 +478,35 @@ class OptimalControlProblem:
                 self.subject_to(item, label=label, include_start=include_start, include_end=include_end)
             return
         for expression, lower, upper, text in self._relations(constraint):
-            path = bool(ca.depends_on(expression, self._path_symbols)) or \
-                bool(ca.depends_on(ca.vertcat(lower, upper), self._path_symbols))
+            path = bool(ca.depends_on(expression, self._path_symbols)) or bool(
+                ca.depends_on(ca.vertcat(lower, upper), self._path_symbols)
+            )
             point = bool(ca.depends_on(ca.vertcat(expression, lower, upper), self._point_symbols))
             interval = bool(ca.depends_on(ca.vertcat(expression, lower, upper), self._interval_symbols))
             if (path or interval) and point:
-                raise ValueError(f"constraint {text} mixes the path (x, u, y, t) with at_start/at_end "
-                                 "values or integrals; write them as separate constraints")
-            self.constraints.append(Constraint(expression, lower, upper, label or text, path or interval,
-                                               bool(include_start), bool(include_end), interval))
+                raise ValueError(
+                    f"constraint {text} mixes the path (x, u, y, t) with at_start/at_end "
+                    "values or integrals; write them as separate constraints"
+                )
+            self.constraints.append(
+                Constraint(
+                    expression,
+                    lower,
+                    upper,
+                    label or text,
+                    path or interval,
+                    bool(include_start),
+                    bool(include_end),
+                    interval,
+                )
+            )
 
     def _relations(self, constraint):
         """(expression, lower, upper, text) per scalar relation; decision-free sides become bounds."""
         # Sides free of these are bounds (numbers and `parameter` values).
-        decisions = ca.vertcat(self._path_symbols, self._point_symbols, self._interval_symbols, self.param_vector,
-                               self.final_time)
+        decisions = ca.vertcat(
+            self._path_symbols, self._point_symbols, self._interval_symbols, self.param_vector, self.final_time
+        )
         inf = ca.SX(np.inf)
         if isinstance(constraint, Bounded):
             expression = _sx(constraint.expression, "bounded(...) expression")
@@ -468,8 +522,10 @@ class OptimalControlProblem:
                     yield expression[i], lower[i], upper[i], text
             return
         if isinstance(constraint, (bool, np.bool_)) or not isinstance(constraint, (ca.SX, ca.DM)):
-            raise ValueError("subject_to needs an SX relation (==, <=, >=) of the problem's symbols or "
-                             f"ocp.bounded(lower, expression, upper), got {type(constraint).__name__} {constraint!r}")
+            raise ValueError(
+                "subject_to needs an SX relation (==, <=, >=) of the problem's symbols or "
+                f"ocp.bounded(lower, expression, upper), got {type(constraint).__name__} {constraint!r}"
+            )
         constraint = ca.SX(constraint)
         for i in range(constraint.numel()):
             element = constraint[i]
@@ -497,8 +553,15 @@ class OptimalControlProblem:
 
         return OCPSolver(self, transcription, **options)
 
-    def solve(self, transcription=None, *, refine_tolerance: float | None = None, max_refinements: int = 6,
-              solver_options: dict | None = None, **solve_options):
+    def solve(
+        self,
+        transcription=None,
+        *,
+        refine_tolerance: float | None = None,
+        max_refinements: int = 6,
+        solver_options: dict | None = None,
+        **solve_options,
+    ):
         """Transcribe, solve once and return an `OCPSolution`.
 
         refine_tolerance : with collocation, halve the intervals whose collocation defect
@@ -510,8 +573,9 @@ class OptimalControlProblem:
         if refine_tolerance is not None:
             from .mesh_refinement import solve_refined
 
-            return solve_refined(self, transcription, refine_tolerance, max_refinements,
-                                 solver_options or {}, solve_options)
+            return solve_refined(
+                self, transcription, refine_tolerance, max_refinements, solver_options or {}, solve_options
+            )
         return self.solver(transcription, **(solver_options or {})).solve(**solve_options)
 
     def start_from(self, x0=None) -> ca.SX:
@@ -527,16 +591,16 @@ class OptimalControlProblem:
     def check_complete(self) -> None:
         """Raise unless the problem has an objective."""
         if self.objective is None:
-            raise ValueError("the problem has no objective: call ocp.minimize(...) (or ocp.minimize(0) "
-                             "for a feasibility problem)")
+            raise ValueError(
+                "the problem has no objective: call ocp.minimize(...) (or ocp.minimize(0) for a feasibility problem)"
+            )
 
 
 def _sx(value, what: str) -> ca.SX:
     if isinstance(value, ca.MX):
         raise ValueError(f"{what} must be built from the problem's SX symbols (ocp.x, ocp.u, ...), got an MX")
     try:
-        return ca.SX(np.asarray(value, dtype=float)) if isinstance(value, (list, tuple, np.ndarray)) \
-            else ca.SX(value)
+        return ca.SX(np.asarray(value, dtype=float)) if isinstance(value, (list, tuple, np.ndarray)) else ca.SX(value)
     except (NotImplementedError, TypeError, RuntimeError, ValueError) as err:
         raise ValueError(f"{what} must be a CasADi SX expression or a number, got {value!r}") from err
 
@@ -550,8 +614,11 @@ def _broadcast(value: ca.SX, n: int, what: str) -> ca.SX:
 
 
 def _values(value, size: int, what: str) -> np.ndarray:
-    arr = np.broadcast_to(np.asarray(value, dtype=float), (size,)) if np.ndim(value) == 0 \
+    arr = (
+        np.broadcast_to(np.asarray(value, dtype=float), (size,))
+        if np.ndim(value) == 0
         else np.asarray(value, dtype=float).reshape(-1)
+    )
     if arr.size != size or not np.all(np.isfinite(arr)):
         raise ValueError(f"{what} must be {size} finite numbers, got {value!r}")
     return arr.copy()

@@ -51,9 +51,16 @@ class _InnerFailure(RuntimeError):
     pass
 
 
-def solve_nested(ocp, transcription=None, *, tolerance: float = 1e-10, ftol: float = 1e-12,
-                 max_outer_iterations: int = 200, solver_options: dict | None = None,
-                 **solve_options) -> NestedCodesignResult:
+def solve_nested(
+    ocp,
+    transcription=None,
+    *,
+    tolerance: float = 1e-10,
+    ftol: float = 1e-12,
+    max_outer_iterations: int = 200,
+    solver_options: dict | None = None,
+    **solve_options,
+) -> NestedCodesignResult:
     """Nested co-design of the parameters in `ocp.choose(...)`; see the module docstring.
 
     tolerance : L-BFGS-B's ftol and gtol (on J* and its gradient in the [0, 1]-scaled parameters)
@@ -92,8 +99,14 @@ def solve_nested(ocp, transcription=None, *, tolerance: float = 1e-10, ftol: flo
     outer_status, success, iterations = "", False, 0
     try:
         start = (np.array([ocp.chosen[n].guess for n in names]) - lower) / span
-        result = minimize(inner, start, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(names),
-                          options={"ftol": ftol, "gtol": tolerance, "maxiter": int(max_outer_iterations)})
+        result = minimize(
+            inner,
+            start,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(0.0, 1.0)] * len(names),
+            options={"ftol": ftol, "gtol": tolerance, "maxiter": int(max_outer_iterations)},
+        )
         outer_status, success, iterations = str(result.message), bool(result.success), int(result.nit)
         if memory["z"] is None or not np.array_equal(memory["z"], result.x):
             inner(result.x)  # the reported solution at the returned point
@@ -103,5 +116,14 @@ def solve_nested(ocp, transcription=None, *, tolerance: float = 1e-10, ftol: flo
     if solution is None:
         raise RuntimeError(f"nested co-design: {outer_status}")
     params = {n: float(solution.params[n]) for n in names}
-    return NestedCodesignResult(params, solution.objective, solution, success and solution.success, outer_status,
-                                iterations, len(statuses), statuses, time.perf_counter() - started)
+    return NestedCodesignResult(
+        params,
+        solution.objective,
+        solution,
+        success and solution.success,
+        outer_status,
+        iterations,
+        len(statuses),
+        statuses,
+        time.perf_counter() - started,
+    )

@@ -21,8 +21,9 @@ from models.simulate import lagrange_basis
 from .transcription import Transcription
 
 
-def resimulate(plant: Plant, t, x0, u, params=None, *, method: str = "adaptive", rtol: float = 1e-10,
-               atol: float = 1e-10) -> np.ndarray:
+def resimulate(
+    plant: Plant, t, x0, u, params=None, *, method: str = "adaptive", rtol: float = 1e-10, atol: float = 1e-10
+) -> np.ndarray:
     """States at the times `t` (M+1,) from `x0` under `u` (M, nu) held on [t_k, t_{k+1}).
 
     Uses `models.simulate` once for a uniform grid, once per run of equal steps otherwise.
@@ -39,7 +40,7 @@ def resimulate(plant: Plant, t, x0, u, params=None, *, method: str = "adaptive",
         while run < steps.size and abs(steps[run] - steps[k]) <= 1e-12 * max(steps[k], 1.0):
             run += 1
         sim = models.simulate(plant, out[k], u[k:run], steps[k], method=method, params=params, rtol=rtol, atol=atol)
-        out[k + 1:run + 1] = sim.x[1:]
+        out[k + 1 : run + 1] = sim.x[1:]
         k = run
     return out
 
@@ -170,20 +171,26 @@ class OCPSolution:
             d0 = np.asarray(f(x0, u, p)).ravel() * h[i]
             d1 = np.asarray(f(x1, u, p)).ravel() * h[i]
             si = s[i]
-            out[i] = ((2 * si**3 - 3 * si**2 + 1) * x0 + (si**3 - 2 * si**2 + si) * d0
-                      + (-2 * si**3 + 3 * si**2) * x1 + (si**3 - si**2) * d1)
+            out[i] = (
+                (2 * si**3 - 3 * si**2 + 1) * x0
+                + (si**3 - 2 * si**2 + si) * d0
+                + (-2 * si**3 + 3 * si**2) * x1
+                + (si**3 - si**2) * d1
+            )
         return out
 
     # ------------------------------------------------------------------ check
     def verify(self, rtol: float = 1e-10, atol: float = 1e-10) -> Verification:
         """Re-simulate the optimal input (as the plant received it) on the nonlinear plant (CVODES)
         and report the state defects."""
-        return verify_trajectory(self.plant, self.t, self.states, self.plant_inputs, self.param_values(), rtol=rtol,
-                                 atol=atol)
+        return verify_trajectory(
+            self.plant, self.t, self.states, self.plant_inputs, self.param_values(), rtol=rtol, atol=atol
+        )
 
 
-def verify_trajectory(plant: Plant, t, states, inputs, params=None, *, rtol: float = 1e-10,
-                      atol: float = 1e-10) -> Verification:
+def verify_trajectory(
+    plant: Plant, t, states, inputs, params=None, *, rtol: float = 1e-10, atol: float = 1e-10
+) -> Verification:
     """The `Verification` of states (N+1, nx) at times t (N+1,) under inputs (N, nu) held in between.
 
     For a trajectory from any source (another optimizer, a hand-written transcription).
@@ -198,14 +205,22 @@ def verify_trajectory(plant: Plant, t, states, inputs, params=None, *, rtol: flo
     restarted = np.empty_like(states)
     restarted[0] = states[0]
     for j in range(t.size - 1):
-        run = models.simulate(plant, states[j], inputs[j:j + 1], t[j + 1] - t[j], method="adaptive", params=p,
-                              rtol=rtol, atol=atol)
+        run = models.simulate(
+            plant, states[j], inputs[j : j + 1], t[j + 1] - t[j], method="adaptive", params=p, rtol=rtol, atol=atol
+        )
         restarted[j + 1] = run.x[-1]
     local = np.abs(restarted - states)
     kl, il = np.unravel_index(int(np.argmax(local)), local.shape)
-    return Verification(float(errors[k, i]), plant.state_names[i], float(t[k]), float(local[kl, il]),
-                        plant.state_names[il], float(t[kl]), dict(zip(plant.state_names, errors.max(axis=0).tolist())),
-                        simulated)
+    return Verification(
+        float(errors[k, i]),
+        plant.state_names[i],
+        float(t[k]),
+        float(local[kl, il]),
+        plant.state_names[il],
+        float(t[kl]),
+        dict(zip(plant.state_names, errors.max(axis=0).tolist())),
+        simulated,
+    )
 
 
 def _index(names, name, kind, owner) -> int:

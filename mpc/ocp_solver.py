@@ -71,9 +71,18 @@ class OCPSolver:
     transcription : Transcription, the NLP's pieces
     """
 
-    def __init__(self, ocp, transcription=None, *, hessian: str = "exact", tolerance: float = 1e-8,
-                 max_iterations: int = 3000, ipopt_options: dict | None = None, chosen_as_parameters: bool = False,
-                 print_level: int = 0):
+    def __init__(
+        self,
+        ocp,
+        transcription=None,
+        *,
+        hessian: str = "exact",
+        tolerance: float = 1e-8,
+        max_iterations: int = 3000,
+        ipopt_options: dict | None = None,
+        chosen_as_parameters: bool = False,
+        print_level: int = 0,
+    ):
         if hessian not in HESSIANS:
             raise ValueError(f"hessian must be one of {', '.join(HESSIANS)}, got {hessian!r}")
         if not np.isfinite(tolerance) or tolerance <= 0:
@@ -82,8 +91,13 @@ class OCPSolver:
             raise ValueError(f"max_iterations must be an integer >= 1, got {max_iterations}")
         self.ocp = ocp
         self.transcription = Transcription(ocp, transcription, chosen_as_parameters=chosen_as_parameters)
-        ipopt: dict[str, Any] = {"print_level": int(print_level), "sb": "yes", "tol": float(tolerance),
-                 "max_iter": int(max_iterations), "hessian_approximation": hessian}
+        ipopt: dict[str, Any] = {
+            "print_level": int(print_level),
+            "sb": "yes",
+            "tol": float(tolerance),
+            "max_iter": int(max_iterations),
+            "hessian_approximation": hessian,
+        }
         ipopt |= dict(ipopt_options or {})
         self._options: dict[str, Any] = {"print_time": False, "ipopt": ipopt}
         self._solver = ca.nlpsol("ocp", "ipopt", self.transcription.nlp, self._options)
@@ -93,16 +107,30 @@ class OCPSolver:
     def warm_solver(self) -> ca.Function:
         """The same NLP with IPOPT's warm-start mode (multipliers used, small bound push); built on first use."""
         if self._warm_solver is None:
-            options = {"print_time": False,
-                       "ipopt": self._options["ipopt"] | {"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9,
-                                                          "warm_start_mult_bound_push": 1e-9,
-                                                          "mu_init": 1e-6}}
+            options = {
+                "print_time": False,
+                "ipopt": self._options["ipopt"]
+                | {
+                    "warm_start_init_point": "yes",
+                    "warm_start_bound_push": 1e-9,
+                    "warm_start_mult_bound_push": 1e-9,
+                    "mu_init": 1e-6,
+                },
+            }
             self._warm_solver = ca.nlpsol("ocp_warm", "ipopt", self.transcription.nlp, options)
         return self._warm_solver
 
     # ------------------------------------------------------------------ solve
-    def solve(self, *, x0=None, params: dict | None = None, plant_params: dict | None = None, guess=None,
-              guess_input=None, warm_start=None) -> OCPSolution:
+    def solve(
+        self,
+        *,
+        x0=None,
+        params: dict | None = None,
+        plant_params: dict | None = None,
+        guess=None,
+        guess_input=None,
+        warm_start=None,
+    ) -> OCPSolution:
         """Solve with these parameter values from the given starting point; see the module docstring.
 
         The result reports IPOPT's status; a failed or infeasible solve is returned (with
@@ -114,19 +142,24 @@ class OCPSolver:
         bad = np.flatnonzero(lbx > ubx + 1e-12)
         if bad.size:
             i = int(bad[0])
-            raise ValueError(f"bounds on {tr.decision_labels[i]} are empty: [{lbx[i] * tr.scale[i]:.6g}, "
-                             f"{ubx[i] * tr.scale[i]:.6g}]")
+            raise ValueError(
+                f"bounds on {tr.decision_labels[i]} are empty: [{lbx[i] * tr.scale[i]:.6g}, {ubx[i] * tr.scale[i]:.6g}]"
+            )
         solver, lam = self._solver, {}
         if warm_start is not None:
             start = warm_start if isinstance(warm_start, WarmStart) else None
             if isinstance(warm_start, OCPSolution) and warm_start.transcription is tr:
                 start = WarmStart(warm_start.decision, warm_start.lam_x, warm_start.lam_g)
             if start is None:
-                raise ValueError("warm_start must be an OCPSolution of this solver or a WarmStart; pass a "
-                                 "solution of another mesh as guess=")
+                raise ValueError(
+                    "warm_start must be an OCPSolution of this solver or a WarmStart; pass a "
+                    "solution of another mesh as guess="
+                )
             if start.decision.size != tr.layout.size or start.lam_g.size != lbg.size:
-                raise ValueError(f"warm_start has {start.decision.size} decisions and {start.lam_g.size} "
-                                 f"multipliers, the NLP {tr.layout.size} and {lbg.size}")
+                raise ValueError(
+                    f"warm_start has {start.decision.size} decisions and {start.lam_g.size} "
+                    f"multipliers, the NLP {tr.layout.size} and {lbg.size}"
+                )
             w0 = np.clip(start.decision, lbx, ubx)
             lam = {"lam_x0": start.lam_x, "lam_g0": start.lam_g}
             solver = self.warm_solver
@@ -158,8 +191,12 @@ class OCPSolver:
             f, accumulated, T, p, g = (np.asarray(v, dtype=float).ravel() for v in values[:5])
             fed = np.asarray(values[5], dtype=float).reshape(plant.nu, -1).T
         else:
-            f, accumulated, T, p = np.array([np.nan]), np.full(len(tr.ocp.accumulated), np.nan), np.array([np.nan]), \
-                np.full(plant.n_params, np.nan)
+            f, accumulated, T, p = (
+                np.array([np.nan]),
+                np.full(len(tr.ocp.accumulated), np.nan),
+                np.array([np.nan]),
+                np.full(plant.n_params, np.nan),
+            )
             g = np.full(lbg.size, np.nan)
             fed = np.full((tr.intervals, plant.nu), np.nan)
         label, amount = self.largest_violation(w, g, lbx, ubx, lbg, ubg)
@@ -173,12 +210,30 @@ class OCPSolver:
         chosen = {name: float(phys[i]) for name, i in layout.chosen.items()}
         params = dict(zip([q.name for q in plant.param_info], p.tolist()))
         return OCPSolution(
-            t=float(T[0]) * tr.mesh, states=states, inputs=phys[layout.inputs], plant_inputs=fed,
+            t=float(T[0]) * tr.mesh,
+            states=states,
+            inputs=phys[layout.inputs],
+            plant_inputs=fed,
             controls=phys[layout.controls],
-            params=params, chosen=chosen, final_time=float(T[0]), objective=float(f[0]), accumulated=accumulated,
-            success=success, status=status, solver_status=ipopt_status, iterations=iterations, solve_time=solve_time,
-            largest_violation=(label, amount), decision=w, lam_x=lam_x, lam_g=lam_g, lam_p=lam_p,
-            parameter_vector=P, transcription=tr, collocation_states=collocation)
+            params=params,
+            chosen=chosen,
+            final_time=float(T[0]),
+            objective=float(f[0]),
+            accumulated=accumulated,
+            success=success,
+            status=status,
+            solver_status=ipopt_status,
+            iterations=iterations,
+            solve_time=solve_time,
+            largest_violation=(label, amount),
+            decision=w,
+            lam_x=lam_x,
+            lam_g=lam_g,
+            lam_p=lam_p,
+            parameter_vector=P,
+            transcription=tr,
+            collocation_states=collocation,
+        )
 
     def largest_violation(self, w, g, lbx, ubx, lbg, ubg) -> tuple[str, float]:
         """(label, amount) of the constraint row or decision bound violated most at w (physical units for bounds)."""
@@ -208,8 +263,10 @@ class OCPSolver:
             T = guess.final_time if ocp.free_time is not None else T
         elif guess is not None:
             if not all(hasattr(guess, a) for a in ("t", "x", "u")):
-                raise ValueError("guess must be an OCPSolution or a trajectory with t, x and u "
-                                 f"(a models.Trajectory), got {type(guess).__name__}")
+                raise ValueError(
+                    "guess must be an OCPSolution or a trajectory with t, x and u "
+                    f"(a models.Trajectory), got {type(guess).__name__}"
+                )
             if ocp.free_time is not None:
                 T = float(np.asarray(guess.t)[-1])
         node_times = self._node_times(T)  # (N, d+1) fractions -> times; mesh point N separately
@@ -261,8 +318,12 @@ class OCPSolver:
     def _plant_params(self, P) -> np.ndarray:
         tr = self.transcription
         fixed = dict(zip(tr.fixed_param_names, P[tr.parameter_slices["plant"]]))
-        return np.array([fixed.get(q.name, tr.ocp.chosen[q.name].guess if q.name in tr.ocp.chosen else 0.0)
-                         for q in tr.plant.param_info])
+        return np.array(
+            [
+                fixed.get(q.name, tr.ocp.chosen[q.name].guess if q.name in tr.ocp.chosen else 0.0)
+                for q in tr.plant.param_info
+            ]
+        )
 
     def _input_sequence(self, guess_input, T) -> np.ndarray:
         tr = self.transcription
@@ -274,8 +335,9 @@ class OCPSolver:
             values = np.asarray(guess_input, dtype=float)
         values = values.reshape(N, -1) if values.size == N * nu else values
         if values.shape != (N, nu) or not np.all(np.isfinite(values)):
-            raise ValueError(f"guess_input must be ({N}, {nu}) finite values or a function of t, got shape "
-                             f"{np.shape(values)}")
+            raise ValueError(
+                f"guess_input must be ({N}, {nu}) finite values or a function of t, got shape {np.shape(values)}"
+            )
         return values
 
     @staticmethod

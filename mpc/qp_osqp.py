@@ -27,8 +27,7 @@ import scipy.sparse as sparse
 from .linear import INFINITY, MPCProblem, QPParameters, QPSolution
 
 #: Tight enough that the first input agrees with the interior-point reference to 1e-5.
-DEFAULT_SETTINGS = dict(eps_abs=1e-7, eps_rel=1e-7, polishing=True, max_iter=20000, verbose=False,
-                        warm_starting=True)
+DEFAULT_SETTINGS = dict(eps_abs=1e-7, eps_rel=1e-7, polishing=True, max_iter=20000, verbose=False, warm_starting=True)
 
 
 def _checked_settings(settings) -> dict:
@@ -62,8 +61,15 @@ class OsqpSolver:
         N, nx, nu, ns = problem.horizon, problem.nx, problem.nu, problem.n_soft
         self.n_states, self.n_inputs, self.n_slacks = (N + 1) * nx, N * nu, N * ns
         eye = lambda n: sparse.identity(n, format="csc")
-        P = sparse.block_diag([sparse.kron(eye(N), problem.Q), problem.P, sparse.kron(eye(N), problem.R),
-                               sparse.kron(eye(N), sparse.diags(problem.soft_quadratic_weight))], format="csc")
+        P = sparse.block_diag(
+            [
+                sparse.kron(eye(N), problem.Q),
+                problem.P,
+                sparse.kron(eye(N), problem.R),
+                sparse.kron(eye(N), sparse.diags(problem.soft_quadratic_weight)),
+            ],
+            format="csc",
+        )
         self.P = 2 * P
         # Dynamics: −x_{k+1} + A x_k + B u_k = −B d;  −x_0 = −x̂.
         dyn_x = sparse.kron(eye(N + 1), -eye(nx)) + sparse.kron(sparse.eye(N + 1, k=-1), problem.A)
@@ -95,7 +101,7 @@ class OsqpSolver:
         self.lower, self.upper = np.concatenate(lower), np.concatenate(upper)
         self._rate_start = self.A.shape[0] - self.n_inputs if problem.rate_limit is not None else None
         self.q = np.zeros(self.A.shape[1])
-        self.q[self.n_states + self.n_inputs:] = np.tile(problem.soft_linear_weight, N)
+        self.q[self.n_states + self.n_inputs :] = np.tile(problem.soft_linear_weight, N)
         self.scale = 1 / np.sqrt(self.P.diagonal())
         D = sparse.diags(self.scale)
         self._P_scaled = (D @ self.P @ D).tocsc()
@@ -105,20 +111,19 @@ class OsqpSolver:
     def reset(self) -> None:
         """Set OSQP up afresh (forgets the warm start)."""
         self._solver = osqp.OSQP()
-        self._solver.setup(self._P_scaled, self.q * self.scale, self._A_scaled, self.lower, self.upper,
-                           **self.settings)
+        self._solver.setup(self._P_scaled, self.q * self.scale, self._A_scaled, self.lower, self.upper, **self.settings)
 
     def _update_vectors(self, params: QPParameters) -> None:
         pb, N, nx, nu = self.problem, self.problem.horizon, self.problem.nx, self.problem.nu
-        self.q[:N * nx] = np.tile(-2 * pb.Q @ params.x_target, N)
-        self.q[N * nx:self.n_states] = -2 * pb.P @ params.x_target
-        self.q[self.n_states:self.n_states + self.n_inputs] = np.tile(-2 * pb.R @ params.u_target, N)
+        self.q[: N * nx] = np.tile(-2 * pb.Q @ params.x_target, N)
+        self.q[N * nx : self.n_states] = -2 * pb.P @ params.x_target
+        self.q[self.n_states : self.n_states + self.n_inputs] = np.tile(-2 * pb.R @ params.u_target, N)
         dynamics = np.concatenate([-params.x0, np.tile(-pb.B @ params.disturbance, N)])
-        self.lower[:self.n_states] = dynamics
-        self.upper[:self.n_states] = dynamics
+        self.lower[: self.n_states] = dynamics
+        self.upper[: self.n_states] = dynamics
         if self._rate_start is not None:
-            self.lower[self._rate_start:self._rate_start + nu] = params.u_previous - pb.rate_limit
-            self.upper[self._rate_start:self._rate_start + nu] = params.u_previous + pb.rate_limit
+            self.lower[self._rate_start : self._rate_start + nu] = params.u_previous - pb.rate_limit
+            self.upper[self._rate_start : self._rate_start + nu] = params.u_previous + pb.rate_limit
 
     def solve(self, params: QPParameters) -> QPSolution:
         """Update q and the bounds for `params`, solve warm-started, return the plan."""
@@ -131,7 +136,14 @@ class OsqpSolver:
         status = str(result.info.status)
         z = np.asarray(result.x, dtype=float) * self.scale if result.x is not None else np.full(self.A.shape[1], np.nan)
         success = status == "solved" and np.all(np.isfinite(z))
-        inputs = z[self.n_states:self.n_states + self.n_inputs].reshape(N, nu)
-        slacks = z[self.n_states + self.n_inputs:].reshape(N, ns)
-        return QPSolution(inputs, slacks, bool(success), status, int(result.info.iter), elapsed,
-                          {"polished": int(result.info.status_polish) == 1})
+        inputs = z[self.n_states : self.n_states + self.n_inputs].reshape(N, nu)
+        slacks = z[self.n_states + self.n_inputs :].reshape(N, ns)
+        return QPSolution(
+            inputs,
+            slacks,
+            bool(success),
+            status,
+            int(result.info.iter),
+            elapsed,
+            {"polished": int(result.info.status_polish) == 1},
+        )

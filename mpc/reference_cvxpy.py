@@ -43,9 +43,11 @@ def mpc_problem(problem: MPCProblem, x0, disturbance, x_target, u_target, u_prev
     s = cp.Variable((N, max(ns, 1)), nonneg=True, name="s")
     Q_root, R_root, P_root = (_square_root(W) for W in (problem.Q, problem.R, problem.P))
 
-    cost = (cp.sum_squares((x[:N] - x_target) @ Q_root)
-            + cp.sum_squares((u - u_target) @ R_root)
-            + cp.sum_squares((x[N] - x_target) @ P_root))
+    cost = (
+        cp.sum_squares((x[:N] - x_target) @ Q_root)
+        + cp.sum_squares((u - u_target) @ R_root)
+        + cp.sum_squares((x[N] - x_target) @ P_root)
+    )
     constraints = [
         x[0] == x0,
         x[1:] == x[:N] @ A.T + (u + disturbance) @ B.T,
@@ -53,11 +55,14 @@ def mpc_problem(problem: MPCProblem, x0, disturbance, x_target, u_target, u_prev
         u <= problem.input_upper,
     ]
     if problem.rate_limit is not None:
-        constraints += [cp.abs(u[0] - u_previous) <= problem.rate_limit,
-                        cp.abs(cp.diff(u, axis=0)) <= problem.rate_limit]
+        constraints += [
+            cp.abs(u[0] - u_previous) <= problem.rate_limit,
+            cp.abs(cp.diff(u, axis=0)) <= problem.rate_limit,
+        ]
     if ns:
-        cost += cp.sum(s @ problem.soft_linear_weight) + \
-            cp.sum_squares(s @ np.diag(np.sqrt(problem.soft_quadratic_weight)))
+        cost += cp.sum(s @ problem.soft_linear_weight) + cp.sum_squares(
+            s @ np.diag(np.sqrt(problem.soft_quadratic_weight))
+        )
         g = x[1:] @ G.T
         lower, upper = np.isfinite(problem.soft_lower), np.isfinite(problem.soft_upper)
         if lower.any():
@@ -87,16 +92,23 @@ class CvxpySolver:
 
     name = "cvxpy"
 
-    def __init__(self, problem: MPCProblem, parametrized: bool = True, solver: str = "CLARABEL",
-                 solver_options: dict | None = None):
+    def __init__(
+        self,
+        problem: MPCProblem,
+        parametrized: bool = True,
+        solver: str = "CLARABEL",
+        solver_options: dict | None = None,
+    ):
         if solver not in cp.installed_solvers():
-            raise ValueError(f"solver {solver!r} is not an installed cvxpy solver; installed: "
-                             f"{', '.join(cp.installed_solvers())}")
+            raise ValueError(
+                f"solver {solver!r} is not an installed cvxpy solver; installed: {', '.join(cp.installed_solvers())}"
+            )
         self.problem = problem
         self.parametrized = parametrized
         self.solver = solver
-        tight: dict[str, Any] = dict(tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12, tol_ktratio=1e-10,
-                                     max_iter=500)
+        tight: dict[str, Any] = dict(
+            tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12, tol_ktratio=1e-10, max_iter=500
+        )
         self.solver_options: dict[str, Any] = (tight if solver == "CLARABEL" else {}) | dict(solver_options or {})
         # cvxpy's C++ canonicalization does not take every expression here; choose the
         # SciPy one up front instead of a warning on each solve.
@@ -104,9 +116,13 @@ class CvxpySolver:
         if parametrized:
             nx, nu = problem.nx, problem.nu
             # In the order of QPParameters' fields.
-            self.parameters = (cp.Parameter(nx, name="x0"), cp.Parameter(nu, name="d"),
-                               cp.Parameter(nx, name="x_s"), cp.Parameter(nu, name="u_s"),
-                               cp.Parameter(nu, name="u_prev"))
+            self.parameters = (
+                cp.Parameter(nx, name="x0"),
+                cp.Parameter(nu, name="d"),
+                cp.Parameter(nx, name="x_s"),
+                cp.Parameter(nu, name="u_s"),
+                cp.Parameter(nu, name="u_prev"),
+            )
             self._cvx, self._u, self._s = mpc_problem(problem, *self.parameters)
 
     def solve(self, params: QPParameters) -> QPSolution:

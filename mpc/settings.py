@@ -47,8 +47,16 @@ class SoftSpec:
         """The tightened SoftBound the MPC designed on `known` uses."""
         lower, upper = self.bounds(known)
         margin = self.backoff * (upper - lower) / 2
-        return SoftBound.on(known, self.combination, lower + margin, upper - margin, scale=(upper - lower) / 2,
-                            linear_weight=linear_weight, quadratic_weight=quadratic_weight, name=self.name)
+        return SoftBound.on(
+            known,
+            self.combination,
+            lower + margin,
+            upper - margin,
+            scale=(upper - lower) / 2,
+            linear_weight=linear_weight,
+            quadratic_weight=quadratic_weight,
+            name=self.name,
+        )
 
 
 @dataclass(frozen=True)
@@ -84,17 +92,23 @@ class MPCSettings:
 
 def design_arguments(known: Plant, settings: MPCSettings) -> dict:
     """Keyword arguments of `LinearMPC` / `NonlinearMPC` from `settings` on the known plant."""
-    soft = tuple(s.soft_bound(known, settings.soft_linear_weight, settings.soft_quadratic_weight)
-                 for s in settings.soft)
+    soft = tuple(
+        s.soft_bound(known, settings.soft_linear_weight, settings.soft_quadratic_weight) for s in settings.soft
+    )
     limit = known.input_limit
-    return dict(sample_period=settings.sample_period, horizon=settings.horizon,
-                state_weight=np.array(settings.state_weight), input_weight=settings.input_weight, soft_bounds=soft,
-                disturbance_step_std=settings.disturbance_step_std * limit,
-                input_noise_std=settings.input_noise_std * limit, measurement_std=settings.measurement_std)
+    return dict(
+        sample_period=settings.sample_period,
+        horizon=settings.horizon,
+        state_weight=np.array(settings.state_weight),
+        input_weight=settings.input_weight,
+        soft_bounds=soft,
+        disturbance_step_std=settings.disturbance_step_std * limit,
+        input_noise_std=settings.input_noise_std * limit,
+        measurement_std=settings.measurement_std,
+    )
 
 
-def linear_mpc(known: Plant, settings: MPCSettings, *, tracked: str, solver: str = "daqp",
-               **overrides) -> LinearMPC:
+def linear_mpc(known: Plant, settings: MPCSettings, *, tracked: str, solver: str = "daqp", **overrides) -> LinearMPC:
     """The linear MPC designed on `known` with `settings`; keyword arguments override them.
 
     Parameters

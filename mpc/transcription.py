@@ -49,8 +49,13 @@ def _mesh(mesh, intervals: int) -> tuple | None:
     if mesh is None:
         return None
     arr = np.asarray(mesh, dtype=float).reshape(-1)
-    if arr.size != intervals + 1 or not np.all(np.isfinite(arr)) or arr[0] != 0 or arr[-1] != 1 \
-            or np.any(np.diff(arr) <= 0):
+    if (
+        arr.size != intervals + 1
+        or not np.all(np.isfinite(arr))
+        or arr[0] != 0
+        or arr[-1] != 1
+        or np.any(np.diff(arr) <= 0)
+    ):
         raise ValueError(f"mesh must be {intervals + 1} increasing fractions of T from 0 to 1, got {mesh}")
     return tuple(arr)
 
@@ -279,8 +284,9 @@ class Transcription:
         user_values = [P[self.parameter_slices[name]] for name in ocp.parameters]
         user_symbols = [sym for sym, _ in ocp.parameters.values()]
         fixed_pos = {name: i for i, name in enumerate(self.fixed_param_names)}
-        p = ca.vertcat(*[phys[chosen_index[q.name]] if q.name in chosen else P[fixed_pos[q.name]]
-                         for q in plant.param_info])
+        p = ca.vertcat(
+            *[phys[chosen_index[q.name]] if q.name in chosen else P[fixed_pos[q.name]] for q in plant.param_info]
+        )
         T = phys[final_index] if final_index is not None else ca.SX(ocp.fixed_final_time)
         self.final_time_expression = T
         self.param_expression = p
@@ -296,8 +302,9 @@ class Transcription:
         path_names = ["x", "u", "c", "t", "p", "T", *ocp.parameters]
         integrals = [a for a in ocp.accumulated if a.kind == "integral"]
         sums = [a for a in ocp.accumulated if a.kind == "sum"]
-        integrand_fn = ca.Function("integrands", path_in, [ca.vertcat(*[a.integrand for a in integrals])],
-                                   path_names, ["L"])
+        integrand_fn = ca.Function(
+            "integrands", path_in, [ca.vertcat(*[a.integrand for a in integrals])], path_names, ["L"]
+        )
         summand_fn = ca.Function("summands", path_in, [ca.vertcat(*[a.integrand for a in sums])], path_names, ["l"])
         f = plant.casadi_f
         rows = _Rows()
@@ -314,22 +321,36 @@ class Transcription:
             xk, xc = ca.SX.sym("xk", nx), ca.SX.sym("xc", nx, d)
             uk, pk, hk = ca.SX.sym("u", nu), ca.SX.sym("p", plant.n_params), ca.SX.sym("h")
             nodes = ca.horzcat(xk, xc)
-            residual = ca.horzcat(*[(hk * f(xc[:, j], uk, pk) - nodes @ ca.DM(cc.derivative[:, j])) / state_scale
-                                    for j in range(d)])
-            interval = ca.Function("collocation_interval", [xk, xc, uk, pk, hk],
-                                   [ca.vec(residual), nodes @ ca.DM(cc.continuity)], ["x", "xc", "u", "p", "h"],
-                                   ["residual", "x_end"])
+            residual = ca.horzcat(
+                *[(hk * f(xc[:, j], uk, pk) - nodes @ ca.DM(cc.derivative[:, j])) / state_scale for j in range(d)]
+            )
+            interval = ca.Function(
+                "collocation_interval",
+                [xk, xc, uk, pk, hk],
+                [ca.vec(residual), nodes @ ca.DM(cc.continuity)],
+                ["x", "xc", "u", "p", "h"],
+                ["residual", "x_end"],
+            )
             for k in range(N):
                 res, x_end = interval(X[k], ca.horzcat(*XC[k]), fed[k], p, h[k])
                 ends.append(x_end)
-                rows.add(res, 0, 0, [f"collocation of {n} on interval {k}, point {j + 1}"
-                                     for j in range(d) for n in plant.state_names])
-                rows.add((X[k + 1] - x_end) / state_scale, 0, 0,
-                         [f"continuity of {n} at mesh point {k + 1}" for n in plant.state_names])
+                rows.add(
+                    res,
+                    0,
+                    0,
+                    [f"collocation of {n} on interval {k}, point {j + 1}" for j in range(d) for n in plant.state_names],
+                )
+                rows.add(
+                    (X[k + 1] - x_end) / state_scale,
+                    0,
+                    0,
+                    [f"continuity of {n} at mesh point {k + 1}" for n in plant.state_names],
+                )
                 for j in range(d):
                     tj = t_mesh[k] + cc.tau[j + 1] * h[k]
-                    integral_values += h[k] * cc.quadrature[j] * \
-                        integrand_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
+                    integral_values += (
+                        h[k] * cc.quadrature[j] * integrand_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
+                    )
         else:
             assert isinstance(method, MultipleShooting)
             step = rk4_interval(plant, integrand_fn, method.substeps)
@@ -338,8 +359,12 @@ class Transcription:
                 x_next, q = step(X[k], U[k], fed[k], C[k], t_mesh[k], h[k], p, T, *user_values)
                 ends.append(x_next)
                 dynamics_rows[k] = len(rows.labels) + np.arange(nx)
-                rows.add((X[k + 1] - x_next) / state_scale, 0, 0,
-                         [f"shooting gap of {n} at mesh point {k + 1}" for n in plant.state_names])
+                rows.add(
+                    (X[k + 1] - x_next) / state_scale,
+                    0,
+                    0,
+                    [f"shooting gap of {n} at mesh point {k + 1}" for n in plant.state_names],
+                )
                 integral_values += q
         sum_values = ca.SX.zeros(len(sums))
         for k in range(N):
@@ -363,8 +388,10 @@ class Transcription:
 
         def bound(indices, lower, upper):
             indices = np.atleast_1d(indices)
-            for value, numeric, symbolic, pick in ((lower, lbx, lbx_of_params, ca.fmax),
-                                                   (upper, ubx, ubx_of_params, ca.fmin)):
+            for value, numeric, symbolic, pick in (
+                (lower, lbx, lbx_of_params, ca.fmax),
+                (upper, ubx, ubx_of_params, ca.fmin),
+            ):
                 value = ca.SX(value)
                 if value.is_constant():
                     combine = np.maximum if pick is ca.fmax else np.minimum
@@ -392,18 +419,27 @@ class Transcription:
         for i, sym in enumerate(_elements(ocp.control_vector)):
             path_targets[sym.name()] = (sym, "control", i)
         point_targets = {}
-        for vec, where in ((ocp.state_start, states[0]), (ocp.state_end, states[N]), (ocp.input_start, inputs[0]),
-                           (ocp.input_end, inputs[N - 1]), (ocp.control_start, controls[0]),
-                           (ocp.control_end, controls[N - 1])):
+        for vec, where in (
+            (ocp.state_start, states[0]),
+            (ocp.state_end, states[N]),
+            (ocp.input_start, inputs[0]),
+            (ocp.input_end, inputs[N - 1]),
+            (ocp.control_start, controls[0]),
+            (ocp.control_end, controls[N - 1]),
+        ):
             for i, sym in enumerate(_elements(vec)):
                 point_targets[sym.name()] = (sym, int(where[i]))
         for name, index in chosen_index.items():
             point_targets[name] = (ocp.p[name], index)
         if final_index is not None:
             point_targets["T"] = (ocp.final_time, final_index)
-        decisions = ca.vertcat(ocp._path_symbols, ocp._point_symbols, ocp._interval_symbols,
-                               *[ocp.p[n] for n in chosen],
-                               ocp.final_time if final_index is not None else ca.SX(0, 1))
+        decisions = ca.vertcat(
+            ocp._path_symbols,
+            ocp._point_symbols,
+            ocp._interval_symbols,
+            *[ocp.p[n] for n in chosen],
+            ocp.final_time if final_index is not None else ca.SX(0, 1),
+        )
 
         bound_in = ca.vertcat(*user_symbols) if user_symbols else ca.SX(0, 1)
         bound_of = lambda e: ca.substitute(e, bound_in, ca.vertcat(*user_values)) if user_symbols else e
@@ -411,15 +447,17 @@ class Transcription:
         method_is_radau = points == "radau"
         for con in ocp.constraints:
             if not ca.depends_on(con.expression, decisions):
-                raise ValueError(f"constraint {con.label!r} involves no decision of this problem "
-                                 "(its value is fixed by the parameters)")
+                raise ValueError(
+                    f"constraint {con.label!r} involves no decision of this problem "
+                    "(its value is fixed by the parameters)"
+                )
             lower, upper = bound_of(con.lower), bound_of(con.upper)
             target = con.expression.name() if con.expression.is_symbolic() else None
             if con.path and target in path_targets and ca.is_equal(con.expression, path_targets[target][0]):
                 _, kind, i = path_targets[target]
                 if kind == "state":
                     first, last = (0 if con.include_start else 1), (N if con.include_end else N - 1)
-                    bound(states[first:last + 1, i], lower, upper)
+                    bound(states[first : last + 1, i], lower, upper)
                     inner = colloc[:, :, i].ravel()
                     if method_is_radau and not con.include_end:
                         inner = inner[:-1]  # Radau's last point of the last interval is x_N
@@ -436,28 +474,39 @@ class Transcription:
         interval_constraints = [c for c in general_path if c.interval]
         general_path = [c for c in general_path if not c.interval]
         if general_path:
-            path_fn = ca.Function("path_constraints", path_in, [ca.vertcat(*[c.expression for c in general_path])],
-                                  path_names, ["g"])
+            path_fn = ca.Function(
+                "path_constraints", path_in, [ca.vertcat(*[c.expression for c in general_path])], path_names, ["g"]
+            )
             lows = ca.vertcat(*[bound_of(c.lower) for c in general_path])
             highs = ca.vertcat(*[bound_of(c.upper) for c in general_path])
             where = "of T" if final_index is not None else "s"
             for k in range(N + 1):
                 uk, ck = (U[k], C[k]) if k < N else (U[N - 1], C[N - 1])
-                keep = [i for i, c in enumerate(general_path)
-                        if not ((k == 0 and not c.include_start) or (k == N and not c.include_end))]
+                keep = [
+                    i
+                    for i, c in enumerate(general_path)
+                    if not ((k == 0 and not c.include_start) or (k == N and not c.include_end))
+                ]
                 if keep:
                     values = path_fn(X[k], uk, ck, t_mesh[k], p, T, *user_values)
                     at = self.mesh[k] * (1 if final_index is not None else ocp.fixed_final_time)
-                    rows.add(ca.vertcat(*[values[i] for i in keep]), ca.vertcat(*[lows[i] for i in keep]),
-                             ca.vertcat(*[highs[i] for i in keep]),
-                             [f"{general_path[i].label} at mesh point {k} (t = {at:.4g} {where})" for i in keep])
+                    rows.add(
+                        ca.vertcat(*[values[i] for i in keep]),
+                        ca.vertcat(*[lows[i] for i in keep]),
+                        ca.vertcat(*[highs[i] for i in keep]),
+                        [f"{general_path[i].label} at mesh point {k} (t = {at:.4g} {where})" for i in keep],
+                    )
                 if k < N:
                     interior = range(d - 1) if method_is_radau else range(d)
                     for j in interior:
                         tj = t_mesh[k] + tau_nodes[j + 1] * h[k]
                         values = path_fn(XC[k][j], U[k], C[k], tj, p, T, *user_values)
-                        rows.add(values, lows, highs, [f"{c.label} on interval {k}, collocation point {j + 1}"
-                                                       for c in general_path])
+                        rows.add(
+                            values,
+                            lows,
+                            highs,
+                            [f"{c.label} on interval {k}, collocation point {j + 1}" for c in general_path],
+                        )
 
         if interval_constraints:
             # On interval k: x_next is the state its integration ends in (equal to x_{k+1} at a
@@ -466,26 +515,46 @@ class Transcription:
             expressions = ca.vertcat(*[c.expression for c in interval_constraints])
             uses_previous = ca.depends_on(expressions, ocp.input_previous)
             if uses_previous and ocp.input_before_start is None:
-                raise ValueError("a constraint uses u_previous: give the input before the first interval with "
-                                 "ocp.input_before(...)")
+                raise ValueError(
+                    "a constraint uses u_previous: give the input before the first interval with ocp.input_before(...)"
+                )
             before = bound_of(ocp.input_before_start) if uses_previous else ca.SX.zeros(nu)
-            interval_fn = ca.Function("interval_constraints", [*path_in, ocp.state_next, ocp.input_previous],
-                                      [expressions], [*path_names, "x_next", "u_previous"], ["g"])
+            interval_fn = ca.Function(
+                "interval_constraints",
+                [*path_in, ocp.state_next, ocp.input_previous],
+                [expressions],
+                [*path_names, "x_next", "u_previous"],
+                ["g"],
+            )
             lows = ca.vertcat(*[bound_of(c.lower) for c in interval_constraints])
             highs = ca.vertcat(*[bound_of(c.upper) for c in interval_constraints])
             for k in range(N):
-                values = interval_fn(X[k], U[k], C[k], t_mesh[k], p, T, *user_values, ends[k],
-                                     U[k - 1] if k else before)
+                values = interval_fn(
+                    X[k], U[k], C[k], t_mesh[k], p, T, *user_values, ends[k], U[k - 1] if k else before
+                )
                 rows.add(values, lows, highs, [f"{c.label} on interval {k}" for c in interval_constraints])
 
-        point_in = [ocp.state_start, ocp.state_end, ocp.input_start, ocp.input_end, ocp.control_start,
-                    ocp.control_end, ca.vertcat(*[a.symbol for a in ocp.accumulated]), ocp.param_vector,
-                    ocp.final_time, *user_symbols]
+        point_in = [
+            ocp.state_start,
+            ocp.state_end,
+            ocp.input_start,
+            ocp.input_end,
+            ocp.control_start,
+            ocp.control_end,
+            ca.vertcat(*[a.symbol for a in ocp.accumulated]),
+            ocp.param_vector,
+            ocp.final_time,
+            *user_symbols,
+        ]
         point_args = [X[0], X[N], U[0], U[N - 1], C[0], C[N - 1], self.accumulated_values, p, T, *user_values]
         if general_point:
             point_fn = ca.Function("point_constraints", point_in, [ca.vertcat(*[c.expression for c in general_point])])
-            rows.add(point_fn(*point_args), ca.vertcat(*[bound_of(c.lower) for c in general_point]),
-                     ca.vertcat(*[bound_of(c.upper) for c in general_point]), [c.label for c in general_point])
+            rows.add(
+                point_fn(*point_args),
+                ca.vertcat(*[bound_of(c.lower) for c in general_point]),
+                ca.vertcat(*[bound_of(c.upper) for c in general_point]),
+                [c.label for c in general_point],
+            )
         objective = ca.Function("objective", point_in, [ocp.objective])(*point_args)
 
         g = ca.vertcat(*rows.g) if rows.g else ca.SX(0, 1)
@@ -499,10 +568,14 @@ class Transcription:
             lbx_all[i] = ca.fmax(value, lbx[i])
         for i, value in ubx_of_params.items():
             ubx_all[i] = ca.fmin(value, ubx[i])
-        self.bounds = ca.Function("bounds", [P], [lbx_all, ubx_all, lbg, ubg],
-                                  ["P"], ["lbx", "ubx", "lbg", "ubg"])
-        self.values = ca.Function("values", [w, P], [objective, self.accumulated_values, T, p, g, ca.horzcat(*fed)],
-                                  ["w", "P"], ["f", "accumulated", "T", "p", "g", "plant_inputs"])
+        self.bounds = ca.Function("bounds", [P], [lbx_all, ubx_all, lbg, ubg], ["P"], ["lbx", "ubx", "lbg", "ubg"])
+        self.values = ca.Function(
+            "values",
+            [w, P],
+            [objective, self.accumulated_values, T, p, g, ca.horzcat(*fed)],
+            ["w", "P"],
+            ["f", "accumulated", "T", "p", "g", "plant_inputs"],
+        )
 
     # -------------------------------------------------------------------- helpers
     def parameter_values(self, x0=None, params=None, plant_params=None) -> np.ndarray:
@@ -516,18 +589,24 @@ class Transcription:
         values = dict(params or {})
         for name in values:
             if name not in ocp.parameters:
-                raise ValueError(f"params: the problem has no parameter {name!r}; its parameters are "
-                                 f"{', '.join(ocp.parameters) or 'none'}")
+                raise ValueError(
+                    f"params: the problem has no parameter {name!r}; its parameters are "
+                    f"{', '.join(ocp.parameters) or 'none'}"
+                )
         if x0 is not None:
             if "x0" not in ocp.parameters:
-                raise ValueError("x0 given, but the problem has no start_from(): call ocp.start_from() to make the "
-                                 "initial state a parameter")
+                raise ValueError(
+                    "x0 given, but the problem has no start_from(): call ocp.start_from() to make the "
+                    "initial state a parameter"
+                )
             values["x0"] = x0
         if plant_params:
             for name in plant_params:
                 if name not in self.fixed_param_names:
-                    raise ValueError(f"plant_params: {name!r} is not a fixed parameter of {self.plant.name}; "
-                                     f"fixed parameters are {', '.join(self.fixed_param_names)}")
+                    raise ValueError(
+                        f"plant_params: {name!r} is not a fixed parameter of {self.plant.name}; "
+                        f"fixed parameters are {', '.join(self.fixed_param_names)}"
+                    )
         full = self.plant.param_vector(dict(plant_params or {}))
         index = {q.name: i for i, q in enumerate(self.plant.param_info)}
         out = np.empty(self.nlp["p"].numel())
@@ -566,9 +645,13 @@ def rk4_interval(plant, integrands: ca.Function, substeps: int) -> ca.Function:
 
     z = rk4(rate, ca.vertcat(x, ca.SX.zeros(integrands.size1_out(0))), h, substeps, t0)
     xs, q = z[:nx], z[nx:]
-    return ca.Function("rk4_interval", [x, u, fed, c, t0, h, p, T, *user], [ca.cse(xs), ca.cse(q)],
-                       ["x", "u", "u_plant", "c", "t0", "h", "p", "T", *user_names],
-                       ["x_next", "integrals"])
+    return ca.Function(
+        "rk4_interval",
+        [x, u, fed, c, t0, h, p, T, *user],
+        [ca.cse(xs), ca.cse(q)],
+        ["x", "u", "u_plant", "c", "t0", "h", "p", "T", *user_names],
+        ["x_next", "integrals"],
+    )
 
 
 def _elements(vector: ca.SX) -> list:

@@ -27,8 +27,18 @@ if TYPE_CHECKING:
 #: The scenarios a study can run, as named on the command line.
 SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
-__all__ = ["CaseStudy", "Options", "SCENARIO_NAMES", "StudyResult", "get", "names", "register", "run",
-           "run_study", "unregister"]
+__all__ = [
+    "CaseStudy",
+    "Options",
+    "SCENARIO_NAMES",
+    "StudyResult",
+    "get",
+    "names",
+    "register",
+    "run",
+    "run_study",
+    "unregister",
+]
 
 
 def __getattr__(name: str):
@@ -72,11 +82,23 @@ def unregister(name: str) -> None:
     cases.unregister(name)
 
 
-def run_study(name: str | CaseStudy, *, scenarios: Sequence[str] | None = None, mc: int = 200,
-              seed: int = 0, quick: bool = False, out: str | os.PathLike | None = None,
-              providers: Sequence[str] | None = None, controllers: Mapping | None = None, strict: bool = False,
-              threads: int = 2, jit: bool | str = "auto", progress: Callable | None = None,
-              run_id: str | None = None, executor=None) -> StudyResult:
+def run_study(
+    name: str | CaseStudy,
+    *,
+    scenarios: Sequence[str] | None = None,
+    mc: int = 200,
+    seed: int = 0,
+    quick: bool = False,
+    out: str | os.PathLike | None = None,
+    providers: Sequence[str] | None = None,
+    controllers: Mapping | None = None,
+    strict: bool = False,
+    threads: int = 2,
+    jit: bool | str = "auto",
+    progress: Callable | None = None,
+    run_id: str | None = None,
+    executor=None,
+) -> StudyResult:
     """Run one study; with `out`, write its tables, answers, plots and animation into out/<plant>/.
 
     Parameters
@@ -115,10 +137,12 @@ def run_study(name: str | CaseStudy, *, scenarios: Sequence[str] | None = None, 
     if out is not None and (not isinstance(out, (str, os.PathLike)) or not str(os.fspath(out)).strip()):
         raise ValueError(f"out must name a folder (or be None to write nothing), got {out!r}")
     study = name if isinstance(name, CaseStudy) else get(name)
-    options = runner.Options(scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict,
-                             quick=quick)
-    result = runner.run_study(study, options, providers=providers, controllers=controllers, progress=progress,
-                              executor=executor)
+    options = runner.Options(
+        scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict, quick=quick
+    )
+    result = runner.run_study(
+        study, options, providers=providers, controllers=controllers, progress=progress, executor=executor
+    )
     if out is not None:
         if study.trajectories:
             solve_trajectories(result)
@@ -136,8 +160,9 @@ def solve_trajectories(result: StudyResult) -> None:
 
     started = time.perf_counter()
     options = result.options
-    solved = trajectories.solve_case(result.study, quick=options.quick, study_result=result, strict=options.strict,
-                                     seed=options.seed)
+    solved = trajectories.solve_case(
+        result.study, quick=options.quick, study_result=result, strict=options.strict, seed=options.seed
+    )
     result.trajectories = solved
     result.notes += [f"trajectories: {note}" for note in solved.notes]
     result.timing["trajectories_s"] = time.perf_counter() - started

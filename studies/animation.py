@@ -42,13 +42,14 @@ def draw(case, plant, x, reference: float) -> list:
     and labelled (`label_target`)."""
     if case.drawing is None:
         raise ValueError(f"the {case.plant} case has no drawing")
-    shapes = case.drawing(dict(plant.params), dict(zip(plant.state_names, np.asarray(x, dtype=float))),
-                          float(reference))
+    shapes = case.drawing(
+        dict(plant.params), dict(zip(plant.state_names, np.asarray(x, dtype=float))), float(reference)
+    )
     return label_target(shapes, target_text(case, reference))
 
 
 def target_text(case, reference: float) -> str:
-    """"target θ = 50°" / "target z = 2 m": the reference of the tracked coordinate, angles in degrees."""
+    """ "target θ = 50°" / "target z = 2 m": the reference of the tracked coordinate, angles in degrees."""
     symbol = {"theta": "θ", "phi": "φ", "z": "z", "x": "x"}.get(case.tracked, case.tracked)
     if case.tracked_unit == "rad":
         return f"target {symbol} = {math.degrees(reference):.3g}°"
@@ -65,8 +66,12 @@ def label_target(shapes: list, label: str) -> list:
     if not marks:
         return shapes
     mark = np.array(marks[0]["p"] if marks[0]["k"] != "circle" else [marks[0]["p"]], dtype=float)
-    others = [q for prim in shapes if prim is not marks[0] and prim["k"] != "text" and not is_track(prim)
-              for q in (prim["p"] if prim["k"] != "circle" else [prim["p"]])]
+    others = [
+        q
+        for prim in shapes
+        if prim is not marks[0] and prim["k"] != "text" and not is_track(prim)
+        for q in (prim["p"] if prim["k"] != "circle" else [prim["p"]])
+    ]
     everything = np.vstack([mark, np.array(others, dtype=float).reshape(-1, 2)])
     size = float(np.max(np.ptp(everything, axis=0))) or 1.0
     if marks[0]["k"] == "line":
@@ -101,13 +106,13 @@ def frames(case, plant, run, max_frames: int) -> tuple[np.ndarray, list, list]:
             break
         shapes.append(draw(case, plant, run.x[k], run.r[k, 0]))
         readouts.append(readout(plant, run.x[k]))
-    return times[:len(shapes)], shapes, readouts
+    return times[: len(shapes)], shapes, readouts
 
 
 def readout(plant, x) -> str:
     """The coordinates of state `x` as the page prints them: "z = 0.123 m, theta = 45.0 deg"."""
     parts = []
-    for name, value in zip(plant.coordinate_names, x[:plant.nq]):
+    for name, value in zip(plant.coordinate_names, x[: plant.nq]):
         scale, unit = style.display_unit(name)
         parts.append(f"{name} = {value * scale:.{1 if style.is_angle(name) else 3}f} {unit}")
     return ", ".join(parts)
@@ -144,8 +149,9 @@ def view(shapes: list, margin: float = 0.08) -> tuple[float, float, float, float
 
 
 # ------------------------------------------------------------------------------- GIF
-def write_gif(path: Path, case, plant, run, label: str, max_frames: int = 100, dpi: int = 80,
-              frame_ms: int | None = None) -> Path:
+def write_gif(
+    path: Path, case, plant, run, label: str, max_frames: int = 100, dpi: int = 80, frame_ms: int | None = None
+) -> Path:
     """An animated GIF of the run, at most `max_frames` frames, real time or faster.
 
     Frames last at least 40 ms (browsers slow down faster GIFs); a long run
@@ -178,8 +184,9 @@ def write_gif(path: Path, case, plant, run, label: str, max_frames: int = 100, d
     palette = images[len(images) // 2].quantize(colors=64)
     frames_p = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
     with files.atomic_path(path) as tmp:
-        frames_p[0].save(tmp, format="GIF", save_all=True, append_images=frames_p[1:], duration=frame_ms, loop=0,
-                         optimize=False)
+        frames_p[0].save(
+            tmp, format="GIF", save_all=True, append_images=frames_p[1:], duration=frame_ms, loop=0, optimize=False
+        )
     return path
 
 
@@ -188,8 +195,14 @@ def _artist(ax, prim: dict, dpi: int) -> Artist:
     artist: Artist
     if prim["k"] == "line":
         points = np.array(prim["p"])
-        artist = Line2D(points[:, 0], points[:, 1], color=prim["c"], linewidth=width,
-                        linestyle="--" if prim["d"] else "-", solid_capstyle="round")
+        artist = Line2D(
+            points[:, 0],
+            points[:, 1],
+            color=prim["c"],
+            linewidth=width,
+            linestyle="--" if prim["d"] else "-",
+            solid_capstyle="round",
+        )
         ax.add_line(artist)
     elif prim["k"] == "poly":
         artist = Polygon(prim["p"], closed=True, facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
@@ -227,8 +240,16 @@ def _rounded(value, digits: int = 4):
     return value
 
 
-def write_html(path: Path, case, plant, runs: Mapping[str, Any], selected: str | None = None, caption: str = "",
-               max_frames: int = 300, verdicts: dict | None = None) -> Path:
+def write_html(
+    path: Path,
+    case,
+    plant,
+    runs: Mapping[str, Any],
+    selected: str | None = None,
+    caption: str = "",
+    max_frames: int = 300,
+    verdicts: dict | None = None,
+) -> Path:
     """A self-contained HTML page (inline SVG and script) animating the runs of several controllers.
 
     Parameters
@@ -244,17 +265,27 @@ def write_html(path: Path, case, plant, runs: Mapping[str, Any], selected: str |
     selected = next(iter(runs)) if selected is None else selected
     if selected not in runs:
         raise ValueError(f"selected controller {selected!r} is not among the runs: {', '.join(runs)}")
-    data = {"order": list(runs), "selected": selected, "runs": {}, "input": plant.input_names[0],
-            "input_unit": case.input_unit, "verdicts": dict(verdicts or {}),
-            "colors": {label: style.of(label).color for label in runs}}
+    data = {
+        "order": list(runs),
+        "selected": selected,
+        "runs": {},
+        "input": plant.input_names[0],
+        "input_unit": case.input_unit,
+        "verdicts": dict(verdicts or {}),
+        "colors": {label: style.of(label).color for label in runs},
+    }
     for label, run in runs.items():
         data["runs"][label] = run_data(case, plant, run, max_frames)
     # One pass: a label containing a placeholder is shown as it is, never filled in. '<' is escaped in
     # the JSON so no label can close the script.
-    page = files.fill_template(_TEMPLATE, {
-        "__TITLE__": html.escape(f"{plant.title}: the controllers on the text's step"),
-        "__CAPTION__": html.escape(caption),
-        "__DATA__": json.dumps(data, separators=(",", ":"), ensure_ascii=False).replace("<", "\\u003c")})
+    page = files.fill_template(
+        _TEMPLATE,
+        {
+            "__TITLE__": html.escape(f"{plant.title}: the controllers on the text's step"),
+            "__CAPTION__": html.escape(caption),
+            "__DATA__": json.dumps(data, separators=(",", ":"), ensure_ascii=False).replace("<", "\\u003c"),
+        },
+    )
     return files.write_text(path, page)
 
 
@@ -265,9 +296,14 @@ def run_data(case, plant, run, max_frames: int) -> dict:
     digits = max(3, 3 - int(math.floor(math.log10(max(xmax - xmin, ymax - ymin)))) + 1)
     index = np.searchsorted(run.t, times - 1e-9)
     command = run.u[np.minimum(index, len(run.u) - 1), 0]
-    return {"t": [round(float(t), 4) for t in times], "frames": _rounded(shapes, digits), "readouts": readouts,
-            "view": [xmin, ymin, xmax - xmin, ymax - ymin], "u": [round(float(v), 5) for v in command],
-            "limit": float(np.max(run.input_limit))}
+    return {
+        "t": [round(float(t), 4) for t in times],
+        "frames": _rounded(shapes, digits),
+        "readouts": readouts,
+        "view": [xmin, ymin, xmax - xmin, ymax - ymin],
+        "u": [round(float(v), 5) for v in command],
+        "limit": float(np.max(run.input_limit)),
+    }
 
 
 _TEMPLATE = """<!DOCTYPE html>

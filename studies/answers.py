@@ -29,9 +29,8 @@ from .runner import call_providers
 def _coordinate_tf(lin: models.LinearModel, coordinate: str, input_name: str) -> control.TransferFunction:
     """Transfer function from `input_name` to the state `coordinate` (cleaned as `LinearModel.tf` does)."""
     i = lin.state_names.index(coordinate)
-    row = np.eye(lin.nx)[i:i + 1]
-    single = dataclasses.replace(lin, C=row, D=np.zeros((1, lin.nu)), ye=lin.xe[i:i + 1],
-                                 output_names=(coordinate,))
+    row = np.eye(lin.nx)[i : i + 1]
+    single = dataclasses.replace(lin, C=row, D=np.zeros((1, lin.nu)), ye=lin.xe[i : i + 1], output_names=(coordinate,))
     return control.minreal(single.tf(coordinate, input_name), verbose=False)
 
 
@@ -49,9 +48,13 @@ def printed_model(plant: models.Plant, numeral: str) -> dict:
 def _printed(declaration, numeral: str) -> dict:
     T = symbolic.kinetic_energy(declaration)
     equations = symbolic.equations_of_motion(declaration)
-    return {f"{numeral}.1": {"T": str(T), "latex": f"$T = {symbolic.latex(T, declaration)}$"},
-            f"{numeral}.3": {"equations": [f"{e.lhs} = {e.rhs}" for e in equations],
-                             "latex": [f"${symbolic.latex(e, declaration)}$" for e in equations]}}
+    return {
+        f"{numeral}.1": {"T": str(T), "latex": f"$T = {symbolic.latex(T, declaration)}$"},
+        f"{numeral}.3": {
+            "equations": [f"{e.lhs} = {e.rhs}" for e in equations],
+            "latex": [f"${symbolic.latex(e, declaration)}$" for e in equations],
+        },
+    }
 
 
 def model_answers(study: CaseStudy) -> dict:
@@ -70,11 +73,21 @@ def model_answers(study: CaseStudy) -> dict:
     lin = plant.linearize(xe, ue)
     u_name = plant.input_names[0]
     out = printed_model(plant, n) | {
-        f"{n}.5": {"x_e": dict(zip(plant.state_names, xe)), "u_e": dict(zip(plant.input_names, ue)),
-                   "A": lin.A, "B": lin.B},
+        f"{n}.5": {
+            "x_e": dict(zip(plant.state_names, xe)),
+            "u_e": dict(zip(plant.input_names, ue)),
+            "A": lin.A,
+            "B": lin.B,
+        },
         f"{n}.6": {f"{o}/{u_name}": lin.tf(o, u_name) for o in plant.output_names},
-        f"{n}.7": {"states": list(plant.state_names), "outputs": list(plant.output_names),
-                   "A": lin.A, "B": lin.B, "C": lin.C, "D": lin.D},
+        f"{n}.7": {
+            "states": list(plant.state_names),
+            "outputs": list(plant.output_names),
+            "A": lin.A,
+            "B": lin.B,
+            "C": lin.C,
+            "D": lin.D,
+        },
     }
     if study.cascade:
         inner, outer = study.cascade
@@ -82,12 +95,16 @@ def model_answers(study: CaseStudy) -> dict:
         model = models.get(name, **dict(overrides))
         mlin = model.linearize()
         g_inner = _coordinate_tf(mlin, inner, model.input_names[0])
-        g_outer = clean_tf(control.minreal(_coordinate_tf(mlin, outer, model.input_names[0]) / g_inner,
-                                        verbose=False))
-        where = "" if name == study.plant else f" ({name}" + "".join(f", {k} = {v:g}" for k, v in
-                                                                      dict(overrides).items()) + ")"
-        out[f"{n}.6"] |= {f"cascade inner {inner}/{model.input_names[0]}{where}": g_inner,
-                          f"cascade outer {outer}/{inner}{where}": g_outer}
+        g_outer = clean_tf(control.minreal(_coordinate_tf(mlin, outer, model.input_names[0]) / g_inner, verbose=False))
+        where = (
+            ""
+            if name == study.plant
+            else f" ({name}" + "".join(f", {k} = {v:g}" for k, v in dict(overrides).items()) + ")"
+        )
+        out[f"{n}.6"] |= {
+            f"cascade inner {inner}/{model.input_names[0]}{where}": g_inner,
+            f"cascade outer {outer}/{inner}{where}": g_outer,
+        }
     return out
 
 
@@ -180,9 +197,12 @@ def format_value(value, indent: str = "    ") -> str:
 
 def format_answers(study: CaseStudy, answers: Mapping, title: str) -> str:
     """The answers and errata as Markdown text, items in homework order."""
-    lines = [f"# Homework answers: {title}", "",
-             "SI units, angles in rad. .1-.7 from the model declared in `models`; design items from the "
-             "case's designs.", ""]
+    lines = [
+        f"# Homework answers: {title}",
+        "",
+        "SI units, angles in rad. .1-.7 from the model declared in `models`; design items from the case's designs.",
+        "",
+    ]
     for item, values in answers.items():
         if item == "errata":
             continue

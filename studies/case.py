@@ -25,13 +25,29 @@ if TYPE_CHECKING:
 KNOWN_ERROR = 0.05
 
 #: Controller labels in table order; a provider's other labels follow these.
-CONTROLLERS = ("PD", "PID", "PID (no anti-windup)", "loopshaped", "pole placement",
-               "pole placement + integrator", "observer-based", "disturbance observer", "LQR", "LQR + Kalman",
-               "linear MPC", "nonlinear MPC", "tuned")
+CONTROLLERS = (
+    "PD",
+    "PID",
+    "PID (no anti-windup)",
+    "loopshaped",
+    "pole placement",
+    "pole placement + integrator",
+    "observer-based",
+    "disturbance observer",
+    "LQR",
+    "LQR + Kalman",
+    "linear MPC",
+    "nonlinear MPC",
+    "tuned",
+)
 
 #: Where controllers come from: ``module:function``, called as ``function(case_name, known=Plant)``.
-PROVIDERS = ("studies.providers:classical", "studies.providers:statespace", "studies.providers:mpc",
-             "studies.providers:tuned")
+PROVIDERS = (
+    "studies.providers:classical",
+    "studies.providers:statespace",
+    "studies.providers:mpc",
+    "studies.providers:tuned",
+)
 
 #: Where homework answers come from: ``module:function``, called as ``function(case_name)``.
 ANSWER_PROVIDERS = ("studies.providers:classical_answers", "studies.providers:statespace_answers")
@@ -71,8 +87,9 @@ class Scenario:
         """The reference signal: the equilibrium value plus the levels times the case's step."""
         if len(self.levels) == 1:
             return signals.step(self.levels[0] * case.step, 0.0, equilibrium_value)
-        return signals.steps([level * case.step for level in self.levels],
-                             case.duration * self.segment_fraction, equilibrium_value)
+        return signals.steps(
+            [level * case.step for level in self.levels], case.duration * self.segment_fraction, equilibrium_value
+        )
 
 
 def step() -> Scenario:
@@ -88,8 +105,9 @@ def series_of_steps(levels=(1.0, 0.0, -1.0, 0.0), segment_fraction: float = 0.5)
 
 def input_disturbance() -> Scenario:
     """The step with the case's constant input disturbance acting from t = 0 (the text's .16/.17)."""
-    return Scenario("disturbance", "the step with the case's constant input disturbance from t = 0",
-                    input_disturbance=True)
+    return Scenario(
+        "disturbance", "the step with the case's constant input disturbance from t = 0", input_disturbance=True
+    )
 
 
 def measurement_noise(noise: Mapping[str, float]) -> Scenario:
@@ -100,8 +118,7 @@ def measurement_noise(noise: Mapping[str, float]) -> Scenario:
 
 def parameter_monte_carlo(rel: float = KNOWN_ERROR) -> Scenario:
     """The step on plants whose uncertain parameters are uniform within ±rel of nominal."""
-    return Scenario("mc", f"the step on ±{100 * rel:g} % parameter samples (Monte Carlo)",
-                    monte_carlo=True, rel=rel)
+    return Scenario("mc", f"the step on ±{100 * rel:g} % parameter samples (Monte Carlo)", monte_carlo=True, rel=rel)
 
 
 def standard_scenarios(noise: Mapping[str, float]) -> tuple:

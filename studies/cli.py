@@ -71,43 +71,87 @@ def _known_names() -> list:
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="python -m studies", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+        prog="python -m studies",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  python -m studies --quick\n  python -m studies arm --scenario step --mc 500 --out DIR\n"
-               "  python -m studies pendulum --sweep m2=0.5:2:8 --workers 2\n  python -m studies --list")
-    p.add_argument("plants", nargs="*", metavar="PLANT",
-                   help=f"plants to study (default all: {', '.join(_known_names())})")
-    p.add_argument("--scenario", action="append", metavar="NAME",
-                   help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}")
-    p.add_argument("--mc", type=_count, metavar="N",
-                   help=f"Monte Carlo samples of every controller, MPC included (default {FULL['mc']}, "
-                        f"--quick {QUICK['mc']}; 0 skips the Monte Carlo)")
-    p.add_argument("--seed", type=_seed, default=0,
-                   help="seed of the parameter samples and the noise, a whole number >= 0 (default 0)")
-    p.add_argument("--out", type=_folder, default="results", metavar="DIR",
-                   help="output folder (default results/)")
-    p.add_argument("--quick", action="store_true",
-                   help=f"{QUICK['mc']} Monte Carlo samples, lighter plots and animations")
-    p.add_argument("--jobs", type=int, default=2, metavar="N",
-                   help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
-                        "everything in this process)")
-    p.add_argument("--workers", type=int, metavar="N",
-                   help="run on a Dask LocalCluster of N worker processes: the plants, or one plant's Monte Carlo "
-                        "samples and sweep points (the same numbers as without Dask)")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run on the Dask cluster of this scheduler (tcp://host:8786); its workers must import "
-                        "this package")
-    p.add_argument("--sweep", metavar="PARAM=LOW:HIGH:N",
-                   help="instead of the study: every controller of one plant on N values of its true parameter "
-                        "PARAM from LOW to HIGH (writes OUT/PLANT/sweep.csv, sweep.png, sweep.md)")
-    p.add_argument("--list", action="store_true",
-                   help="list plants, scenarios and declared controllers (designs nothing, runs nothing)")
-    p.add_argument("--provider", action="append", default=[], metavar="MODULE:FUNCTION",
-                   help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}")
-    p.add_argument("--strict", action="store_true",
-                   help="exit 1 on a missing or failing provider (before running), on a controller error, and "
-                        "when any row is not ok (degraded, diverged, failed or skipped)")
-    p.add_argument("--answers", action="store_true",
-                   help="print the homework answers and errata (always written to OUT/<plant>/answers.md)")
+        "  python -m studies pendulum --sweep m2=0.5:2:8 --workers 2\n  python -m studies --list",
+    )
+    p.add_argument(
+        "plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(_known_names())})"
+    )
+    p.add_argument(
+        "--scenario",
+        action="append",
+        metavar="NAME",
+        help=f"run only these scenarios (repeat or comma-separate): {', '.join(SCENARIO_NAMES)}",
+    )
+    p.add_argument(
+        "--mc",
+        type=_count,
+        metavar="N",
+        help=f"Monte Carlo samples of every controller, MPC included (default {FULL['mc']}, "
+        f"--quick {QUICK['mc']}; 0 skips the Monte Carlo)",
+    )
+    p.add_argument(
+        "--seed",
+        type=_seed,
+        default=0,
+        help="seed of the parameter samples and the noise, a whole number >= 0 (default 0)",
+    )
+    p.add_argument("--out", type=_folder, default="results", metavar="DIR", help="output folder (default results/)")
+    p.add_argument(
+        "--quick", action="store_true", help=f"{QUICK['mc']} Monte Carlo samples, lighter plots and animations"
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=2,
+        metavar="N",
+        help="run N plants at once in separate processes (default 2, one per core here; 1 runs "
+        "everything in this process)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="run on a Dask LocalCluster of N worker processes: the plants, or one plant's Monte Carlo "
+        "samples and sweep points (the same numbers as without Dask)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on the Dask cluster of this scheduler (tcp://host:8786); its workers must import this package",
+    )
+    p.add_argument(
+        "--sweep",
+        metavar="PARAM=LOW:HIGH:N",
+        help="instead of the study: every controller of one plant on N values of its true parameter "
+        "PARAM from LOW to HIGH (writes OUT/PLANT/sweep.csv, sweep.png, sweep.md)",
+    )
+    p.add_argument(
+        "--list",
+        action="store_true",
+        help="list plants, scenarios and declared controllers (designs nothing, runs nothing)",
+    )
+    p.add_argument(
+        "--provider",
+        action="append",
+        default=[],
+        metavar="MODULE:FUNCTION",
+        help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}",
+    )
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 1 on a missing or failing provider (before running), on a controller error, and "
+        "when any row is not ok (degraded, diverged, failed or skipped)",
+    )
+    p.add_argument(
+        "--answers",
+        action="store_true",
+        help="print the homework answers and errata (always written to OUT/<plant>/answers.md)",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="print the answers and every note as well")
     p.add_argument("--quiet", action="store_true", help="no progress bar: only the closing lines")
     return p
@@ -129,10 +173,17 @@ class Progress:
         tty = stream.isatty()
         self.slots = dict(slots)
         self.done = dict.fromkeys(self.slots, 0.0)
-        self.bar = tqdm(total=sum(self.slots.values()), unit="run", file=stream, disable=disable,
-                        dynamic_ncols=True, mininterval=0.2 if tty else 20.0, ascii=not tty,
-                        bar_format="{desc} {percentage:3.0f}%|{bar}| {n}/{total} runs [{elapsed}<{remaining}]"
-                                   "{postfix}", desc=f"{len(self.slots)} plant{'s' * (len(self.slots) > 1)}")
+        self.bar = tqdm(
+            total=sum(self.slots.values()),
+            unit="run",
+            file=stream,
+            disable=disable,
+            dynamic_ncols=True,
+            mininterval=0.2 if tty else 20.0,
+            ascii=not tty,
+            bar_format="{desc} {percentage:3.0f}%|{bar}| {n}/{total} runs [{elapsed}<{remaining}]{postfix}",
+            desc=f"{len(self.slots)} plant{'s' * (len(self.slots) > 1)}",
+        )
 
     def update(self, plant: str, done: int, total: int, text: str) -> None:
         self.done[plant] = self.slots.get(plant, 0) * min(done, total) / max(total, 1)
@@ -151,8 +202,9 @@ def progress_slots(plants, scenarios, settings: dict) -> dict:
     for name in plants:
         listed = listing.get(name) if name in listing.names() else None
         declared = listed.scenarios if listed else SCENARIO_NAMES
-        chosen = [s for s in declared if (scenarios is None or s in scenarios)
-                  and not (s == "mc" and settings.get("mc") == 0)]
+        chosen = [
+            s for s in declared if (scenarios is None or s in scenarios) and not (s == "mc" and settings.get("mc") == 0)
+        ]
         slots[name] = max(1, len(chosen) * len(listed.controllers if listed else (1,)))
     return slots
 
@@ -178,13 +230,17 @@ def _list(plants, providers) -> str:
         lines.append("  scenarios: " + ", ".join(listed.scenarios))
         lines.append("  controllers: " + ", ".join(listed.controllers))
         lines += [f"  + the controllers of {spec}, named when they are designed" for spec in providers]
-    lines += ["", "Controllers are listed as each case declares them; a provider may lack some (the run notes "
-                  "which) or add others."]
+    lines += [
+        "",
+        "Controllers are listed as each case declares them; a provider may lack some (the run notes "
+        "which) or add others.",
+    ]
     return "\n".join(lines)
 
 
-def _run_plant(name: str, settings: dict, out: str, answers: bool, queue=None, executor=None,
-               run_id: str | None = None) -> dict:
+def _run_plant(
+    name: str, settings: dict, out: str, answers: bool, queue=None, executor=None, run_id: str | None = None
+) -> dict:
     """Run and write one study; returns what the command prints (picklable, for --jobs and Dask)."""
     from . import get, run_study
     from .answers import format_answers
@@ -194,10 +250,18 @@ def _run_plant(name: str, settings: dict, out: str, answers: bool, queue=None, e
     progress = None if queue is None else (lambda done, total, text: queue.put((name, done, total, text)))
     result = run_study(study, out=out, progress=progress, executor=executor, run_id=run_id, **settings)
     table = result.table
-    return {"name": name, "answers": format_answers(study, result.answers, result.plant.title) if answers else None,
-            "controllers": len(result.controllers), "rows": len(table), "timing": result.timing,
-            "notes": list(result.notes), "best": result.best("step"), "counts": verdict_counts(table),
-            "not_ok": not_ok_lines(table), "not_ok_rows": len(not_ok_rows(table))}
+    return {
+        "name": name,
+        "answers": format_answers(study, result.answers, result.plant.title) if answers else None,
+        "controllers": len(result.controllers),
+        "rows": len(table),
+        "timing": result.timing,
+        "notes": list(result.notes),
+        "best": result.best("step"),
+        "counts": verdict_counts(table),
+        "not_ok": not_ok_lines(table),
+        "not_ok_rows": len(not_ok_rows(table)),
+    }
 
 
 def plant_task(task: tuple) -> tuple:
@@ -211,8 +275,11 @@ def plant_task(task: tuple) -> tuple:
     name, settings, answers, run_id = task
     with tempfile.TemporaryDirectory(prefix="studies-") as folder:
         report = _run_plant(name, settings, folder, answers, run_id=run_id)
-        files = {str(path.relative_to(folder)): path.read_bytes()
-                 for path in sorted(Path(folder).rglob("*")) if path.is_file()}
+        files = {
+            str(path.relative_to(folder)): path.read_bytes()
+            for path in sorted(Path(folder).rglob("*"))
+            if path.is_file()
+        }
     return report, files
 
 
@@ -275,8 +342,9 @@ def not_ok_lines(table, width: int = 118) -> list:
 
 def _plant_line(done: dict) -> str:
     plural = {"meets specs": "meet specs", "violates": "violate"}
-    counts = ", ".join(f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items()
-                       if n)
+    counts = ", ".join(
+        f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items() if n
+    )
     best = f"; best step ITAE: {done['best']}" if done.get("best") else ""
     return f"{done['name']}: {done['controllers']} controllers, {done['rows']} rows: {counts or 'no verdicts'}{best}"
 
@@ -289,9 +357,11 @@ def closing_lines(finished: list, out: str, verbose: bool = False) -> list:
         lines += done["not_ok"]
         failures = [n for n in done["notes"] if "failed" in n and not n.startswith("not provided")]
         lines += [f"  note: {n}" for n in (done["notes"] if verbose else failures)]
-    lines.append(f"open {os.path.join(out, 'index.html')} (every plant at a glance) or "
-                 f"{os.path.join(out, 'summary.md')}; {os.path.join(out, '<plant>', 'table.md')} says what each "
-                 "row misses, and by how much")
+    lines.append(
+        f"open {os.path.join(out, 'index.html')} (every plant at a glance) or "
+        f"{os.path.join(out, 'summary.md')}; {os.path.join(out, '<plant>', 'table.md')} says what each "
+        "row misses, and by how much"
+    )
     return lines
 
 
@@ -356,8 +426,17 @@ class _Inline:
         self.progress.update(*item)
 
 
-def _run_all(plants, settings: dict, providers: list, out: str, answers: bool, jobs: int, progress: Progress,
-             executor=None, run_id: str | None = None) -> list:
+def _run_all(
+    plants,
+    settings: dict,
+    providers: list,
+    out: str,
+    answers: bool,
+    jobs: int,
+    progress: Progress,
+    executor=None,
+    run_id: str | None = None,
+) -> list:
     from . import get
 
     # Parallel jobs take the plants last-registered first (the text's later plants, such as the crane, run
@@ -371,8 +450,12 @@ def _run_all(plants, settings: dict, providers: list, out: str, answers: bool, j
         from distributed import as_completed
 
         run = uuid.uuid4().hex[:8]
-        futures = [executor.client.submit(plant_task, (name, per_plant[name], answers, run_id), pure=False,
-                                          key=f"plant-{name}-{run}") for name in order]
+        futures = [
+            executor.client.submit(
+                plant_task, (name, per_plant[name], answers, run_id), pure=False, key=f"plant-{name}-{run}"
+            )
+            for name in order
+        ]
         reports: list = []
         files: dict = {}
         try:
@@ -394,11 +477,15 @@ def _run_all(plants, settings: dict, providers: list, out: str, answers: bool, j
     import queue as queue_module
 
     context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager, \
-            concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool, _stop_workers_on_error():
+    with (
+        context.Manager() as manager,
+        concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool,
+        _stop_workers_on_error(),
+    ):
         messages = manager.Queue()
-        pending = {pool.submit(_run_plant, name, per_plant[name], out, answers, messages, None, run_id)
-                   for name in order}
+        pending = {
+            pool.submit(_run_plant, name, per_plant[name], out, answers, messages, None, run_id) for name in order
+        }
         while pending:
             try:
                 progress.update(*messages.get(timeout=0.2))
@@ -422,8 +509,10 @@ def _gather(future):
     try:
         return future.result()
     except KilledWorker as err:
-        raise RunFailed(f"{future.key}: a Dask worker died while running it and the scheduler gave up after "
-                        f"retrying ({err}); nothing was written") from None
+        raise RunFailed(
+            f"{future.key}: a Dask worker died while running it and the scheduler gave up after "
+            f"retrying ({err}); nothing was written"
+        ) from None
 
 
 def _run_sweep(args, p, plants, settings, progress_stream) -> int:
@@ -437,7 +526,7 @@ def _run_sweep(args, p, plants, settings, progress_stream) -> int:
         grid = Grid.parse(args.sweep)
     except ValueError as err:
         p.error(str(err))
-    scenario = (settings["scenarios"] or ["step"])
+    scenario = settings["scenarios"] or ["step"]
     if len(scenario) != 1 or scenario[0] == "mc":
         p.error(f"--sweep runs one scenario other than mc; got {', '.join(scenario)}")
     import models
@@ -452,21 +541,32 @@ def _run_sweep(args, p, plants, settings, progress_stream) -> int:
     started = time.perf_counter()
     try:
         with connect(args.scheduler, args.workers) as executor:
-            table, notes = run_sweep(study, grid, scenario=scenario[0], options=options,
-                                     providers=list(study.providers) + args.provider, executor=executor,
-                                     progress=lambda done, total, text: progress.update(name, done, total, text))
+            table, notes = run_sweep(
+                study,
+                grid,
+                scenario=scenario[0],
+                options=options,
+                providers=list(study.providers) + args.provider,
+                executor=executor,
+                progress=lambda done, total, text: progress.update(name, done, total, text),
+            )
     except Exception as err:
         progress.close()
         print(f"python -m studies: the sweep failed: {type(err).__name__}: {err}", file=sys.stderr)
         return 1
     progress.close()
     write_sweep(study, grid, table, args.out, notes, scenario[0])
-    lines = [f"{name}: {table.controller.nunique()} controllers x {len(grid.values)} values of {grid.param} "
-             f"({grid.values[0]:g} to {grid.values[-1]:g}), scenario {scenario[0]}", *sweep_summary(table, grid)]
+    lines = [
+        f"{name}: {table.controller.nunique()} controllers x {len(grid.values)} values of {grid.param} "
+        f"({grid.values[0]:g} to {grid.values[-1]:g}), scenario {scenario[0]}",
+        *sweep_summary(table, grid),
+    ]
     lines += [f"  note: {n}" for n in notes if args.verbose or "failed" in n]
     folder = os.path.join(args.out, name)
-    lines.append(f"open {os.path.join(folder, 'sweep.png')} (cost and verdict against {grid.param}), "
-                 f"{os.path.join(folder, 'sweep.md')} and sweep.csv; {time.perf_counter() - started:.1f} s")
+    lines.append(
+        f"open {os.path.join(folder, 'sweep.png')} (cost and verdict against {grid.param}), "
+        f"{os.path.join(folder, 'sweep.md')} and sweep.csv; {time.perf_counter() - started:.1f} s"
+    )
     print("\n".join(lines))
     return 0
 
@@ -496,8 +596,14 @@ def main(argv=None) -> int:
     defaults = dict(QUICK if args.quick else FULL)
     dask = args.workers is not None or bool(args.scheduler)
     jobs = 1 if dask else min(args.jobs, len(plants))
-    settings = {"scenarios": scenarios, "mc": defaults["mc"] if args.mc is None else args.mc,
-                "seed": args.seed, "quick": args.quick, "strict": args.strict, "threads": max(1, 2 // jobs)}
+    settings = {
+        "scenarios": scenarios,
+        "mc": defaults["mc"] if args.mc is None else args.mc,
+        "seed": args.seed,
+        "quick": args.quick,
+        "strict": args.strict,
+        "threads": max(1, 2 // jobs),
+    }
 
     from models import checks, files, interrupts
 
@@ -530,8 +636,9 @@ def main(argv=None) -> int:
     published = False
     try:
         with connect(args.scheduler, args.workers) as executor:
-            finished = _run_all(plants, settings, args.provider, str(staging), answers, jobs, progress, executor,
-                                run_id)
+            finished = _run_all(
+                plants, settings, args.provider, str(staging), answers, jobs, progress, executor, run_id
+            )
         progress.close()
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
             writers.publish(staging, args.out, registered, run_id)
@@ -539,8 +646,11 @@ def main(argv=None) -> int:
     except Exception as err:
         progress.close()
         if not interrupts.is_interrupt(err):  # an interrupt CasADi reported as an error is handled below
-            print(f"python -m studies: failed: {type(err).__name__}: {err}; nothing of this run was written to "
-                  f"{args.out}", file=sys.stderr)
+            print(
+                f"python -m studies: failed: {type(err).__name__}: {err}; nothing of this run was written to "
+                f"{args.out}",
+                file=sys.stderr,
+            )
             return 1
         interrupted = True
     except KeyboardInterrupt:
@@ -551,15 +661,25 @@ def main(argv=None) -> int:
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     if interrupted:
-        print("python -m studies: interrupted" + (f"; run {run_id} was complete and is in {args.out}" if published
-              else f"; nothing of this run was written to {args.out}"), file=sys.stderr)
+        print(
+            "python -m studies: interrupted"
+            + (
+                f"; run {run_id} was complete and is in {args.out}"
+                if published
+                else f"; nothing of this run was written to {args.out}"
+            ),
+            file=sys.stderr,
+        )
         return 130
     finished = sorted(finished, key=lambda d: registered.index(d["name"]))
     for done in finished:
         if done["answers"]:
             print(done["answers"], flush=True)
-    where = (f"on Dask ({args.scheduler or f'{args.workers} local workers'})" if dask
-             else f"with {jobs} job{'s' if jobs > 1 else ''}")
+    where = (
+        f"on Dask ({args.scheduler or f'{args.workers} local workers'})"
+        if dask
+        else f"with {jobs} job{'s' if jobs > 1 else ''}"
+    )
     lines = closing_lines(finished, args.out, args.verbose)
     lines.append(f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
     if missing:

@@ -69,12 +69,17 @@ SPRING_MASS, SPRING_TIME, SPRING_RANGE = 1.0, 2.0, (0.1, 2.0)
 def spring_mass_plant() -> models.Plant:
     """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen."""
 
-    @models.declare(name="spring_mass", title="spring and mass (issue 13)", coordinates=("s",), inputs=("u",),
-                    params=(models.Param("m", SPRING_MASS, "kg", "mass"), models.Param("k", 0.5, "N/m", "stiffness")),
-                    input_limit=1.0, register=False)
+    @models.declare(
+        name="spring_mass",
+        title="spring and mass (issue 13)",
+        coordinates=("s",),
+        inputs=("u",),
+        params=(models.Param("m", SPRING_MASS, "kg", "mass"), models.Param("k", 0.5, "N/m", "stiffness")),
+        input_limit=1.0,
+        register=False,
+    )
     def declaration(q, dq, u, p):
-        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u],
-                              outputs={"s": q.s})
+        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u], outputs={"s": q.s})
 
     return models.Plant(declaration)
 
@@ -89,10 +94,14 @@ def spring_mass(quick: bool) -> TrajectorySetup:
     ocp.subject_to(ocp.at_start(ocp.state) == 0)
     ocp.subject_to(ocp.at_end(ocp.x.ds) == 0)
     return TrajectorySetup(
-        ocp, Collocation(intervals=40 if quick else 100), {}, "s(T) (m), maximized",
+        ocp,
+        Collocation(intervals=40 if quick else 100),
+        {},
+        "s(T) (m), maximized",
         f"m s'' = −k s + u, m = {SPRING_MASS:g} kg, from rest; maximize the displacement s(T) at T = "
         f"{SPRING_TIME:g} s with s'(T) = 0 and |u| ≤ 1 N, choosing the stiffness k in [{SPRING_RANGE[0]:g}, "
-        f"{SPRING_RANGE[1]:g}] N/m and the force history together.")
+        f"{SPRING_RANGE[1]:g}] N/m and the force history together.",
+    )
 
 
 def spring_mass_semi_analytic() -> dict:
@@ -107,13 +116,24 @@ def spring_mass_semi_analytic() -> dict:
         return (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / k
 
     found = minimize_scalar(lambda k: -best(k), bounds=SPRING_RANGE, method="bounded", options={"xatol": 1e-12})
-    return {"parameter": float(found.x), "objective": float(-found.fun),
-            "how": "one-switch bang-bang, s*(k) in closed form, maximized over k"}
+    return {
+        "parameter": float(found.x),
+        "objective": float(-found.fun),
+        "how": "one-switch bang-bang, s*(k) in closed form, maximized over k",
+    }
 
 
 SPRING_MASS_PROBLEM = OpenLoopCodesign(
-    "spring_mass", "spring-mass: stiffness and force history (issue 13)", "spring and mass (user-declared)",
-    spring_mass, "k", "N/m", maximized=True, sweep=(0.25, 0.5, 1.0, 1.5, 2.0), reference=spring_mass_semi_analytic)
+    "spring_mass",
+    "spring-mass: stiffness and force history (issue 13)",
+    "spring and mass (user-declared)",
+    spring_mass,
+    "k",
+    "N/m",
+    maximized=True,
+    sweep=(0.25, 0.5, 1.0, 1.5, 2.0),
+    reference=spring_mass_semi_analytic,
+)
 
 
 def problems() -> list[OpenLoopCodesign]:
@@ -176,28 +196,43 @@ def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
     sign = -1.0 if problem.maximized else 1.0
     setup = problem.build(quick)
     if list(setup.problem.chosen) != [problem.parameter]:
-        raise ValueError(f"{problem.key}: the problem must choose exactly {problem.parameter!r}, chooses "
-                         f"{list(setup.problem.chosen)}")
+        raise ValueError(
+            f"{problem.key}: the problem must choose exactly {problem.parameter!r}, chooses "
+            f"{list(setup.problem.chosen)}"
+        )
     options = dict(setup.solve_options)
     started = time.perf_counter()
     solution = setup.problem.solve(setup.transcription, **options)
     verification = solution.verify() if solution.success else None
-    simultaneous = Decision("simultaneous", solution.chosen.get(problem.parameter, math.nan), sign * solution.objective,
-                            solution.success, solution.status, f"{solution.iterations} IPOPT",
-                            time.perf_counter() - started,
-                            verification.max_interval_defect if verification else math.nan, solution.final_time)
+    simultaneous = Decision(
+        "simultaneous",
+        solution.chosen.get(problem.parameter, math.nan),
+        sign * solution.objective,
+        solution.success,
+        solution.status,
+        f"{solution.iterations} IPOPT",
+        time.perf_counter() - started,
+        verification.max_interval_defect if verification else math.nan,
+        solution.final_time,
+    )
 
     fresh = problem.build(quick)
     started = time.perf_counter()
     nested_result = solve_nested(fresh.problem, fresh.transcription, **dict(fresh.solve_options))
     inner = nested_result.solution
     verification = inner.verify() if nested_result.success else None
-    nested = Decision("nested", nested_result.params[problem.parameter], sign * nested_result.objective,
-                      nested_result.success, nested_result.outer_status,
-                      f"{nested_result.outer_iterations} L-BFGS-B, {nested_result.inner_solves} IPOPT solves",
-                      time.perf_counter() - started,
-                      verification.max_interval_defect if verification else math.nan, inner.final_time,
-                      sign * envelope_gradient(inner, problem.parameter))
+    nested = Decision(
+        "nested",
+        nested_result.params[problem.parameter],
+        sign * nested_result.objective,
+        nested_result.success,
+        nested_result.outer_status,
+        f"{nested_result.outer_iterations} L-BFGS-B, {nested_result.inner_solves} IPOPT solves",
+        time.perf_counter() - started,
+        verification.max_interval_defect if verification else math.nan,
+        inner.final_time,
+        sign * envelope_gradient(inner, problem.parameter),
+    )
 
     rows, at_text = [], None
     values = list(problem.sweep) + ([problem.text_value] if problem.text_value is not None else [])
@@ -205,9 +240,13 @@ def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
         solver = fresh.problem.solver(fresh.transcription, chosen_as_parameters=True, tolerance=1e-10)
         for value in dict.fromkeys(values):
             point = solver.solve(plant_params={problem.parameter: value}, guess=inner)
-            row = {"parameter": float(value), "objective": sign * point.objective, "success": point.success,
-                   "final_time": point.final_time,
-                   "gradient": sign * envelope_gradient(point, problem.parameter) if point.success else math.nan}
+            row = {
+                "parameter": float(value),
+                "objective": sign * point.objective,
+                "success": point.success,
+                "final_time": point.final_time,
+                "gradient": sign * envelope_gradient(point, problem.parameter) if point.success else math.nan,
+            }
             if value in problem.sweep:
                 rows.append(row)
             if value == problem.text_value:
@@ -252,42 +291,91 @@ def section(result: CodesignResult) -> str:
 
     p = result.problem
     what = result.setup.objective
-    lines = [f"## {p.title}", "", result.setup.description, "",
-             f"Plant: {p.plant}. Transcription: {_describe(result.setup.transcription)}. Objective: {what}."
-             + (f" The text's value: {p.parameter} = {_number(p.text_value)} {p.unit}." if p.text_value is not None
-                else ""), ""]
+    lines = [
+        f"## {p.title}",
+        "",
+        result.setup.description,
+        "",
+        f"Plant: {p.plant}. Transcription: {_describe(result.setup.transcription)}. Objective: {what}."
+        + (f" The text's value: {p.parameter} = {_number(p.text_value)} {p.unit}." if p.text_value is not None else ""),
+        "",
+    ]
     rows = []
     for d in (result.simultaneous, result.nested):
-        rows.append({"method": d.method, "value": f"{_number(d.parameter)} {p.unit}", "objective": _number(d.objective),
-                     "T": _number(d.final_time), "converged": "yes" if d.success else "no",
-                     "status": d.status, "iterations": d.iterations, "wall": f"{d.wall_time:.2f}",
-                     "defect": _number(d.defect, 3)})
-    columns = [("method", "method", str), ("value", p.parameter, str), ("objective", "objective", str),
-               ("T", "T (s)", str), ("converged", "converged", str), ("iterations", "iterations", str),
-               ("wall", "wall time (s)", str), ("defect", "defect", str), ("status", "status", str)]
+        rows.append(
+            {
+                "method": d.method,
+                "value": f"{_number(d.parameter)} {p.unit}",
+                "objective": _number(d.objective),
+                "T": _number(d.final_time),
+                "converged": "yes" if d.success else "no",
+                "status": d.status,
+                "iterations": d.iterations,
+                "wall": f"{d.wall_time:.2f}",
+                "defect": _number(d.defect, 3),
+            }
+        )
+    columns = [
+        ("method", "method", str),
+        ("value", p.parameter, str),
+        ("objective", "objective", str),
+        ("T", "T (s)", str),
+        ("converged", "converged", str),
+        ("iterations", "iterations", str),
+        ("wall", "wall time (s)", str),
+        ("defect", "defect", str),
+        ("status", "status", str),
+    ]
     lines += [markdown_table(rows, columns)]
     dp, dj = result.agree
-    lines += [f"Simultaneous and nested agree to |Δ{p.parameter}| = {dp:.2g} {p.unit} and a relative "
-              f"|ΔJ| = {dj:.2g}. Wall time: simultaneous {result.simultaneous.wall_time:.2f} s, nested "
-              f"{result.nested.wall_time:.2f} s.", ""]
+    lines += [
+        f"Simultaneous and nested agree to |Δ{p.parameter}| = {dp:.2g} {p.unit} and a relative "
+        f"|ΔJ| = {dj:.2g}. Wall time: simultaneous {result.simultaneous.wall_time:.2f} s, nested "
+        f"{result.nested.wall_time:.2f} s.",
+        "",
+    ]
     lines += [_where(result), ""]
     if result.at_text is not None and result.at_text["success"]:
         best, text = result.nested.objective, result.at_text["objective"]
         worse = "less" if p.maximized else "more"
-        lines += [f"At the text's {p.parameter} = {_number(p.text_value)} {p.unit} the optimum is "
-                  f"{_number(text)}: {_number(abs(text - best), 4)} ({100 * abs(text - best) / abs(best):.2g} %) "
-                  f"{worse} than with the co-designed {p.parameter}.", ""]
+        lines += [
+            f"At the text's {p.parameter} = {_number(p.text_value)} {p.unit} the optimum is "
+            f"{_number(text)}: {_number(abs(text - best), 4)} ({100 * abs(text - best) / abs(best):.2g} %) "
+            f"{worse} than with the co-designed {p.parameter}.",
+            "",
+        ]
     if result.reference:
         ref = result.reference
-        lines += [f"Independent answer ({ref['how']}): {p.parameter} = {_number(ref['parameter'])} {p.unit}, "
-                  f"objective {_number(ref['objective'])}.", ""]
+        lines += [
+            f"Independent answer ({ref['how']}): {p.parameter} = {_number(ref['parameter'])} {p.unit}, "
+            f"objective {_number(ref['objective'])}.",
+            "",
+        ]
     if result.sweep:
-        sweep_rows = [{"p": f"{_number(r['parameter'])} {p.unit}", "J": _number(r["objective"]),
-                       "T": _number(r["final_time"]), "g": _number(r["gradient"], 4),
-                       "ok": "yes" if r["success"] else "no"} for r in result.sweep]
-        lines += [f"The optimal value with {p.parameter} fixed (the nested problem's inner solve):", "",
-                  markdown_table(sweep_rows, [("p", p.parameter, str), ("J", "J*", str), ("T", "T (s)", str),
-                                              ("g", f"dJ*/d{p.parameter}", str), ("ok", "converged", str)])]
+        sweep_rows = [
+            {
+                "p": f"{_number(r['parameter'])} {p.unit}",
+                "J": _number(r["objective"]),
+                "T": _number(r["final_time"]),
+                "g": _number(r["gradient"], 4),
+                "ok": "yes" if r["success"] else "no",
+            }
+            for r in result.sweep
+        ]
+        lines += [
+            f"The optimal value with {p.parameter} fixed (the nested problem's inner solve):",
+            "",
+            markdown_table(
+                sweep_rows,
+                [
+                    ("p", p.parameter, str),
+                    ("J", "J*", str),
+                    ("T", "T (s)", str),
+                    ("g", f"dJ*/d{p.parameter}", str),
+                    ("ok", "converged", str),
+                ],
+            ),
+        ]
     return "\n".join(lines)
 
 
@@ -298,12 +386,16 @@ def _where(result: CodesignResult) -> str:
     gradient = f"dJ*/d{p.parameter} = {_number(d.gradient, 4)} per {p.unit}"
     for end, value in (("lower", chosen.lower), ("upper", chosen.upper)):
         if abs(d.parameter - value) <= 1e-6 * max(1.0, abs(value)):
-            return (f"The answer lies at the {end} end of the range, {_number(value)} {p.unit}: {gradient} there "
-                    f"(the envelope derivative at the nested answer) is what each {p.unit} "
-                    f"{'more' if end == 'lower' else 'less'} costs.")
-    return (f"The answer lies inside the range; {gradient} at the nested answer. It is not zero because the "
-            "held input makes J*(p) piecewise smooth: where the switch of the bang-bang input moves from one "
-            "interval to the next, J*(p) has a kink, and both methods stop on the same kink.")
+            return (
+                f"The answer lies at the {end} end of the range, {_number(value)} {p.unit}: {gradient} there "
+                f"(the envelope derivative at the nested answer) is what each {p.unit} "
+                f"{'more' if end == 'lower' else 'less'} costs."
+            )
+    return (
+        f"The answer lies inside the range; {gradient} at the nested answer. It is not zero because the "
+        "held input makes J*(p) piecewise smooth: where the switch of the bang-bang input moves from one "
+        "interval to the next, J*(p) has a kink, and both methods stop on the same kink."
+    )
 
 
 def _describe(transcription) -> str:
@@ -316,15 +408,29 @@ def report(results: list[CodesignResult], command: str, machine: str = "") -> st
     """The whole Markdown document (a function of the results, so it can be joined into another report)."""
     from models.files import markdown_table
 
-    summary = [{"problem": r.problem.title, "parameter": f"{r.problem.parameter} ({r.problem.unit})",
-                "text": _number(r.problem.text_value) if r.problem.text_value is not None else "—",
-                "sim": _number(r.simultaneous.parameter), "nested": _number(r.nested.parameter),
-                "J": f"{_number(r.simultaneous.objective)} / {_number(r.nested.objective)}",
-                "converged": f"{'yes' if r.simultaneous.success else 'no'} / {'yes' if r.nested.success else 'no'}",
-                "wall": f"{r.simultaneous.wall_time:.2f} / {r.nested.wall_time:.2f}"} for r in results]
-    columns = [("problem", "problem", str), ("parameter", "chosen parameter", str), ("text", "text", str),
-               ("sim", "simultaneous", str), ("nested", "nested", str), ("J", "objective sim / nested", str),
-               ("converged", "converged sim / nested", str), ("wall", "wall time sim / nested (s)", str)]
+    summary = [
+        {
+            "problem": r.problem.title,
+            "parameter": f"{r.problem.parameter} ({r.problem.unit})",
+            "text": _number(r.problem.text_value) if r.problem.text_value is not None else "—",
+            "sim": _number(r.simultaneous.parameter),
+            "nested": _number(r.nested.parameter),
+            "J": f"{_number(r.simultaneous.objective)} / {_number(r.nested.objective)}",
+            "converged": f"{'yes' if r.simultaneous.success else 'no'} / {'yes' if r.nested.success else 'no'}",
+            "wall": f"{r.simultaneous.wall_time:.2f} / {r.nested.wall_time:.2f}",
+        }
+        for r in results
+    ]
+    columns = [
+        ("problem", "problem", str),
+        ("parameter", "chosen parameter", str),
+        ("text", "text", str),
+        ("sim", "simultaneous", str),
+        ("nested", "nested", str),
+        ("J", "objective sim / nested", str),
+        ("converged", "converged sim / nested", str),
+        ("wall", "wall time sim / nested (s)", str),
+    ]
     parts = [HEADER.format(command=command, machine=machine or "timings of one run"), markdown_table(summary, columns)]
     parts += [section(r) for r in results]
     return "\n".join(parts)
@@ -348,11 +454,16 @@ def main(argv=None) -> int:
         print(f"[{i}/{len(args.only or found)}] {key} ...", end=" ", flush=True)
         result = solve(found[key], args.quick)
         results.append(result)
-        print(f"simultaneous {_number(result.simultaneous.parameter)}, nested {_number(result.nested.parameter)} "
-              f"{found[key].unit} ({result.simultaneous.wall_time:.1f} s / {result.nested.wall_time:.1f} s)",
-              flush=True)
-    command = "python -m studies.codesign_open_loop" + (" --quick" if args.quick else "") + \
-        ("" if args.only is None else " --only " + " ".join(args.only))
+        print(
+            f"simultaneous {_number(result.simultaneous.parameter)}, nested {_number(result.nested.parameter)} "
+            f"{found[key].unit} ({result.simultaneous.wall_time:.1f} s / {result.nested.wall_time:.1f} s)",
+            flush=True,
+        )
+    command = (
+        "python -m studies.codesign_open_loop"
+        + (" --quick" if args.quick else "")
+        + ("" if args.only is None else " --only " + " ".join(args.only))
+    )
     total = sum(r.simultaneous.wall_time + r.nested.wall_time for r in results)
     text = report(results, command, f"{len(results)} problems, {total:.0f} s of solves in all")
     files.write_text(args.out, text)

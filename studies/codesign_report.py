@@ -165,8 +165,15 @@ def measure(plant: models.Plant, block: models.Block, scenario: Scenario, specs:
     if not isinstance(reference, (int, float)):
         raise TypeError(f"measure needs a constant step reference, got {reference!r}")
     x0 = plant.equilibrium()[0] if scenario.x0 is None else np.asarray(scenario.x0, dtype=float)
-    run = models.simulate_closed_loop(plant, block, scenario.reference, scenario.duration, x0=x0,
-                                      input_disturbance=scenario.input_disturbance, allow_divergence=True)
+    run = models.simulate_closed_loop(
+        plant,
+        block,
+        scenario.reference,
+        scenario.duration,
+        x0=x0,
+        input_disturbance=scenario.input_disturbance,
+        allow_divergence=True,
+    )
     step = float(reference) - x0[k]
     y = np.sign(step) * (run.x[1:, k] - x0[k]) / abs(step)  # fraction of the step, samples 1..N
     below = np.flatnonzero(y < 0.9)
@@ -234,9 +241,18 @@ class ActuatorSizing:
 
 def pid_at(pid: PID, known: models.Plant, limit: float | None) -> PID:
     """The same PD block reading `known`, saturating at `limit` (no integrator)."""
-    return PID(known, pid.coordinate, kp=float(pid.gains["kp"]), kd=float(pid.gains["kd"]),
-               sample_period=pid.sample_period, sigma=pid.sigma, derivative_on=pid.derivative_on,
-               output_limit=limit, feedforward=pid.has_feedforward, name=pid.name)
+    return PID(
+        known,
+        pid.coordinate,
+        kp=float(pid.gains["kp"]),
+        kd=float(pid.gains["kd"]),
+        sample_period=pid.sample_period,
+        sigma=pid.sigma,
+        derivative_on=pid.derivative_on,
+        output_limit=limit,
+        feedforward=pid.has_feedforward,
+        name=pid.name,
+    )
 
 
 def sizing_scenario(case: CaseStudy, sizing: ActuatorSizing) -> Scenario:
@@ -257,14 +273,28 @@ def holding_limit(case: CaseStudy, sizing: ActuatorSizing) -> float:
 def _sizing_design(method, plant, block, scenario, specs, wall_time, message, converged, status) -> Design:
     itae, violations = evaluate(plant, block, scenario, specs, Cost("itae"))
     limit = float(plant.input_limit[0])
-    return Design(method=method, value=limit, objective=limit, closed_loop_cost=itae, plant_cost=limit,
-                  feasible=not violations, violations=violations, measured=measure(plant, block, scenario, specs),
-                  wall_time=wall_time, message=message, gains=_listed(block.gains), plant=plant, block=block,
-                  converged=converged, status=status)
+    return Design(
+        method=method,
+        value=limit,
+        objective=limit,
+        closed_loop_cost=itae,
+        plant_cost=limit,
+        feasible=not violations,
+        violations=violations,
+        measured=measure(plant, block, scenario, specs),
+        wall_time=wall_time,
+        message=message,
+        gains=_listed(block.gains),
+        plant=plant,
+        block=block,
+        converged=converged,
+        status=status,
+    )
 
 
-def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float = SIZING_REL_TOL,
-                    methods=METHODS, tune_options=None) -> CaseResult:
+def actuator_sizing(
+    case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float = SIZING_REL_TOL, methods=METHODS, tune_options=None
+) -> CaseResult:
     """Smallest actuator limit meeting the specs, three ways (see the module docstring).
 
     The limit is searched in [holding limit, `sizing.high`]: no smaller limit holds the
@@ -284,33 +314,68 @@ def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float =
     floor = holding_limit(case, sizing)
     options: dict[str, Any] = {"free": sizing.free} | dict(tune_options or {})
     result = CaseResult(
-        key=case.plant, problem=f"actuator sizing: {case.plant}", plant=case.plant, parameter=sizing.parameter,
-        unit=unit, text_value=sizing.text_limit, objective="smallest limit meeting the specs", scenario=scenario,
-        specs=specs, cost=Cost("itae"),
-        notes=[f"spec: {sizing.specs_origin}", f"step {case.step:.4g} from the standard equilibrium, "
-               f"{scenario.duration:g} s run; limits searched in [{floor:.4g}, {sizing.high:g}] {unit}",
-               f"plant-only objective of the sequential method: the smallest limit that holds the target at rest "
-               f"(the largest equilibrium input along the step, {floor:.4g} {unit})"])
+        key=case.plant,
+        problem=f"actuator sizing: {case.plant}",
+        plant=case.plant,
+        parameter=sizing.parameter,
+        unit=unit,
+        text_value=sizing.text_limit,
+        objective="smallest limit meeting the specs",
+        scenario=scenario,
+        specs=specs,
+        cost=Cost("itae"),
+        notes=[
+            f"spec: {sizing.specs_origin}",
+            f"step {case.step:.4g} from the standard equilibrium, "
+            f"{scenario.duration:g} s run; limits searched in [{floor:.4g}, {sizing.high:g}] {unit}",
+            f"plant-only objective of the sequential method: the smallest limit that holds the target at rest "
+            f"(the largest equilibrium input along the step, {floor:.4g} {unit})",
+        ],
+    )
     if "sequential" in methods:
         started = time.perf_counter()
         sized = plant.with_input_limit(floor)
         tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, **options)
         result.designs["sequential"] = _sizing_design(
-            "sequential", sized, tuned.block, scenario, specs, time.perf_counter() - started,
-            f"the holding limit, then the gains tuned for it: {tuned.message}", tuned.stopped_on_test,
-            f"IPOPT: {tuned.status}")
+            "sequential",
+            sized,
+            tuned.block,
+            scenario,
+            specs,
+            time.perf_counter() - started,
+            f"the holding limit, then the gains tuned for it: {tuned.message}",
+            tuned.stopped_on_test,
+            f"IPOPT: {tuned.status}",
+        )
     if "nested" in methods:
         started = time.perf_counter()
         try:
-            nested = size_actuator(plant, sizing.retune_start, scenario, specs, low=floor, high=sizing.high,
-                                   retune=True, rel_tol=rel_tol, tune_options=options)
+            nested = size_actuator(
+                plant,
+                sizing.retune_start,
+                scenario,
+                specs,
+                low=floor,
+                high=sizing.high,
+                retune=True,
+                rel_tol=rel_tol,
+                tune_options=options,
+            )
             counts = {s: nested["statuses"].count(s) for s in dict.fromkeys(nested["statuses"])}
             status = "bisection to rel_tol {:g}; inner IPOPT: {}".format(
-                rel_tol, ", ".join(f"{s} x{c}" for s, c in counts.items()))
+                rel_tol, ", ".join(f"{s} x{c}" for s, c in counts.items())
+            )
             result.designs["nested"] = _sizing_design(
-                "nested", plant.with_input_limit(nested["limit"]), nested["block"], scenario, specs,
-                time.perf_counter() - started, f"bisection over [{floor:.4g}, {sizing.high:g}], "
-                f"{nested['evaluations']} limits tuned", nested["converged"], status)
+                "nested",
+                plant.with_input_limit(nested["limit"]),
+                nested["block"],
+                scenario,
+                specs,
+                time.perf_counter() - started,
+                f"bisection over [{floor:.4g}, {sizing.high:g}], {nested['evaluations']} limits tuned",
+                nested["converged"],
+                status,
+            )
         except ValueError as err:
             result.notes.append(f"nested: {err}")
     for method in ("simultaneous", "simultaneous from sequential"):
@@ -323,14 +388,31 @@ def actuator_sizing(case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float =
             seq = result.designs["sequential"]
             start_limit, start_block = seq.value, seq.block
         sim = size_actuator_simultaneous(
-            plant, sizing.retune_start, scenario, specs, low=floor, high=sizing.high, start_limit=start_limit,
-            start_block=start_block, free=sizing.free,
-            **{k: v for k, v in (tune_options or {}).items() if k in ("max_iter", "tol", "jit", "widths")})
-        where = ("from the middle of the range and the hand gains" if start_block is None else
-                 "from the sequential answer")
+            plant,
+            sizing.retune_start,
+            scenario,
+            specs,
+            low=floor,
+            high=sizing.high,
+            start_limit=start_limit,
+            start_block=start_block,
+            free=sizing.free,
+            **{k: v for k, v in (tune_options or {}).items() if k in ("max_iter", "tol", "jit", "widths")},
+        )
+        where = (
+            "from the middle of the range and the hand gains" if start_block is None else "from the sequential answer"
+        )
         result.designs[method] = _sizing_design(
-            method, plant.with_input_limit(sim["limit"]), sim["block"], scenario, specs,
-            time.perf_counter() - started, f"{where}: {sim['message']}", sim["converged"], sim["status"])
+            method,
+            plant.with_input_limit(sim["limit"]),
+            sim["block"],
+            scenario,
+            specs,
+            time.perf_counter() - started,
+            f"{where}: {sim['message']}",
+            sim["converged"],
+            sim["status"],
+        )
     result.notes.append(_hand_rule_note(case, sizing, plant, scenario, specs, rel_tol))
     return result
 
@@ -341,28 +423,43 @@ def _hand_rule_note(case, sizing, plant, scenario, specs, rel_tol) -> str:
     hand = measure(text_plant, sizing.hand_design(text_plant), scenario, specs)
     low, high = sizing.hand_range
     try:
-        rule = size_actuator(plant, sizing.hand_design, scenario, specs, low=low, high=high, retune=False,
-                             rel_tol=rel_tol)
+        rule = size_actuator(
+            plant, sizing.hand_design, scenario, specs, low=low, high=high, retune=False, rel_tol=rel_tol
+        )
         found = f"the smallest limit at which it meets the specs is {rule['limit']:.4g} {case.input_unit}"
     except ValueError as err:
         found = f"re-derived at each limit up to {high:g} {case.input_unit} it never meets the specs ({err})"
-    return (f"hand design (the text's rule) at the text's {sizing.text_limit:g} {case.input_unit}: rise time "
-            f"{hand['rise_time_s']:.3g} s, overshoot {100 * hand['overshoot']:.2g} %, peak |u| "
-            f"{hand['peak_input']:.4g} {case.input_unit}; {found}")
+    return (
+        f"hand design (the text's rule) at the text's {sizing.text_limit:g} {case.input_unit}: rise time "
+        f"{hand['rise_time_s']:.3g} s, overshoot {100 * hand['overshoot']:.2g} %, peak |u| "
+        f"{hand['peak_input']:.4g} {case.input_unit}; {found}"
+    )
 
 
 # ----------------------------------------------------------------- plant + controller (codesign)
 def _codesign_design(res, name, result: CaseResult) -> Design:
-    return Design(method=res.method, value=float(res.params[name]), objective=res.objective,
-                  closed_loop_cost=res.closed_loop_cost, plant_cost=res.plant_cost, feasible=res.feasible,
-                  violations=list(res.violations),
-                  measured=measure(res.plant, res.block, result.scenario, result.specs), wall_time=res.wall_time,
-                  message=res.message, gains=_listed(res.block.gains), plant=res.plant, block=res.block,
-                  converged=res.converged, status=res.status)
+    return Design(
+        method=res.method,
+        value=float(res.params[name]),
+        objective=res.objective,
+        closed_loop_cost=res.closed_loop_cost,
+        plant_cost=res.plant_cost,
+        feasible=res.feasible,
+        violations=list(res.violations),
+        measured=measure(res.plant, res.block, result.scenario, result.specs),
+        wall_time=res.wall_time,
+        message=res.message,
+        gains=_listed(res.block.gains),
+        plant=res.plant,
+        block=res.block,
+        converged=res.converged,
+        status=res.status,
+    )
 
 
-def codesign_case(result: CaseResult, plant, block, name, low, high, plant_cost, *, methods=METHODS,
-                  tune_options=None) -> CaseResult:
+def codesign_case(
+    result: CaseResult, plant, block, name, low, high, plant_cost, *, methods=METHODS, tune_options=None
+) -> CaseResult:
     """Fill `result` with `designs.codesign.codesign`'s answers (its own numbers, plus a fresh `measure`).
 
     `name` is the plant parameter decided within [low, high], `plant_cost` its price
@@ -370,12 +467,22 @@ def codesign_case(result: CaseResult, plant, block, name, low, high, plant_cost,
     sequential method's plant-only objective. `tune_options` go to every solve
     (max_iter, jit, tol, ...).
     """
-    answers = codesign(plant, block, result.scenario, {name: (low, high)}, plant_cost=plant_cost,
-                       specs=result.specs, cost=result.cost, methods=tuple(methods), **(tune_options or {}))
+    answers = codesign(
+        plant,
+        block,
+        result.scenario,
+        {name: (low, high)},
+        plant_cost=plant_cost,
+        specs=result.specs,
+        cost=result.cost,
+        methods=tuple(methods),
+        **(tune_options or {}),
+    )
     for method, answer in answers.items():
         result.designs[method] = _codesign_design(answer, name, result)
-    result.notes.append(f"plant-only objective of the sequential method: the plant's price alone, minimized "
-                        f"over [{low:g}, {high:g}]")
+    result.notes.append(
+        f"plant-only objective of the sequential method: the plant's price alone, minimized over [{low:g}, {high:g}]"
+    )
     return result
 
 
@@ -388,9 +495,18 @@ def problems() -> dict[str, Callable[[], CaseResult]]:
 
 
 # ----------------------------------------------------------------- report
-COLUMNS = ("problem", "designed parameter", "text", "(1) sequential", "(2) nested", "(3) simultaneous",
-           "(3) from (1)", "gain of (3) over (1), (2)", "wall time (1) / (2) / (3) / (3) from (1) (s)",
-           "all converged")
+COLUMNS = (
+    "problem",
+    "designed parameter",
+    "text",
+    "(1) sequential",
+    "(2) nested",
+    "(3) simultaneous",
+    "(3) from (1)",
+    "gain of (3) over (1), (2)",
+    "wall time (1) / (2) / (3) / (3) from (1) (s)",
+    "all converged",
+)
 
 HEADER = """# Co-design: sequential, nested and simultaneous
 
@@ -442,9 +558,15 @@ def table(results: list[CaseResult]) -> str:
         d = r.designs
         gain = r.gain
         times = " / ".join(f"{d[m].wall_time:.0f}" if m in d else "—" for m in METHODS)
-        cells = [r.problem, f"{r.parameter} ({r.unit})", _number(r.text_value),
-                 *(_cell(d.get(m)) for m in METHODS),
-                 "—" if gain is None else f"{100 * gain:.1f} %", times, "yes" if r.converged else "no"]
+        cells = [
+            r.problem,
+            f"{r.parameter} ({r.unit})",
+            _number(r.text_value),
+            *(_cell(d.get(m)) for m in METHODS),
+            "—" if gain is None else f"{100 * gain:.1f} %",
+            times,
+            "yes" if r.converged else "no",
+        ]
         rows.append(dict(zip(COLUMNS, cells)))
     return files.markdown_table(rows, [(c, c, str) for c in COLUMNS], literal=False)
 
@@ -463,18 +585,22 @@ def notes(results: list[CaseResult]) -> str:
             m = d.measured
             extra = "".join(f", {k} {v:.3g}" for k, v in m.items() if k.startswith("max_abs_"))
             violated = "" if d.feasible else f"; violates {'; '.join(d.violations)}"
-            parts.append(f"- {method}: {r.parameter} = {_number(d.value)} {r.unit}, "
-                         f"ITAE {_number(d.closed_loop_cost)}, rise time {m['rise_time_s']:.3g} s, "
-                         f"overshoot {100 * m['overshoot']:.2g} %, "
-                         f"peak |u| {_number(m['peak_input'])}{extra}{violated}; status: {d.status}; "
-                         f"{d.message}\n")
+            parts.append(
+                f"- {method}: {r.parameter} = {_number(d.value)} {r.unit}, "
+                f"ITAE {_number(d.closed_loop_cost)}, rise time {m['rise_time_s']:.3g} s, "
+                f"overshoot {100 * m['overshoot']:.2g} %, "
+                f"peak |u| {_number(m['peak_input'])}{extra}{violated}; status: {d.status}; "
+                f"{d.message}\n"
+            )
     return "".join(parts)
 
 
 #: The document's sections in order: each a callable (results, command) -> Markdown.
-SECTIONS = (lambda results, command: HEADER.format(command=command),
-            lambda results, command: "\n" + table(results) + "\n",
-            lambda results, command: notes(results))
+SECTIONS = (
+    lambda results, command: HEADER.format(command=command),
+    lambda results, command: "\n" + table(results) + "\n",
+    lambda results, command: notes(results),
+)
 
 
 def report(results: list[CaseResult], command: str, sections=SECTIONS) -> str:
@@ -507,4 +633,3 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-

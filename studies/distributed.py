@@ -78,11 +78,14 @@ class Dask:
         try:
             return self.client.gather(futures)
         except KilledWorker as err:
-            raise RunFailed(f"{what}: a Dask worker died while running it and the scheduler gave up after "
-                            f"retrying ({err}); nothing was written") from None
+            raise RunFailed(
+                f"{what}: a Dask worker died while running it and the scheduler gave up after "
+                f"retrying ({err}); nothing was written"
+            ) from None
         except (CommClosedError, OSError, TimeoutError) as err:
-            raise RunFailed(f"{what}: lost the Dask cluster ({type(err).__name__}: {err}); nothing was "
-                            "written") from None
+            raise RunFailed(
+                f"{what}: lost the Dask cluster ({type(err).__name__}: {err}); nothing was written"
+            ) from None
         finally:
             self.client.cancel(futures)
 
@@ -113,9 +116,15 @@ def connect(scheduler=None, workers: int | None = None) -> Iterator[Local | Dask
             except (OSError, TimeoutError) as err:
                 raise RunFailed(f"cannot reach the Dask scheduler at {scheduler!r}: {err}") from None
         else:
-            cluster = stack.enter_context(LocalCluster(n_workers=int(workers or 1), threads_per_worker=1,
-                                                       processes=True, dashboard_address=None,
-                                                       silence_logs=logging.ERROR))
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=int(workers or 1),
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.ERROR,
+                )
+            )
             client = stack.enter_context(Client(cluster))
         yield Dask(client)
 
@@ -130,8 +139,10 @@ def executor_of(value) -> Local | Dask:
 
     if isinstance(value, Client):
         return Dask(value)
-    raise TypeError(f"executor must be None, studies.distributed.Local/Dask or a dask.distributed.Client, "
-                    f"got {type(value).__name__}")
+    raise TypeError(
+        f"executor must be None, studies.distributed.Local/Dask or a dask.distributed.Client, "
+        f"got {type(value).__name__}"
+    )
 
 
 # ---------------------------------------------------------------------------- Monte Carlo in parts
@@ -144,9 +155,16 @@ def _monte_carlo_part(task: tuple) -> dict:
 
     (plant, controller, reference), duration, samples, first, kwargs = task
     batch = models.monte_carlo(plant, controller, reference, duration, samples, first_sample=first, **kwargs)
-    return {"x": np.array(batch.x), "xc": np.array(batch.xc), "u": np.array(batch.u),
-            "measured": np.array(batch.measured), "diverged_at": np.array(batch.diverged_at),
-            "t": np.array(batch.t), "r": np.array(batch.r), "d": np.array(batch.d)}
+    return {
+        "x": np.array(batch.x),
+        "xc": np.array(batch.xc),
+        "u": np.array(batch.u),
+        "measured": np.array(batch.measured),
+        "diverged_at": np.array(batch.diverged_at),
+        "t": np.array(batch.t),
+        "r": np.array(batch.r),
+        "d": np.array(batch.d),
+    }
 
 
 def monte_carlo(executor, plant, controller, reference, duration: float, param_samples, **kwargs):
@@ -170,10 +188,24 @@ def monte_carlo(executor, plant, controller, reference, duration: float, param_s
     starts = range(0, len(samples), size)
     kwargs = dict(kwargs, threads=1)
     loop = executor.share((plant, controller, reference))
-    parts = executor.map(_monte_carlo_part, [(loop, duration, samples[a:a + size], a, kwargs) for a in starts],
-                         what=f"the Monte Carlo of {getattr(controller, 'name', 'a controller')} on {plant.name}")
-    x, xc, u, measured, diverged_at = (np.concatenate([p[key] for p in parts])
-                                       for key in ("x", "xc", "u", "measured", "diverged_at"))
-    return models.MonteCarloResult(plant=plant, controller=controller.name, t=parts[0]["t"], r=parts[0]["r"],
-                                   d=parts[0]["d"], x=x, xc=xc, u=u, measured=measured, params=samples,
-                                   diverged_at=diverged_at)
+    parts = executor.map(
+        _monte_carlo_part,
+        [(loop, duration, samples[a : a + size], a, kwargs) for a in starts],
+        what=f"the Monte Carlo of {getattr(controller, 'name', 'a controller')} on {plant.name}",
+    )
+    x, xc, u, measured, diverged_at = (
+        np.concatenate([p[key] for p in parts]) for key in ("x", "xc", "u", "measured", "diverged_at")
+    )
+    return models.MonteCarloResult(
+        plant=plant,
+        controller=controller.name,
+        t=parts[0]["t"],
+        r=parts[0]["r"],
+        d=parts[0]["d"],
+        x=x,
+        xc=xc,
+        u=u,
+        measured=measured,
+        params=samples,
+        diverged_at=diverged_at,
+    )

@@ -22,10 +22,13 @@ from models.files import format_number, markdown_table, write_text
 SECTIONS = {
     "hint": ("Hint matrices", ("what the text prints", "what the derivation gives", "size", "cause"), ""),
     "text": ("Other mistakes in the text", ("text", "correction"), ""),
-    "design": ("Mistakes found while designing", ("text", "what the derivation shows"),
-               "Each was found by deriving the design from the model and checking it on the\n"
-               "nonlinear plant; the design records (each case's answers in `studies/cases/`) carry the\n"
-               "same notes."),
+    "design": (
+        "Mistakes found while designing",
+        ("text", "what the derivation shows"),
+        "Each was found by deriving the design from the model and checking it on the\n"
+        "nonlinear plant; the design records (each case's answers in `studies/cases/`) carry the\n"
+        "same notes.",
+    ),
 }
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "errata.md"
@@ -65,8 +68,10 @@ class Erratum:
             raise ValueError(f"unknown errata section {self.section!r}; sections are {', '.join(SECTIONS)}")
         headers = SECTIONS[self.section][1]
         if len(self.cells) != len(headers):
-            raise ValueError(f"{self.item}: the {self.section!r} table has {len(headers)} columns after the item "
-                             f"({', '.join(headers)}), got {len(self.cells)}")
+            raise ValueError(
+                f"{self.item}: the {self.section!r} table has {len(headers)} columns after the item "
+                f"({', '.join(headers)}), got {len(self.cells)}"
+            )
 
     def row(self) -> dict:
         """{section title, "item", header: cell} as the answers list it."""

@@ -103,10 +103,16 @@ def integrator(G, kp: float, kd: float, zeta: float, derivative_on: str = "measu
 
 def root_locus_record(G, kp: float, kd: float, rl: dict) -> dict:
     """The k_i root-locus answer: gain, damping bound, overshoots, poles, Evans form, closed loop."""
-    return record(ki=rl["ki"], zeta_min=rl["zeta_min"], ki_damping=rl["ki_damping"], overshoot_pd=rl["overshoot_pd"],
-                  overshoot_pid=rl["overshoot_pid"], poles=poles_record(rl["poles"]),
-                  **tf_record(rl["evans"], "evans_"),
-                  closed_loop_pid=tf_record(Loop.pid(G, kp, rl["ki"], kd).reference_to_output()))
+    return record(
+        ki=rl["ki"],
+        zeta_min=rl["zeta_min"],
+        ki_damping=rl["ki_damping"],
+        overshoot_pd=rl["overshoot_pd"],
+        overshoot_pid=rl["overshoot_pid"],
+        poles=poles_record(rl["poles"]),
+        **tf_record(rl["evans"], "evans_"),
+        closed_loop_pid=tf_record(Loop.pid(G, kp, rl["ki"], kd).reference_to_output()),
+    )
 
 
 def rate_limit(step: float, wn: float) -> float:
@@ -119,23 +125,34 @@ def single_loop(G, pd, zeta: float) -> tuple[dict, dict]:
     """Integrator by the root locus, and the four loops the .10/.13 answers read."""
     rl = integrator(G, pd.kp, pd.kd, zeta)
     ki = rl["ki"]
-    loops = {"PD": Loop.pid(G, pd.kp, 0.0, pd.kd, name="PD"),
-             "PID": Loop.pid(G, pd.kp, ki, pd.kd, name="PID"),
-             "PD (implemented)": Loop.pid(G, pd.kp, 0.0, pd.kd, sigma=SIGMA, name="PD, dirty derivative"),
-             "PID (implemented)": Loop.pid(G, pd.kp, ki, pd.kd, sigma=SIGMA, name="PID, dirty derivative")}
+    loops = {
+        "PD": Loop.pid(G, pd.kp, 0.0, pd.kd, name="PD"),
+        "PID": Loop.pid(G, pd.kp, ki, pd.kd, name="PID"),
+        "PD (implemented)": Loop.pid(G, pd.kp, 0.0, pd.kd, sigma=SIGMA, name="PD, dirty derivative"),
+        "PID (implemented)": Loop.pid(G, pd.kp, ki, pd.kd, sigma=SIGMA, name="PID, dirty derivative"),
+    }
     return rl, loops
 
 
-def single_loop_blocks(known: models.Plant, coordinate: str, pd, ki: float, *, feedforward: bool,
-                       anti_windup: str = "back_calculation", rate_limit: float | None = None) -> dict:
+def single_loop_blocks(
+    known: models.Plant,
+    coordinate: str,
+    pd,
+    ki: float,
+    *,
+    feedforward: bool,
+    anti_windup: str = "back_calculation",
+    rate_limit: float | None = None,
+) -> dict:
     """The "PD", "PID" and "PID (no anti-windup)" blocks of a single-loop design, saturating at the limit."""
     limit = float(known.input_limit[0])
     common = dict(kp=pd.kp, kd=pd.kd, output_limit=limit, feedforward=feedforward)
     return {
         "PD": PID(known, coordinate, name="PD", **common),
         "PID": PID(known, coordinate, ki=ki, anti_windup=anti_windup, rate_limit=rate_limit, name="PID", **common),
-        "PID (no anti-windup)": PID(known, coordinate, ki=ki, anti_windup="none", name="PID (no anti-windup)",
-                                    **common),
+        "PID (no anti-windup)": PID(
+            known, coordinate, ki=ki, anti_windup="none", name="PID (no anti-windup)", **common
+        ),
     }
 
 
@@ -147,11 +164,18 @@ def loopshaped(L0, spec: LoopSpec, phase_margin_deg: float = 60.0):
     (shaped, prefilter record, new closed loop T): see `designs.loopshaping`.
     """
     if spec.low_frequency is None or spec.high_frequency is None:
-        raise ValueError(f"loopshaped needs the bands of {spec.item}: low_frequency and high_frequency, got "
-                         f"{spec.low_frequency} and {spec.high_frequency}")
-    shaped = improve_loop(L0, low_frequency=spec.low_frequency, low_factor=spec.factor,
-                          high_frequency=spec.high_frequency, high_factor=spec.factor,
-                          phase_margin_deg=phase_margin_deg)
+        raise ValueError(
+            f"loopshaped needs the bands of {spec.item}: low_frequency and high_frequency, got "
+            f"{spec.low_frequency} and {spec.high_frequency}"
+        )
+    shaped = improve_loop(
+        L0,
+        low_frequency=spec.low_frequency,
+        low_factor=spec.factor,
+        high_frequency=spec.high_frequency,
+        high_factor=spec.factor,
+        phase_margin_deg=phase_margin_deg,
+    )
     T_new = Loop.unity(shaped.loop, 1.0).reference_to_output()
     return shaped, flattening_prefilter(T_new), T_new
 
@@ -160,17 +184,28 @@ def loopshaping_record(shaped, pre, T_new) -> dict:
     """The .14 answer: compensator, prefilter, margins before and after, and the specs met."""
     specs = list(shaped.specs)
     peak_after = pre["peak_after"]
-    specs.append(an.SpecCheck("closed-loop magnitude flat (max |F T| <= 1.01)", peak_after <= 1.01 + 1e-9,
-                              peak_after, 1.01))
+    specs.append(
+        an.SpecCheck("closed-loop magnitude flat (max |F T| <= 1.01)", peak_after <= 1.01 + 1e-9, peak_after, 1.01)
+    )
     step_before = an.step_info(T_new)["Overshoot"]
     step_after = an.step_info(pre["prefilter"] * T_new)["Overshoot"]
-    return record(**tf_record(shaped.controller, "C_"), **tf_record(pre["prefilter"], "F_"), lag_zero=shaped.lag_zero,
-                  lag_gain=shaped.lag_gain, lowpass_corner=shaped.lowpass_corner,
-                  lowpass_order=shaped.lowpass_order, lead_phase_deg=shaped.lead_phase_deg,
-                  **margin_record(shaped.baseline, "_baseline"), **margin_record(shaped.loop, ""),
-                  prefilter_corner=pre["corner"], peak_before=pre["peak_before"], peak_after=peak_after,
-                  overshoot_percent_without_prefilter=step_before, overshoot_percent_with_prefilter=step_after,
-                  specs=spec_records(specs))
+    return record(
+        **tf_record(shaped.controller, "C_"),
+        **tf_record(pre["prefilter"], "F_"),
+        lag_zero=shaped.lag_zero,
+        lag_gain=shaped.lag_gain,
+        lowpass_corner=shaped.lowpass_corner,
+        lowpass_order=shaped.lowpass_order,
+        lead_phase_deg=shaped.lead_phase_deg,
+        **margin_record(shaped.baseline, "_baseline"),
+        **margin_record(shaped.loop, ""),
+        prefilter_corner=pre["corner"],
+        peak_before=pre["peak_before"],
+        peak_after=peak_after,
+        overshoot_percent_without_prefilter=step_before,
+        overshoot_percent_with_prefilter=step_after,
+        specs=spec_records(specs),
+    )
 
 
 def cascade_records(prefix: str, slc: SuccessiveLoopClosure[PDDesign], bound: dict, letters: Mapping[str, str]) -> dict:
@@ -182,20 +217,28 @@ def cascade_records(prefix: str, slc: SuccessiveLoopClosure[PDDesign], bound: di
     plants = slc.plants
     item = lambda key: f"{prefix}.8({letters[key]})"
     return {
-        item("inner_tf"): record(**tf_record(plants.inner, "plant_"),
-                                 **tf_record(slc.inner.closed_loop, "closed_loop_"),
-                                 dropped_coupling=plants.dropped),
-        item("bound"): record(max_equilibrium_input=bound["max_equilibrium_input"], bound=bound["bound"],
-                              input_limit=bound["input_limit"]),
+        item("inner_tf"): record(
+            **tf_record(plants.inner, "plant_"),
+            **tf_record(slc.inner.closed_loop, "closed_loop_"),
+            dropped_coupling=plants.dropped,
+        ),
+        item("bound"): record(
+            max_equilibrium_input=bound["max_equilibrium_input"], bound=bound["bound"], input_limit=bound["input_limit"]
+        ),
         item("kp_inner"): record(kp=slc.inner.kp, step=slc.inner_limit),
         item("wn_inner"): record(wn=slc.inner.wn, kd=slc.inner.kd, zeta=slc.inner.zeta),
         item("poles_inner"): record(poles=poles_record(slc.inner.poles), dc_gain=slc.inner_dc_gain),
-        item("outer_tf"): record(**tf_record(plants.outer, "plant_"), **tf_record(slc.outer_model, "model_"),
-                                 inner_dc_gain=slc.inner_dc_gain, **tf_record(slc.outer.closed_loop, "closed_loop_")),
+        item("outer_tf"): record(
+            **tf_record(plants.outer, "plant_"),
+            **tf_record(slc.outer_model, "model_"),
+            inner_dc_gain=slc.inner_dc_gain,
+            **tf_record(slc.outer.closed_loop, "closed_loop_"),
+        ),
         item("kp_outer"): record(kp=slc.outer.kp, step=slc.outer.step, inner_step=slc.inner_limit),
         item("wn_outer"): record(wn=slc.outer.wn, kd=slc.outer.kd, zeta=slc.outer.zeta),
-        item("poles_outer"): record(poles=poles_record(slc.outer.poles), full_poles=poles_record(slc.full_poles),
-                                    separation=slc.separation),
+        item("poles_outer"): record(
+            poles=poles_record(slc.outer.poles), full_poles=poles_record(slc.full_poles), separation=slc.separation
+        ),
     }
 
 
@@ -256,9 +299,14 @@ def frequency_responses(design: ClassicalDesign, omega=None) -> dict:
     plant, the loop gain and the closed loop from reference to output.
     """
     omega = np.logspace(-3, 3, 600) if omega is None else np.asarray(omega, dtype=float)
-    return {label: {"plant": an.bode_data(loop.plant, omega), "loop": an.bode_data(loop.loop_gain(), omega),
-                    "closed_loop": an.bode_data(loop.reference_to_output(), omega)}
-            for label, loop in design.loops.items()}
+    return {
+        label: {
+            "plant": an.bode_data(loop.plant, omega),
+            "loop": an.bode_data(loop.loop_gain(), omega),
+            "closed_loop": an.bode_data(loop.reference_to_output(), omega),
+        }
+        for label, loop in design.loops.items()
+    }
 
 
 # ----------------------------------------------------------------- state-space engine
@@ -299,9 +347,18 @@ def _choices(case: CaseStudy, choices: StateSpaceChoices | None) -> StateSpaceCh
     return choices
 
 
-def statespace_design(case: CaseStudy, known: models.Plant | None = None, choices: StateSpaceChoices | None = None,
-                      *, poles=None, integrator_pole: float | None = None, observer_poles=None,
-                      disturbance_pole: float | None = None, Q=None, R=None) -> ssd.StateSpaceDesign:
+def statespace_design(
+    case: CaseStudy,
+    known: models.Plant | None = None,
+    choices: StateSpaceChoices | None = None,
+    *,
+    poles=None,
+    integrator_pole: float | None = None,
+    observer_poles=None,
+    disturbance_pole: float | None = None,
+    Q=None,
+    R=None,
+) -> ssd.StateSpaceDesign:
     """Every state-space design of the case, on `known` (default nominal), by `choices` (default the case's).
 
     The keywords override the choices: poles (nx, rad/s), integrator_pole, observer_poles,
@@ -312,17 +369,26 @@ def statespace_design(case: CaseStudy, known: models.Plant | None = None, choice
     poles = choices.poles(known) if poles is None else poles
     if Q is None or R is None:
         room = float(known.input_limit[0] - abs(known.linearize().ue[0]))
-        Q_rule, R_rule = ss.bryson_tracking_weights(known.state_names, dict(choices.bryson_maxima),
-                                                    case.design_step * choices.integral_horizon, room)
+        Q_rule, R_rule = ss.bryson_tracking_weights(
+            known.state_names, dict(choices.bryson_maxima), case.design_step * choices.integral_horizon, room
+        )
         Q = Q_rule if Q is None else Q
         R = R_rule if R is None else R
     return ssd.design(
-        known, case.tracked, poles=poles, Q=Q, R=R, sample_period=case.sample_period,
+        known,
+        case.tracked,
+        poles=poles,
+        Q=Q,
+        R=R,
+        sample_period=case.sample_period,
         observer_sample_period=case.observer_sample_period,
         integrator_pole=choices.integrator_pole if integrator_pole is None else integrator_pole,
-        observer_poles=observer_poles, observer_speedup=choices.observer_speedup,
-        observer_outputs=choices.observer_outputs, observer_uses_integrator=choices.observer_uses_integrator,
-        disturbance_pole=disturbance_pole)
+        observer_poles=observer_poles,
+        observer_speedup=choices.observer_speedup,
+        observer_outputs=choices.observer_outputs,
+        observer_uses_integrator=choices.observer_uses_integrator,
+        disturbance_pole=disturbance_pole,
+    )
 
 
 def plain(value):
@@ -333,8 +399,7 @@ def plain(value):
     return to_jsonable(arr, encode=False)
 
 
-def statespace_records(d: ssd.StateSpaceDesign, case: CaseStudy,
-                       choices: StateSpaceChoices) -> dict:
+def statespace_records(d: ssd.StateSpaceDesign, case: CaseStudy, choices: StateSpaceChoices) -> dict:
     """The design's numbers grouped as the homework asks for them (SI units, rad/s; lists; complex allowed).
 
     Keys: "rule" (the pole choice), "controllable", "feedback", "integrator",
@@ -345,60 +410,106 @@ def statespace_records(d: ssd.StateSpaceDesign, case: CaseStudy,
     A_I, B_I = ss.augment_integrator(A, B, d.model.C_r)
     poles = np.asarray(choices.poles(d.model.plant), dtype=complex)
     pairs = poles[poles.imag > 0]
-    rule = {"natural_frequencies": plain(np.abs(pairs)), "damping_ratios": plain(-pairs.real / np.abs(pairs)),
-            **dict(choices.rule_values), "poles": plain(d.poles)}
-    observer = {"L": plain(d.L), "observer_poles": plain(d.observer_poles),
-                "controller_poles": plain(d.controller_poles), "L_discrete": plain(d.L_discrete),
-                "observer_poles_z": plain(d.observer_poles_z), "sample_period": d.observer_sample_period,
-                "measured_outputs": list(d.observer_outputs), "with_integrator": d.observer_uses_integrator}
+    rule = {
+        "natural_frequencies": plain(np.abs(pairs)),
+        "damping_ratios": plain(-pairs.real / np.abs(pairs)),
+        **dict(choices.rule_values),
+        "poles": plain(d.poles),
+    }
+    observer = {
+        "L": plain(d.L),
+        "observer_poles": plain(d.observer_poles),
+        "controller_poles": plain(d.controller_poles),
+        "L_discrete": plain(d.L_discrete),
+        "observer_poles_z": plain(d.observer_poles_z),
+        "sample_period": d.observer_sample_period,
+        "measured_outputs": list(d.observer_outputs),
+        "with_integrator": d.observer_uses_integrator,
+    }
     if not d.observer_uses_integrator:
         observer["kr"] = d.kr
     return {
         "rule": rule,
         "controllable": {"controllability_rank": d.controllability_rank, "n_states": d.model.nx},
-        "feedback": {"K": plain(d.K), "kr": d.kr, "poles": plain(np.linalg.eigvals(A - B @ d.K)),
-                     "poles_sampled_z": plain(d.poles_sampled_z), "sample_period": d.sample_period},
-        "integrator": {"K": plain(d.K_integral), "ki": d.ki, "kr": 0.0, "integrator_pole": d.integrator_pole,
-                       "poles": plain(np.linalg.eigvals(A_I - B_I @ np.hstack([d.K_integral, [[-d.ki]]])))},
-        "observable": {"observability_rank": d.observability_rank, "n_states": d.model.nx,
-                       "measured_outputs": list(d.observer_outputs)},
+        "feedback": {
+            "K": plain(d.K),
+            "kr": d.kr,
+            "poles": plain(np.linalg.eigvals(A - B @ d.K)),
+            "poles_sampled_z": plain(d.poles_sampled_z),
+            "sample_period": d.sample_period,
+        },
+        "integrator": {
+            "K": plain(d.K_integral),
+            "ki": d.ki,
+            "kr": 0.0,
+            "integrator_pole": d.integrator_pole,
+            "poles": plain(np.linalg.eigvals(A_I - B_I @ np.hstack([d.K_integral, [[-d.ki]]]))),
+        },
+        "observable": {
+            "observability_rank": d.observability_rank,
+            "n_states": d.model.nx,
+            "measured_outputs": list(d.observer_outputs),
+        },
         "observer": observer,
         "disturbance observer": {
-            "L": plain(d.L_disturbance), "observer_poles": plain(d.disturbance_observer_poles),
+            "L": plain(d.L_disturbance),
+            "observer_poles": plain(d.disturbance_observer_poles),
             "controller_poles": plain(d.disturbance_controller_poles),
             "L_discrete": plain(d.L_disturbance_discrete),
-            "observer_poles_z": plain(d.disturbance_observer_poles_z), "sample_period": d.sample_period,
-            "K": plain(d.K), "kr": d.kr, "input_disturbance": case.input_disturbance},
-        "LQR": {"K": plain(d.K_lqr), "ki": d.ki_lqr, "Q": plain(d.Q), "R": plain(d.R),
-                "poles": plain(d.lqr_poles), "K_without_integrator": plain(d.K_lqr_plain),
-                "kr_without_integrator": d.kr_lqr_plain, "K_discrete": plain(d.K_dlqr),
-                "poles_discrete_z": plain(d.dlqr_poles_z),
-                "kalman_L": plain(d.L_kalman), "kalman_poles_z": plain(d.kalman_poles_z),
-                "kalman_W": plain(d.kalman_W), "kalman_V": plain(d.kalman_V)},
+            "observer_poles_z": plain(d.disturbance_observer_poles_z),
+            "sample_period": d.sample_period,
+            "K": plain(d.K),
+            "kr": d.kr,
+            "input_disturbance": case.input_disturbance,
+        },
+        "LQR": {
+            "K": plain(d.K_lqr),
+            "ki": d.ki_lqr,
+            "Q": plain(d.Q),
+            "R": plain(d.R),
+            "poles": plain(d.lqr_poles),
+            "K_without_integrator": plain(d.K_lqr_plain),
+            "kr_without_integrator": d.kr_lqr_plain,
+            "K_discrete": plain(d.K_dlqr),
+            "poles_discrete_z": plain(d.dlqr_poles_z),
+            "kalman_L": plain(d.L_kalman),
+            "kalman_poles_z": plain(d.kalman_poles_z),
+            "kalman_W": plain(d.kalman_W),
+            "kalman_V": plain(d.kalman_V),
+        },
         "model": f"{d.plant}: {d.model.nx} states ({', '.join(d.model.plant.state_names)})",
     }
 
 
 def statespace_items_15_to_17(numeral: str) -> Callable[[dict], dict]:
     """The records under the item labels of chapters I–III: .15(c), .15(e), .15(f), .16, .17(b), .17(c), .17(e)."""
+
     def items(r: dict) -> dict:
-        return {f"{numeral}.15(c)": r["rule"], f"{numeral}.15(e)": r["controllable"],
-                f"{numeral}.15(f)": r["feedback"], f"{numeral}.16": r["integrator"],
-                f"{numeral}.17(b)": r["observable"], f"{numeral}.17(c)": r["observer"],
-                f"{numeral}.17(e)": r["disturbance observer"], "LQR": r["LQR"]}
+        return {
+            f"{numeral}.15(c)": r["rule"],
+            f"{numeral}.15(e)": r["controllable"],
+            f"{numeral}.15(f)": r["feedback"],
+            f"{numeral}.16": r["integrator"],
+            f"{numeral}.17(b)": r["observable"],
+            f"{numeral}.17(c)": r["observer"],
+            f"{numeral}.17(e)": r["disturbance observer"],
+            "LQR": r["LQR"],
+        }
+
     return items
 
 
-def statespace_answers(case: CaseStudy, known: models.Plant | None = None, choices: StateSpaceChoices | None = None,
-                       **overrides) -> dict:
+def statespace_answers(
+    case: CaseStudy, known: models.Plant | None = None, choices: StateSpaceChoices | None = None, **overrides
+) -> dict:
     """Homework item -> record of the state-space design (items as the case's `StateSpaceChoices.items` says)."""
     choices = _choices(case, choices)
     d = statespace_design(case, known, choices, **overrides)
     return choices.items(statespace_records(d, case, choices))
 
 
-def statespace_controllers(case: CaseStudy, known: models.Plant | None = None,
-                           choices: StateSpaceChoices | None = None, **overrides) -> dict:
+def statespace_controllers(
+    case: CaseStudy, known: models.Plant | None = None, choices: StateSpaceChoices | None = None, **overrides
+) -> dict:
     """Label -> block of the state-space design (`designs.statespace_design.LABELS`)."""
     return ssd.controllers(statespace_design(case, known, choices, **overrides))
-

@@ -25,8 +25,14 @@ from . import SCENARIO_NAMES
 HERE = Path(__file__).resolve().parent
 
 #: Scenario builders of `studies.case` and the scenario names they make.
-BUILDERS = {"step": ("step",), "series_of_steps": ("steps",), "input_disturbance": ("disturbance",),
-            "measurement_noise": ("noise",), "parameter_monte_carlo": ("mc",), "standard_scenarios": SCENARIO_NAMES}
+BUILDERS = {
+    "step": ("step",),
+    "series_of_steps": ("steps",),
+    "input_disturbance": ("disturbance",),
+    "measurement_noise": ("noise",),
+    "parameter_monte_carlo": ("mc",),
+    "standard_scenarios": SCENARIO_NAMES,
+}
 
 _ROMAN = {"I": 1, "V": 5, "X": 10, "L": 50, "C": 100}
 
@@ -86,15 +92,24 @@ def read(path: Path) -> Listed | None:
     tree = ast.parse(Path(path).read_text(encoding="utf-8"))
     constants = _constants(tree)
     for node in tree.body:
-        if (isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name)
-                and node.targets[0].id == "CASE" and isinstance(node.value, ast.Call)
-                and getattr(node.value.func, "id", None) == "CaseStudy"):
+        if (
+            isinstance(node, ast.Assign)
+            and len(node.targets) == 1
+            and isinstance(node.targets[0], ast.Name)
+            and node.targets[0].id == "CASE"
+            and isinstance(node.value, ast.Call)
+            and getattr(node.value.func, "id", None) == "CaseStudy"
+        ):
             keywords = {k.arg: k.value for k in node.value.keywords}
-            return Listed(name=_value(keywords["plant"], constants), numeral=_value(keywords["numeral"], constants),
-                          source=_value(keywords["source"], constants) if "source" in keywords else "",
-                          scenarios=_scenarios(keywords["scenarios"]),
-                          controllers=tuple(_value(keywords["controllers"], constants)) if "controllers" in keywords
-                          else default_controllers())
+            return Listed(
+                name=_value(keywords["plant"], constants),
+                numeral=_value(keywords["numeral"], constants),
+                source=_value(keywords["source"], constants) if "source" in keywords else "",
+                scenarios=_scenarios(keywords["scenarios"]),
+                controllers=tuple(_value(keywords["controllers"], constants))
+                if "controllers" in keywords
+                else default_controllers(),
+            )
     return None
 
 
@@ -106,8 +121,12 @@ def _numeral(numeral: str) -> int:
 @functools.lru_cache(maxsize=1)
 def cases() -> tuple[Listed, ...]:
     """Every case file's declaration, in the registry's order (by numeral, then file name)."""
-    found = [listed for path in sorted((HERE / "cases").glob("*.py")) if not path.name.startswith("_")
-             if (listed := read(path)) is not None]
+    found = [
+        listed
+        for path in sorted((HERE / "cases").glob("*.py"))
+        if not path.name.startswith("_")
+        if (listed := read(path)) is not None
+    ]
     return tuple(sorted(found, key=lambda c: _numeral(c.numeral)))
 
 

@@ -50,13 +50,29 @@ def linearize_block(block: Block, xc, y, r) -> BlockLinearization:
     ys = ca.SX.sym("y", block.n_measured)
     rs = ca.SX.sym("r", block.n_reference)
     xn, u = block.casadi_step(xs, ys, rs, block.gain_vector())
-    jac = ca.Function("block_jacobians", [xs, ys, rs],
-                      [ca.jacobian(xn, xs), ca.jacobian(xn, ys), ca.jacobian(xn, rs), ca.jacobian(u, xs),
-                       ca.jacobian(u, ys), ca.jacobian(u, rs), u])
+    jac = ca.Function(
+        "block_jacobians",
+        [xs, ys, rs],
+        [
+            ca.jacobian(xn, xs),
+            ca.jacobian(xn, ys),
+            ca.jacobian(xn, rs),
+            ca.jacobian(u, xs),
+            ca.jacobian(u, ys),
+            ca.jacobian(u, rs),
+            u,
+        ],
+    )
     values = [np.asarray(v, dtype=float) for v in jac(np.asarray(xc, dtype=float).reshape(-1), y, r)]
-    shapes = [(block.n_state, block.n_state), (block.n_state, block.n_measured),
-              (block.n_state, block.n_reference), (block.n_input, block.n_state),
-              (block.n_input, block.n_measured), (block.n_input, block.n_reference), (block.n_input,)]
+    shapes = [
+        (block.n_state, block.n_state),
+        (block.n_state, block.n_measured),
+        (block.n_state, block.n_reference),
+        (block.n_input, block.n_state),
+        (block.n_input, block.n_measured),
+        (block.n_input, block.n_reference),
+        (block.n_input,),
+    ]
     values = [v.reshape(s) for v, s in zip(values, shapes)]
     return BlockLinearization(*values)
 
@@ -84,8 +100,9 @@ def rest_point(plant: models.Plant, block: Block, reference_value: float, durati
 def final_point(plant: models.Plant, block: Block, run) -> OperatingPoint:
     """The last sample of a closed-loop run (a `models.ClosedLoopResult`) as an operating point."""
     if run.diverged_at is not None:
-        raise models.SimulationError(f"{block.name} does not hold {plant.name} at rest: the loop diverged at "
-                                     f"t = {run.diverged_at:.3g} s")
+        raise models.SimulationError(
+            f"{block.name} does not hold {plant.name} at rest: the loop diverged at t = {run.diverged_at:.3g} s"
+        )
     x = run.x[-1]
     u = np.clip(run.u[-1], -plant.input_limit, plant.input_limit)
     residual = float(np.max(np.abs(plant.f(x, u))))
@@ -131,8 +148,12 @@ class LoopGain:
         crossover does not exist.
         """
         m = an.margins(self.system())
-        return {"gain_margin_db": m["gm_db"], "phase_margin_deg": m["pm_deg"],
-                "phase_crossover_rad_s": m["phase_crossover"], "gain_crossover_rad_s": m["gain_crossover"]}
+        return {
+            "gain_margin_db": m["gm_db"],
+            "phase_margin_deg": m["pm_deg"],
+            "phase_crossover_rad_s": m["phase_crossover"],
+            "gain_crossover_rad_s": m["gain_crossover"],
+        }
 
     def closed_loop_poles(self, gain: float = 1.0) -> np.ndarray:
         """Eigenvalues z of the loop closed with gain k: eig(A − k B C)."""
@@ -149,8 +170,7 @@ def _measurement_matrix(plant_lin: models.LinearModel, block: Block) -> np.ndarr
     return plant_lin.C if block.measures == "outputs" else np.eye(plant_lin.nx)
 
 
-def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = "input",
-         label: str = "") -> LoopGain:
+def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = "input", label: str = "") -> LoopGain:
     """The loop gain of `block` on `plant` about `point`, broken where `which` says.
 
     Parameters
@@ -187,11 +207,13 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
         C = -np.hstack([inner.Dy @ Cm, inner.Cc])
         return LoopGain(label or block.name, which, A, B, C, block.sample_period)
     ni, n_o = inner.Ac.shape[0], outer.Ac.shape[0]
-    A = np.block([
-        [Ad + Bd @ inner.Dy @ Cm, Bd @ inner.Cc, np.zeros((nx, n_o))],
-        [inner.By @ Cm, inner.Ac, np.zeros((ni, n_o))],
-        [outer.By @ Cm, np.zeros((n_o, ni)), outer.Ac],
-    ])
+    A = np.block(
+        [
+            [Ad + Bd @ inner.Dy @ Cm, Bd @ inner.Cc, np.zeros((nx, n_o))],
+            [inner.By @ Cm, inner.Ac, np.zeros((ni, n_o))],
+            [outer.By @ Cm, np.zeros((n_o, ni)), outer.Ac],
+        ]
+    )
     B = np.vstack([Bd @ inner.Dr, inner.Br, np.zeros((n_o, inner.Dr.shape[1]))])
     C = -np.hstack([outer.Dy @ Cm, np.zeros((outer.Dy.shape[0], ni)), outer.Cc])
     if B.shape[1] != 1 or C.shape[0] != 1:
@@ -199,8 +221,14 @@ def loop(plant: models.Plant, block: Block, point: OperatingPoint, which: str = 
     return LoopGain(label or block.name, which, A, B, C, block.sample_period)
 
 
-def analyse(plant: models.Plant, case, controllers: dict, reference_value: float,
-            runs: dict | None = None, truths: dict | None = None) -> tuple[dict, list]:
+def analyse(
+    plant: models.Plant,
+    case,
+    controllers: dict,
+    reference_value: float,
+    runs: dict | None = None,
+    truths: dict | None = None,
+) -> tuple[dict, list]:
     """Every loop of every block controller about the point where it holds the plant at rest.
 
     The point is the end of the controller's run in `runs` ((label, scenario)
@@ -221,11 +249,19 @@ def analyse(plant: models.Plant, case, controllers: dict, reference_value: float
             continue
         plant_of = (truths or {}).get(label, plant)
         try:
-            finished = [run for (owner, _), run in (runs or {}).items() if owner == label
-                        and run.diverged_at is None and not np.any(run.d)
-                        and abs(run.r[-1, 0] - reference_value) < 1e-12]
-            point = (final_point(plant_of, controller, finished[0]) if finished
-                     else rest_point(plant_of, controller, reference_value, 2 * case.duration))
+            finished = [
+                run
+                for (owner, _), run in (runs or {}).items()
+                if owner == label
+                and run.diverged_at is None
+                and not np.any(run.d)
+                and abs(run.r[-1, 0] - reference_value) < 1e-12
+            ]
+            point = (
+                final_point(plant_of, controller, finished[0])
+                if finished
+                else rest_point(plant_of, controller, reference_value, 2 * case.duration)
+            )
             found = {"input": loop(plant_of, controller, point, "input", label)}
             if isinstance(controller, Cascade):
                 found["inner"] = loop(plant_of, controller, point, "inner", label)
@@ -239,8 +275,10 @@ def analyse(plant: models.Plant, case, controllers: dict, reference_value: float
             unrested[label] = point.residual
         out[label] = found
     if unrested:
-        notes.append(f"linearized about the final state of their run, where the loop is not exactly at rest under "
-                     f"the constant command (|f| up to {max(unrested.values()):.2g}): {', '.join(unrested)}")
+        notes.append(
+            f"linearized about the final state of their run, where the loop is not exactly at rest under "
+            f"the constant command (|f| up to {max(unrested.values()):.2g}): {', '.join(unrested)}"
+        )
     return out, notes
 
 
@@ -263,15 +301,21 @@ def spec_check(design: LoopGain, spec, baseline: LoopGain | None = None, points:
             result["low_frequency"] = None
         else:
             omega = np.logspace(np.log10(spec.low_frequency) - 3, np.log10(spec.low_frequency), points)
-            result["low_frequency"] = bool(np.all(np.abs(design.frequency_response(omega)) >=
-                                                  spec.factor * np.abs(baseline.frequency_response(omega))))
+            result["low_frequency"] = bool(
+                np.all(
+                    np.abs(design.frequency_response(omega)) >= spec.factor * np.abs(baseline.frequency_response(omega))
+                )
+            )
     if spec.high_frequency is not None:
         if baseline is None or spec.high_frequency >= nyquist:
             result["high_frequency"] = None
         else:
             omega = np.logspace(np.log10(spec.high_frequency), np.log10(0.999 * nyquist), points)
-            result["high_frequency"] = bool(np.all(np.abs(design.frequency_response(omega)) <=
-                                                   np.abs(baseline.frequency_response(omega)) / spec.factor))
+            result["high_frequency"] = bool(
+                np.all(
+                    np.abs(design.frequency_response(omega)) <= np.abs(baseline.frequency_response(omega)) / spec.factor
+                )
+            )
     margins = design.margins() if (spec.crossover or spec.phase_margin) else {}
     if spec.crossover is not None:
         wc = margins["gain_crossover_rad_s"]

@@ -35,8 +35,11 @@ from models import specs  # noqa: E402
 from . import style  # noqa: E402
 
 #: Horizontal box plots: `orientation` from matplotlib 3.10 on, `vert` before (deprecated since).
-_HORIZONTAL = ({"orientation": "horizontal"} if tuple(int(v) for v in matplotlib.__version__.split(".")[:2]) >= (3, 10)
-               else {"vert": False})
+_HORIZONTAL = (
+    {"orientation": "horizontal"}
+    if tuple(int(v) for v in matplotlib.__version__.split(".")[:2]) >= (3, 10)
+    else {"vert": False}
+)
 
 #: Relative ITAE at which the heat map's colour is fully "bad" (ten times the best on the plant).
 WORST_RATIO = 10.0
@@ -62,8 +65,9 @@ def relative_itae(table) -> dict:
     itae = rows.itae.astype(float)
     finite = itae[np.isfinite(itae) & (itae > 0)]
     best = float(finite.min()) if len(finite) else math.nan
-    return {label: float(value) / best if np.isfinite(value) and best > 0 else math.nan
-            for label, value in itae.items()}
+    return {
+        label: float(value) / best if np.isfinite(value) and best > 0 else math.nan for label, value in itae.items()
+    }
 
 
 def _ratio_color(ratio: float) -> str:
@@ -93,8 +97,9 @@ def heat_map(studies) -> str:
     body = []
     for label in labels:
         look = style.of(label)
-        cells = [f'<th scope="row"><span class="swatch" style="background:{look.color}"></span>'
-                 f'{html.escape(label)}</th>']
+        cells = [
+            f'<th scope="row"><span class="swatch" style="background:{look.color}"></span>{html.escape(label)}</th>'
+        ]
         for name, _, _ in studies:
             if label not in rows[name].index:
                 cells.append(f'<td class="absent" data-controller="{html.escape(label)}" data-plant="{name}">—</td>')
@@ -105,18 +110,23 @@ def heat_map(studies) -> str:
             number = f"{ratio:.3g}×" if np.isfinite(ratio) else ""
             detail = str(row.get("verdict_detail", "")) if isinstance(row.get("verdict_detail"), str) else ""
             title = f"{label} on {name}: {verdict}" + (f" ({detail})" if detail else "")
-            cells.append(f'<td data-controller="{html.escape(label)}" data-plant="{name}" '
-                         f'data-verdict="{html.escape(verdict)}" title="{html.escape(title)}" '
-                         f'style="background:{_ratio_color(ratio)}"><span class="mark" '
-                         f'style="color:{style.verdict_color(verdict)}">{style.verdict_symbol(verdict)}</span> '
-                         f"{number}</td>")
+            cells.append(
+                f'<td data-controller="{html.escape(label)}" data-plant="{name}" '
+                f'data-verdict="{html.escape(verdict)}" title="{html.escape(title)}" '
+                f'style="background:{_ratio_color(ratio)}"><span class="mark" '
+                f'style="color:{style.verdict_color(verdict)}">{style.verdict_symbol(verdict)}</span> '
+                f"{number}</td>"
+            )
         body.append("<tr>" + "".join(cells) + "</tr>")
-    legend = " ".join(f'<span style="color:{color}">{symbol}</span> {html.escape(label)}'
-                      for label, (symbol, color) in style.VERDICTS.items())
-    return ('<table id="heatmap" class="heatmap"><caption>Step ITAE relative to the best on each plant '
-            f"(1× = best; colour from green to red at {WORST_RATIO:g}× and beyond) and the row's verdict: "
-            f"{legend}</caption><thead><tr><th></th>{head}</tr></thead><tbody>" + "".join(body)
-            + "</tbody></table>")
+    legend = " ".join(
+        f'<span style="color:{color}">{symbol}</span> {html.escape(label)}'
+        for label, (symbol, color) in style.VERDICTS.items()
+    )
+    return (
+        '<table id="heatmap" class="heatmap"><caption>Step ITAE relative to the best on each plant '
+        f"(1× = best; colour from green to red at {WORST_RATIO:g}× and beyond) and the row's verdict: "
+        f"{legend}</caption><thead><tr><th></th>{head}</tr></thead><tbody>" + "".join(body) + "</tbody></table>"
+    )
 
 
 def _svg(fig: Figure, salt: str) -> str:
@@ -125,9 +135,8 @@ def _svg(fig: Figure, salt: str) -> str:
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": salt}):
         FigureCanvasSVG(fig).print_svg(buffer, metadata={"Date": None})
     text = buffer.getvalue()
-    text = text[text.index("<svg"):]
-    return re.sub(r'<svg([^>]*?) width="[^"]*" height="[^"]*"', r'<svg\1 style="width:100%;height:auto"', text,
-                  count=1)
+    text = text[text.index("<svg") :]
+    return re.sub(r'<svg([^>]*?) width="[^"]*" height="[^"]*"', r'<svg\1 style="width:100%;height:auto"', text, count=1)
 
 
 def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure, list]:
@@ -140,9 +149,17 @@ def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure
 
 
 def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
-    handles = [Line2D([], [], color=style.of(label).color, marker=style.of(label).marker if marker else None,
-                      linestyle="none" if marker else style.of(label).linestyle, markersize=7)  # type: ignore[arg-type]
-               for label in labels]
+    handles = [
+        Line2D(
+            [],
+            [],
+            color=style.of(label).color,
+            marker=style.of(label).marker if marker else None,
+            linestyle="none" if marker else style.of(label).linestyle,
+            markersize=7,
+        )  # type: ignore[arg-type]
+        for label in labels
+    ]
     ncol = style.legend_columns(labels, fig.get_figwidth(), fontsize=8)
     legend = fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
     for i, text in enumerate(legend.get_texts()):
@@ -172,9 +189,16 @@ def scatter(studies) -> str | None:
                 continue
             look = style.of(str(label))
             meets = row.get("verdict") == specs.MEETS
-            ax.plot([edge if math.isinf(time_) else time_], [overshoot], linestyle="none", marker=look.marker,
-                    markersize=8, markeredgecolor=look.color, markerfacecolor=look.color if meets else "none",
-                    markeredgewidth=1.5)
+            ax.plot(
+                [edge if math.isinf(time_) else time_],
+                [overshoot],
+                linestyle="none",
+                marker=look.marker,
+                markersize=8,
+                markeredgecolor=look.color,
+                markerfacecolor=look.color if meets else "none",
+                markeredgewidth=1.5,
+            )
         if len(finite) < len(settling.dropna()):
             ax.axvline(edge / 1.15 * 1.075, color="#999", linestyle="--", linewidth=0.8)
             ax.text(edge, ax.get_ylim()[1], "∞", ha="center", va="bottom", fontsize=9, color="#555")
@@ -183,8 +207,9 @@ def scatter(studies) -> str | None:
         ax.set_ylabel("overshoot (%)", fontsize=8)
         ax.grid(True, alpha=0.3)
         ax.tick_params(labelsize=8)
-    fig.suptitle("The text's step: settling time against overshoot (filled: meets its specs; hollow: misses them)",
-                 fontsize=11)
+    fig.suptitle(
+        "The text's step: settling time against overshoot (filled: meets its specs; hollow: misses them)", fontsize=11
+    )
     fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.85 / fig.get_figheight(), hspace=0.45, wspace=0.25)
     _legend(fig, labels)
     return _svg(fig, "scatter")
@@ -241,6 +266,12 @@ def boxplots(out: Path, studies) -> str | None:
         ax.grid(True, axis="x", alpha=0.3)
         ax.tick_params(axis="x", labelsize=8)
     fig.suptitle("Monte Carlo on the ±5 % parameter box: spread of the step's ITAE per controller", fontsize=11)
-    fig.subplots_adjust(left=0.17, right=0.98, top=1 - 0.9 / fig.get_figheight(), bottom=0.6 / fig.get_figheight(),
-                        hspace=0.4, wspace=0.55)
+    fig.subplots_adjust(
+        left=0.17,
+        right=0.98,
+        top=1 - 0.9 / fig.get_figheight(),
+        bottom=0.6 / fig.get_figheight(),
+        hspace=0.4,
+        wspace=0.55,
+    )
     return _svg(fig, "boxplots")

@@ -25,14 +25,16 @@ from . import style  # noqa: E402
 #: Commands beyond this multiple of the actuator limit are cut off in input plots (and the plot says so).
 INPUT_PLOT_RANGE = 3.0
 
+
 def figure(width: float, height: float) -> Figure:
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig
 
 
-def legend_below(fig: Figure, handles, labels, ncol: int | None = None, top: float = 0.9,
-                 hspace: float = 0.25, left: float = 0.09) -> None:
+def legend_below(
+    fig: Figure, handles, labels, ncol: int | None = None, top: float = 0.9, hspace: float = 0.25, left: float = 0.09
+) -> None:
     """A figure legend under the axes, with room made for it (no layout engine: it is slow).
 
     `ncol` defaults to as many columns of the labels as fit across the figure (`style.legend_columns`).
@@ -85,14 +87,24 @@ def responses(result, scenario: str, path: Path, dpi: int = 110) -> Path | None:
     reference = runs[0][1]
     top.plot(reference.t, reference.r[:, 0] * scale, label="reference", **style.REFERENCE)
     for sign in (1, -1):
-        bottom.axhline(sign * limit, color=style.LIMIT_COLOR, linestyle="--", linewidth=1,
-                       label=f"actuator limit ±{limit:g} {study.input_unit}" if sign > 0 else None)
+        bottom.axhline(
+            sign * limit,
+            color=style.LIMIT_COLOR,
+            linestyle="--",
+            linewidth=1,
+            label=f"actuator limit ±{limit:g} {study.input_unit}" if sign > 0 else None,
+        )
     for label, run in runs:
         own = float(np.max(run.input_limit))
         if own != limit:  # a design the text gives its own actuator
             for sign in (1, -1):
-                bottom.axhline(sign * own, color=style.of(label).color, linestyle=":", linewidth=1,
-                               label=f"{label}: its limit ±{own:g} {study.input_unit}" if sign > 0 else None)
+                bottom.axhline(
+                    sign * own,
+                    color=style.of(label).color,
+                    linestyle=":",
+                    linewidth=1,
+                    label=f"{label}: its limit ±{own:g} {study.input_unit}" if sign > 0 else None,
+                )
     top.set_ylabel(f"{case.tracked} ({unit})")
     bottom.set_ylabel(f"commanded {result.plant.input_names[0]} ({study.input_unit})")
     bottom.set_xlabel("t (s)")
@@ -122,26 +134,33 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
     for ax, (label, env) in zip(axes, items):
         t = env.t
         color = style.of(label).color
-        ax.fill_between(t, env.tracked[0] * scale, env.tracked[-1] * scale, color=color, alpha=0.2,
-                        linewidth=0, label="min–max")
-        ax.fill_between(t, env.tracked[1] * scale, env.tracked[-2] * scale, color=color, alpha=0.4,
-                        linewidth=0, label="5–95 %")
+        ax.fill_between(
+            t, env.tracked[0] * scale, env.tracked[-1] * scale, color=color, alpha=0.2, linewidth=0, label="min–max"
+        )
+        ax.fill_between(
+            t, env.tracked[1] * scale, env.tracked[-2] * scale, color=color, alpha=0.4, linewidth=0, label="5–95 %"
+        )
         ax.plot(t, env.tracked[2] * scale, label="median", **style.of(label).line(1.0))
         ax.plot(t, env.reference * scale, label="reference", **style.REFERENCE)
         note = f", {env.diverged} diverged" if env.diverged else ""
         ax.set_title(f"{label} ({env.samples} samples{note})", fontsize=9)
         ax.grid(True, alpha=0.3)
         ax.set_ylabel(f"{case.tracked} ({unit})", fontsize=8)
-    for ax in axes[len(items):]:
+    for ax in axes[len(items) :]:
         ax.set_visible(False)
     for ax in axes[-cols:]:
         ax.set_xlabel("t (s)")
     axes[0].legend(fontsize=7)
     rel = next((s.rel for s in study.scenarios if s.monte_carlo), study.known_rel)
-    fig.suptitle(f"{result.plant.title}: step on ±{100 * rel:g} % parameter samples (nonlinear plant)",
-                 fontsize=10)
-    fig.subplots_adjust(left=0.07, right=0.98, top=1 - 0.7 / fig.get_figheight(), bottom=0.5 / fig.get_figheight(),
-                        hspace=0.45, wspace=0.3)
+    fig.suptitle(f"{result.plant.title}: step on ±{100 * rel:g} % parameter samples (nonlinear plant)", fontsize=10)
+    fig.subplots_adjust(
+        left=0.07,
+        right=0.98,
+        top=1 - 0.7 / fig.get_figheight(),
+        bottom=0.5 / fig.get_figheight(),
+        hspace=0.45,
+        wspace=0.3,
+    )
     return save(fig, path, dpi)
 
 
@@ -170,8 +189,9 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
         response = lp.frequency_response(omega)
         text = label
         if checks and label in checks:
-            verdict = ", ".join(f"{k}: {'met' if v else 'missed' if v is not None else 'n/a'}"
-                                for k, v in checks[label].items())
+            verdict = ", ".join(
+                f"{k}: {'met' if v else 'missed' if v is not None else 'n/a'}" for k, v in checks[label].items()
+            )
             text += f" ({verdict})" if verdict else ""
         line = style.of(label).line(2.2 if label == spec.design else 1.1)
         mag.semilogx(omega, 20 * np.log10(np.abs(response)), label=text, **line)
@@ -181,34 +201,61 @@ def bode(result, loops: dict, spec, path: Path, checks: dict | None = None, dpi:
         base = np.abs(baseline.frequency_response(omega))
         if spec.low_frequency:
             low = omega <= spec.low_frequency
-            mag.semilogx(omega[low], 20 * np.log10(spec.factor * base[low]), color="red", linewidth=2.5,
-                         alpha=0.6, label=f"{spec.item}: |L| ≥ {spec.factor:g}·|L {spec.baseline}| "
-                                          f"below {spec.low_frequency:g} rad/s")
+            mag.semilogx(
+                omega[low],
+                20 * np.log10(spec.factor * base[low]),
+                color="red",
+                linewidth=2.5,
+                alpha=0.6,
+                label=f"{spec.item}: |L| ≥ {spec.factor:g}·|L {spec.baseline}| below {spec.low_frequency:g} rad/s",
+            )
         if spec.high_frequency:
             high = omega >= spec.high_frequency
-            mag.semilogx(omega[high], 20 * np.log10(base[high] / spec.factor), color="darkred", linewidth=2.5,
-                         alpha=0.6, label=f"{spec.item}: |L| ≤ |L {spec.baseline}|/{spec.factor:g} "
-                                          f"above {spec.high_frequency:g} rad/s")
+            mag.semilogx(
+                omega[high],
+                20 * np.log10(base[high] / spec.factor),
+                color="darkred",
+                linewidth=2.5,
+                alpha=0.6,
+                label=f"{spec.item}: |L| ≤ |L {spec.baseline}|/{spec.factor:g} above {spec.high_frequency:g} rad/s",
+            )
     elif spec.low_frequency or spec.high_frequency:
         for f in (spec.low_frequency, spec.high_frequency):
             if f:
                 mag.axvline(f, color="red", linestyle=":", linewidth=1)
-        mag.text(0.01, 0.03, f"{spec.item}: baseline {spec.baseline!r} not available, so the relative specs are "
-                 f"only marked by their frequencies", transform=mag.transAxes, fontsize=8, color="red")
+        mag.text(
+            0.01,
+            0.03,
+            f"{spec.item}: baseline {spec.baseline!r} not available, so the relative specs are "
+            f"only marked by their frequencies",
+            transform=mag.transAxes,
+            fontsize=8,
+            color="red",
+        )
     if spec.crossover:
         for ax in (mag, phase):
             ax.axvline(spec.crossover, color="red", linestyle="--", linewidth=1)
         mag.plot([], [], color="red", linestyle="--", label=f"{spec.item}: crossover {spec.crossover:g} rad/s")
     if spec.phase_margin:
-        phase.axhline(-180 + spec.phase_margin, color="red", linestyle="--", linewidth=1,
-                      label=f"{spec.item}: phase margin {spec.phase_margin:g} deg")
+        phase.axhline(
+            -180 + spec.phase_margin,
+            color="red",
+            linestyle="--",
+            linewidth=1,
+            label=f"{spec.item}: phase margin {spec.phase_margin:g} deg",
+        )
         phase.legend(fontsize=7)
     mag.axhline(0, color="gray", linewidth=0.8)
     phase.axhline(-180, color="gray", linewidth=0.8)
-    where = {"input": "at the plant input", "outer": "outer loop (at the inner reference)",
-             "inner": "inner loop (outer loop open)"}[spec.loop]
-    mag.set_title(f"{result.plant.title}: loop gain L(z) {where}, exact linearization, Ts = "
-                  f"{chosen[0][1].sample_period:g} s", fontsize=10)
+    where = {
+        "input": "at the plant input",
+        "outer": "outer loop (at the inner reference)",
+        "inner": "inner loop (outer loop open)",
+    }[spec.loop]
+    mag.set_title(
+        f"{result.plant.title}: loop gain L(z) {where}, exact linearization, Ts = {chosen[0][1].sample_period:g} s",
+        fontsize=10,
+    )
     mag.set_ylabel("|L| (dB)")
     phase.set_ylabel("∠L (deg)")
     phase.set_xlabel("ω (rad/s)")
@@ -255,12 +302,21 @@ def root_loci(result, loops: dict, path: Path, dpi: int = 110, gains: int = 300)
         ax.grid(True, alpha=0.3)
         ax.set_xlabel("Re s (1/s)", fontsize=8)
         ax.set_ylabel("Im s (rad/s)", fontsize=8)
-    for ax in axes[len(chosen):]:
+    for ax in axes[len(chosen) :]:
         ax.set_visible(False)
-    fig.suptitle(f"{result.plant.title}: root locus of k·L at the plant input (k = 0.01…100; × design k = 1, "
-                 "○ open loop), s = ln(z)/Ts", fontsize=10)
-    fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.7 / fig.get_figheight(), bottom=0.6 / fig.get_figheight(),
-                        hspace=0.5, wspace=0.35)
+    fig.suptitle(
+        f"{result.plant.title}: root locus of k·L at the plant input (k = 0.01…100; × design k = 1, "
+        "○ open loop), s = ln(z)/Ts",
+        fontsize=10,
+    )
+    fig.subplots_adjust(
+        left=0.08,
+        right=0.98,
+        top=1 - 0.7 / fig.get_figheight(),
+        bottom=0.6 / fig.get_figheight(),
+        hspace=0.5,
+        wspace=0.35,
+    )
     return save(fig, path, dpi)
 
 
@@ -278,8 +334,15 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
         look = style.of(label)
         ax.scatter(poles.real, poles.imag, marker=look.marker, color=look.color, s=36, label=label)
     plant_poles = np.linalg.eigvals(result.plant.linearize().A)
-    ax.scatter(plant_poles.real, plant_poles.imag, marker="o", facecolors="none", edgecolors="black", s=60,
-               label="plant (open loop)")
+    ax.scatter(
+        plant_poles.real,
+        plant_poles.imag,
+        marker="o",
+        facecolors="none",
+        edgecolors="black",
+        s=60,
+        label="plant (open loop)",
+    )
     half = max(_focus(p, ts) for p, ts in everything)
     ax.set_xlim(-half, 0.3 * half)
     ax.set_ylim(-half, half)
@@ -287,8 +350,7 @@ def pole_map(result, loops: dict, path: Path, dpi: int = 110) -> Path | None:
     ax.grid(True, alpha=0.3)
     ax.set_xlabel("Re s (1/s)")
     ax.set_ylabel("Im s (rad/s)")
-    ax.set_title(f"{result.plant.title}: closed-loop poles, exact linearization at rest, s = ln(z)/Ts",
-                 fontsize=10)
+    ax.set_title(f"{result.plant.title}: closed-loop poles, exact linearization at rest, s = ln(z)/Ts", fontsize=10)
     handles, labels = ax.get_legend_handles_labels()
     legend_below(fig, handles, labels, top=0.94)
     return save(fig, path, dpi)

@@ -38,8 +38,10 @@ def mpc(name: str, known: models.Plant | None = None) -> dict:
     if case.mpc is None:
         raise NotProvided(f"the {name} case has no MPC settings")
     known = models.get(name) if known is None else known
-    return {"linear MPC": mpc_package.linear_mpc(known, case.mpc, tracked=case.tracked),
-            "nonlinear MPC": mpc_package.nonlinear_mpc(known, case.mpc, tracked=case.tracked)}
+    return {
+        "linear MPC": mpc_package.linear_mpc(known, case.mpc, tracked=case.tracked),
+        "nonlinear MPC": mpc_package.nonlinear_mpc(known, case.mpc, tracked=case.tracked),
+    }
 
 
 def tuned(name: str, known: models.Plant | None = None) -> dict:

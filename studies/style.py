@@ -67,8 +67,20 @@ TABLE = {
 }
 
 #: Colours, line styles and markers for labels not in `TABLE`, picked by a hash of the label.
-_EXTRA_COLORS = ("#637939", "#3182bd", "#e6550d", "#31a354", "#756bb1", "#636363", "#d6616b", "#ce6dbd",
-                 "#8ca252", "#bd9e39", "#6b6ecf", "#ad494a")
+_EXTRA_COLORS = (
+    "#637939",
+    "#3182bd",
+    "#e6550d",
+    "#31a354",
+    "#756bb1",
+    "#636363",
+    "#d6616b",
+    "#ce6dbd",
+    "#8ca252",
+    "#bd9e39",
+    "#6b6ecf",
+    "#ad494a",
+)
 _EXTRA_LINES = ("-", "--", "-.", ":")
 _EXTRA_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
 
@@ -82,8 +94,11 @@ def of(label: str) -> Style:
     if label in TABLE:
         return TABLE[label]
     code = zlib.crc32(str(label).encode("utf-8"))
-    return Style(_EXTRA_COLORS[code % len(_EXTRA_COLORS)], _EXTRA_LINES[(code >> 8) % len(_EXTRA_LINES)],
-                 _EXTRA_MARKERS[(code >> 16) % len(_EXTRA_MARKERS)])
+    return Style(
+        _EXTRA_COLORS[code % len(_EXTRA_COLORS)],
+        _EXTRA_LINES[(code >> 8) % len(_EXTRA_LINES)],
+        _EXTRA_MARKERS[(code >> 16) % len(_EXTRA_MARKERS)],
+    )
 
 
 #: Verdict label -> (symbol, colour) used in tables, the heat map and the scatters.

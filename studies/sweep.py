@@ -38,7 +38,7 @@ class Grid:
 
     @classmethod
     def parse(cls, text: str) -> Grid:
-        """"m1=0.2:0.4:5" -> m1 at 0.2, 0.25, ..., 0.4 (N >= 2 values, LOW < HIGH)."""
+        """ "m1=0.2:0.4:5" -> m1 at 0.2, 0.25, ..., 0.4 (N >= 2 values, LOW < HIGH)."""
         match = re.fullmatch(r"\s*([A-Za-z_]\w*)\s*=\s*([^:]+):([^:]+):(\d+)\s*", str(text))
         if not match:
             raise ValueError(f"a sweep is PARAM=LOW:HIGH:N (e.g. m1=0.2:0.4:5), got {text!r}")
@@ -56,8 +56,7 @@ class Grid:
 def grid_params(plant: models.Plant, grid: Grid) -> np.ndarray:
     """(N, n_params) parameter vectors: nominal, with `grid.param` at each value (checked by the plant)."""
     if grid.param not in plant.params:
-        raise ValueError(f"{plant.name} has no parameter {grid.param!r}; its parameters are "
-                         f"{', '.join(plant.params)}")
+        raise ValueError(f"{plant.name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
     index = list(plant.params).index(grid.param)
     rows = np.tile(plant.param_vector(), (len(grid.values), 1))
     rows[:, index] = grid.values
@@ -69,9 +68,17 @@ def grid_params(plant: models.Plant, grid: Grid) -> np.ndarray:
     return rows
 
 
-def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: runner.Options | None = None,
-              providers: Sequence[str] | None = None, controllers: Mapping | None = None, executor=None,
-              progress: Callable[[int, int, str], None] | None = None):
+def run_sweep(
+    study: CaseStudy,
+    grid: Grid,
+    *,
+    scenario: str = "step",
+    options: runner.Options | None = None,
+    providers: Sequence[str] | None = None,
+    controllers: Mapping | None = None,
+    executor=None,
+    progress: Callable[[int, int, str], None] | None = None,
+):
     """Every controller of `study` on the true plant at each grid value; one row per (controller, value).
 
     Parameters
@@ -93,8 +100,9 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
     chosen = next((s for s in study.scenarios if s.name == scenario and not s.monte_carlo), None)
     if chosen is None:
         names = [s.name for s in study.scenarios if not s.monte_carlo]
-        raise ValueError(f"a sweep runs one scenario of the study other than the Monte Carlo ({', '.join(names)}); "
-                         f"got {scenario!r}")
+        raise ValueError(
+            f"a sweep runs one scenario of the study other than the Monte Carlo ({', '.join(names)}); got {scenario!r}"
+        )
     plant = models.get(study.plant)
     samples = grid_params(plant, grid)
     designed, notes = runner.design_controllers(study, study.known_plant(plant), providers, options.strict)
@@ -108,23 +116,45 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
         started = time.perf_counter()
         try:
             if isinstance(controller, Block):
-                noise = (runner.measurement_noise_std(truth, controller, chosen.noise) if chosen.noise else 0.0)
+                noise = runner.measurement_noise_std(truth, controller, chosen.noise) if chosen.noise else 0.0
                 steps = int(round(duration / controller.sample_period))
-                results = list(distributed.monte_carlo(
-                    executor, truth, controller, reference, duration, samples, seed=options.seed,
-                    threads=options.threads, substeps=study.substeps, noise_std=noise,
-                    input_disturbance=study.input_disturbance if chosen.input_disturbance else 0.0,
-                    jit=runner.use_jit(options, truth, controller, len(samples), steps, study.substeps)))
+                results = list(
+                    distributed.monte_carlo(
+                        executor,
+                        truth,
+                        controller,
+                        reference,
+                        duration,
+                        samples,
+                        seed=options.seed,
+                        threads=options.threads,
+                        substeps=study.substeps,
+                        noise_std=noise,
+                        input_disturbance=study.input_disturbance if chosen.input_disturbance else 0.0,
+                        jit=runner.use_jit(options, truth, controller, len(samples), steps, study.substeps),
+                    )
+                )
             else:
-                results = [runner.simulate_scenario(truth, controller, chosen, study, options, base, study.substeps,
-                                                    params=row) for row in samples]
+                results = [
+                    runner.simulate_scenario(
+                        truth, controller, chosen, study, options, base, study.substeps, params=row
+                    )
+                    for row in samples
+                ]
             for value, row, result in zip(grid.values, samples, results):
                 judged = study.specs_for(chosen.name, dict(zip(names, row)))
                 values = metrics.run_metrics(result, study.tracked, judged.state_bounds)
                 status = "ok" if result.diverged_at is None else f"diverged at t = {result.diverged_at:.3g} s"
                 verdict = specs.judge(judged, result, study.tracked, study.step, status, measured=values)
-                rows.append({"controller": label, grid.param: value, "status": status,
-                             **runner.verdict_columns(verdict), **values})
+                rows.append(
+                    {
+                        "controller": label,
+                        grid.param: value,
+                        "status": status,
+                        **runner.verdict_columns(verdict),
+                        **values,
+                    }
+                )
         except distributed.RunFailed:
             raise
         except Exception as err:  # one controller's failure leaves the others' points
@@ -133,13 +163,23 @@ def run_sweep(study: CaseStudy, grid: Grid, *, scenario: str = "step", options: 
             if options.strict:
                 raise
             status = f"failed: {type(err).__name__}: {err}".splitlines()[0]
-            rows += [{"controller": label, grid.param: value, "status": status[:200],
-                      **runner.verdict_columns(specs.Verdict(specs.FAILED, (), status[:200])),
-                      **dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)} for value in grid.values]
+            rows += [
+                {
+                    "controller": label,
+                    grid.param: value,
+                    "status": status[:200],
+                    **runner.verdict_columns(specs.Verdict(specs.FAILED, (), status[:200])),
+                    **dict.fromkeys(metrics.METRIC_COLUMNS, math.nan),
+                }
+                for value in grid.values
+            ]
             notes.append(f"{label}: {status[:200]}")
         if progress:
-            progress(done, len(designed), f"{study.plant} sweep of {grid.param}: {label} "
-                                          f"({time.perf_counter() - started:.1f} s)")
+            progress(
+                done,
+                len(designed),
+                f"{study.plant} sweep of {grid.param}: {label} ({time.perf_counter() - started:.1f} s)",
+            )
     frame = pd.DataFrame(rows)
     columns = ["controller", grid.param, "status", "verdict", "verdict_detail", *metrics.METRIC_COLUMNS]
     return frame.reindex(columns=columns), notes
@@ -166,33 +206,48 @@ def write_sweep(study: CaseStudy, grid: Grid, table, out, notes: Sequence[str] =
         cost.plot(mine[grid.param], itae, label=label, **look.line())
         meets = (mine.verdict == specs.MEETS).to_numpy()
         cost.plot(mine[grid.param][meets], itae[meets], linestyle="none", marker=look.marker, color=look.color)
-        cost.plot(mine[grid.param][~meets], itae[~meets], linestyle="none", marker=look.marker,
-                  markerfacecolor="none", markeredgecolor=look.color)
+        cost.plot(
+            mine[grid.param][~meets],
+            itae[~meets],
+            linestyle="none",
+            marker=look.marker,
+            markerfacecolor="none",
+            markeredgecolor=look.color,
+        )
     if np.nanmin(table.itae.astype(float).replace(0, np.nan)) > 0:
         cost.set_yscale("log")
     for i, label in enumerate(labels):
         mine = table[table.controller == label]
-        strip.scatter(mine[grid.param], np.full(len(mine), i), marker="s", s=90,
-                      c=[style.verdict_color(v) for v in mine.verdict])
+        strip.scatter(
+            mine[grid.param], np.full(len(mine), i), marker="s", s=90, c=[style.verdict_color(v) for v in mine.verdict]
+        )
     strip.set_yticks(range(len(labels)), labels, fontsize=7)
     strip.invert_yaxis()
     for ax in (cost, strip):
         ax.axvline(nominal, color="#555", linestyle=":", linewidth=1)
         ax.grid(True, alpha=0.3)
     cost.set_ylabel(f"ITAE ({'rad' if study.tracked_unit == 'rad' else study.tracked_unit} s²)")
-    strip.set_xlabel(f"{grid.param} of the true plant ({unit}); dotted: nominal {nominal:g}; "
-                     "controllers designed from the known model")
+    strip.set_xlabel(
+        f"{grid.param} of the true plant ({unit}); dotted: nominal {nominal:g}; "
+        "controllers designed from the known model"
+    )
     legend = "  ".join(f"{symbol} {label}" for label, (symbol, _) in style.VERDICTS.items())
     strip.set_title(f"verdict against the specs (colour): {legend}", fontsize=8)
     cost.set_title(f"{plant.title}: {scenario} as {grid.param} varies (filled: meets its specs)", fontsize=10)
     handles, names = cost.get_legend_handles_labels()
     plots.legend_below(fig, handles, names, top=0.95, hspace=0.15, left=0.2)
     plots.save(fig, folder / "sweep.png", 100)
-    lines = [f"# {plant.title}: sweep of {grid.param}", "",
-             f"Every controller, designed from the known model, on the nonlinear plant with {grid.param} from "
-             f"{grid.values[0]:g} to {grid.values[-1]:g} {unit} ({len(grid.values)} values; nominal {nominal:g}), "
-             f"scenario {scenario}. Rows in sweep.csv; picture in sweep.png.", "", *sweep_summary(table, grid),
-             *([""] + [f"- note: {n}" for n in notes] if notes else []), ""]
+    lines = [
+        f"# {plant.title}: sweep of {grid.param}",
+        "",
+        f"Every controller, designed from the known model, on the nonlinear plant with {grid.param} from "
+        f"{grid.values[0]:g} to {grid.values[-1]:g} {unit} ({len(grid.values)} values; nominal {nominal:g}), "
+        f"scenario {scenario}. Rows in sweep.csv; picture in sweep.png.",
+        "",
+        *sweep_summary(table, grid),
+        *([""] + [f"- note: {n}" for n in notes] if notes else []),
+        "",
+    ]
     write_text(folder / "sweep.md", "\n".join(lines))
     return {"sweep.csv": "sweep.csv", "sweep.png": "sweep.png", "sweep.md": "sweep.md"}
 

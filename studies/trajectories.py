@@ -198,8 +198,10 @@ class CaseTrajectories:
 def describe(transcription) -> str:
     """The transcription in words: "Radau collocation, degree 3, N = 100"."""
     if hasattr(transcription, "degree"):
-        return (f"{transcription.points.capitalize()} collocation, degree {transcription.degree}, "
-                f"N = {transcription.intervals}")
+        return (
+            f"{transcription.points.capitalize()} collocation, degree {transcription.degree}, "
+            f"N = {transcription.intervals}"
+        )
     return f"multiple shooting (RK4, {transcription.substeps} step/interval), N = {transcription.intervals}"
 
 
@@ -214,13 +216,24 @@ def solve_problem(problem: TrajectoryProblem, plant: models.Plant, quick: bool, 
 
 def problem_row(plant: models.Plant, solved: SolvedTrajectory) -> dict:
     s, v = solved.solution, solved.verification
-    row = {"key": solved.problem.key, "problem": solved.problem.title, "status": s.status,
-           "final_time_s": s.final_time, "objective": s.objective, "objective_is": solved.setup.objective,
-           "peak_u": float(np.max(np.abs(s.inputs))), "u_limit": float(np.max(plant.input_limit)),
-           "transcription": describe(solved.setup.transcription), "iterations": s.iterations,
-           "wall_s": solved.wall_time, "defect_whole": v.max_defect, "defect_whole_state": v.state,
-           "defect_interval": v.max_interval_defect, "defect_interval_state": v.interval_state,
-           "verified": solved.verified}
+    row = {
+        "key": solved.problem.key,
+        "problem": solved.problem.title,
+        "status": s.status,
+        "final_time_s": s.final_time,
+        "objective": s.objective,
+        "objective_is": solved.setup.objective,
+        "peak_u": float(np.max(np.abs(s.inputs))),
+        "u_limit": float(np.max(plant.input_limit)),
+        "transcription": describe(solved.setup.transcription),
+        "iterations": s.iterations,
+        "wall_s": solved.wall_time,
+        "defect_whole": v.max_defect,
+        "defect_whole_state": v.state,
+        "defect_interval": v.max_interval_defect,
+        "defect_interval_state": v.interval_state,
+        "verified": solved.verified,
+    }
     for name in solved.problem.report:
         row[f"max_abs_{name}"] = float(np.max(np.abs(s.state(name))))
     return row
@@ -230,8 +243,13 @@ def motion(solution, target: float, input_limit, step: float = 0.01) -> Motion:
     """The optimized motion every `step` s (the collocation polynomial or the shooting interpolant)."""
     count = max(2, int(math.ceil(solution.final_time / step)))
     t = np.linspace(0.0, solution.final_time, count + 1)
-    return Motion(t, solution.state_at(t), np.full((t.size, 1), float(target)), solution.input_at(t[:-1]),
-                  np.asarray(input_limit, dtype=float))
+    return Motion(
+        t,
+        solution.state_at(t),
+        np.full((t.size, 1), float(target)),
+        solution.input_at(t[:-1]),
+        np.asarray(input_limit, dtype=float),
+    )
 
 
 def _bryson(plant: models.Plant, tracking: Tracking) -> tuple[np.ndarray, np.ndarray]:
@@ -244,8 +262,9 @@ def _bryson(plant: models.Plant, tracking: Tracking) -> tuple[np.ndarray, np.nda
     return bryson_weights(state_max, np.broadcast_to(np.asarray(tracking.input_max, dtype=float), (plant.nu,)))
 
 
-def track(case, problem: TrajectoryProblem, plant: models.Plant, nominal_solution, quick: bool, solved: Mapping,
-          seed: int = 0) -> TrackingRun:
+def track(
+    case, problem: TrajectoryProblem, plant: models.Plant, nominal_solution, quick: bool, solved: Mapping, seed: int = 0
+) -> TrackingRun:
     """Re-optimize `problem` on the case's known model with headroom, track it with a time-varying LQR on `plant`.
 
     The controller knows the +known_rel model; the truth is `plant` (nominal), then `tracking.samples`
@@ -268,8 +287,10 @@ def track(case, problem: TrajectoryProblem, plant: models.Plant, nominal_solutio
     ts = case.sample_period
     steps = int(round(planned.final_time / ts))
     if abs(steps * ts - planned.final_time) > 1e-9 * max(1.0, planned.final_time):
-        raise ValueError(f"{problem.key}: tracking needs a final time that is a whole number of samples of "
-                         f"{ts:g} s, got {planned.final_time:.6g} s")
+        raise ValueError(
+            f"{problem.key}: tracking needs a final time that is a whole number of samples of "
+            f"{ts:g} s, got {planned.final_time:.6g} s"
+        )
     times = ts * np.arange(steps + 1)
     states = planned.state_at(times)
     states[-1] = planned.states[-1]
@@ -279,14 +300,16 @@ def track(case, problem: TrajectoryProblem, plant: models.Plant, nominal_solutio
     duration = planned.final_time + spec.hold
     reference = design.reference(duration)
     x0 = planned.states[0]
-    nominal = models.simulate_closed_loop(plant, design.block, reference, duration, x0=x0, substeps=case.substeps,
-                                          allow_divergence=True)
+    nominal = models.simulate_closed_loop(
+        plant, design.block, reference, duration, x0=x0, substeps=case.substeps, allow_divergence=True
+    )
     runs = [("nominal plant", nominal)]
     samples = None
     if spec.samples:
         params = models.sample_params(plant, spec.samples, rel=case.known_rel, seed=seed)
-        samples = models.monte_carlo(plant, design.block, reference, duration, params, x0=x0,
-                                     substeps=case.substeps, seed=seed)
+        samples = models.monte_carlo(
+            plant, design.block, reference, duration, params, x0=x0, substeps=case.substeps, seed=seed
+        )
         runs += [(f"sample {i}", run) for i, run in enumerate(samples)]
     rows = [tracking_row(label, run, problem, spec, planned) for label, run in runs]
     return TrackingRun(planned, design, nominal, samples, rows)
@@ -298,12 +321,19 @@ def tracking_row(label: str, run, problem: TrajectoryProblem, spec: Tracking, pl
     names = list(run.state_names)
     last = run.t >= run.t[-1] - SETTLE_WINDOW - 1e-9
     finite = run.diverged_at is None and bool(np.all(np.isfinite(run.x)))
-    worst = {name: float(np.max(np.abs(run.x[last, names.index(name)] - end[names.index(name)])))
-             for name in spec.settled} if finite else {name: math.inf for name in spec.settled}
+    worst = (
+        {name: float(np.max(np.abs(run.x[last, names.index(name)] - end[names.index(name)]))) for name in spec.settled}
+        if finite
+        else {name: math.inf for name in spec.settled}
+    )
     held = finite and all(worst[name] <= bound for name, bound in spec.settled.items())
-    row = {"run": label, "held": held, "diverged_at_s": run.diverged_at,
-           "peak_u": float(np.nanmax(np.abs(run.u))) if run.u.size else math.nan,
-           "u_limit": float(np.max(run.input_limit))}
+    row = {
+        "run": label,
+        "held": held,
+        "diverged_at_s": run.diverged_at,
+        "peak_u": float(np.nanmax(np.abs(run.u))) if run.u.size else math.nan,
+        "u_limit": float(np.max(run.input_limit)),
+    }
     for name in spec.settled:
         row[f"final_dev_{name}"] = worst[name]
     for name in problem.report:
@@ -313,8 +343,9 @@ def tracking_row(label: str, run, problem: TrajectoryProblem, spec: Tracking, pl
     return row
 
 
-def simulate_command(plant: models.Plant, x0, command: OpenLoopCommand, settle: float, hold, method: str = "adaptive"
-                     ) -> tuple[models.Trajectory, float]:
+def simulate_command(
+    plant: models.Plant, x0, command: OpenLoopCommand, settle: float, hold, method: str = "adaptive"
+) -> tuple[models.Trajectory, float]:
     """Run an open-loop command on `plant` from x0, then the input `hold` (nu,) for `settle` s.
 
     Returns (the run, the command's duration in s).
@@ -326,15 +357,26 @@ def simulate_command(plant: models.Plant, x0, command: OpenLoopCommand, settle: 
     return run, command.sample_period * len(inputs)
 
 
-def comparison_row(label: str, run: models.Trajectory, command_time: float, problem: TrajectoryProblem, end,
-                   tracked: str, description: str = "") -> dict:
+def comparison_row(
+    label: str,
+    run: models.Trajectory,
+    command_time: float,
+    problem: TrajectoryProblem,
+    end,
+    tracked: str,
+    description: str = "",
+) -> dict:
     """Move time, peak input, largest reported states, error at the end of the command and residual after it."""
     after = run.t >= command_time - 1e-9
     names = list(run.state_names)
     k_end = int(np.argmax(after))
-    row = {"command": label, "move_time_s": command_time, "peak_u": float(np.max(np.abs(run.u))),
-           "end_error": float(abs(run.x[k_end, names.index(tracked)] - end[names.index(tracked)])),
-           "description": description}
+    row = {
+        "command": label,
+        "move_time_s": command_time,
+        "peak_u": float(np.max(np.abs(run.u))),
+        "end_error": float(abs(run.x[k_end, names.index(tracked)] - end[names.index(tracked)])),
+        "description": description,
+    }
     for name in problem.report:
         row[f"max_abs_{name}"] = float(np.max(np.abs(run.x[:, names.index(name)])))
         row[f"residual_{name}"] = float(np.max(np.abs(run.x[after, names.index(name)] - end[names.index(name)])))
@@ -346,7 +388,7 @@ def compare(case, problem: TrajectoryProblem, plant: models.Plant, solved: Solve
     solution = solved.solution
     end, x0 = solution.states[-1], solution.states[0]
     settle = solution.final_time
-    hold = plant.equilibrium_input(end[:plant.nq])  # what holds the end state at rest (gravity)
+    hold = plant.equilibrium_input(end[: plant.nq])  # what holds the end state at rest (gravity)
     out = []
     steps = np.diff(solution.t)
     if not np.allclose(steps, steps[0], rtol=1e-9):
@@ -356,8 +398,14 @@ def compare(case, problem: TrajectoryProblem, plant: models.Plant, solved: Solve
     commands += [(label, build(plant)) for label, build in problem.open_loop.items()]
     for label, command in commands:
         run, duration = simulate_command(plant, x0, command, settle, hold)
-        out.append(ComparedRun(label, run, duration,
-                               comparison_row(label, run, duration, problem, end, case.tracked, command.description)))
+        out.append(
+            ComparedRun(
+                label,
+                run,
+                duration,
+                comparison_row(label, run, duration, problem, end, case.tracked, command.description),
+            )
+        )
     return out
 
 
@@ -370,9 +418,12 @@ def step_rows(study_result, problem: TrajectoryProblem) -> list[dict]:
             continue
         match = table[(table.controller == label) & (table.scenario == "step")]
         names = list(run.state_names)
-        row = {"controller": label, "status": str(match.status.iloc[0]) if len(match) else "",
-               "settling_time_s": float(match.settling_time_s.iloc[0]) if len(match) else math.nan,
-               "peak_u": float(np.nanmax(np.abs(run.u)))}
+        row = {
+            "controller": label,
+            "status": str(match.status.iloc[0]) if len(match) else "",
+            "settling_time_s": float(match.settling_time_s.iloc[0]) if len(match) else math.nan,
+            "peak_u": float(np.nanmax(np.abs(run.u))),
+        }
         for name in problem.report:
             row[f"max_abs_{name}"] = float(np.nanmax(np.abs(run.x[:, names.index(name)])))
         rows.append(row)
@@ -388,8 +439,9 @@ def fastest_step(study_result, rows: list[dict]):
     return best["controller"], best["settling_time_s"], study_result.runs[(best["controller"], "step")]
 
 
-def solve_case(case, *, quick: bool = False, study_result=None, strict: bool = False, seed: int = 0
-               ) -> CaseTrajectories:
+def solve_case(
+    case, *, quick: bool = False, study_result=None, strict: bool = False, seed: int = 0
+) -> CaseTrajectories:
     """Solve, verify, track and compare every trajectory problem of `case` (a `CaseStudy`).
 
     study_result : the case's `studies.runner.StudyResult`, for the step comparison (optional)
@@ -414,8 +466,10 @@ def solve_case(case, *, quick: bool = False, study_result=None, strict: bool = F
                 result.notes.append(f"{problem.key}: {solved.solution.status}")
                 continue
             if not solved.verified:
-                result.notes.append(f"{problem.key}: verify() defect per interval "
-                                    f"{solved.verification.max_interval_defect:.3g} above {DEFECT_TOLERANCE:g}")
+                result.notes.append(
+                    f"{problem.key}: verify() defect per interval "
+                    f"{solved.verification.max_interval_defect:.3g} above {DEFECT_TOLERANCE:g}"
+                )
             if problem.tracking is not None:
                 phase = "tracking"
                 result.tracking[problem.key] = track(case, problem, plant, solved.solution, quick, result.solved, seed)
@@ -430,8 +484,9 @@ def solve_case(case, *, quick: bool = False, study_result=None, strict: bool = F
             if strict:
                 raise
             where = traceback.extract_tb(err.__traceback__)[-1]
-            result.notes.append(f"{problem.key}: {phase} failed ({type(err).__name__}: {err}; at "
-                                f"{where.filename}:{where.lineno})")
+            result.notes.append(
+                f"{problem.key}: {phase} failed ({type(err).__name__}: {err}; at {where.filename}:{where.lineno})"
+            )
     return result
 
 
@@ -471,8 +526,14 @@ def plot_problem(result: CaseTrajectories, solved: SolvedTrajectory, path: Path,
         index = plant.state_names.index(name)
         ax.plot(dense.t, scale * dense.x[:, index], color="C0", linewidth=1.4, label="optimized (interpolant)")
         ax.plot(s.t, scale * s.states[:, index], ".", color="C0", markersize=3, label="mesh points")
-        ax.plot(s.t, scale * solved.verification.simulated[:, index], "--", color="C3", linewidth=1.0,
-                label="input re-simulated (CVODES, from x(0))")
+        ax.plot(
+            s.t,
+            scale * solved.verification.simulated[:, index],
+            "--",
+            color="C3",
+            linewidth=1.0,
+            label="input re-simulated (CVODES, from x(0))",
+        )
         ax.set_ylabel(f"{name} ({unit})")
         ax.grid(True, alpha=0.3)
     limit = float(plant.input_limit[0])
@@ -490,8 +551,9 @@ def plot_problem(result: CaseTrajectories, solved: SolvedTrajectory, path: Path,
     return plots.save(fig, path, dpi)
 
 
-def plot_tracking(result: CaseTrajectories, problem: TrajectoryProblem, tracked: TrackingRun, path: Path,
-                  dpi: int) -> Path:
+def plot_tracking(
+    result: CaseTrajectories, problem: TrajectoryProblem, tracked: TrackingRun, path: Path, dpi: int
+) -> Path:
     """The tracked runs (nominal plant and Monte Carlo samples) against the trajectory planned on the known model."""
     from . import plots
 
@@ -504,10 +566,16 @@ def plot_tracking(result: CaseTrajectories, problem: TrajectoryProblem, tracked:
         scale, unit = display_unit(name)
         index = plant.state_names.index(name)
         for j, run in enumerate(runs):
-            ax.plot(run.t, scale * run.x[:, index], color="0.6", linewidth=0.7,
-                    label="Monte Carlo samples (±5 %)" if j == 0 else None)
-        ax.plot(tracked.nominal.t, scale * tracked.nominal.x[:, index], color="C0", linewidth=1.4,
-                label="nominal plant")
+            ax.plot(
+                run.t,
+                scale * run.x[:, index],
+                color="0.6",
+                linewidth=0.7,
+                label="Monte Carlo samples (±5 %)" if j == 0 else None,
+            )
+        ax.plot(
+            tracked.nominal.t, scale * tracked.nominal.x[:, index], color="C0", linewidth=1.4, label="nominal plant"
+        )
         ax.plot(dense.t, scale * dense.x[:, index], "--", color="C1", linewidth=1.2, label="planned on the known model")
         ax.axvline(planned.final_time, color="k", linestyle=":", linewidth=0.8)
         ax.set_ylabel(f"{name} ({unit})")
@@ -523,15 +591,19 @@ def plot_tracking(result: CaseTrajectories, problem: TrajectoryProblem, tracked:
     axes[-1].set_xlabel("t (s); dotted: end of the trajectory, the LQR holds from there")
     axes[-1].grid(True, alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{plant.title}: {problem.title},\ntracked by a time-varying LQR designed on the "
-                 f"{100 * result.case.known_rel:+g} % model; the truth nominal and ±{100 * result.case.known_rel:g} % "
-                 "samples", fontsize=9)
+    fig.suptitle(
+        f"{plant.title}: {problem.title},\ntracked by a time-varying LQR designed on the "
+        f"{100 * result.case.known_rel:+g} % model; the truth nominal and ±{100 * result.case.known_rel:g} % "
+        "samples",
+        fontsize=9,
+    )
     _margins(fig)
     return plots.save(fig, path, dpi)
 
 
-def plot_comparison(result: CaseTrajectories, problem: TrajectoryProblem, runs: list, path: Path, dpi: int,
-                    closed_loop=None) -> Path:
+def plot_comparison(
+    result: CaseTrajectories, problem: TrajectoryProblem, runs: list, path: Path, dpi: int, closed_loop=None
+) -> Path:
     """The optimal input and the open-loop commands on the plant: coordinates and input.
 
     closed_loop : (label, settling time s, run) of a study's step run to draw too (dashed), or None
@@ -544,8 +616,13 @@ def plot_comparison(result: CaseTrajectories, problem: TrajectoryProblem, runs: 
     end = max(c.run.t[-1] for c in runs)
     if closed_loop is not None:
         label, settling, run = closed_loop
-        curves.append((f"closed loop: {label} (settles first, {settling:.3g} s)", run,
-                       dict(color="0.3", linewidth=1.0, linestyle="--")))
+        curves.append(
+            (
+                f"closed loop: {label} (settles first, {settling:.3g} s)",
+                run,
+                dict(color="0.3", linewidth=1.0, linestyle="--"),
+            )
+        )
         end = max(end, 1.2 * settling)
     for label, run, style in curves:
         for ax, name in zip(axes, plant.coordinate_names):
@@ -563,8 +640,11 @@ def plot_comparison(result: CaseTrajectories, problem: TrajectoryProblem, runs: 
     axes[-1].set_xlabel("t (s)")
     axes[-1].grid(True, alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{plant.title}: {problem.title}\nagainst open-loop commands (each then the input holding the end)"
-                 + ("" if closed_loop is None else ",\nand the study's first step response to settle"), fontsize=9)
+    fig.suptitle(
+        f"{plant.title}: {problem.title}\nagainst open-loop commands (each then the input holding the end)"
+        + ("" if closed_loop is None else ",\nand the study's first step response to settle"),
+        fontsize=9,
+    )
     _margins(fig)
     return plots.save(fig, path, dpi)
 
@@ -600,13 +680,23 @@ def write_files(result: CaseTrajectories, folder: Path) -> dict:
         if result.case.drawing is not None:
             run = motion(solved.solution, _target(result, solved.solution), result.plant.input_limit)
             label = solved.problem.title
-            caption = (f"{label}: the optimized motion (collocation interpolant, nonlinear model), "
-                       f"T = {solved.solution.final_time:.4g} s.")
+            caption = (
+                f"{label}: the optimized motion (collocation interpolant, nonlinear model), "
+                f"T = {solved.solution.final_time:.4g} s."
+            )
             gif, page = f"trajectory_{key}.gif", f"trajectory_{key}.html"
-            animation.write_gif(folder / gif, result.case, result.plant, run, label, max_frames=30 if quick else 100,
-                                dpi=64 if quick else 80)
-            animation.write_html(folder / page, result.case, result.plant, {label: run}, label, caption,
-                                 max_frames=300 if quick else 600)
+            animation.write_gif(
+                folder / gif,
+                result.case,
+                result.plant,
+                run,
+                label,
+                max_frames=30 if quick else 100,
+                dpi=64 if quick else 80,
+            )
+            animation.write_html(
+                folder / page, result.case, result.plant, {label: run}, label, caption, max_frames=300 if quick else 600
+            )
             files |= {gif: gif, page: page}
     for key, tracked in result.tracking.items():
         problem = result.solved[key].problem
@@ -614,17 +704,26 @@ def write_files(result: CaseTrajectories, folder: Path) -> dict:
         files[name] = plot_tracking(result, problem, tracked, folder / name, dpi).name
         if result.case.drawing is not None:
             name = f"trajectory_{key}_tracking.gif"
-            animation.write_gif(folder / name, result.case, result.plant, tracked.nominal,
-                                f"{problem.title}, tracked", max_frames=30 if quick else 100, dpi=64 if quick else 80)
+            animation.write_gif(
+                folder / name,
+                result.case,
+                result.plant,
+                tracked.nominal,
+                f"{problem.title}, tracked",
+                max_frames=30 if quick else 100,
+                dpi=64 if quick else 80,
+            )
             files[name] = name
         write_csv(folder / f"trajectory_{key}_tracking.csv", pd.DataFrame(tracked.rows))
         files[f"trajectory_{key}_tracking.csv"] = f"trajectory_{key}_tracking.csv"
     for key, runs in result.compared.items():
         name = f"trajectory_{key}_comparison.png"
-        files[name] = plot_comparison(result, result.solved[key].problem, runs, folder / name, dpi,
-                                      result.step_runs.get(key)).name
-        rows = [c.row for c in runs] + [{"command": f"closed loop: {r['controller']}", **r}
-                                         for r in result.step_rows.get(key, [])]
+        files[name] = plot_comparison(
+            result, result.solved[key].problem, runs, folder / name, dpi, result.step_runs.get(key)
+        ).name
+        rows = [c.row for c in runs] + [
+            {"command": f"closed loop: {r['controller']}", **r} for r in result.step_rows.get(key, [])
+        ]
         write_csv(folder / f"trajectory_{key}_comparison.csv", pd.DataFrame(rows))
         files[f"trajectory_{key}_comparison.csv"] = f"trajectory_{key}_comparison.csv"
     rows = result.rows()
@@ -647,8 +746,9 @@ def _cell(value, name: str | None = None) -> str:
 
 
 def _report_text(row: dict, problem: TrajectoryProblem, prefix: str = "max_abs_") -> str:
-    return "; ".join(f"{what} {_cell(row[prefix + name], name)}" for name, what in problem.report.items()
-                     if prefix + name in row)
+    return "; ".join(
+        f"{what} {_cell(row[prefix + name], name)}" for name, what in problem.report.items() if prefix + name in row
+    )
 
 
 def markdown(result: CaseTrajectories, files: Mapping, notes: list) -> str:
@@ -657,27 +757,39 @@ def markdown(result: CaseTrajectories, files: Mapping, notes: list) -> str:
 
     case, plant = result.case, result.plant
     unit = case.input_unit
-    parts = [f"# {plant.title}: optimized trajectories", "",
-             "Each problem is an `mpc.OptimalControlProblem` on the nonlinear plant (nominal parameters), "
-             "transcribed as stated and solved by IPOPT; the wall time runs from posing the problem to the "
-             "verified answer. *Defect* is `OCPSolution.verify()`: the optimal input, held on each interval, "
-             "re-simulated with CVODES, largest state difference at the mesh points (SI units of that state), "
-             "from x(0) over the whole horizon (an unstable plant amplifies it) and restarted from the "
-             f"optimized state on every interval (the transcription's own error; verified below "
-             f"{DEFECT_TOLERANCE:g}). Angles in degrees here, radians in the CSV files."
-             + (" Run with --quick: coarser meshes." if result.quick else ""), ""]
+    parts = [
+        f"# {plant.title}: optimized trajectories",
+        "",
+        "Each problem is an `mpc.OptimalControlProblem` on the nonlinear plant (nominal parameters), "
+        "transcribed as stated and solved by IPOPT; the wall time runs from posing the problem to the "
+        "verified answer. *Defect* is `OCPSolution.verify()`: the optimal input, held on each interval, "
+        "re-simulated with CVODES, largest state difference at the mesh points (SI units of that state), "
+        "from x(0) over the whole horizon (an unstable plant amplifies it) and restarted from the "
+        f"optimized state on every interval (the transcription's own error; verified below "
+        f"{DEFECT_TOLERANCE:g}). Angles in degrees here, radians in the CSV files."
+        + (" Run with --quick: coarser meshes." if result.quick else ""),
+        "",
+    ]
     rows = []
     for solved in result.solved.values():
         row = problem_row(plant, solved)
         row["extremes"] = _report_text(row, solved.problem)
         rows.append(row)
-    columns = [("problem", "problem", format_number), ("status", "status", format_number),
-               ("final_time_s", "T (s)", format_number), ("objective", "objective", format_number),
-               ("objective_is", "objective is", format_number), ("peak_u", f"peak |u| ({unit})", format_number),
-               ("extremes", "largest along the motion", format_number),
-               ("transcription", "transcription", format_number), ("iterations", "IPOPT iterations", format_number),
-               ("wall_s", "wall (s)", format_number), ("defect_whole", "defect, whole horizon", format_number),
-               ("defect_interval", "defect per interval", format_number), ("verified", "verified", format_number)]
+    columns = [
+        ("problem", "problem", format_number),
+        ("status", "status", format_number),
+        ("final_time_s", "T (s)", format_number),
+        ("objective", "objective", format_number),
+        ("objective_is", "objective is", format_number),
+        ("peak_u", f"peak |u| ({unit})", format_number),
+        ("extremes", "largest along the motion", format_number),
+        ("transcription", "transcription", format_number),
+        ("iterations", "IPOPT iterations", format_number),
+        ("wall_s", "wall (s)", format_number),
+        ("defect_whole", "defect, whole horizon", format_number),
+        ("defect_interval", "defect per interval", format_number),
+        ("verified", "verified", format_number),
+    ]
     parts += [markdown_table(rows, columns)]
     for key, solved in result.solved.items():
         problem, s = solved.problem, solved.solution
@@ -685,22 +797,28 @@ def markdown(result: CaseTrajectories, files: Mapping, notes: list) -> str:
         if f"trajectory_{key}.png" in files:
             parts += [f"![{problem.title}](trajectory_{key}.png)", ""]
         if f"trajectory_{key}.gif" in files:
-            parts += [f"Animation: [trajectory_{key}.gif](trajectory_{key}.gif), "
-                      f"[trajectory_{key}.html](trajectory_{key}.html) (play and slider).", ""]
+            parts += [
+                f"Animation: [trajectory_{key}.gif](trajectory_{key}.gif), "
+                f"[trajectory_{key}.html](trajectory_{key}.html) (play and slider).",
+                "",
+            ]
         if key in result.tracking:
             parts += _tracking_section(result, problem, result.tracking[key], files)
         if key in result.compared:
             parts += _comparison_section(result, problem, result.compared[key], result.step_rows.get(key), files)
         if s.success and key in result.timing:
-            parts += [f"Wall time of this problem including its tracking and comparisons: "
-                      f"{result.timing[key]:.3g} s.", ""]
+            parts += [
+                f"Wall time of this problem including its tracking and comparisons: {result.timing[key]:.3g} s.",
+                "",
+            ]
     if notes:
         parts += ["## Notes", ""] + [f"- {note}" for note in notes] + [""]
     return "\n".join(parts)
 
 
-def _tracking_section(result: CaseTrajectories, problem: TrajectoryProblem, tracked: TrackingRun,
-                      files: Mapping) -> list:
+def _tracking_section(
+    result: CaseTrajectories, problem: TrajectoryProblem, tracked: TrackingRun, files: Mapping
+) -> list:
     from models.files import format_number, markdown_table
 
     case, spec, unit = result.case, problem.tracking, result.case.input_unit
@@ -708,33 +826,48 @@ def _tracking_section(result: CaseTrajectories, problem: TrajectoryProblem, trac
     planned = tracked.planned
     held = sum(bool(r["held"]) for r in tracked.rows)
     settled = ", ".join(f"|{name} − end| ≤ {_cell(bound, name)}" for name, bound in spec.settled.items())
-    maxima = ", ".join([f"{name} {_cell(value, name)}" for name, value in spec.state_max.items()]
-                       + [f"{name} {value:g} {unit}" for name, value in zip(result.plant.input_names,
-                                                                            np.atleast_1d(spec.input_max))])
-    text = (f"**Tracking.** The controller knows the model with {', '.join(result.plant.uncertain_params)} "
-            f"{100 * case.known_rel:+g} %: the trajectory is re-optimized on it with |u| ≤ "
-            f"{100 * (1 - spec.headroom):g} % of the limit (objective {planned.objective:.5g}, T = "
-            f"{planned.final_time:.4g} s, {planned.status}), leaving {100 * spec.headroom:g} % of the actuator to "
-            f"the feedback. A time-varying LQR along it (Bryson maxima {maxima}; `designs.trajectory_tracking`) "
-            f"runs at Ts = {case.sample_period:g} s, then the LQR "
-            f"at the upright end holds it for {spec.hold:g} s. The truth is the nominal plant, then "
-            f"{spec.samples} samples with those parameters uniform within ±{100 * case.known_rel:g} % (seed 0). "
-            f"*Held*: {settled} over the last {SETTLE_WINDOW:g} s. **{held} of {len(tracked.rows)} runs held**.")
+    maxima = ", ".join(
+        [f"{name} {_cell(value, name)}" for name, value in spec.state_max.items()]
+        + [f"{name} {value:g} {unit}" for name, value in zip(result.plant.input_names, np.atleast_1d(spec.input_max))]
+    )
+    text = (
+        f"**Tracking.** The controller knows the model with {', '.join(result.plant.uncertain_params)} "
+        f"{100 * case.known_rel:+g} %: the trajectory is re-optimized on it with |u| ≤ "
+        f"{100 * (1 - spec.headroom):g} % of the limit (objective {planned.objective:.5g}, T = "
+        f"{planned.final_time:.4g} s, {planned.status}), leaving {100 * spec.headroom:g} % of the actuator to "
+        f"the feedback. A time-varying LQR along it (Bryson maxima {maxima}; `designs.trajectory_tracking`) "
+        f"runs at Ts = {case.sample_period:g} s, then the LQR "
+        f"at the upright end holds it for {spec.hold:g} s. The truth is the nominal plant, then "
+        f"{spec.samples} samples with those parameters uniform within ±{100 * case.known_rel:g} % (seed 0). "
+        f"*Held*: {settled} over the last {SETTLE_WINDOW:g} s. **{held} of {len(tracked.rows)} runs held**."
+    )
     rows = []
     for r in tracked.rows:
-        rows.append({**r, "extremes": _report_text(r, problem),
-                     "final": "; ".join(f"{name} {_cell(r['final_dev_' + name], name)}" for name in spec.settled)})
-    columns = [("run", "plant", format_number), ("held", "held at the end", format_number),
-               ("peak_u", f"peak |u| ({unit})", format_number), ("extremes", "largest along the run", format_number),
-               ("final", "largest |x − end| in the last second", format_number),
-               ("params", "parameters", format_number)]
+        rows.append(
+            {
+                **r,
+                "extremes": _report_text(r, problem),
+                "final": "; ".join(f"{name} {_cell(r['final_dev_' + name], name)}" for name in spec.settled),
+            }
+        )
+    columns = [
+        ("run", "plant", format_number),
+        ("held", "held at the end", format_number),
+        ("peak_u", f"peak |u| ({unit})", format_number),
+        ("extremes", "largest along the run", format_number),
+        ("final", "largest |x − end| in the last second", format_number),
+        ("params", "parameters", format_number),
+    ]
     out = [text, "", markdown_table(rows, columns)]
     key = problem.key
     if f"trajectory_{key}_tracking.png" in files:
         out += [f"![tracking](trajectory_{key}_tracking.png)", ""]
     if f"trajectory_{key}_tracking.gif" in files:
-        out += [f"Animation of the nominal run: [trajectory_{key}_tracking.gif](trajectory_{key}_tracking.gif) "
-                "(the marker is the planned cart position).", ""]
+        out += [
+            f"Animation of the nominal run: [trajectory_{key}_tracking.gif](trajectory_{key}_tracking.gif) "
+            "(the marker is the planned cart position).",
+            "",
+        ]
     return out
 
 
@@ -742,32 +875,49 @@ def _comparison_section(result: CaseTrajectories, problem: TrajectoryProblem, ru
     from models.files import format_number, markdown_table
 
     unit = result.case.input_unit
-    text = ("**Against open-loop commands.** Each command (and the optimal input) runs on the nonlinear plant "
-            "(CVODES) from the same start, then the input that holds the end state at rest, for as long as the "
-            "optimal move again. *Move* is the "
-            "command's length; *residual* the largest |x − end| after it.")
+    text = (
+        "**Against open-loop commands.** Each command (and the optimal input) runs on the nonlinear plant "
+        "(CVODES) from the same start, then the input that holds the end state at rest, for as long as the "
+        "optimal move again. *Move* is the "
+        "command's length; *residual* the largest |x − end| after it."
+    )
     rows = []
     for compared in runs:
         r = compared.row
-        rows.append({**r, "extremes": _report_text(r, problem), "residual": _report_text(r, problem, "residual_"),
-                     "end": _cell(r["end_error"], result.case.tracked)})
-    columns = [("command", "command", format_number), ("move_time_s", "move (s)", format_number),
-               ("peak_u", f"peak |u| ({unit})", format_number), ("extremes", "largest along the run", format_number),
-               ("end", f"|{result.case.tracked} − end| when the command ends", format_number),
-               ("residual", "residual after the command", format_number),
-               ("description", "what it is", format_number)]
+        rows.append(
+            {
+                **r,
+                "extremes": _report_text(r, problem),
+                "residual": _report_text(r, problem, "residual_"),
+                "end": _cell(r["end_error"], result.case.tracked),
+            }
+        )
+    columns = [
+        ("command", "command", format_number),
+        ("move_time_s", "move (s)", format_number),
+        ("peak_u", f"peak |u| ({unit})", format_number),
+        ("extremes", "largest along the run", format_number),
+        ("end", f"|{result.case.tracked} − end| when the command ends", format_number),
+        ("residual", "residual after the command", format_number),
+        ("description", "what it is", format_number),
+    ]
     out = [text, "", markdown_table(rows, columns)]
     if f"trajectory_{problem.key}_comparison.png" in files:
         out += [f"![comparison](trajectory_{problem.key}_comparison.png)", ""]
     if problem.compare_step:
         if steps:
-            step_text = ("**Against the study's step responses** (the same move by each controller in closed loop, "
-                         "from `table.md`; settling: within 2 % of the step for good).")
+            step_text = (
+                "**Against the study's step responses** (the same move by each controller in closed loop, "
+                "from `table.md`; settling: within 2 % of the step for good)."
+            )
             step_table = [{**r, "extremes": _report_text(r, problem)} for r in steps]
-            step_columns = [("controller", "controller", format_number), ("status", "status", format_number),
-                            ("settling_time_s", "settling 2 % (s)", format_number),
-                            ("peak_u", f"peak |u| ({unit})", format_number),
-                            ("extremes", "largest along the run", format_number)]
+            step_columns = [
+                ("controller", "controller", format_number),
+                ("status", "status", format_number),
+                ("settling_time_s", "settling 2 % (s)", format_number),
+                ("peak_u", f"peak |u| ({unit})", format_number),
+                ("extremes", "largest along the run", format_number),
+            ]
             out += [step_text, "", markdown_table(step_table, step_columns)]
         else:
             out += ["The study's step responses were not run with these trajectories (run the whole study).", ""]

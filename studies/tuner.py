@@ -81,14 +81,20 @@ def scenario(case: CaseStudy, name: str = "disturbance", **fields) -> Scenario:
     xe, _ = plant.equilibrium()
     r = xe[plant.state_names.index(case.tracked)] + case.step
     disturbance = case.input_disturbance if name == "disturbance" else 0.0
-    return Scenario(reference=r, duration=case.duration, x0=xe, input_disturbance=disturbance,
-                    tracked=case.tracked, name=name, **fields)
+    return Scenario(
+        reference=r,
+        duration=case.duration,
+        x0=xe,
+        input_disturbance=disturbance,
+        tracked=case.tracked,
+        name=name,
+        **fields,
+    )
 
 
 def scenarios(case: CaseStudy, specs: dict | None = None, costs: dict | None = None) -> list[Scenario]:
     """The `SCENARIOS`, each with its own specs and cost when given (dicts scenario name -> Specs / Cost)."""
-    return [scenario(case, name, specs=(specs or {}).get(name), cost=(costs or {}).get(name))
-            for name in SCENARIOS]
+    return [scenario(case, name, specs=(specs or {}).get(name), cost=(costs or {}).get(name)) for name in SCENARIOS]
 
 
 def hand_design(case: CaseStudy, known: models.Plant | None = None):
@@ -115,8 +121,9 @@ def tuning_samples(case: CaseStudy) -> tuple[np.ndarray, str]:
 
 
 def _problem(case, block, specs: dict | None, cost: Cost, params) -> TuningProblem:
-    return TuningProblem(models.get(case.plant), block, scenarios(case, specs), cost=cost, samples=params,
-                         substeps=SUBSTEPS)
+    return TuningProblem(
+        models.get(case.plant), block, scenarios(case, specs), cost=cost, samples=params, substeps=SUBSTEPS
+    )
 
 
 def _start_itae_and_energy(case, block, params) -> tuple[float, float]:
@@ -135,8 +142,16 @@ def worst_step(case: CaseStudy, block, params, name: str = "disturbance") -> dic
     assert x0 is not None and isinstance(target, float), "scenario() gives an x0 and a constant reference"
     worst = {"overshoot": 0.0, "settling_time_s": 0.0}
     for p in params:
-        run = models.simulate_closed_loop(plant, block, sc.reference, sc.duration, x0=sc.x0, params=p,
-                                          input_disturbance=sc.input_disturbance, substeps=SUBSTEPS)
+        run = models.simulate_closed_loop(
+            plant,
+            block,
+            sc.reference,
+            sc.duration,
+            x0=sc.x0,
+            params=p,
+            input_disturbance=sc.input_disturbance,
+            substeps=SUBSTEPS,
+        )
         m = metrics.step_metrics(run.t, run.x[:, k], initial=x0[k], target=target)
         worst["overshoot"] = max(worst["overshoot"], m["overshoot_pct"] / 100)
         worst["settling_time_s"] = max(worst["settling_time_s"], m["settling_time_s"])
@@ -152,8 +167,11 @@ def measured_specs(case: CaseStudy, block, params) -> tuple[dict, dict]:
     for name in SCENARIOS:
         worst[name] = w = worst_step(case, block, params, name)
         settling = w["settling_time_s"]
-        specs[name] = Specs(max_overshoot=w["overshoot"], settling_time=settling if np.isfinite(settling) else None,
-                            max_spectral_abscissa=0.0)
+        specs[name] = Specs(
+            max_overshoot=w["overshoot"],
+            settling_time=settling if np.isfinite(settling) else None,
+            max_spectral_abscissa=0.0,
+        )
     return specs, worst
 
 
@@ -171,20 +189,31 @@ def gain_bounds(block) -> dict:
 def with_margin(specs: Specs) -> Specs:
     """The specs tuning enforces on its few samples: tighter, so that fresh samples still meet `specs`."""
     assert specs.max_overshoot is not None, "measured_specs always sets max_overshoot"
-    return Specs(max_overshoot=MARGIN * specs.max_overshoot, settling_band=specs.settling_band,
-                 settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time,
-                 max_spectral_abscissa=specs.max_spectral_abscissa)
+    return Specs(
+        max_overshoot=MARGIN * specs.max_overshoot,
+        settling_band=specs.settling_band,
+        settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time,
+        max_spectral_abscissa=specs.max_spectral_abscissa,
+    )
 
 
 def _spec_record(specs: Specs) -> dict:
-    return {"max_overshoot": specs.max_overshoot, "settling_time_s": specs.settling_time,
-            "settling_band": specs.settling_band, "max_spectral_abscissa": specs.max_spectral_abscissa}
+    return {
+        "max_overshoot": specs.max_overshoot,
+        "settling_time_s": specs.settling_time,
+        "settling_band": specs.settling_band,
+        "max_spectral_abscissa": specs.max_spectral_abscissa,
+    }
 
 
 def specs_from_record(record: dict) -> dict:
     """{scenario: Specs} of a stored record (without the spectral check, which needs the solution)."""
-    return {name: Specs(max_overshoot=s["max_overshoot"], settling_time=s["settling_time_s"],
-                        settling_band=s["settling_band"]) for name, s in record["specs"].items()}
+    return {
+        name: Specs(
+            max_overshoot=s["max_overshoot"], settling_time=s["settling_time_s"], settling_band=s["settling_band"]
+        )
+        for name, s in record["specs"].items()
+    }
 
 
 def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progress=None) -> dict:
@@ -197,31 +226,64 @@ def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progr
     weight = ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
     cost = Cost("itae", energy_weight=weight)
     tuned_specs = {name: with_margin(s) for name, s in specs.items()}
-    result = tune(models.get(case.plant), block, scenarios(case, tuned_specs), cost=cost, samples=train,
-                  bounds=gain_bounds(block), substeps=SUBSTEPS, max_iter=max_iter, jit=jit, progress=progress)
+    result = tune(
+        models.get(case.plant),
+        block,
+        scenarios(case, tuned_specs),
+        cost=cost,
+        samples=train,
+        bounds=gain_bounds(block),
+        substeps=SUBSTEPS,
+        max_iter=max_iter,
+        jit=jit,
+        progress=progress,
+    )
     record = {
-        "plant": case.plant, "start": START, "start_gains": _listed(block.gains), "gains": _listed(result.gains),
+        "plant": case.plant,
+        "start": START,
+        "start_gains": _listed(block.gains),
+        "gains": _listed(result.gains),
         "known": f"uncertain parameters +{100 * case.known_rel:g} % (models.perturbed)",
         "scenarios": {name: _scenario_text(name) for name in SCENARIOS},
-        "cost": {"kind": "itae", "energy_weight": weight, "energy_share_at_start": ENERGY_SHARE,
-                 "scenario_weights": {name: 1.0 for name in SCENARIOS}},
-        "tuning_margin": MARGIN, "gain_range": GAIN_RANGE,
+        "cost": {
+            "kind": "itae",
+            "energy_weight": weight,
+            "energy_share_at_start": ENERGY_SHARE,
+            "scenario_weights": {name: 1.0 for name in SCENARIOS},
+        },
+        "tuning_margin": MARGIN,
+        "gain_range": GAIN_RANGE,
         "specs": {name: _spec_record(s) for name, s in specs.items()},
         "hand_measured": hand_measured,
-        "tuning": {"samples": len(train), "chosen": chosen, "seed": TUNING_SEED, "rel": case.known_rel,
-                   "initial_cost": result.initial_cost,
-                   "cost": result.cost, "improvement": result.improvement, "feasible": result.feasible,
-                   "status": result.status, "converged": result.converged, "method": result.method,
-                   "stages": result.stages, "smoothing_gap": result.smoothing_gap,
-                   "message": result.message, "iterations": result.iterations, "jit": jit,
-                   "wall_time_s": time.perf_counter() - started},
+        "tuning": {
+            "samples": len(train),
+            "chosen": chosen,
+            "seed": TUNING_SEED,
+            "rel": case.known_rel,
+            "initial_cost": result.initial_cost,
+            "cost": result.cost,
+            "improvement": result.improvement,
+            "feasible": result.feasible,
+            "status": result.status,
+            "converged": result.converged,
+            "method": result.method,
+            "stages": result.stages,
+            "smoothing_gap": result.smoothing_gap,
+            "message": result.message,
+            "iterations": result.iterations,
+            "jit": jit,
+            "wall_time_s": time.perf_counter() - started,
+        },
     }
     return record | {"validation": validate(case, record)}
 
 
 def _scenario_text(name: str) -> str:
-    return ("the text's step from the standard equilibrium" if name == "step" else
-            "the text's step with the case's input disturbance from t = 0")
+    return (
+        "the text's step from the standard equilibrium"
+        if name == "step"
+        else "the text's step with the case's input disturbance from t = 0"
+    )
 
 
 def validate(case: CaseStudy, record: dict) -> dict:
@@ -229,18 +291,25 @@ def validate(case: CaseStudy, record: dict) -> dict:
     block = hand_design(case)
     tuned = block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})
     fresh = samples(case, N_VALIDATION, VALIDATION_SEED)
-    check = _problem(case, block, specs_from_record(record),
-                     Cost("itae", energy_weight=record["cost"]["energy_weight"]), fresh)
+    check = _problem(
+        case, block, specs_from_record(record), Cost("itae", energy_weight=record["cost"]["energy_weight"]), fresh
+    )
     _, hand_costs, hand_violations = check.values(check.start())
     _, tuned_costs, tuned_violations = check.values(tuned.gain_vector()[check.free_index])
-    return {"samples": N_VALIDATION, "seed": VALIDATION_SEED,
-            "hand_mean": float(np.mean(hand_costs)), "tuned_mean": float(np.mean(tuned_costs)),
-            "hand_worst": float(np.max(hand_costs)), "tuned_worst": float(np.max(tuned_costs)),
-            "improvement_mean": float(1 - np.mean(tuned_costs) / np.mean(hand_costs)),
-            "tuned_better_on": int(np.sum(tuned_costs < hand_costs)),
-            "hand_step": {name: worst_step(case, block, fresh, name) for name in SCENARIOS},
-            "tuned_step": {name: worst_step(case, tuned, fresh, name) for name in SCENARIOS},
-            "tuned_violations": tuned_violations, "hand_violations": hand_violations}
+    return {
+        "samples": N_VALIDATION,
+        "seed": VALIDATION_SEED,
+        "hand_mean": float(np.mean(hand_costs)),
+        "tuned_mean": float(np.mean(tuned_costs)),
+        "hand_worst": float(np.max(hand_costs)),
+        "tuned_worst": float(np.max(tuned_costs)),
+        "improvement_mean": float(1 - np.mean(tuned_costs) / np.mean(hand_costs)),
+        "tuned_better_on": int(np.sum(tuned_costs < hand_costs)),
+        "hand_step": {name: worst_step(case, block, fresh, name) for name in SCENARIOS},
+        "tuned_step": {name: worst_step(case, tuned, fresh, name) for name in SCENARIOS},
+        "tuned_violations": tuned_violations,
+        "hand_violations": hand_violations,
+    }
 
 
 def _listed(gains: dict) -> dict:
@@ -269,9 +338,11 @@ def controllers(case: CaseStudy, known: models.Plant | None = None) -> dict:
     for key, value in record["start_gains"].items():
         now = np.asarray(block.gains[key], dtype=float)
         if now.shape != np.shape(value) or not np.allclose(now, value, rtol=1e-9, atol=1e-12):
-            raise ValueError(f"{case.plant}: the stored tuned gains start from a different {START!r} design "
-                             f"(gain {key} is now {now.tolist()}, was {value}); "
-                             f"rerun `python -m studies.tuner {case.plant}`")
+            raise ValueError(
+                f"{case.plant}: the stored tuned gains start from a different {START!r} design "
+                f"(gain {key} is now {now.tolist()}, was {value}); "
+                f"rerun `python -m studies.tuner {case.plant}`"
+            )
     return {LABEL: block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})}
 
 
@@ -279,6 +350,7 @@ def _report_every(n: int):
     def report(iteration, objective, seconds):
         if iteration % n == 0:
             print(f"    iteration {iteration:3d}: cost {objective:.6g} ({seconds:.0f} s)", flush=True)
+
     return report
 
 
@@ -291,10 +363,15 @@ def main(argv=None) -> int:
     names = [n for n in cases.names() if cases.get(n).classical is not None]
     parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
     parser.add_argument("plants", nargs="*", default=names, help=f"cases to tune (default all: {', '.join(names)})")
-    parser.add_argument("--max-iter", type=int, default=MAX_ITER,
-                        help=f"IPOPT iteration cap per solve (default {MAX_ITER}; a stop there is reported)")
-    parser.add_argument("--validate", action="store_true",
-                        help="re-validate the stored gains on the fresh samples, without tuning")
+    parser.add_argument(
+        "--max-iter",
+        type=int,
+        default=MAX_ITER,
+        help=f"IPOPT iteration cap per solve (default {MAX_ITER}; a stop there is reported)",
+    )
+    parser.add_argument(
+        "--validate", action="store_true", help="re-validate the stored gains on the fresh samples, without tuning"
+    )
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in names]
@@ -318,15 +395,20 @@ def main(argv=None) -> int:
         t, v = record["tuning"], record["validation"]
         if t["status"] not in CONVERGED or not t["converged"]:
             failed.append(name)
-        steps = "; ".join(f"{s}: worst overshoot {100 * v['hand_step'][s]['overshoot']:.2f} -> "
-                          f"{100 * v['tuned_step'][s]['overshoot']:.2f} %, worst settling "
-                          f"{v['hand_step'][s]['settling_time_s']:.3g} -> {v['tuned_step'][s]['settling_time_s']:.3g} s"
-                          for s in SCENARIOS)
-        print(f"  {t['message']}; {t['iterations']} iterations, {t['wall_time_s']:.1f} s; "
-              f"cost {t['initial_cost']:.4g} -> {t['cost']:.4g} ({100 * t['improvement']:.1f} % better); "
-              f"fresh samples: mean {v['hand_mean']:.4g} -> {v['tuned_mean']:.4g} "
-              f"({100 * v['improvement_mean']:.1f} %), better on {v['tuned_better_on']}/{v['samples']}, "
-              f"violations {v['tuned_violations'] or 'none'}; {steps}", flush=True)
+        steps = "; ".join(
+            f"{s}: worst overshoot {100 * v['hand_step'][s]['overshoot']:.2f} -> "
+            f"{100 * v['tuned_step'][s]['overshoot']:.2f} %, worst settling "
+            f"{v['hand_step'][s]['settling_time_s']:.3g} -> {v['tuned_step'][s]['settling_time_s']:.3g} s"
+            for s in SCENARIOS
+        )
+        print(
+            f"  {t['message']}; {t['iterations']} iterations, {t['wall_time_s']:.1f} s; "
+            f"cost {t['initial_cost']:.4g} -> {t['cost']:.4g} ({100 * t['improvement']:.1f} % better); "
+            f"fresh samples: mean {v['hand_mean']:.4g} -> {v['tuned_mean']:.4g} "
+            f"({100 * v['improvement_mean']:.1f} %), better on {v['tuned_better_on']}/{v['samples']}, "
+            f"violations {v['tuned_violations'] or 'none'}; {steps}",
+            flush=True,
+        )
     if failed:
         print(f"not converged: {', '.join(failed)}", flush=True)
         return 1

@@ -88,8 +88,11 @@ def check_study_folder(folder: str | os.PathLike) -> list[str]:
             problems.append(f"{name} is missing")
         elif file_digest(path) != digest:
             problems.append(f"{name} is not the file run {info.get('run_id')} wrote")
-    extra = sorted(p.name for p in folder.iterdir() if p.name != "run.json" and p.name not in manifest
-                   and not p.name.startswith("."))
+    extra = sorted(
+        p.name
+        for p in folder.iterdir()
+        if p.name != "run.json" and p.name not in manifest and not p.name.startswith(".")
+    )
     problems += [f"{name} is not from run {info.get('run_id')}" for name in extra]
     return problems
 
@@ -135,8 +138,12 @@ def verdict_grid(table) -> tuple[list, list]:
     rows = []
     for label in dict.fromkeys(table.controller):
         mine = table[table.controller == label].set_index("scenario")
-        rows.append({"controller": label, **{s: verdict_text(mine.loc[s, "verdict"]) if s in mine.index else "—"
-                                             for s in scenarios}})
+        rows.append(
+            {
+                "controller": label,
+                **{s: verdict_text(mine.loc[s, "verdict"]) if s in mine.index else "—" for s in scenarios},
+            }
+        )
     columns = [("controller", "controller", format_number)] + [(s, s, format_number) for s in scenarios]
     return rows, columns
 
@@ -155,8 +162,10 @@ def specs_lines(result) -> list:
     for name in scenarios:
         chosen = study.specs_for(name, plant.params)
         described.setdefault((chosen.describe(), chosen.source), []).append(name)
-    return [f"- {', '.join(names)}: {text}" + (f" ({source})" if source else "")
-            for (text, source), names in described.items()]
+    return [
+        f"- {', '.join(names)}: {text}" + (f" ({source})" if source else "")
+        for (text, source), names in described.items()
+    ]
 
 
 def caption(result) -> str:
@@ -164,18 +173,22 @@ def caption(result) -> str:
     study, plant, options = result.study, result.plant, result.options
     uncertain = ", ".join(plant.uncertain_params)
     mc = next((s for s in study.scenarios if s.monte_carlo), None)
-    text = (f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
-            "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
-            f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
-            "period, the actuator clipped at its limit), never a linear model alone. "
-            "The simulated plant has the text's nominal parameters; "
-            f"the controllers are designed from the model known to them, with {uncertain} "
-            f"{100 * study.known_rel:+g} %.")
+    text = (
+        f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
+        "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
+        f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
+        "period, the actuator clipped at its limit), never a linear model alone. "
+        "The simulated plant has the text's nominal parameters; "
+        f"the controllers are designed from the model known to them, with {uncertain} "
+        f"{100 * study.known_rel:+g} %."
+    )
     if mc is not None:
-        text += (f" Monte Carlo rows (scenario `mc`): worst case over the samples (uniform ±{100 * mc.rel:g} % on "
-                 f"{uncertain}, seed {options.seed}); every controller runs the same {options.mc} samples, block "
-                 "controllers as one batched CasADi map, controllers that optimize each step (MPC) one by one "
-                 "(the `runs` column gives the count); spreads are in table.csv (`*_std`).")
+        text += (
+            f" Monte Carlo rows (scenario `mc`): worst case over the samples (uniform ±{100 * mc.rel:g} % on "
+            f"{uncertain}, seed {options.seed}); every controller runs the same {options.mc} samples, block "
+            "controllers as one batched CasADi map, controllers that optimize each step (MPC) one by one "
+            "(the `runs` column gives the count); spreads are in table.csv (`*_std`)."
+        )
     return text
 
 
@@ -186,7 +199,8 @@ DEFINITIONS = (
     "of steps reports its worst step; peak |u| of the command, time at limit: commands within 0.1 % of or beyond "
     "the limit; energy ∫u² dt of the delivered input; violation: largest excess of the command over the limit or "
     "of a state bound, in % of the limit or bound range; step: controller compute time per sample. CSV columns "
-    "are in SI units (rad, m, N, N m); this Markdown shows angles in degrees.")
+    "are in SI units (rad, m, N, N m); this Markdown shows angles in degrees."
+)
 
 
 def _loop_rows(loops_found: dict, specs, checks: dict) -> list:
@@ -194,9 +208,13 @@ def _loop_rows(loops_found: dict, specs, checks: dict) -> list:
     for label, found in loops_found.items():
         for which, lp in found.items():
             poles = lp.s_plane(lp.closed_loop_poles(1.0))
-            row = {"controller": label, "loop": which, **lp.margins(),
-                   "slowest_pole_real": float(np.max(poles.real)) if poles.size else math.nan,
-                   "stable": bool(np.all(np.abs(lp.closed_loop_poles(1.0)) < 1))}
+            row = {
+                "controller": label,
+                "loop": which,
+                **lp.margins(),
+                "slowest_pole_real": float(np.max(poles.real)) if poles.size else math.nan,
+                "stable": bool(np.all(np.abs(lp.closed_loop_poles(1.0)) < 1)),
+            }
             for spec in specs:
                 if spec.loop == which:
                     for name, verdict in checks.get((label, spec.item), {}).items():
@@ -264,8 +282,7 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
         files["monte_carlo.png"] = "monte_carlo.png"
 
     _, base = _tracked_value(result)
-    found, loop_notes = loops_module.analyse(plant, study, result.controllers, base, result.runs,
-                                             result.truths)
+    found, loop_notes = loops_module.analyse(plant, study, result.controllers, base, result.runs, result.truths)
     notes += loop_notes
     checks = {}
     for spec in study.loops:
@@ -297,17 +314,28 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
         notes.append(f"no animation: the {study.plant} case has no drawing")
     elif best is not None and (best, "step") in result.runs:
         run = result.runs[(best, "step")]
-        animation.write_gif(folder / "animation.gif", study, plant, run, best, max_frames=30 if quick else 100,
-                            dpi=64 if quick else 80)
+        animation.write_gif(
+            folder / "animation.gif", study, plant, run, best, max_frames=30 if quick else 100, dpi=64 if quick else 80
+        )
         shown = {label: r for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is None}
         left_out = [label for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is not None]
         steps = result.table[result.table.scenario == "step"].set_index("controller")
         step_verdicts = {label: verdict_text(steps.loc[label, "verdict"]) for label in shown if label in steps.index}
-        text = (f"Nonlinear simulations of the text's step ({study.source}); first shown: {best}, the lowest ITAE. "
-                "Pick a controller, and a second one as a faint ghost; the commanded input is beside the drawing "
-                "with the actuator limit." + (f" Left out (diverged): {', '.join(left_out)}." if left_out else ""))
-        animation.write_html(folder / "animation.html", study, plant, shown, best, text,
-                             max_frames=150 if quick else 300, verdicts=step_verdicts)
+        text = (
+            f"Nonlinear simulations of the text's step ({study.source}); first shown: {best}, the lowest ITAE. "
+            "Pick a controller, and a second one as a faint ghost; the commanded input is beside the drawing "
+            "with the actuator limit." + (f" Left out (diverged): {', '.join(left_out)}." if left_out else "")
+        )
+        animation.write_html(
+            folder / "animation.html",
+            study,
+            plant,
+            shown,
+            best,
+            text,
+            max_frames=150 if quick else 300,
+            verdicts=step_verdicts,
+        )
         files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
     else:
         notes.append("no animation: no controller completed the step scenario")
@@ -320,22 +348,41 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
     result.timing["files_s"] = time.perf_counter() - started
     write_text(folder / "table.md", _study_markdown(result, notes, loop_rows, run_id))
     files["table.md"] = "table.md"
-    write_json(folder / "run.json", {
-        "plant": plant.name, "title": plant.title, "numeral": study.numeral, "best": best, "run_id": run_id,
-        "settings": run_settings(result), "status": status_counts(result.table),
-        "timing": result.timing, "notes": notes, "files": files, "tracked": study.tracked,
-        "tracked_unit": study.tracked_unit, "input_unit": study.input_unit,
-        "sha256": {name: file_digest(folder / name) for name in sorted(files.values())}})
+    write_json(
+        folder / "run.json",
+        {
+            "plant": plant.name,
+            "title": plant.title,
+            "numeral": study.numeral,
+            "best": best,
+            "run_id": run_id,
+            "settings": run_settings(result),
+            "status": status_counts(result.table),
+            "timing": result.timing,
+            "notes": notes,
+            "files": files,
+            "tracked": study.tracked,
+            "tracked_unit": study.tracked_unit,
+            "input_unit": study.input_unit,
+            "sha256": {name: file_digest(folder / name) for name in sorted(files.values())},
+        },
+    )
     return files
 
 
 def run_settings(result) -> dict:
     """Everything that decides a study's numbers: the options, the providers and the case's scenarios."""
     options, study = result.options, result.study
-    return {"mc": options.mc, "seed": options.seed, "quick": options.quick,
-            "strict": options.strict, "jit": options.jit,
-            "threads": options.threads, "providers": list(result.providers),
-            "scenarios": [s.name for s in study.scenarios if options.scenarios is None or s.name in options.scenarios]}
+    return {
+        "mc": options.mc,
+        "seed": options.seed,
+        "quick": options.quick,
+        "strict": options.strict,
+        "jit": options.jit,
+        "threads": options.threads,
+        "providers": list(result.providers),
+        "scenarios": [s.name for s in study.scenarios if options.scenarios is None or s.name in options.scenarios],
+    }
 
 
 def status_counts(table) -> dict:
@@ -350,8 +397,9 @@ def not_ok_rows(table) -> list:
     """(controller, scenario, status) of every row whose status is not "ok", in table order."""
     from .runner import status_kind
 
-    return [(str(r.controller), str(r.scenario), str(r.status)) for r in table.itertuples()
-            if status_kind(r.status) != "ok"]
+    return [
+        (str(r.controller), str(r.scenario), str(r.status)) for r in table.itertuples() if status_kind(r.status) != "ok"
+    ]
 
 
 def timings_frame(table, samples):
@@ -384,8 +432,9 @@ def status_lines(table) -> list:
         if status.startswith("skipped"):
             skipped.setdefault(status, []).append(f"{controller} / {scenario}")
         else:
-            lines.append(f"- **{escape_markdown(controller)} / {escape_markdown(scenario)}**: "
-                         f"{escape_markdown(status)}")
+            lines.append(
+                f"- **{escape_markdown(controller)} / {escape_markdown(scenario)}**: {escape_markdown(status)}"
+            )
     for status, where in skipped.items():
         lines.append(f"- {escape_markdown(status)}: {escape_markdown(', '.join(where))}")
     return lines
@@ -397,45 +446,86 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
     rows = result.table.to_dict("records")
     grid_rows, grid_columns = verdict_grid(result.table)
     failing = not_ok(result.table)
-    parts = [f"# {plant.title}: controllers compared", "", f"Run {run_id}; settings in run.json.", "",
-             caption(result), "", "## Verdicts against the specs", "",
-             "Specs (`models.specs`; a series of steps is judged by its worst step, a Monte Carlo by its worst "
-             "sample):", "", *specs_lines(result), "", markdown_table(grid_rows, grid_columns)]
+    parts = [
+        f"# {plant.title}: controllers compared",
+        "",
+        f"Run {run_id}; settings in run.json.",
+        "",
+        caption(result),
+        "",
+        "## Verdicts against the specs",
+        "",
+        "Specs (`models.specs`; a series of steps is judged by its worst step, a Monte Carlo by its worst sample):",
+        "",
+        *specs_lines(result),
+        "",
+        markdown_table(grid_rows, grid_columns),
+    ]
     if failing:
         parts += ["What the rows that do not meet their specs miss:", ""]
-        parts += [f"- {escape_markdown(r['controller'])} / {escape_markdown(r['scenario'])}: "
-                  f"{verdict_text(r['verdict'])}"
-                  + (f" — {escape_markdown(r['verdict_detail'])}" if isinstance(r.get("verdict_detail"), str)
-                     and r["verdict_detail"] and not str(r["verdict_detail"]).startswith("skipped") else "")
-                  for r in failing]
+        parts += [
+            f"- {escape_markdown(r['controller'])} / {escape_markdown(r['scenario'])}: "
+            f"{verdict_text(r['verdict'])}"
+            + (
+                f" — {escape_markdown(r['verdict_detail'])}"
+                if isinstance(r.get("verdict_detail"), str)
+                and r["verdict_detail"]
+                and not str(r["verdict_detail"]).startswith("skipped")
+                else ""
+            )
+            for r in failing
+        ]
         parts.append("")
-    parts += ["## How the rows ran", "", *status_lines(result.table), "",
-              "## Metrics", "", markdown_table(rows, columns), DEFINITIONS, ""]
+    parts += [
+        "## How the rows ran",
+        "",
+        *status_lines(result.table),
+        "",
+        "## Metrics",
+        "",
+        markdown_table(rows, columns),
+        DEFINITIONS,
+        "",
+    ]
     mc_rows = [r for r in rows if r["scenario"] == "mc"]
     if mc_rows:
         angle = study.tracked_unit == "rad"
         scale, unit = (180 / math.pi, "deg") if angle else (1.0, study.tracked_unit)
-        parts += ["## Monte Carlo: worst case and spread (sample standard deviation)", "",
-                  markdown_table(mc_rows, [
-                      ("controller", "controller", format_number), ("samples", "samples", format_number),
-                      ("diverged_samples", "diverged", format_number),
-                      ("settling_time_s", "settling worst (s)", scaled()),
-                      ("settling_time_s_std", "settling std (s)", scaled()),
-                      ("overshoot_pct", "overshoot worst (%)", scaled()),
-                      ("overshoot_pct_std", "overshoot std (%)", scaled()),
-                      ("iae", f"IAE worst ({unit} s)", scaled(scale)),
-                      ("iae_std", f"IAE std ({unit} s)", scaled(scale)),
-                      ("peak_u", f"peak |u| worst ({study.input_unit})", scaled()),
-                      ("step_ms", "step (ms)", scaled())])]
+        parts += [
+            "## Monte Carlo: worst case and spread (sample standard deviation)",
+            "",
+            markdown_table(
+                mc_rows,
+                [
+                    ("controller", "controller", format_number),
+                    ("samples", "samples", format_number),
+                    ("diverged_samples", "diverged", format_number),
+                    ("settling_time_s", "settling worst (s)", scaled()),
+                    ("settling_time_s_std", "settling std (s)", scaled()),
+                    ("overshoot_pct", "overshoot worst (%)", scaled()),
+                    ("overshoot_pct_std", "overshoot std (%)", scaled()),
+                    ("iae", f"IAE worst ({unit} s)", scaled(scale)),
+                    ("iae_std", f"IAE std ({unit} s)", scaled(scale)),
+                    ("peak_u", f"peak |u| worst ({study.input_unit})", scaled()),
+                    ("step_ms", "step (ms)", scaled()),
+                ],
+            ),
+        ]
     if loop_rows:
         keys = [k for k in loop_rows[0] if k not in ("controller", "loop")]
         extra = sorted({k for r in loop_rows for k in r} - set(loop_rows[0]))
-        parts += ["## Linear loop analysis (exact linearization where each block holds the plant at rest)", "",
-                  markdown_table(loop_rows, [("controller", "controller", format_number),
-                                             ("loop", "loop", format_number)]
-                                 + [(k, k.replace("_", " "), format_number) for k in keys + extra]),
-                  "Margins from `control.stability_margins` of the discrete loop L(z) (closed loop 1 + L = 0); "
-                  "slowest pole: largest real part of s = ln(z)/Ts of the closed loop.", ""]
+        parts += [
+            "## Linear loop analysis (exact linearization where each block holds the plant at rest)",
+            "",
+            markdown_table(
+                loop_rows,
+                [("controller", "controller", format_number), ("loop", "loop", format_number)]
+                + [(k, k.replace("_", " "), format_number) for k in keys + extra],
+            ),
+            "Margins from `control.stability_margins` of the discrete loop L(z) (closed loop 1 + L = 0); "
+            "slowest pole: largest real part of s = ln(z)/Ts of the closed loop.",
+            "",
+        ]
     timing = ", ".join(f"{k[:-2].replace('_', ' ')} {v:.1f} s" for k, v in result.timing.items())
     timing = timing.replace("total", "simulations in all").replace("files", "plots, animations and files")
     parts += ["## Notes", ""] + [f"- {escape_markdown(n)}" for n in notes or ["none"]]
@@ -513,22 +603,39 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
     lines = ["# Summary: every controller on every plant", ""]
     if run_id is not None:
         lines += [f"Run {run_id}. A plant folder written by another run says so below.", ""]
-    lines += [f"Each cell: the verdict of the text's step against the plant's specs ({legend}), then its 2 % "
-              "settling time / overshoot on the nonlinear plant (from OUT/<plant>/table.csv; ∞: not settled by "
-              "the end of the run; — : controller not provided for that plant). Each plant's table.md says which "
-              "specs a row misses and by how much.", ""]
+    lines += [
+        f"Each cell: the verdict of the text's step against the plant's specs ({legend}), then its 2 % "
+        "settling time / overshoot on the nonlinear plant (from OUT/<plant>/table.csv; ∞: not settled by "
+        "the end of the run; — : controller not provided for that plant). Each plant's table.md says which "
+        "specs a row misses and by how much.",
+        "",
+    ]
     columns = [("controller", "controller", format_number)] + [(n, n, format_number) for n, _, _ in studies]
     rows = [{"controller": label, **{n: _cell(t, label) for n, _, t in studies}} for label in labels]
     lines += [markdown_table(rows, columns)]
     lines += ["## Per plant", ""]
-    per = [{"plant": n, "run": _run_of(info, run_id), "best": info.get("best") or "—",
-            "controllers": int(t.controller.nunique()), **verdict_counts(t),
+    per = [
+        {
+            "plant": n,
+            "run": _run_of(info, run_id),
+            "best": info.get("best") or "—",
+            "controllers": int(t.controller.nunique()),
+            **verdict_counts(t),
             "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
             "settings": f"mc {info['settings']['mc']}, seed {info['settings']['seed']}"
-                        + (", quick" if info["settings"]["quick"] else "")} for n, info, t in studies]
-    lines += [markdown_table(per, [(k, k if k != "best" else "best (lowest step ITAE)", format_number)
-                                   for k in ("plant", "run", "best", "controllers", *COUNTED, "time",
-                                             "settings")])]
+            + (", quick" if info["settings"]["quick"] else ""),
+        }
+        for n, info, t in studies
+    ]
+    lines += [
+        markdown_table(
+            per,
+            [
+                (k, k if k != "best" else "best (lowest step ITAE)", format_number)
+                for k in ("plant", "run", "best", "controllers", *COUNTED, "time", "settings")
+            ],
+        )
+    ]
     for n, _, table in studies:
         if not_ok_rows(table):
             lines += ["", f"Rows of {n} that did not run as designed:", ""] + status_lines(table)[1:]
@@ -549,9 +656,11 @@ def _status_html(table, info: dict, run_id: str | None) -> str:
     parts = [f'<p class="run">{html.escape(_run_of(info, run_id))}. Rows: {html.escape(counts)}.</p>']
     bad = not_ok_rows(table)
     if bad:
-        parts.append('<ul class="not-ok">' + "".join(
-            f"<li><b>{html.escape(c)} / {html.escape(s)}</b>: {html.escape(st)}</li>" for c, s, st in bad)
-            + "</ul>")
+        parts.append(
+            '<ul class="not-ok">'
+            + "".join(f"<li><b>{html.escape(c)} / {html.escape(s)}</b>: {html.escape(st)}</li>" for c, s, st in bad)
+            + "</ul>"
+        )
     return "".join(parts)
 
 
@@ -562,9 +671,11 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
     studies = _read_studies(out, names)
     from . import overview
 
-    body = ["<h1>Case studies: every controller on every plant</h1>",
-            '<p>Tables, plots and animations from nonlinear closed-loop simulations. '
-            '<a href="summary.md">summary.md</a></p>']
+    body = [
+        "<h1>Case studies: every controller on every plant</h1>",
+        "<p>Tables, plots and animations from nonlinear closed-loop simulations. "
+        '<a href="summary.md">summary.md</a></p>',
+    ]
     if run_id is not None:
         body.append(f"<p>Run {html.escape(run_id)}.</p>")
     body.append("<ul>")
@@ -577,15 +688,23 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
         body.append("</section>")
     for n, info, table in studies:
         files = info["files"]
-        links = " · ".join(f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
-                           for f in files.values() if not f.endswith(".png") and not f.endswith(".gif"))
-        body += [f'<h2 id="{n}">{html.escape(info["title"])}</h2>', f"<p>{links}</p>",
-                 _status_html(table, info, run_id)]
+        links = " · ".join(
+            f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
+            for f in files.values()
+            if not f.endswith(".png") and not f.endswith(".gif")
+        )
+        body += [
+            f'<h2 id="{n}">{html.escape(info["title"])}</h2>',
+            f"<p>{links}</p>",
+            _status_html(table, info, run_id),
+        ]
         if info.get("best"):
-            body.append(f'<p>Best in the step scenario (lowest ITAE): {html.escape(info["best"])}</p>')
+            body.append(f"<p>Best in the step scenario (lowest ITAE): {html.escape(info['best'])}</p>")
         if "animation.gif" in files:
-            body.append(f'<p><a href="{n}/animation.html"><img src="{n}/animation.gif" '
-                        f'alt="{html.escape(info["title"])} animation"></a></p>')
+            body.append(
+                f'<p><a href="{n}/animation.html"><img src="{n}/animation.gif" '
+                f'alt="{html.escape(info["title"])} animation"></a></p>'
+            )
         if "verdict" in table:
             grid_rows, grid_columns = verdict_grid(table)
             body += ["<h3>Verdicts against the specs</h3>", html_table(grid_rows, grid_columns)]
@@ -595,15 +714,18 @@ def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Pat
             body += ["<h3>The step: metrics</h3>", html_table(step_rows, [c for c in columns if c[0] != "scenario"])]
         for f in files.values():
             if f.endswith(".png"):
-                body.append(f'<figure><img src="{n}/{html.escape(f)}" alt="{html.escape(f)}" loading="lazy">'
-                            f"<figcaption>{html.escape(f)}</figcaption></figure>")
-    page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Case studies</title><style>"
-            "body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1100px}"
-            "table{border-collapse:collapse;font-size:0.8em}td,th{border:1px solid #ccc;padding:2px 6px}"
-            "img{max-width:100%}figure{margin:1em 0}"
-            ".heatmap td{text-align:center;min-width:5.5em}.heatmap th{text-align:left;font-weight:normal}"
-            ".heatmap caption{caption-side:bottom;text-align:left;font-size:0.9em;padding-top:0.4em}"
-            ".swatch{display:inline-block;width:0.8em;height:0.8em;margin-right:0.4em;vertical-align:middle}"
-            ".mark{font-weight:bold}</style></head><body>\n"
-            + "\n".join(body) + "\n</body></html>\n")
+                body.append(
+                    f'<figure><img src="{n}/{html.escape(f)}" alt="{html.escape(f)}" loading="lazy">'
+                    f"<figcaption>{html.escape(f)}</figcaption></figure>"
+                )
+    page = (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>Case studies</title><style>'
+        "body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1100px}"
+        "table{border-collapse:collapse;font-size:0.8em}td,th{border:1px solid #ccc;padding:2px 6px}"
+        "img{max-width:100%}figure{margin:1em 0}"
+        ".heatmap td{text-align:center;min-width:5.5em}.heatmap th{text-align:left;font-weight:normal}"
+        ".heatmap caption{caption-side:bottom;text-align:left;font-size:0.9em;padding-top:0.4em}"
+        ".swatch{display:inline-block;width:0.8em;height:0.8em;margin-right:0.4em;vertical-align:middle}"
+        ".mark{font-weight:bold}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
     return write_text(out / "index.html", page)

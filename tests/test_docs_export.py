@@ -29,15 +29,20 @@ def test_the_documented_example_exports_compiles_and_agrees_with_python(tmp_path
     script = tmp_path / "example.py"
     script.write_text(python[0] + "\n" + python[1] + "\nprint(run.diverged_at is None and run.u.shape)\n")
     env = dict(os.environ, PYTHONPATH=str(REPO), CODESIGN_CONTROL_CACHE=str(tmp_path / "cache"))
-    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=600)
+    done = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.strip().splitlines()[-1] == "(1000, 1)"
     generated = tmp_path / "generated"
     assert sorted(p.name for p in generated.iterdir()) == ["arm_mpc.c", "arm_mpc.h", "arm_pid.c", "arm_pid.h"]
     (generated / "main.c").write_text(c_program[0])
-    subprocess.run([*mc.compiler(), "-std=c99", "-O2", "-o", "main", "main.c", "arm_pid.c", "arm_mpc.c", "-lm"],
-                   cwd=generated, check=True, capture_output=True)
+    subprocess.run(
+        [*mc.compiler(), "-std=c99", "-O2", "-o", "main", "main.c", "arm_pid.c", "arm_mpc.c", "-lm"],
+        cwd=generated,
+        check=True,
+        capture_output=True,
+    )
     printed = subprocess.run([str(generated / "main")], check=True, capture_output=True, text=True).stdout
     rows = [line.split() for line in printed.strip().splitlines()]
     # The same three samples through the Python controllers.

@@ -31,8 +31,7 @@ def controllers_to_export(name: str) -> dict:
     """Label -> controller of every kind designed for plant `name` (nominal parameters)."""
     known = models.get(name)
     found = {f"classical {label}": block for label, block in providers.classical(name, known).items()}
-    found |= {f"state space {label}": block
-              for label, block in providers.statespace(name, known).items()}
+    found |= {f"state space {label}": block for label, block in providers.statespace(name, known).items()}
     found["linear MPC"] = providers.mpc(name, known)["linear MPC"]
     return found
 
@@ -55,8 +54,12 @@ def test_every_exported_controller_gives_the_python_commands(name):
     reference = plant.equilibrium()[0][plant.state_names.index(case.tracked)] + case.step
     for index, (label, controller) in enumerate(controllers_to_export(name).items()):
         compiled = export(controller, f"controller{index}")
-        runs = [models.simulate_closed_loop(plant, c, reference, DURATION, input_disturbance=case.input_disturbance,
-                                            noise_std=1e-4, seed=3) for c in (controller, compiled)]
+        runs = [
+            models.simulate_closed_loop(
+                plant, c, reference, DURATION, input_disturbance=case.input_disturbance, noise_std=1e-4, seed=3
+            )
+            for c in (controller, compiled)
+        ]
         assert runs[0].diverged_at is None, label
         assert runs[1].u.shape == runs[0].u.shape == (round(DURATION / controller.sample_period), plant.nu)
         np.testing.assert_allclose(runs[1].u, runs[0].u, atol=1e-9, rtol=0, err_msg=f"{name}: {label}")
@@ -72,8 +75,13 @@ def kinds(controller) -> set[str]:
     kind = type(controller).__name__
     if kind == "FilteredBlock":  # a block followed by a Tustin filter (the pendulum's zero-cancelling filter)
         return {"Tustin filter"} | kinds(controller.block)
-    name = {"PID": "PID", "TransferFunctionBlock": "transfer-function block", "StateFeedback": "state feedback",
-            "ObserverFeedback": "observer", "LinearMPC": "linear MPC"}[kind]
+    name = {
+        "PID": "PID",
+        "TransferFunctionBlock": "transfer-function block",
+        "StateFeedback": "state feedback",
+        "ObserverFeedback": "observer",
+        "LinearMPC": "linear MPC",
+    }[kind]
     found = {name}
     if kind == "TransferFunctionBlock":
         found.add("Tustin filter")
@@ -94,8 +102,18 @@ def test_the_plants_cover_every_kind_twice():
         for controller in controllers_to_export(name).values():
             for kind in kinds(controller):
                 plants_of.setdefault(kind, set()).add(name)
-    assert set(plants_of) == {"PID", "PID with anti-windup", "transfer-function block",
-                              "transfer-function block with anti-windup", "Tustin filter", "prefilter", "cascade",
-                              "state feedback", "state feedback with integrator", "observer",
-                              "disturbance observer", "linear MPC"}
+    assert set(plants_of) == {
+        "PID",
+        "PID with anti-windup",
+        "transfer-function block",
+        "transfer-function block with anti-windup",
+        "Tustin filter",
+        "prefilter",
+        "cascade",
+        "state feedback",
+        "state feedback with integrator",
+        "observer",
+        "disturbance observer",
+        "linear MPC",
+    }
     assert all(len(plants) >= 2 for plants in plants_of.values()), plants_of

@@ -18,11 +18,20 @@ def test_the_readme_has_python_blocks():
     assert len(BLOCKS) >= 5
 
 
-@pytest.mark.parametrize("index", [pytest.param(i, marks=[pytest.mark.slow] if any(k in b for k in LONG) else [],
-                                                id=f"block{i}") for i, b in enumerate(BLOCKS)])
+@pytest.mark.parametrize(
+    "index",
+    [
+        pytest.param(i, marks=[pytest.mark.slow] if any(k in b for k in LONG) else [], id=f"block{i}")
+        for i, b in enumerate(BLOCKS)
+    ],
+)
 def test_each_readme_block_runs_on_its_own(index, tmp_path):
-    env = dict(os.environ, MPLBACKEND="Agg",
-               PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
-    done = subprocess.run([sys.executable, "-c", BLOCKS[index]], cwd=tmp_path, env=env, capture_output=True,
-                          text=True, timeout=1800)
+    env = dict(
+        os.environ,
+        MPLBACKEND="Agg",
+        PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", BLOCKS[index]], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1800
+    )
     assert done.returncode == 0, f"README block {index}:\n{BLOCKS[index]}\n{done.stderr[-3000:]}"

@@ -57,8 +57,7 @@ def register(case: CaseStudy, replace: bool = False) -> CaseStudy:
     numeral_value(case.numeral)
     _discover()
     if case.plant in _REGISTRY and not replace:
-        raise ValueError(f"a case study named {case.plant!r} is registered already; pass replace=True to "
-                         "replace it")
+        raise ValueError(f"a case study named {case.plant!r} is registered already; pass replace=True to replace it")
     _REGISTRY[case.plant] = case
     return case
 

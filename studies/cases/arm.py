@@ -59,14 +59,17 @@ def classical(known: models.Plant) -> ClassicalDesign:
     ki = rl["ki"]
     a = {}
     a["I.8(a)"] = record(**tf_record(G, "plant_"), **tf_record(pd.closed_loop, "closed_loop_"))
-    a["I.8(b)"] = record(max_equilibrium_input=bound["max_equilibrium_input"], bound=bound["bound"],
-                         input_limit=bound["input_limit"])
+    a["I.8(b)"] = record(
+        max_equilibrium_input=bound["max_equilibrium_input"], bound=bound["bound"], input_limit=bound["input_limit"]
+    )
     a["I.8(c)"] = record(kp=pd.kp, step=CASE.design_step)
     a["I.8(d)"] = record(wn=pd.wn, kd=pd.kd, zeta=pd.zeta)
     a["I.8(e)"] = record(poles=poles_record(pd.poles))
     a["I.10(a)"] = record(**error_record(loops["PD"]), **error_record(loops["PID"], "_pid"))
-    a["I.10(b)"] = record(ess_input_disturbance=dc_gain(loops["PD"].input_disturbance_to_output()),
-                          ess_input_disturbance_pid=dc_gain(loops["PID"].input_disturbance_to_output()))
+    a["I.10(b)"] = record(
+        ess_input_disturbance=dc_gain(loops["PD"].input_disturbance_to_output()),
+        ess_input_disturbance_pid=dc_gain(loops["PID"].input_disturbance_to_output()),
+    )
     a["I.10(c)"] = record(**tf_record(loops["PID"].reference_to_output(), "closed_loop_"), ki=ki)
     a["I.10(d)"] = root_locus_record(G, pd.kp, pd.kd, rl)
     pid_impl, pd_impl = loops["PID (implemented)"], loops["PD (implemented)"]
@@ -74,20 +77,30 @@ def classical(known: models.Plant) -> ClassicalDesign:
     a["I.13(a)"] = record(omega=0.4, tracking_error_percent=an.percent_tracking_error_below(pid_impl, 0.4))
     a["I.13(b)"] = record(slope=5.0, ess_ramp=5.0 * steady_state_errors(pid_impl)["ess_ramp"])
     a["I.13(c)"] = record(omega=0.01, input_disturbance_percent=an.percent_input_disturbance_below(pid_impl, 0.01))
-    a["I.13(d)"] = record(omega=100.0, noise_percent=an.percent_noise_above(pid_impl, 100.0),
-                          noise_percent_ideal_derivative=an.percent_noise_above(loops["PID"], 100.0))
+    a["I.13(d)"] = record(
+        omega=100.0,
+        noise_percent=an.percent_noise_above(pid_impl, 100.0),
+        noise_percent_ideal_derivative=an.percent_noise_above(loops["PID"], 100.0),
+    )
     # I.14: lag + low-pass + lead on the implemented PD loop, then a prefilter.
     C_pd = pid_tf(pd.kp, 0.0, pd.kd, SIGMA)
     shaped, pre, T_new = loopshaped(G * C_pd, LOOPSHAPING)
     a["I.14"] = loopshaping_record(shaped, pre, T_new)
     blocks = single_loop_blocks(known, "theta", pd, ki, feedforward=True)
-    blocks["loopshaped"] = TransferFunctionBlock(known, "theta", shaped.controller * C_pd, prefilter=pre["prefilter"],
-                                                 output_limit=float(known.input_limit[0]), feedforward=True,
-                                                 name="loopshaped (I.14)")
-    loops["loopshaped"] = Loop(G, shaped.controller * C_pd, pre["prefilter"] * shaped.controller * C_pd,
-                               "loopshaped")
-    notes = [f"ζ = {ZETA} (I.8(d) leaves it to the student)",
-             "feedforward τ_e = m g ℓ/2 cos θ at the measured θ (I.9), from the known plant"]
+    blocks["loopshaped"] = TransferFunctionBlock(
+        known,
+        "theta",
+        shaped.controller * C_pd,
+        prefilter=pre["prefilter"],
+        output_limit=float(known.input_limit[0]),
+        feedforward=True,
+        name="loopshaped (I.14)",
+    )
+    loops["loopshaped"] = Loop(G, shaped.controller * C_pd, pre["prefilter"] * shaped.controller * C_pd, "loopshaped")
+    notes = [
+        f"ζ = {ZETA} (I.8(d) leaves it to the student)",
+        "feedforward τ_e = m g ℓ/2 cos θ at the measured θ (I.9), from the known plant",
+    ]
     return ClassicalDesign(a, blocks, loops, notes)
 
 
@@ -101,14 +114,18 @@ def statespace_poles(known: models.Plant, damping_ratio: float = ZETA) -> np.nda
     limit = float(known.input_limit[0])
     kp = (limit - abs(linear.ue[0])) / CASE.design_step
     if kp <= 0:
-        raise ValueError(f"arm: the equilibrium torque {linear.ue[0]:.3g} N m leaves no room under "
-                         f"the limit {limit} N m")
+        raise ValueError(
+            f"arm: the equilibrium torque {linear.ue[0]:.3g} N m leaves no room under the limit {limit} N m"
+        )
     return ss.second_order_poles(np.sqrt(linear.B[1, 0] * kp), damping_ratio)
 
 
 STATESPACE = StateSpaceChoices(
-    poles=statespace_poles, bryson_maxima={"theta": np.deg2rad(50)}, items=statespace_items_15_to_17("I"),
-    observer_uses_integrator=True)
+    poles=statespace_poles,
+    bryson_maxima={"theta": np.deg2rad(50)},
+    items=statespace_items_15_to_17("I"),
+    observer_uses_integrator=True,
+)
 
 
 # ----------------------------------------------------------------- MPC
@@ -136,10 +153,18 @@ def sizing_start(known: models.Plant) -> models.Block:
 #: The arm's motor requirement (the text gives no time-domain spec for the arm): the 50° step 90 % done
 #: by 0.6 s and staying there, overshoot at most 5 %; judged on a 3 s run.
 SIZING_SPECS = Specs(rise_time=0.6, max_overshoot=0.05)
-SIZING = ActuatorSizing(text_limit=1.0, high=1.2, hand_range=(0.75, 1.2), duration=3.0, parameter="torque limit",
-                        hand_design=sizing_hand_design, retune_start=sizing_start, specs=SIZING_SPECS,
-                        specs_origin="a stated requirement (the text gives none for the arm): 90 % of the 50° "
-                                     "step by 0.6 s and staying, overshoot ≤ 5 %")
+SIZING = ActuatorSizing(
+    text_limit=1.0,
+    high=1.2,
+    hand_range=(0.75, 1.2),
+    duration=3.0,
+    parameter="torque limit",
+    hand_design=sizing_hand_design,
+    retune_start=sizing_start,
+    specs=SIZING_SPECS,
+    specs_origin="a stated requirement (the text gives none for the arm): 90 % of the 50° "
+    "step by 0.6 s and staying, overshoot ≤ 5 %",
+)
 
 
 def actuator_sizing(**options):
@@ -155,16 +180,25 @@ def point_to_point_time(plant: models.Plant, quick: bool, solved: dict) -> Traje
     ocp.subject_to(ocp.at_start(ocp.state) == [0.0, 0.0])
     ocp.subject_to(ocp.at_end(ocp.state) == [CASE.step, 0.0])
     return TrajectorySetup(
-        ocp, Collocation(intervals=20 if quick else 40), {}, "T (s)",
+        ocp,
+        Collocation(intervals=20 if quick else 40),
+        {},
+        "T (s)",
         f"From level at rest to θ = {np.degrees(CASE.step):g} deg at rest (the text's step), |τ| ≤ 1 N m, in the "
         "least time; the gravity torque m g ℓ/2 cos θ (0.735 N m at level) leaves 0.26 N m to accelerate and "
         "1.7 N m to brake. Bang-bang with one switch; the held input puts the switch on a mesh point, so T is "
-        "within about one interval of the continuous-time answer.")
+        "within about one interval of the continuous-time answer.",
+    )
 
 
 TRAJECTORIES = (
-    TrajectoryProblem("point_to_point_time", "50° point to point, minimum time", point_to_point_time,
-                      report={"dtheta": "rate"}, compare_step=True),
+    TrajectoryProblem(
+        "point_to_point_time",
+        "50° point to point, minimum time",
+        point_to_point_time,
+        report={"dtheta": "rate"},
+        compare_step=True,
+    ),
 )
 
 
@@ -183,26 +217,43 @@ def draw(p: dict, s: dict, r: float) -> list:
 
 # ----------------------------------------------------------------- errata
 ERRATA = (
-    Erratum('hint', 'I.15 (arm)', (
-        'A = [[0, 1], [0, −0.667]], B = (0, 66.667)',
-        'the same (−0.6667, 66.667)',
-        'agrees to the printed digits',
-        '—',
-    )),
-    Erratum('text', 'I.15(c)', (
-        'roots of s² + 2ζωₙ + ωₙ²',
-        's² + 2ζωₙ s + ωₙ²',
-    )),
-    Erratum('text', 'I.11(c), II.11, III.11, IV.12, V.12, VI.11', (
-        '"dirty derivative gain τ = 0.05"',
-        '0.05 s is the bandwidth time constant σ of the dirty derivative s/(σ s + 1), not a gain',
-    ), also=('pendulum', 'satellite', 'uuv', 'ballbeam', 'crane')),
-    Erratum('design', 'I.15 hint', (
-        "feed forward τ_e = (m g ℓ / 2) cos θᵈ with I.8's K = (k_p, k_d)",
-        'about the 50° reference the gravity stiffness (m g ℓ / 2) sin 50° = 0.563 N m/rad exceeds k_p = 0.304 '
-        'N m/rad, so the rest point at θᵈ is unstable and the arm stalls near 0°. The equilibrium torque must '
-        'be cancelled at the measured angle (what our blocks do).',
-    )),
+    Erratum(
+        "hint",
+        "I.15 (arm)",
+        (
+            "A = [[0, 1], [0, −0.667]], B = (0, 66.667)",
+            "the same (−0.6667, 66.667)",
+            "agrees to the printed digits",
+            "—",
+        ),
+    ),
+    Erratum(
+        "text",
+        "I.15(c)",
+        (
+            "roots of s² + 2ζωₙ + ωₙ²",
+            "s² + 2ζωₙ s + ωₙ²",
+        ),
+    ),
+    Erratum(
+        "text",
+        "I.11(c), II.11, III.11, IV.12, V.12, VI.11",
+        (
+            '"dirty derivative gain τ = 0.05"',
+            "0.05 s is the bandwidth time constant σ of the dirty derivative s/(σ s + 1), not a gain",
+        ),
+        also=("pendulum", "satellite", "uuv", "ballbeam", "crane"),
+    ),
+    Erratum(
+        "design",
+        "I.15 hint",
+        (
+            "feed forward τ_e = (m g ℓ / 2) cos θᵈ with I.8's K = (k_p, k_d)",
+            "about the 50° reference the gravity stiffness (m g ℓ / 2) sin 50° = 0.563 N m/rad exceeds k_p = 0.304 "
+            "N m/rad, so the rest point at θᵈ is unstable and the arm stalls near 0°. The equilibrium torque must "
+            "be cancelled at the measured angle (what our blocks do).",
+        ),
+    ),
 )
 
 
@@ -210,21 +261,36 @@ ERRATA = (
 #: ω_n = 4.5 rad/s, I.8(d)) settles in 4/(ζ ω_n) = 1.3 s with 4.3 % overshoot. We ask 1.5 times that
 #: settling time for the saturating 50° step (2 s), 10 % overshoot, and a steady-state error within the
 #: 2 % settling band.
-SPECS = {"*": models.specs.Specs(
-    max_settling_time_s=2.0, max_overshoot_pct=10.0, max_ss_error_pct=2.0,
-    source="stated: 1.5 x the I.8(d) design's settling time, 10 % overshoot, 2 % error")}
+SPECS = {
+    "*": models.specs.Specs(
+        max_settling_time_s=2.0,
+        max_overshoot_pct=10.0,
+        max_ss_error_pct=2.0,
+        source="stated: 1.5 x the I.8(d) design's settling time, 10 % overshoot, 2 % error",
+    )
+}
 
 CASE = CaseStudy(
-    plant="arm", numeral="I", tracked="theta",
-    design_step=np.deg2rad(50), step=np.deg2rad(50), input_disturbance=0.2, duration=5.0,
+    plant="arm",
+    numeral="I",
+    tracked="theta",
+    design_step=np.deg2rad(50),
+    step=np.deg2rad(50),
+    input_disturbance=0.2,
+    duration=5.0,
     source="I.8(c) step 50 deg; I.17(e) disturbance 0.2 N m; I.11 Ts = 0.01 s",
-    tracked_unit="rad", input_unit="N m",
+    tracked_unit="rad",
+    input_unit="N m",
     # I.8(c): 50 deg, sized so that the PD just saturates; I.17(e): 0.2 N m; noise in rad, the text gives no
     # sensor: an encoder-scale 0.06 deg; I.11(a): m and ell known to 5 %.
     scenarios=standard_scenarios({"theta": 1e-3}),
     loops=(LOOPSHAPING,),
-    classical=classical, statespace=STATESPACE, mpc=MPC,
+    classical=classical,
+    statespace=STATESPACE,
+    mpc=MPC,
     codesign={"arm": actuator_sizing},
     specs=SPECS,
-    drawing=draw, errata=ERRATA, trajectories=TRAJECTORIES,
+    drawing=draw,
+    errata=ERRATA,
+    trajectories=TRAJECTORIES,
 )

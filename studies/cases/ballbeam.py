@@ -58,8 +58,10 @@ BANDWIDTH_INNER, ZETA_INNER = 20.0, 0.7
 BANDWIDTH_OUTER, ZETA_OUTER = 2.0, 0.6
 #: V.13(b): the beam angle within 0.0175 rad (1 deg) under a 13.2 N input disturbance.
 ANGLE_DISTURBANCE, ANGLE_ERROR = 13.2, 0.0175
-LOOPS = (LoopSpec("V.13(a)", "inner", baseline=None, crossover=BANDWIDTH_INNER),
-         LoopSpec("V.13(c)", "outer", baseline=None, crossover=BANDWIDTH_OUTER))
+LOOPS = (
+    LoopSpec("V.13(a)", "inner", baseline=None, crossover=BANDWIDTH_INNER),
+    LoopSpec("V.13(c)", "outer", baseline=None, crossover=BANDWIDTH_OUTER),
+)
 #: V.11 (the text gives only the title "Root locus design"): a lead for the outer loop placing the
 #: closed-loop pair at V.8(i)'s ω_n and ζ, its zero at this fraction of ω_n.
 ROOT_LOCUS_ZERO = 0.5
@@ -70,20 +72,48 @@ def classical(known: models.Plant) -> ClassicalDesign:
     """V.8 successive loop closure, V.10 integrators, V.11 root-locus lead, V.13 frequency-response leads."""
     bound = linearized_input_bound(known, {"z": (0.0, known.params["ell"])})
     ff = known.equilibrium_input_jacobian().ravel()
-    slc = successive_loop_closure(known, "theta", "z", inner_bound=bound["bound"], outer_step=CASE.design_step,
-                                  separation=SEPARATION, zeta_inner=ZETA, zeta_outer=ZETA, feedforward_gradient=ff)
-    a = cascade_records("V", slc, bound, dict(inner_tf="b", bound="c", kp_inner="d", wn_inner="e", poles_inner="f",
-                                              outer_tf="g", kp_outer="h", wn_outer="i", poles_outer="j"))
+    slc = successive_loop_closure(
+        known,
+        "theta",
+        "z",
+        inner_bound=bound["bound"],
+        outer_step=CASE.design_step,
+        separation=SEPARATION,
+        zeta_inner=ZETA,
+        zeta_outer=ZETA,
+        feedforward_gradient=ff,
+    )
+    a = cascade_records(
+        "V",
+        slc,
+        bound,
+        dict(
+            inner_tf="b",
+            bound="c",
+            kp_inner="d",
+            wn_inner="e",
+            poles_inner="f",
+            outer_tf="g",
+            kp_outer="h",
+            wn_outer="i",
+            poles_outer="j",
+        ),
+    )
     G_in, G_out = slc.plants.inner, slc.outer_model
     rl = integrator(G_out, slc.outer.kp, slc.outer.kd, ZETA)
     rl_in = integrator(G_in, slc.inner.kp, slc.inner.kd, ZETA)
-    outer_pd, outer_pid = (Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd),
-                           Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd))
+    outer_pd, outer_pid = (
+        Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd),
+        Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd),
+    )
     a["V.10(a)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"))
-    a["V.10(b)"] = record(**tf_record(outer_pid.reference_to_error(), "error_"),
-                          type_pid=error_record(outer_pid)["type"])
-    a["V.10(c)"] = record(ess_input_disturbance=dc_gain(outer_pd.input_disturbance_to_output()),
-                          ess_input_disturbance_pid=dc_gain(outer_pid.input_disturbance_to_output()))
+    a["V.10(b)"] = record(
+        **tf_record(outer_pid.reference_to_error(), "error_"), type_pid=error_record(outer_pid)["type"]
+    )
+    a["V.10(c)"] = record(
+        ess_input_disturbance=dc_gain(outer_pd.input_disturbance_to_output()),
+        ess_input_disturbance_pid=dc_gain(outer_pid.input_disturbance_to_output()),
+    )
     a["V.10(d)"] = root_locus_record(G_out, slc.outer.kp, slc.outer.kd, rl)
     a["V.10(d) inner"] = root_locus_record(G_in, slc.inner.kp, slc.inner.kd, rl_in)
     a |= root_locus_design(slc)
@@ -97,47 +127,97 @@ def classical(known: models.Plant) -> ClassicalDesign:
     C_in = lead_in.controller * an.tf([1.0, lag_zero], [1.0, lag_zero / lag_gain])
     loop_in = Loop.unity(G_in, C_in, "inner lead-lag")
     error_lag = abs(ANGLE_DISTURBANCE * dc_gain(loop_in.input_disturbance_to_output()))
-    a["V.13(a)"] = record(bandwidth=BANDWIDTH_INNER, zeta=ZETA_INNER, crossover_target=wc_in, pm_target_deg=pm_in,
-                          lead_zero=lead_in.zero, lead_pole=lead_in.pole, gain=lead_in.gain,
-                          **margin_record(G_in * lead_in.controller, ""),
-                          bandwidth_achieved=float(control.bandwidth(loop_lead.reference_to_output())),
-                          specs=spec_records(frequency_design_checks(loop_lead, wc_in, pm_in, BANDWIDTH_INNER)))
-    a["V.13(b)"] = record(disturbance=ANGLE_DISTURBANCE, angle_error_lead=error_lead, lag_zero=lag_zero,
-                          lag_gain=lag_gain, angle_error_lead_lag=error_lag, **tf_record(C_in, "C_"),
-                          specs=spec_records([an.SpecCheck("angle error < 0.0175 rad under 13.2 N",
-                                                           error_lag < ANGLE_ERROR, error_lag, ANGLE_ERROR),
-                                              an.check_stable(loop_in)]))
+    a["V.13(a)"] = record(
+        bandwidth=BANDWIDTH_INNER,
+        zeta=ZETA_INNER,
+        crossover_target=wc_in,
+        pm_target_deg=pm_in,
+        lead_zero=lead_in.zero,
+        lead_pole=lead_in.pole,
+        gain=lead_in.gain,
+        **margin_record(G_in * lead_in.controller, ""),
+        bandwidth_achieved=float(control.bandwidth(loop_lead.reference_to_output())),
+        specs=spec_records(frequency_design_checks(loop_lead, wc_in, pm_in, BANDWIDTH_INNER)),
+    )
+    a["V.13(b)"] = record(
+        disturbance=ANGLE_DISTURBANCE,
+        angle_error_lead=error_lead,
+        lag_zero=lag_zero,
+        lag_gain=lag_gain,
+        angle_error_lead_lag=error_lag,
+        **tf_record(C_in, "C_"),
+        specs=spec_records(
+            [
+                an.SpecCheck("angle error < 0.0175 rad under 13.2 N", error_lag < ANGLE_ERROR, error_lag, ANGLE_ERROR),
+                an.check_stable(loop_in),
+            ]
+        ),
+    )
     wc_out, pm_out = crossover_for_bandwidth(BANDWIDTH_OUTER, ZETA_OUTER), prototype_phase_margin(ZETA_OUTER)
     lead_out = lead_for_crossover(slc.plants.outer, wc_out, pm_out)
     loop_out = Loop.unity(slc.plants.outer, lead_out.controller, "outer lead")
-    a["V.13(c)"] = record(bandwidth=BANDWIDTH_OUTER, zeta=ZETA_OUTER, crossover_target=wc_out, pm_target_deg=pm_out,
-                          lead_zero=lead_out.zero, lead_pole=lead_out.pole, gain=lead_out.gain,
-                          **tf_record(lead_out.controller, "C_"),
-                          **margin_record(slc.plants.outer * lead_out.controller, ""),
-                          bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
-                          specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, BANDWIDTH_OUTER)))
+    a["V.13(c)"] = record(
+        bandwidth=BANDWIDTH_OUTER,
+        zeta=ZETA_OUTER,
+        crossover_target=wc_out,
+        pm_target_deg=pm_out,
+        lead_zero=lead_out.zero,
+        lead_pole=lead_out.pole,
+        gain=lead_out.gain,
+        **tf_record(lead_out.controller, "C_"),
+        **margin_record(slc.plants.outer * lead_out.controller, ""),
+        bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
+        specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, BANDWIDTH_OUTER)),
+    )
     rate = rate_limit(CASE.design_step, slc.outer.wn)
     blocks = {
         "PD": cascade_blocks(known, slc, feedforward=True, name="PD"),
-        "PID": cascade_blocks(known, slc, ki=rl["ki"], inner_ki=rl_in["ki"], feedforward=True,
-                              anti_windup="integrate_while_slow", rate_limit=rate, name="PID"),
-        "PID (no anti-windup)": cascade_blocks(known, slc, ki=rl["ki"], inner_ki=rl_in["ki"], feedforward=True,
-                                               anti_windup="none", name="PID (no anti-windup)"),
+        "PID": cascade_blocks(
+            known,
+            slc,
+            ki=rl["ki"],
+            inner_ki=rl_in["ki"],
+            feedforward=True,
+            anti_windup="integrate_while_slow",
+            rate_limit=rate,
+            name="PID",
+        ),
+        "PID (no anti-windup)": cascade_blocks(
+            known,
+            slc,
+            ki=rl["ki"],
+            inner_ki=rl_in["ki"],
+            feedforward=True,
+            anti_windup="none",
+            name="PID (no anti-windup)",
+        ),
     }
-    inner_block = TransferFunctionBlock(known, "theta", C_in, output_limit=float(known.input_limit[0]),
-                                        feedforward=True, name="loopshaped inner (theta)")
-    outer_block = TransferFunctionBlock(known, "z", lead_out.controller, output_limit=slc.inner_limit,
-                                        name="loopshaped outer (z)")
+    inner_block = TransferFunctionBlock(
+        known,
+        "theta",
+        C_in,
+        output_limit=float(known.input_limit[0]),
+        feedforward=True,
+        name="loopshaped inner (theta)",
+    )
+    outer_block = TransferFunctionBlock(
+        known, "z", lead_out.controller, output_limit=slc.inner_limit, name="loopshaped outer (z)"
+    )
     blocks["loopshaped"] = models.Cascade(outer_block, inner_block, name="lead-lag (V.13)")
-    loops = {"outer PD": Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd, sigma=SIGMA, name="outer PD"),
-             "outer PID": Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd, sigma=SIGMA, name="outer PID"),
-             "inner lead-lag": loop_in, "outer lead": loop_out}
-    notes = [f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
-             "feedforward F_e = (m1 z/ℓ + m2/2) g cos θ at the measured (z, θ), from the known plant (V.13(d) hint)",
-             "k_i is negative (V.12(f)); the PID integrates only while |ż| is small",
-             "the PID integrates in both loops (V.12(e)'s nested PID loops): with θ_d bounded at A_θ the inner PD "
-             "holds at most k_p,θ A_θ = F̃_max of unmodelled force, and a 1.5 N disturbance plus the ±5 % "
-             "feedforward error exceed it"]
+    loops = {
+        "outer PD": Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd, sigma=SIGMA, name="outer PD"),
+        "outer PID": Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd, sigma=SIGMA, name="outer PID"),
+        "inner lead-lag": loop_in,
+        "outer lead": loop_out,
+    }
+    notes = [
+        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
+        "feedforward F_e = (m1 z/ℓ + m2/2) g cos θ at the measured (z, θ), from the known plant (V.13(d) hint)",
+        "k_i is negative (V.12(f)); the PID integrates only while |ż| is small",
+        "the PID integrates in both loops (V.12(e)'s nested PID loops): with θ_d bounded at A_θ the inner PD "
+        "holds at most k_p,θ A_θ = F̃_max of unmodelled force, and a 1.5 N disturbance plus the ±5 % "
+        "feedforward error exceed it",
+    ]
     return ClassicalDesign(a, blocks, loops, notes)
 
 
@@ -160,13 +240,26 @@ def root_locus_design(slc) -> dict:
     step_lead = an.step_info(loop.reference_to_output())
     step_pd = an.step_info(Loop.pid(model, slc.outer.kp, 0.0, slc.outer.kd).reference_to_output())
     return {
-        "V.11(a)": record(gain=sign * lead.gain, zero=lead.lead_zero, pole=lead.lead_pole, wn=slc.outer.wn,
-                          zeta=slc.outer.zeta, target_pole=target, **tf_record(C, "C_"),
-                          poles=poles_record(loop.poles()), specs=spec_records([an.check_stable(loop)])),
-        "V.11(b)": record(rise_time=step_lead["RiseTime"], overshoot_percent=step_lead["Overshoot"],
-                          settling_time=step_lead["SettlingTime"], rise_time_pd=step_pd["RiseTime"],
-                          overshoot_percent_pd=step_pd["Overshoot"], settling_time_pd=step_pd["SettlingTime"],
-                          dc_gain=dc_gain(loop.reference_to_output())),
+        "V.11(a)": record(
+            gain=sign * lead.gain,
+            zero=lead.lead_zero,
+            pole=lead.lead_pole,
+            wn=slc.outer.wn,
+            zeta=slc.outer.zeta,
+            target_pole=target,
+            **tf_record(C, "C_"),
+            poles=poles_record(loop.poles()),
+            specs=spec_records([an.check_stable(loop)]),
+        ),
+        "V.11(b)": record(
+            rise_time=step_lead["RiseTime"],
+            overshoot_percent=step_lead["Overshoot"],
+            settling_time=step_lead["SettlingTime"],
+            rise_time_pd=step_pd["RiseTime"],
+            overshoot_percent_pd=step_pd["Overshoot"],
+            settling_time_pd=step_pd["SettlingTime"],
+            dc_gain=dc_gain(loop.reference_to_output()),
+        ),
     }
 
 
@@ -177,24 +270,39 @@ POLES = (-4.5 + 4.5j, -4.5 - 4.5j, -6 + 1.5j, -6 - 1.5j)
 
 def statespace_items(r: dict) -> dict:
     """V.14(b)-(c), V.15(b)-(c); the text has no integrator or disturbance-observer item for V."""
-    return {"V.14(b)": r["controllable"], "V.14(c)": r["feedback"], "V.15(b)": r["observable"],
-            "V.15(c)": r["observer"], "integrator": r["integrator"], "disturbance observer": r["disturbance observer"],
-            "LQR": r["LQR"]}
+    return {
+        "V.14(b)": r["controllable"],
+        "V.14(c)": r["feedback"],
+        "V.15(b)": r["observable"],
+        "V.15(c)": r["observer"],
+        "integrator": r["integrator"],
+        "disturbance observer": r["disturbance observer"],
+        "LQR": r["LQR"],
+    }
 
 
 STATESPACE = StateSpaceChoices(
-    poles=lambda known: np.asarray(POLES, dtype=complex), bryson_maxima={"z": 0.25, "theta": np.deg2rad(10)},
-    items=statespace_items, observer_outputs=("z",),
-    notes=("V.15 measures the ball position z only, as the text says; the Kalman filter reads (z, θ): from z "
-           "alone the beam-angle estimate cannot be faster than −2.2 ± 2.2j, slower than the LQR's own poles, "
-           "and the ball then leaves the beam under the 1.5 N disturbance",))
+    poles=lambda known: np.asarray(POLES, dtype=complex),
+    bryson_maxima={"z": 0.25, "theta": np.deg2rad(10)},
+    items=statespace_items,
+    observer_outputs=("z",),
+    notes=(
+        "V.15 measures the ball position z only, as the text says; the Kalman filter reads (z, θ): from z "
+        "alone the beam-angle estimate cannot be faster than −2.2 ± 2.2j, slower than the LQR's own poles, "
+        "and the ball then leaves the beam under the 1.5 N disturbance",
+    ),
+)
 
 
 # ----------------------------------------------------------------- MPC
 MPC = MPCSettings(
-    0.01, 60, (100.0, 10.0, 1.0, 1.0), 1 / 15**2,
+    0.01,
+    60,
+    (100.0, 10.0, 1.0, 1.0),
+    1 / 15**2,
     soft=(SoftSpec("ball on beam", {"z": 1.0}, 0.0, lambda p: p.params["ell"], backoff=0.1),),
-    notes="0 <= z <= ell; 0.6 s horizon, two unstable time constants (0.27 s)")
+    notes="0 <= z <= ell; 0.6 s horizon, two unstable time constants (0.27 s)",
+)
 
 
 # ----------------------------------------------------------------- co-design: the smallest actuator
@@ -225,11 +333,18 @@ def sizing_start(known: models.Plant) -> models.Block:
 #: The beam's actuator requirement (the text gives no time-domain spec for the ball on beam): the 0.15 m
 #: step 90 % done by 2 s and staying there, overshoot at most 5 %; judged on a 6 s run.
 SIZING_SPECS = Specs(rise_time=2.0, max_overshoot=0.05)
-SIZING = ActuatorSizing(text_limit=15.0, high=18.0, hand_range=(13.25, 18.0), duration=6.0,
-                        parameter="force limit", hand_design=sizing_hand_design, retune_start=sizing_start,
-                        specs=SIZING_SPECS,
-                        specs_origin="a stated requirement (the text gives none for the ball on beam): 90 % of "
-                                     "the 0.15 m step by 2 s and staying, overshoot ≤ 5 %")
+SIZING = ActuatorSizing(
+    text_limit=15.0,
+    high=18.0,
+    hand_range=(13.25, 18.0),
+    duration=6.0,
+    parameter="force limit",
+    hand_design=sizing_hand_design,
+    retune_start=sizing_start,
+    specs=SIZING_SPECS,
+    specs_origin="a stated requirement (the text gives none for the ball on beam): 90 % of "
+    "the 0.15 m step by 2 s and staying, overshoot ≤ 5 %",
+)
 
 
 def actuator_sizing(**options):
@@ -248,32 +363,56 @@ def draw(p: dict, s: dict, r: float) -> list:
     return [
         d.polygon([(-0.06 * ell, -0.15 * ell), (0.06 * ell, -0.15 * ell), (0, 0)], fill=d.GROUND, stroke=d.GROUND),
         d.line([(0, 0), (ell * along[0], ell * along[1])], d.BODY, 6),
-        d.polygon([mark, (mark[0] - 0.03 * ell * normal[0] - 0.02 * ell * along[0],
-                          mark[1] - 0.03 * ell * normal[1] - 0.02 * ell * along[1]),
-                   (mark[0] - 0.03 * ell * normal[0] + 0.02 * ell * along[0],
-                    mark[1] - 0.03 * ell * normal[1] + 0.02 * ell * along[1])], d.REFERENCE, d.REFERENCE),
+        d.polygon(
+            [
+                mark,
+                (
+                    mark[0] - 0.03 * ell * normal[0] - 0.02 * ell * along[0],
+                    mark[1] - 0.03 * ell * normal[1] - 0.02 * ell * along[1],
+                ),
+                (
+                    mark[0] - 0.03 * ell * normal[0] + 0.02 * ell * along[0],
+                    mark[1] - 0.03 * ell * normal[1] + 0.02 * ell * along[1],
+                ),
+            ],
+            d.REFERENCE,
+            d.REFERENCE,
+        ),
         d.circle(ball, radius, d.ACCENT),
     ]
 
 
 # ----------------------------------------------------------------- errata
 ERRATA = (
-    Erratum('hint', 'V.14 (ball on beam)', (
-        'F[3,2] = −9.81, F[4,1] = −18.2108; G[4] = 2.6519',
-        "−9.8 and −18.1923 with the case study's g = 9.8 m/s²; G[4] = 2.6519",
-        '0.10 % in both gravity entries',
-        'the hint was computed with g = 9.81 m/s² while the case study states g = 9.8 m/s². With g = 9.81 our '
-        "linearization reproduces the hint to its printed digits. The hint's output matrix H = (1, 0, 0, 0) "
-        'measures only z although V.7 defines y = (z, θ); that matches V.15 (ball position measured), not V.7.',
-    )),
-    Erratum('text', 'V.14 hint', (
-        'F_e = m1 g z_e / L + m2 g / 2',
-        'L is the beam length ℓ (L is not defined for this plant)',
-    )),
-    Erratum('design', 'I.17, V.15 hints', (
-        '"but sense", and x̃, x̂ mixed in the observer equation',
-        '"since"; the observer estimates x̃ = x − x_e',
-    ), also=('arm',)),
+    Erratum(
+        "hint",
+        "V.14 (ball on beam)",
+        (
+            "F[3,2] = −9.81, F[4,1] = −18.2108; G[4] = 2.6519",
+            "−9.8 and −18.1923 with the case study's g = 9.8 m/s²; G[4] = 2.6519",
+            "0.10 % in both gravity entries",
+            "the hint was computed with g = 9.81 m/s² while the case study states g = 9.8 m/s². With g = 9.81 our "
+            "linearization reproduces the hint to its printed digits. The hint's output matrix H = (1, 0, 0, 0) "
+            "measures only z although V.7 defines y = (z, θ); that matches V.15 (ball position measured), not V.7.",
+        ),
+    ),
+    Erratum(
+        "text",
+        "V.14 hint",
+        (
+            "F_e = m1 g z_e / L + m2 g / 2",
+            "L is the beam length ℓ (L is not defined for this plant)",
+        ),
+    ),
+    Erratum(
+        "design",
+        "I.17, V.15 hints",
+        (
+            '"but sense", and x̃, x̂ mixed in the observer equation',
+            '"since"; the observer estimates x̃ = x − x_e',
+        ),
+        also=("arm",),
+    ),
 )
 
 
@@ -281,17 +420,29 @@ ERRATA = (
 #: The text gives no time specs: the V.8 outer loop's target (ζ = 0.707, ω_n = 1.16 rad/s, V.8(i)) settles
 #: in 4/(ζ ω_n) = 4.9 s with 4.3 % overshoot. We ask 1.5 times that settling time (7.5 s), 10 % overshoot,
 #: and a steady-state error within the 2 % settling band.
-SPECS = {"*": models.specs.Specs(
-    max_settling_time_s=7.5, max_overshoot_pct=10.0, max_ss_error_pct=2.0,
-    source="V.8: the ball on the beam; stated: 1.5 x the V.8(i) outer loop's settling time, "
-           "10 % overshoot, 2 % error")}
+SPECS = {
+    "*": models.specs.Specs(
+        max_settling_time_s=7.5,
+        max_overshoot_pct=10.0,
+        max_ss_error_pct=2.0,
+        source="V.8: the ball on the beam; stated: 1.5 x the V.8(i) outer loop's settling time, "
+        "10 % overshoot, 2 % error",
+    )
+}
 
 CASE = CaseStudy(
-    plant="ballbeam", numeral="V", tracked="z",
-    design_step=0.25, step=0.15, input_disturbance=1.5, observer_sample_period=0.001, duration=10.0,
+    plant="ballbeam",
+    numeral="V",
+    tracked="z",
+    design_step=0.25,
+    step=0.15,
+    input_disturbance=1.5,
+    observer_sample_period=0.001,
+    duration=10.0,
     source="V.8(h) design step 0.25 m; comparison step 0.25 -> 0.40 m keeps the ball on the 0.5 m beam; "
-           "no disturbance given: 10 % of 15 N; V.12 Ts = 0.01 s, V.15 Ts = 0.001 s",
-    tracked_unit="m", input_unit="N",
+    "no disturbance given: 10 % of 15 N; V.12 Ts = 0.01 s, V.15 Ts = 0.001 s",
+    tracked_unit="m",
+    input_unit="N",
     # 0.25 -> 0.40 m stays on the beam; V.15(e): a series of step changes; the text gives no disturbance:
     # 10 % of 15 N; noise in m, rad: the text gives no sensors; V.12(c): m1, m2, ell known to 5 %.
     scenarios=standard_scenarios({"z": 1e-3, "theta": 1e-3}),
@@ -299,8 +450,11 @@ CASE = CaseStudy(
     bounds=lambda params: {"z": (0.0, params["ell"])},
     loops=LOOPS,
     cascade=("theta", "z"),  # V.6: F -> theta (inner), theta -> z (outer)
-    classical=classical, statespace=STATESPACE, mpc=MPC,
+    classical=classical,
+    statespace=STATESPACE,
+    mpc=MPC,
     codesign={"ballbeam": actuator_sizing},
     specs=SPECS,
-    drawing=draw, errata=ERRATA,
+    drawing=draw,
+    errata=ERRATA,
 )

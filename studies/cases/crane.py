@@ -58,8 +58,10 @@ OUTER = {"wn": 0.45, "zeta": 0.35}
 #: VI.13: inner (load angle) loop bandwidth 3 rad/s with 25 deg phase margin; outer (car) loop 0.5 rad/s, ζ 0.4.
 BANDWIDTH_INNER, PHASE_MARGIN_INNER = 3.0, 25.0
 BANDWIDTH_OUTER, ZETA_OUTER = 0.5, 0.4
-LOOPS = (LoopSpec("VI.13(a)", "inner", baseline=None, crossover=BANDWIDTH_INNER, phase_margin=PHASE_MARGIN_INNER),
-         LoopSpec("VI.13(b)", "outer", baseline=None, crossover=BANDWIDTH_OUTER))
+LOOPS = (
+    LoopSpec("VI.13(a)", "inner", baseline=None, crossover=BANDWIDTH_INNER, phase_margin=PHASE_MARGIN_INNER),
+    LoopSpec("VI.13(b)", "outer", baseline=None, crossover=BANDWIDTH_OUTER),
+)
 
 
 # ----------------------------------------------------------------- classical homework (VI.8-VI.13)
@@ -69,8 +71,9 @@ def one_load_model(known: models.Plant) -> models.Plant:
         return known.with_params(b=0.0)
     if known.name == "crane":
         p = known.params
-        return models.get("crane1", mc=p["mc"], m=p["m1"], ell=p["ell1"], b=0.0, g=p["g"],
-                          input_limit=known.input_limit)
+        return models.get(
+            "crane1", mc=p["mc"], m=p["m1"], ell=p["ell1"], b=0.0, g=p["g"], input_limit=known.input_limit
+        )
     raise ValueError(f"the crane design needs the crane or crane1 plant, got {known.name!r}")
 
 
@@ -96,20 +99,31 @@ def classical(known: models.Plant) -> ClassicalDesign:
     outer_pid = Loop.pid(G_out, outer["kp"], rl["ki"], outer["kd"], derivative_on="error")
     pair = [p for p in outer["poles"] if p.imag > 0][0]
     a: dict[str, Any] = {}  # homework item -> its record, and a note
-    a["VI.8(b)"] = record(**tf_record(plants.inner, "plant_"), **tf_record(inner.closed_loop, "closed_loop_"),
-                          dropped_coupling=plants.dropped)
-    a["VI.8(c)"] = record(kp=inner.kp, kd=inner.kd, wn=inner.wn, zeta=inner.zeta, rise_time=rise_time,
-                          overshoot_percent=100 * overshoot)
+    a["VI.8(b)"] = record(
+        **tf_record(plants.inner, "plant_"),
+        **tf_record(inner.closed_loop, "closed_loop_"),
+        dropped_coupling=plants.dropped,
+    )
+    a["VI.8(c)"] = record(
+        kp=inner.kp, kd=inner.kd, wn=inner.wn, zeta=inner.zeta, rise_time=rise_time, overshoot_percent=100 * overshoot
+    )
     a["VI.8(d)"] = record(poles=poles_record(inner.poles))
     a["VI.8(e)"] = record(dc_gain=K)
-    a["VI.8(f)"] = record(**tf_record(plants.outer, "plant_"),
-                          **tf_record(outer_pd.reference_to_output(), "closed_loop_"))
+    a["VI.8(f)"] = record(
+        **tf_record(plants.outer, "plant_"), **tf_record(outer_pd.reference_to_output(), "closed_loop_")
+    )
     a["VI.8(g)"] = record(kp=outer["kp"], kd=outer["kd"], wn=OUTER["wn"], zeta=OUTER["zeta"])
-    a["VI.8(h)"] = record(poles=poles_record(outer["poles"]), wn_pair=abs(pair), zeta_pair=-pair.real / abs(pair),
-                          full_poles=poles_record(full))
+    a["VI.8(h)"] = record(
+        poles=poles_record(outer["poles"]),
+        wn_pair=abs(pair),
+        zeta_pair=-pair.real / abs(pair),
+        full_poles=poles_record(full),
+    )
     a["VI.10(a)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"))
-    a["VI.10(b)"] = record(x_per_rad=dc_gain(outer_pd.input_disturbance_to_output()),
-                           x_per_rad_pid=dc_gain(outer_pid.input_disturbance_to_output()))
+    a["VI.10(b)"] = record(
+        x_per_rad=dc_gain(outer_pd.input_disturbance_to_output()),
+        x_per_rad_pid=dc_gain(outer_pid.input_disturbance_to_output()),
+    )
     a["VI.10(c)"] = root_locus_record(G_out, outer["kp"], outer["kd"], rl)
     # VI.13: lead inner loop (bandwidth 3 rad/s, PM 25 deg), lead outer loop (bandwidth 0.5 rad/s, ζ 0.4).
     pm_in, bw_in = PHASE_MARGIN_INNER, BANDWIDTH_INNER
@@ -122,42 +136,69 @@ def classical(known: models.Plant) -> ClassicalDesign:
     wc_out, pm_out = crossover_for_bandwidth(bw_out, zeta_out), prototype_phase_margin(zeta_out)
     lead_out = lead_for_crossover(K_lead * plants.outer, wc_out, pm_out)
     loop_out = Loop.unity(K_lead * plants.outer, lead_out.controller, "outer lead")
-    a["VI.13(a)"] = record(bandwidth=bw_in, pm_target_deg=pm_in, crossover_target=wc_in, lead_zero=lead_in.zero,
-                           lead_pole=lead_in.pole, gain=lead_in.gain, lead_count=lead_in.count,
-                           **tf_record(lead_in.controller, "C_"),
-                           **margin_record(plants.inner * lead_in.controller, ""),
-                           bandwidth_achieved=float(control.bandwidth(loop_in.reference_to_output())),
-                           stable=loop_in.is_stable(),
-                           specs=spec_records(frequency_design_checks(loop_in, wc_in, pm_in, bw_in)))
-    a["VI.13(b)"] = record(inner_dc_gain=K_lead, bandwidth=bw_out, zeta=zeta_out, crossover_target=wc_out,
-                           pm_target_deg=pm_out, lead_zero=lead_out.zero, lead_pole=lead_out.pole,
-                           gain=lead_out.gain, **tf_record(lead_out.controller, "C_"),
-                           **margin_record(K_lead * plants.outer * lead_out.controller, ""),
-                           bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
-                           stable=loop_out.is_stable(),
-                           specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, bw_out)))
+    a["VI.13(a)"] = record(
+        bandwidth=bw_in,
+        pm_target_deg=pm_in,
+        crossover_target=wc_in,
+        lead_zero=lead_in.zero,
+        lead_pole=lead_in.pole,
+        gain=lead_in.gain,
+        lead_count=lead_in.count,
+        **tf_record(lead_in.controller, "C_"),
+        **margin_record(plants.inner * lead_in.controller, ""),
+        bandwidth_achieved=float(control.bandwidth(loop_in.reference_to_output())),
+        stable=loop_in.is_stable(),
+        specs=spec_records(frequency_design_checks(loop_in, wc_in, pm_in, bw_in)),
+    )
+    a["VI.13(b)"] = record(
+        inner_dc_gain=K_lead,
+        bandwidth=bw_out,
+        zeta=zeta_out,
+        crossover_target=wc_out,
+        pm_target_deg=pm_out,
+        lead_zero=lead_out.zero,
+        lead_pole=lead_out.pole,
+        gain=lead_out.gain,
+        **tf_record(lead_out.controller, "C_"),
+        **margin_record(K_lead * plants.outer * lead_out.controller, ""),
+        bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
+        stable=loop_out.is_stable(),
+        specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, bw_out)),
+    )
     inner_name = "theta" if known.name == "crane1" else "theta1"
-    slc = SuccessiveLoopClosure(plants=plants, inner=inner, inner_dc_gain=K, outer_model=G_out,
-                                outer=PlacedPD(outer["kp"], outer["kd"]),
-                                outer_dc_gain=dc_gain(outer_pd.reference_to_output()),
-                                separation=inner.wn / OUTER["wn"], inner_limit=inner_limit, full_poles=full)
+    slc = SuccessiveLoopClosure(
+        plants=plants,
+        inner=inner,
+        inner_dc_gain=K,
+        outer_model=G_out,
+        outer=PlacedPD(outer["kp"], outer["kd"]),
+        outer_dc_gain=dc_gain(outer_pd.reference_to_output()),
+        separation=inner.wn / OUTER["wn"],
+        inner_limit=inner_limit,
+        full_poles=full,
+    )
     kw: dict[str, Any] = dict(inner_coordinate=inner_name, outer_derivative_on="error")
     blocks = {
         "PD": cascade_blocks(known, slc, name="PD", **kw),
         "PID": cascade_blocks(known, slc, ki=rl["ki"], name="PID", **kw),
-        "PID (no anti-windup)": cascade_blocks(known, slc, ki=rl["ki"], anti_windup="none",
-                                               name="PID (no anti-windup)", **kw),
+        "PID (no anti-windup)": cascade_blocks(
+            known, slc, ki=rl["ki"], anti_windup="none", name="PID (no anti-windup)", **kw
+        ),
     }
-    inner_block = TransferFunctionBlock(known, inner_name, lead_in.controller, output_limit=limit_force,
-                                        name=f"loopshaped inner ({inner_name})")
-    outer_block = TransferFunctionBlock(known, "x", lead_out.controller, output_limit=inner_limit,
-                                        name="loopshaped outer (x)")
+    inner_block = TransferFunctionBlock(
+        known, inner_name, lead_in.controller, output_limit=limit_force, name=f"loopshaped inner ({inner_name})"
+    )
+    outer_block = TransferFunctionBlock(
+        known, "x", lead_out.controller, output_limit=inner_limit, name="loopshaped outer (x)"
+    )
     blocks["loopshaped"] = models.Cascade(outer_block, inner_block, name="lead (VI.13)")
     loops = {"outer PD": outer_pd, "outer PID": outer_pid, "inner lead": loop_in, "outer lead": loop_out}
-    notes = ["designed on crane1 with b = 0 (VI.8: m2 = ℓ2 = b = 0)",
-             f"VI.8(c): ζ = {zeta_in:.4f} from 50 % overshoot, ω_n from the exact 10–90 % rise time of 1 s",
-             f"bound on θ_d: {inner_limit:.4g} rad, the θ error that saturates the {limit_force:g} N force",
-             "outer derivative in the forward path (on the error), VI.8"]
+    notes = [
+        "designed on crane1 with b = 0 (VI.8: m2 = ℓ2 = b = 0)",
+        f"VI.8(c): ζ = {zeta_in:.4f} from 50 % overshoot, ω_n from the exact 10–90 % rise time of 1 s",
+        f"bound on θ_d: {inner_limit:.4g} rad, the θ error that saturates the {limit_force:g} N force",
+        "outer derivative in the forward path (on the error), VI.8",
+    ]
     if known.name == "crane":
         notes.append("two-load crane: the controllers read (x, θ1, θ2) and ignore θ2; answers are crane1's")
         a["note"] = "VI.8–VI.13 treat the crane with one load (crane1); these are its answers"
@@ -174,9 +215,16 @@ POLES_SECOND_LOAD = (-0.35 + 0.5j, -0.35 - 0.5j)
 def statespace_items(r: dict) -> dict:
     """VI.14(b)-(e), VI.15(b)-(c), naming the design model; no integrator or disturbance-observer item in VI."""
     model = {"model": r["model"]}
-    return {"VI.14(b)": r["controllable"] | model, "VI.14(c)": r["feedback"] | model,
-            "VI.14(e)": {"kr": r["feedback"]["kr"]}, "VI.15(b)": r["observable"], "VI.15(c)": r["observer"],
-            "integrator": r["integrator"], "disturbance observer": r["disturbance observer"], "LQR": r["LQR"]}
+    return {
+        "VI.14(b)": r["controllable"] | model,
+        "VI.14(c)": r["feedback"] | model,
+        "VI.14(e)": {"kr": r["feedback"]["kr"]},
+        "VI.15(b)": r["observable"],
+        "VI.15(c)": r["observer"],
+        "integrator": r["integrator"],
+        "disturbance observer": r["disturbance observer"],
+        "LQR": r["LQR"],
+    }
 
 
 #: The two-load crane, designed on its full 6-state model with VI.7's three outputs measured. The
@@ -184,34 +232,54 @@ def statespace_items(r: dict) -> dict:
 #: 10 m step held for 1 s, with which the move overshoots 8 % instead of 14 % (settling 21 s).
 STATESPACE = StateSpaceChoices(
     poles=lambda known: np.asarray(POLES_ONE_LOAD + POLES_SECOND_LOAD, dtype=complex),
-    bryson_maxima={"x": 10.0, "theta1": np.deg2rad(10), "theta2": np.deg2rad(10)}, items=statespace_items,
-    integral_horizon=1.0, integrator_pole=-0.5,
-    notes=("an input-noise-only Kalman model drives the crane's swing estimate to the lightly damped zeros of "
-           "x/F, −0.0005 ± 0.99j: the filter's model has acceleration noise on every coordinate",))
+    bryson_maxima={"x": 10.0, "theta1": np.deg2rad(10), "theta2": np.deg2rad(10)},
+    items=statespace_items,
+    integral_horizon=1.0,
+    integrator_pole=-0.5,
+    notes=(
+        "an input-noise-only Kalman model drives the crane's swing estimate to the lightly damped zeros of "
+        "x/F, −0.0005 ± 0.99j: the filter's model has acceleration noise on every coordinate",
+    ),
+)
 
 #: VI.14-VI.15 on the single-load crane1. The observer measures the car position only (VI.15) and is 3
 #: times faster than the state feedback: 5 times puts a pair of eig(A − B K − L C) at +0.19 ± 12j, which
 #: VI.15(c) forbids; 2–4 times keeps them in the left half plane.
 STATESPACE_ONE_LOAD = StateSpaceChoices(
     poles=lambda known: np.asarray(POLES_ONE_LOAD, dtype=complex),
-    bryson_maxima={"x": 10.0, "theta": np.deg2rad(10)}, items=statespace_items, observer_outputs=("x",),
-    observer_speedup=3.0, integral_horizon=1.0, integrator_pole=-0.5)
+    bryson_maxima={"x": 10.0, "theta": np.deg2rad(10)},
+    items=statespace_items,
+    observer_outputs=("x",),
+    observer_speedup=3.0,
+    integral_horizon=1.0,
+    integrator_pole=-0.5,
+)
 
 
 # ----------------------------------------------------------------- MPC
 # The swing modes (0.67 and 1.15 rad/s) and a 10 m move of 10-20 s need horizons of seconds: 0.1 s samples.
 MPC = MPCSettings(
-    0.1, 80, (1.0, 100.0, 100.0, 1.0, 1000.0, 1000.0), 1 / 5000**2,
-    soft=(SoftSpec("swing 1", {"theta1": 1.0}, -0.1, 0.1, backoff=0.1),
-          SoftSpec("swing 2", {"theta2": 1.0}, -0.1, 0.1, backoff=0.1)),
+    0.1,
+    80,
+    (1.0, 100.0, 100.0, 1.0, 1000.0, 1000.0),
+    1 / 5000**2,
+    soft=(
+        SoftSpec("swing 1", {"theta1": 1.0}, -0.1, 0.1, backoff=0.1),
+        SoftSpec("swing 2", {"theta2": 1.0}, -0.1, 0.1, backoff=0.1),
+    ),
     disturbance_step_std=0.05,
     notes="|theta_i| <= 0.1 rad; 8 s horizon, 0.85 of the slow swing period; the heavy swing-rate "
-          "weights damp the 24 m cable mode (time constant 6 s, the best a cart force achieves)")
+    "weights damp the 24 m cable mode (time constant 6 s, the best a cart force achieves)",
+)
 MPC_ONE_LOAD = MPCSettings(
-    0.1, 80, (1.0, 100.0, 1.0, 100.0), 1 / 5000**2,
+    0.1,
+    80,
+    (1.0, 100.0, 1.0, 100.0),
+    1 / 5000**2,
     soft=(SoftSpec("swing", {"theta": 1.0}, -0.1, 0.1, backoff=0.1),),
     disturbance_step_std=0.05,
-    notes="|theta| <= 0.1 rad; 8 s horizon, 1.5 swing periods")
+    notes="|theta| <= 0.1 rad; 8 s horizon, 1.5 swing periods",
+)
 
 
 # ----------------------------------------------------------------- co-design: the cable length
@@ -252,16 +320,31 @@ def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFE
     plant = models.get("crane1")
     block = statespace_controllers(CASE, plant, STATESPACE_ONE_LOAD)["pole placement"]
     result = cr.CaseResult(
-        key="crane", problem="crane transfer (crane1)", plant="crane1", parameter="cable length ℓ", unit="m",
-        text_value=plant.params["ell"], objective="ITAE(x) + hoisting price",
+        key="crane",
+        problem="crane transfer (crane1)",
+        plant="crane1",
+        parameter="cable length ℓ",
+        unit="m",
+        text_value=plant.params["ell"],
+        objective="ITAE(x) + hoisting price",
         scenario=cr.step_scenario(plant, CASE.tracked, CASE.step, duration),
-        specs=Specs(state_bounds={"theta": SWING_BOUND}), cost=Cost("itae"),
-        notes=[f"start: the text's VI.14 pole placement at ℓ = 10 m; |θ| ≤ {SWING_BOUND:g} rad; "
-               f"{duration:g} s run",
-               f"plant cost {HOIST_PRICE:g} m s²/J × m g (ℓ_max − ℓ), ℓ in [{CABLE_RANGE[0]:g}, "
-               f"{CABLE_RANGE[1]:g}] m"])
-    return cr.codesign_case(result, plant, block, "ell", *CABLE_RANGE, hoist_cost, methods=methods or cr.METHODS,
-                            tune_options={"jit": True} | dict(tune_options or {}))
+        specs=Specs(state_bounds={"theta": SWING_BOUND}),
+        cost=Cost("itae"),
+        notes=[
+            f"start: the text's VI.14 pole placement at ℓ = 10 m; |θ| ≤ {SWING_BOUND:g} rad; {duration:g} s run",
+            f"plant cost {HOIST_PRICE:g} m s²/J × m g (ℓ_max − ℓ), ℓ in [{CABLE_RANGE[0]:g}, {CABLE_RANGE[1]:g}] m",
+        ],
+    )
+    return cr.codesign_case(
+        result,
+        plant,
+        block,
+        "ell",
+        *CABLE_RANGE,
+        hoist_cost,
+        methods=methods or cr.METHODS,
+        tune_options={"jit": True} | dict(tune_options or {}),
+    )
 
 
 # ----------------------------------------------------------------- trajectory optimization: the 10 m transfer
@@ -289,10 +372,14 @@ def transfer_time(plant: models.Plant, quick: bool, solved: dict) -> TrajectoryS
     ocp = transfer(plant, FreeTime(2.0, 60.0, 15.0))
     ocp.minimize(ocp.final_time)
     return TrajectorySetup(
-        ocp, Collocation(intervals=40 if quick else 80), {}, "T (s)",
+        ocp,
+        Collocation(intervals=40 if quick else 80),
+        {},
+        "T (s)",
         f"The car moves {CASE.step:g} m from rest to rest with both loads hanging still at the end, |F| ≤ 5 kN, "
         f"every swing angle within ±{TRANSFER_SWING:g} rad ({np.degrees(TRANSFER_SWING):.3g} deg, the MPC's "
-        "soft bound), in the least time. Started from the linear interpolation of the end states.")
+        "soft bound), in the least time. Started from the linear interpolation of the end states.",
+    )
 
 
 def rigid_body(plant: models.Plant) -> tuple[float, float]:
@@ -322,10 +409,14 @@ def zv_full_force(plant: models.Plant) -> OpenLoopCommand:
     one_load = models.get("crane1", mc=p["mc"], m=p["m1"], ell=p["ell1"], b=p["b"], g=p["g"])
     omega, zeta = swing_modes(one_load)[0]
     shaper = input_shaping.zero_vibration(omega, zeta)
-    return shaped_bang_bang(plant, shaper, float(plant.input_limit[0]),
-                            f"ZV shaper of crane1's swing mode (ω_n = {omega:.4g} rad/s, ζ = {zeta:.3g}; impulses "
-                            f"{shaper.amplitudes[0]:.3f}, {shaper.amplitudes[1]:.3f} at 0, {shaper.duration:.3g} s) "
-                            "on the rigid body's 5 kN rest-to-rest bang-bang (with friction)")
+    return shaped_bang_bang(
+        plant,
+        shaper,
+        float(plant.input_limit[0]),
+        f"ZV shaper of crane1's swing mode (ω_n = {omega:.4g} rad/s, ζ = {zeta:.3g}; impulses "
+        f"{shaper.amplitudes[0]:.3f}, {shaper.amplitudes[1]:.3f} at 0, {shaper.duration:.3g} s) "
+        "on the rigid body's 5 kN rest-to-rest bang-bang (with friction)",
+    )
 
 
 def zv_zv_within_swing(plant: models.Plant) -> OpenLoopCommand:
@@ -349,17 +440,25 @@ def zv_zv_within_swing(plant: models.Plant) -> OpenLoopCommand:
         middle = (low + high) / 2
         low, high = (middle, high) if largest_swing(middle) <= TRANSFER_SWING else (low, middle)
     text = ", ".join(f"{w:.4g} rad/s" for w, _ in modes)
-    return shaped_bang_bang(plant, shaper, low,
-                            f"ZV-ZV shaper of the crane's swing modes ({text}; {len(shaper.times)} impulses over "
-                            f"{shaper.duration:.3g} s) on the rigid body's rest-to-rest bang-bang at "
-                            f"{low / 1000:.4g} kN, the largest force keeping every swing within {TRANSFER_SWING:g} rad")
+    return shaped_bang_bang(
+        plant,
+        shaper,
+        low,
+        f"ZV-ZV shaper of the crane's swing modes ({text}; {len(shaper.times)} impulses over "
+        f"{shaper.duration:.3g} s) on the rigid body's rest-to-rest bang-bang at "
+        f"{low / 1000:.4g} kN, the largest force keeping every swing within {TRANSFER_SWING:g} rad",
+    )
 
 
 TRAJECTORIES = (
-    TrajectoryProblem("transfer_time", "10 m transfer, minimum time", transfer_time,
-                      report={"theta1": "swing 1", "theta2": "swing 2"}, compare_step=True,
-                      open_loop={"ZV, 5 kN bang-bang": zv_full_force,
-                                 "ZV-ZV, bang-bang within the swing bound": zv_zv_within_swing}),
+    TrajectoryProblem(
+        "transfer_time",
+        "10 m transfer, minimum time",
+        transfer_time,
+        report={"theta1": "swing 1", "theta2": "swing 2"},
+        compare_step=True,
+        open_loop={"ZV, 5 kN bang-bang": zv_full_force, "ZV-ZV, bang-bang within the swing bound": zv_zv_within_swing},
+    ),
 )
 
 
@@ -371,17 +470,29 @@ def cable_min_time(quick: bool) -> TrajectorySetup:
     ocp.choose("ell", *CABLE_RANGE, guess=plant.params["ell"])
     ocp.minimize(ocp.final_time)
     return TrajectorySetup(
-        ocp, Collocation(intervals=30 if quick else 60), {}, "T (s)",
+        ocp,
+        Collocation(intervals=30 if quick else 60),
+        {},
+        "T (s)",
         f"crane1 (the car and one load, VI.8, with the car's friction) moves {CASE.step:g} m from rest to rest, "
         f"the load hanging still at the end, |F| ≤ 5 kN, |θ| ≤ {TRANSFER_SWING:g} rad, in the least time, with the "
         f"cable length ℓ in [{CABLE_RANGE[0]:g}, {CABLE_RANGE[1]:g}] m decided with the force. A longer cable "
         "swings slower and costs transfer time: dT*/dℓ, the envelope derivative, is the price of each metre "
-        "(and, at the shortest cable, what the bound costs).")
+        "(and, at the shortest cable, what the bound costs).",
+    )
 
 
 OPEN_LOOP_CODESIGN = (
-    OpenLoopCodesign("crane_cable", "crane: cable length for the minimum-time 10 m transfer", "crane1", cable_min_time,
-                     "ell", "m", text_value=10.0, sweep=(5.0, 10.0, 15.0, 20.0)),
+    OpenLoopCodesign(
+        "crane_cable",
+        "crane: cable length for the minimum-time 10 m transfer",
+        "crane1",
+        cable_min_time,
+        "ell",
+        "m",
+        text_value=10.0,
+        sweep=(5.0, 10.0, 15.0, 20.0),
+    ),
 )
 
 
@@ -405,64 +516,107 @@ def draw(p: dict, s: dict, r: float) -> list:
 
 # ----------------------------------------------------------------- errata
 ERRATA = (
-    Erratum('hint', 'VI.14 (crane, one load)', (
-        'numeric F[1,1] = −1.3333, F[2,1] = 0.1333',
-        '−b/mc = −0.13333, b/(mc ℓ) = 0.013333',
-        'ten times too large',
-        'the numbers were computed with b = 2000 N s/m; the case study gives b = 200 N s/m. With b = 2000 every '
-        'printed entry of F is reproduced. All other entries of F and the numeric G agree.',
-    )),
-    Erratum('hint', 'VI.14 (crane, symbolic)', (
-        'G = (−1/mc, −1/(mc ℓ), 0, 0)',
-        '(+1/mc, −1/(mc ℓ), 0, 0)',
-        'sign of the first entry',
-        'sign error in the symbolic form; the numeric G printed above it (+6.6667e−4) has the right sign.',
-    )),
-    Erratum('hint', 'VI.14 (crane)', (
-        'the hint keeps the damping b',
-        'VI.8 says "let m2 = ℓ2 = b = 0" for the single-load crane',
-        '—',
-        "the hint contradicts VI.8's simplification. We keep b = 200 N s/m in `crane1` (friction does not "
-        'vanish on the real car); designs that follow VI.8 pass `b=0` to the model they design from.',
-    )),
-    Erratum('text', 'VI.11(b), VI.12(b), VI.14(a)', (
-        'cart position "z", x = (ż, θ̇, z, θ)',
-        "the crane's car position is x",
-    )),
-    Erratum('text', 'VI.14(b)', (
-        '"state space matrices derived in Homework IV.7"',
-        'VI.7',
-    )),
-    Erratum('text', 'VI', (
-        'no force limit is given for the crane',
-        'we chose 5 kN (`models.catalog.CRANE_FORCE_LIMIT`): 2.3 m/s² for the 2.2 t of car and loads; the VI.14 '
-        "pole placement on the text's 10 m step asks for 11.9 kN, so the limit is active",
-    )),
-    Erratum('design', 'VI.8(c)', (
-        'an exact 1 s rise time with 50 % overshoot for the load angle',
-        "gives ω_n = 1.22 rad/s, just above the load's own 1.14 rad/s, so the inner DC gain is 0.12; with "
-        "VI.8's b = 0 the loop's gain margin is 0 (an undamped resonance), though it is stable",
-    )),
+    Erratum(
+        "hint",
+        "VI.14 (crane, one load)",
+        (
+            "numeric F[1,1] = −1.3333, F[2,1] = 0.1333",
+            "−b/mc = −0.13333, b/(mc ℓ) = 0.013333",
+            "ten times too large",
+            "the numbers were computed with b = 2000 N s/m; the case study gives b = 200 N s/m. With b = 2000 every "
+            "printed entry of F is reproduced. All other entries of F and the numeric G agree.",
+        ),
+    ),
+    Erratum(
+        "hint",
+        "VI.14 (crane, symbolic)",
+        (
+            "G = (−1/mc, −1/(mc ℓ), 0, 0)",
+            "(+1/mc, −1/(mc ℓ), 0, 0)",
+            "sign of the first entry",
+            "sign error in the symbolic form; the numeric G printed above it (+6.6667e−4) has the right sign.",
+        ),
+    ),
+    Erratum(
+        "hint",
+        "VI.14 (crane)",
+        (
+            "the hint keeps the damping b",
+            'VI.8 says "let m2 = ℓ2 = b = 0" for the single-load crane',
+            "—",
+            "the hint contradicts VI.8's simplification. We keep b = 200 N s/m in `crane1` (friction does not "
+            "vanish on the real car); designs that follow VI.8 pass `b=0` to the model they design from.",
+        ),
+    ),
+    Erratum(
+        "text",
+        "VI.11(b), VI.12(b), VI.14(a)",
+        (
+            'cart position "z", x = (ż, θ̇, z, θ)',
+            "the crane's car position is x",
+        ),
+    ),
+    Erratum(
+        "text",
+        "VI.14(b)",
+        (
+            '"state space matrices derived in Homework IV.7"',
+            "VI.7",
+        ),
+    ),
+    Erratum(
+        "text",
+        "VI",
+        (
+            "no force limit is given for the crane",
+            "we chose 5 kN (`models.catalog.CRANE_FORCE_LIMIT`): 2.3 m/s² for the 2.2 t of car and loads; the VI.14 "
+            "pole placement on the text's 10 m step asks for 11.9 kN, so the limit is active",
+        ),
+    ),
+    Erratum(
+        "design",
+        "VI.8(c)",
+        (
+            "an exact 1 s rise time with 50 % overshoot for the load angle",
+            "gives ω_n = 1.22 rad/s, just above the load's own 1.14 rad/s, so the inner DC gain is 0.12; with "
+            "VI.8's b = 0 the loop's gain margin is 0 (an undamped resonance), though it is stable",
+        ),
+    ),
 )
 
-REMARK = Remark("hint", "The hint's state order for VI.14, (ẋ, θ̇, x, θ), differs from VI.7's (x, θ, ẋ, θ̇) and from\n"
-                        "ours; the test permutes before comparing. This is a convention change, not an error.")
+REMARK = Remark(
+    "hint",
+    "The hint's state order for VI.14, (ẋ, θ̇, x, θ), differs from VI.7's (x, θ, ẋ, θ̇) and from\n"
+    "ours; the test permutes before comparing. This is a convention change, not an error.",
+)
 
 
 #: Specs of every scenario. VI.8(g) asks ω_n in [0.4, 0.5] rad/s and ζ in [0.3, 0.4] of the outer loop:
 #: at ζ = 0.4 a second-order step overshoots 25 %, and the middle (0.45 rad/s, 0.35) settles in
 #: 4/(ζ ω_n) = 25 s. We ask 1.5 times that (40 s), 25 % overshoot, a steady-state error within the 2 %
 #: settling band, and both loads within the co-design's swing bound (|θ| <= `SWING_BOUND` rad) all along.
-SPECS = {"*": models.specs.Specs(
-    max_settling_time_s=40.0, max_overshoot_pct=25.0, max_ss_error_pct=2.0,
-    state_bounds={"theta1": (-SWING_BOUND, SWING_BOUND), "theta2": (-SWING_BOUND, SWING_BOUND)},
-    source="VI.8(g) overshoot at ζ = 0.4; stated: 1.5 x its settling time, 2 % error, swing bound")}
+SPECS = {
+    "*": models.specs.Specs(
+        max_settling_time_s=40.0,
+        max_overshoot_pct=25.0,
+        max_ss_error_pct=2.0,
+        state_bounds={"theta1": (-SWING_BOUND, SWING_BOUND), "theta2": (-SWING_BOUND, SWING_BOUND)},
+        source="VI.8(g) overshoot at ζ = 0.4; stated: 1.5 x its settling time, 2 % error, swing bound",
+    )
+}
 
 CASE = CaseStudy(
-    plant="crane", numeral="VI", tracked="x",
-    design_step=10.0, step=10.0, input_disturbance=500.0, observer_sample_period=0.001, duration=60.0,
+    plant="crane",
+    numeral="VI",
+    tracked="x",
+    design_step=10.0,
+    step=10.0,
+    input_disturbance=500.0,
+    observer_sample_period=0.001,
+    duration=60.0,
     source="VI.14(e) step 10 m; no disturbance given: 10 % of 5 kN; VI.11 Ts = 0.01 s, VI.15 Ts = 0.001 s",
-    tracked_unit="m", input_unit="N",
+    tracked_unit="m",
+    input_unit="N",
     # VI.14(e): 10 m; the text gives no disturbance: 10 % of 5 kN; noise in m, rad: the text gives none;
     # VI.11(a): all but g known to 5 %.
     scenarios=standard_scenarios({"x": 1e-2, "theta1": 1e-3, "theta2": 1e-3}),
@@ -470,8 +624,14 @@ CASE = CaseStudy(
     # VI.6: the single-load crane without friction (m2 = ell2 = b = 0): F -> theta -> x.
     cascade=("theta", "x"),
     cascade_model=("crane1", {"b": 0.0}),
-    classical=classical, statespace=STATESPACE, mpc=MPC, design_models=("crane1",),
+    classical=classical,
+    statespace=STATESPACE,
+    mpc=MPC,
+    design_models=("crane1",),
     codesign={"crane": cable_transfer},
     specs=SPECS,
-    drawing=draw, errata=ERRATA + (REMARK,), trajectories=TRAJECTORIES, open_loop_codesign=OPEN_LOOP_CODESIGN,
+    drawing=draw,
+    errata=ERRATA + (REMARK,),
+    trajectories=TRAJECTORIES,
+    open_loop_codesign=OPEN_LOOP_CODESIGN,
 )

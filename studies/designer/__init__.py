@@ -129,13 +129,16 @@ class GainControl:
         try:
             value = float(str(text).strip()) if not isinstance(text, (int, float)) else float(text)
         except ValueError:
-            raise ValueError(f"{self.key}: {str(text)!r} is not a number; give a value in "
-                             f"[{self.low:.4g}, {self.high:.4g}]") from None
+            raise ValueError(
+                f"{self.key}: {str(text)!r} is not a number; give a value in [{self.low:.4g}, {self.high:.4g}]"
+            ) from None
         if not math.isfinite(value):
             raise ValueError(f"{self.key}: {value} is not finite; give a value in [{self.low:.4g}, {self.high:.4g}]")
         if not self.low <= value <= self.high:
-            raise ValueError(f"{self.key}: {value:.6g} is outside the allowed range [{self.low:.4g}, {self.high:.4g}] "
-                             f"({RANGE:g} x the design's {self.design:.4g} either way, sign kept)")
+            raise ValueError(
+                f"{self.key}: {value:.6g} is outside the allowed range [{self.low:.4g}, {self.high:.4g}] "
+                f"({RANGE:g} x the design's {self.design:.4g} either way, sign kept)"
+            )
         return value
 
 
@@ -255,13 +258,20 @@ def loop_margins(design: loops.LoopGain, omega: np.ndarray, response: np.ndarray
     response = design.frequency_response(omega) if response is None else response
     magnitude = np.abs(response) - 1.0
     angle = np.angle(-response)  # zero where the phase crosses -180 degrees
-    w_180 = [brentq(lambda w: np.angle(-at(w)), omega[i], omega[i + 1])
-             for i in np.flatnonzero(np.diff(np.sign(angle))) if np.real(response[i]) <= 0
-             and abs(angle[i] - angle[i + 1]) < np.pi]  # a jump of 2 pi is the +180 crossing, not -180
-    w_c = [brentq(lambda w: abs(at(w)) - 1.0, omega[i], omega[i + 1])
-           for i in np.flatnonzero(np.diff(np.sign(magnitude)))]
-    out = {"gain_margin_db": math.inf, "phase_margin_deg": math.inf, "phase_crossover_rad_s": math.nan,
-           "gain_crossover_rad_s": math.nan}
+    w_180 = [
+        brentq(lambda w: np.angle(-at(w)), omega[i], omega[i + 1])
+        for i in np.flatnonzero(np.diff(np.sign(angle)))
+        if np.real(response[i]) <= 0 and abs(angle[i] - angle[i + 1]) < np.pi
+    ]  # a jump of 2 pi is the +180 crossing, not -180
+    w_c = [
+        brentq(lambda w: abs(at(w)) - 1.0, omega[i], omega[i + 1]) for i in np.flatnonzero(np.diff(np.sign(magnitude)))
+    ]
+    out = {
+        "gain_margin_db": math.inf,
+        "phase_margin_deg": math.inf,
+        "phase_crossover_rad_s": math.nan,
+        "gain_crossover_rad_s": math.nan,
+    }
     if w_180:
         with np.errstate(divide="ignore"):
             gm = 1.0 / np.abs([at(w) for w in w_180])
@@ -275,22 +285,26 @@ def loop_margins(design: loops.LoopGain, omega: np.ndarray, response: np.ndarray
     return out
 
 
-def loop_spec_curves(spec: LoopSpec, design: loops.LoopGain, baseline: loops.LoopGain | None,
-                     margins: dict, omega: np.ndarray) -> dict:
+def loop_spec_curves(
+    spec: LoopSpec, design: loops.LoopGain, baseline: loops.LoopGain | None, margins: dict, omega: np.ndarray
+) -> dict:
     """The loopshaping `spec`'s checks on `design` and its bounds on |L| in dB over `omega`.
 
     The band checks are `studies.loops.spec_check`'s; the crossover and phase margin are judged with its
     rules (crossover within a factor 1.5, at least the phase margin) on `margins`, the update's own.
     """
-    checks = loops.spec_check(design, replace(spec, crossover=None, phase_margin=None), baseline,
-                              points=SPEC_POINTS)
+    checks = loops.spec_check(design, replace(spec, crossover=None, phase_margin=None), baseline, points=SPEC_POINTS)
     if spec.crossover is not None:
         wc = margins["gain_crossover_rad_s"]
         checks["crossover"] = bool(np.isfinite(wc) and spec.crossover / 1.5 <= wc <= spec.crossover * 1.5)
     if spec.phase_margin is not None:
         checks["phase_margin"] = bool(margins["phase_margin_deg"] >= spec.phase_margin)
-    curves: dict[str, Any] = {"item": spec.item, "checks": checks, "crossover": spec.crossover,
-                              "phase_margin": spec.phase_margin}
+    curves: dict[str, Any] = {
+        "item": spec.item,
+        "checks": checks,
+        "crossover": spec.crossover,
+        "phase_margin": spec.phase_margin,
+    }
     if baseline is not None:
         base_db = 20 * np.log10(np.abs(baseline.frequency_response(omega)))
         shift = 20 * math.log10(spec.factor)
@@ -319,8 +333,17 @@ class Designer:
         (`pole_controls`) and `place` redesigns the gains from them
     """
 
-    def __init__(self, case: CaseStudy, block: Block, label: str | None = None, *, plant: models.Plant | None = None,
-                 baseline: Block | None = None, poles=None, placement: Callable[[np.ndarray], Block] | None = None):
+    def __init__(
+        self,
+        case: CaseStudy,
+        block: Block,
+        label: str | None = None,
+        *,
+        plant: models.Plant | None = None,
+        baseline: Block | None = None,
+        poles=None,
+        placement: Callable[[np.ndarray], Block] | None = None,
+    ):
         if not isinstance(case, CaseStudy):
             raise TypeError(f"case must be a studies CaseStudy, got {type(case).__name__} {case!r}")
         if not isinstance(block, Block):
@@ -355,8 +378,9 @@ class Designer:
                 self.baseline_loop = self.loop_gain(baseline, self.simulate(baseline, "step"))
             except Exception as err:  # the relative specs need it; the rest of the page does not
                 self.notes.append(f"no baseline loop ({type(err).__name__}: {err})")
-        frequencies = np.logspace(math.log10(LOWEST_FREQUENCY), math.log10(0.999 * math.pi / block.sample_period),
-                                  FREQUENCIES)
+        frequencies = np.logspace(
+            math.log10(LOWEST_FREQUENCY), math.log10(0.999 * math.pi / block.sample_period), FREQUENCIES
+        )
         self.omega = frequencies
         self.lock = threading.Lock()
 
@@ -372,8 +396,7 @@ class Designer:
         if label is None:
             label = next(iter(designed))
         if label not in designed:
-            raise ValueError(f"{case.plant} has no controller {label!r} with gains; choose from "
-                             f"{', '.join(designed)}")
+            raise ValueError(f"{case.plant} has no controller {label!r} with gains; choose from {', '.join(designed)}")
         baseline = next((designed.get(s.baseline) for s in case.loops if s.baseline), None)
         return cls(case, designed[label], label, baseline=baseline, **pole_placement(case, label))
 
@@ -433,8 +456,9 @@ class Designer:
     def simulate(self, block: Block, scenario: str):
         """The run of `block` on `scenario` as the study tables run it (a `models.ClosedLoopResult`;
         `diverged_at` set instead of raising)."""
-        return runner.simulate_scenario(self.plant, block, self.scenario(scenario), self.case, self.options,
-                                        self.base, self.case.substeps)
+        return runner.simulate_scenario(
+            self.plant, block, self.scenario(scenario), self.case, self.options, self.base, self.case.substeps
+        )
 
     def operating_point(self, block: Block, run) -> loops.OperatingPoint:
         """Where the loop is linearized: the end of the run, or the equilibrium at the final reference
@@ -468,8 +492,19 @@ class Designer:
             judged = self.case.specs_for(scenario, self.plant.params)
             measured = metrics.run_metrics(run, self.case.tracked, judged.state_bounds)
             verdict = specs.judge(judged, run, self.case.tracked, self.case.step, status, measured=measured)
-            out = Update(gains, scenario, run.t, run.x[:, self.tracked_index], run.r[:, 0], run.u[:, 0],
-                         float(self.plant.input_limit[0]), status, verdict, measured, run=run)
+            out = Update(
+                gains,
+                scenario,
+                run.t,
+                run.x[:, self.tracked_index],
+                run.r[:, 0],
+                run.u[:, 0],
+                float(self.plant.input_limit[0]),
+                status,
+                verdict,
+                measured,
+                run=run,
+            )
             try:
                 self._analyse(block, run, out)
             except Exception as err:  # the linear analysis is a plot; the run and the verdict stand
@@ -493,8 +528,13 @@ class Designer:
         if self.loop_spec is not None:
             out.loop_specs = [loop_spec_curves(self.loop_spec, design, self.baseline_loop, out.margins, self.omega)]
 
-    def envelope(self, values: Mapping[str, float] | None = None, scenario: str = "step",
-                 samples: int = ENVELOPE_SAMPLES, seed: int = 0) -> dict:
+    def envelope(
+        self,
+        values: Mapping[str, float] | None = None,
+        scenario: str = "step",
+        samples: int = ENVELOPE_SAMPLES,
+        seed: int = 0,
+    ) -> dict:
         """The tracked coordinate over `samples` plants with the uncertain parameters uniform within the
         case's Monte Carlo spread (±5 %), as one batched run (`models.monte_carlo`).
 
@@ -509,21 +549,41 @@ class Designer:
         params = models.sample_params(self.plant, samples, rel=spread, seed=seed)
         noise = runner.measurement_noise_std(self.plant, block, chosen.noise) if chosen.noise else 0.0
         with self.lock:
-            batch = models.monte_carlo(self.plant, block, chosen.reference(self.case, self.base),
-                                       chosen.duration(self.case), params, substeps=self.case.substeps,
-                                       input_disturbance=self.case.input_disturbance if chosen.input_disturbance
-                                       else 0.0, noise_std=noise, seed=seed, threads=2)
+            batch = models.monte_carlo(
+                self.plant,
+                block,
+                chosen.reference(self.case, self.base),
+                chosen.duration(self.case),
+                params,
+                substeps=self.case.substeps,
+                input_disturbance=self.case.input_disturbance if chosen.input_disturbance else 0.0,
+                noise_std=noise,
+                seed=seed,
+                threads=2,
+            )
         kept = np.isnan(batch.diverged_at)
         tracked = batch.x[kept, :, self.tracked_index]
         quantiles = ENVELOPE_QUANTILES
-        bands = (np.quantile(tracked, quantiles, axis=0) if len(tracked)
-                 else np.full((len(quantiles), len(batch.t)), np.nan))
-        return {"t": batch.t, "quantiles": quantiles, "tracked": bands, "samples": samples,
-                "diverged": int(np.sum(~kept))}
+        bands = (
+            np.quantile(tracked, quantiles, axis=0) if len(tracked) else np.full((len(quantiles), len(batch.t)), np.nan)
+        )
+        return {
+            "t": batch.t,
+            "quantiles": quantiles,
+            "tracked": bands,
+            "samples": samples,
+            "diverged": int(np.sum(~kept)),
+        }
 
     # ------------------------------------------------------------- tune and export
-    def tune(self, values: Mapping[str, float] | None = None, scenario: str = "step", *, max_iter: int = 100,
-             progress: Callable[[int, float, float], None] | None = None):
+    def tune(
+        self,
+        values: Mapping[str, float] | None = None,
+        scenario: str = "step",
+        *,
+        max_iter: int = 100,
+        progress: Callable[[int, float, float], None] | None = None,
+    ):
         """Tune the gains from `values` with `designs.tuning.tune` on the nominal plant and `scenario`
         ("disturbance" with the case's input disturbance, otherwise the step): ITAE of the tracked
         coordinate, the gains kept within their controls' ranges (the elements the design sets to
@@ -550,10 +610,20 @@ class Designer:
         # A copy of the plant, with Function caches of its own: the page's updates go on in the server's thread
         # while this one tunes, and a cached Function must not be called from two threads at once.
         plant = self.plant.with_input_limit(self.plant.input_limit)
-        result = tuning.tune(plant, start, [chosen], cost=tuning.Cost("itae"), bounds=bounds,
-                             substeps=self.case.substeps, max_iter=max_iter, progress=progress)
-        tuned = {c.key: float(np.clip(np.asarray(result.gains[c.gain], dtype=float)[c.index], c.low, c.high))
-                 for c in self.controls}
+        result = tuning.tune(
+            plant,
+            start,
+            [chosen],
+            cost=tuning.Cost("itae"),
+            bounds=bounds,
+            substeps=self.case.substeps,
+            max_iter=max_iter,
+            progress=progress,
+        )
+        tuned = {
+            c.key: float(np.clip(np.asarray(result.gains[c.gain], dtype=float)[c.index], c.low, c.high))
+            for c in self.controls
+        }
         return result, tuned
 
     def export(self, values: Mapping[str, float] | None = None) -> dict:
@@ -561,8 +631,12 @@ class Designer:
         from models import export
 
         block = self.block_for(values)
-        out = {"plant": self.case.plant, "controller": self.label, "sample_period_s": block.sample_period,
-               "gains": {k: np.asarray(v, dtype=float).tolist() for k, v in block.gains.items()}}
+        out = {
+            "plant": self.case.plant,
+            "controller": self.label,
+            "sample_period_s": block.sample_period,
+            "gains": {k: np.asarray(v, dtype=float).tolist() for k, v in block.gains.items()},
+        }
         try:
             out["c"] = export.export_block(block, f"{self.case.plant}_{self.label}").files()
         except export.UnsupportedExport as err:
@@ -578,8 +652,11 @@ def pole_controls(poles) -> tuple[GainControl, ...]:
     out = []
     for j, group in enumerate(pole_groups(poles)):
         pole = poles[group[0]]
-        parts = [(0, pole.real, f"p{j + 1}")] if pole.imag == 0 else \
-            [(0, pole.real, f"p{j + 1}.re"), (1, abs(pole.imag), f"p{j + 1}.im")]
+        parts = (
+            [(0, pole.real, f"p{j + 1}")]
+            if pole.imag == 0
+            else [(0, pole.real, f"p{j + 1}.re"), (1, abs(pole.imag), f"p{j + 1}.im")]
+        )
         for part, value, key in parts:
             if value == 0:
                 continue
@@ -597,8 +674,11 @@ def pole_groups(poles) -> list[list[int]]:
             continue
         group = [i]
         if pole.imag != 0:
-            mates = [k for k in range(len(poles)) if k not in used and k != i
-                     and abs(poles[k] - np.conj(pole)) <= 1e-9 * max(1.0, abs(pole))]
+            mates = [
+                k
+                for k in range(len(poles))
+                if k not in used and k != i and abs(poles[k] - np.conj(pole)) <= 1e-9 * max(1.0, abs(pole))
+            ]
             if not mates:
                 raise ValueError(f"pole {pole} has no complex conjugate among {poles}")
             group.append(mates[0])

@@ -9,12 +9,19 @@ import sys
 def main(argv=None) -> int:
     import studies
 
-    parser = argparse.ArgumentParser(prog="python -m studies.designer",
-                                     description="Move a gain, see the nonlinear response, the verdict and the loop.")
-    parser.add_argument("plant", nargs="?", default="arm",
-                        help=f"case study (default arm): {', '.join(studies.names())}")
-    parser.add_argument("controller", nargs="?", default=None,
-                        help="controller label, e.g. PD (default the case's first controller with gains)")
+    parser = argparse.ArgumentParser(
+        prog="python -m studies.designer",
+        description="Move a gain, see the nonlinear response, the verdict and the loop.",
+    )
+    parser.add_argument(
+        "plant", nargs="?", default="arm", help=f"case study (default arm): {', '.join(studies.names())}"
+    )
+    parser.add_argument(
+        "controller",
+        nargs="?",
+        default=None,
+        help="controller label, e.g. PD (default the case's first controller with gains)",
+    )
     parser.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default 0: a free port)")
     args = parser.parse_args(argv)
     if args.plant not in studies.names():

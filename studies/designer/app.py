@@ -79,7 +79,9 @@ class Page:
         self.catalog = catalog
         labels, self.designers = catalog(plant)
         label = labels[0] if label is None else label
-        self.plant = Select(title="plant", options=list[str | tuple[Any, str]](plants), value=plant, name="plant", width=260)
+        self.plant = Select(
+            title="plant", options=list[str | tuple[Any, str]](plants), value=plant, name="plant", width=260
+        )
         self.plant.on_change("value", lambda attr, old, new: self._on_plant(old, new))
         self.values: dict[str, float] = {}
         self.tuning = False
@@ -87,7 +89,9 @@ class Page:
         self.pending = False  # a redraw is scheduled for the gains a slider drag set
         self.scenario = "step"
         self.title = Div(text="", name="title")
-        self.controller = Select(title="controller", options=list[str | tuple[Any, str]](labels), value=label, name="controller", width=260)
+        self.controller = Select(
+            title="controller", options=list[str | tuple[Any, str]](labels), value=label, name="controller", width=260
+        )
         self.scenario_select = Select(title="scenario", options=[], value="step", name="scenario", width=260)
         self.gains = column(name="gains")
         self.pool: dict = {}  # (kind, key) -> the row of widgets of that control, kept across designs
@@ -105,18 +109,28 @@ class Page:
         self.verdict = Div(text="", name="verdict", width=WIDTH)
         self.margins = Div(text="", name="margins", width=WIDTH)
         scene: dict[str, list] = {"xs": [], "ys": [], "color": [], "width": []}
-        self.sources = {name: ColumnDataSource(name=name, data=data) for name, data in {
-            "scene_lines": dict(scene), "scene_dashed": dict(scene), "scene_polygons": {"xs": [], "ys": [], "fill": [],
-                                                                                       "color": []},
-            "scene_circles": {"x": [], "y": [], "r": [], "fill": [], "color": []},
-            "scene_text": {"x": [], "y": [], "text": [], "color": []},
-            "response": {"t": [], "y": [], "r": []},
-            "envelope": {"t": [], "min": [], "low": [], "high": [], "max": []}, "input": {"t": [], "u": []},
-            "bode": {"omega": [], "magnitude_db": [], "phase_deg": []}, "locus": {"re": [], "im": []},
-            "poles": {"re": [], "im": []}, "spec_low": {"omega": [], "db": []},
-            "spec_high": {"omega": [], "db": []}}.items()}
-        self.limit_spans = (Span(dimension="width", line_dash="dashed", line_color="#cf222e"),
-                            Span(dimension="width", line_dash="dashed", line_color="#cf222e"))
+        self.sources = {
+            name: ColumnDataSource(name=name, data=data)
+            for name, data in {
+                "scene_lines": dict(scene),
+                "scene_dashed": dict(scene),
+                "scene_polygons": {"xs": [], "ys": [], "fill": [], "color": []},
+                "scene_circles": {"x": [], "y": [], "r": [], "fill": [], "color": []},
+                "scene_text": {"x": [], "y": [], "text": [], "color": []},
+                "response": {"t": [], "y": [], "r": []},
+                "envelope": {"t": [], "min": [], "low": [], "high": [], "max": []},
+                "input": {"t": [], "u": []},
+                "bode": {"omega": [], "magnitude_db": [], "phase_deg": []},
+                "locus": {"re": [], "im": []},
+                "poles": {"re": [], "im": []},
+                "spec_low": {"omega": [], "db": []},
+                "spec_high": {"omega": [], "db": []},
+            }.items()
+        }
+        self.limit_spans = (
+            Span(dimension="width", line_dash="dashed", line_color="#cf222e"),
+            Span(dimension="width", line_dash="dashed", line_color="#cf222e"),
+        )
         self.crossover_span = Span(dimension="height", line_dash="dotted", line_color="#8250df", visible=False)
         self.phase_span = Span(dimension="width", line_dash="dotted", line_color="#8250df", visible=False)
         self.controller.on_change("value", lambda attr, old, new: self._on_controller(old, new))
@@ -134,65 +148,133 @@ class Page:
         self.anim_time.on_change("value", lambda attr, old, new: self.draw_frame())
         self.play_button.on_click(self._on_play)
         self.layout = row(
-            column(self.title, self.plant, self.controller, self.scenario_select, self.envelope, self.gains,
-                   row(self.tune_button, self.reset_button, self.export_button), self.tune_status,
-                   self.export_data, self.figures["scene"], row(self.play_button, self.anim_time), self.readout,
-                   width=300),
+            column(
+                self.title,
+                self.plant,
+                self.controller,
+                self.scenario_select,
+                self.envelope,
+                self.gains,
+                row(self.tune_button, self.reset_button, self.export_button),
+                self.tune_status,
+                self.export_data,
+                self.figures["scene"],
+                row(self.play_button, self.anim_time),
+                self.readout,
+                width=300,
+            ),
             column(self.verdict, self.figures["response"], self.figures["input"], self.margins),
-            column(self.figures["magnitude"], self.figures["phase"], self.figures["locus"]))
+            column(self.figures["magnitude"], self.figures["phase"], self.figures["locus"]),
+        )
         self.load(label)
 
     # ------------------------------------------------------------- layout
     def _figures(self) -> dict:
         s = self.sources
-        response = figure(width=WIDTH, height=HEIGHT, title="step response of the nonlinear plant",
-                          x_axis_label="t (s)", name="response_figure")
+        response = figure(
+            width=WIDTH,
+            height=HEIGHT,
+            title="step response of the nonlinear plant",
+            x_axis_label="t (s)",
+            name="response_figure",
+        )
         response.varea("t", "min", "max", source=s["envelope"], fill_color="#0969da", fill_alpha=0.12)
         response.varea("t", "low", "high", source=s["envelope"], fill_color="#0969da", fill_alpha=0.25)
         response.line("t", "r", source=s["response"], line_dash="dashed", color="#6e7781", legend_label="reference")
         response.line("t", "y", source=s["response"], line_width=2, color="#0969da", legend_label="response")
         response.legend.location = "bottom_right"
-        inputs = figure(width=WIDTH, height=HEIGHT - 50, title="commanded input (dashed: actuator limit)",
-                        x_axis_label="t (s)", x_range=response.x_range, name="input_figure")
+        inputs = figure(
+            width=WIDTH,
+            height=HEIGHT - 50,
+            title="commanded input (dashed: actuator limit)",
+            x_axis_label="t (s)",
+            x_range=response.x_range,
+            name="input_figure",
+        )
         inputs.line("t", "u", source=s["input"], line_width=1.5, color="#1a7f37")
         inputs.renderers.extend(self.limit_spans)
-        magnitude = figure(width=WIDTH, height=HEIGHT, x_axis_type="log", title="loop gain |L| (dB)",
-                           name="magnitude_figure")
+        magnitude = figure(
+            width=WIDTH, height=HEIGHT, x_axis_type="log", title="loop gain |L| (dB)", name="magnitude_figure"
+        )
         magnitude.line("omega", "magnitude_db", source=s["bode"], line_width=2, color="#0969da")
-        magnitude.line("omega", "db", source=s["spec_low"], line_dash="dashed", color="#cf222e",
-                       legend_label="spec: at least")
-        magnitude.line("omega", "db", source=s["spec_high"], line_dash="dashed", color="#bf8700",
-                       legend_label="spec: at most")
+        magnitude.line(
+            "omega", "db", source=s["spec_low"], line_dash="dashed", color="#cf222e", legend_label="spec: at least"
+        )
+        magnitude.line(
+            "omega", "db", source=s["spec_high"], line_dash="dashed", color="#bf8700", legend_label="spec: at most"
+        )
         magnitude.renderers.extend([self.crossover_span, Span(dimension="width", location=0, line_color="#6e7781")])
         magnitude.legend.location = "bottom_left"
-        phase = figure(width=WIDTH, height=HEIGHT - 50, x_axis_type="log", x_range=magnitude.x_range,
-                       title="phase of L (deg)", x_axis_label="ω (rad/s)", name="phase_figure")
+        phase = figure(
+            width=WIDTH,
+            height=HEIGHT - 50,
+            x_axis_type="log",
+            x_range=magnitude.x_range,
+            title="phase of L (deg)",
+            x_axis_label="ω (rad/s)",
+            name="phase_figure",
+        )
         phase.line("omega", "phase_deg", source=s["bode"], line_width=2, color="#0969da")
         phase.renderers.extend([self.phase_span, Span(dimension="width", location=-180, line_color="#6e7781")])
-        locus = figure(width=WIDTH, height=HEIGHT + 40, title="root locus (s-plane; x: closed-loop poles)",
-                       x_axis_label="Re s (1/s)", y_axis_label="Im s (rad/s)", name="locus_figure")
+        locus = figure(
+            width=WIDTH,
+            height=HEIGHT + 40,
+            title="root locus (s-plane; x: closed-loop poles)",
+            x_axis_label="Re s (1/s)",
+            y_axis_label="Im s (rad/s)",
+            name="locus_figure",
+        )
         locus.scatter("re", "im", source=s["locus"], size=2, color="#6e7781")
         locus.scatter("re", "im", source=s["poles"], marker="x", size=12, line_width=2, color="#cf222e")
         locus.renderers.append(Span(dimension="height", location=0, line_color="#6e7781"))
-        scene = figure(width=290, height=290, match_aspect=True, title="the run, animated", name="scene_figure",
-                       x_range=Range1d(start=-1, end=1), y_range=Range1d(start=-1, end=1))
+        scene = figure(
+            width=290,
+            height=290,
+            match_aspect=True,
+            title="the run, animated",
+            name="scene_figure",
+            x_range=Range1d(start=-1, end=1),
+            y_range=Range1d(start=-1, end=1),
+        )
         scene.patches("xs", "ys", source=s["scene_polygons"], fill_color="fill", line_color="color")
         scene.multi_line("xs", "ys", source=s["scene_lines"], line_color="color", line_width="width")
-        scene.multi_line("xs", "ys", source=s["scene_dashed"], line_color="color", line_width="width",
-                         line_dash="dashed")
+        scene.multi_line(
+            "xs", "ys", source=s["scene_dashed"], line_color="color", line_width="width", line_dash="dashed"
+        )
         scene.circle("x", "y", radius="r", source=s["scene_circles"], fill_color="fill", line_color="color")
-        scene.text("x", "y", text="text", source=s["scene_text"], text_color="color", text_align="center",
-                   text_baseline="middle", text_font_size="12px")
+        scene.text(
+            "x",
+            "y",
+            text="text",
+            source=s["scene_text"],
+            text_color="color",
+            text_align="center",
+            text_baseline="middle",
+            text_font_size="12px",
+        )
         scene.grid.visible = False
-        return {"response": response, "input": inputs, "magnitude": magnitude, "phase": phase, "locus": locus,
-                "scene": scene}
+        return {
+            "response": response,
+            "input": inputs,
+            "magnitude": magnitude,
+            "phase": phase,
+            "locus": locus,
+            "scene": scene,
+        }
 
     def _row(self, kind: str, c: GainControl):
         """Slider, typed value and message of a gain ("gain") or desired pole ("pole") control."""
         names = {"gain": ("gain", "slider", "gain_error"), "pole": ("pole", "pole_slider", "pole_error")}[kind]
-        slider = Slider(start=c.log_low, end=c.log_high, value=math.log10(abs(c.design)),
-                        step=(c.log_high - c.log_low) / 400, title=f"{c.key} (log10 |value|)", show_value=False,
-                        name=f"{names[1]}:{c.key}", width=150)
+        slider = Slider(
+            start=c.log_low,
+            end=c.log_high,
+            value=math.log10(abs(c.design)),
+            step=(c.log_high - c.log_low) / 400,
+            title=f"{c.key} (log10 |value|)",
+            show_value=False,
+            name=f"{names[1]}:{c.key}",
+            width=150,
+        )
         text = TextInput(value=f"{c.design:.6g}", name=f"{names[0]}:{c.key}", width=100, title=c.key)
         error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260)
         # The control is looked up when the widget changes: a pole change redesigns the gains' ranges.
@@ -202,8 +284,9 @@ class Page:
         if kind == "gain":
             slider.on_change("value", lambda attr, old, new: self._dragged(self._control(kind, key), new))
         else:
-            slider.on_change("value_throttled", lambda attr, old, new: self._on_slider(kind, self._control(kind, key),
-                                                                                       new))
+            slider.on_change(
+                "value_throttled", lambda attr, old, new: self._on_slider(kind, self._control(kind, key), new)
+            )
         text.on_change("value", lambda attr, old, new: self._on_text(kind, self._control(kind, key), new))
         return column(row(text, slider), error), slider, text, error
 
@@ -403,14 +486,20 @@ class Page:
 
         def progress(iteration, objective, seconds):
             if iteration % 5 == 0:
-                doc.add_next_tick_callback(lambda: setattr(
-                    self.tune_status, "text", f"tuning: iteration {iteration}, ITAE {objective:.4g} ({seconds:.0f} s)"))
+                doc.add_next_tick_callback(
+                    lambda: setattr(
+                        self.tune_status,
+                        "text",
+                        f"tuning: iteration {iteration}, ITAE {objective:.4g} ({seconds:.0f} s)",
+                    )
+                )
 
         def work():
             try:
                 result, tuned = designer.tune(values, scenario, progress=progress)
-                message = (f"tuned: ITAE {result.initial_cost:.4g} -> {result.cost:.4g} "
-                           f"({result.status}); {result.message}")
+                message = (
+                    f"tuned: ITAE {result.initial_cost:.4g} -> {result.cost:.4g} ({result.status}); {result.message}"
+                )
             except Exception as err:  # reported on the page; the server goes on
                 tuned, message = None, f"tuning failed: {type(err).__name__}: {err}".splitlines()[0]
             doc.add_next_tick_callback(lambda: self._tuned(designer, tuned, message))
@@ -453,21 +542,27 @@ class Page:
             return
         y = _finite(e["tracked"] * self.scale)
         self.sources["envelope"].data = {"t": e["t"], "min": y[0], "low": y[1], "high": y[3], "max": y[4]}
-        self.margins.text += (f"<br>Monte Carlo envelope: {e['samples']} plants (shaded: all, and 5-95 %), "
-                              f"{e['diverged']} diverged")
+        self.margins.text += (
+            f"<br>Monte Carlo envelope: {e['samples']} plants (shaded: all, and 5-95 %), {e['diverged']} diverged"
+        )
 
     def draw(self, u: Update) -> None:
         s = self.sources
         keep = np.ones(len(u.t), dtype=bool) if not u.diverged else u.t <= float(u.status.split("= ")[1].split()[0])
-        s["response"].data = {"t": u.t[keep], "y": _finite(u.tracked[keep] * self.scale),
-                              "r": u.reference[keep] * self.scale}
+        s["response"].data = {
+            "t": u.t[keep],
+            "y": _finite(u.tracked[keep] * self.scale),
+            "r": u.reference[keep] * self.scale,
+        }
         keep_u = keep[:-1]
         s["input"].data = {"t": u.t[:-1][keep_u], "u": _finite(u.u[keep_u])}
         self.limit_spans[0].location, self.limit_spans[1].location = u.input_limit, -u.input_limit
         label = specs.DIVERGED if u.diverged else u.verdict.label
         color = style.verdict_color(label)
-        self.verdict.text = (f"<b style='color:{color}'>{u.verdict_text()}</b>"
-                             f" <span style='color:#6e7781'>({1e3 * u.seconds:.0f} ms)</span>")
+        self.verdict.text = (
+            f"<b style='color:{color}'>{u.verdict_text()}</b>"
+            f" <span style='color:#6e7781'>({1e3 * u.seconds:.0f} ms)</span>"
+        )
         s["bode"].data = {"omega": u.omega, "magnitude_db": _finite(u.magnitude_db), "phase_deg": _finite(u.phase_deg)}
         s["locus"].data = {"re": _finite(u.locus.real.ravel()), "im": _finite(u.locus.imag.ravel())}
         s["poles"].data = {"re": _finite(u.poles.real), "im": _finite(u.poles.imag)}
@@ -496,8 +591,11 @@ class Page:
         last = len(run.t) - 1 if run.diverged_at is None else max(0, int(np.searchsorted(run.t, run.diverged_at)) - 1)
         self.run, self.last = run, last
         index = np.unique(np.linspace(0, last, 25).astype(int))
-        shapes = [animation.draw(case, self.designer.plant, run.x[k], run.r[k, 0]) for k in index
-                  if np.all(np.isfinite(run.x[k]))]
+        shapes = [
+            animation.draw(case, self.designer.plant, run.x[k], run.r[k, 0])
+            for k in index
+            if np.all(np.isfinite(run.x[k]))
+        ]
         xmin, xmax, ymin, ymax = animation.view(shapes)
         scene = self.figures["scene"]
         side = max(xmax - xmin, ymax - ymin)
@@ -525,20 +623,34 @@ class Page:
         s = self.sources
         for name, dashed in (("scene_lines", False), ("scene_dashed", True)):
             lines = [p for p in shapes if p["k"] == "line" and bool(p["d"]) == dashed]
-            s[name].data = {"xs": [[q[0] for q in p["p"]] for p in lines],
-                            "ys": [[q[1] for q in p["p"]] for p in lines], "color": [p["c"] for p in lines],
-                            "width": [p["w"] for p in lines]}
+            s[name].data = {
+                "xs": [[q[0] for q in p["p"]] for p in lines],
+                "ys": [[q[1] for q in p["p"]] for p in lines],
+                "color": [p["c"] for p in lines],
+                "width": [p["w"] for p in lines],
+            }
         polygons = [p for p in shapes if p["k"] == "poly"]
-        s["scene_polygons"].data = {"xs": [[q[0] for q in p["p"]] for p in polygons],
-                                    "ys": [[q[1] for q in p["p"]] for p in polygons],
-                                    "fill": [p["f"] for p in polygons], "color": [p["c"] for p in polygons]}
+        s["scene_polygons"].data = {
+            "xs": [[q[0] for q in p["p"]] for p in polygons],
+            "ys": [[q[1] for q in p["p"]] for p in polygons],
+            "fill": [p["f"] for p in polygons],
+            "color": [p["c"] for p in polygons],
+        }
         circles = [p for p in shapes if p["k"] == "circle"]
-        s["scene_circles"].data = {"x": [p["p"][0] for p in circles], "y": [p["p"][1] for p in circles],
-                                   "r": [p["r"] for p in circles], "fill": [p["f"] for p in circles],
-                                   "color": [p["c"] for p in circles]}
+        s["scene_circles"].data = {
+            "x": [p["p"][0] for p in circles],
+            "y": [p["p"][1] for p in circles],
+            "r": [p["r"] for p in circles],
+            "fill": [p["f"] for p in circles],
+            "color": [p["c"] for p in circles],
+        }
         texts = [p for p in shapes if p["k"] == "text"]
-        s["scene_text"].data = {"x": [p["p"][0] for p in texts], "y": [p["p"][1] for p in texts],
-                                "text": [p["s"] for p in texts], "color": [p["c"] for p in texts]}
+        s["scene_text"].data = {
+            "x": [p["p"][0] for p in texts],
+            "y": [p["p"][1] for p in texts],
+            "text": [p["s"] for p in texts],
+            "color": [p["c"] for p in texts],
+        }
         tracked = run.x[k, self.designer.tracked_index] * self.scale
         self.readout.text = f"t = {run.t[k]:.2f} s: {self.designer.case.tracked} = {tracked:.4g} {self.unit}"
 
@@ -568,16 +680,24 @@ def _margins_text(u: Update, spec: dict) -> str:
     if not u.margins:
         return "<i>" + "; ".join(u.notes) + "</i>"
     m = u.margins
-    gain = (f"gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s"
-            if math.isfinite(m["gain_margin_db"]) else "no gain margin (the phase does not cross -180°)")
-    phase = (f"phase margin {m['phase_margin_deg']:.3g}° at {m['gain_crossover_rad_s']:.3g} rad/s"
-             if math.isfinite(m["phase_margin_deg"]) else "no phase margin (|L| does not cross 1)")
+    gain = (
+        f"gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s"
+        if math.isfinite(m["gain_margin_db"])
+        else "no gain margin (the phase does not cross -180°)"
+    )
+    phase = (
+        f"phase margin {m['phase_margin_deg']:.3g}° at {m['gain_crossover_rad_s']:.3g} rad/s"
+        if math.isfinite(m["phase_margin_deg"])
+        else "no phase margin (|L| does not cross 1)"
+    )
     text = f"{u.loop} loop: {gain}, {phase}"
     unstable = int(np.sum(u.poles.real > 0))
     text += f"; {unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
     if spec:
-        checks = ", ".join(f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
-                           for name, ok in spec["checks"].items())
+        checks = ", ".join(
+            f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
+            for name, ok in spec["checks"].items()
+        )
         text += f"<br>loopshaping specs ({spec['item']}): {checks}"
     return text
 
@@ -595,8 +715,14 @@ def application(catalog: Catalog, plants: list[str], plant: str, label: str | No
     return Application(FunctionHandler(make))
 
 
-def serve(catalog: Catalog, plants: list[str], plant: str, label: str | None = None, port: int = 0,
-          ready: Callable[[str], None] | None = None) -> None:
+def serve(
+    catalog: Catalog,
+    plants: list[str],
+    plant: str,
+    label: str | None = None,
+    port: int = 0,
+    ready: Callable[[str], None] | None = None,
+) -> None:
     """Serve the page on 127.0.0.1:`port` (0: a free port) until interrupted; print its URL.
 
     Parameters
@@ -614,8 +740,10 @@ def serve(catalog: Catalog, plants: list[str], plant: str, label: str | None = N
 
     # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
     sockets, port = bind_sockets("127.0.0.1", port)
-    tornado_app = BokehTornado({"/": application(catalog, plants, plant, label)},
-                               extra_websocket_origins=[f"127.0.0.1:{port}", f"localhost:{port}"])
+    tornado_app = BokehTornado(
+        {"/": application(catalog, plants, plant, label)},
+        extra_websocket_origins=[f"127.0.0.1:{port}", f"localhost:{port}"],
+    )
     http = HTTPServer(tornado_app)
     http.add_sockets(sockets)
     loop = IOLoop.current()

@@ -113,7 +113,7 @@ def test_margins_of_a_type_one_loop():
     # L = k/(s (s + a)): ω_c² = (−a² + √(a⁴ + 4k²))/2, PM = 90° − atan(ω_c/a), GM infinite.
     k, a = 10.0, 2.0
     m = margins(tf([k], [1.0, a, 0.0]))
-    wc = np.sqrt((-a**2 + np.sqrt(a**4 + 4 * k**2)) / 2)
+    wc = np.sqrt((-(a**2) + np.sqrt(a**4 + 4 * k**2)) / 2)
     assert m["gain_crossover"] == pytest.approx(wc, rel=1e-6)
     assert m["pm_deg"] == pytest.approx(90 - np.degrees(np.arctan(wc / a)), rel=1e-6)
     assert m["gm"] == np.inf

@@ -12,8 +12,16 @@ Q, R, W = 1.0, 1.0, 0.5
 B_RANGE, K_BOUNDS = (0.1, 2.0), (0.0, 10.0)
 
 
-@models.declare(name="lag_b", title="x' = -b x + u", coordinates=(), inputs=("u",), first_order=("x",),
-                params=(models.Param("b", 1.0, "1/s"),), input_limit=1e6, register=False)
+@models.declare(
+    name="lag_b",
+    title="x' = -b x + u",
+    coordinates=(),
+    inputs=("u",),
+    first_order=("x",),
+    params=(models.Param("b", 1.0, "1/s"),),
+    input_limit=1e6,
+    register=False,
+)
 def _lag(q, dq, u, p, s):
     return models.Physics(rates={"x": -p.b * s.x + u.u}, outputs={"x": s.x})
 
@@ -22,8 +30,15 @@ class Proportional(models.Block):
     """u = −k x (reads the state, no reference)."""
 
     def __init__(self, k, sample_period):
-        super().__init__(sample_period=sample_period, n_state=0, n_measured=1, n_reference=0, n_input=1,
-                         gains={"k": k}, measures="state")
+        super().__init__(
+            sample_period=sample_period,
+            n_state=0,
+            n_measured=1,
+            n_reference=0,
+            n_input=1,
+            gains={"k": k},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, -g["k"] * y[0]
@@ -68,12 +83,22 @@ def test_first_order_codesign_converges_to_the_closed_form_optimum_as_the_sample
     periods = (0.08, 0.04, 0.02, 0.01)
     for ts in periods:
         plant, block, scenario, cost = _problem(ts)
-        answer = codesign(plant, block, scenario, {"b": B_RANGE}, plant_cost=lambda p: W * p["b"], cost=cost,
-                          bounds={"k": K_BOUNDS}, methods=("simultaneous",), tol=1e-10)["simultaneous"]
+        answer = codesign(
+            plant,
+            block,
+            scenario,
+            {"b": B_RANGE},
+            plant_cost=lambda p: W * p["b"],
+            cost=cost,
+            bounds={"k": K_BOUNDS},
+            methods=("simultaneous",),
+            tol=1e-10,
+        )["simultaneous"]
         assert answer.converged and answer.feasible, answer.message
         b, k = answer.params["b"], float(answer.block.gains["k"])
-        sampled = scipy.optimize.minimize(sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead",
-                                          options={"xatol": 1e-10, "fatol": 1e-14})
+        sampled = scipy.optimize.minimize(
+            sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-14}
+        )
         sampled_psi_at = sampled_psi(sampled.x, ts)
         np.testing.assert_allclose([b, k], sampled.x, rtol=1e-4)
         assert answer.objective == pytest.approx(sampled_psi_at, rel=1e-7)
@@ -89,10 +114,20 @@ def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_d
     (its price alone: the cheapest b) with its best k is worse, as the closed form says."""
     ts = 0.1
     plant, block, scenario, cost = _problem(ts)
-    answers = codesign(plant, block, scenario, {"b": B_RANGE}, plant_cost=lambda p: W * p["b"], cost=cost,
-                       bounds={"k": K_BOUNDS}, tol=1e-10, nested_tol=1e-5)
-    sampled = scipy.optimize.minimize(sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead",
-                                      options={"xatol": 1e-10, "fatol": 1e-14})
+    answers = codesign(
+        plant,
+        block,
+        scenario,
+        {"b": B_RANGE},
+        plant_cost=lambda p: W * p["b"],
+        cost=cost,
+        bounds={"k": K_BOUNDS},
+        tol=1e-10,
+        nested_tol=1e-5,
+    )
+    sampled = scipy.optimize.minimize(
+        sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-14}
+    )
     for method in ("nested", "simultaneous", "simultaneous from sequential"):
         a = answers[method]
         assert a.converged and a.feasible, (method, a.status, a.message)
@@ -102,8 +137,9 @@ def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_d
     assert answers["nested"].evaluations == len(answers["nested"].history) > 3
     seq = answers["sequential"]
     assert seq.converged and seq.params["b"] == pytest.approx(B_RANGE[0], abs=1e-6)
-    best_k = scipy.optimize.minimize_scalar(lambda k: sampled_psi((B_RANGE[0], k), ts), bounds=K_BOUNDS,
-                                            method="bounded", options={"xatol": 1e-10})
+    best_k = scipy.optimize.minimize_scalar(
+        lambda k: sampled_psi((B_RANGE[0], k), ts), bounds=K_BOUNDS, method="bounded", options={"xatol": 1e-10}
+    )
     assert float(seq.block.gains["k"]) == pytest.approx(best_k.x, rel=1e-4)
     assert seq.objective == pytest.approx(best_k.fun, rel=1e-7) and seq.objective > 1.01 * sampled.fun
     # Each reported objective is what a fresh problem on the designed plant gives.
@@ -117,8 +153,17 @@ def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_d
 def test_gain_bounds_hold_in_every_method_when_free_is_left_at_its_default():
     """Issue 12: with free=None the simultaneous solve dropped the bounds (seen: k <= 1, answer 1.30)."""
     plant, block, scenario, cost = _problem(0.1)
-    answers = codesign(plant, block, scenario, {"b": B_RANGE}, plant_cost=lambda p: W * p["b"], cost=cost,
-                       bounds={"k": (0.0, 0.3)}, free=None, nested_tol=1e-3)
+    answers = codesign(
+        plant,
+        block,
+        scenario,
+        {"b": B_RANGE},
+        plant_cost=lambda p: W * p["b"],
+        cost=cost,
+        bounds={"k": (0.0, 0.3)},
+        free=None,
+        nested_tol=1e-3,
+    )
     for method, a in answers.items():
         assert float(a.block.gains["k"]) <= 0.3 + 1e-9, method
     # The bound is active: the unbounded optimum has k = 0.57.
@@ -130,8 +175,15 @@ class RollPD(models.Block):
 
     def __init__(self, limit, kp=60.0, kd=40.0):
         self.limit = limit
-        super().__init__(sample_period=0.01, n_state=0, n_measured=2, n_reference=1, n_input=1,
-                         gains={"kp": kp, "kd": kd}, measures="state")
+        super().__init__(
+            sample_period=0.01,
+            n_state=0,
+            n_measured=2,
+            n_reference=1,
+            n_input=1,
+            gains={"kp": kp, "kd": kd},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, models.saturate(g["kp"] * (r[0] - y[0]) - g["kd"] * y[1], self.limit)
@@ -142,10 +194,17 @@ def test_uuv_buoyancy_offset_simultaneous_from_sequential_is_never_worse():
     """UUV roll: the centre-of-buoyancy offset L (its ballast costs 200 per metre) with a PD."""
     uuv = models.get("uuv")
     scenario = Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi")
-    results = codesign(uuv, RollPD(uuv.input_limit[0]), scenario, {"L": (0.01, 0.2)},
-                       plant_cost=lambda p: 200 * p["L"] * 1e-3, cost=Cost("itae"), specs=Specs(max_overshoot=0.05),
-                       bounds={"kp": (0, 500), "kd": (0, 500)},
-                       methods=("sequential", "simultaneous from sequential"))
+    results = codesign(
+        uuv,
+        RollPD(uuv.input_limit[0]),
+        scenario,
+        {"L": (0.01, 0.2)},
+        plant_cost=lambda p: 200 * p["L"] * 1e-3,
+        cost=Cost("itae"),
+        specs=Specs(max_overshoot=0.05),
+        bounds={"kp": (0, 500), "kd": (0, 500)},
+        methods=("sequential", "simultaneous from sequential"),
+    )
     seq, sim = results["sequential"], results["simultaneous from sequential"]
     assert seq.feasible and sim.feasible, (seq.message, sim.message)
     assert sim.objective <= seq.objective * (1 + 1e-9)
@@ -166,6 +225,7 @@ def _arm_saturation_pd(plant):
     wn = np.sqrt(kp / inertia)
     kd = 2 * 0.9 * wn * inertia - p["b"]
     from tests.designs.test_tuning import ArmPD
+
     return ArmPD(plant, kp=kp, kd=kd)
 
 
@@ -182,8 +242,7 @@ def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     specs = Specs(rise_time=0.8, max_overshoot=0.05)
-    sized = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0, retune=False,
-                          rel_tol=0.01)
+    sized = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0, retune=False, rel_tol=0.01)
     limit = sized["limit"]
     smaller = arm.with_input_limit(limit / 1.02)
     assert _meets(arm, limit, sized["block"]) and not _meets(arm, limit / 1.02, _arm_saturation_pd(smaller))
@@ -195,6 +254,7 @@ def test_a_decided_limit_is_the_same_loop_as_a_block_built_for_it():
     arm = models.get("arm")
     top, small = arm.with_input_limit(3.0), arm.with_input_limit(0.9)
     from tests.designs.test_tuning import ArmPD
+
     wrapped = ActuatorLimit(ArmPD(top, kp=2.0, kd=0.2), 0.9)
     assert wrapped.gains["actuator_limit"] == 0.9 and wrapped.gain_names[-1] == "actuator_limit"
     direct = ArmPD(small, kp=2.0, kd=0.2)
@@ -212,12 +272,24 @@ def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     specs = Specs(rise_time=0.8, max_overshoot=0.05)
     bounds = {"kp": (0, 5), "kd": (0, 1)}
-    nested = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, retune=True,
-                           rel_tol=0.01, tune_options={"bounds": bounds})
-    assert nested["converged"] and all(s in ("Solve_Succeeded", "Solved_To_Acceptable_Level",
-                                             "Infeasible_Problem_Detected") for s in nested["statuses"])
-    sim = size_actuator_simultaneous(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0,
-                                     start_limit=1.5, bounds=bounds)
+    nested = size_actuator(
+        arm,
+        _arm_saturation_pd,
+        scenario,
+        specs,
+        low=0.75,
+        high=3.0,
+        retune=True,
+        rel_tol=0.01,
+        tune_options={"bounds": bounds},
+    )
+    assert nested["converged"] and all(
+        s in ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Infeasible_Problem_Detected")
+        for s in nested["statuses"]
+    )
+    sim = size_actuator_simultaneous(
+        arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, start_limit=1.5, bounds=bounds
+    )
     assert sim["converged"] and sim["feasible"], sim["message"]
     assert sim["limit"] <= nested["limit"] * 1.01
     assert _meets(arm, sim["limit"], sim["block"]) and _meets(arm, nested["limit"], nested["block"])

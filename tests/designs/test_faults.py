@@ -20,8 +20,15 @@ class PD(models.Block):
     """τ = kp (r − θ) − kd θ', saturated at 1; reads the state (the arm)."""
 
     def __init__(self, kp=0.3, kd=0.1):
-        super().__init__(sample_period=0.01, n_state=0, n_measured=2, n_reference=1, n_input=1,
-                         gains={"kp": kp, "kd": kd}, measures="state")
+        super().__init__(
+            sample_period=0.01,
+            n_state=0,
+            n_measured=2,
+            n_reference=1,
+            n_input=1,
+            gains={"kp": kp, "kd": kd},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, models.saturate(g["kp"] * (r[0] - y[0]) - g["kd"] * y[1], 1.0)
@@ -69,32 +76,43 @@ def test_zero_samples_are_refused(arm, monkeypatch):
         tune(arm, PD(), STEP, samples=np.zeros((0, arm.n_params)))
 
 
-@pytest.mark.parametrize("pair,message", [((1.0, 0.5), "bounds\\['kp'\\] has low > high"),
-                                          ((math.nan, 1.0), "bounds\\['kp'\\] must not be NaN")])
+@pytest.mark.parametrize(
+    "pair,message",
+    [((1.0, 0.5), "bounds\\['kp'\\] has low > high"), ((math.nan, 1.0), "bounds\\['kp'\\] must not be NaN")],
+)
 def test_inverted_or_nan_bounds_are_refused(arm, monkeypatch, pair, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
         tune(arm, PD(), STEP, bounds={"kp": pair})
 
 
-@pytest.mark.parametrize("value,error,message", [(0, ValueError, "max_iter must be an integer >= 1, got 0"),
-                                                 (2.5, ValueError, "max_iter must be an integer, got 2.5"),
-                                                 ("10", TypeError, "max_iter must be an integer, got str")])
+@pytest.mark.parametrize(
+    "value,error,message",
+    [
+        (0, ValueError, "max_iter must be an integer >= 1, got 0"),
+        (2.5, ValueError, "max_iter must be an integer, got 2.5"),
+        ("10", TypeError, "max_iter must be an integer, got str"),
+    ],
+)
 def test_bad_max_iter_is_refused(arm, monkeypatch, value, error, message):
     _never_solves(monkeypatch)
     with pytest.raises(error, match=message):
         tune(arm, PD(), STEP, max_iter=value)
 
 
-@pytest.mark.parametrize("rel_tol,message", [(0.0, "rel_tol must be a fraction in \\(0, 1\\), got 0.0"),
-                                             (math.nan, "rel_tol must be a fraction in \\(0, 1\\), got nan"),
-                                             (1.5, "rel_tol must be a fraction in \\(0, 1\\), got 1.5"),
-                                             (1e-300, "needs .* limits, more than 60")])
+@pytest.mark.parametrize(
+    "rel_tol,message",
+    [
+        (0.0, "rel_tol must be a fraction in \\(0, 1\\), got 0.0"),
+        (math.nan, "rel_tol must be a fraction in \\(0, 1\\), got nan"),
+        (1.5, "rel_tol must be a fraction in \\(0, 1\\), got 1.5"),
+        (1e-300, "needs .* limits, more than 60"),
+    ],
+)
 def test_size_actuator_refuses_a_tolerance_that_never_ends_or_ends_at_once(arm, rel_tol, message):
     started = time.perf_counter()
     with pytest.raises(ValueError, match=message):
-        size_actuator(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=0.5, high=2.0, retune=False,
-                      rel_tol=rel_tol)
+        size_actuator(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=0.5, high=2.0, retune=False, rel_tol=rel_tol)
     assert time.perf_counter() - started < 1.0
 
 
@@ -102,37 +120,48 @@ def test_size_actuator_tries_a_bounded_number_of_limits(arm):
     """rel_tol = 1e-6 over [0.8, 3] needs 24 limits: the loop ends there, every limit tried is recorded."""
     from tests.designs.test_tuning import ArmPD
 
-    sized = size_actuator(arm, lambda p: ArmPD(p, kp=2.0, kd=0.2), STEP, Specs(rise_time=1.0), low=0.8, high=3.0,
-                          retune=False, rel_tol=1e-6)
+    sized = size_actuator(
+        arm,
+        lambda p: ArmPD(p, kp=2.0, kd=0.2),
+        STEP,
+        Specs(rise_time=1.0),
+        low=0.8,
+        high=3.0,
+        retune=False,
+        rel_tol=1e-6,
+    )
     assert sized["evaluations"] == len(sized["history"]) <= 25
 
 
 # ----------------------------------------------------------------- the rest of the class: tune
-@pytest.mark.parametrize("kwargs,error,message", [
-    ({"specs": Specs(rise_time=5.0)}, ValueError, "rise_time = 5 s is after the end of the scenario"),
-    ({"robust": "median"}, ValueError, "robust must be 'mean' or 'worst', got 'median'"),
-    ({"free": "kp"}, TypeError, "free must be a sequence of gain names, got 'kp'"),
-    ({"free": ["kq"]}, ValueError, "has no gain \\['kq'\\]"),
-    ({"free": []}, ValueError, "nothing to decide"),
-    ({"bounds": {"kq": (0, 1)}}, ValueError, "bounds given for 'kq', which is not a free gain"),
-    ({"bounds": {"kp": (0, 1, 2)}}, ValueError, "bounds\\['kp'\\] must be a pair \\(low, high\\)"),
-    ({"bounds": {"kp": ((0, 1), 2)}}, ValueError, "bounds\\['kp'\\] must be numbers or arrays shaped like"),
-    ({"bounds": [("kp", 0, 1)]}, TypeError, "bounds must be a dict gain name"),
-    ({"tol": 0.0}, ValueError, "tol must be a finite number > 0, got 0.0"),
-    ({"tol": math.nan}, ValueError, "tol must be a finite number > 0, got nan"),
-    ({"hessian": "bfgs"}, ValueError, "hessian must be 'limited-memory' or 'exact', got 'bfgs'"),
-    ({"method": "slack"}, ValueError, "method must be 'smooth' or 'exact', got 'slack'"),
-    ({"widths": (1e-2, 1e-1)}, ValueError, "widths must be a non-empty, strictly decreasing"),
-    ({"widths": (0.1, 0.0)}, ValueError, "widths must be a non-empty, strictly decreasing"),
-    ({"widths": ()}, ValueError, "widths must be a non-empty"),
-    ({"jit": "yes"}, TypeError, "jit must be True or False, got str"),
-    ({"progress": 3}, TypeError, "progress must be callable"),
-    ({"substeps": 2.7}, ValueError, "substeps must be an integer, got 2.7"),
-    ({"samples": np.full((2, 4), math.nan)}, ValueError, "samples has a non-finite entry"),
-    ({"samples": np.zeros((1, 2))}, ValueError, "samples must have shape"),
-    ({"specs": "fast"}, TypeError, "specs must be a designs.tuning.Specs, got str"),
-    ({"cost": "itae"}, TypeError, "cost must be a designs.tuning.Cost, got str"),
-])
+@pytest.mark.parametrize(
+    "kwargs,error,message",
+    [
+        ({"specs": Specs(rise_time=5.0)}, ValueError, "rise_time = 5 s is after the end of the scenario"),
+        ({"robust": "median"}, ValueError, "robust must be 'mean' or 'worst', got 'median'"),
+        ({"free": "kp"}, TypeError, "free must be a sequence of gain names, got 'kp'"),
+        ({"free": ["kq"]}, ValueError, "has no gain \\['kq'\\]"),
+        ({"free": []}, ValueError, "nothing to decide"),
+        ({"bounds": {"kq": (0, 1)}}, ValueError, "bounds given for 'kq', which is not a free gain"),
+        ({"bounds": {"kp": (0, 1, 2)}}, ValueError, "bounds\\['kp'\\] must be a pair \\(low, high\\)"),
+        ({"bounds": {"kp": ((0, 1), 2)}}, ValueError, "bounds\\['kp'\\] must be numbers or arrays shaped like"),
+        ({"bounds": [("kp", 0, 1)]}, TypeError, "bounds must be a dict gain name"),
+        ({"tol": 0.0}, ValueError, "tol must be a finite number > 0, got 0.0"),
+        ({"tol": math.nan}, ValueError, "tol must be a finite number > 0, got nan"),
+        ({"hessian": "bfgs"}, ValueError, "hessian must be 'limited-memory' or 'exact', got 'bfgs'"),
+        ({"method": "slack"}, ValueError, "method must be 'smooth' or 'exact', got 'slack'"),
+        ({"widths": (1e-2, 1e-1)}, ValueError, "widths must be a non-empty, strictly decreasing"),
+        ({"widths": (0.1, 0.0)}, ValueError, "widths must be a non-empty, strictly decreasing"),
+        ({"widths": ()}, ValueError, "widths must be a non-empty"),
+        ({"jit": "yes"}, TypeError, "jit must be True or False, got str"),
+        ({"progress": 3}, TypeError, "progress must be callable"),
+        ({"substeps": 2.7}, ValueError, "substeps must be an integer, got 2.7"),
+        ({"samples": np.full((2, 4), math.nan)}, ValueError, "samples has a non-finite entry"),
+        ({"samples": np.zeros((1, 2))}, ValueError, "samples must have shape"),
+        ({"specs": "fast"}, TypeError, "specs must be a designs.tuning.Specs, got str"),
+        ({"cost": "itae"}, TypeError, "cost must be a designs.tuning.Cost, got str"),
+    ],
+)
 def test_tune_refuses_before_solving(arm, monkeypatch, kwargs, error, message):
     _never_solves(monkeypatch)
     with pytest.raises(error, match=message):
@@ -147,66 +176,94 @@ def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
         tune(arm, PD(), STEP, samples=rows)
 
 
-@pytest.mark.parametrize("scenario,specs,message", [
-    (Scenario(reference=None, duration=2.0, tracked="theta"), Specs(max_overshoot=0.1),
-     "max_overshoot need a step, and the scenario has none: it regulates"),
-    (Scenario(reference=0.0, duration=2.0, tracked="theta"), Specs(rise_time=1.0),
-     "rise_time need a step.*its final reference equals the initial tracked value"),
-    (Scenario(reference=lambda t: 0.5 * (t > 1.0), duration=2.0, tracked="theta", name="late step"),
-     Specs(settling_time=1.5), "settling_time need a step, and the scenario \\(late step\\) has none: its reference "
-     "is not constant"),
-    (Scenario(reference=0.5, duration=2.0), Specs(max_overshoot=0.1), "it names no tracked state"),
-    (STEP, Specs(state_bounds={"phi": 1.0}), "state_bounds: arm has no state 'phi'"),
-    (STEP, Specs(final_values={"omega": (0.0, 0.1)}), "final_values: arm has no state 'omega'"),
-    (Scenario(reference=0.5, duration=2.0, tracked="phi"), None, "arm has no state 'phi'"),
-    (Scenario(reference=0.5, duration=0.001, tracked="theta"), None, "shorter than one sample"),
-    (Scenario(reference=0.5, duration=2.0, x0=[0.0, math.nan], tracked="theta"), None,
-     "arm initial state x0 has non-finite entries"),
-    (Scenario(reference=0.5, duration=2.0, tracked="theta", noise_std=-1.0), None, "noise_std must be one number"),
-])
+@pytest.mark.parametrize(
+    "scenario,specs,message",
+    [
+        (
+            Scenario(reference=None, duration=2.0, tracked="theta"),
+            Specs(max_overshoot=0.1),
+            "max_overshoot need a step, and the scenario has none: it regulates",
+        ),
+        (
+            Scenario(reference=0.0, duration=2.0, tracked="theta"),
+            Specs(rise_time=1.0),
+            "rise_time need a step.*its final reference equals the initial tracked value",
+        ),
+        (
+            Scenario(reference=lambda t: 0.5 * (t > 1.0), duration=2.0, tracked="theta", name="late step"),
+            Specs(settling_time=1.5),
+            "settling_time need a step, and the scenario \\(late step\\) has none: its reference is not constant",
+        ),
+        (Scenario(reference=0.5, duration=2.0), Specs(max_overshoot=0.1), "it names no tracked state"),
+        (STEP, Specs(state_bounds={"phi": 1.0}), "state_bounds: arm has no state 'phi'"),
+        (STEP, Specs(final_values={"omega": (0.0, 0.1)}), "final_values: arm has no state 'omega'"),
+        (Scenario(reference=0.5, duration=2.0, tracked="phi"), None, "arm has no state 'phi'"),
+        (Scenario(reference=0.5, duration=0.001, tracked="theta"), None, "shorter than one sample"),
+        (
+            Scenario(reference=0.5, duration=2.0, x0=[0.0, math.nan], tracked="theta"),
+            None,
+            "arm initial state x0 has non-finite entries",
+        ),
+        (Scenario(reference=0.5, duration=2.0, tracked="theta", noise_std=-1.0), None, "noise_std must be one number"),
+    ],
+)
 def test_specs_the_scenario_cannot_judge_are_refused(arm, monkeypatch, scenario, specs, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
         tune(arm, PD(), scenario, specs=specs)
 
 
-@pytest.mark.parametrize("build,error,message", [
-    (lambda: Specs(settling_band=0.0), ValueError, "settling_band must be a fraction in \\(0, 1\\), got 0.0"),
-    (lambda: Specs(settling_band=1.5), ValueError, "settling_band must be a fraction in \\(0, 1\\), got 1.5"),
-    (lambda: Specs(max_overshoot=math.inf), ValueError, "max_overshoot must be finite, got inf"),
-    (lambda: Specs(max_overshoot="5 %"), TypeError, "max_overshoot must be a real number, got str"),
-    (lambda: Specs(rise_time=-1.0), ValueError, "rise_time \\(s\\) must be a finite number > 0, got -1.0"),
-    (lambda: Specs(max_spectral_abscissa=math.nan), ValueError, "max_spectral_abscissa \\(1/s\\) must be finite"),
-    (lambda: Specs(state_bounds={"theta": (1.0, -1.0)}), ValueError, "state_bounds\\['theta'\\] must be .* low < high"),
-    (lambda: Specs(state_bounds={"theta": -0.2}), ValueError, "state_bounds\\['theta'\\] must be a finite bound > 0"),
-    (lambda: Specs(state_bounds={"theta": (math.nan, 1.0)}), ValueError, "state_bounds\\['theta'\\]"),
-    (lambda: Specs(state_bounds=[("theta", 1.0)]), TypeError, "state_bounds must be a dict"),
-    (lambda: Specs(final_values={"theta": (0.0, 0.0)}), ValueError, "final_values\\['theta'\\] must be a pair"),
-    (lambda: Specs(final_values={"theta": 0.5}), ValueError, "final_values\\['theta'\\] must be a pair"),
-    (lambda: Scenario(0.5, math.nan, tracked="theta"), ValueError, "duration \\(s\\) must be a finite number > 0"),
-    (lambda: Scenario(0.5, 2.0, tracked="theta", weight=0.0), ValueError, "scenario weight must be a finite"),
-    (lambda: Scenario(0.5, 2.0, tracked="theta", seed=-1), ValueError, "seed must be an integer >= 0, got -1"),
-    (lambda: Scenario(0.5, 2.0, tracked=3), TypeError, "tracked must be a state name"),
-    (lambda: Cost("l1"), ValueError, "unknown cost 'l1'"),
-    (lambda: Cost(energy_weight=math.nan), ValueError, "energy_weight must be finite and >= 0, got nan"),
-    (lambda: Cost(energy_weight=-1.0), ValueError, "energy_weight must be finite and >= 0, got -1.0"),
-    (lambda: Cost(smoothing=0.0), ValueError, "smoothing must be a finite number > 0, got 0.0"),
-    (lambda: Cost(kind=None), ValueError, "the cost has no term"),
-])
+@pytest.mark.parametrize(
+    "build,error,message",
+    [
+        (lambda: Specs(settling_band=0.0), ValueError, "settling_band must be a fraction in \\(0, 1\\), got 0.0"),
+        (lambda: Specs(settling_band=1.5), ValueError, "settling_band must be a fraction in \\(0, 1\\), got 1.5"),
+        (lambda: Specs(max_overshoot=math.inf), ValueError, "max_overshoot must be finite, got inf"),
+        (lambda: Specs(max_overshoot="5 %"), TypeError, "max_overshoot must be a real number, got str"),
+        (lambda: Specs(rise_time=-1.0), ValueError, "rise_time \\(s\\) must be a finite number > 0, got -1.0"),
+        (lambda: Specs(max_spectral_abscissa=math.nan), ValueError, "max_spectral_abscissa \\(1/s\\) must be finite"),
+        (
+            lambda: Specs(state_bounds={"theta": (1.0, -1.0)}),
+            ValueError,
+            "state_bounds\\['theta'\\] must be .* low < high",
+        ),
+        (
+            lambda: Specs(state_bounds={"theta": -0.2}),
+            ValueError,
+            "state_bounds\\['theta'\\] must be a finite bound > 0",
+        ),
+        (lambda: Specs(state_bounds={"theta": (math.nan, 1.0)}), ValueError, "state_bounds\\['theta'\\]"),
+        (lambda: Specs(state_bounds=[("theta", 1.0)]), TypeError, "state_bounds must be a dict"),
+        (lambda: Specs(final_values={"theta": (0.0, 0.0)}), ValueError, "final_values\\['theta'\\] must be a pair"),
+        (lambda: Specs(final_values={"theta": 0.5}), ValueError, "final_values\\['theta'\\] must be a pair"),
+        (lambda: Scenario(0.5, math.nan, tracked="theta"), ValueError, "duration \\(s\\) must be a finite number > 0"),
+        (lambda: Scenario(0.5, 2.0, tracked="theta", weight=0.0), ValueError, "scenario weight must be a finite"),
+        (lambda: Scenario(0.5, 2.0, tracked="theta", seed=-1), ValueError, "seed must be an integer >= 0, got -1"),
+        (lambda: Scenario(0.5, 2.0, tracked=3), TypeError, "tracked must be a state name"),
+        (lambda: Cost("l1"), ValueError, "unknown cost 'l1'"),
+        (lambda: Cost(energy_weight=math.nan), ValueError, "energy_weight must be finite and >= 0, got nan"),
+        (lambda: Cost(energy_weight=-1.0), ValueError, "energy_weight must be finite and >= 0, got -1.0"),
+        (lambda: Cost(smoothing=0.0), ValueError, "smoothing must be a finite number > 0, got 0.0"),
+        (lambda: Cost(kind=None), ValueError, "the cost has no term"),
+    ],
+)
 def test_records_refuse_bad_values_when_made(build, error, message):
     with pytest.raises(error, match=message):
         build()
 
 
-@pytest.mark.parametrize("cost,message", [
-    (Cost(kind=None, state_weights=[[1.0, 2.0], [0.0, 1.0]]), "state_weights must be symmetric"),
-    (Cost(kind=None, state_weights=[[1.0, 0.0], [0.0, -1.0]]), "state_weights must be positive semidefinite"),
-    (Cost(kind=None, state_weights={"phi": 1.0}), "state_weights: no signal named \\['phi'\\]"),
-    (Cost(kind=None, input_weights=[1.0, 2.0]), "input_weights must be a dict, 1 diagonal entries"),
-    (Cost(kind=None, output_weights=[math.nan]), "output_weights must be finite"),
-    (Cost("itae", signal="omega"), "the cost's signal 'omega' is not 'error' nor a state"),
-    (Cost(kind=None, state_weights={"theta": 1.0}, target={"phi": 0.0}), "target: no signal named 'phi'"),
-])
+@pytest.mark.parametrize(
+    "cost,message",
+    [
+        (Cost(kind=None, state_weights=[[1.0, 2.0], [0.0, 1.0]]), "state_weights must be symmetric"),
+        (Cost(kind=None, state_weights=[[1.0, 0.0], [0.0, -1.0]]), "state_weights must be positive semidefinite"),
+        (Cost(kind=None, state_weights={"phi": 1.0}), "state_weights: no signal named \\['phi'\\]"),
+        (Cost(kind=None, input_weights=[1.0, 2.0]), "input_weights must be a dict, 1 diagonal entries"),
+        (Cost(kind=None, output_weights=[math.nan]), "output_weights must be finite"),
+        (Cost("itae", signal="omega"), "the cost's signal 'omega' is not 'error' nor a state"),
+        (Cost(kind=None, state_weights={"theta": 1.0}, target={"phi": 0.0}), "target: no signal named 'phi'"),
+    ],
+)
 def test_costs_the_plant_cannot_evaluate_are_refused(arm, monkeypatch, cost, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
@@ -230,30 +287,33 @@ def test_scenarios_must_be_scenarios(arm):
 
 
 # ----------------------------------------------------------------- codesign
-@pytest.mark.parametrize("design_params,kwargs,error,message", [
-    ({"m": 0.5}, {}, ValueError, "design_params\\['m'\\] must be a pair \\(low, high\\), got 0.5"),
-    ({"m": (0.6, 0.4)}, {}, ValueError, "range of m must be finite with low < high"),
-    ({"m": (math.nan, 0.6)}, {}, ValueError, "range of m must be finite with low < high"),
-    ({"m": (0.4, math.inf)}, {}, ValueError, "range of m must be finite with low < high"),
-    ({"m": ("0.4", 0.6)}, {}, TypeError, "design_params\\['m'\\] bound must be a real number, got str"),
-    ({"m": (-1.0, 0.6)}, {}, ValueError, "m"),
-    ({"m": (0.6, 0.8)}, {}, ValueError, "m = 0.5 starts outside its range"),
-    ({"q": (0.4, 0.6)}, {}, ValueError, "arm has no parameter 'q'"),
-    ({}, {}, ValueError, "design_params is empty"),
-    ([("m", 0.4, 0.6)], {}, TypeError, "design_params must be a dict"),
-    ({"m": (0.4, 0.6)}, {"plant_cost": None}, ValueError, "the sequential method needs a plant-only objective"),
-    ({"m": (0.4, 0.6)}, {"methods": ("joint",)}, ValueError, "unknown co-design method \\['joint'\\]"),
-    ({"m": (0.4, 0.6)}, {"methods": "nested"}, TypeError, "methods must be a non-empty sequence"),
-    ({"m": (0.4, 0.6)}, {"methods": ("simultaneous from sequential",)}, ValueError, "needs 'sequential'"),
-    ({"m": (0.4, 0.6)}, {"nested_tol": 0.0}, ValueError, "nested_tol must be a finite number > 0"),
-    ({"m": (0.4, 0.6)}, {"nested_tol": 1.0}, ValueError, "nested_tol must be a fraction of the range below 1"),
-    ({"m": (0.4, 0.6)}, {"max_iter": 0}, ValueError, "max_iter must be an integer >= 1, got 0"),
-    ({"m": (0.4, 0.6)}, {"tol": -1.0}, ValueError, "tol must be a finite number > 0"),
-    ({"m": (0.4, 0.6)}, {"plant_cost": 3.0}, TypeError, "plant_cost must be callable"),
-    ({"m": (0.4, 0.6)}, {"bounds": {"kp": (1.0, 0.0)}}, ValueError, "bounds\\['kp'\\] has low > high"),
-    ({"m": (0.4, 0.6)}, {"specs": Specs(settling_time=9.0)}, ValueError, "settling_time = 9 s is after the end"),
-    ({"m": (0.4, 0.6)}, {"samples": np.zeros((0, 4))}, ValueError, "samples has no rows"),
-])
+@pytest.mark.parametrize(
+    "design_params,kwargs,error,message",
+    [
+        ({"m": 0.5}, {}, ValueError, "design_params\\['m'\\] must be a pair \\(low, high\\), got 0.5"),
+        ({"m": (0.6, 0.4)}, {}, ValueError, "range of m must be finite with low < high"),
+        ({"m": (math.nan, 0.6)}, {}, ValueError, "range of m must be finite with low < high"),
+        ({"m": (0.4, math.inf)}, {}, ValueError, "range of m must be finite with low < high"),
+        ({"m": ("0.4", 0.6)}, {}, TypeError, "design_params\\['m'\\] bound must be a real number, got str"),
+        ({"m": (-1.0, 0.6)}, {}, ValueError, "m"),
+        ({"m": (0.6, 0.8)}, {}, ValueError, "m = 0.5 starts outside its range"),
+        ({"q": (0.4, 0.6)}, {}, ValueError, "arm has no parameter 'q'"),
+        ({}, {}, ValueError, "design_params is empty"),
+        ([("m", 0.4, 0.6)], {}, TypeError, "design_params must be a dict"),
+        ({"m": (0.4, 0.6)}, {"plant_cost": None}, ValueError, "the sequential method needs a plant-only objective"),
+        ({"m": (0.4, 0.6)}, {"methods": ("joint",)}, ValueError, "unknown co-design method \\['joint'\\]"),
+        ({"m": (0.4, 0.6)}, {"methods": "nested"}, TypeError, "methods must be a non-empty sequence"),
+        ({"m": (0.4, 0.6)}, {"methods": ("simultaneous from sequential",)}, ValueError, "needs 'sequential'"),
+        ({"m": (0.4, 0.6)}, {"nested_tol": 0.0}, ValueError, "nested_tol must be a finite number > 0"),
+        ({"m": (0.4, 0.6)}, {"nested_tol": 1.0}, ValueError, "nested_tol must be a fraction of the range below 1"),
+        ({"m": (0.4, 0.6)}, {"max_iter": 0}, ValueError, "max_iter must be an integer >= 1, got 0"),
+        ({"m": (0.4, 0.6)}, {"tol": -1.0}, ValueError, "tol must be a finite number > 0"),
+        ({"m": (0.4, 0.6)}, {"plant_cost": 3.0}, TypeError, "plant_cost must be callable"),
+        ({"m": (0.4, 0.6)}, {"bounds": {"kp": (1.0, 0.0)}}, ValueError, "bounds\\['kp'\\] has low > high"),
+        ({"m": (0.4, 0.6)}, {"specs": Specs(settling_time=9.0)}, ValueError, "settling_time = 9 s is after the end"),
+        ({"m": (0.4, 0.6)}, {"samples": np.zeros((0, 4))}, ValueError, "samples has no rows"),
+    ],
+)
 def test_codesign_refuses_before_solving(arm, monkeypatch, design_params, kwargs, error, message):
     _never_solves(monkeypatch)
     kwargs = {"plant_cost": lambda p: p["m"]} | kwargs
@@ -262,17 +322,20 @@ def test_codesign_refuses_before_solving(arm, monkeypatch, design_params, kwargs
 
 
 # ----------------------------------------------------------------- size_actuator
-@pytest.mark.parametrize("kwargs,error,message", [
-    ({"low": 2.0, "high": 1.0}, ValueError, "need finite 0 < low < high, got low=2.0, high=1.0"),
-    ({"low": math.nan}, ValueError, "need finite 0 < low < high, got low=nan"),
-    ({"high": math.inf}, ValueError, "need finite 0 < low < high"),
-    ({"low": 0.0}, ValueError, "need finite 0 < low < high, got low=0.0"),
-    ({"low": "1"}, TypeError, "low must be a real number, got str"),
-    ({"retune": "yes"}, TypeError, "retune must be True or False, got str"),
-    ({"design": "PD"}, TypeError, "design must be callable Plant -> Block"),
-    ({"specs": None}, TypeError, "specs must be a designs.tuning.Specs"),
-    ({"tune_options": ["bounds"]}, TypeError, "tune_options must be a dict of keyword arguments"),
-])
+@pytest.mark.parametrize(
+    "kwargs,error,message",
+    [
+        ({"low": 2.0, "high": 1.0}, ValueError, "need finite 0 < low < high, got low=2.0, high=1.0"),
+        ({"low": math.nan}, ValueError, "need finite 0 < low < high, got low=nan"),
+        ({"high": math.inf}, ValueError, "need finite 0 < low < high"),
+        ({"low": 0.0}, ValueError, "need finite 0 < low < high, got low=0.0"),
+        ({"low": "1"}, TypeError, "low must be a real number, got str"),
+        ({"retune": "yes"}, TypeError, "retune must be True or False, got str"),
+        ({"design": "PD"}, TypeError, "design must be callable Plant -> Block"),
+        ({"specs": None}, TypeError, "specs must be a designs.tuning.Specs"),
+        ({"tune_options": ["bounds"]}, TypeError, "tune_options must be a dict of keyword arguments"),
+    ],
+)
 def test_size_actuator_refuses_before_any_limit_is_tried(arm, kwargs, error, message):
     tried = []
 
@@ -286,9 +349,14 @@ def test_size_actuator_refuses_before_any_limit_is_tried(arm, kwargs, error, mes
     assert tried == []
 
 
-@pytest.mark.parametrize("kwargs,message", [({"start_limit": 3.0}, "start_limit = 3 is outside \\[0.5, 2\\]"),
-                                            ({"cost_weight": -1.0}, "cost_weight must be >= 0"),
-                                            ({"low": 2.0, "high": 2.0}, "need finite 0 < low < high")])
+@pytest.mark.parametrize(
+    "kwargs,message",
+    [
+        ({"start_limit": 3.0}, "start_limit = 3 is outside \\[0.5, 2\\]"),
+        ({"cost_weight": -1.0}, "cost_weight must be >= 0"),
+        ({"low": 2.0, "high": 2.0}, "need finite 0 < low < high"),
+    ],
+)
 def test_simultaneous_sizing_refuses_before_solving(arm, monkeypatch, kwargs, message):
     _never_solves(monkeypatch)
     args = {"low": 0.5, "high": 2.0, "start_limit": 1.0} | kwargs

@@ -51,8 +51,10 @@ def _c2d_step(G, n):
     return control.forced_response(control.c2d(G, TS, "tustin"), np.arange(n) * TS, np.ones(n)).outputs
 
 
-@pytest.mark.parametrize("C", [lead(5, 50) * lag(0.5, 12) * low_pass(60, 2), notch(1.14, 0.05, 0.7) * lead(2, 40),
-                               tf([2.0, 1.0], [1.0, 0.0])])
+@pytest.mark.parametrize(
+    "C",
+    [lead(5, 50) * lag(0.5, 12) * low_pass(60, 2), notch(1.14, 0.05, 0.7) * lead(2, 40), tf([2.0, 1.0], [1.0, 0.0])],
+)
 def test_block_equals_tustin_step_response(arm, C):
     n = 400
     block = TransferFunctionBlock(arm, "theta", C, anti_windup="none")

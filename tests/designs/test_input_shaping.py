@@ -61,8 +61,9 @@ def test_residual_vibration_formula_matches_the_simulated_amplitude(mistuning):
     basis = np.column_stack([np.sin(damped * t), np.cos(damped * t)])
     growth = np.exp(zeta * actual * t)[:, None]
     amplitude = lambda y: np.linalg.norm(np.linalg.lstsq(basis, y * growth[:, 0], rcond=None)[0])
-    assert zv.residual_vibration(actual, zeta) == pytest.approx(amplitude(shaped) / amplitude(single), rel=1e-9,
-                                                                abs=1e-12)
+    assert zv.residual_vibration(actual, zeta) == pytest.approx(
+        amplitude(shaped) / amplitude(single), rel=1e-9, abs=1e-12
+    )
 
 
 def test_convolved_shaper_cancels_both_modes():
@@ -70,7 +71,8 @@ def test_convolved_shaper_cancels_both_modes():
     both = shaping.zero_vibration(*modes[0]).convolve(shaping.zero_vibration(*modes[1]))
     assert both.amplitudes.sum() == pytest.approx(1.0, abs=1e-15)
     assert len(both.times) == 4 and both.duration == pytest.approx(
-        shaping.zero_vibration(*modes[0]).duration + shaping.zero_vibration(*modes[1]).duration)
+        shaping.zero_vibration(*modes[0]).duration + shaping.zero_vibration(*modes[1]).duration
+    )
     for omega, zeta in modes:
         assert both.residual_vibration(omega, zeta) < 1e-12
     assert shaping.zero_vibration(*modes[0]).residual_vibration(*modes[1]) > 0.1
@@ -85,7 +87,7 @@ def test_apply_sums_delayed_copies_of_the_command():
 
 def test_oscillatory_modes_of_a_block_diagonal_model():
     def oscillator(omega, zeta):
-        return np.array([[0.0, 1.0], [-omega**2, -2 * zeta * omega]])
+        return np.array([[0.0, 1.0], [-(omega**2), -2 * zeta * omega]])
 
     A = np.zeros((5, 5))
     A[:2, :2], A[2:4, 2:4], A[4, 4] = oscillator(2.0, 0.1), oscillator(0.5, 0.3), -1.0

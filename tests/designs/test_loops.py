@@ -100,27 +100,31 @@ def test_ball_on_beam_cascade_poles_equal_the_hand_derived_polynomial():
     grad = np.asarray(jac(lin.xe[:2])).ravel()
     # With the feedforward cancelling the ball's weight: s²(s² + b k_di s + b k_pi) − g b k_pi (k_po + k_do s) = 0.
     char = np.polysub(np.polymul([1, 0, 0], [1, b * kdi, b * kpi]), np.polymul([g * b * kpi], [kdo, kpo]))
-    np.testing.assert_allclose(np.sort_complex(cascade_poles(lin, "theta", "z", (kpi, kdi), (kpo, kdo),
-                                                             feedforward_gradient=grad)),
-                               np.sort_complex(np.roots(char)), rtol=1e-5)
+    np.testing.assert_allclose(
+        np.sort_complex(cascade_poles(lin, "theta", "z", (kpi, kdi), (kpo, kdo), feedforward_gradient=grad)),
+        np.sort_complex(np.roots(char)),
+        rtol=1e-5,
+    )
 
 
 def test_successive_loop_closure_meets_its_rules():
     p = models.get("pendulum")
-    slc = successive_loop_closure(p, "theta", "z", inner_bound=5.0, outer_step=2.0, separation=10.0,
-                                  outer_model="low_frequency")
+    slc = successive_loop_closure(
+        p, "theta", "z", inner_bound=5.0, outer_step=2.0, separation=10.0, outer_model="low_frequency"
+    )
     a_th = slc.inner_limit
-    assert slc.inner.kp == pytest.approx(-5.0 / a_th)           # F̃ just saturates on a step A_θ
-    assert slc.outer.kp == pytest.approx(a_th / 2.0)            # θ_d just saturates on a 2 m step
-    assert slc.inner.wn / slc.outer.wn == pytest.approx(10.0)   # bandwidth separation
+    assert slc.inner.kp == pytest.approx(-5.0 / a_th)  # F̃ just saturates on a step A_θ
+    assert slc.outer.kp == pytest.approx(a_th / 2.0)  # θ_d just saturates on a 2 m step
+    assert slc.inner.wn / slc.outer.wn == pytest.approx(10.0)  # bandwidth separation
     K = 2 * abs(slc.inner.kp) / (2 * abs(slc.inner.kp) - 24.5)  # −2 k_p/(−24.5 − 2 k_p)
     assert slc.inner_dc_gain == pytest.approx(K)
     assert slc.outer.wn == pytest.approx(np.sqrt(K * 9.8 * slc.outer.kp))
     assert np.all(slc.full_poles.real < 0)
     _same(low_frequency_model(slc.plants.outer), [9.8], [1, 0, 0])
     with pytest.raises(ValueError, match="bandwidth separation of 1e\\+06"):
-        successive_loop_closure(p, "theta", "z", inner_bound=5.0, outer_step=2.0, separation=1e6,
-                                outer_model="low_frequency")
+        successive_loop_closure(
+            p, "theta", "z", inner_bound=5.0, outer_step=2.0, separation=1e6, outer_model="low_frequency"
+        )
     with pytest.raises(ValueError, match="no coordinate 'x'"):
         cascade_plants(p, "theta", "x")
 

@@ -28,14 +28,14 @@ def test_prototype_relations(zeta):
     assert prototype_crossover(wn, zeta) == pytest.approx(wc, rel=1e-6)
     assert prototype_phase_margin(zeta) == pytest.approx(pm, rel=1e-6)
     half_power_db = 20 * np.log10(1 / np.sqrt(2))  # the closed form is the 1/√2 crossing
-    assert prototype_bandwidth(wn, zeta) == pytest.approx(control.bandwidth(control.feedback(L, 1), half_power_db),
-                                                          rel=1e-6)
+    assert prototype_bandwidth(wn, zeta) == pytest.approx(
+        control.bandwidth(control.feedback(L, 1), half_power_db), rel=1e-6
+    )
     assert damping_for_phase_margin(pm) == pytest.approx(zeta, rel=1e-9)
     assert crossover_for_bandwidth(prototype_bandwidth(wn, zeta), zeta) == pytest.approx(wc, rel=1e-9)
 
 
-@pytest.mark.parametrize("plant", [tf([2.652], [1, 0, 0]), tf([-9.8], [1, 0, 0]),
-                                   tf([-6.667e-5], [1, 0, 1.308])])
+@pytest.mark.parametrize("plant", [tf([2.652], [1, 0, 0]), tf([-9.8], [1, 0, 0]), tf([-6.667e-5], [1, 0, 1.308])])
 def test_lead_for_crossover_meets_its_margin(plant):
     design = lead_for_crossover(plant, 2.0, 55.0)
     L = plant * design.controller
@@ -54,8 +54,9 @@ def _closed(L):
 
 
 def test_arm_loopshaping_meets_I14_independently():
-    shaped = improve_loop(ARM_PD, low_frequency=0.007, low_factor=10, high_frequency=200, high_factor=10,
-                          phase_margin_deg=60)
+    shaped = improve_loop(
+        ARM_PD, low_frequency=0.007, low_factor=10, high_frequency=200, high_factor=10, phase_margin_deg=60
+    )
     assert shaped.all_met, [s for s in shaped.specs if not s.met]
     T_old, S_old = _closed(ARM_PD)
     T_new, S_new = _closed(ARM_PD * shaped.controller)

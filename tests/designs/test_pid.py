@@ -49,8 +49,9 @@ def test_pd_with_a_plant_zero_places_the_poles():
     wn, zeta = 0.4, 0.707
     design = pd_design(control.tf([n1, n0], [1, a1, a0]), zeta=zeta, wn=wn)
     char = [1 + n1 * design.kd, a1 + n1 * design.kp + n0 * design.kd, a0 + n0 * design.kp]
-    np.testing.assert_allclose(np.sort_complex(np.roots(char)),
-                               np.sort_complex(np.roots([1, 2 * zeta * wn, wn**2])), rtol=1e-9)
+    np.testing.assert_allclose(
+        np.sort_complex(np.roots(char)), np.sort_complex(np.roots([1, 2 * zeta * wn, wn**2])), rtol=1e-9
+    )
 
 
 def test_saturation_rule_that_cannot_stabilize_is_refused():
@@ -80,15 +81,17 @@ def _tustin_step(G, n):
 def test_pid_on_the_error_equals_tustin_of_its_transfer_function(arm):
     n = 300
     block = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, derivative_on="error", anti_windup="none")
-    np.testing.assert_allclose(_run(block, np.zeros(n), np.ones(n)), _tustin_step(pid_tf(0.3, 0.2, 0.08, 0.05), n),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        _run(block, np.zeros(n), np.ones(n)), _tustin_step(pid_tf(0.3, 0.2, 0.08, 0.05), n), atol=1e-9
+    )
 
 
 def test_pid_on_the_measurement_equals_tustin_of_the_feedback_path(arm):
     n = 300
     block = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, anti_windup="none")
-    np.testing.assert_allclose(_run(block, np.ones(n), np.zeros(n)), -_tustin_step(pid_tf(0.3, 0.2, 0.08, 0.05), n),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        _run(block, np.ones(n), np.zeros(n)), -_tustin_step(pid_tf(0.3, 0.2, 0.08, 0.05), n), atol=1e-9
+    )
 
 
 def test_feedforward_is_the_known_gravity_torque(arm):
@@ -164,8 +167,15 @@ def test_closed_loop_cost_gradient_in_the_classical_gains(arm):
     run = models.closed_loop_function(arm, block, n)
     gains = ca.MX.sym("g", block.gain_vector().size)
     x0 = np.zeros(2)
-    X = run(x0, block.initial_state(arm.output(x0), [0.3]), 0.3 * np.ones((1, n)), np.zeros((1, n)),
-            np.zeros((1, n)), arm.param_vector(), gains)[0]
+    X = run(
+        x0,
+        block.initial_state(arm.output(x0), [0.3]),
+        0.3 * np.ones((1, n)),
+        np.zeros((1, n)),
+        np.zeros((1, n)),
+        arm.param_vector(),
+        gains,
+    )[0]
     cost = ca.Function("cost", [gains], [ca.sumsqr(X[0, :] - 0.3) * TS])
     grad = ca.Function("grad", [gains], [ca.gradient(cost(gains), gains)])
     g0 = block.gain_vector()

@@ -28,8 +28,9 @@ def test_damping_boundary_of_a_second_order_locus():
 def test_integrator_evans_form_matches_the_pid_loop():
     kp, kd, ki = 0.3, 0.085, 0.2
     L = integrator_evans_form(ARM, kp, kd)
-    np.testing.assert_allclose(np.sort_complex(locus(L, [ki])[0]), np.sort_complex(Loop.pid(ARM, kp, ki, kd).poles()),
-                               rtol=1e-8)
+    np.testing.assert_allclose(
+        np.sort_complex(locus(L, [ki])[0]), np.sort_complex(Loop.pid(ARM, kp, ki, kd).poles()), rtol=1e-8
+    )
 
 
 def test_integrator_gain_sits_on_the_damping_boundary():
@@ -45,8 +46,7 @@ def test_integrator_gain_respects_the_overshoot_allowance():
     kp, kd = 0.3037, 0.0854
     out = integrator_gain(ARM, kp, kd, 0.9 * 0.707, overshoot_allowance=10.0)
     pd = control.feedback(ARM * kp, 1 + kd / kp * control.tf([1, 0], [1]))
-    pid = control.feedback(ARM * control.tf([kp, out["ki"]], [1, 0]),
-                           control.tf([kd, kp, out["ki"]], [kp, out["ki"]]))
+    pid = control.feedback(ARM * control.tf([kp, out["ki"]], [1, 0]), control.tf([kd, kp, out["ki"]], [kp, out["ki"]]))
     overshoot_pd = control.step_info(pd, T=np.linspace(0, 60, 12001))["Overshoot"]
     overshoot_pid = control.step_info(pid, T=np.linspace(0, 60, 12001))["Overshoot"]
     assert 0 < out["ki"] < out["ki_damping"]
@@ -70,8 +70,9 @@ def test_lead_by_angle_puts_a_pole_at_the_target():
     assert np.min(np.abs(roots - target)) < 1e-8
     with_lag = lag_for_static_gain(design, G, 19.0, 0.5)
     assert dc_gain(with_lag.transfer_function() * G) == pytest.approx(19.0, rel=1e-12)
-    assert step_info(Loop.unity(G, with_lag.transfer_function()).reference_to_output())["SteadyStateValue"] == \
-        pytest.approx(19.0 / 20.0)
+    assert step_info(Loop.unity(G, with_lag.transfer_function()).reference_to_output())[
+        "SteadyStateValue"
+    ] == pytest.approx(19.0 / 20.0)
 
 
 def test_root_locus_bad_input():

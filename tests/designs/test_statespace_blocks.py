@@ -56,8 +56,9 @@ def _observer(model, K, kr, poles, disturbance=False, ki=None):
         A = np.block([[A, disc.B], [np.zeros((1, 4)), np.eye(1)]])
         C = np.hstack([C, np.zeros((2, 1))])
     L = ss.discrete_observer_gain(A, C, np.exp(np.asarray(poles) * TS))
-    block = ObserverFeedback(model, K, kr, ss.current_estimator_gain(A, L), ki, sample_period=TS,
-                             disturbance_observer=disturbance)
+    block = ObserverFeedback(
+        model, K, kr, ss.current_estimator_gain(A, L), ki, sample_period=TS, disturbance_observer=disturbance
+    )
     return block, A - L @ C
 
 
@@ -189,8 +190,9 @@ def test_bad_block_inputs_name_the_culprit():
     with pytest.raises(ValueError, match="has no disturbance observer"):
         disc = model.discrete(TS)
         L = ss.discrete_observer_gain(disc.A, disc.C, [0.9, 0.91, 0.92, 0.93])
-        ObserverFeedback(model, [1, 2, 3, 4], 1.0, ss.current_estimator_gain(disc.A, L),
-                         sample_period=TS).disturbance_estimate(np.zeros((3, 4)))
+        ObserverFeedback(
+            model, [1, 2, 3, 4], 1.0, ss.current_estimator_gain(disc.A, L), sample_period=TS
+        ).disturbance_estimate(np.zeros((3, 4)))
 
 
 def test_closed_loop_is_differentiable_in_the_gains():
@@ -201,8 +203,14 @@ def test_closed_loop_is_differentiable_in_the_gains():
     from designs import statespace_design
 
     arm = models.get("arm")
-    design = statespace_design.design(arm, "theta", poles=[-8 + 6j, -8 - 6j], Q=np.diag([1 / 0.87**2, 0.0, 1 / 0.2**2]),
-                                      R=[[1 / 0.26**2]], sample_period=TS)
+    design = statespace_design.design(
+        arm,
+        "theta",
+        poles=[-8 + 6j, -8 - 6j],
+        Q=np.diag([1 / 0.87**2, 0.0, 1 / 0.2**2]),
+        R=[[1 / 0.26**2]],
+        sample_period=TS,
+    )
     block = statespace_design.controllers(design)["LQR + Kalman"]
     n = 100
     run = models.closed_loop_function(arm, block, n, substeps=2)

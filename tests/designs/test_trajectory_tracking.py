@@ -25,8 +25,9 @@ def test_step_jacobians_match_central_differences():
     F = lambda x, u: np.asarray(step(x, u, p), dtype=float).ravel()
     h = 1e-6
     for k in range(4):
-        A = np.column_stack([(F(states[k] + h * e, inputs[k]) - F(states[k] - h * e, inputs[k])) / (2 * h)
-                             for e in np.eye(plant.nx)])
+        A = np.column_stack(
+            [(F(states[k] + h * e, inputs[k]) - F(states[k] - h * e, inputs[k])) / (2 * h) for e in np.eye(plant.nx)]
+        )
         B = (F(states[k], inputs[k] + h) - F(states[k], inputs[k] - h))[:, None] / (2 * h)
         np.testing.assert_allclose(As[k], A, atol=1e-8)
         np.testing.assert_allclose(Bs[k], B, atol=1e-8)
@@ -42,8 +43,7 @@ def roll():
     ocp.minimize(ocp.integral(ocp.u.tau**2))
     ocp.subject_to(ocp.at_start(ocp.state) == [0.0, 0.0])
     ocp.subject_to(ocp.at_end(ocp.state) == [ANGLE, 0.0])
-    solution = ocp.solve(mpc.MultipleShooting(intervals=steps, substeps=SUBSTEPS),
-                         solver_options={"tolerance": 1e-12})
+    solution = ocp.solve(mpc.MultipleShooting(intervals=steps, substeps=SUBSTEPS), solver_options={"tolerance": 1e-12})
     assert solution.success, solution.status
     assert np.max(np.abs(solution.inputs)) < 0.5 * plant.input_limit[0]  # room for the feedback: no saturation
     Q, R = WEIGHTS
@@ -53,10 +53,11 @@ def roll():
 
 def test_on_the_trajectory_the_block_reproduces_it(roll):
     plant, solution, design = roll
-    run = models.simulate_closed_loop(plant, design.block, design.reference(2.5), 2.5, x0=solution.states[0],
-                                      substeps=SUBSTEPS)
+    run = models.simulate_closed_loop(
+        plant, design.block, design.reference(2.5), 2.5, x0=solution.states[0], substeps=SUBSTEPS
+    )
     steps = len(solution.inputs)
-    np.testing.assert_allclose(run.x[:steps + 1], solution.states, atol=1e-8)
+    np.testing.assert_allclose(run.x[: steps + 1], solution.states, atol=1e-8)
     np.testing.assert_allclose(run.u[:steps], solution.inputs, atol=1e-6)
     # Held at the end by the LQR with the equilibrium torque.
     np.testing.assert_allclose(run.x[-1], solution.states[-1], atol=1e-8)
@@ -67,8 +68,9 @@ def test_a_small_start_error_follows_the_designed_deviation_dynamics(roll):
     """δx_{k+1} = (A_k − B_k K_k) δx_k to first order: the gains are wired in the right order and sign."""
     plant, solution, design = roll
     delta = np.array([1e-4, -2e-4])
-    run = models.simulate_closed_loop(plant, design.block, design.reference(2.0), 2.0,
-                                      x0=solution.states[0] + delta, substeps=SUBSTEPS)
+    run = models.simulate_closed_loop(
+        plant, design.block, design.reference(2.0), 2.0, x0=solution.states[0] + delta, substeps=SUBSTEPS
+    )
     As, Bs = tracking.linearize_along(plant, TS, solution.states, solution.inputs, SUBSTEPS)
     predicted = [delta]
     for k in range(len(solution.inputs)):

@@ -9,20 +9,26 @@ from designs.tuning import AGREEMENT, Cost, Scenario, Specs, TuningProblem, clos
 from models import metrics
 
 
-@models.declare(name="cart_velocity", title="m v' = u - b v", coordinates=("s",), inputs=("u",),
-                params=(models.Param("m", 1.0, "kg"), models.Param("b", 1.0, "N s/m")),
-                input_limit=1e6, register=False)
+@models.declare(
+    name="cart_velocity",
+    title="m v' = u - b v",
+    coordinates=("s",),
+    inputs=("u",),
+    params=(models.Param("m", 1.0, "kg"), models.Param("b", 1.0, "N s/m")),
+    input_limit=1e6,
+    register=False,
+)
 def _cart_velocity(q, dq, u, p):
-    return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=0 * q.s, forces=[u.u - p.b * dq.s],
-                          outputs={"s": q.s})
+    return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=0 * q.s, forces=[u.u - p.b * dq.s], outputs={"s": q.s})
 
 
 class VelocityGain(models.Block):
     """u = k (r − v), reading the state (s, v)."""
 
     def __init__(self, k):
-        super().__init__(sample_period=0.01, n_state=0, n_measured=2, n_reference=1, n_input=1,
-                         gains={"k": k}, measures="state")
+        super().__init__(
+            sample_period=0.01, n_state=0, n_measured=2, n_reference=1, n_input=1, gains={"k": k}, measures="state"
+        )
 
     def expr(self, xc, y, r, g):
         return xc, g["k"] * (r[0] - y[1])
@@ -33,8 +39,15 @@ class ArmPD(models.Block):
 
     def __init__(self, known, kp=0.3, kd=0.1):
         self.known = known
-        super().__init__(sample_period=0.01, n_state=0, n_measured=2, n_reference=1, n_input=1,
-                         gains={"kp": kp, "kd": kd}, measures="state")
+        super().__init__(
+            sample_period=0.01,
+            n_state=0,
+            n_measured=2,
+            n_reference=1,
+            n_input=1,
+            gains={"kp": kp, "kd": kd},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         feedforward = self.known.casadi_equilibrium_input(y[0], self.known.param_vector())
@@ -60,9 +73,13 @@ def test_tuner_finds_the_closed_form_optimum_of_a_first_order_loop():
     lin = rho * (1 - phi**2) + gamma**2
     k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
     # 40 s: λ^(2N) ≈ e^-270, so the finite horizon is the infinite one to machine precision.
-    result = tune(plant, VelocityGain(1.0),
-                  Scenario(reference=0.0, duration=40.0, x0=[0.0, 1.0], tracked="ds"),
-                  cost=Cost("ise", energy_weight=rho), tol=1e-12)
+    result = tune(
+        plant,
+        VelocityGain(1.0),
+        Scenario(reference=0.0, duration=40.0, x0=[0.0, 1.0], tracked="ds"),
+        cost=Cost("ise", energy_weight=rho),
+        tol=1e-12,
+    )
     assert result.success, result.message
     assert float(result.gains["k"]) == pytest.approx(k_star, abs=1e-6)
     assert result.cost == pytest.approx(ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2), rel=1e-9)
@@ -76,8 +93,12 @@ def test_cost_gradient_equals_central_differences(arm):
     for point in (problem.start(), np.array([0.8, 0.12])):
         exact = np.asarray(grad(point)).ravel()
         h = 1e-6 * np.maximum(1, np.abs(point))
-        fd = np.array([(float(obj(point + h[i] * e)) - float(obj(point - h[i] * e))) / (2 * h[i])
-                       for i, e in enumerate(np.eye(point.size))])
+        fd = np.array(
+            [
+                (float(obj(point + h[i] * e)) - float(obj(point - h[i] * e))) / (2 * h[i])
+                for i, e in enumerate(np.eye(point.size))
+            ]
+        )
         np.testing.assert_allclose(exact, fd, rtol=1e-5)
 
 
@@ -93,8 +114,13 @@ def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
     target = np.deg2rad(50)
     specs = Specs(max_overshoot=0.02, settling_time=1.5)
     # Without bounds ITAE keeps falling towards bang-bang as the gains grow.
-    result = tune(arm, block, Scenario(reference=target, duration=3.0, tracked="theta"), specs=specs,
-                  bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    result = tune(
+        arm,
+        block,
+        Scenario(reference=target, duration=3.0, tracked="theta"),
+        specs=specs,
+        bounds={"kp": (0, 1.0), "kd": (0, 0.2)},
+    )
     assert result.success and result.feasible, result.message
     assert result.cost < 0.9 * result.initial_cost
     res = models.simulate_closed_loop(arm, result.block, target, 3.0)
@@ -104,8 +130,13 @@ def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
 
 
 def test_infeasible_specs_are_named(arm):
-    result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"),
-                  specs=Specs(rise_time=0.05, max_overshoot=0.0), max_iter=30)
+    result = tune(
+        arm,
+        ArmPD(arm),
+        Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"),
+        specs=Specs(rise_time=0.05, max_overshoot=0.0),
+        max_iter=30,
+    )
     assert not result.feasible and not result.success
     assert any("90 % of the step by 0.05 s" in v for v in result.violations)
     assert "infeasible" in result.message
@@ -113,8 +144,14 @@ def test_infeasible_specs_are_named(arm):
 
 def test_iteration_limit_returns_the_best_feasible_point_and_says_it_did_not_converge(arm):
     calls = []
-    result = tune(arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
-                  specs=Specs(max_overshoot=0.05), max_iter=2, progress=lambda *a: calls.append(a))
+    result = tune(
+        arm,
+        ArmPD(arm),
+        Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
+        specs=Specs(max_overshoot=0.05),
+        max_iter=2,
+        progress=lambda *a: calls.append(a),
+    )
     assert result.status == "Maximum_Iterations_Exceeded"
     assert not result.converged and len(result.stages) == 1  # the continuation stops at a stage that did not converge
     assert [c[0] for c in calls] == list(range(len(result.history))) == [0, 1, 2]
@@ -147,20 +184,24 @@ def test_spectral_abscissa_of_a_linear_loop_equals_its_eigenvalues():
     assert alpha == pytest.approx(expected, rel=1e-9)
 
 
-@pytest.mark.parametrize("kwargs,message", [
-    ({"free": ["kq"]}, "has no gain"),
-    ({"robust": "median"}, "robust must be"),
-    ({"scenarios": Scenario(reference=0.5, duration=1.0, tracked="phi")}, "arm has no state 'phi'"),
-    ({"cost": "itae"}, None),
-])
+@pytest.mark.parametrize(
+    "kwargs,message",
+    [
+        ({"free": ["kq"]}, "has no gain"),
+        ({"robust": "median"}, "robust must be"),
+        ({"scenarios": Scenario(reference=0.5, duration=1.0, tracked="phi")}, "arm has no state 'phi'"),
+        ({"cost": "itae"}, None),
+    ],
+)
 def test_bad_tuning_input(arm, kwargs, message):
     if message is None:
         with pytest.raises(ValueError, match="unknown cost 'l1'"):
             Cost("l1")
         return
     with pytest.raises(ValueError, match=message):
-        TuningProblem(arm, ArmPD(arm), **({"scenarios": Scenario(reference=0.5, duration=1.0, tracked="theta")}
-                                          | kwargs))
+        TuningProblem(
+            arm, ArmPD(arm), **({"scenarios": Scenario(reference=0.5, duration=1.0, tracked="theta")} | kwargs)
+        )
 
 
 def test_a_violated_spec_reports_its_excess_from_a_fresh_simulation(arm):
@@ -193,16 +234,23 @@ def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agre
     block = ArmPD(arm)
     target = np.deg2rad(50)
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
-    result = tune(arm, block, scenario, cost=Cost("itae", energy_weight=0.01), specs=Specs(max_overshoot=0.02),
-                  bounds={"kp": (0, 5.0), "kd": (0, 1.0)})
+    result = tune(
+        arm,
+        block,
+        scenario,
+        cost=Cost("itae", energy_weight=0.01),
+        specs=Specs(max_overshoot=0.02),
+        bounds={"kp": (0, 5.0), "kd": (0, 1.0)},
+    )
     assert result.method == "smooth" and result.converged and result.status == "Solve_Succeeded", result.message
     assert result.feasible and result.cost < result.initial_cost
     exact, run = _itae_by_simulation(arm, result.block, target, 3.0, energy_weight=0.01, substeps=10)
     assert np.sum(np.abs(run.u[:, 0]) >= arm.input_limit[0] - 1e-12) >= 20  # it saturates for 20 samples or more
     width = result.stages[-1]["width"]
     problem = TuningProblem(arm, block, scenario, cost=Cost("itae", energy_weight=0.01))
-    smoothed = ca.Function("smoothed", [problem.decision, problem.width],
-                           [problem.aggregate(problem.smoothed()[0])])(result.decision, width)
+    smoothed = ca.Function("smoothed", [problem.decision, problem.width], [problem.aggregate(problem.smoothed()[0])])(
+        result.decision, width
+    )
     assert float(smoothed) == pytest.approx(exact, rel=AGREEMENT)
     assert result.cost == pytest.approx(exact, rel=1e-9)
     # Stopped because the last two widths gave the same exact cost, not because the widths ran out.
@@ -219,16 +267,27 @@ def test_smoothed_gradient_equals_central_differences(arm):
     point, width = problem.start(), 0.05
     exact = np.asarray(f(point, width)[1]).ravel()
     h = 1e-6 * np.abs(point)
-    fd = [(float(f(point + h[i] * e, width)[0]) - float(f(point - h[i] * e, width)[0])) / (2 * h[i])
-          for i, e in enumerate(np.eye(point.size))]
+    fd = [
+        (float(f(point + h[i] * e, width)[0]) - float(f(point - h[i] * e, width)[0])) / (2 * h[i])
+        for i, e in enumerate(np.eye(point.size))
+    ]
     np.testing.assert_allclose(exact, fd, rtol=1e-5)
 
 
 # ----------------------------------------------------------------- several scenarios
 def _step_and_disturbance(target, **fields):
-    return [Scenario(reference=target, duration=3.0, tracked="theta", name="step", **fields),
-            Scenario(reference=target, duration=3.0, input_disturbance=0.2, tracked="theta", name="disturbance",
-                     weight=2.0, **fields)]
+    return [
+        Scenario(reference=target, duration=3.0, tracked="theta", name="step", **fields),
+        Scenario(
+            reference=target,
+            duration=3.0,
+            input_disturbance=0.2,
+            tracked="theta",
+            name="disturbance",
+            weight=2.0,
+            **fields,
+        ),
+    ]
 
 
 def test_several_scenarios_sum_their_weighted_costs_per_sample(arm):
@@ -248,8 +307,10 @@ def test_several_scenarios_sum_their_weighted_costs_per_sample(arm):
 
 def _two_steps():
     """The 50° step that saturates the arm's motor and a 20° step that does not."""
-    return [Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta", name="large step"),
-            Scenario(reference=np.deg2rad(20), duration=3.0, tracked="theta", name="small step", weight=2.0)]
+    return [
+        Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta", name="large step"),
+        Scenario(reference=np.deg2rad(20), duration=3.0, tracked="theta", name="small step", weight=2.0),
+    ]
 
 
 def _step_figures(plant, block, scenario):
@@ -265,11 +326,20 @@ def test_multi_scenario_tuning_is_never_worse_than_the_hand_design_on_any_scenar
     plain = _two_steps()
     hand = {s.name: _step_figures(arm, block, s) for s in plain}
     assert all(np.isfinite(settle) for _, settle in hand.values())
-    scenarios = [Scenario(s.reference, s.duration, tracked="theta", name=s.name, weight=s.weight,
-                          specs=Specs(max_overshoot=hand[s.name][0], settling_time=hand[s.name][1]))
-                 for s in plain]
-    result = tune(arm, block, scenarios, cost=Cost("itae", energy_weight=0.01),
-                  bounds={"kp": (0.06, 6.0), "kd": (0.012, 1.2)})
+    scenarios = [
+        Scenario(
+            s.reference,
+            s.duration,
+            tracked="theta",
+            name=s.name,
+            weight=s.weight,
+            specs=Specs(max_overshoot=hand[s.name][0], settling_time=hand[s.name][1]),
+        )
+        for s in plain
+    ]
+    result = tune(
+        arm, block, scenarios, cost=Cost("itae", energy_weight=0.01), bounds={"kp": (0.06, 6.0), "kd": (0.012, 1.2)}
+    )
     assert result.converged and result.feasible, result.message
     assert result.cost < 0.9 * result.initial_cost
     for s in plain:
@@ -282,15 +352,28 @@ def test_multi_scenario_tuning_is_never_worse_than_the_hand_design_on_any_scenar
 def test_quadratic_cost_terminal_and_output_terms_equal_a_numpy_sum_over_a_fresh_run(arm):
     block = ArmPD(arm)
     target = np.deg2rad(30)
-    cost = Cost(kind=None, state_weights=np.array([[2.0, 0.3], [0.3, 0.5]]), input_weights={"tau": 0.7},
-                output_weights=[1.5], terminal_weights={"dtheta": 4.0}, input_target={"tau": 0.4})
+    cost = Cost(
+        kind=None,
+        state_weights=np.array([[2.0, 0.3], [0.3, 0.5]]),
+        input_weights={"tau": 0.7},
+        output_weights=[1.5],
+        terminal_weights={"dtheta": 4.0},
+        input_target={"tau": 0.4},
+    )
     problem = TuningProblem(arm, block, Scenario(reference=target, duration=2.0, tracked="theta"), cost=cost)
     run = models.simulate_closed_loop(arm, block, target, 2.0, substeps=10)
     ts = block.sample_period
     dx = run.x[:-1] - np.array([target, 0.0])  # default target: the equilibrium with θ at the final reference
     Q = np.array([[2.0, 0.3], [0.3, 0.5]])
-    expected = ts * (np.einsum("ki,ij,kj->", dx, Q, dx) + 0.7 * np.sum((run.u[:, 0] - 0.4) ** 2)
-                     + 1.5 * np.sum((run.y[:-1, 0] - target) ** 2)) + 4.0 * run.x[-1, 1] ** 2
+    expected = (
+        ts
+        * (
+            np.einsum("ki,ij,kj->", dx, Q, dx)
+            + 0.7 * np.sum((run.u[:, 0] - 0.4) ** 2)
+            + 1.5 * np.sum((run.y[:-1, 0] - target) ** 2)
+        )
+        + 4.0 * run.x[-1, 1] ** 2
+    )
     assert problem.values(problem.start())[0] == pytest.approx(expected, rel=1e-10)
 
 
@@ -307,18 +390,36 @@ def test_criterion_of_any_signal_and_regulation_from_an_initial_state(arm):
     assert ise.values(ise.start())[0] == pytest.approx(ts * np.sum((run.u[:, 0] - ue[0]) ** 2), rel=1e-10)
     # Specs on any state of a regulation: a bound and a final value, checked against the run.
     bound = float(np.max(np.abs(run.x[1:, 1])))
-    holds = TuningProblem(arm, block, scenario, cost=Cost("iae", signal="theta"),
-                          specs=Specs(state_bounds={"dtheta": 1.01 * bound}, final_values={"theta": (0.0, 0.05)}))
+    holds = TuningProblem(
+        arm,
+        block,
+        scenario,
+        cost=Cost("iae", signal="theta"),
+        specs=Specs(state_bounds={"dtheta": 1.01 * bound}, final_values={"theta": (0.0, 0.05)}),
+    )
     assert holds.values(holds.start())[2] == [] and abs(run.x[-1, 0]) < 0.05
     assert run.x[1:, 1].min() == -bound  # it swings back with a negative rate
-    fails = TuningProblem(arm, block, scenario, cost=Cost("iae", signal="theta"),
-                          specs=Specs(state_bounds={"dtheta": (-0.5 * bound, np.inf)}))
+    fails = TuningProblem(
+        arm,
+        block,
+        scenario,
+        cost=Cost("iae", signal="theta"),
+        specs=Specs(state_bounds={"dtheta": (-0.5 * bound, np.inf)}),
+    )
     (violation,) = fails.values(fails.start())[2]
     assert violation.startswith(f"{-0.5 * bound:g} <= dtheta <= inf (regulation)")
 
 
-@models.declare(name="lag", title="x' = -b x + u", coordinates=(), inputs=("u",), first_order=("x",),
-                params=(models.Param("b", 2.0, "1/s"),), input_limit=1e6, register=False)
+@models.declare(
+    name="lag",
+    title="x' = -b x + u",
+    coordinates=(),
+    inputs=("u",),
+    first_order=("x",),
+    params=(models.Param("b", 2.0, "1/s"),),
+    input_limit=1e6,
+    register=False,
+)
 def _lag(q, dq, u, p, s):
     return models.Physics(rates={"x": -p.b * s.x + u.u}, outputs={"x": s.x})
 
@@ -327,8 +428,15 @@ class Proportional(models.Block):
     """u = −k x on a one-state plant (reads the state, no reference)."""
 
     def __init__(self, k, sample_period=0.01):
-        super().__init__(sample_period=sample_period, n_state=0, n_measured=1, n_reference=0, n_input=1,
-                         gains={"k": k}, measures="state")
+        super().__init__(
+            sample_period=sample_period,
+            n_state=0,
+            n_measured=1,
+            n_reference=0,
+            n_input=1,
+            gains={"k": k},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, -g["k"] * y[0]
@@ -345,12 +453,16 @@ def test_a_first_order_plant_tunes_without_registering_to_its_sampled_lqr_gain()
     rho = r / q
     lin = rho * (1 - phi**2) + gamma**2
     k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
-    result = tune(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]),
-                  cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}), tol=1e-12)
+    result = tune(
+        plant,
+        Proportional(1.0, ts),
+        Scenario(reference=None, duration=12.0, x0=[1.0]),
+        cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}),
+        tol=1e-12,
+    )
     assert result.converged and result.success, result.message
     assert float(result.gains["k"]) == pytest.approx(k_star, rel=1e-6)
-    assert result.cost == pytest.approx(q * ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2),
-                                        rel=1e-9)
+    assert result.cost == pytest.approx(q * ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2), rel=1e-9)
 
 
 def test_worst_case_tuning_minimizes_the_largest_sample_cost_of_the_closed_form():
@@ -367,10 +479,18 @@ def test_worst_case_tuning_minimizes_the_largest_sample_cost_of_the_closed_form(
         lam = phi - (1 - phi) / b * k
         return ts * (q + r * k**2) / (1 - lam**2)
 
-    best = scipy.optimize.minimize_scalar(lambda k: max(closed_form(k, b) for b in rows[:, 0]), bounds=(0, 10),
-                                          method="bounded", options={"xatol": 1e-12})
-    result = tune(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]), samples=rows,
-                  robust="worst", cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}), tol=1e-12)
+    best = scipy.optimize.minimize_scalar(
+        lambda k: max(closed_form(k, b) for b in rows[:, 0]), bounds=(0, 10), method="bounded", options={"xatol": 1e-12}
+    )
+    result = tune(
+        plant,
+        Proportional(1.0, ts),
+        Scenario(reference=None, duration=12.0, x0=[1.0]),
+        samples=rows,
+        robust="worst",
+        cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}),
+        tol=1e-12,
+    )
     assert result.converged, result.message
     assert float(result.gains["k"]) == pytest.approx(best.x, rel=1e-5)
     assert result.cost == pytest.approx(best.fun, rel=1e-8)

@@ -14,8 +14,15 @@ class StateFeedback(models.Block):
 
     def __init__(self, K, kr, sample_period=0.01):
         K = np.atleast_1d(np.asarray(K, dtype=float))
-        super().__init__(sample_period=sample_period, n_state=0, n_measured=K.size, n_reference=1,
-                         n_input=1, gains={"K": K, "kr": kr}, measures="state")
+        super().__init__(
+            sample_period=sample_period,
+            n_state=0,
+            n_measured=K.size,
+            n_reference=1,
+            n_input=1,
+            gains={"K": K, "kr": kr},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, -ca.dot(g["K"], y) + g["kr"] * r[0]
@@ -23,8 +30,9 @@ class StateFeedback(models.Block):
 
 class Constant(models.Block):
     def __init__(self, value, n_measured=1):
-        super().__init__(sample_period=0.01, n_state=0, n_measured=n_measured, n_reference=1,
-                         n_input=1, gains={"value": value})
+        super().__init__(
+            sample_period=0.01, n_state=0, n_measured=n_measured, n_reference=1, n_input=1, gains={"value": value}
+        )
 
     def expr(self, xc, y, r, g):
         return xc, g["value"]
@@ -35,8 +43,7 @@ class Proportional(models.Block):
 
     def __init__(self, k, index, n_measured):
         self.index = index
-        super().__init__(sample_period=0.01, n_state=1, n_measured=n_measured, n_reference=1,
-                         n_input=1, gains={"k": k})
+        super().__init__(sample_period=0.01, n_state=1, n_measured=n_measured, n_reference=1, n_input=1, gains={"k": k})
 
     def expr(self, xc, y, r, g):
         return xc + 1, g["k"] * (r[0] - y[self.index])
@@ -93,14 +100,16 @@ def test_monte_carlo_equals_single_runs():
     pend = models.get("pendulum")
     lin = pend.linearize()
     import control
+
     K = control.place(lin.A, lin.B, [-3, -3.5, -4, -4.5])[0]
     kr = -1.0 / (np.array([1, 0, 0, 0]) @ np.linalg.solve(lin.A - lin.B @ K[None], lin.B))[0]
     ctrl = StateFeedback(K, kr)
     samples = models.sample_params(pend, 4, seed=3)
     batch = models.monte_carlo(pend, ctrl, 0.5, 3.0, samples, noise_std=1e-3, seed=11)
     for i, res in enumerate(batch):
-        single = models.simulate_closed_loop(pend, ctrl, 0.5, 3.0, params=samples[i], noise_std=1e-3,
-                                             seed=np.random.SeedSequence([11, i]))
+        single = models.simulate_closed_loop(
+            pend, ctrl, 0.5, 3.0, params=samples[i], noise_std=1e-3, seed=np.random.SeedSequence([11, i])
+        )
         np.testing.assert_allclose(res.x, single.x, atol=1e-12)
         np.testing.assert_allclose(res.u, single.u, atol=1e-12)
     assert not np.allclose(batch[0].x, batch[1].x)
@@ -135,8 +144,15 @@ def test_gradient_of_a_closed_loop_cost_equals_finite_differences():
     ctrl = StateFeedback([0.6, 0.05], 0.6)
     run = models.closed_loop_function(arm, ctrl, 150)
     gains = ca.MX.sym("g", 3)
-    X = run(np.zeros(2), np.zeros(0), 0.3 * np.ones((1, 150)), np.zeros((2, 150)), np.zeros((1, 150)),
-            arm.param_vector(), gains)[0]
+    X = run(
+        np.zeros(2),
+        np.zeros(0),
+        0.3 * np.ones((1, 150)),
+        np.zeros((2, 150)),
+        np.zeros((1, 150)),
+        arm.param_vector(),
+        gains,
+    )[0]
     cost = ca.Function("cost", [gains], [ca.sumsqr(X[0, :] - 0.3) * 0.01])
     grad = ca.Function("grad", [gains], [ca.gradient(cost(gains), gains)])
     g0 = ctrl.gain_vector()
@@ -149,24 +165,31 @@ def test_gradient_of_a_closed_loop_cost_equals_finite_differences():
 def test_closed_loop_divergence_names_the_time(blow_up_plant):
     with pytest.raises(models.SimulationError, match=r"closed loop diverged at t = 0\.9"):
         models.simulate_closed_loop(blow_up_plant, Constant(0.0), 0.0, 2.0, x0=[1.0, 0.0])
-    res = models.simulate_closed_loop(blow_up_plant, Constant(0.0), 0.0, 2.0, x0=[1.0, 0.0],
-                                      allow_divergence=True)
+    res = models.simulate_closed_loop(blow_up_plant, Constant(0.0), 0.0, 2.0, x0=[1.0, 0.0], allow_divergence=True)
     assert 0.92 <= res.diverged_at <= 0.95
 
 
-@pytest.mark.parametrize("kwargs,error,message", [
-    ({"controller": Constant(0.0, n_measured=2)}, ValueError, "reads 2 measurements but arm provides 1"),
-    ({"duration": -1.0}, ValueError, r"duration \(s\) must be a finite number > 0, got -1.0"),
-    ({"reference": np.zeros((5, 1))}, ValueError, "reference must be a constant"),
-    ({"noise_std": -0.1}, ValueError, "noise_std must be finite and >= 0"),
-    ({"reference": lambda t: np.where(t > 0.5, np.nan, 0.0)}, ValueError, "reference is not finite at t = 0.51"),
-    ({"controller": object()}, TypeError, "is not a controller"),
-])
+@pytest.mark.parametrize(
+    "kwargs,error,message",
+    [
+        ({"controller": Constant(0.0, n_measured=2)}, ValueError, "reads 2 measurements but arm provides 1"),
+        ({"duration": -1.0}, ValueError, r"duration \(s\) must be a finite number > 0, got -1.0"),
+        ({"reference": np.zeros((5, 1))}, ValueError, "reference must be a constant"),
+        ({"noise_std": -0.1}, ValueError, "noise_std must be finite and >= 0"),
+        ({"reference": lambda t: np.where(t > 0.5, np.nan, 0.0)}, ValueError, "reference is not finite at t = 0.51"),
+        ({"controller": object()}, TypeError, "is not a controller"),
+    ],
+)
 def test_closed_loop_bad_input(kwargs, error, message):
     args = {"controller": Constant(0.0), "reference": 0.0, "duration": 1.0} | kwargs
     with pytest.raises(error, match=message):
-        models.simulate_closed_loop(models.get("arm"), args["controller"], args["reference"], args["duration"],
-                                    noise_std=args.get("noise_std", 0.0))
+        models.simulate_closed_loop(
+            models.get("arm"),
+            args["controller"],
+            args["reference"],
+            args["duration"],
+            noise_std=args.get("noise_std", 0.0),
+        )
 
 
 def test_block_rejects_bad_gains():
@@ -184,6 +207,7 @@ def test_monte_carlo_is_bit_identical_to_single_runs_whatever_the_chunking(measu
     if measures == "state":
         lin = pend.linearize()
         import control
+
         K = control.place(lin.A, lin.B, [-3, -3.5, -4, -4.5])[0]
         ctrl = StateFeedback(K, -1.0 / (np.array([1, 0, 0, 0]) @ np.linalg.solve(lin.A - lin.B @ K[None], lin.B))[0])
     else:
@@ -193,9 +217,18 @@ def test_monte_carlo_is_bit_identical_to_single_runs_whatever_the_chunking(measu
     batches = [models.monte_carlo(pend, ctrl, 0.3, 2.0, samples, chunk_size=c, **kw) for c in (1, 2, None)]
     chunked = list(models.monte_carlo_chunks(pend, ctrl, 0.3, 2.0, samples, chunk_size=2, **kw))
     for i, row in enumerate(samples):
-        single = models.simulate_closed_loop(pend, ctrl, 0.3, 2.0, params=row, noise_std=1e-3, substeps=2,
-                                             seed=np.random.SeedSequence([21, i]), input_disturbance=0.1,
-                                             allow_divergence=True)
+        single = models.simulate_closed_loop(
+            pend,
+            ctrl,
+            0.3,
+            2.0,
+            params=row,
+            noise_std=1e-3,
+            substeps=2,
+            seed=np.random.SeedSequence([21, i]),
+            input_disturbance=0.1,
+            allow_divergence=True,
+        )
         chunk = chunked[i // 2][i % 2]
         for batch in batches:
             for field in ("x", "y", "u", "xc", "measured", "params", "t", "r", "d", "input_limit"):

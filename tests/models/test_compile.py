@@ -74,8 +74,9 @@ def run_script(cwd: Path, env_changes: dict, prefix: tuple = ()) -> dict:
     env |= {"PYTHONPATH": str(REPO), "PYTHONDONTWRITEBYTECODE": "1"} | env_changes
     env = {key: value for key, value in env.items() if value is not None}
     try:
-        done = subprocess.run([*prefix, sys.executable, str(script)], cwd=cwd, env=env, capture_output=True,
-                              text=True, timeout=300)
+        done = subprocess.run(
+            [*prefix, sys.executable, str(script)], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
+        )
     finally:
         script.unlink()
         script.parent.rmdir()
@@ -124,11 +125,23 @@ def test_a_second_run_and_two_concurrent_runs_compile_once(world_readable_tmp):
     env = {"CODESIGN_CONTROL_CACHE": str(cache)}
     script = world_readable_tmp / "script.py"
     script.write_text(SCRIPT)
-    full_env = {k: v for k, v in os.environ.items() if k != "CC"} | {"PYTHONPATH": str(REPO),
-                                                                     "PYTHONDONTWRITEBYTECODE": "1"} | env
+    full_env = (
+        {k: v for k, v in os.environ.items() if k != "CC"}
+        | {"PYTHONPATH": str(REPO), "PYTHONDONTWRITEBYTECODE": "1"}
+        | env
+    )
     # Two processes compiling the same sources at once: both succeed, one library each in the cache.
-    processes = [subprocess.Popen([sys.executable, str(script)], cwd=world_readable_tmp, env=full_env,
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    processes = [
+        subprocess.Popen(
+            [sys.executable, str(script)],
+            cwd=world_readable_tmp,
+            env=full_env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(2)
+    ]
     reports = []
     for process in processes:
         out, err = process.communicate(timeout=300)
@@ -220,11 +233,14 @@ def test_an_interrupted_compilation_leaves_no_build_folder(private_cache, monkey
     assert list(private_cache.iterdir()) == []
 
 
-@pytest.mark.parametrize("make_cache, reason", [
-    (lambda tmp: "relative/cache", "not an absolute path"),
-    (lambda tmp: tmp / "shared", "writable by other users"),
-    (lambda tmp: tmp / "file", "cannot create the cache directory"),
-])
+@pytest.mark.parametrize(
+    "make_cache, reason",
+    [
+        (lambda tmp: "relative/cache", "not an absolute path"),
+        (lambda tmp: tmp / "shared", "writable by other users"),
+        (lambda tmp: tmp / "file", "cannot create the cache directory"),
+    ],
+)
 def test_a_cache_that_is_not_private_refuses_to_build(tmp_path, monkeypatch, make_cache, reason):
     cache = make_cache(tmp_path)
     if cache == tmp_path / "shared":
@@ -251,11 +267,14 @@ def test_compiler_errors_are_reported_or_fall_back(private_cache, monkeypatch):
     assert [p for p in private_cache.iterdir()] == []
 
 
-@pytest.mark.parametrize("files, match", [
-    ({"../escape.c": "int f;"}, "plain file name"),
-    ({"sub/a.c": "int f;"}, "plain file name"),
-    ({"only.h": "int f;"}, "at least one .c file"),
-])
+@pytest.mark.parametrize(
+    "files, match",
+    [
+        ({"../escape.c": "int f;"}, "plain file name"),
+        ({"sub/a.c": "int f;"}, "plain file name"),
+        ({"only.h": "int f;"}, "at least one .c file"),
+    ],
+)
 def test_bad_file_sets_are_refused(files, match):
     with pytest.raises(ValueError, match=match):
         mc.build_library(files)

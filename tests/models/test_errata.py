@@ -28,9 +28,9 @@ def test_pendulum_hint_II15_agrees():
 def test_satellite_hint_III15_has_the_third_row_sign_flipped():
     sat = models.get("satellite")
     Js, Jp, k, b = (sat.params[n] for n in ("Js", "Jp", "k", "b"))
-    hint_A = np.array([[0, 0, 1, 0], [0, 0, 0, 1],
-                       [k / Js, -k / Js, b / Js, -b / Js],
-                       [k / Jp, -k / Jp, b / Jp, -b / Jp]])
+    hint_A = np.array(
+        [[0, 0, 1, 0], [0, 0, 0, 1], [k / Js, -k / Js, b / Js, -b / Js], [k / Jp, -k / Jp, b / Jp, -b / Jp]]
+    )
     lin = sat.linearize()
     np.testing.assert_allclose(lin.A[[0, 1, 3]], hint_A[[0, 1, 3]], atol=1e-15)
     np.testing.assert_allclose(lin.A[2], -hint_A[2], atol=1e-15)

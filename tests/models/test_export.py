@@ -26,8 +26,14 @@ class PendulumPD(models.Block):
     state (theta_prev, theta_rate, z_prev, z_rate); an if_else that switches the derivative gain."""
 
     def __init__(self):
-        super().__init__(sample_period=0.01, n_state=4, n_measured=2, n_reference=1, n_input=1,
-                         gains={"k": np.array([-0.05, -0.08, 40.0, 3.0]), "sigma": 0.05})
+        super().__init__(
+            sample_period=0.01,
+            n_state=4,
+            n_measured=2,
+            n_reference=1,
+            n_input=1,
+            gains={"k": np.array([-0.05, -0.08, 40.0, 3.0]), "sigma": 0.05},
+        )
 
     def expr(self, xc, y, r, gains):
         k, ts = gains["k"], self.sample_period
@@ -49,8 +55,10 @@ def test_exported_block_runs_the_same_closed_loop_as_the_python_block():
     block = PendulumPD()
     controller = export_block(block, "pendulum_pd").load(initial_state=block.initial_state)
     assert isinstance(controller, models.Controller)
-    runs = [models.simulate_closed_loop(plant, c, 0.5, 10.0, input_disturbance=0.3, noise_std=1e-3, seed=4)
-            for c in (block, controller)]
+    runs = [
+        models.simulate_closed_loop(plant, c, 0.5, 10.0, input_disturbance=0.3, noise_std=1e-3, seed=4)
+        for c in (block, controller)
+    ]
     assert runs[0].diverged_at is None and np.max(np.abs(runs[0].u)) == 5.0  # it saturates
     np.testing.assert_allclose(runs[1].u, runs[0].u, atol=1e-9, rtol=0)
     np.testing.assert_allclose(runs[1].x, runs[0].x, atol=1e-9, rtol=0)
@@ -65,18 +73,31 @@ def test_exported_files_are_self_contained_c99_without_allocation(tmp_path):
     includes = set(re.findall(r'#include [<"]([^>"]+)[>"]', exported.source + exported.header))
     assert includes == {"math.h", "pendulum_pd.h"}
     assert not re.search(r"\b(malloc|calloc|realloc|free)\s*\(", exported.source)
-    for macro, value in (("N_STATE", 4), ("N_MEASURED", 2), ("N_REFERENCE", 1), ("N_INPUT", 1),
-                         ("SAMPLE_PERIOD", "0.01")):
+    for macro, value in (
+        ("N_STATE", 4),
+        ("N_MEASURED", 2),
+        ("N_REFERENCE", 1),
+        ("N_INPUT", 1),
+        ("SAMPLE_PERIOD", "0.01"),
+    ):
         assert f"#define PENDULUM_PD_{macro} {value}\n" in exported.header
     # The initial state offered is the block's own at the (y0, r0) given.
     np.testing.assert_array_equal(exported.initial_state, [0.01, 0.0, 0.2, 0.0])
     assert "const double PENDULUM_PD_INITIAL_STATE[4] = {\n    0.01, 0.0, 0.2, 0.0\n};" in exported.source
     # Strict C99 with every warning of -Wall an error, and the header from C++ too.
     command = mc.compiler()
-    subprocess.run([*command, "-std=c99", "-pedantic", "-Wall", "-Werror", "-c", "pendulum_pd.c", "-o", "x.o"],
-                   cwd=tmp_path / "out", check=True, capture_output=True)
-    subprocess.run([*command, "-x", "c++", "-fsyntax-only", "-Wall", "-Werror", "pendulum_pd.h"],
-                   cwd=tmp_path / "out", check=True, capture_output=True)
+    subprocess.run(
+        [*command, "-std=c99", "-pedantic", "-Wall", "-Werror", "-c", "pendulum_pd.c", "-o", "x.o"],
+        cwd=tmp_path / "out",
+        check=True,
+        capture_output=True,
+    )
+    subprocess.run(
+        [*command, "-x", "c++", "-fsyntax-only", "-Wall", "-Werror", "pendulum_pd.h"],
+        cwd=tmp_path / "out",
+        check=True,
+        capture_output=True,
+    )
 
 
 def test_a_c_program_using_the_header_gets_the_python_commands(tmp_path):
@@ -134,8 +155,13 @@ class PythonInside(models.Block):
     @property
     def casadi_step(self):
         xc, y, r, g = ca.MX.sym("xc", 0), ca.MX.sym("y", 1), ca.MX.sym("r", 1), ca.MX.sym("g", 1)
-        return ca.Function("step", [xc, y, r, g], [ca.MX(0, 1), self._callback(g * (r - y))],
-                           ["xc", "y", "r", "gains"], ["xc_next", "u"])
+        return ca.Function(
+            "step",
+            [xc, y, r, g],
+            [ca.MX(0, 1), self._callback(g * (r - y))],
+            ["xc", "y", "r", "gains"],
+            ["xc_next", "u"],
+        )
 
 
 class NotABlock:
@@ -150,11 +176,16 @@ class NotABlock:
 
 
 def test_what_cannot_be_exported_is_named():
-    with pytest.raises(UnsupportedExport, match=r"PythonInside: its step calls something that is not plain "
-                                                r"arithmetic: python_gain \(CallbackInternal\)"):
+    with pytest.raises(
+        UnsupportedExport,
+        match=r"PythonInside: its step calls something that is not plain "
+        r"arithmetic: python_gain \(CallbackInternal\)",
+    ):
         export_block(PythonInside(), "inside")
-    with pytest.raises(UnsupportedExport, match="hand-written controller: only models.Block controllers are "
-                                                "exported here; NotABlock is not one"):
+    with pytest.raises(
+        UnsupportedExport,
+        match="hand-written controller: only models.Block controllers are exported here; NotABlock is not one",
+    ):
         export_block(NotABlock(), "hand")
 
 

@@ -24,8 +24,16 @@ def _motor_declaration(arm_mass=0.0):
     params = [models.Param(k, v, "SI") for k, v in MOTOR.items()]
     params.append(models.Param("m", arm_mass, "kg", positive=False))
 
-    @models.declare(name="dc_motor", title="DC motor with inductance", coordinates=("theta",), inputs=("v",),
-                    first_order=("i",), params=tuple(params), input_limit=12.0, register=False)
+    @models.declare(
+        name="dc_motor",
+        title="DC motor with inductance",
+        coordinates=("theta",),
+        inputs=("v",),
+        first_order=("i",),
+        params=tuple(params),
+        input_limit=12.0,
+        register=False,
+    )
     def motor(q, dq, u, p, s):
         rod = p.m * 0.3**2 / 3
         return models.Physics(
@@ -44,8 +52,16 @@ def motor():
     return models.Plant(_motor_declaration())
 
 
-@models.declare(name="first_order_lag", title="x' = -b x + u", coordinates=(), inputs=("u",), first_order=("x",),
-                params=(models.Param("b", 2.0, "1/s"),), input_limit=10.0, register=False)
+@models.declare(
+    name="first_order_lag",
+    title="x' = -b x + u",
+    coordinates=(),
+    inputs=("u",),
+    first_order=("x",),
+    params=(models.Param("b", 2.0, "1/s"),),
+    input_limit=10.0,
+    register=False,
+)
 def _lag(q, dq, u, p, s):
     return models.Physics(rates={"x": -p.b * s.x + u.u}, outputs={"x": s.x})
 
@@ -93,8 +109,11 @@ def test_motor_lifting_an_arm_holds_an_angle_with_the_current_gravity_asks(motor
     assert plant.equilibrium_input([theta])[0] == pytest.approx(R * current, rel=1e-12)
     J_total = J + 0.2 * 0.3**2 / 3
     lin = plant.linearize(xe, ue)
-    np.testing.assert_allclose(lin.A, [[0, 1, 0], [weight * np.sin(theta) / J_total, -b / J_total, K / J_total],
-                                       [0, -K / L, -R / L]], rtol=1e-12)
+    np.testing.assert_allclose(
+        lin.A,
+        [[0, 1, 0], [weight * np.sin(theta) / J_total, -b / J_total, K / J_total], [0, -K / L, -R / L]],
+        rtol=1e-12,
+    )
 
 
 def test_power_balance_of_the_motor(motor):
@@ -144,8 +163,15 @@ class Proportional(models.Block):
     """u = k (r − y), reading the plant's first output."""
 
     def __init__(self, k, n_measured=1, measures="outputs"):
-        super().__init__(sample_period=0.01, n_state=0, n_measured=n_measured, n_reference=1, n_input=1,
-                         gains={"k": k}, measures=measures)
+        super().__init__(
+            sample_period=0.01,
+            n_state=0,
+            n_measured=n_measured,
+            n_reference=1,
+            n_input=1,
+            gains={"k": k},
+            measures=measures,
+        )
 
     def expr(self, xc, y, r, g):
         return xc, g["k"] * (r[0] - y[0])
@@ -180,8 +206,15 @@ def test_dc_motor_under_state_feedback_is_the_exact_discrete_recursion(motor):
 
     class StateFeedback(models.Block):
         def __init__(self):
-            super().__init__(sample_period=Ts, n_state=0, n_measured=3, n_reference=1, n_input=1,
-                             gains={"K": K, "kr": 20.0}, measures="state")
+            super().__init__(
+                sample_period=Ts,
+                n_state=0,
+                n_measured=3,
+                n_reference=1,
+                n_input=1,
+                gains={"K": K, "kr": 20.0},
+                measures="state",
+            )
 
         def expr(self, xc, y, r, g):
             return xc, -ca.dot(g["K"], y) + g["kr"] * r[0]
@@ -199,8 +232,9 @@ def test_monte_carlo_of_a_first_order_plant_equals_single_runs(lag):
     samples = np.array([[1.0], [2.0], [3.0]])
     batch = models.monte_carlo(lag, Proportional(5.0), 1.0, 1.0, samples, x0=[0.0], noise_std=0.01, seed=3)
     for i, row in enumerate(samples):
-        single = models.simulate_closed_loop(lag, Proportional(5.0), 1.0, 1.0, x0=[0.0], params=row,
-                                             noise_std=0.01, seed=np.random.SeedSequence([3, i]))
+        single = models.simulate_closed_loop(
+            lag, Proportional(5.0), 1.0, 1.0, x0=[0.0], params=row, noise_std=0.01, seed=np.random.SeedSequence([3, i])
+        )
         np.testing.assert_array_equal(batch[i].x, single.x)
     # At rest x = k r / (k + b): the larger b, the lower.
     assert batch.x[0, -1, 0] > batch.x[1, -1, 0] > batch.x[2, -1, 0]

@@ -18,10 +18,12 @@ def satellite():
 
 # ------------------------------------------------------------ rank tests
 def test_controllability_and_observability_matrices_match_python_control(satellite):
-    np.testing.assert_allclose(lqr.controllability_matrix(satellite.A, satellite.B),
-                               control.ctrb(satellite.A, satellite.B), atol=1e-14)
-    np.testing.assert_allclose(lqr.observability_matrix(satellite.A, satellite.C),
-                               control.obsv(satellite.A, satellite.C), atol=1e-14)
+    np.testing.assert_allclose(
+        lqr.controllability_matrix(satellite.A, satellite.B), control.ctrb(satellite.A, satellite.B), atol=1e-14
+    )
+    np.testing.assert_allclose(
+        lqr.observability_matrix(satellite.A, satellite.C), control.obsv(satellite.A, satellite.C), atol=1e-14
+    )
     assert lqr.require_controllable(satellite.A, satellite.B) == 4
     assert lqr.require_observable(satellite.A, satellite.C) == 4
 
@@ -90,8 +92,11 @@ def test_lqr_solves_the_riccati_equation_of_every_plant(name):
     R = np.array([[0.3]])
     K, P = lqr.lqr(lin.A, lin.B, Q, R, name)
     residual = lin.A.T @ P + P @ lin.A - P @ lin.B @ np.linalg.solve(R, lin.B.T @ P) + Q
-    scale = np.linalg.norm(lin.A.T @ P) * 2 + np.linalg.norm(P @ lin.B @ np.linalg.solve(R, lin.B.T @ P)) \
+    scale = (
+        np.linalg.norm(lin.A.T @ P) * 2
+        + np.linalg.norm(P @ lin.B @ np.linalg.solve(R, lin.B.T @ P))
         + np.linalg.norm(Q)
+    )
     assert np.linalg.norm(residual) / scale < 1e-9
     assert lqr.riccati_residual(lin.A, lin.B, Q, R, P) < 1e-9
     np.testing.assert_allclose(K, np.linalg.solve(R, lin.B.T @ P), rtol=1e-12)
@@ -131,8 +136,7 @@ def test_dkalman_equals_the_converged_covariance_recursion(satellite):
     # Prediction covariance: P+ = A P A' - A P C' (C P C' + V)^-1 C P A' + W, the dual recursion.
     _, P_rec = _riccati_recursion(disc.A.T, disc.C.T, W, V)
     np.testing.assert_allclose(P, P_rec, rtol=1e-8)
-    np.testing.assert_allclose(L, disc.A @ P_rec @ disc.C.T @ np.linalg.inv(disc.C @ P_rec @ disc.C.T + V),
-                               rtol=1e-8)
+    np.testing.assert_allclose(L, disc.A @ P_rec @ disc.C.T @ np.linalg.inv(disc.C @ P_rec @ disc.C.T + V), rtol=1e-8)
 
 
 def test_bryson_weights_and_bad_weights():

@@ -41,11 +41,11 @@ def test_optimal_cost_and_inputs_equal_the_batch_least_squares_answer():
         rows, previous = slice((k + 1) * n, (k + 2) * n), slice(k * n, (k + 1) * n)
         Phi[rows] = As[k] @ Phi[previous]
         Gamma[rows] = As[k] @ Gamma[previous]
-        Gamma[rows, k * m:(k + 1) * m] += Bs[k]
+        Gamma[rows, k * m : (k + 1) * m] += Bs[k]
     weight = np.zeros(((steps + 1) * n, (steps + 1) * n))
     for k in range(steps):
-        weight[k * n:(k + 1) * n, k * n:(k + 1) * n] = Q
-    weight[steps * n:, steps * n:] = final
+        weight[k * n : (k + 1) * n, k * n : (k + 1) * n] = Q
+    weight[steps * n :, steps * n :] = final
     input_weight = np.kron(np.eye(steps), R)
     hessian = Gamma.T @ weight @ Gamma + input_weight
     u_best = -np.linalg.solve(hessian, Gamma.T @ weight @ Phi @ x0)

@@ -71,12 +71,15 @@ def test_second_order_step_closed_forms(zeta, wn):
     assert metrics.tracking_integrals(t, y, np.ones_like(t))["iae"] == pytest.approx(iae, rel=1e-5)
 
 
-@pytest.mark.parametrize("system", [
-    control.tf([2.0], [0.5, 1.0]),                          # first order, DC gain 2
-    control.tf([1.5 * 9.0], [1.0, 3.0, 9.0]),                # ζ = 0.5, ωn = 3, DC gain 1.5
-    control.tf([4.0, 8.0], [1.0, 3.0, 6.0, 4.0 * 1.0]),      # third order with a zero
-    control.tf([-1.0, 2.0], [1.0, 2.0, 2.0]),               # non-minimum phase, undershoot
-])
+@pytest.mark.parametrize(
+    "system",
+    [
+        control.tf([2.0], [0.5, 1.0]),  # first order, DC gain 2
+        control.tf([1.5 * 9.0], [1.0, 3.0, 9.0]),  # ζ = 0.5, ωn = 3, DC gain 1.5
+        control.tf([4.0, 8.0], [1.0, 3.0, 6.0, 4.0 * 1.0]),  # third order with a zero
+        control.tf([-1.0, 2.0], [1.0, 2.0, 2.0]),  # non-minimum phase, undershoot
+    ],
+)
 def test_agrees_with_python_control_step_info(system):
     t = np.linspace(0.0, 30.0, 30001)
     dt = t[1] - t[0]
@@ -112,10 +115,22 @@ def test_input_metrics_by_hand():
 def make_result(t, x, r, u, limit=1.0, diverged_at=None, step_time=None):
     n = len(t) - 1
     return models.ClosedLoopResult(
-        t=t, x=x, y=x[:, :1], r=r[:, None], u=u, d=np.zeros_like(u), measured=x[:-1, :1], xc=None,
-        step_time=np.full(n, 1e-4) if step_time is None else step_time, status=None,
-        input_limit=np.array([limit]), state_names=("z", "dz"), output_names=("z",), input_names=("F",),
-        diverged_at=diverged_at)
+        t=t,
+        x=x,
+        y=x[:, :1],
+        r=r[:, None],
+        u=u,
+        d=np.zeros_like(u),
+        measured=x[:-1, :1],
+        xc=None,
+        step_time=np.full(n, 1e-4) if step_time is None else step_time,
+        status=None,
+        input_limit=np.array([limit]),
+        state_names=("z", "dz"),
+        output_names=("z",),
+        input_names=("F",),
+        diverged_at=diverged_at,
+    )
 
 
 def test_run_metrics_takes_the_worst_of_a_series_of_steps():

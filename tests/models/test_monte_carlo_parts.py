@@ -14,8 +14,15 @@ class StateFeedback(models.Block):
     """u = -K x + kr r, reading the full state (a test fixture, not a design)."""
 
     def __init__(self, K, kr):
-        super().__init__(sample_period=0.01, n_state=0, n_measured=len(K), n_reference=1, n_input=1,
-                         gains={"K": np.asarray(K, dtype=float), "kr": kr}, measures="state")
+        super().__init__(
+            sample_period=0.01,
+            n_state=0,
+            n_measured=len(K),
+            n_reference=1,
+            n_input=1,
+            gains={"K": np.asarray(K, dtype=float), "kr": kr},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, -ca.dot(g["K"], y) + g["kr"] * r[0]
@@ -27,8 +34,10 @@ def test_parts_with_their_first_sample_are_the_whole_monte_carlo_noise_included(
     samples = models.sample_params(arm, 9, seed=2)
     kw = dict(noise_std=1e-3, seed=5, substeps=2)
     whole = models.monte_carlo(arm, block, 0.3, 1.0, samples, **kw)
-    parts = [models.monte_carlo(arm, block, 0.3, 1.0, samples[a:b], first_sample=a, **kw)
-             for a, b in ((0, 4), (4, 5), (5, 9))]
+    parts = [
+        models.monte_carlo(arm, block, 0.3, 1.0, samples[a:b], first_sample=a, **kw)
+        for a, b in ((0, 4), (4, 5), (5, 9))
+    ]
     for name in ("x", "u", "measured"):
         np.testing.assert_array_equal(np.concatenate([getattr(p, name) for p in parts]), getattr(whole, name))
     assert [p.first_sample for p in parts] == [0, 4, 5]

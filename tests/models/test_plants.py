@@ -28,7 +28,9 @@ def test_jacobians_equal_central_differences(name):
         h = 1e-6
         A_fd = np.column_stack([(plant.f(x + h * e, u) - plant.f(x - h * e, u)) / (2 * h) for e in np.eye(plant.nx)])
         B_fd = np.column_stack([(plant.f(x, u + h * e) - plant.f(x, u - h * e)) / (2 * h) for e in np.eye(plant.nu)])
-        C_fd = np.column_stack([(plant.output(x + h * e) - plant.output(x - h * e)) / (2 * h) for e in np.eye(plant.nx)])
+        C_fd = np.column_stack(
+            [(plant.output(x + h * e) - plant.output(x - h * e)) / (2 * h) for e in np.eye(plant.nx)]
+        )
         for exact, fd in ((lin.A, A_fd), (lin.B, B_fd), (lin.C, C_fd)):
             scale = max(1.0, np.max(np.abs(exact)))
             np.testing.assert_allclose(exact, fd, rtol=1e-6, atol=1e-6 * scale)
@@ -45,7 +47,7 @@ def test_power_balance(name):
     p = plant.params
     rng = np.random.default_rng(2)
     for x, u in _random_points(plant, rng):
-        dq = x[plant.nq:]
+        dq = x[plant.nq :]
         power = {
             "arm": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
             "pendulum": lambda u, dq: (u[0] - p["b"] * dq[0]) * dq[0],
@@ -77,9 +79,9 @@ def _hand_linearization(name, p):
         return A, np.array([[0], [0], [1 / m2], [-1 / (m2 * ell)]])
     if name == "satellite":
         Js, Jp, k, b = (p[n] for n in ("Js", "Jp", "k", "b"))
-        A = np.array([[0, 0, 1, 0], [0, 0, 0, 1],
-                      [-k / Js, k / Js, -b / Js, b / Js],
-                      [k / Jp, -k / Jp, b / Jp, -b / Jp]])
+        A = np.array(
+            [[0, 0, 1, 0], [0, 0, 0, 1], [-k / Js, k / Js, -b / Js, b / Js], [k / Jp, -k / Jp, b / Jp, -b / Jp]]
+        )
         return A, np.array([[0], [0], [1 / Js], [0]])
     if name == "uuv":
         J, m, L, b, g = (p[n] for n in ("J", "m", "L", "b", "g"))
@@ -140,22 +142,34 @@ def test_arm_linearization_at_a_raised_angle():
     assert ue[0] == pytest.approx(p["m"] * p["g"] * p["ell"] / 2 * np.cos(theta), rel=1e-12)
     J = p["m"] * p["ell"] ** 2 / 3
     lin = arm.linearize(xe, ue)
-    np.testing.assert_allclose(lin.A, [[0, 1], [p["m"] * p["g"] * p["ell"] / 2 * np.sin(theta) / J, -p["b"] / J]],
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        lin.A, [[0, 1], [p["m"] * p["g"] * p["ell"] / 2 * np.sin(theta) / J, -p["b"] / J]], rtol=1e-12
+    )
 
 
-@pytest.mark.parametrize("name,fixed", [
-    ("arm", {"theta": 0.5}), ("arm", {}), ("pendulum", {}), ("pendulum", {"theta": np.pi}),
-    ("satellite", {}), ("uuv", {}), ("uuv", {"phi": 0.3}), ("ballbeam", {"z": 0.25}),
-    ("ballbeam", {"z": 0.4}), ("crane", {}), ("crane1", {"x": 3.0}),
-])
+@pytest.mark.parametrize(
+    "name,fixed",
+    [
+        ("arm", {"theta": 0.5}),
+        ("arm", {}),
+        ("pendulum", {}),
+        ("pendulum", {"theta": np.pi}),
+        ("satellite", {}),
+        ("uuv", {}),
+        ("uuv", {"phi": 0.3}),
+        ("ballbeam", {"z": 0.25}),
+        ("ballbeam", {"z": 0.4}),
+        ("crane", {}),
+        ("crane1", {"x": 3.0}),
+    ],
+)
 def test_equilibrium_residual(name, fixed):
     plant = models.get(name)
     xe, ue = plant.equilibrium(**fixed)
     assert np.max(np.abs(plant.f(xe, ue))) < 1e-10
     for key, value in fixed.items():
         assert xe[plant.coordinate_names.index(key)] == pytest.approx(value)
-    assert np.all(xe[plant.nq:] == 0)
+    assert np.all(xe[plant.nq :] == 0)
 
 
 def test_ballbeam_equilibrium_force_is_the_moment_balance():
@@ -190,20 +204,23 @@ def test_output_map_of_the_satellite():
     np.testing.assert_allclose(sat.linearize().C, [[1, 0, 0, 0], [-1, 1, 0, 0]])
 
 
-@pytest.mark.parametrize("call,message", [
-    (lambda: models.get("robot"), "unknown plant 'robot'; valid plants: arm, pendulum"),
-    (lambda: models.get("arm", M=1.0), "arm has no parameter 'M'; its parameters are m, ell, g, b"),
-    (lambda: models.get("arm", m=-0.5), r"parameter m \(kg\) must be finite and > 0"),
-    (lambda: models.get("arm", m=0.0), r"must be finite and > 0"),
-    (lambda: models.get("arm", b=-1e-3), r"parameter b .* >= 0"),
-    (lambda: models.get("arm", ell=float("nan")), "must be finite"),
-    (lambda: models.get("arm").f([0.0], [0.0]), r"state \('theta', 'dtheta'\) must have 2 entries"),
-    (lambda: models.get("arm").f([0.0, np.inf], [0.0]), "non-finite"),
-    (lambda: models.get("arm").f([0.0, 0.0], [0.0, 1.0]), "input .* must have 1 entries"),
-    (lambda: models.get("arm").equilibrium(phi=0.1), "cannot fix 'phi'"),
-    (lambda: models.get("arm").linearize([0.3, 0.0], [0.0]), "not an equilibrium"),
-    (lambda: models.get("arm", input_limit=-1), "input_limit must be finite and > 0"),
-])
+@pytest.mark.parametrize(
+    "call,message",
+    [
+        (lambda: models.get("robot"), "unknown plant 'robot'; valid plants: arm, pendulum"),
+        (lambda: models.get("arm", M=1.0), "arm has no parameter 'M'; its parameters are m, ell, g, b"),
+        (lambda: models.get("arm", m=-0.5), r"parameter m \(kg\) must be finite and > 0"),
+        (lambda: models.get("arm", m=0.0), r"must be finite and > 0"),
+        (lambda: models.get("arm", b=-1e-3), r"parameter b .* >= 0"),
+        (lambda: models.get("arm", ell=float("nan")), "must be finite"),
+        (lambda: models.get("arm").f([0.0], [0.0]), r"state \('theta', 'dtheta'\) must have 2 entries"),
+        (lambda: models.get("arm").f([0.0, np.inf], [0.0]), "non-finite"),
+        (lambda: models.get("arm").f([0.0, 0.0], [0.0, 1.0]), "input .* must have 1 entries"),
+        (lambda: models.get("arm").equilibrium(phi=0.1), "cannot fix 'phi'"),
+        (lambda: models.get("arm").linearize([0.3, 0.0], [0.0]), "not an equilibrium"),
+        (lambda: models.get("arm", input_limit=-1), "input_limit must be finite and > 0"),
+    ],
+)
 def test_bad_input_names_the_culprit(call, message):
     with pytest.raises(ValueError, match=message):
         call()
@@ -221,8 +238,7 @@ def test_configuration_is_recovered_from_the_outputs(name):
     plant = models.get(name)
     q = np.random.default_rng(3).uniform(-1, 1, plant.nq)
     y = plant.output(np.concatenate([q, np.zeros(plant.nq)]))
-    np.testing.assert_allclose(np.asarray(plant.casadi_configuration(y, plant.param_vector())).ravel(), q,
-                               atol=1e-14)
+    np.testing.assert_allclose(np.asarray(plant.casadi_configuration(y, plant.param_vector())).ravel(), q, atol=1e-14)
 
 
 def test_equilibrium_input_jacobian_of_the_ball_on_beam_and_the_arm():
@@ -232,5 +248,6 @@ def test_equilibrium_input_jacobian_of_the_ball_on_beam_and_the_arm():
     np.testing.assert_allclose(beam.equilibrium_input_jacobian(), [[p["m1"] * p["g"] / p["ell"], 0.0]], atol=1e-14)
     arm = models.get("arm")
     a = arm.params
-    np.testing.assert_allclose(arm.equilibrium_input_jacobian([0.4]),
-                               [[-a["m"] * a["g"] * a["ell"] / 2 * np.sin(0.4)]], rtol=1e-12)
+    np.testing.assert_allclose(
+        arm.equilibrium_input_jacobian([0.4]), [[-a["m"] * a["g"] * a["ell"] / 2 * np.sin(0.4)]], rtol=1e-12
+    )

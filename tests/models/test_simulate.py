@@ -7,8 +7,15 @@ import pytest
 import models
 from models.simulate import radau_matrices, simulate
 
-UNDAMPED = {"arm": {"b": 0.0}, "pendulum": {"b": 0.0}, "satellite": {"b": 0.0}, "uuv": {"b": 0.0},
-            "ballbeam": {}, "crane": {"b": 0.0}, "crane1": {"b": 0.0}}
+UNDAMPED = {
+    "arm": {"b": 0.0},
+    "pendulum": {"b": 0.0},
+    "satellite": {"b": 0.0},
+    "uuv": {"b": 0.0},
+    "ballbeam": {},
+    "crane": {"b": 0.0},
+    "crane1": {"b": 0.0},
+}
 
 
 @pytest.mark.parametrize("name", models.names())
@@ -16,11 +23,11 @@ def test_energy_is_conserved_without_damping_or_input(name):
     plant = models.get(name, **UNDAMPED[name])
     xe, _ = plant.equilibrium()
     x0 = xe.copy()
-    x0[:plant.nq] += 0.2
-    x0[plant.nq:] += 0.1
+    x0[: plant.nq] += 0.2
+    x0[plant.nq :] += 0.1
     run = simulate(plant, x0, np.zeros((100, plant.nu)), 0.05, method="adaptive")
     energy = np.array([plant.energy(x) for x in run.x])
-    potential = np.array([plant.energy(np.concatenate([x[:plant.nq], np.zeros(plant.nq)])) for x in run.x])
+    potential = np.array([plant.energy(np.concatenate([x[: plant.nq], np.zeros(plant.nq)])) for x in run.x])
     # Relative to the kinetic energy exchanged, not to T + V (whose offset is arbitrary).
     scale = np.max(energy - potential)
     assert scale > 1e-6
@@ -29,9 +36,15 @@ def test_energy_is_conserved_without_damping_or_input(name):
 
 # Stable plants run 10 s; unstable ones start 1e-3 off equilibrium and run while
 # the state stays physical (ball on the beam, pendulum within 0.3 rad).
-RUNS = {"arm": (0.0, 1000, 0.0), "satellite": (0.0, 1000, 0.5), "uuv": (0.0, 1000, 10.0),
-        "crane": (0.0, 1000, 1000.0), "crane1": (0.0, 1000, 1000.0),
-        "pendulum": (1e-3, 100, 0.0), "ballbeam": (1e-3, 100, 0.0)}
+RUNS = {
+    "arm": (0.0, 1000, 0.0),
+    "satellite": (0.0, 1000, 0.5),
+    "uuv": (0.0, 1000, 10.0),
+    "crane": (0.0, 1000, 1000.0),
+    "crane1": (0.0, 1000, 1000.0),
+    "pendulum": (1e-3, 100, 0.0),
+    "ballbeam": (1e-3, 100, 0.0),
+}
 
 
 @pytest.mark.parametrize("name", models.names())
@@ -40,7 +53,7 @@ def test_three_simulators_agree(name):
     offset, n, du = RUNS[name]
     xe, ue = plant.equilibrium()
     x0 = xe.copy()
-    x0[:plant.nq] += offset
+    x0[: plant.nq] += offset
     t = 0.01 * np.arange(n)
     u = ue + du * np.sin(t)[:, None] if name != "arm" else np.zeros((n, 1))
     runs = [simulate(plant, x0, u, 0.01, method=m) for m in ("rk4", "adaptive", "collocation")]
@@ -84,12 +97,15 @@ def test_divergence_names_the_time(method, blow_up_plant):
     assert "blowup" not in models.names()
 
 
-@pytest.mark.parametrize("kwargs,message", [
-    ({"method": "euler"}, "unknown method 'euler'"),
-    ({"x0": [0.0]}, "initial state .* must have 2 entries"),
-    ({"u": np.full((3, 1), np.nan)}, "input sequence has a non-finite entry at row 0"),
-    ({"sample_period": -0.01}, r"sample_period \(s\) must be a finite number > 0, got -0.01"),
-])
+@pytest.mark.parametrize(
+    "kwargs,message",
+    [
+        ({"method": "euler"}, "unknown method 'euler'"),
+        ({"x0": [0.0]}, "initial state .* must have 2 entries"),
+        ({"u": np.full((3, 1), np.nan)}, "input sequence has a non-finite entry at row 0"),
+        ({"sample_period": -0.01}, r"sample_period \(s\) must be a finite number > 0, got -0.01"),
+    ],
+)
 def test_simulate_bad_input(kwargs, message):
     args = {"x0": [0.0, 0.0], "u": np.zeros((3, 1)), "sample_period": 0.01} | kwargs
     with pytest.raises(ValueError, match=message):
@@ -97,10 +113,18 @@ def test_simulate_bad_input(kwargs, message):
 
 
 def test_discretize_double_integrator_closed_form():
-    lin = models.LinearModel(A=np.array([[0.0, 1.0], [0.0, 0.0]]), B=np.array([[0.0], [1.0]]),
-                             C=np.eye(2), D=np.zeros((2, 1)), xe=np.zeros(2), ue=np.zeros(1),
-                             ye=np.zeros(2), state_names=("q", "dq"), input_names=("u",),
-                             output_names=("q", "dq"))
+    lin = models.LinearModel(
+        A=np.array([[0.0, 1.0], [0.0, 0.0]]),
+        B=np.array([[0.0], [1.0]]),
+        C=np.eye(2),
+        D=np.zeros((2, 1)),
+        xe=np.zeros(2),
+        ue=np.zeros(1),
+        ye=np.zeros(2),
+        state_names=("q", "dq"),
+        input_names=("u",),
+        output_names=("q", "dq"),
+    )
     disc = lin.discretize(0.1)
     np.testing.assert_allclose(disc.A, [[1, 0.1], [0, 1]], atol=1e-15)
     np.testing.assert_allclose(disc.B, [[0.005], [0.1]], atol=1e-15)

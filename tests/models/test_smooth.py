@@ -56,8 +56,16 @@ def test_smoothed_saturation_has_a_continuous_derivative_matching_finite_differe
 
 def test_logic_and_fmin_fmax_are_blended_and_equalities_kept():
     x, k = ca.SX.sym("x"), ca.SX.sym("k")
-    exact = ca.Function("f", [x, k], [ca.if_else(ca.logic_and(x > 0, ca.logic_not(x > 1)), x**2, -x),
-                                      ca.fmin(x, 1.0), ca.fmax(x, 1.0), ca.if_else(k == 0, 1.0, 1 / k)])
+    exact = ca.Function(
+        "f",
+        [x, k],
+        [
+            ca.if_else(ca.logic_and(x > 0, ca.logic_not(x > 1)), x**2, -x),
+            ca.fmin(x, 1.0),
+            ca.fmax(x, 1.0),
+            ca.if_else(k == 0, 1.0, 1 / k),
+        ],
+    )
     smooth = smoothed(exact)
     for value in (-1.0, 0.5, 0.8, 1.5):
         for a, b in zip(exact(value, 0.0), smooth(value, 0.0, 1e-3)):
@@ -83,8 +91,15 @@ def test_smoothed_closed_loop_equals_the_exact_one_away_from_the_limits():
     exact = models.closed_loop_function(arm, block, n, 10)
     smooth = models.closed_loop_function(arm, block, n, 10, smooth=True)
     assert smooth.name_in()[-1] == "width"
-    args = (np.zeros(2), np.zeros(0), np.full((1, n), np.deg2rad(50)), np.zeros((2, n)), np.zeros((1, n)),
-            arm.param_vector(), block.gain_vector())
+    args = (
+        np.zeros(2),
+        np.zeros(0),
+        np.full((1, n), np.deg2rad(50)),
+        np.zeros((2, n)),
+        np.zeros((1, n)),
+        arm.param_vector(),
+        block.gain_vector(),
+    )
     X, _, U, _ = (np.asarray(v) for v in exact(*args))
     assert np.max(np.abs(U)) == 1.0  # the run saturates
     Xs, _, Us, _ = (np.asarray(v) for v in smooth(*args, 1e-8))

@@ -21,10 +21,23 @@ def response(y, t=None, u=None, limit=1.0, extra=None) -> ClosedLoopResult:
     u = np.zeros((len(t) - 1, 1)) if u is None else np.asarray(u, dtype=float).reshape(-1, 1)
     first = int(first_faults(x[None], u[None])[0])
     names = ("y",) + (("w",) if extra is not None else ())
-    return ClosedLoopResult(t=t, x=x, y=x, r=np.ones((len(t), 1)), u=u, d=np.zeros_like(u), measured=x[:-1],
-                            xc=None, step_time=np.zeros(len(t) - 1), status=None, input_limit=np.array([limit]),
-                            state_names=names, output_names=names, input_names=("u",),
-                            diverged_at=None if first < 0 else float(t[first]))
+    return ClosedLoopResult(
+        t=t,
+        x=x,
+        y=x,
+        r=np.ones((len(t), 1)),
+        u=u,
+        d=np.zeros_like(u),
+        measured=x[:-1],
+        xc=None,
+        step_time=np.zeros(len(t) - 1),
+        status=None,
+        input_limit=np.array([limit]),
+        state_names=names,
+        output_names=names,
+        input_names=("u",),
+        diverged_at=None if first < 0 else float(t[first]),
+    )
 
 
 def second_order(zeta, wn, duration=10.0):
@@ -84,7 +97,7 @@ def test_a_slow_drift_violates_settling_and_steady_state_error_without_a_limit_c
     by_name = {v.spec: v for v in found.violations}
     assert math.isinf(by_name["settling time"].value)
     # ss error: mean of the last 5 % of y minus 1, i.e. 0.01 × mean(t over the window) (e^{-t/0.3} is gone).
-    window = t[-math.ceil(0.05 * len(t)):]
+    window = t[-math.ceil(0.05 * len(t)) :]
     assert by_name["ss error"].value == pytest.approx(100 * 0.01 * window.mean(), rel=1e-6)
 
 
@@ -117,9 +130,17 @@ def test_state_bounds_final_values_and_the_actuator_limit():
 
 
 def test_status_words_and_monte_carlo_combination():
-    assert [specs.execution(s) for s in ("ok", "degraded (2)", "diverged at t = 3 s", "failed: boom",
-                                         "skipped: budget", "3 of 20 diverged (first at t = 1 s)")] == \
-        ["ok", "degraded", "diverged", "failed", "skipped", "diverged"]
+    assert [
+        specs.execution(s)
+        for s in (
+            "ok",
+            "degraded (2)",
+            "diverged at t = 3 s",
+            "failed: boom",
+            "skipped: budget",
+            "3 of 20 diverged (first at t = 1 s)",
+        )
+    ] == ["ok", "degraded", "diverged", "failed", "skipped", "diverged"]
     assert specs.verdict(SPECS, {}, 1.0, "failed: solver").label == specs.FAILED
     meets = specs.Verdict(specs.MEETS)
     slow = specs.Verdict(specs.VIOLATES, (specs.Violation("settling time", 5, 4, "s"),), "settling time 5 s > 4 s")

@@ -12,8 +12,15 @@ from models import symbolic
 
 def test_sympy_form_of_an_expression_evaluates_as_casadi_does():
     x, y = ca.SX.sym("x"), ca.SX.sym("y")
-    expr = (ca.sin(x) * y**2 - ca.cos(x * y) / (1 + x**2) + ca.sqrt(ca.exp(y) + 2) * ca.tan(x / 3)
-            - ca.log(2 + y**2) + ca.atan2(y, 2 + x) + ca.fabs(x - y) - 2 * x)
+    expr = (
+        ca.sin(x) * y**2
+        - ca.cos(x * y) / (1 + x**2)
+        + ca.sqrt(ca.exp(y) + 2) * ca.tan(x / 3)
+        - ca.log(2 + y**2)
+        + ca.atan2(y, 2 + x)
+        + ca.fabs(x - y)
+        - 2 * x
+    )
     converted = symbolic.to_sympy(expr)
     f = ca.Function("f", [x, y], [expr])
     g = sympy.lambdify([sympy.Symbol("x"), sympy.Symbol("y")], converted, "numpy")
@@ -37,12 +44,12 @@ def test_printed_model_evaluates_as_the_derived_one(name):
         x = rng.uniform(-0.8, 0.8, plant.nx)
         u = rng.uniform(-1, 1, plant.nu)
         xdot = plant.f(x, u)
-        values = dict(zip(plant.coordinate_names, x[:plant.nq]))
-        values |= {"d" + c: v for c, v in zip(plant.coordinate_names, x[plant.nq:])}
-        values |= {"dd" + c: v for c, v in zip(plant.coordinate_names, xdot[plant.nq:])}
+        values = dict(zip(plant.coordinate_names, x[: plant.nq]))
+        values |= {"d" + c: v for c, v in zip(plant.coordinate_names, x[plant.nq :])}
+        values |= {"dd" + c: v for c, v in zip(plant.coordinate_names, xdot[plant.nq :])}
         values |= dict(zip(plant.input_names, u)) | dict(zip(plant.params, p))
         subs = {named.symbols[k]: v for k, v in values.items()}
-        kinetic = plant.energy(x) - plant.energy(np.concatenate([x[:plant.nq], np.zeros(plant.nq)]))
+        kinetic = plant.energy(x) - plant.energy(np.concatenate([x[: plant.nq], np.zeros(plant.nq)]))
         assert float(T.subs(subs)) == pytest.approx(kinetic, rel=1e-10, abs=1e-12)
         for eq in equations:  # the true accelerations satisfy each printed equation
             lhs, rhs = float(eq.lhs.subs(subs)), float(eq.rhs.subs(subs))

@@ -24,8 +24,14 @@ class FailingSolver(mpc.CondensedDaqpSolver):
         self.calls += 1
         if self.calls - 1 in self.fail_on:
             n = self.problem.horizon
-            return QPSolution(np.full((n, self.problem.nu), np.nan), np.full((n, self.problem.n_soft), np.nan),
-                              False, "injected failure", 0, 0.0)
+            return QPSolution(
+                np.full((n, self.problem.nu), np.nan),
+                np.full((n, self.problem.n_soft), np.nan),
+                False,
+                "injected failure",
+                0,
+                0.0,
+            )
         return solution
 
 
@@ -39,8 +45,10 @@ class OvershootingSolver(mpc.CondensedDaqpSolver):
 
 
 def test_controllers_entry_point_returns_both_designs_following_the_protocol(build_mpc):
-    designs = {label: build_mpc(kind, "pendulum", models.perturbed(models.get("pendulum"), 0.05))
-               for label, kind in (("linear MPC", "linear"), ("nonlinear MPC", "nonlinear"))}
+    designs = {
+        label: build_mpc(kind, "pendulum", models.perturbed(models.get("pendulum"), 0.05))
+        for label, kind in (("linear MPC", "linear"), ("nonlinear MPC", "nonlinear"))
+    }
     assert set(designs) == {"linear MPC", "nonlinear MPC"}
     for controller in designs.values():
         assert isinstance(controller, models.Controller)
@@ -56,8 +64,17 @@ def test_linear_mpc_command_never_exceeds_the_limit_and_does_saturate(build_mpc)
     assert np.all(np.abs(result.u) <= limit)
     assert np.max(np.abs(result.u)) == limit
     record = result.status[0]
-    assert {"solver", "status", "success", "iterations", "solve_time", "fallback", "input_excess",
-            "soft_violation", "soft_violation_now"} <= set(record)
+    assert {
+        "solver",
+        "status",
+        "success",
+        "iterations",
+        "solve_time",
+        "fallback",
+        "input_excess",
+        "soft_violation",
+        "soft_violation_now",
+    } <= set(record)
     assert all(s["success"] for s in result.status)
 
 
@@ -100,7 +117,7 @@ def test_failed_solve_applies_the_shifted_previous_plan_clipped(build_mpc):
     xc = controller.initial_state(y, r)
     n, nu = controller.horizon, plant.nu
     for k in range(12):
-        previous_plan = xc[plant.nx + nu:].reshape(n, nu)
+        previous_plan = xc[plant.nx + nu :].reshape(n, nu)
         xc, u = controller.step(xc, y, r)
         info = controller.step_info()
         if k in failures:
@@ -123,8 +140,7 @@ def test_failures_in_a_run_are_recorded_and_the_run_completes(build_mpc):
 
 def test_iteration_limits_are_reported_and_handled(build_mpc):
     plant = models.get("pendulum")
-    linear = build_mpc("linear", "pendulum",
-                       solver=lambda problem: mpc.CondensedDaqpSolver(problem, iteration_limit=1))
+    linear = build_mpc("linear", "pendulum", solver=lambda problem: mpc.CondensedDaqpSolver(problem, iteration_limit=1))
     result = models.simulate_closed_loop(plant, linear, 2.0, 0.5)
     hit = [s for s in result.status if s["status"] == "iteration limit"]
     assert hit and all(s["fallback"] and not s["success"] for s in hit)
@@ -185,8 +201,13 @@ def test_soft_bound_equals_the_hard_one_when_that_is_feasible(pendulum_qp_record
             continue
         cvx, u, s = mpc_problem(problem, *params)
         hard = cp.Problem(cvx.objective, cvx.constraints + [s == 0])
-        hard.solve(solver="CLARABEL", canon_backend=cp.SCIPY_CANON_BACKEND, tol_gap_abs=1e-12,
-                   tol_gap_rel=1e-12, tol_feas=1e-12)
+        hard.solve(
+            solver="CLARABEL",
+            canon_backend=cp.SCIPY_CANON_BACKEND,
+            tol_gap_abs=1e-12,
+            tol_gap_rel=1e-12,
+            tol_feas=1e-12,
+        )
         assert hard.status == cp.OPTIMAL
         np.testing.assert_allclose(soft.inputs[0], u.value[0], atol=1e-5)
         compared += 1
@@ -220,14 +241,17 @@ def test_nonlinear_and_linear_mpc_plan_the_same_on_the_linear_satellite(x, build
     assert violations[1] == pytest.approx(violations[0], abs=1e-6)
 
 
-@pytest.mark.parametrize("change, match", [
-    (dict(horizon=0), "horizon"),
-    (dict(state_weight=np.array([np.nan, 1.0, 1.0, 1.0])), "state_weight"),
-    (dict(input_weight=0.0), "input_weight"),
-    (dict(state_weight=np.array([-1.0, 1.0, 1.0, 1.0])), "positive semidefinite"),
-    (dict(rate_limit=[0.0]), "rate_limit"),
-    (dict(sample_period=-0.01), "sample_period"),
-])
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (dict(horizon=0), "horizon"),
+        (dict(state_weight=np.array([np.nan, 1.0, 1.0, 1.0])), "state_weight"),
+        (dict(input_weight=0.0), "input_weight"),
+        (dict(state_weight=np.array([-1.0, 1.0, 1.0, 1.0])), "positive semidefinite"),
+        (dict(rate_limit=[0.0]), "rate_limit"),
+        (dict(sample_period=-0.01), "sample_period"),
+    ],
+)
 def test_bad_design_input_names_the_culprit(change, match, build_mpc):
     with pytest.raises(ValueError, match=match):
         build_mpc("linear", "pendulum", **change)
@@ -237,8 +261,19 @@ def test_bad_problem_and_runtime_input_name_the_culprit(build_mpc):
     with pytest.raises(ValueError, match="infeasible"):
         mpc.MPCProblem([[1.0]], [[1.0]], 1.0, 1.0, 5, 1.0, -1.0)
     with pytest.raises(ValueError, match="soft bound 'z'"):
-        mpc.MPCProblem([[1.0]], [[1.0]], 1.0, 1.0, 5, -1.0, 1.0, soft_rows=[[1.0]], soft_lower=[1.0],
-                       soft_upper=[0.0], soft_names=["z"])
+        mpc.MPCProblem(
+            [[1.0]],
+            [[1.0]],
+            1.0,
+            1.0,
+            5,
+            -1.0,
+            1.0,
+            soft_rows=[[1.0]],
+            soft_lower=[1.0],
+            soft_upper=[0.0],
+            soft_names=["z"],
+        )
     with pytest.raises(ValueError, match="horizon"):
         build_mpc("nonlinear", "arm", horizon=0)
     controller = build_mpc("linear", "pendulum")

@@ -52,7 +52,7 @@ class ExportedQP:
         z = np.zeros(self.n)
         code = self._solve(ctypes.addressof(self._memory), p.ctypes.data, z.ctypes.data)
         N, nu, ns = self.problem.horizon, self.problem.nu, self.problem.n_soft
-        return QPSolution(z[:N * nu].reshape(N, nu), z[N * nu:].reshape(N, ns), code == 0, status_text(code))
+        return QPSolution(z[: N * nu].reshape(N, nu), z[N * nu :].reshape(N, ns), code == 0, status_text(code))
 
     def reset(self):
         pass
@@ -75,8 +75,9 @@ def test_exported_qp_solver_matches_daqp_and_the_cvxpy_reference(case):
         np.testing.assert_allclose(ours.inputs[0], ref.inputs[0], atol=tolerance, rtol=0)
         cost = problem.cost(params, ours.inputs, ours.slacks)
         assert cost == pytest.approx(problem.cost(params, ref.inputs, ref.slacks), rel=1e-6, abs=1e-9)
-        active += bool(np.any(np.isclose(np.abs(ours.inputs - (problem.input_upper + problem.input_lower) / 2),
-                                         limit, atol=1e-9)))
+        active += bool(
+            np.any(np.isclose(np.abs(ours.inputs - (problem.input_upper + problem.input_lower) / 2), limit, atol=1e-9))
+        )
     assert active >= 2  # the instances do saturate
 
 
@@ -101,7 +102,7 @@ def test_exported_step_reports_non_finite_values_as_python_does(fault, status):
     else:
         xc[1] = np.inf
     if fault == "estimate and plan":
-        xc[plant.nx + 1:] = np.nan
+        xc[plant.nx + 1 :] = np.nan
     results = [controller.step(xc, y, r) for controller in (python, compiled)]
     info = compiled.step_info()
     assert info["code"] == status and not info["success"]
@@ -128,11 +129,17 @@ def test_status_codes_are_named_in_the_header():
 
 
 def test_what_cannot_be_exported_is_named():
-    with pytest.raises(UnsupportedExport, match=r"nonlinear MPC: only mpc.LinearMPC is exported here; "
-                                                r"NonlinearMPC is not one \(its SQP over the plant's equations"):
+    with pytest.raises(
+        UnsupportedExport,
+        match=r"nonlinear MPC: only mpc.LinearMPC is exported here; "
+        r"NonlinearMPC is not one \(its SQP over the plant's equations",
+    ):
         export_linear_mpc(build("nonlinear", "arm"), "nmpc")
-    with pytest.raises(UnsupportedExport, match="linear MPC: only models.Block controllers are exported here; "
-                                                r"LinearMPC is not one \(use mpc.export.export_linear_mpc\)"):
+    with pytest.raises(
+        UnsupportedExport,
+        match="linear MPC: only models.Block controllers are exported here; "
+        r"LinearMPC is not one \(use mpc.export.export_linear_mpc\)",
+    ):
         models.export.export_block(build("linear", "arm"), "mpc")
     with pytest.raises(ValueError, match="name must be a C identifier prefix"):
         export_linear_mpc(build("linear", "arm"), "linear MPC")

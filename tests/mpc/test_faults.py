@@ -60,8 +60,14 @@ def test_ctrl_c_interrupts_every_run_of_a_session(tmp_path):
     last one, not caught, gives a non-zero exit. Before the fix about a third of the signals
     were swallowed (a "solver error" step and the run went on, or no trace at all)."""
     script, env = interrupt_script(tmp_path)
-    process = subprocess.Popen([sys.executable, str(script), str(len(OFFSETS))], cwd=tmp_path, env=env, text=True,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process = subprocess.Popen(
+        [sys.executable, str(script), str(len(OFFSETS))],
+        cwd=tmp_path,
+        env=env,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     try:
         for k, offset in enumerate(OFFSETS):
             assert process.stdout.readline().strip() == "running"
@@ -85,8 +91,17 @@ def test_ctrl_c_stops_a_nonlinear_mpc_run_at_every_offset(tmp_path):
     script, env = interrupt_script(tmp_path)
     outcomes = []
     for batch in (OFFSETS[:4], OFFSETS[4:8], OFFSETS[8:]):
-        processes = [subprocess.Popen([sys.executable, str(script), "1"], cwd=tmp_path, env=env, text=True,
-                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in batch]
+        processes = [
+            subprocess.Popen(
+                [sys.executable, str(script), "1"],
+                cwd=tmp_path,
+                env=env,
+                text=True,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+            )
+            for _ in batch
+        ]
         started = []
         for process in processes:
             assert process.stdout.readline().strip() == "running"
@@ -108,8 +123,10 @@ def test_ctrl_c_stops_a_nonlinear_mpc_run_at_every_offset(tmp_path):
 
 def test_casadi_reports_of_an_interrupt_are_recognized():
     """CasADi's forms of a Ctrl-C (seen in the runs above) are interrupts; other errors are not."""
-    casadi_report = RuntimeError("Error in Function::call for 'nmpc' [Sqpmethod] at .../function.cpp:1655:\n"
-                                 ".../function.cpp:514:\nKeyboardInterrupt")
+    casadi_report = RuntimeError(
+        "Error in Function::call for 'nmpc' [Sqpmethod] at .../function.cpp:1655:\n"
+        ".../function.cpp:514:\nKeyboardInterrupt"
+    )
     assert models.interrupts.is_interrupt(casadi_report)
     wrapped = SystemError("<function DM.__array__> returned a result with an exception set")
     wrapped.__cause__ = KeyboardInterrupt()
@@ -138,7 +155,7 @@ def test_a_nan_estimate_is_reported_and_never_optimal(kind):
     xc = xc.copy()
     xc[1] = np.nan  # the estimator's state
     for _ in range(4):
-        plan = xc[nx + nu:].reshape(n, nu)
+        plan = xc[nx + nu :].reshape(n, nu)
         xc, u = controller.step(xc, y, r)
         info = controller.step_info()
         assert info["status"] == "non-finite estimate"
@@ -152,8 +169,8 @@ def test_a_nan_estimate_is_reported_and_never_optimal(kind):
 def test_a_nan_measurement_is_skipped_the_prediction_used_and_the_next_one_recovers(kind):
     plant, controller, xc, y, r = start(kind)
     nx, nu, n = plant.nx, plant.nu, controller.horizon
-    plan = xc[nx + nu:].reshape(n, nu)
-    x_pred, d_pred = xc[:nx].copy(), xc[nx:nx + nu].copy()
+    plan = xc[nx + nu :].reshape(n, nu)
+    x_pred, d_pred = xc[:nx].copy(), xc[nx : nx + nu].copy()
     bad = y.copy()
     bad[0] = np.nan
     xc_next, u = controller.step(xc, bad, r)
@@ -167,7 +184,7 @@ def test_a_nan_measurement_is_skipped_the_prediction_used_and_the_next_one_recov
     else:
         expected = np.asarray(controller.step_model(x_pred, u + d_pred, controller.plant.param_vector())).ravel()
     np.testing.assert_allclose(xc_next[:nx], expected, rtol=1e-12, atol=1e-14)
-    np.testing.assert_array_equal(xc_next[nx:nx + nu], d_pred)
+    np.testing.assert_array_equal(xc_next[nx : nx + nu], d_pred)
     _, u = controller.step(xc_next, y, r)
     assert controller.step_info()["success"] and controller.step_info()["status"] != "non-finite measurement"
 
@@ -195,7 +212,7 @@ def test_a_nan_command_is_reported_not_passed_off(kind):
     nx, nu = plant.nx, plant.nu
     xc = xc.copy()
     xc[0] = np.nan  # no solve ...
-    xc[nx + nu:] = np.nan  # ... and no plan to fall back on
+    xc[nx + nu :] = np.nan  # ... and no plan to fall back on
     _, u = controller.step(xc, y, r)
     info = controller.step_info()
     assert np.all(np.isnan(u))
@@ -242,54 +259,100 @@ def pendulum():
 
 ERRORS = [
     # (what to call, exception type, the culprit as a regex)
-    (lambda: build("linear", "pendulum", solver="gurobi"), ValueError,
-     r"solver must be one of 'daqp', 'osqp', 'cvxpy' or a callable problem -> solver, got 'gurobi'"),
-    (lambda: build("nonlinear", "arm", iteration="newton"), ValueError,
-     r"iteration must be one of 'rti', 'sqp', got 'newton'"),
-    (lambda: SoftBound.on(pendulum(), {"theta": 1.0}, 0.2, -0.2), ValueError,
-     r"soft bound '\+1 theta': lower 0.2 > upper -0.2"),
+    (
+        lambda: build("linear", "pendulum", solver="gurobi"),
+        ValueError,
+        r"solver must be one of 'daqp', 'osqp', 'cvxpy' or a callable problem -> solver, got 'gurobi'",
+    ),
+    (
+        lambda: build("nonlinear", "arm", iteration="newton"),
+        ValueError,
+        r"iteration must be one of 'rti', 'sqp', got 'newton'",
+    ),
+    (
+        lambda: SoftBound.on(pendulum(), {"theta": 1.0}, 0.2, -0.2),
+        ValueError,
+        r"soft bound '\+1 theta': lower 0.2 > upper -0.2",
+    ),
     (lambda: build("linear", "pendulum", solver=42), ValueError, r"solver must be one of .*got 42"),
-    (lambda: build("linear", "pendulum", solver=lambda problem: object()), ValueError,
-     r"made object, which has no solve or reset method"),
+    (
+        lambda: build("linear", "pendulum", solver=lambda problem: object()),
+        ValueError,
+        r"made object, which has no solve or reset method",
+    ),
     (lambda: build("linear", "pendulum", horizon=True), TypeError, r"horizon must be an integer, got bool True"),
     (lambda: build("linear", "pendulum", horizon=2.5), ValueError, r"horizon must be an integer, got 2.5"),
     (lambda: build("linear", "pendulum", horizon="50"), TypeError, r"horizon must be an integer, got str '50'"),
     (lambda: build("linear", "pendulum", sample_period="0.01"), TypeError, r"sample_period \(s\) must be a real"),
     (lambda: build("nonlinear", "arm", sample_period=float("nan")), ValueError, r"sample_period \(s\) must be .* nan"),
-    (lambda: mpc.NonlinearMPCProblem(models.get("arm"), 0.01, 10, 1.0, 1.0, substeps=2.7), ValueError,
-     r"substeps must be an integer, got 2.7"),
+    (
+        lambda: mpc.NonlinearMPCProblem(models.get("arm"), 0.01, 10, 1.0, 1.0, substeps=2.7),
+        ValueError,
+        r"substeps must be an integer, got 2.7",
+    ),
     (lambda: build("nonlinear", "arm", max_iterations=2.5), ValueError, r"max_iterations must be an integer, got 2.5"),
     (lambda: build("nonlinear", "arm", max_iterations=0), ValueError, r"max_iterations must be an integer >= 1, got 0"),
-    (lambda: mpc.NonlinearMPCProblem(models.get("arm"), 0.01, 10, 1.0, 1.0, tolerance=-1e-4),
-     ValueError, r"tolerance must be a finite number > 0, got -0.0001"),
+    (
+        lambda: mpc.NonlinearMPCProblem(models.get("arm"), 0.01, 10, 1.0, 1.0, tolerance=-1e-4),
+        ValueError,
+        r"tolerance must be a finite number > 0, got -0.0001",
+    ),
     (lambda: SoftBound.on(pendulum(), {"theta": 1.0}, np.nan, 0.2), ValueError, r"bounds must not be NaN"),
     (lambda: SoftBound.on(pendulum(), {"theta": 1.0}, -np.inf, np.inf), ValueError, r"has no finite side"),
     (lambda: SoftBound.on(pendulum(), {}, -1, 1), ValueError, r"combination is empty"),
     (lambda: SoftBound.on(pendulum(), ["theta"], -1, 1), TypeError, r"combination must be a mapping"),
     (lambda: SoftBound.on(pendulum(), {"theta": "one"}, -1, 1), TypeError, r"coefficient of theta must hold real"),
     (lambda: SoftBound.on(pendulum(), {"theta": 0.0}, -1, 1), ValueError, r"needs finite coefficients, not all zero"),
-    (lambda: SoftBound.on(pendulum(), {"theta": 1.0}, -1, 1, linear_weight=-5), ValueError,
-     r"linear_weight must be finite and >= 0, got -5.0"),
+    (
+        lambda: SoftBound.on(pendulum(), {"theta": 1.0}, -1, 1, linear_weight=-5),
+        ValueError,
+        r"linear_weight must be finite and >= 0, got -5.0",
+    ),
     (lambda: SoftBound.on(pendulum(), {"theta": 1.0}, -1, "1"), TypeError, r"upper must hold real numbers, got '1'"),
-    (lambda: CvxpySolver(build("linear", "arm").problem, solver="GUROBI"), ValueError,
-     r"solver 'GUROBI' is not an installed cvxpy solver"),
-    (lambda: mpc.OsqpSolver(build("linear", "arm").problem, {"eps_abs": -1.0}), ValueError,
-     r"OSQP setting eps_abs must be a number >= 0, got -1.0"),
-    (lambda: mpc.OsqpSolver(build("linear", "arm").problem, {"max_iter": "many"}), TypeError,
-     r"OSQP setting max_iter must be a number or True/False, got str 'many'"),
-    (lambda: mpc.CondensedDaqpSolver(build("linear", "arm").problem, iteration_limit=0.5), ValueError,
-     r"iteration_limit must be an integer, got 0.5"),
+    (
+        lambda: CvxpySolver(build("linear", "arm").problem, solver="GUROBI"),
+        ValueError,
+        r"solver 'GUROBI' is not an installed cvxpy solver",
+    ),
+    (
+        lambda: mpc.OsqpSolver(build("linear", "arm").problem, {"eps_abs": -1.0}),
+        ValueError,
+        r"OSQP setting eps_abs must be a number >= 0, got -1.0",
+    ),
+    (
+        lambda: mpc.OsqpSolver(build("linear", "arm").problem, {"max_iter": "many"}),
+        TypeError,
+        r"OSQP setting max_iter must be a number or True/False, got str 'many'",
+    ),
+    (
+        lambda: mpc.CondensedDaqpSolver(build("linear", "arm").problem, iteration_limit=0.5),
+        ValueError,
+        r"iteration_limit must be an integer, got 0.5",
+    ),
     (lambda: build("linear", "pendulum", state_weight="heavy"), TypeError, r"state_weight Q must hold real numbers"),
     (lambda: build("linear", "pendulum", rate_limit="fast"), TypeError, r"rate_limit must hold real numbers"),
-    (lambda: build("linear", "pendulum", soft_bounds=[("theta", -1, 1)]), TypeError,
-     r"soft_bounds must be SoftBound objects"),
-    (lambda: mpc.LinearMPC("pendulum", sample_period=0.01, horizon=10, state_weight=1.0, input_weight=1.0,
-                           tracked="z"),
-     TypeError, r"known must be a models.Plant, got str 'pendulum'"),
-    (lambda: DisturbanceObserver(np.eye(2), np.ones((2, 1)), np.ones((1, 3)), 1.0, 1.0, 1.0), ValueError,
-     r"C \(1, 3\)"),
-    (lambda: DisturbanceObserver(np.eye(2), np.ones((2, 1)), np.ones((1, 2)), 1.0, 1.0, [1.0, 2.0, 3.0]), ValueError,
-     r"measurement_std must be a number or 1 numbers"),
+    (
+        lambda: build("linear", "pendulum", soft_bounds=[("theta", -1, 1)]),
+        TypeError,
+        r"soft_bounds must be SoftBound objects",
+    ),
+    (
+        lambda: mpc.LinearMPC(
+            "pendulum", sample_period=0.01, horizon=10, state_weight=1.0, input_weight=1.0, tracked="z"
+        ),
+        TypeError,
+        r"known must be a models.Plant, got str 'pendulum'",
+    ),
+    (
+        lambda: DisturbanceObserver(np.eye(2), np.ones((2, 1)), np.ones((1, 3)), 1.0, 1.0, 1.0),
+        ValueError,
+        r"C \(1, 3\)",
+    ),
+    (
+        lambda: DisturbanceObserver(np.eye(2), np.ones((2, 1)), np.ones((1, 2)), 1.0, 1.0, [1.0, 2.0, 3.0]),
+        ValueError,
+        r"measurement_std must be a number or 1 numbers",
+    ),
 ]
 
 
@@ -300,10 +363,13 @@ def test_bad_input_gets_a_one_line_error_naming_the_culprit(call, error, culprit
     assert "\n" not in str(raised.value)
 
 
-@pytest.mark.parametrize("y, error, culprit", [
-    ("abc", TypeError, r"measurement \('z', 'theta'\) must hold real numbers, got 'abc'"),
-    (np.zeros(3), ValueError, r"measurement \('z', 'theta'\) must have 2 entries"),
-])
+@pytest.mark.parametrize(
+    "y, error, culprit",
+    [
+        ("abc", TypeError, r"measurement \('z', 'theta'\) must hold real numbers, got 'abc'"),
+        (np.zeros(3), ValueError, r"measurement \('z', 'theta'\) must have 2 entries"),
+    ],
+)
 def test_bad_step_input_gets_a_one_line_error(y, error, culprit):
     controller = build("linear", "pendulum")
     xc = controller.initial_state(np.zeros(2), np.zeros(1))

@@ -15,8 +15,15 @@ from mpc.transcription import collocation_coefficients, rk4_interval
 def point_mass(mass=2.0, limit=3.0):
     """The double integrator: kinetic energy m v²/2, force f, |f| <= limit (acceleration limit / m)."""
 
-    @models.declare(name="point_mass", title="point mass", coordinates=("s",), inputs=("f",),
-                    params=(models.Param("m", mass, "kg"),), input_limit=limit, register=False)
+    @models.declare(
+        name="point_mass",
+        title="point mass",
+        coordinates=("s",),
+        inputs=("f",),
+        params=(models.Param("m", mass, "kg"),),
+        input_limit=limit,
+        register=False,
+    )
     def declaration(q, dq, u, p):
         return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=0, forces=[u.f], outputs={"s": q.s})
 
@@ -26,13 +33,23 @@ def point_mass(mass=2.0, limit=3.0):
 def spring_mass(mass=1.0, stiffness=4.0, damping=0.0, limit=1.0):
     """m s'' = -k s - b s' + f."""
 
-    @models.declare(name="spring_mass", title="spring mass damper", coordinates=("s",), inputs=("f",),
-                    params=(models.Param("m", mass, "kg"), models.Param("k", stiffness, "N/m"),
-                            models.Param("b", damping, "N s/m", positive=False)),
-                    input_limit=limit, register=False)
+    @models.declare(
+        name="spring_mass",
+        title="spring mass damper",
+        coordinates=("s",),
+        inputs=("f",),
+        params=(
+            models.Param("m", mass, "kg"),
+            models.Param("k", stiffness, "N/m"),
+            models.Param("b", damping, "N s/m", positive=False),
+        ),
+        input_limit=limit,
+        register=False,
+    )
     def declaration(q, dq, u, p):
-        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.f - p.b * dq.s],
-                              outputs={"s": q.s})
+        return models.Physics(
+            kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.f - p.b * dq.s], outputs={"s": q.s}
+        )
 
     return models.Plant(declaration)
 
@@ -44,8 +61,11 @@ def rest_to_rest(plant, final_time, distance):
     return ocp
 
 
-TRANSCRIPTIONS = [mpc.Collocation(intervals=20), mpc.Collocation(intervals=20, degree=2, points="legendre"),
-                  mpc.MultipleShooting(intervals=20)]
+TRANSCRIPTIONS = [
+    mpc.Collocation(intervals=20),
+    mpc.Collocation(intervals=20, degree=2, points="legendre"),
+    mpc.MultipleShooting(intervals=20),
+]
 
 
 # --------------------------------------------------------------------------- closed forms
@@ -128,8 +148,12 @@ def test_a_path_constraint_on_an_output_holds_at_every_collocation_point():
     ocp.subject_to(ocp.bounded(-0.02, ocp.y.phi_minus_theta, 0.02))
     solution = ocp.solve(mpc.Collocation(intervals=40, degree=2, points="legendre"))
     assert solution.success, solution.status
-    twist = np.concatenate([solution.states[:, 1] - solution.states[:, 0],
-                            (solution.collocation_states[:, :, 1] - solution.collocation_states[:, :, 0]).ravel()])
+    twist = np.concatenate(
+        [
+            solution.states[:, 1] - solution.states[:, 0],
+            (solution.collocation_states[:, :, 1] - solution.collocation_states[:, :, 0]).ravel(),
+        ]
+    )
     assert np.max(np.abs(twist)) <= 0.02 + 1e-7
     assert np.max(np.abs(twist)) >= 0.02 - 1e-6  # active: without it the twist is larger
     free = mpc.OptimalControlProblem(models.get("satellite"), 40.0)
@@ -185,8 +209,7 @@ def test_finite_horizon_lq_converges_to_the_riccati_cost_at_second_order():
     for N in (40, 80):
         ocp = mpc.OptimalControlProblem(plant, final_time, actuator_limit=False)
         x, u = ocp.x, ocp.u
-        ocp.minimize(ocp.integral(x.s**2 + 0.5 * x.ds**2 + 0.1 * u.f**2)
-                     + ocp.at_end(2 * x.s**2 + x.ds**2))
+        ocp.minimize(ocp.integral(x.s**2 + 0.5 * x.ds**2 + 0.1 * u.f**2) + ocp.at_end(2 * x.s**2 + x.ds**2))
         ocp.subject_to(ocp.at_start(ocp.state) == x0)
         solution = ocp.solve(mpc.Collocation(intervals=N))
         assert solution.success, solution.status
@@ -195,10 +218,17 @@ def test_finite_horizon_lq_converges_to_the_riccati_cost_at_second_order():
     assert 3.5 < errors[0] / errors[1] < 4.5
 
 
-@pytest.mark.parametrize("points, degree, intervals, order", [
-    ("legendre", 1, (16, 32), 2), ("legendre", 2, (16, 32), 4), ("legendre", 3, (8, 16), 6),
-    ("radau", 1, (64, 128), 1), ("radau", 2, (16, 32), 3), ("radau", 3, (16, 32), 5),
-])
+@pytest.mark.parametrize(
+    "points, degree, intervals, order",
+    [
+        ("legendre", 1, (16, 32), 2),
+        ("legendre", 2, (16, 32), 4),
+        ("legendre", 3, (8, 16), 6),
+        ("radau", 1, (64, 128), 1),
+        ("radau", 2, (16, 32), 3),
+        ("radau", 3, (16, 32), 5),
+    ],
+)
 def test_collocation_error_falls_at_the_order_of_its_points(points, degree, intervals, order):
     """Free oscillation s'' = -ω² s from s = 1 (input fixed at zero): s(T) = cos ωT and
     ∫ s² dt = T/2 + sin 2ωT / 4ω. Gauss collocation is of order 2d, Radau IIA of 2d - 1."""
@@ -210,11 +240,16 @@ def test_collocation_error_falls_at_the_order_of_its_points(points, degree, inte
         ocp.minimize(ocp.integral(ocp.x.s**2))
         ocp.subject_to(ocp.at_start(ocp.state) == [1.0, 0.0])
         ocp.subject_to(ocp.u.f == 0)
-        solution = ocp.solve(mpc.Collocation(intervals=N, degree=degree, points=points),
-                             solver_options={"tolerance": 1e-14})
+        solution = ocp.solve(
+            mpc.Collocation(intervals=N, degree=degree, points=points), solver_options={"tolerance": 1e-14}
+        )
         assert solution.success, solution.status
-        errors.append([abs(solution.states[-1, 0] - np.cos(omega * final_time)),
-                       abs(solution.objective - (final_time / 2 + np.sin(2 * omega * final_time) / (4 * omega)))])
+        errors.append(
+            [
+                abs(solution.states[-1, 0] - np.cos(omega * final_time)),
+                abs(solution.objective - (final_time / 2 + np.sin(2 * omega * final_time) / (4 * omega))),
+            ]
+        )
     observed = np.log2(np.array(errors[0]) / np.array(errors[1]))
     np.testing.assert_allclose(observed, order, atol=0.25)
 
@@ -223,8 +258,7 @@ def test_multiple_shooting_uses_the_plants_rk4_map():
     """The shooting interval's state is `Plant.step_function`'s RK4 (substeps included), and
     its quadrature of a constant integrand is exact."""
     plant = models.get("pendulum")
-    x, u, c, t, p, T = (ca.SX.sym(n, size) for n, size in (("x", 4), ("u", 1), ("c", 0), ("t", 1), ("p", 5),
-                                                            ("T", 1)))
+    x, u, c, t, p, T = (ca.SX.sym(n, size) for n, size in (("x", 4), ("u", 1), ("c", 0), ("t", 1), ("p", 5), ("T", 1)))
     integrands = ca.Function("integrands", [x, u, c, t, p, T], [ca.vertcat(u**2, t)])
     step = rk4_interval(plant, integrands, 3)
     reference = plant.step_function(0.2, 3)
@@ -233,10 +267,10 @@ def test_multiple_shooting_uses_the_plants_rk4_map():
     for _ in range(5):
         x0, u0 = rng.normal(size=4), rng.normal(size=1)
         x_next, integrals = step(x0, u0, u0, np.zeros(0), 0.4, 0.2, p_value, 1.0)
-        np.testing.assert_allclose(np.asarray(x_next).ravel(), np.asarray(reference(x0, u0, p_value)).ravel(),
-                                   rtol=1e-13, atol=1e-13)
-        np.testing.assert_allclose(np.asarray(integrals).ravel(), [0.2 * u0[0] ** 2, (0.6**2 - 0.4**2) / 2],
-                                   rtol=1e-13)
+        np.testing.assert_allclose(
+            np.asarray(x_next).ravel(), np.asarray(reference(x0, u0, p_value)).ravel(), rtol=1e-13, atol=1e-13
+        )
+        np.testing.assert_allclose(np.asarray(integrals).ravel(), [0.2 * u0[0] ** 2, (0.6**2 - 0.4**2) / 2], rtol=1e-13)
 
 
 def test_radau_coefficients_match_the_simulators():
@@ -254,8 +288,9 @@ def test_collocation_coefficients_differentiate_and_integrate_polynomials_exactl
     for power in range(exact_to + 1):  # ∫₀¹ τ^k dτ = 1/(k+1)
         assert c.quadrature @ c.tau[1:] ** power == pytest.approx(1 / (power + 1), abs=1e-13)
     for power in range(degree + 1):  # d/dτ τ^k = k τ^(k-1) at the points; τ^k at 1 is 1
-        np.testing.assert_allclose(c.tau**power @ c.derivative, power * c.tau[1:] ** max(power - 1, 0) * (power > 0),
-                                   atol=1e-11)
+        np.testing.assert_allclose(
+            c.tau**power @ c.derivative, power * c.tau[1:] ** max(power - 1, 0) * (power > 0), atol=1e-11
+        )
         assert c.tau**power @ c.continuity == pytest.approx(1.0, abs=1e-12)
 
 
@@ -320,8 +355,9 @@ def test_mesh_refinement_meets_its_tolerance_and_verifies():
 @pytest.mark.slow
 def test_mesh_refinement_of_the_swing_up():
     ocp = swing_up()
-    solution = ocp.solve(mpc.Collocation(intervals=40), refine_tolerance=1e-5,
-                         guess_input=lambda t: [2 * np.sin(2 * np.pi * t / 4.0)])
+    solution = ocp.solve(
+        mpc.Collocation(intervals=40), refine_tolerance=1e-5, guess_input=lambda t: [2 * np.sin(2 * np.pi * t / 4.0)]
+    )
     assert solution.success, solution.status
     assert solution.refinement[-1][1] <= 1e-5 < solution.refinement[0][1]
     assert solution.verify().max_interval_defect < 1e-5
@@ -388,8 +424,9 @@ def test_the_nmpc_problem_posed_here_is_what_nonlinear_mpc_problem_solves():
     sample_period, horizon = 0.01, 50
     Q, R, P = np.diag([1.0, 10.0, 0.1, 0.1]), np.array([[1e-2]]), np.diag([10.0, 50.0, 5.0, 5.0])
     x_hat, d_hat, x_s, u_s = np.array([0.1, 0.15, -0.2, 0.3]), np.array([0.5]), np.array([0.6, 0, 0, 0]), np.zeros(1)
-    problem = mpc.NonlinearMPCProblem(plant, sample_period, horizon, Q, R, iteration="sqp", tolerance=1e-11,
-                                      compiled=False)
+    problem = mpc.NonlinearMPCProblem(
+        plant, sample_period, horizon, Q, R, iteration="sqp", tolerance=1e-11, compiled=False
+    )
     ours = problem.solve(x_hat, d_hat, x_s, u_s, P, np.zeros(1), np.zeros((horizon, 1)))
     assert ours.success, ours.status
     assert 0 < np.sum(np.abs(ours.inputs) < 4.9) < horizon  # some inputs saturate, some do not

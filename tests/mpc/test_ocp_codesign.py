@@ -42,19 +42,25 @@ def switch_time(k):
 
 @pytest.fixture(scope="module")
 def semi_analytic():
-    result = minimize_scalar(lambda k: -best_displacement(k), bounds=K_RANGE, method="bounded",
-                             options={"xatol": 1e-12})
+    result = minimize_scalar(
+        lambda k: -best_displacement(k), bounds=K_RANGE, method="bounded", options={"xatol": 1e-12}
+    )
     assert np.sqrt(result.x / MASS) * FINAL_TIME < np.pi  # one switch, as derived
     return result.x, -result.fun
 
 
 def spring_mass_problem():
-    @models.declare(name="spring", title="spring and mass", coordinates=("s",), inputs=("u",),
-                    params=(models.Param("m", MASS, "kg"), models.Param("k", 0.5, "N/m")),
-                    input_limit=1.0, register=False)
+    @models.declare(
+        name="spring",
+        title="spring and mass",
+        coordinates=("s",),
+        inputs=("u",),
+        params=(models.Param("m", MASS, "kg"), models.Param("k", 0.5, "N/m")),
+        input_limit=1.0,
+        register=False,
+    )
     def declaration(q, dq, u, p):
-        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u],
-                              outputs={"s": q.s})
+        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u], outputs={"s": q.s})
 
     ocp = mpc.OptimalControlProblem(models.Plant(declaration), FINAL_TIME)
     ocp.choose("k", *K_RANGE)
@@ -100,11 +106,11 @@ def test_nested_codesign_agrees_with_simultaneous(simultaneous):
 @pytest.mark.parametrize("k", [0.7, 1.2])
 def test_nested_gradient_is_the_derivative_of_the_optimal_value(k):
     """Envelope theorem: dJ*/dk = ∂L/∂k = -lam_p, against central differences of J*."""
-    solver = spring_mass_problem().solver(mpc.Collocation(intervals=40), chosen_as_parameters=True,
-                                          tolerance=1e-12)
+    solver = spring_mass_problem().solver(mpc.Collocation(intervals=40), chosen_as_parameters=True, tolerance=1e-12)
     position = solver.transcription.fixed_param_names.index("k")
     solution = solver.solve(plant_params={"k": k})
     step = 1e-5
-    difference = (solver.solve(plant_params={"k": k + step}).objective
-                  - solver.solve(plant_params={"k": k - step}).objective) / (2 * step)
+    difference = (
+        solver.solve(plant_params={"k": k + step}).objective - solver.solve(plant_params={"k": k - step}).objective
+    ) / (2 * step)
     assert -solution.lam_p[position] == pytest.approx(difference, rel=1e-5)

@@ -24,8 +24,11 @@ Q, R, TERMINAL = np.diag([1.0, 10.0, 0.1, 0.1]), np.array([[1e-2]]), np.diag([10
 def pendulum_problem(soft=True, rate=None):
     """The NMPC's problem on the +5 % pendulum (N = 30, Ts = 0.01 s) with a tight soft |theta| bound."""
     plant = models.perturbed(models.get("pendulum"), 0.05)
-    bounds = (mpc.SoftBound.on(plant, {"theta": 1.0}, -0.12, 0.12, scale=0.12, linear_weight=10.0,
-                               quadratic_weight=100.0),) if soft else ()
+    bounds = (
+        (mpc.SoftBound.on(plant, {"theta": 1.0}, -0.12, 0.12, scale=0.12, linear_weight=10.0, quadratic_weight=100.0),)
+        if soft
+        else ()
+    )
     ocp = mpc_problem(plant, 0.01, 30, Q, R, soft_bounds=bounds, rate_limit=rate)
     return plant, ocp
 

@@ -23,8 +23,9 @@ def test_step_settles_within_limits_under_mismatch_and_disturbance(name, kind, s
     controller = build_mpc(kind, name, known)
     index = plant.state_names.index(case.tracked)
     reference = plant.equilibrium()[0][index] + case.step
-    result = models.simulate_closed_loop(plant, controller, reference, case.duration,
-                                         input_disturbance=case.input_disturbance)
+    result = models.simulate_closed_loop(
+        plant, controller, reference, case.duration, input_disturbance=case.input_disturbance
+    )
 
     limit = plant.input_limit
     assert np.all(np.abs(result.u) <= limit)

@@ -38,8 +38,9 @@ def pendulum_problem(rate_limit=1.0):
     plant = models.get("pendulum")
     model = plant.linearize().discretize(0.01)
     soft = [SoftBound.on(plant, {"theta": 1.0}, -0.15, 0.15, name="theta")]
-    return problem_from_model(model, [1.0, 10.0, 0.1, 0.1], 1e-2, 30, plant.input_limit,
-                              rate_limit=rate_limit, soft_bounds=soft)
+    return problem_from_model(
+        model, [1.0, 10.0, 0.1, 0.1], 1e-2, 30, plant.input_limit, rate_limit=rate_limit, soft_bounds=soft
+    )
 
 
 def ballbeam_problem():
@@ -69,9 +70,15 @@ def random_instances(problem, scale, count, seed):
     for _ in range(count):
         x_target = np.zeros(nx)
         x_target[0] = rng.normal() * scale[0]
-        out.append(QPParameters(rng.normal(size=nx) * scale, rng.normal(size=nu) * 0.1 * problem.input_upper,
-                                x_target, rng.normal(size=nu) * 0.1 * problem.input_upper,
-                                rng.uniform(problem.input_lower, problem.input_upper)))
+        out.append(
+            QPParameters(
+                rng.normal(size=nx) * scale,
+                rng.normal(size=nu) * 0.1 * problem.input_upper,
+                x_target,
+                rng.normal(size=nu) * 0.1 * problem.input_upper,
+                rng.uniform(problem.input_lower, problem.input_upper),
+            )
+        )
     return out
 
 
@@ -79,8 +86,13 @@ CRANE_LIMIT = 5000.0
 CASES = {  # problem, state spread, OSQP must succeed everywhere, first-input tolerance, OSQP's tolerance
     "pendulum (soft theta, rate limit)": (pendulum_problem, np.array([0.5, 0.08, 0.5, 0.5]), True, 1e-5, 1e-5),
     "ball on beam (soft ends)": (ballbeam_problem, np.array([0.15, 0.05, 0.5, 0.5]), True, 1e-5, 1e-5),
-    "crane, kilonewtons (soft swing)": (crane_problem, np.array([1.0, 0.06, 0.3, 0.02]), False,
-                                        1e-5 * CRANE_LIMIT, 1e-4 * CRANE_LIMIT),
+    "crane, kilonewtons (soft swing)": (
+        crane_problem,
+        np.array([1.0, 0.06, 0.3, 0.02]),
+        False,
+        1e-5 * CRANE_LIMIT,
+        1e-4 * CRANE_LIMIT,
+    ),
     "arm (input bounds only)": (arm_problem, np.array([1.0, 2.0]), True, 1e-5, 1e-5),
 }
 
@@ -99,8 +111,10 @@ def test_first_input_of_every_path_matches_the_cvxpy_reference(case):
         ref = reference.solve(params)
         assert ref.success, ref.status
         u0 = ref.inputs[0]
-        saturated += np.any(np.isclose(ref.inputs, problem.input_lower, atol=1e-7)
-                            | np.isclose(ref.inputs, problem.input_upper, atol=1e-7))
+        saturated += np.any(
+            np.isclose(ref.inputs, problem.input_lower, atol=1e-7)
+            | np.isclose(ref.inputs, problem.input_upper, atol=1e-7)
+        )
         violated += bool(problem.n_soft and np.max(ref.slacks) > 1e-4)
         if problem.rate_limit is not None:
             steps = np.abs(np.diff(np.vstack([params.u_previous, ref.inputs]), axis=0))
@@ -116,7 +130,8 @@ def test_first_input_of_every_path_matches_the_cvxpy_reference(case):
             np.testing.assert_allclose(solution.inputs[0], u0, atol=atol, rtol=0, err_msg=name)
             # Same optimum, not just the same first move.
             assert problem.cost(params, solution.inputs, solution.slacks) == pytest.approx(
-                problem.cost(params, ref.inputs, ref.slacks), rel=1e-6 if atol <= tolerance else 1e-4, abs=1e-9), name
+                problem.cost(params, ref.inputs, ref.slacks), rel=1e-6 if atol <= tolerance else 1e-4, abs=1e-9
+            ), name
     assert min(successes.values()) >= 1
     # The instances exercise the constraints they are meant to.
     assert saturated >= 2

@@ -42,10 +42,12 @@ def subprocess_env() -> dict:
 # ----------------------------------------------------------------------------- headless Chromium
 def chromium_paths() -> tuple[str | None, str | None]:
     """The Chromium executable and its chromedriver (Debian's chromium and chromium-driver), or None."""
-    browser = next((path for name in ("chromium", "chromium-browser", "google-chrome")
-                    if (path := shutil.which(name))), None)
-    driver = shutil.which("chromedriver") or ("/usr/bin/chromedriver" if Path("/usr/bin/chromedriver").exists()
-                                             else None)
+    browser = next(
+        (path for name in ("chromium", "chromium-browser", "google-chrome") if (path := shutil.which(name))), None
+    )
+    driver = shutil.which("chromedriver") or (
+        "/usr/bin/chromedriver" if Path("/usr/bin/chromedriver").exists() else None
+    )
     return browser, driver
 
 
@@ -66,7 +68,8 @@ class Page:
     def wait(self, expression: str):
         """The value a JavaScript promise expression resolves to."""
         return self.driver.execute_async_script(
-            f"const done = arguments[arguments.length - 1]; Promise.resolve({expression}).then(done);")
+            f"const done = arguments[arguments.length - 1]; Promise.resolve({expression}).then(done);"
+        )
 
     def errors(self) -> list[str]:
         """Console errors and uncaught exceptions seen so far."""
@@ -81,8 +84,14 @@ def browser(tmp_path):
         pytest.skip("Chromium or chromedriver is not installed (CI installs chromium and chromium-driver)")
     options = webdriver.ChromeOptions()
     options.binary_location = executable
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                 "--window-size=1200,900", f"--user-data-dir={tmp_path / 'profile'}"):
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1200,900",
+        f"--user-data-dir={tmp_path / 'profile'}",
+    ):
         options.add_argument(flag)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(options=options, service=webdriver.ChromeService(executable_path=driver_path))

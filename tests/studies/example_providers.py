@@ -30,10 +30,10 @@ def _tracking_gains(plant: models.Plant, name: str, weight: float):
     q = np.ones(plant.nx)
     q[i] = 1.0 / case.step**2
     K, _, _ = control.lqr(lin.A, lin.B, np.diag(q), np.eye(1) * weight / plant.input_limit[0] ** 2)
-    row = np.eye(plant.nx)[i:i + 1]
+    row = np.eye(plant.nx)[i : i + 1]
     big = np.block([[lin.A, lin.B], [row, np.zeros((1, 1))]])
     solution = np.linalg.solve(big, np.concatenate([np.zeros(plant.nx), [1.0]]))
-    return np.asarray(K)[0], solution[:plant.nx], solution[plant.nx:], xe, ue, float(xe[i])
+    return np.asarray(K)[0], solution[: plant.nx], solution[plant.nx :], xe, ue, float(xe[i])
 
 
 class StateFeedback(models.Block):
@@ -41,8 +41,16 @@ class StateFeedback(models.Block):
 
     def __init__(self, K, Nx, Nu, xe, ue, re, sample_period=0.01, name="state feedback"):
         self.xe, self.ue, self.re = np.asarray(xe), np.asarray(ue), float(re)
-        super().__init__(sample_period=sample_period, n_state=0, n_measured=len(K), n_reference=1, n_input=1,
-                         gains={"K": K, "Nx": Nx, "Nu": Nu}, measures="state", name=name)
+        super().__init__(
+            sample_period=sample_period,
+            n_state=0,
+            n_measured=len(K),
+            n_reference=1,
+            n_input=1,
+            gains={"K": K, "Nx": Nx, "Nu": Nu},
+            measures="state",
+            name=name,
+        )
 
     def expr(self, xc, y, r, g):
         dr = r[0] - self.re
@@ -54,8 +62,15 @@ class DirtyPD(models.Block):
 
     def __init__(self, kp, kd, ue, sample_period=0.01):
         self.ue = float(ue)
-        super().__init__(sample_period=sample_period, n_state=2, n_measured=1, n_reference=1, n_input=1,
-                         gains={"kp": kp, "kd": kd}, name="PD")
+        super().__init__(
+            sample_period=sample_period,
+            n_state=2,
+            n_measured=1,
+            n_reference=1,
+            n_input=1,
+            gains={"kp": kp, "kd": kd},
+            name="PD",
+        )
 
     def expr(self, xc, y, r, g):
         rate = dirty_derivative(xc[1], xc[0], y[0], 0.05, self.sample_period)
@@ -87,8 +102,10 @@ class PythonStateFeedback:
         count = int(xc[0])
         if self.fail_after is not None and count >= self.fail_after:
             u = np.full(1, np.nan)
-        self._info = {"status": "solved" if count % 50 else "max_iter_reached",
-                      "solve_time": time.perf_counter() - start}
+        self._info = {
+            "status": "solved" if count % 50 else "max_iter_reached",
+            "solve_time": time.perf_counter() - start,
+        }
         return np.array([count + 1.0]), u
 
     def step_info(self):
@@ -118,8 +135,9 @@ def diverging(name: str, known: models.Plant | None = None) -> dict:
     """A controller whose command becomes NaN after 1 s: the run must be reported as diverged."""
     plant = known or models.get(name)
     K, Nx, Nu, xe, ue, re = _tracking_gains(plant, name, 1.0)
-    return {"broken": PythonStateFeedback(StateFeedback(K, Nx, Nu, xe, ue, re), float(plant.input_limit[0]),
-                                          fail_after=100)}
+    return {
+        "broken": PythonStateFeedback(StateFeedback(K, Nx, Nu, xe, ue, re), float(plant.input_limit[0]), fail_after=100)
+    }
 
 
 def lqr_only(name: str, known: models.Plant | None = None) -> dict:

@@ -34,8 +34,10 @@ class InterruptInDisguise(PythonStateFeedback):
 
     def step(self, xc, y, r):
         if xc[0] >= 20:
-            raise RuntimeError("Error in Function::call for 'solver' [IpoptInterface] at .../casadi/core/"
-                               "function.cpp:1401:\nKeyboardInterrupt")
+            raise RuntimeError(
+                "Error in Function::call for 'solver' [IpoptInterface] at .../casadi/core/"
+                "function.cpp:1401:\nKeyboardInterrupt"
+            )
         return super().step(xc, y, r)
 
 
@@ -67,8 +69,7 @@ HOSTILE_LABELS = ("<script>alert(1)</script> *bold* | pipe", "__DATA__ and __TIT
 def hostile_labels(name: str, known: models.Plant | None = None) -> dict:
     """The example LQR (the fastest, so it is the animated 'best' one) under labels with markup."""
     found = controllers(name, known)
-    return {HOSTILE_LABELS[0]: found["LQR fast"], HOSTILE_LABELS[1]: found["LQR"],
-            HOSTILE_LABELS[2]: found["LQR slow"]}
+    return {HOSTILE_LABELS[0]: found["LQR fast"], HOSTILE_LABELS[1]: found["LQR"], HOSTILE_LABELS[2]: found["LQR slow"]}
 
 
 def announce_nonlinear_mpc(name: str, known: models.Plant | None = None) -> dict:
@@ -78,6 +79,7 @@ def announce_nonlinear_mpc(name: str, known: models.Plant | None = None) -> dict
 
     start = NonlinearMPC.initial_state
     if not getattr(start, "announces", False):
+
         def initial_state(self, y0, r0):
             state = start(self, y0, r0)
             print("NMPC RUN STARTED", file=sys.stderr, flush=True)

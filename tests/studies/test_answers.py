@@ -39,11 +39,14 @@ def test_ballbeam_equilibrium_force_of_the_v14_hint():
     assert found["x_e"]["z"] == pytest.approx(ell / 2)
 
 
-@pytest.mark.parametrize("plant,present,absent", [
-    ("uuv", ["IV.3(b) vs IV.7", "IV.8(c)", "IV.15, V.15, VI.15"], ["V.14 hint", "VI.14(b)"]),
-    ("ballbeam", ["V.14 (ball on beam)", "V.14 hint", "IV.15, V.15, VI.15"], ["IV.3(b) vs IV.7", "VI.14(b)"]),
-    ("arm", ["I.15 (arm)", "I.15(c)", "pendulum, satellite, arm parameters"], ["II.8(a)", "III.12"]),
-])
+@pytest.mark.parametrize(
+    "plant,present,absent",
+    [
+        ("uuv", ["IV.3(b) vs IV.7", "IV.8(c)", "IV.15, V.15, VI.15"], ["V.14 hint", "VI.14(b)"]),
+        ("ballbeam", ["V.14 (ball on beam)", "V.14 hint", "IV.15, V.15, VI.15"], ["IV.3(b) vs IV.7", "VI.14(b)"]),
+        ("arm", ["I.15 (arm)", "I.15(c)", "pendulum, satellite, arm parameters"], ["II.8(a)", "III.12"]),
+    ],
+)
 def test_errata_declared_in_the_case_files_are_picked_for_the_case(plant, present, absent):
     items = [row["item"] for row in answers.errata(studies.get(plant))]
     for item in present:

@@ -23,13 +23,17 @@ def page_data(path):
 
 
 def move_slider(browser, index: int) -> str:
-    return browser.evaluate(f"const s = document.getElementById('slider'); s.value = '{index}';"
-                            "s.dispatchEvent(new Event('input')); document.getElementById('time').textContent")
+    return browser.evaluate(
+        f"const s = document.getElementById('slider'); s.value = '{index}';"
+        "s.dispatchEvent(new Event('input')); document.getElementById('time').textContent"
+    )
 
 
 def pick(browser, select: str, label: str) -> None:
-    browser.evaluate(f"const p = document.getElementById('{select}'); p.value = {json.dumps(label)};"
-                     "p.dispatchEvent(new Event('change')); 0")
+    browser.evaluate(
+        f"const p = document.getElementById('{select}'); p.value = {json.dumps(label)};"
+        "p.dispatchEvent(new Event('change')); 0"
+    )
 
 
 def drawn(browser, group: str = "frame") -> list:
@@ -38,7 +42,8 @@ def drawn(browser, group: str = "frame") -> list:
         f"Array.from(document.getElementById('{group}').children).map(e => ({{tag: e.tagName,"
         " points: e.getAttribute('points'), stroke: e.getAttribute('stroke'), fill: e.getAttribute('fill'),"
         " width: e.getAttribute('stroke-width'), cx: e.getAttribute('cx'), cy: e.getAttribute('cy'),"
-        " text: e.textContent}))")
+        " text: e.textContent}))"
+    )
 
 
 def points(element) -> np.ndarray:
@@ -72,10 +77,11 @@ def test_the_arm_is_drawn_where_the_simulation_put_it_at_three_slider_positions(
         assert label == f"t = {frames[index]:.2f} s"
         theta = run.x[sample(run, frames[index]), 0]
         # The tip of the rod is at ℓ (cos θ, sin θ) of that sample (4 significant digits on the page).
-        np.testing.assert_allclose(arm_tip(browser), ell * np.array([math.cos(theta), math.sin(theta)]),
-                                   atol=2e-4)
-        assert browser.evaluate("document.getElementById('readout').textContent") == \
-            data["runs"][selected]["readouts"][index]
+        np.testing.assert_allclose(arm_tip(browser), ell * np.array([math.cos(theta), math.sin(theta)]), atol=2e-4)
+        assert (
+            browser.evaluate("document.getElementById('readout').textContent")
+            == data["runs"][selected]["readouts"][index]
+        )
     labels = [e["text"] for e in drawn(browser) if e["tag"] == "text"]
     assert labels == ["target θ = 50°"]
     assert browser.errors() == []
@@ -87,16 +93,18 @@ def test_the_picker_switches_controller_the_ghost_follows_and_the_command_is_bes
     first = data["selected"]
     other = next(label for label in data["order"] if label != first)
     browser.open((out / "arm" / "animation.html").as_uri())
-    assert browser.evaluate("Array.from(document.getElementById('controller').options).map(o => o.value)") == \
-        data["order"]
+    assert (
+        browser.evaluate("Array.from(document.getElementById('controller').options).map(o => o.value)") == data["order"]
+    )
     pick(browser, "controller", other)
     frames = data["runs"][other]["t"]
     index = len(frames) // 3
     move_slider(browser, index)
     run, ell = result.runs[(other, "step")], result.plant.params["ell"]
     k = sample(run, frames[index])
-    np.testing.assert_allclose(arm_tip(browser), ell * np.array([math.cos(run.x[k, 0]), math.sin(run.x[k, 0])]),
-                               atol=2e-4)
+    np.testing.assert_allclose(
+        arm_tip(browser), ell * np.array([math.cos(run.x[k, 0]), math.sin(run.x[k, 0])]), atol=2e-4
+    )
     # The command beside the drawing is that run's at that sample; the limit is the arm's 1 N m.
     shown = browser.evaluate("document.getElementById('input-value').textContent")
     assert shown.startswith("tau = ") and shown.endswith(" N m")
@@ -108,8 +116,9 @@ def test_the_picker_switches_controller_the_ghost_follows_and_the_command_is_bes
     ghost_run = result.runs[(first, "step")]
     ghost = [e for e in drawn(browser, "ghostframe") if e["tag"] == "polyline" and e["width"] == "8"]
     g = sample(ghost_run, max(t for t in data["runs"][first]["t"] if t <= frames[index] + 1e-9))
-    np.testing.assert_allclose(points(ghost[0])[-1], ell * np.array([math.cos(ghost_run.x[g, 0]),
-                                                                      math.sin(ghost_run.x[g, 0])]), atol=2e-4)
+    np.testing.assert_allclose(
+        points(ghost[0])[-1], ell * np.array([math.cos(ghost_run.x[g, 0]), math.sin(ghost_run.x[g, 0])]), atol=2e-4
+    )
     assert browser.evaluate("document.getElementById('ghostframe').getAttribute('opacity')") == "0.3"
     assert browser.evaluate("document.querySelectorAll('#input-plot polyline.ghost-command').length") == 1
     pick(browser, "ghost", "")
@@ -123,8 +132,12 @@ def test_cart_and_loads_are_drawn_where_the_simulation_put_them(name, browser, t
     xe, _ = plant.equilibrium()
     base = xe[plant.state_names.index(case.tracked)]
     blocks = example_controllers(name, plant)
-    runs = {label: models.simulate_closed_loop(plant, blocks[label], models.signals.step(case.step, 0.0, base),
-                                               4.0, substeps=2) for label in ("LQR", "LQR fast")}
+    runs = {
+        label: models.simulate_closed_loop(
+            plant, blocks[label], models.signals.step(case.step, 0.0, base), 4.0, substeps=2
+        )
+        for label in ("LQR", "LQR fast")
+    }
     path = animation.write_html(tmp_path / "animation.html", case, plant, runs, "LQR", max_frames=60)
     data = page_data(path)
     browser.open(path.as_uri())
@@ -142,13 +155,18 @@ def test_cart_and_loads_are_drawn_where_the_simulation_put_them(name, browser, t
                 # The cart is centred on z; the bob is ℓ from the pivot on the cart's top, θ from up.
                 assert cart[0][:, 0].mean() == pytest.approx(s["z"], abs=1e-3)
                 top = cart[0][:, 1].max()
-                np.testing.assert_allclose(circles[0], [s["z"] + p["ell"] * math.sin(s["theta"]),
-                                                        top + p["ell"] * math.cos(s["theta"])], atol=1e-3)
+                np.testing.assert_allclose(
+                    circles[0],
+                    [s["z"] + p["ell"] * math.sin(s["theta"]), top + p["ell"] * math.cos(s["theta"])],
+                    atol=1e-3,
+                )
             else:
                 # The car is centred on x; each load hangs ℓi below it at θi from down.
                 assert cart[0][:, 0].mean() == pytest.approx(s["x"], abs=1e-2)
-                loads = [[s["x"] + p[f"ell{i}"] * math.sin(s[f"theta{i}"]), -p[f"ell{i}"] * math.cos(s[f"theta{i}"])]
-                         for i in (1, 2)]
+                loads = [
+                    [s["x"] + p[f"ell{i}"] * math.sin(s[f"theta{i}"]), -p[f"ell{i}"] * math.cos(s[f"theta{i}"])]
+                    for i in (1, 2)
+                ]
                 np.testing.assert_allclose(circles, loads, atol=1e-2)
     assert browser.errors() == []
 
@@ -160,7 +178,8 @@ def test_play_button_advances_the_animation(arm_study, browser):
     moved = browser.wait(
         "new Promise(done => { const s = document.getElementById('slider'); let n = 0;"
         "  const poll = () => { if (Number(s.value) > 0 || n++ > 200) done(Number(s.value)); "
-        "                       else setTimeout(poll, 50); }; poll(); })")
+        "                       else setTimeout(poll, 50); }; poll(); })"
+    )
     assert moved > 0
     assert browser.evaluate("document.getElementById('play').textContent") in ("Pause", "Play")
     assert browser.errors() == []
@@ -173,20 +192,25 @@ def test_index_pictures_name_exactly_the_tables_controllers(arm_study, browser):
     browser.open((out / "index.html").as_uri())
     heat = browser.evaluate("Array.from(document.querySelectorAll('#heatmap tbody th')).map(e => e.textContent)")
     assert sorted(heat) == sorted(set(table.controller))
-    marks = browser.evaluate("Array.from(document.querySelectorAll('#heatmap td[data-controller]')).map("
-                             "e => [e.dataset.controller, e.dataset.verdict])")
+    marks = browser.evaluate(
+        "Array.from(document.querySelectorAll('#heatmap td[data-controller]')).map("
+        "e => [e.dataset.controller, e.dataset.verdict])"
+    )
     step = table[table.scenario == "step"].set_index("controller")
     assert {c: v for c, v in marks} == {c: step.loc[c, "verdict"] for c in step.index}
-    legend = browser.evaluate("Array.from(document.querySelectorAll('#scatter [id^=\"legend-label\"] text'))"
-                              ".map(e => e.textContent)")
+    legend = browser.evaluate(
+        "Array.from(document.querySelectorAll('#scatter [id^=\"legend-label\"] text')).map(e => e.textContent)"
+    )
     assert sorted(legend) == sorted(set(table.controller))
-    boxes = browser.evaluate("Array.from(document.querySelectorAll('#boxplots [id^=\"box-label\"] text'))"
-                             ".map(e => e.textContent)")
+    boxes = browser.evaluate(
+        "Array.from(document.querySelectorAll('#boxplots [id^=\"box-label\"] text')).map(e => e.textContent)"
+    )
     finite = samples[np.isfinite(samples.itae)]
     assert sorted(boxes) == sorted(set(finite.controller))
     images = browser.wait(
         "Promise.all(Array.from(document.images).map(i => { i.loading = 'eager';"
         "  return i.decode().then(() => [i.getAttribute('src'), i.naturalWidth],"
-        "                         () => [i.getAttribute('src'), 0]); }))")
+        "                         () => [i.getAttribute('src'), 0]); }))"
+    )
     assert images and all(width > 0 for _, width in images), images
     assert browser.errors() == []

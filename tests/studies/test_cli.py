@@ -11,24 +11,33 @@ import studies
 
 
 def run_cli(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "studies", *args], cwd=REPO, env=subprocess_env(),
-                          capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "studies", *args],
+        cwd=REPO,
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
-@pytest.mark.parametrize("args,message", [
-    (["foo"], "unknown plant 'foo'; valid plants: arm, pendulum, satellite, uuv, ballbeam, crane"),
-    (["arm", "--mc", "-5"], "argument --mc: the number of samples must be >= 0, got -5"),
-    (["arm", "--mc", "many"], "argument --mc: expected a whole number of samples, got 'many'"),
-    (["arm", "--scenario", "step,ramp"], "unknown scenario 'ramp'; valid scenarios: step, steps, disturbance"),
-    (["arm", "--provider", "nocolon"], "--provider needs MODULE:FUNCTION"),
-    (["arm", "--jobs", "0"], "--jobs must be >= 1"),
-    (["arm", "--workers", "0"], "--workers must be >= 1"),
-    (["arm", "--workers", "2", "--scheduler", "tcp://localhost:1"], "give --workers (a local Dask cluster) or"),
-    (["arm", "pendulum", "--sweep", "m=1:2:3"], "--sweep runs one plant; name exactly one, got 2"),
-    (["pendulum", "--sweep", "m2=2:1:3"], "a sweep needs finite LOW < HIGH and N >= 2 points"),
-    (["pendulum", "--sweep", "m2"], "a sweep is PARAM=LOW:HIGH:N"),
-    (["pendulum", "--sweep", "mass=1:2:3"], "pendulum has no parameter 'mass'; its parameters are m1, m2"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["foo"], "unknown plant 'foo'; valid plants: arm, pendulum, satellite, uuv, ballbeam, crane"),
+        (["arm", "--mc", "-5"], "argument --mc: the number of samples must be >= 0, got -5"),
+        (["arm", "--mc", "many"], "argument --mc: expected a whole number of samples, got 'many'"),
+        (["arm", "--scenario", "step,ramp"], "unknown scenario 'ramp'; valid scenarios: step, steps, disturbance"),
+        (["arm", "--provider", "nocolon"], "--provider needs MODULE:FUNCTION"),
+        (["arm", "--jobs", "0"], "--jobs must be >= 1"),
+        (["arm", "--workers", "0"], "--workers must be >= 1"),
+        (["arm", "--workers", "2", "--scheduler", "tcp://localhost:1"], "give --workers (a local Dask cluster) or"),
+        (["arm", "pendulum", "--sweep", "m=1:2:3"], "--sweep runs one plant; name exactly one, got 2"),
+        (["pendulum", "--sweep", "m2=2:1:3"], "a sweep needs finite LOW < HIGH and N >= 2 points"),
+        (["pendulum", "--sweep", "m2"], "a sweep is PARAM=LOW:HIGH:N"),
+        (["pendulum", "--sweep", "mass=1:2:3"], "pendulum has no parameter 'mass'; its parameters are m1, m2"),
+    ],
+)
 def test_bad_arguments_exit_2_with_the_documented_message(args, message):
     done = run_cli(*args)
     assert done.returncode == 2
@@ -55,11 +64,30 @@ def test_list_names_plants_scenarios_and_declared_controllers_without_designing(
 
 def test_a_small_run_writes_the_files_and_ends_with_verdicts_and_paths(tmp_path):
     out = tmp_path / "out"
-    done = run_cli("uuv", "--scenario", "step", "--mc", "0", "--out", str(out), "--quick",
-                   "--provider", "example_providers:controllers")
+    done = run_cli(
+        "uuv",
+        "--scenario",
+        "step",
+        "--mc",
+        "0",
+        "--out",
+        str(out),
+        "--quick",
+        "--provider",
+        "example_providers:controllers",
+    )
     assert done.returncode == 0, done.stderr
-    for name in ("uuv/table.csv", "uuv/table.md", "uuv/answers.json", "uuv/answers.md", "uuv/step.png",
-                 "uuv/animation.gif", "uuv/animation.html", "summary.md", "index.html"):
+    for name in (
+        "uuv/table.csv",
+        "uuv/table.md",
+        "uuv/answers.json",
+        "uuv/answers.md",
+        "uuv/step.png",
+        "uuv/animation.gif",
+        "uuv/animation.html",
+        "summary.md",
+        "index.html",
+    ):
         assert (out / name).exists(), name
     # Answers go to the files, not the console; the console names every row that misses its specs.
     assert "IV.5" not in done.stdout and "IV.5" in (out / "uuv" / "answers.md").read_text()
@@ -77,7 +105,18 @@ def test_a_small_run_writes_the_files_and_ends_with_verdicts_and_paths(tmp_path)
 
 
 def test_answers_are_printed_when_asked(tmp_path):
-    done = run_cli("uuv", "--scenario", "step", "--mc", "0", "--out", str(tmp_path / "out"), "--quick",
-                   "--answers", "--provider", "example_providers:lqr_only")
+    done = run_cli(
+        "uuv",
+        "--scenario",
+        "step",
+        "--mc",
+        "0",
+        "--out",
+        str(tmp_path / "out"),
+        "--quick",
+        "--answers",
+        "--provider",
+        "example_providers:lqr_only",
+    )
     assert done.returncode == 0, done.stderr
     assert "IV.5" in done.stdout and "IV.6" in done.stdout and "Errata found" in done.stdout

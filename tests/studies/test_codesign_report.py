@@ -45,8 +45,9 @@ def _check_reported(result: cr.CaseResult, plant_cost=None):
         fresh = TuningProblem(design.plant, design.block, result.scenario, specs=result.specs, cost=result.cost)
         value, _, violations = fresh.values(fresh.start())
         assert value == pytest.approx(design.closed_loop_cost, rel=1e-6), method
-        assert design.feasible == (not violations) == _meets(design.plant, design.block, result.scenario,
-                                                             result.specs), method
+        assert (
+            design.feasible == (not violations) == _meets(design.plant, design.block, result.scenario, result.specs)
+        ), method
         assert design.status, method
         if name is None:  # actuator sizing: the value is the limit, and the objective
             assert design.plant.input_limit[0] == pytest.approx(design.value) == design.objective
@@ -82,8 +83,11 @@ def test_full_sizing_every_method_converges_and_simultaneous_is_no_worse_than_ne
     sim = result.best(("simultaneous", "simultaneous from sequential"))
     assert nested.feasible and sim is not None
     assert sim.value <= nested.value * (1 + cr.SIZING_REL_TOL)
-    assert result.gain is not None and result.gain == pytest.approx(1 - sim.objective / min(
-        d.objective for m, d in result.designs.items() if m in ("sequential", "nested") and d.feasible))
+    assert result.gain is not None and result.gain == pytest.approx(
+        1
+        - sim.objective
+        / min(d.objective for m, d in result.designs.items() if m in ("sequential", "nested") and d.feasible)
+    )
 
 
 def test_hand_designs_at_the_text_limit():
@@ -117,8 +121,9 @@ def test_sizing_specs_come_from_the_text_or_a_stated_requirement():
 
 def test_satellite_stiffness_short_run_reports_what_it_designed():
     """A short, cheap run: the wiring (ranges, costs, fresh re-evaluation, statuses), not the optimum."""
-    result = satellite.panel_stiffness(methods=("sequential", "simultaneous"), duration=24.0,
-                                       tune_options={"max_iter": 3, "jit": False})
+    result = satellite.panel_stiffness(
+        methods=("sequential", "simultaneous"), duration=24.0, tune_options={"max_iter": 3, "jit": False}
+    )
     _check_reported(result, satellite.stiffness_cost)
     low, high = satellite.STIFFNESS_RANGE
     assert result.designs["sequential"].value == pytest.approx(low, abs=1e-6)  # its price alone: the cheapest
@@ -128,8 +133,9 @@ def test_satellite_stiffness_short_run_reports_what_it_designed():
 
 
 def test_crane_short_run_reports_what_it_designed():
-    result = crane.cable_transfer(methods=("sequential", "simultaneous"), duration=6.0,
-                                  tune_options={"max_iter": 2, "jit": False})
+    result = crane.cable_transfer(
+        methods=("sequential", "simultaneous"), duration=6.0, tune_options={"max_iter": 2, "jit": False}
+    )
     _check_reported(result, crane.hoist_cost)
     assert result.plant == "crane1" and list(result.specs.state_bounds) == ["theta"]
     assert result.designs["sequential"].value == pytest.approx(crane.CABLE_RANGE[1], abs=1e-6)
@@ -145,8 +151,10 @@ def test_plant_costs_in_their_units():
 
 @pytest.mark.slow
 def test_satellite_and_crane_full_runs():
-    for result, cost in ((satellite.panel_stiffness(), satellite.stiffness_cost),
-                         (crane.cable_transfer(), crane.hoist_cost)):
+    for result, cost in (
+        (satellite.panel_stiffness(), satellite.stiffness_cost),
+        (crane.cable_transfer(), crane.hoist_cost),
+    ):
         _check_reported(result, cost)
         assert result.converged
         assert result.designs["nested"].feasible and result.best(("simultaneous", "simultaneous from sequential"))
@@ -155,20 +163,47 @@ def test_satellite_and_crane_full_runs():
 def _fake_result(key="fake"):
     plant = models.get("arm")
     block = arm.SIZING.hand_design(plant)
-    base = dict(method="sequential", value=1.0, objective=1.0, closed_loop_cost=0.1, plant_cost=1.0,
-                feasible=True, violations=[], measured={"rise_time_s": 0.5, "overshoot": 0.01, "peak_input": 1.0},
-                wall_time=0.5, message="ok", gains={}, plant=plant, block=block, converged=True,
-                status="IPOPT: Solve_Succeeded")
-    designs = {"sequential": cr.Design(**base),
-               "nested": cr.Design(**base | {"method": "nested", "value": 0.9, "objective": 0.9, "wall_time": 10.0}),
-               "simultaneous": cr.Design(**base | {"method": "simultaneous", "value": 0.8, "objective": 0.8,
-                                                   "feasible": False}),
-               "simultaneous from sequential": cr.Design(**base | {"method": "simultaneous from sequential",
-                                                                   "value": 0.85, "objective": 0.85})}
-    return cr.CaseResult(key=key, problem=f"problem {key}", plant="arm", parameter="torque limit", unit="N m",
-                         text_value=1.0, objective="smallest limit",
-                         scenario=cr.sizing_scenario(arm.CASE, arm.SIZING),
-                         specs=Specs(rise_time=0.5), cost=Cost(), designs=designs, notes=["a note"])
+    base = dict(
+        method="sequential",
+        value=1.0,
+        objective=1.0,
+        closed_loop_cost=0.1,
+        plant_cost=1.0,
+        feasible=True,
+        violations=[],
+        measured={"rise_time_s": 0.5, "overshoot": 0.01, "peak_input": 1.0},
+        wall_time=0.5,
+        message="ok",
+        gains={},
+        plant=plant,
+        block=block,
+        converged=True,
+        status="IPOPT: Solve_Succeeded",
+    )
+    designs = {
+        "sequential": cr.Design(**base),
+        "nested": cr.Design(**base | {"method": "nested", "value": 0.9, "objective": 0.9, "wall_time": 10.0}),
+        "simultaneous": cr.Design(
+            **base | {"method": "simultaneous", "value": 0.8, "objective": 0.8, "feasible": False}
+        ),
+        "simultaneous from sequential": cr.Design(
+            **base | {"method": "simultaneous from sequential", "value": 0.85, "objective": 0.85}
+        ),
+    }
+    return cr.CaseResult(
+        key=key,
+        problem=f"problem {key}",
+        plant="arm",
+        parameter="torque limit",
+        unit="N m",
+        text_value=1.0,
+        objective="smallest limit",
+        scenario=cr.sizing_scenario(arm.CASE, arm.SIZING),
+        specs=Specs(rise_time=0.5),
+        cost=Cost(),
+        designs=designs,
+        notes=["a note"],
+    )
 
 
 def test_gain_compares_the_best_feasible_answers():
@@ -184,8 +219,10 @@ def test_table_and_cli_write_the_document_atomically(tmp_path, monkeypatch, caps
     text = cr.table([result])
     lines = text.strip().splitlines()
     assert len(lines) == 3 and all(line.count("|") == len(cr.COLUMNS) + 1 for line in lines)
-    assert ("| problem fake | torque limit (N m) | 1 | 1 → 1 | 0.9 → 0.9 | 0.8 → 0.8 (infeasible) | 0.85 → 0.85 | "
-            "5.6 % | 0 / 10 / 0 / 0 | yes |") in text
+    assert (
+        "| problem fake | torque limit (N m) | 1 | 1 → 1 | 0.9 → 0.9 | 0.8 → 0.8 (infeasible) | 0.85 → 0.85 | "
+        "5.6 % | 0 / 10 / 0 / 0 | yes |"
+    ) in text
     monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda: result})
     out = tmp_path / "sub" / "codesign.md"
     assert cr.main(["--out", str(out)]) == 0
@@ -200,12 +237,20 @@ def test_table_and_cli_write_the_document_atomically(tmp_path, monkeypatch, caps
     assert extra.endswith("## Open-loop co-design\n") and extra.startswith(cr.report([result], "cmd"))
 
 
-@pytest.mark.xfail(strict=True, reason="docs/codesign.md predates the converged co-design methods; regenerate it "
-                   "with python -m studies.codesign_report (about 15 minutes per problem here)")
+@pytest.mark.xfail(
+    strict=True,
+    reason="docs/codesign.md predates the converged co-design methods; regenerate it "
+    "with python -m studies.codesign_report (about 15 minutes per problem here)",
+)
 def test_committed_document_lists_every_problem_converged():
     doc = cr.DOC.read_text()
-    for problem in ("actuator sizing: arm", "actuator sizing: uuv", "actuator sizing: ballbeam",
-                    "crane transfer (crane1)", "satellite panel"):
+    for problem in (
+        "actuator sizing: arm",
+        "actuator sizing: uuv",
+        "actuator sizing: ballbeam",
+        "crane transfer (crane1)",
+        "satellite panel",
+    ):
         row = next(line for line in doc.splitlines() if line.startswith(f"| {problem} |"))
         assert row.rstrip().endswith("| yes |"), row
     assert "Maximum_Iterations_Exceeded" not in doc

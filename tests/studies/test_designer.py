@@ -35,8 +35,9 @@ def independent_run(session, **gains):
     xe, _ = plant.equilibrium()
     base = xe[plant.state_names.index(case.tracked)]
     block = session.block.with_gains(**gains)
-    return models.simulate_closed_loop(plant, block, lambda t: base + case.step, case.duration,
-                                       substeps=case.substeps, allow_divergence=True)
+    return models.simulate_closed_loop(
+        plant, block, lambda t: base + case.step, case.duration, substeps=case.substeps, allow_divergence=True
+    )
 
 
 def test_a_changed_gain_gives_the_response_simulate_closed_loop_gives(arm):
@@ -87,13 +88,16 @@ def test_root_locus_at_unit_gain_is_the_closed_loop_of_the_update(arm):
     np.testing.assert_allclose(np.sort_complex(update.locus[k]), np.sort_complex(update.poles), rtol=1e-9)
 
 
-@pytest.mark.parametrize("text, message", [
-    ("abc", "kp: 'abc' is not a number"),
-    ("nan", "kp: nan is not finite"),
-    ("inf", "kp: inf is not finite"),
-    ("-0.2", "kp: -0.2 is outside the allowed range"),
-    ("1e3", "kp: 1000 is outside the allowed range"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("abc", "kp: 'abc' is not a number"),
+        ("nan", "kp: nan is not finite"),
+        ("inf", "kp: inf is not finite"),
+        ("-0.2", "kp: -0.2 is outside the allowed range"),
+        ("1e3", "kp: 1000 is outside the allowed range"),
+    ],
+)
 def test_a_bad_typed_gain_is_refused_with_a_message(arm, text, message):
     (control,) = [c for c in arm.controls if c.key == "kp"]
     with pytest.raises(ValueError, match=re.escape(message)):
@@ -118,8 +122,9 @@ class Proportional(Block):
     """u = k (r - y): no saturation of its own, so a wrong sign runs away."""
 
     def __init__(self, k: float):
-        super().__init__(sample_period=0.01, n_state=0, n_measured=1, n_reference=1, n_input=1, gains={"k": k},
-                         name="proportional")
+        super().__init__(
+            sample_period=0.01, n_state=0, n_measured=1, n_reference=1, n_input=1, gains={"k": k}, name="proportional"
+        )
 
     def expr(self, xc, y, r, gains):
         return ca.SX(0, 1), gains["k"] * (r - y)
@@ -130,8 +135,14 @@ def test_an_unstable_gain_says_diverged_at_the_time_simulate_closed_loop_finds()
     plant = models.get("arm").with_input_limit(1e12)
     session = designer.Designer(case, Proportional(-50.0), plant=plant)
     update = session.update({"k": -200.0})
-    run = models.simulate_closed_loop(plant, Proportional(-200.0), lambda t: session.base + case.step, case.duration,
-                                      substeps=case.substeps, allow_divergence=True)
+    run = models.simulate_closed_loop(
+        plant,
+        Proportional(-200.0),
+        lambda t: session.base + case.step,
+        case.duration,
+        substeps=case.substeps,
+        allow_divergence=True,
+    )
     assert run.diverged_at is not None
     assert update.diverged
     assert update.verdict_text() == f"diverged at t = {run.diverged_at:.3g} s"
@@ -144,8 +155,12 @@ def test_the_monte_carlo_envelope_is_the_quantiles_of_runs_on_the_same_samples(a
     plant = models.get("arm")
     params = models.sample_params(plant, 6, rel=0.05, seed=3)
     block = arm.block.with_gains(kd=0.2)
-    runs = [models.simulate_closed_loop(plant, block, lambda t: arm.base + arm.case.step, arm.case.duration,
-                                        params=p, substeps=arm.case.substeps) for p in params]
+    runs = [
+        models.simulate_closed_loop(
+            plant, block, lambda t: arm.base + arm.case.step, arm.case.duration, params=p, substeps=arm.case.substeps
+        )
+        for p in params
+    ]
     expected = np.quantile([r.x[:, 0] for r in runs], designer.ENVELOPE_QUANTILES, axis=0)
     np.testing.assert_allclose(envelope["tracked"], expected, rtol=1e-9, atol=1e-12)
     assert envelope["diverged"] == 0 and np.ptp(expected[:, -1]) > 1e-3  # the samples differ
@@ -156,14 +171,20 @@ def test_placed_poles_are_the_eigenvalues_of_the_known_linear_loop_and_the_run_u
     assert [c.key for c in session.pole_controls] == ["p1.re", "p1.im"]
     block = session.place({"p1.re": -4.0, "p1.im": 3.0})
     lin = session.case.known_plant().linearize()
-    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(lin.A - lin.B @ block.gains["K"])),
-                               [-4 - 3j, -4 + 3j], rtol=1e-9)
+    np.testing.assert_allclose(
+        np.sort_complex(np.linalg.eigvals(lin.A - lin.B @ block.gains["K"])), [-4 - 3j, -4 + 3j], rtol=1e-9
+    )
     # The gain controls now range about the new design, and the run uses it.
     (k0,) = [c for c in session.controls if c.key == "K[0,0]"]
     assert k0.design == pytest.approx(float(block.gains["K"][0, 0]))
     update = session.update()
-    run = models.simulate_closed_loop(models.get("arm"), block, lambda t: session.base + session.case.step,
-                                      session.case.duration, substeps=session.case.substeps)
+    run = models.simulate_closed_loop(
+        models.get("arm"),
+        block,
+        lambda t: session.base + session.case.step,
+        session.case.duration,
+        substeps=session.case.substeps,
+    )
     np.testing.assert_allclose(update.tracked, run.x[:, 0], rtol=1e-9, atol=1e-12)
     with pytest.raises(ValueError, match=re.escape("p1.re: 4 is outside the allowed range")):
         session.place({"p1.re": 4.0})
@@ -230,8 +251,14 @@ def wait_for(browser, expression: str, timeout: float = 30.0):
 def server():
     """`python -m studies.designer arm PD` on a free port of 127.0.0.1; its URL. Stopped at the end."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    process = subprocess.Popen([sys.executable, "-m", "studies.designer", "arm", "PD"], cwd=ROOT, env=env,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "studies.designer", "arm", "PD"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         url = None
         for line in process.stdout:
@@ -251,8 +278,10 @@ def server():
 def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, arm, tmp_path):
     browser.driver.set_window_size(1480, 1120)
     browser.open(server)
-    wait_for(browser, "window.Bokeh && Bokeh.documents.length && "
-                      "Bokeh.documents[0].get_model_by_name('response').get_length() > 0")
+    wait_for(
+        browser,
+        "window.Bokeh && Bokeh.documents.length && Bokeh.documents[0].get_model_by_name('response').get_length() > 0",
+    )
     scale, _ = tracked_scale(arm.case.tracked_unit)
     verdict_before = read(browser, "D.get_model_by_name('verdict').text")
     assert "overshoot" in verdict_before
@@ -270,8 +299,11 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
         i = int(np.argmin(np.abs(np.asarray(t) - when)))
         assert t[i] == pytest.approx(run.t[i], abs=1e-12)
         assert y[i] / scale == pytest.approx(run.x[i, k], rel=1e-9, abs=1e-12)
-    verdict_after = wait_for(browser, "Bokeh.documents[0].get_model_by_name('verdict').text.includes('settling')"
-                                      " && Bokeh.documents[0].get_model_by_name('verdict').text")
+    verdict_after = wait_for(
+        browser,
+        "Bokeh.documents[0].get_model_by_name('verdict').text.includes('settling')"
+        " && Bokeh.documents[0].get_model_by_name('verdict').text",
+    )
     assert "overshoot" not in verdict_after, "kd = 0.7 brings the overshoot under the 10 % bound"
     assert read(browser, "D.get_model_by_name('slider:kd').value") == pytest.approx(math.log10(0.7))
 
@@ -287,14 +319,21 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
     click(browser, "export_button")
     assert json.loads(wait_for(browser, "Bokeh.documents[0].get_model_by_name('export').text"))["gains"] == start
     click(browser, "tune")
-    status = wait_for(browser, "Bokeh.documents[0].get_model_by_name('tune_status').text.startsWith('tun') && "
-                               "!Bokeh.documents[0].get_model_by_name('tune_status').text.startsWith('tuning') && "
-                               "Bokeh.documents[0].get_model_by_name('tune_status').text", timeout=120)
+    status = wait_for(
+        browser,
+        "Bokeh.documents[0].get_model_by_name('tune_status').text.startsWith('tun') && "
+        "!Bokeh.documents[0].get_model_by_name('tune_status').text.startsWith('tuning') && "
+        "Bokeh.documents[0].get_model_by_name('tune_status').text",
+        timeout=120,
+    )
     assert status.startswith("tuned: ITAE"), status
     wait_for(browser, f"Bokeh.documents[0].get_model_by_name('response').data.y[100] !== {y[100]!r}")
     click(browser, "export_button")
-    tuned = wait_for(browser, "JSON.parse(Bokeh.documents[0].get_model_by_name('export').text).gains.kd !== 0.7 && "
-                              "JSON.parse(Bokeh.documents[0].get_model_by_name('export').text).gains")
+    tuned = wait_for(
+        browser,
+        "JSON.parse(Bokeh.documents[0].get_model_by_name('export').text).gains.kd !== 0.7 && "
+        "JSON.parse(Bokeh.documents[0].get_model_by_name('export').text).gains",
+    )
     assert set(tuned) == set(start) and tuned != start
     for c in arm.controls:
         assert read(browser, f"D.get_model_by_name('gain:{c.key}').value") == f"{tuned[c.key]:.6g}"
@@ -315,8 +354,11 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
     for when in (0.3, 1.0, 4.0):
         read(browser, f"D.get_model_by_name('anim_time').value = {when}; 0")
         wait_for(browser, f"Bokeh.documents[0].get_model_by_name('readout').text.startsWith('t = {when:.2f} s')")
-        rods = read(browser, "const L = D.get_model_by_name('scene_lines').data; "
-                             "Array.from(L.width).map((w, i) => [w, Array.from(L.xs[i]), Array.from(L.ys[i])])")
+        rods = read(
+            browser,
+            "const L = D.get_model_by_name('scene_lines').data; "
+            "Array.from(L.width).map((w, i) => [w, Array.from(L.xs[i]), Array.from(L.ys[i])])",
+        )
         (tip,) = [(xs[-1], ys[-1]) for width, xs, ys in rods if width == 8]
         theta = run.x[int(np.argmin(np.abs(run.t - when))), 0]
         np.testing.assert_allclose(tip, ell * np.array([math.cos(theta), math.sin(theta)]), rtol=1e-9, atol=1e-12)
@@ -324,13 +366,19 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
     # A drag: the slider's value moves in many steps; the page ends at the last one's response.
     (kp,) = [c for c in arm.controls if c.key == "kp"]
     exponents = np.linspace(math.log10(kp.design), math.log10(kp.design) + 0.5, 12)
-    read(browser, f"const s = D.get_model_by_name('slider:kp'); {json.dumps(list(exponents))}"
-                  ".forEach(e => {{ s.value = e }}); 0")
+    read(
+        browser,
+        f"const s = D.get_model_by_name('slider:kp'); {json.dumps(list(exponents))}"
+        ".forEach(e => {{ s.value = e }}); 0",
+    )
     dragged = kp.from_log(float(exponents[-1]))
     wait_for(browser, f"Bokeh.documents[0].get_model_by_name('gain:kp').value === '{dragged:.6g}'")
     run = independent_run(arm, kp=dragged)
-    wait_for(browser, f"Math.abs(Bokeh.documents[0].get_model_by_name('response').data.y[150] - "
-                      f"{float(run.x[150, 0] * scale)!r}) < 1e-9")
+    wait_for(
+        browser,
+        f"Math.abs(Bokeh.documents[0].get_model_by_name('response').data.y[150] - "
+        f"{float(run.x[150, 0] * scale)!r}) < 1e-9",
+    )
     y = read(browser, "Array.from(D.get_model_by_name('response').data.y)")
     np.testing.assert_allclose(np.asarray(y) / scale, run.x[:, 0], rtol=1e-9, atol=1e-12)
 

@@ -59,8 +59,23 @@ def test_a_study_on_dask_writes_the_same_table(client, tmp_path):
     kwargs = dict(providers=(EXAMPLE,), scenarios=["step", "mc"], mc=40, seed=3, quick=True)
     here = studies.run("arm", **kwargs)
     there = studies.run("arm", executor=client, **kwargs)
-    columns = ["controller", "scenario", "status", "verdict", "verdict_detail", "rise_time_s", "settling_time_s",
-               "overshoot_pct", "ss_error", "iae", "itae", "peak_u", "energy", "samples", "iae_std"]
+    columns = [
+        "controller",
+        "scenario",
+        "status",
+        "verdict",
+        "verdict_detail",
+        "rise_time_s",
+        "settling_time_s",
+        "overshoot_pct",
+        "ss_error",
+        "iae",
+        "itae",
+        "peak_u",
+        "energy",
+        "samples",
+        "iae_std",
+    ]
     pd.testing.assert_frame_equal(here[columns], there[columns])
 
 
@@ -111,13 +126,15 @@ def test_the_command_on_dask_writes_what_one_process_writes_and_nothing_when_wor
     assert done.returncode == 0, done.stderr[-2000:]
     assert "on Dask (2 local workers)" in done.stdout
     for plant in ("arm", "uuv"):
-        columns = ["controller", "scenario", "status", "verdict", "rise_time_s", "settling_time_s", "itae",
-                   "samples"]
-        pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "alone" / plant / "table.csv")[columns],
-                                      pd.read_csv(tmp_path / "dask" / plant / "table.csv")[columns])
+        columns = ["controller", "scenario", "status", "verdict", "rise_time_s", "settling_time_s", "itae", "samples"]
+        pd.testing.assert_frame_equal(
+            pd.read_csv(tmp_path / "alone" / plant / "table.csv")[columns],
+            pd.read_csv(tmp_path / "dask" / plant / "table.csv")[columns],
+        )
     out = tmp_path / "dying"
-    done = run_cli(*common, "--provider", "example_providers:killing_the_worker", "--out", str(out),
-                   "--workers", "2", timeout=900)
+    done = run_cli(
+        *common, "--provider", "example_providers:killing_the_worker", "--out", str(out), "--workers", "2", timeout=900
+    )
     assert done.returncode == 1
     assert "a Dask worker died while running it" in done.stderr and "nothing was written" in done.stderr
     assert not out.exists() or not any(out.iterdir())

@@ -12,14 +12,16 @@ def registered():
 
 
 def test_committed_document_equals_the_generated_one():
-    assert errata.DOC.read_text(encoding="utf-8") == errata.document(registered()), \
+    assert errata.DOC.read_text(encoding="utf-8") == errata.document(registered()), (
         "docs/errata.md is stale: run python -m studies.errata"
+    )
 
 
 def test_a_shared_row_is_declared_once_and_listed_for_every_case_it_concerns():
     item = "I.11(c), II.11, III.11, IV.12, V.12, VI.11"
-    declared = [case.plant for case in registered() for e in case.errata
-                if isinstance(e, errata.Erratum) and e.item == item]
+    declared = [
+        case.plant for case in registered() for e in case.errata if isinstance(e, errata.Erratum) and e.item == item
+    ]
     assert declared == ["arm"]
     for case in registered():
         rows = errata.errata_of(case, registered())

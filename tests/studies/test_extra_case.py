@@ -19,12 +19,19 @@ NAME = "test_mass_spring_damper"
 M, K, B, LIMIT = 1.0, 4.0, 1.2, 20.0
 
 
-@models.declare(name=NAME, title="mass on a spring and damper (test)", coordinates=("x",), inputs=("F",),
-                params=(models.Param("m", M, "kg"), models.Param("k", K, "N/m"), models.Param("b", B, "N s/m")),
-                input_limit=LIMIT, uncertain=("m", "k", "b"))
+@models.declare(
+    name=NAME,
+    title="mass on a spring and damper (test)",
+    coordinates=("x",),
+    inputs=("F",),
+    params=(models.Param("m", M, "kg"), models.Param("k", K, "N/m"), models.Param("b", B, "N s/m")),
+    input_limit=LIMIT,
+    uncertain=("m", "k", "b"),
+)
 def mass_spring_damper(q, dq, u, p):
-    return models.Physics(kinetic=p.m * dq.x**2 / 2, potential=p.k * q.x**2 / 2, forces=[u.F - p.b * dq.x],
-                          outputs={"x": q.x})
+    return models.Physics(
+        kinetic=p.m * dq.x**2 / 2, potential=p.k * q.x**2 / 2, forces=[u.F - p.b * dq.x], outputs={"x": q.x}
+    )
 
 
 def classical(known: models.Plant) -> ClassicalDesign:
@@ -32,18 +39,32 @@ def classical(known: models.Plant) -> ClassicalDesign:
     G = known.linearize().tf("x", "F")
     pd = pd_design(G, zeta=0.8, wn=3.0)
     limit = float(known.input_limit[0])
-    blocks = {"PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD"),
-              "PID": PID(known, "x", kp=pd.kp, kd=pd.kd, ki=12.0, output_limit=limit, name="PID")}
+    blocks = {
+        "PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD"),
+        "PID": PID(known, "x", kp=pd.kp, kd=pd.kd, ki=12.0, output_limit=limit, name="PID"),
+    }
     answers = {"VII.8": record(kp=pd.kp, kd=pd.kd, dc_gain=dc_gain(Loop.pid(G, pd.kp, 0, pd.kd).reference_to_output()))}
     return ClassicalDesign(answers, blocks)
 
 
 CASE = CaseStudy(
-    plant=NAME, numeral="VII", tracked="x", design_step=0.5, step=0.5, input_disturbance=2.0, duration=10.0,
-    tracked_unit="m", input_unit="N", scenarios=(step(), input_disturbance()), known_rel=0.0,
+    plant=NAME,
+    numeral="VII",
+    tracked="x",
+    design_step=0.5,
+    step=0.5,
+    input_disturbance=2.0,
+    duration=10.0,
+    tracked_unit="m",
+    input_unit="N",
+    scenarios=(step(), input_disturbance()),
+    known_rel=0.0,
     classical=classical,
-    statespace=StateSpaceChoices(poles=lambda known: second_order_poles(3.0, 0.8), bryson_maxima={"x": 0.5},
-                                 items=lambda r: {"VII.15(f)": r["feedback"], "LQR": r["LQR"]}),
+    statespace=StateSpaceChoices(
+        poles=lambda known: second_order_poles(3.0, 0.8),
+        bryson_maxima={"x": 0.5},
+        items=lambda r: {"VII.15(f)": r["feedback"], "LQR": r["LQR"]},
+    ),
     mpc=MPCSettings(0.05, 40, (100.0, 1.0), 1e-2),
 )
 
@@ -64,8 +85,16 @@ def _row(table, controller, scenario):
 
 
 def test_every_kind_of_controller_runs_on_the_new_case(table):
-    assert set(table.controller) >= {"PD", "PID", "pole placement", "pole placement + integrator", "LQR",
-                                      "LQR + Kalman", "linear MPC", "nonlinear MPC"}
+    assert set(table.controller) >= {
+        "PD",
+        "PID",
+        "pole placement",
+        "pole placement + integrator",
+        "LQR",
+        "LQR + Kalman",
+        "linear MPC",
+        "nonlinear MPC",
+    }
     assert set(table.status) == {"ok"}
     # No stored tuned gains: no "tuned" row, and a note saying why.
     assert "tuned" not in set(table.controller)
@@ -106,8 +135,14 @@ def test_pole_placement_step_matches_the_linear_simulation(table):
 def test_the_registry_lists_the_new_case_after_the_six_and_refuses_a_second():
     studies.register(CASE)
     try:
-        assert studies.names()[-1] == NAME and studies.names()[:6] == ("arm", "pendulum", "satellite", "uuv",
-                                                                        "ballbeam", "crane")
+        assert studies.names()[-1] == NAME and studies.names()[:6] == (
+            "arm",
+            "pendulum",
+            "satellite",
+            "uuv",
+            "ballbeam",
+            "crane",
+        )
         with pytest.raises(ValueError, match="registered already; pass replace=True"):
             studies.register(CASE)
         assert studies.register(CASE, replace=True) is CASE

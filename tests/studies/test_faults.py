@@ -55,14 +55,23 @@ def workdir(tmp_path) -> Path:
 
 
 def cli(*args, cwd, timeout=600) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "studies", *args], cwd=cwd, env=subprocess_env(),
-                          capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "studies", *args],
+        cwd=cwd,
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 def snapshot(folder: Path) -> dict:
     """Every file under `folder`, hidden ones included: relative path -> SHA-256."""
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 def previous_run(out: Path) -> dict:
@@ -85,7 +94,7 @@ def descendants(pid: int) -> set:
                 stat = (entry / "stat").read_text()
             except OSError:
                 continue
-            parents[int(entry.name)] = int(stat[stat.rindex(")") + 2:].split()[1])
+            parents[int(entry.name)] = int(stat[stat.rindex(")") + 2 :].split()[1])
     found, grew = set(), {pid}
     while grew:
         grew = {child for child, parent in parents.items() if parent in grew} - found
@@ -113,9 +122,29 @@ def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str) -> tuple:
     log = workdir / f"stderr-{tag}.txt"
     with open(log, "w") as stream:
         process = subprocess.Popen(
-            [sys.executable, "-m", "studies", *plants, "--scenario", "step", "--mc", "0", "--quick", "--quiet",
-             "--jobs", str(jobs), "--out", "out", "--provider", "fault_providers:announce_nonlinear_mpc"],
-            cwd=workdir, env=subprocess_env(), stdout=subprocess.DEVNULL, stderr=stream)
+            [
+                sys.executable,
+                "-m",
+                "studies",
+                *plants,
+                "--scenario",
+                "step",
+                "--mc",
+                "0",
+                "--quick",
+                "--quiet",
+                "--jobs",
+                str(jobs),
+                "--out",
+                "out",
+                "--provider",
+                "fault_providers:announce_nonlinear_mpc",
+            ],
+            cwd=workdir,
+            env=subprocess_env(),
+            stdout=subprocess.DEVNULL,
+            stderr=stream,
+        )
     try:
         deadline = time.monotonic() + 300
         while "NMPC RUN STARTED" not in log.read_text():
@@ -180,8 +209,9 @@ def test_the_command_reads_an_interrupt_reported_as_an_error_as_an_interrupt(wor
     from studies import cli as command
 
     def interrupted(*args, **kwargs):
-        raise SystemError("<built-in function Function_call> returned a result with an exception set: "
-                          "KeyboardInterrupt")
+        raise SystemError(
+            "<built-in function Function_call> returned a result with an exception set: KeyboardInterrupt"
+        )
 
     monkeypatch.setattr(command, "_run_all", interrupted)
     monkeypatch.chdir(workdir)
@@ -212,8 +242,9 @@ def test_an_interrupted_write_leaves_the_previous_folder(tmp_path, monkeypatch):
 def test_a_study_folder_is_replaced_whole_and_records_its_run(tmp_path):
     """A stale file of an earlier run does not survive a rewrite; run.json names the run, its settings
     and the SHA-256 of every file, which check_study_folder verifies."""
-    result = runner.run_study(arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step",), mc=0,
-                                                                                          seed=7))
+    result = runner.run_study(
+        arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step",), mc=0, seed=7)
+    )
     out = tmp_path / "out"
     (out / "arm").mkdir(parents=True)
     (out / "arm" / "stale.png").write_bytes(b"from an earlier run")
@@ -235,8 +266,9 @@ def test_a_mixed_folder_is_detected_and_reported_in_the_summary_and_index(tmp_pa
     check_study_folder, and summary.md and index.html say the folder is not as its run wrote it; a
     plant written by an earlier run is marked as such."""
     result = runner.run_study(arm_study("example_providers:lqr_only"), STEP_ONLY)
-    uuv = runner.run_study(dataclasses.replace(studies.get("uuv"), providers=("example_providers:lqr_only",)),
-                           STEP_ONLY)
+    uuv = runner.run_study(
+        dataclasses.replace(studies.get("uuv"), providers=("example_providers:lqr_only",)), STEP_ONLY
+    )
     out = tmp_path / "out"
     writers.write_study(uuv, out, run_id="earlier")
     writers.write_study(result, out, run_id="now")
@@ -257,38 +289,71 @@ def test_a_mixed_folder_is_detected_and_reported_in_the_summary_and_index(tmp_pa
 def test_a_failed_run_leaves_the_output_folder_as_it_was(workdir):
     """--strict with a provider that raises: exit 1, and OUT holds the earlier run's files only."""
     before = previous_run(workdir / "out")
-    done = cli("arm", "--scenario", "step", "--mc", "0", "--quick", "--quiet", "--strict", "--out", "out",
-               "--provider", "example_providers:failing", cwd=workdir)
+    done = cli(
+        "arm",
+        "--scenario",
+        "step",
+        "--mc",
+        "0",
+        "--quick",
+        "--quiet",
+        "--strict",
+        "--out",
+        "out",
+        "--provider",
+        "example_providers:failing",
+        cwd=workdir,
+    )
     assert done.returncode == 1, done.stderr[-3000:]
-    assert "python -m studies: failed: RuntimeError: no design for arm; nothing of this run was written to out" \
+    assert (
+        "python -m studies: failed: RuntimeError: no design for arm; nothing of this run was written to out"
         in done.stderr
+    )
     assert snapshot(workdir / "out") == before
 
 
 # =========================================================================== class 6: status
 def test_status_kinds():
-    assert [runner.status_kind(s) for s in ("ok", "degraded: solver failed on 3 of 500 steps",
-                                            "diverged at t = 1 s", "diverged: 2 of 9 samples, first at t = 1 s",
-                                            "failed: ValueError: x", "skipped: no such scenario", math.nan, "")] \
-        == ["ok", "degraded", "diverged", "diverged", "failed", "skipped", "failed", "failed"]
+    assert [
+        runner.status_kind(s)
+        for s in (
+            "ok",
+            "degraded: solver failed on 3 of 500 steps",
+            "diverged at t = 1 s",
+            "diverged: 2 of 9 samples, first at t = 1 s",
+            "failed: ValueError: x",
+            "skipped: no such scenario",
+            math.nan,
+            "",
+        )
+    ] == ["ok", "degraded", "diverged", "diverged", "failed", "skipped", "failed", "failed"]
 
 
 def test_an_mpc_whose_solver_fails_on_every_step_is_degraded_not_ok():
     """500 failed solves (each falling back on the previous plan) in the step, and in every step of
     the Monte Carlo samples: 'degraded' with the counts, never 'ok', and not the best row."""
-    result = runner.run_study(arm_study("fault_providers:solver_always_fails", "example_providers:lqr_only"),
-                              runner.Options(scenarios=("step", "mc"), mc=2))
+    result = runner.run_study(
+        arm_study("fault_providers:solver_always_fails", "example_providers:lqr_only"),
+        runner.Options(scenarios=("step", "mc"), mc=2),
+    )
     table = result.table.set_index(["controller", "scenario"]).status
     assert table[("failing MPC", "step")] == "degraded: solver failed on 500 of 500 steps, fallback on 500"
-    assert table[("failing MPC", "mc")] == \
-        "degraded: solver failed on 1000 of 1000 steps of 2 samples, fallback on 1000"
+    assert (
+        table[("failing MPC", "mc")] == "degraded: solver failed on 1000 of 1000 steps of 2 samples, fallback on 1000"
+    )
     assert table[("LQR", "step")] == table[("LQR", "mc")] == "ok"
     assert result.best() == "LQR"
 
 
 def test_counts_of_solver_records():
-    records = [{"success": True}, {"success": False, "fallback": True}, {"status": "Solve_Succeeded"},
-               {"status": "Maximum_Iterations_Exceeded"}, {"status": "optimal"}, "not a record"]
+    records = [
+        {"success": True},
+        {"success": False, "fallback": True},
+        {"status": "Solve_Succeeded"},
+        {"status": "Maximum_Iterations_Exceeded"},
+        {"status": "optimal"},
+        "not a record",
+    ]
     assert runner.solver_counts(records) == (5, 2, 1)
     assert runner.degraded_status(5, 2, 1) == "degraded: solver failed on 2 of 5 steps, fallback on 1"
     assert runner.degraded_status(5, 0, 1) == "degraded: fallback on 1 of 5 steps"
@@ -296,15 +361,15 @@ def test_counts_of_solver_records():
 
 
 def test_a_diverging_and_a_failing_controller_have_their_own_status_and_the_others_run():
-    result = runner.run_study(arm_study("example_providers:diverging", "fault_providers:raises_mid_run"),
-                              STEP_ONLY)
+    result = runner.run_study(arm_study("example_providers:diverging", "fault_providers:raises_mid_run"), STEP_ONLY)
     status = result.table.set_index("controller").status
     assert status["broken"] == "diverged at t = 1 s"
     assert status["broken MPC"] == "failed: FloatingPointError: the solver's factorization broke down"
     assert status["LQR"] == "ok"
     with pytest.raises(FloatingPointError, match="factorization broke down"):
-        runner.run_study(arm_study("fault_providers:raises_mid_run"), runner.Options(scenarios=("step",), mc=0,
-                                                                                     strict=True))
+        runner.run_study(
+            arm_study("fault_providers:raises_mid_run"), runner.Options(scenarios=("step",), mc=0, strict=True)
+        )
 
 
 def test_a_provider_that_returns_no_dict_is_noted():
@@ -316,15 +381,31 @@ def test_non_ok_rows_are_visible_in_the_console_summary_and_index_and_strict_exi
     """A run with an MPC whose solver always fails and a controller that diverges, with --strict:
     every file is written (they are the truth), each non-ok row is named on the console, in
     table.md, summary.md and index.html, and the exit status is 1."""
-    done = cli("arm", "--scenario", "step", "--mc", "0", "--quick", "--quiet", "--strict", "--out", "out",
-               "--provider", "fault_providers:solver_always_fails", "--provider", "example_providers:diverging",
-               cwd=workdir)
+    done = cli(
+        "arm",
+        "--scenario",
+        "step",
+        "--mc",
+        "0",
+        "--quick",
+        "--quiet",
+        "--strict",
+        "--out",
+        "out",
+        "--provider",
+        "fault_providers:solver_always_fails",
+        "--provider",
+        "example_providers:diverging",
+        cwd=workdir,
+    )
     assert done.returncode == 1, done.stderr[-3000:]
     degraded = "degraded: solver failed on 500 of 500 steps, fallback on 500"
     console = done.stdout.splitlines()
     # One scenario ran, so each row is listed as "[all]" of its controller's scenarios.
-    assert any(line.strip().startswith(("degraded: ", "violates (degraded): ")) and "failing MPC [all]" in line
-               for line in console), done.stdout
+    assert any(
+        line.strip().startswith(("degraded: ", "violates (degraded): ")) and "failing MPC [all]" in line
+        for line in console
+    ), done.stdout
     assert "  diverged: broken [all]" in console, done.stdout
     assert "python -m studies: --strict: 2 row(s) not ok (listed above)" in console
     out = workdir / "out"
@@ -342,13 +423,20 @@ def test_non_ok_rows_are_visible_in_the_console_summary_and_index_and_strict_exi
     assert writers.check_study_folder(out / "arm") == []
 
 
-@pytest.mark.parametrize("spec,culprit", [
-    ("mpc_typo:controllers", "--provider mpc_typo:controllers: no module named 'mpc_typo'"),
-    ("example_providers:controlers",
-     "--provider example_providers:controlers: module example_providers has no function controlers()"),
-    ("studies.no_such_module:controllers",
-     "--provider studies.no_such_module:controllers: no module named 'studies.no_such_module'"),
-])
+@pytest.mark.parametrize(
+    "spec,culprit",
+    [
+        ("mpc_typo:controllers", "--provider mpc_typo:controllers: no module named 'mpc_typo'"),
+        (
+            "example_providers:controlers",
+            "--provider example_providers:controlers: module example_providers has no function controlers()",
+        ),
+        (
+            "studies.no_such_module:controllers",
+            "--provider studies.no_such_module:controllers: no module named 'studies.no_such_module'",
+        ),
+    ],
+)
 def test_a_misspelled_provider_is_named_and_with_strict_nothing_runs(workdir, monkeypatch, capsys, spec, culprit):
     from studies import cli as command
 
@@ -362,11 +450,25 @@ def test_a_misspelled_provider_is_named_and_with_strict_nothing_runs(workdir, mo
 
 @pytest.mark.slow
 def test_a_misspelled_provider_without_strict_is_named_before_and_after_the_run(workdir):
-    done = cli("uuv", "--scenario", "step", "--mc", "0", "--quick", "--quiet", "--out", "out", "--provider",
-               "mpc_typo:controllers", cwd=workdir)
+    done = cli(
+        "uuv",
+        "--scenario",
+        "step",
+        "--mc",
+        "0",
+        "--quick",
+        "--quiet",
+        "--out",
+        "out",
+        "--provider",
+        "mpc_typo:controllers",
+        cwd=workdir,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
-    assert "python -m studies: --provider mpc_typo:controllers: no module named 'mpc_typo'; running without it" \
+    assert (
+        "python -m studies: --provider mpc_typo:controllers: no module named 'mpc_typo'; running without it"
         in done.stderr
+    )
     assert "ran without 1 missing provider(s): --provider mpc_typo:controllers" in done.stderr
     note = "mpc_typo:controllers: skipped, no module named 'mpc_typo'"
     assert f"- {files.escape_markdown(note)}" in (workdir / "out/uuv/table.md").read_text()
@@ -378,9 +480,12 @@ def test_two_million_monte_carlo_samples_are_refused_before_any_work(workdir):
     done = cli("arm", "--mc", "2000000", "--out", "out", cwd=workdir)
     assert done.returncode == 2
     line = done.stderr.strip().splitlines()[-1]
-    assert re.fullmatch(r"python -m studies: error: --mc 2000000: a Monte Carlo of 2000000 samples on arm needs "
-                        r"about [0-9.]+ GiB, above the limit of 1 GiB \(models.checks.MEMORY_LIMIT_BYTES\); give "
-                        r"fewer samples \(mc\)", line), line
+    assert re.fullmatch(
+        r"python -m studies: error: --mc 2000000: a Monte Carlo of 2000000 samples on arm needs "
+        r"about [0-9.]+ GiB, above the limit of 1 GiB \(models.checks.MEMORY_LIMIT_BYTES\); give "
+        r"fewer samples \(mc\)",
+        line,
+    ), line
     assert time.monotonic() - started < 120 and list(workdir.iterdir()) == []
 
 
@@ -418,8 +523,9 @@ def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(mon
     _, base = runner.tracked_equilibrium(plant, study)
     params = models.sample_params(plant, 7, rel=scenario.rel, seed=2)
     monkeypatch.setattr(models.closed_loop, "MONTE_CARLO_CHUNK_BYTES", 64 * 2**20)
-    batch = models.monte_carlo(plant, lqr, scenario.reference(study, base), scenario.duration(study), params,
-                               seed=2, substeps=study.substeps)
+    batch = models.monte_carlo(
+        plant, lqr, scenario.reference(study, base), scenario.duration(study), params, seed=2, substeps=study.substeps
+    )
     expected = pd.DataFrame([metrics.run_metrics(run, study.tracked) for run in batch])
     got = result.samples[result.samples.controller == "LQR"].reset_index(drop=True)
     for column in ("iae", "itae", "peak_u", "overshoot_pct", "settling_time_s"):
@@ -432,13 +538,15 @@ def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(mon
 def test_a_controllers_compiled_closed_loops_are_freed_after_each_row():
     """The work memory of a closed loop (hundreds of MB at 1 ms over a minute) is not kept once its row
     is done: after the study no cached closed-loop Function of the controller is left on the plant."""
-    result = runner.run_study(arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step", "mc"),
-                                                                                          mc=3))
+    result = runner.run_study(arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step", "mc"), mc=3))
     lqr = result.controllers["LQR"]
 
     def cached():
-        return [key for key, value in result.plant.function_cache.items()
-                if isinstance(value, tuple) and value[0] is lqr.casadi_step]
+        return [
+            key
+            for key, value in result.plant.function_cache.items()
+            if isinstance(value, tuple) and value[0] is lqr.casadi_step
+        ]
 
     assert cached() == []
     models.simulate_closed_loop(result.plant, lqr, 0.1, 1.0)
@@ -447,18 +555,21 @@ def test_a_controllers_compiled_closed_loops_are_freed_after_each_row():
 
 
 # =========================================================================== class 8: bad input
-@pytest.mark.parametrize("args,message", [
-    (["--seed", "-1"], "argument --seed: the seed must be a whole number >= 0, got -1"),
-    (["--seed", "1.5"], "argument --seed: expected a whole number >= 0, got '1.5'"),
-    (["--out", ""], "argument --out: expected a folder name, got '' (use . for this folder)"),
-    (["--out", "  "], "argument --out: expected a folder name, got '  ' (use . for this folder)"),
-    (["--scenario", ""], "--scenario names no scenario; valid scenarios: step, steps, disturbance, noise, mc"),
-    (["--scenario", " , "], "--scenario names no scenario"),
-    (["--jobs", "two"], "argument --jobs: invalid int value: 'two'"),
-    (["--provider", "a:b:c"], "--provider needs MODULE:FUNCTION, got 'a:b:c'"),
-    (["--provider", " :controllers"], "--provider needs MODULE:FUNCTION, got ' :controllers'"),
-    (["--provider", "example_providers:"], "--provider needs MODULE:FUNCTION, got 'example_providers:'"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--seed", "-1"], "argument --seed: the seed must be a whole number >= 0, got -1"),
+        (["--seed", "1.5"], "argument --seed: expected a whole number >= 0, got '1.5'"),
+        (["--out", ""], "argument --out: expected a folder name, got '' (use . for this folder)"),
+        (["--out", "  "], "argument --out: expected a folder name, got '  ' (use . for this folder)"),
+        (["--scenario", ""], "--scenario names no scenario; valid scenarios: step, steps, disturbance, noise, mc"),
+        (["--scenario", " , "], "--scenario names no scenario"),
+        (["--jobs", "two"], "argument --jobs: invalid int value: 'two'"),
+        (["--provider", "a:b:c"], "--provider needs MODULE:FUNCTION, got 'a:b:c'"),
+        (["--provider", " :controllers"], "--provider needs MODULE:FUNCTION, got ' :controllers'"),
+        (["--provider", "example_providers:"], "--provider needs MODULE:FUNCTION, got 'example_providers:'"),
+    ],
+)
 def test_bad_command_line_arguments_exit_2_naming_the_argument(workdir, monkeypatch, capsys, args, message):
     """The command's main() in this process (the interpreter's start-up would dominate), run from the
     working folder with a space and a semicolon."""
@@ -474,29 +585,36 @@ def test_bad_command_line_arguments_exit_2_naming_the_argument(workdir, monkeypa
     assert list(workdir.iterdir()) == []  # nothing written, not even into the working folder
 
 
-@pytest.mark.parametrize("kwargs,error,message", [
-    ({"scenarios": "step"}, TypeError, "scenarios must be a list of scenario names such as ['step'], got str 'step'"),
-    ({"scenarios": []}, ValueError, "scenarios is empty; give None for every scenario"),
-    ({"scenarios": ["step", "ramp"]}, ValueError, "unknown scenario 'ramp' in scenarios"),
-    ({"mc": True}, TypeError, "mc (Monte Carlo samples) must be an integer, got bool True"),
-    ({"mc": "5"}, TypeError, "mc (Monte Carlo samples) must be an integer, got str '5'"),
-    ({"mc": 2.5}, ValueError, "mc (Monte Carlo samples) must be an integer, got 2.5"),
-    ({"mc": -1}, ValueError, "mc (Monte Carlo samples) must be an integer >= 0, got -1"),
-    ({"seed": -1}, ValueError, "seed must be an integer >= 0, got -1"),
-    ({"seed": "0"}, TypeError, "seed must be an integer, got str '0'"),
-    ({"threads": 0}, ValueError, "threads must be an integer >= 1, got 0"),
-    ({"quick": "no"}, TypeError, "quick must be True or False, got str 'no'"),
-    ({"strict": 1}, TypeError, "strict must be True or False, got int 1"),
-    ({"jit": "yes"}, ValueError, "jit must be True, False or 'auto', got 'yes'"),
-    ({"jit": 1}, ValueError, "jit must be True, False or 'auto', got 1"),
-    ({"out": ""}, ValueError, "out must name a folder (or be None to write nothing), got ''"),
-    ({"out": 5}, ValueError, "out must name a folder (or be None to write nothing), got 5"),
-    ({"providers": EXAMPLE}, TypeError, "providers must be a list of 'module:function' strings, got str"),
-    ({"providers": ["nocolon"]}, ValueError, "providers: each provider is 'module:function', got 'nocolon'"),
-    ({"controllers": ["PD"]}, TypeError, "controllers must be a dict {label: controller}, got list"),
-    ({"progress": 5}, TypeError, "progress must be a function progress(done, total, text), got 5"),
-    ({"mc": 2_000_000}, models.checks.ResourceLimitError, "a Monte Carlo of 2000000 samples on arm needs about"),
-])
+@pytest.mark.parametrize(
+    "kwargs,error,message",
+    [
+        (
+            {"scenarios": "step"},
+            TypeError,
+            "scenarios must be a list of scenario names such as ['step'], got str 'step'",
+        ),
+        ({"scenarios": []}, ValueError, "scenarios is empty; give None for every scenario"),
+        ({"scenarios": ["step", "ramp"]}, ValueError, "unknown scenario 'ramp' in scenarios"),
+        ({"mc": True}, TypeError, "mc (Monte Carlo samples) must be an integer, got bool True"),
+        ({"mc": "5"}, TypeError, "mc (Monte Carlo samples) must be an integer, got str '5'"),
+        ({"mc": 2.5}, ValueError, "mc (Monte Carlo samples) must be an integer, got 2.5"),
+        ({"mc": -1}, ValueError, "mc (Monte Carlo samples) must be an integer >= 0, got -1"),
+        ({"seed": -1}, ValueError, "seed must be an integer >= 0, got -1"),
+        ({"seed": "0"}, TypeError, "seed must be an integer, got str '0'"),
+        ({"threads": 0}, ValueError, "threads must be an integer >= 1, got 0"),
+        ({"quick": "no"}, TypeError, "quick must be True or False, got str 'no'"),
+        ({"strict": 1}, TypeError, "strict must be True or False, got int 1"),
+        ({"jit": "yes"}, ValueError, "jit must be True, False or 'auto', got 'yes'"),
+        ({"jit": 1}, ValueError, "jit must be True, False or 'auto', got 1"),
+        ({"out": ""}, ValueError, "out must name a folder (or be None to write nothing), got ''"),
+        ({"out": 5}, ValueError, "out must name a folder (or be None to write nothing), got 5"),
+        ({"providers": EXAMPLE}, TypeError, "providers must be a list of 'module:function' strings, got str"),
+        ({"providers": ["nocolon"]}, ValueError, "providers: each provider is 'module:function', got 'nocolon'"),
+        ({"controllers": ["PD"]}, TypeError, "controllers must be a dict {label: controller}, got list"),
+        ({"progress": 5}, TypeError, "progress must be a function progress(done, total, text), got 5"),
+        ({"mc": 2_000_000}, models.checks.ResourceLimitError, "a Monte Carlo of 2000000 samples on arm needs about"),
+    ],
+)
 def test_bad_arguments_of_run_study_are_named_before_any_work(monkeypatch, kwargs, error, message):
     monkeypatch.setattr(runner, "design_controllers", lambda *a, **k: pytest.fail("ran"))
     with pytest.raises(error) as raised:
@@ -541,8 +659,9 @@ def test_the_same_seed_gives_the_same_bytes_and_the_timings_are_apart(tmp_path):
         assert not set(writers.TIMING_COLUMNS) & set(pd.read_csv(outs[0] / name).columns), name
     assert (outs[0] / "monte_carlo.csv").read_bytes() != (outs[2] / "monte_carlo.csv").read_bytes()
     timings = [pd.read_csv(o / "timings.csv") for o in outs[:2]]
-    mpc = [t[(t.controller == "linear MPC") & (t.scenario == "step") & t["sample"].isna()].step_ms.iloc[0]
-           for t in timings]
+    mpc = [
+        t[(t.controller == "linear MPC") & (t.scenario == "step") & t["sample"].isna()].step_ms.iloc[0] for t in timings
+    ]
     assert all(v > 0 for v in mpc)
     per_sample = timings[0][timings[0]["sample"].notna()]
     assert set(per_sample.controller) == {"linear MPC"} and len(per_sample) == 3
@@ -554,8 +673,20 @@ def test_two_runs_of_the_command_write_the_same_tables(workdir):
     monte_carlo.csv of every plant are byte-identical; run ids differ."""
     outs = []
     for k in range(2):
-        done = cli("arm", "uuv", "--scenario", "step,mc", "--mc", "3", "--quiet", "--seed", "3",
-                   "--out", f"out{k}", cwd=workdir)
+        done = cli(
+            "arm",
+            "uuv",
+            "--scenario",
+            "step,mc",
+            "--mc",
+            "3",
+            "--quiet",
+            "--seed",
+            "3",
+            "--out",
+            f"out{k}",
+            cwd=workdir,
+        )
         assert done.returncode == 0, done.stderr[-3000:]
         outs.append(workdir / f"out{k}")
     for plant in ("arm", "uuv"):
@@ -609,8 +740,20 @@ def test_labels_are_shown_literally_in_every_file(tmp_path):
 # =========================================================================== working folders
 @pytest.mark.slow
 def test_the_command_runs_in_a_folder_with_a_space_and_a_semicolon_and_writes_only_out(workdir):
-    done = cli("uuv", "--scenario", "step", "--mc", "0", "--quick", "--quiet", "--out", "out", "--provider",
-               "example_providers:lqr_only", cwd=workdir)
+    done = cli(
+        "uuv",
+        "--scenario",
+        "step",
+        "--mc",
+        "0",
+        "--quick",
+        "--quiet",
+        "--out",
+        "out",
+        "--provider",
+        "example_providers:lqr_only",
+        cwd=workdir,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert sorted(p.name for p in workdir.iterdir()) == ["out"]
     assert sorted(p.name for p in (workdir / "out").iterdir()) == ["index.html", "summary.md", "uuv"]
@@ -640,21 +783,58 @@ def test_the_command_runs_from_a_read_only_folder_as_another_user():
         os.chmod(out, 0o777)
         os.chmod(home, 0o777)
         os.chmod(cwd, 0o555)
-        env = subprocess_env() | {"HOME": str(home), "MPLCONFIGDIR": str(home / "mpl"), "PYTHONDONTWRITEBYTECODE": "1",
-                                  "XDG_CACHE_HOME": str(home / "cache")}
-        probe = subprocess.run([*prefix, sys.executable, "-c", "import casadi, pandas, studies"], cwd=cwd, env=env,
-                               capture_output=True, text=True)
+        env = subprocess_env() | {
+            "HOME": str(home),
+            "MPLCONFIGDIR": str(home / "mpl"),
+            "PYTHONDONTWRITEBYTECODE": "1",
+            "XDG_CACHE_HOME": str(home / "cache"),
+        }
+        probe = subprocess.run(
+            [*prefix, sys.executable, "-c", "import casadi, pandas, studies"],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if probe.returncode != 0:
             pytest.skip(f"the interpreter or the repository is not usable by user nobody: {probe.stderr[-300:]}")
-        done = subprocess.run([*prefix, sys.executable, "-m", "studies", "uuv", "--scenario", "step", "--mc", "0",
-                               "--quick", "--quiet", "--jobs", "1", "--out", str(out), "--provider",
-                               "example_providers:lqr_only"], cwd=cwd, env=env, capture_output=True, text=True,
-                              timeout=600)
+        done = subprocess.run(
+            [
+                *prefix,
+                sys.executable,
+                "-m",
+                "studies",
+                "uuv",
+                "--scenario",
+                "step",
+                "--mc",
+                "0",
+                "--quick",
+                "--quiet",
+                "--jobs",
+                "1",
+                "--out",
+                str(out),
+                "--provider",
+                "example_providers:lqr_only",
+            ],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert done.returncode == 0, done.stderr[-3000:]
         assert list(cwd.iterdir()) == []
         assert writers.check_study_folder(out / "uuv") == []
-        refused = subprocess.run([*prefix, sys.executable, "-m", "studies", "uuv", "--out", "results"], cwd=cwd,
-                                 env=env, capture_output=True, text=True, timeout=120)
+        refused = subprocess.run(
+            [*prefix, sys.executable, "-m", "studies", "uuv", "--out", "results"],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert refused.returncode == 2
         assert "cannot write to the output folder 'results'" in refused.stderr
     finally:

@@ -8,9 +8,24 @@ from test_cli import run_cli
 
 import studies
 
-PER_PLANT = ("table.csv", "table.md", "answers.json", "answers.md", "monte_carlo.csv", "loops.csv", "step.png",
-             "steps.png", "disturbance.png", "noise.png", "monte_carlo.png", "root_locus.png", "poles.png",
-             "animation.gif", "animation.html", "run.json")
+PER_PLANT = (
+    "table.csv",
+    "table.md",
+    "answers.json",
+    "answers.md",
+    "monte_carlo.csv",
+    "loops.csv",
+    "step.png",
+    "steps.png",
+    "disturbance.png",
+    "noise.png",
+    "monte_carlo.png",
+    "root_locus.png",
+    "poles.png",
+    "animation.gif",
+    "animation.html",
+    "run.json",
+)
 
 
 @pytest.mark.slow
@@ -43,11 +58,34 @@ def test_one_job_and_two_jobs_write_the_same_tables(tmp_path):
     tables = []
     for jobs in ("1", "2"):
         out = tmp_path / f"jobs{jobs}"
-        done = run_cli("arm", "uuv", "--scenario", "step,mc", "--mc", "12", "--out", str(out), "--quiet",
-                       "--jobs", jobs, "--provider", "example_providers:controllers", timeout=900)
+        done = run_cli(
+            "arm",
+            "uuv",
+            "--scenario",
+            "step,mc",
+            "--mc",
+            "12",
+            "--out",
+            str(out),
+            "--quiet",
+            "--jobs",
+            jobs,
+            "--provider",
+            "example_providers:controllers",
+            timeout=900,
+        )
         assert done.returncode == 0, done.stderr[-3000:]
         tables.append({p: pd.read_csv(out / p / "table.csv") for p in ("arm", "uuv")})
     for plant in ("arm", "uuv"):
-        columns = ["controller", "scenario", "status", "rise_time_s", "settling_time_s", "overshoot_pct", "iae",
-                   "peak_u", "samples"]
+        columns = [
+            "controller",
+            "scenario",
+            "status",
+            "rise_time_s",
+            "settling_time_s",
+            "overshoot_pct",
+            "iae",
+            "peak_u",
+            "samples",
+        ]
         pd.testing.assert_frame_equal(tables[0][plant][columns], tables[1][plant][columns])

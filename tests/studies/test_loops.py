@@ -16,8 +16,7 @@ class Proportional(models.Block):
 
     def __init__(self, k, index=0, n_measured=1, bias=0.0):
         self.index, self.bias = index, bias
-        super().__init__(sample_period=TS, n_state=0, n_measured=n_measured, n_reference=1, n_input=1,
-                         gains={"k": k})
+        super().__init__(sample_period=TS, n_state=0, n_measured=n_measured, n_reference=1, n_input=1, gains={"k": k})
 
     def expr(self, xc, y, r, g):
         return xc, g["k"] * (r[0] - y[self.index]) + self.bias
@@ -25,8 +24,15 @@ class Proportional(models.Block):
 
 class StateFeedback(models.Block):
     def __init__(self, K):
-        super().__init__(sample_period=TS, n_state=0, n_measured=len(K), n_reference=1, n_input=1,
-                         gains={"K": np.asarray(K, dtype=float)}, measures="state")
+        super().__init__(
+            sample_period=TS,
+            n_state=0,
+            n_measured=len(K),
+            n_reference=1,
+            n_input=1,
+            gains={"K": np.asarray(K, dtype=float)},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return xc, -ca.dot(g["K"], y)
@@ -36,8 +42,15 @@ class FilteredPD(models.Block):
     """A block with a state, reading the state: u = k w − kd θ̇ with w+ = a w + (1 − a)(r − θ)."""
 
     def __init__(self, k, kd, a):
-        super().__init__(sample_period=TS, n_state=1, n_measured=2, n_reference=1, n_input=1,
-                         gains={"k": k, "kd": kd, "a": a}, measures="state")
+        super().__init__(
+            sample_period=TS,
+            n_state=1,
+            n_measured=2,
+            n_reference=1,
+            n_input=1,
+            gains={"k": k, "kd": kd, "a": a},
+            measures="state",
+        )
 
     def expr(self, xc, y, r, g):
         return g["a"] * xc + (1 - g["a"]) * (r[0] - y[0]), g["k"] * xc[0] - g["kd"] * y[1]
@@ -62,8 +75,9 @@ def test_input_loop_of_a_filtered_pd_equals_controller_times_plant():
     plant = control.c2d(control.ss(*_state_output(arm, point)), TS, method="zoh")  # τ -> (θ, θ̇)
     # Loop broken at τ: L = C_f(z) θ/τ + kd θ̇/τ with C_f = k (1 − a) / (z − a).
     expected = control.tf([2.0 * 0.2], [1.0, -0.8], TS) * plant[0, 0] + 0.3 * plant[1, 0]
-    np.testing.assert_allclose(L.frequency_response(OMEGA), np.squeeze(expected(np.exp(1j * OMEGA * TS))),
-                               rtol=1e-6)  # python-control's transfer-function products round off
+    np.testing.assert_allclose(
+        L.frequency_response(OMEGA), np.squeeze(expected(np.exp(1j * OMEGA * TS))), rtol=1e-6
+    )  # python-control's transfer-function products round off
 
 
 def _state_output(plant, point):
@@ -96,12 +110,14 @@ def test_outer_loop_of_a_cascade_matches_python_control_feedback():
     inner_closed = control.feedback(-40.0 * G, np.array([[0.0, 1.0]]))
     expected_outer = -0.1 * inner_closed[0, 0]
     got = loops.loop(pend, block, point, "outer")
-    np.testing.assert_allclose(got.frequency_response(OMEGA), np.squeeze(expected_outer(np.exp(1j * OMEGA * TS))),
-                               rtol=1e-7)
+    np.testing.assert_allclose(
+        got.frequency_response(OMEGA), np.squeeze(expected_outer(np.exp(1j * OMEGA * TS))), rtol=1e-7
+    )
     expected_inner = -40.0 * G[1, 0]
     got_inner = loops.loop(pend, block, point, "inner")
-    np.testing.assert_allclose(got_inner.frequency_response(OMEGA),
-                               np.squeeze(expected_inner(np.exp(1j * OMEGA * TS))), rtol=1e-8)
+    np.testing.assert_allclose(
+        got_inner.frequency_response(OMEGA), np.squeeze(expected_inner(np.exp(1j * OMEGA * TS))), rtol=1e-8
+    )
     with pytest.raises(ValueError, match="needs a models.Cascade"):
         loops.loop(pend, inner, point, "outer")
 
@@ -153,8 +169,9 @@ def test_margins_hold_on_the_loops_own_frequency_response(plant, gain):
     if np.isfinite(wgc):
         value = lp.frequency_response([wgc])[0]
         assert abs(value) == pytest.approx(1.0, rel=1e-6)
-        assert ours["phase_margin_deg"] == pytest.approx((np.degrees(np.angle(value)) + 180.0 + 180) % 360 - 180,
-                                                         abs=1e-5)
+        assert ours["phase_margin_deg"] == pytest.approx(
+            (np.degrees(np.angle(value)) + 180.0 + 180) % 360 - 180, abs=1e-5
+        )
     else:  # no gain crossover: |L| stays below one up to the Nyquist frequency
         omega = np.logspace(-4, np.log10(0.999 * np.pi / lp.sample_period), 5000)
         assert np.max(np.abs(lp.frequency_response(omega))) < 1
@@ -169,8 +186,9 @@ class FilteredPDOutput(models.Block):
     """u = kp e + kd (e − e_prev)/Ts on the first output, e = r − y (a test fixture with a state)."""
 
     def __init__(self, kp, kd, n_measured=1):
-        super().__init__(sample_period=TS, n_state=1, n_measured=n_measured, n_reference=1, n_input=1,
-                         gains={"kp": kp, "kd": kd})
+        super().__init__(
+            sample_period=TS, n_state=1, n_measured=n_measured, n_reference=1, n_input=1, gains={"kp": kp, "kd": kd}
+        )
 
     def expr(self, xc, y, r, g):
         e = r[0] - y[0]

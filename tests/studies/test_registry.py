@@ -40,8 +40,11 @@ def test_the_listing_read_from_the_case_files_agrees_with_the_imported_registry(
     assert listing.names() == studies.names()
     for name in studies.names():
         case, listed = studies.get(name), listing.get(name)
-        assert (listed.numeral, listed.source, listed.controllers) == (case.numeral, case.source,
-                                                                        tuple(case.controllers))
+        assert (listed.numeral, listed.source, listed.controllers) == (
+            case.numeral,
+            case.source,
+            tuple(case.controllers),
+        )
         assert listed.scenarios == tuple(s.name for s in case.scenarios)
 
 
@@ -53,11 +56,14 @@ def test_list_imports_neither_the_cases_nor_the_numerics():
 
     from conftest import REPO, subprocess_env
 
-    script = ("import sys; from studies import cli; cli.main(['--list']);"
-              "print(sorted(m for m in ('casadi', 'control', 'scipy', 'models', 'designs', 'studies.cases')"
-              " if m in sys.modules))")
-    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, env=subprocess_env(), capture_output=True,
-                          text=True, timeout=120)
+    script = (
+        "import sys; from studies import cli; cli.main(['--list']);"
+        "print(sorted(m for m in ('casadi', 'control', 'scipy', 'models', 'designs', 'studies.cases')"
+        " if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO, env=subprocess_env(), capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "[]"
     assert "pendulum: II.8(h) step 2 m" in done.stdout

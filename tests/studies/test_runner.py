@@ -22,12 +22,19 @@ def arm_study(**changes):
 
 
 def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
-    study = arm_study(providers=("no_such_package_for_studies.designs:controllers", "json:controllers",
-                                 "example_providers:failing", EXAMPLE))
+    study = arm_study(
+        providers=(
+            "no_such_package_for_studies.designs:controllers",
+            "json:controllers",
+            "example_providers:failing",
+            EXAMPLE,
+        )
+    )
     result = runner.run_study(study, STEP_ONLY)
     notes = "\n".join(result.notes)
-    assert ("no_such_package_for_studies.designs:controllers: skipped, no module named "
-            "'no_such_package_for_studies'") in notes
+    assert (
+        "no_such_package_for_studies.designs:controllers: skipped, no module named 'no_such_package_for_studies'"
+    ) in notes
     assert "json:controllers: skipped, module json has no function controllers()" in notes
     assert "example_providers:failing: failed (RuntimeError: no design for arm" in notes
     # The declared order first (PD, LQR, linear MPC), then the provider's other labels.
@@ -40,8 +47,10 @@ def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
     with pytest.raises(runner.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
         runner.run_study(study, runner.Options(scenarios=("step",), mc=0, strict=True))
     with pytest.raises(RuntimeError, match="no design for arm"):
-        runner.run_study(dataclasses.replace(study, providers=study.providers[2:]),
-                         runner.Options(scenarios=("step",), mc=0, strict=True))
+        runner.run_study(
+            dataclasses.replace(study, providers=study.providers[2:]),
+            runner.Options(scenarios=("step",), mc=0, strict=True),
+        )
 
 
 def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
@@ -53,7 +62,7 @@ def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
     plant = result.plant
     applied = np.clip(run.u, -plant.input_limit, plant.input_limit)
     for k in range(0, len(applied), 7):
-        one = models.simulate(plant, run.x[k], applied[k:k + 1], run.t[1] - run.t[0], method="adaptive")
+        one = models.simulate(plant, run.x[k], applied[k : k + 1], run.t[1] - run.t[0], method="adaptive")
         # RK4 with 2 sub-steps of 5 ms against CVODES at 1e-12: a local error of a few 1e-9.
         np.testing.assert_allclose(one.x[-1], run.x[k + 1], rtol=1e-7, atol=1e-9)
     lin = plant.linearize().discretize(run.t[1])
@@ -139,11 +148,14 @@ def test_noise_on_a_full_state_measurement_follows_the_outputs_and_a_dirty_deriv
         runner.measurement_noise_std(sat, _Reader("outputs"), {"phi": 1e-3})
 
 
-@pytest.mark.parametrize("kwargs,message", [
-    ({"mc": -1}, "mc .* must be an integer >= 0"),
-    ({"scenarios": ("step", "ramp")}, "unknown scenario 'ramp' in scenarios"),
-    ({"jit": "sometimes"}, "jit must be"),
-])
+@pytest.mark.parametrize(
+    "kwargs,message",
+    [
+        ({"mc": -1}, "mc .* must be an integer >= 0"),
+        ({"scenarios": ("step", "ramp")}, "unknown scenario 'ramp' in scenarios"),
+        ({"jit": "sometimes"}, "jit must be"),
+    ],
+)
 def test_bad_options_say_what_is_wrong(kwargs, message):
     with pytest.raises(ValueError, match=message):
         runner.Options(**kwargs)
@@ -151,8 +163,22 @@ def test_bad_options_say_what_is_wrong(kwargs, message):
 
 def test_run_returns_the_table_as_a_dataframe_with_the_documented_columns():
     table = studies.run("uuv", scenarios=["step", "disturbance"], mc=0, providers=[EXAMPLE])
-    required = ["controller", "scenario", "rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae",
-                "itae", "peak_u", "u_limit", "saturated_frac", "energy", "violation", "step_ms"]
+    required = [
+        "controller",
+        "scenario",
+        "rise_time_s",
+        "settling_time_s",
+        "overshoot_pct",
+        "ss_error",
+        "iae",
+        "itae",
+        "peak_u",
+        "u_limit",
+        "saturated_frac",
+        "energy",
+        "violation",
+        "step_ms",
+    ]
     assert set(required) <= set(table.columns)
     assert set(table.scenario) == {"step", "disturbance"} and (table.u_limit == 50.0).all()
     # The example provider gives a few of the study's labels; the notes name the others.

@@ -1,7 +1,6 @@
 """The sweep: its grid, and its points against runs made another way (the study's own step row at the nominal
 value; a directly simulated plant with the parameter changed elsewhere)."""
 
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -16,8 +15,12 @@ from studies import runner, sweep
 def test_grid_parse_and_its_errors():
     grid = sweep.Grid.parse("m=0.3:0.7:5")
     assert grid.param == "m" and grid.values == pytest.approx((0.3, 0.4, 0.5, 0.6, 0.7))
-    for text, message in (("m", "a sweep is PARAM=LOW:HIGH:N"), ("m=1:0:3", "finite LOW < HIGH and N >= 2"),
-                          ("m=0:1:1", "N >= 2"), ("m=a:1:3", "a sweep is PARAM=LOW:HIGH:N|must be numbers")):
+    for text, message in (
+        ("m", "a sweep is PARAM=LOW:HIGH:N"),
+        ("m=1:0:3", "finite LOW < HIGH and N >= 2"),
+        ("m=0:1:1", "N >= 2"),
+        ("m=a:1:3", "a sweep is PARAM=LOW:HIGH:N|must be numbers"),
+    ):
         with pytest.raises(ValueError, match=message):
             sweep.Grid.parse(text)
     arm = models.get("arm")
@@ -42,8 +45,9 @@ def test_the_nominal_point_is_the_studys_step_row(swept):
     nominal = table[table[grid.param] == 0.5].set_index("controller")
     rows = study.set_index("controller")
     for column in ("rise_time_s", "settling_time_s", "overshoot_pct", "iae", "itae", "peak_u", "energy"):
-        np.testing.assert_allclose(nominal.loc[rows.index, column].astype(float), rows[column].astype(float),
-                                   rtol=1e-9, err_msg=column)
+        np.testing.assert_allclose(
+            nominal.loc[rows.index, column].astype(float), rows[column].astype(float), rtol=1e-9, err_msg=column
+        )
     assert list(nominal.loc[rows.index, "verdict"]) == list(rows.verdict)
 
 
@@ -51,8 +55,9 @@ def test_an_off_nominal_point_is_the_plant_with_that_parameter(swept):
     case, grid, table, _ = swept
     heavy = models.get("arm", m=0.8)
     block = {label: c for label, c in runner.design_controllers(case, case.known_plant(), (EXAMPLE,))[0].items()}["LQR"]
-    run = models.simulate_closed_loop(heavy, block, case.scenarios[0].reference(case, 0.0), case.duration,
-                                      substeps=case.substeps)
+    run = models.simulate_closed_loop(
+        heavy, block, case.scenarios[0].reference(case, 0.0), case.duration, substeps=case.substeps
+    )
     expected = metrics.run_metrics(run, "theta")
     row = table[(table.controller == "LQR") & (table.m == 0.8)].iloc[0]
     for column in ("settling_time_s", "overshoot_pct", "itae", "energy"):

@@ -77,8 +77,7 @@ def arm_exact_minimum_time(params, limit, target):
 
     def stop(switch):
         first = solve_ivp(rhs(limit), (0, switch), [0.0, 0.0], rtol=1e-12, atol=1e-12)
-        second = solve_ivp(rhs(-limit), (switch, switch + 5), first.y[:, -1], events=stopped, rtol=1e-12,
-                           atol=1e-12)
+        second = solve_ivp(rhs(-limit), (switch, switch + 5), first.y[:, -1], events=stopped, rtol=1e-12, atol=1e-12)
         return second.t_events[0][0], second.y_events[0][0][0]
 
     switch = brentq(lambda s: stop(s)[1] - target, 0.05, 1.0, xtol=1e-13)
@@ -162,8 +161,10 @@ def test_zv_shaper_on_crane1_removes_the_residual_swing():
     crane1 = models.get("crane1")
     omega, zeta = crane_case.swing_modes(crane1)[0]
     residual = {}
-    for label, shaper in (("shaped", input_shaping.zero_vibration(omega, zeta)),
-                          ("unshaped", input_shaping.Shaper([0.0], [1.0]))):
+    for label, shaper in (
+        ("shaped", input_shaping.zero_vibration(omega, zeta)),
+        ("unshaped", input_shaping.Shaper([0.0], [1.0])),
+    ):
         command = crane_case.shaped_bang_bang(crane1, shaper, 2000.0, label)
         padded = np.vstack([command.inputs, np.zeros((2000, 1))])
         run = models.simulate(crane1, np.zeros(4), padded, command.sample_period, substeps=2)
@@ -179,8 +180,9 @@ def test_crane_minimum_time_by_multiple_shooting_agrees():
     plant = models.get("crane")
     setup = crane_case.transfer_time(plant, False, {})
     collocation = setup.problem.solve(setup.transcription)
-    shooting = crane_case.transfer_time(plant, False, {}).problem.solve(mpc.MultipleShooting(intervals=80),
-                                                                        guess=collocation)
+    shooting = crane_case.transfer_time(plant, False, {}).problem.solve(
+        mpc.MultipleShooting(intervals=80), guess=collocation
+    )
     assert collocation.success and shooting.success
     assert shooting.final_time == pytest.approx(collocation.final_time, rel=0.01)
     assert case.trajectories[0].key == "transfer_time"
@@ -202,8 +204,9 @@ def test_swing_up_tracking_stays_up_under_the_parameter_error(solved):
     np.testing.assert_allclose(tracked.nominal.x[-1], 0.0, atol=0.01)
     # The feedback does the work: the planned input alone, open loop on the nominal plant, does not stay up.
     planned = tracked.planned
-    alone = models.simulate(result.plant, planned.states[0], planned.inputs, planned.final_time / len(planned.inputs),
-                            method="adaptive")
+    alone = models.simulate(
+        result.plant, planned.states[0], planned.inputs, planned.final_time / len(planned.inputs), method="adaptive"
+    )
     assert abs(alone.state("theta")[-1]) > math.radians(5)
 
 
@@ -222,9 +225,15 @@ def test_write_leaves_the_tables_figures_and_animations(solved, tmp_path):
     result = solved("crane")
     files = trajectories.write(result, tmp_path)
     folder = tmp_path / "crane"
-    for name in ("trajectories.md", "trajectories.csv", "trajectory_transfer_time.png", "trajectory_transfer_time.gif",
-                 "trajectory_transfer_time.html", "trajectory_transfer_time_comparison.png",
-                 "trajectory_transfer_time_comparison.csv"):
+    for name in (
+        "trajectories.md",
+        "trajectories.csv",
+        "trajectory_transfer_time.png",
+        "trajectory_transfer_time.gif",
+        "trajectory_transfer_time.html",
+        "trajectory_transfer_time_comparison.png",
+        "trajectory_transfer_time_comparison.csv",
+    ):
         assert (folder / name).stat().st_size > 0, name
         assert name in files
     table = pd.read_csv(folder / "trajectories.csv")

@@ -26,10 +26,17 @@ def _stored_tuning(name: str) -> dict:
 
 #: The stored designs, each expected to fail (strictly) while its file says it was not re-tuned with the
 #: current tuner: the claims below are the current tuner's, which those gains never had (issue 16 is open).
-RECORDED = [name if _stored_tuning(name).get("re_tuned", True) else
-            pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=f"{name}: stored gains not re-tuned: "
-                                                       + _stored_tuning(name).get("note", "")[:200]))
-            for name in PLANTS]
+RECORDED = [
+    name
+    if _stored_tuning(name).get("re_tuned", True)
+    else pytest.param(
+        name,
+        marks=pytest.mark.xfail(
+            strict=True, reason=f"{name}: stored gains not re-tuned: " + _stored_tuning(name).get("note", "")[:200]
+        ),
+    )
+    for name in PLANTS
+]
 CHECK_SEED, N_CHECK = 3, 4
 
 
@@ -37,12 +44,20 @@ def _cost_and_metrics(name, block, params, weight, scenario_name):
     case = studies.get(name)
     plant, sc = models.get(name), tuner.scenario(case, scenario_name)
     k = plant.state_names.index(case.tracked)
-    run = models.simulate_closed_loop(plant, block, sc.reference, sc.duration, x0=sc.x0, params=params,
-                                      input_disturbance=sc.input_disturbance, substeps=tuner.SUBSTEPS)
+    run = models.simulate_closed_loop(
+        plant,
+        block,
+        sc.reference,
+        sc.duration,
+        x0=sc.x0,
+        params=params,
+        input_disturbance=sc.input_disturbance,
+        substeps=tuner.SUBSTEPS,
+    )
     assert run.diverged_at is None
     ts = block.sample_period
     e = sc.reference - run.x[:-1, k]
-    cost = ts * (np.sum(run.t[:-1] * np.abs(e)) + weight * np.sum(run.u ** 2))
+    cost = ts * (np.sum(run.t[:-1] * np.abs(e)) + weight * np.sum(run.u**2))
     m = metrics.step_metrics(run.t, run.x[:, k], initial=sc.x0[k], target=sc.reference)
     return cost, m, np.max(np.abs(run.u), axis=0)
 

@@ -10,18 +10,50 @@ import pytest
 
 from models import files
 
-REQUIRED_COLUMNS = ["controller", "scenario", "rise_time_s", "settling_time_s", "overshoot_pct", "ss_error", "iae",
-                    "itae", "peak_u", "u_limit", "saturated_frac", "energy", "violation", "step_ms"]
+REQUIRED_COLUMNS = [
+    "controller",
+    "scenario",
+    "rise_time_s",
+    "settling_time_s",
+    "overshoot_pct",
+    "ss_error",
+    "iae",
+    "itae",
+    "peak_u",
+    "u_limit",
+    "saturated_frac",
+    "energy",
+    "violation",
+    "step_ms",
+]
 
 
 def test_json_conventions():
-    value = {"kp": np.float64(0.3), "n": np.int64(3), "ok": np.bool_(True), "poles": np.array([-1 + 2j, -1 - 2j]),
-             "inf": math.inf, "minus": -np.inf, "nan": float("nan"), "K": np.array([[1.5, 2.0]]),
-             "G": control.tf([2.0], [1.0, 3.0]), 4: (1, 2.5)}
+    value = {
+        "kp": np.float64(0.3),
+        "n": np.int64(3),
+        "ok": np.bool_(True),
+        "poles": np.array([-1 + 2j, -1 - 2j]),
+        "inf": math.inf,
+        "minus": -np.inf,
+        "nan": float("nan"),
+        "K": np.array([[1.5, 2.0]]),
+        "G": control.tf([2.0], [1.0, 3.0]),
+        4: (1, 2.5),
+    }
     decoded = json.loads(files.dumps(value))
-    assert decoded == {"kp": 0.3, "n": 3, "ok": True, "poles": [[-1.0, 2.0], [-1.0, -2.0]], "inf": "inf",
-                       "minus": "-inf", "nan": "nan", "K": [[1.5, 2.0]], "G": {"num": [2.0], "den": [1.0, 3.0]},
-                       "4": [1, 2.5]}
+    assert decoded == {
+        "kp": 0.3,
+        "n": 3,
+        "ok": True,
+        "poles": [[-1.0, 2.0], [-1.0, -2.0]],
+        "inf": "inf",
+        "minus": "-inf",
+        "nan": "nan",
+        "K": [[1.5, 2.0]],
+        "G": {"num": [2.0], "den": [1.0, 3.0]},
+        "4": [1, 2.5],
+    }
     with pytest.raises(TypeError, match="cannot write object"):
         files.dumps({"x": object()})
 
@@ -48,16 +80,39 @@ def test_check_writable_names_the_folder(tmp_path):
 
 
 def test_format_number():
-    assert [files.format_number(v) for v in (math.nan, math.inf, 0.0, 1234567.0, 0.000123456, 3, "x")] == \
-        ["—", "∞", "0", "1.235e6", "0.0001235", "3", "x"]
+    assert [files.format_number(v) for v in (math.nan, math.inf, 0.0, 1234567.0, 0.000123456, 3, "x")] == [
+        "—",
+        "∞",
+        "0",
+        "1.235e6",
+        "0.0001235",
+        "3",
+        "x",
+    ]
 
 
 def test_a_study_writes_every_file(arm_study):
     result, out = arm_study
     folder = out / "arm"
-    for name in ("table.csv", "table.md", "answers.json", "answers.md", "monte_carlo.csv", "loops.csv", "step.png",
-                 "steps.png", "disturbance.png", "noise.png", "monte_carlo.png", "bode_input.png", "root_locus.png",
-                 "poles.png", "animation.gif", "animation.html", "run.json"):
+    for name in (
+        "table.csv",
+        "table.md",
+        "answers.json",
+        "answers.md",
+        "monte_carlo.csv",
+        "loops.csv",
+        "step.png",
+        "steps.png",
+        "disturbance.png",
+        "noise.png",
+        "monte_carlo.png",
+        "bode_input.png",
+        "root_locus.png",
+        "poles.png",
+        "animation.gif",
+        "animation.html",
+        "run.json",
+    ):
         assert (folder / name).stat().st_size > 0, name
     for name in ("summary.md", "index.html"):
         assert (out / name).stat().st_size > 0

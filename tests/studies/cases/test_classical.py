@@ -51,8 +51,11 @@ def test_arm_8_closed_forms(arm_answers):
     assert a["I.8(c)"]["kp"] == pytest.approx(kp, rel=1e-9)
     assert a["I.8(d)"]["wn"] == pytest.approx(wn, rel=1e-9)
     assert a["I.8(d)"]["kd"] == pytest.approx((2 * ZETA * wn - a1) / b0, rel=1e-9)
-    np.testing.assert_allclose(sorted(a["I.8(e)"]["poles"], key=lambda p: p.imag),
-                               sorted(np.roots([1, 2 * ZETA * wn, wn**2]), key=lambda p: p.imag), rtol=1e-9)
+    np.testing.assert_allclose(
+        sorted(a["I.8(e)"]["poles"], key=lambda p: p.imag),
+        sorted(np.roots([1, 2 * ZETA * wn, wn**2]), key=lambda p: p.imag),
+        rtol=1e-9,
+    )
 
 
 def test_arm_10_types_and_errors(arm_answers):
@@ -89,15 +92,19 @@ def test_arm_13_frequency_answers(arm_answers):
     assert a["I.13(d)"]["noise_percent"] == pytest.approx(100 * np.max(_mag(noise, high)), rel=1e-4)
     disturbance = control.feedback(G, C_y)
     assert a["I.13(c)"]["input_disturbance_percent"] == pytest.approx(
-        100 * np.max(_mag(disturbance, np.logspace(-6, -2, 2000))), rel=1e-4)
+        100 * np.max(_mag(disturbance, np.logspace(-6, -2, 2000))), rel=1e-4
+    )
     assert a["I.13(b)"]["ess_ramp"] == 0.0  # PID on a type-1 plant: type 2
 
 
 def test_arm_14_specs_are_met_and_true(arm_answers):
     rec = arm_answers["I.14"]
     assert all(s["met"] for s in rec["specs"]), [s for s in rec["specs"] if not s["met"]]
-    gm, pm, _, _, wc, _ = control.stability_margins(_tf(rec, "C_") * models.get("arm").linearize().tf(
-        "theta", "tau") * _pd_dirty(arm_answers["I.8(c)"]["kp"], arm_answers["I.8(d)"]["kd"]))
+    gm, pm, _, _, wc, _ = control.stability_margins(
+        _tf(rec, "C_")
+        * models.get("arm").linearize().tf("theta", "tau")
+        * _pd_dirty(arm_answers["I.8(c)"]["kp"], arm_answers["I.8(d)"]["kd"])
+    )
     assert pm == pytest.approx(60.0, abs=0.5)
     assert rec["overshoot_percent_with_prefilter"] < rec["overshoot_percent_without_prefilter"]
 
@@ -174,8 +181,11 @@ def test_uuv_11_lead_lag_meets_its_specs():
     # The dominant pair sits where it was placed: closed-loop poles of 1 + C G recomputed here.
     G = models.get("uuv").linearize().tf("phi", "tau")
     rec = a["IV.11(c)"]
-    C = rec["gain"] * control.tf([1, rec["zero"]], [1, rec["pole"]]) * control.tf([1, rec["lag_zero"]],
-                                                                                 [1, rec["lag_pole"]])
+    C = (
+        rec["gain"]
+        * control.tf([1, rec["zero"]], [1, rec["pole"]])
+        * control.tf([1, rec["lag_zero"]], [1, rec["lag_pole"]])
+    )
     poles = control.poles(control.feedback(C * G, 1))
     target = -0.85 * 5 + 1j * 5 * np.sqrt(1 - 0.85**2)
     assert np.min(np.abs(poles - target)) < 1e-6
@@ -286,8 +296,7 @@ def test_frequency_responses_are_the_loops_behind_the_13_answers(arm_answers):
     w = np.array([0.1, 1.0, 10.0])
     data = homework.frequency_responses(homework.classical_design(studies.get("arm")), omega=w)
     G = models.get("arm").linearize().tf("theta", "tau")
-    L = G * (a["I.8(c)"]["kp"] + a["I.10(d)"]["ki"] * control.tf([1], [1, 0])
-             + _pd_dirty(0.0, a["I.8(d)"]["kd"]))
+    L = G * (a["I.8(c)"]["kp"] + a["I.10(d)"]["ki"] * control.tf([1], [1, 0]) + _pd_dirty(0.0, a["I.8(d)"]["kd"]))
     np.testing.assert_allclose(data["PID (implemented)"]["loop"]["magnitude"], _mag(L, w), rtol=1e-9)
     np.testing.assert_allclose(data["PID (implemented)"]["plant"]["magnitude"], _mag(G, w), rtol=1e-9)
 

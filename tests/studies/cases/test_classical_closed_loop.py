@@ -13,11 +13,25 @@ import models
 
 #: Long enough for the slowest integrator to finish (s): the arm's 0.2 N m disturbance is 75 % of its
 #: linearized torque bound, the pendulum's and crane's outer integrators are slow by design.
-DURATION = {"arm": 60.0, "pendulum": 200.0, "satellite": 200.0, "uuv": 40.0, "ballbeam": 80.0, "crane1": 300.0,
-            "crane": 300.0}
+DURATION = {
+    "arm": 60.0,
+    "pendulum": 200.0,
+    "satellite": 200.0,
+    "uuv": 40.0,
+    "ballbeam": 80.0,
+    "crane1": 300.0,
+    "crane": 300.0,
+}
 #: A step that saturates the loop (actuator or inner-reference bound), as a multiple of the case's step.
-SATURATING = {"arm": 3.0, "pendulum": 1.0, "satellite": 4.0 / np.deg2rad(30), "uuv": 2.0, "ballbeam": 1.0,
-              "crane1": 2.0, "crane": 2.0}
+SATURATING = {
+    "arm": 3.0,
+    "pendulum": 1.0,
+    "satellite": 4.0 / np.deg2rad(30),
+    "uuv": 2.0,
+    "ballbeam": 1.0,
+    "crane1": 2.0,
+    "crane": 2.0,
+}
 PLANTS = {name: models.get(name) for name in DURATION}
 
 
@@ -28,8 +42,9 @@ def _run(name, label, known=None, step_multiple=1.0, disturbance=0.0, duration=N
     x0, _ = plant.equilibrium()
     start = x0[plant.coordinate_names.index(case.tracked)]
     step = step_multiple * case.step
-    res = models.simulate_closed_loop(plant, block, models.signals.step(step, 0.5, start),
-                                      duration or DURATION[name], input_disturbance=disturbance)
+    res = models.simulate_closed_loop(
+        plant, block, models.signals.step(step, 0.5, start), duration or DURATION[name], input_disturbance=disturbance
+    )
     return res, (res.state(case.tracked) - start) / step, plant
 
 
@@ -42,7 +57,7 @@ SIGNS = [1.0, pytest.param(-1.0, marks=pytest.mark.slow)]
 def test_pid_removes_the_error_under_mismatch_and_disturbance(name, sign):
     known = models.perturbed(PLANTS[name], 0.05, sign)
     res, y, plant = _run(name, "PID", known, disturbance=case_of(name).input_disturbance)
-    last_second = y[-int(1.0 / res.t[1]):]
+    last_second = y[-int(1.0 / res.t[1]) :]
     assert np.max(np.abs(last_second - 1.0)) < 1e-3
     assert np.max(np.abs(res.u)) <= plant.input_limit[0] * (1 + 1e-12)
 

@@ -47,8 +47,12 @@ def test_every_placed_pole_is_where_it_was_asked(designs, name):
     for matrix, requested in checks:
         assert ss.pole_mismatch(np.linalg.eigvals(matrix), requested) < 1e-8
     disc = d.model.discrete(d.observer_sample_period)
-    assert ss.pole_mismatch(np.linalg.eigvals(disc.A - d.L_discrete @ C), np.exp(d.observer_poles *
-                                                                                  d.observer_sample_period)) < 1e-8
+    assert (
+        ss.pole_mismatch(
+            np.linalg.eigvals(disc.A - d.L_discrete @ C), np.exp(d.observer_poles * d.observer_sample_period)
+        )
+        < 1e-8
+    )
     # The text's .17(c) / IV-VI.15(c) demand: the compensator eig(A - B K - L C) in the left half plane.
     assert np.all(d.controller_poles.real < 0)
     assert d.controllability_rank == nx and d.observability_rank == nx
@@ -155,7 +159,7 @@ def test_observer_error_decays_on_the_nonlinear_plant(plants, name):
     reference, case = _step(statespace_design(name, plant))
     x0 = plant.equilibrium()[0]
     xc0 = block.initial_state(plant.output(x0), reference(0.0))
-    xc0[plant.nq:plant.nx] += 0.01  # wrong initial velocity estimates (5 times this drops the ball)
+    xc0[plant.nq : plant.nx] += 0.01  # wrong initial velocity estimates (5 times this drops the ball)
     res = models.simulate_closed_loop(plant, block, reference, case.duration, xc0=xc0, substeps=SUBSTEPS)
     error = np.abs(res.x - block.state_estimate(res.xc))
     assert np.max(error[0]) > 0.01 - 1e-12
@@ -173,8 +177,9 @@ def test_integral_action_removes_the_error_that_plain_state_feedback_leaves(plan
     labels = INTEGRAL_ACTION + (["observer-based"] if name in ("arm", "pendulum", "satellite") else [])
     errors = {}
     for label in labels + ["pole placement"]:
-        res = models.simulate_closed_loop(plant, blocks[label], reference, case.duration,
-                                          input_disturbance=case.input_disturbance, substeps=SUBSTEPS)
+        res = models.simulate_closed_loop(
+            plant, blocks[label], reference, case.duration, input_disturbance=case.input_disturbance, substeps=SUBSTEPS
+        )
         errors[label] = abs(res.r[-1, 0] - res.x[-1, blocks[label].model.tracked_state])
     assert all(errors[label] < 1e-3 for label in labels), errors
     assert errors["pole placement"] > 1e-3
@@ -188,12 +193,13 @@ def test_disturbance_estimate_converges_to_the_disturbance(plants, name):
     for known in (plant, models.perturbed(plant, 0.05, 1)):
         block = statespace_controllers(name, known)["disturbance observer"]
         reference, _ = _step(statespace_design(name, known))
-        res = models.simulate_closed_loop(plant, block, reference, case.duration, input_disturbance=d_true,
-                                          substeps=SUBSTEPS)
+        res = models.simulate_closed_loop(
+            plant, block, reference, case.duration, input_disturbance=d_true, substeps=SUBSTEPS
+        )
         d_hat = block.disturbance_estimate(res.xc)[-1]
         # At rest the true plant needs u + d = u_e,true(q); the known model explains u_e,known(q) - u,
         # so d̂ settles at d + u_e,known(q) - u_e,true(q): d itself when the model is right.
-        q = res.x[-1, :plant.nq]
+        q = res.x[-1, : plant.nq]
         expected = d_true + (known.equilibrium_input(q) - plant.equilibrium_input(q))[0]
         assert d_hat == pytest.approx(expected, abs=1e-4 * d_true)
         if known is plant:
@@ -255,16 +261,25 @@ def test_integral_designs_hold_zero_error_on_every_parameter_corner(plants, name
     reference, case = _step(statespace_design(name, plant))
     corners = models.corner_params(plant)
     for label in INTEGRAL_ACTION:
-        runs = models.monte_carlo(plant, blocks[label], reference, case.duration, corners, substeps=SUBSTEPS,
-                                  input_disturbance=case.input_disturbance, threads=1)
+        runs = models.monte_carlo(
+            plant,
+            blocks[label],
+            reference,
+            case.duration,
+            corners,
+            substeps=SUBSTEPS,
+            input_disturbance=case.input_disturbance,
+            threads=1,
+        )
         errors = [abs(run.r[-1, 0] - run.x[-1, blocks[label].model.tracked_state]) for run in runs]
         assert max(errors) < 1e-3, (label, max(errors))
 
 
 def test_design_overrides_replace_the_default_poles_and_weights(plants):
     arm = plants["arm"]
-    d = statespace_design("arm", arm, poles=[-5.0, -6.0], integrator_pole=-7.0, observer_poles=[-20.0, -21.0],
-                  disturbance_pole=-9.0)
+    d = statespace_design(
+        "arm", arm, poles=[-5.0, -6.0], integrator_pole=-7.0, observer_poles=[-20.0, -21.0], disturbance_pole=-9.0
+    )
     # theta'' = -a theta' + b0 u: s^2 + (a + b0 k2) s + b0 k1 = (s + 5)(s + 6).
     a, b0 = -d.model.linear.A[1, 1], d.model.linear.B[1, 0]
     np.testing.assert_allclose(d.K, [[30 / b0, (11 - a) / b0]], rtol=1e-10)
