@@ -227,21 +227,22 @@ _MPC_KINDS = ("linear MPC", "nonlinear MPC")
 
 
 def _wall_by_kind(results: Path) -> dict:
-    """Seconds of the run's rows (the table's wall_s, summed over plants) per controller kind, and
-    the MPCs' mean step (ms) in the Monte Carlo rows."""
+    """Seconds of the run's rows (timings.csv's wall_s, summed over plants) per controller kind, the
+    MPCs' Monte Carlo rows also alone."""
     import pandas as pd
 
-    tables = [pd.read_csv(path) for path in sorted(results.glob("*/table.csv"))]
+    tables = [pd.read_csv(path) for path in sorted(results.glob("*/timings.csv"))]
     if not tables:
         return {}
     table = pd.concat(tables, ignore_index=True)
-    kind = table.controller.where(table.controller.isin(_MPC_KINDS), "blocks").str.replace(" ", "_")
-    out = {f"rows_{k}_s": float(v) for k, v in table.groupby(kind).wall_s.sum().items()}
-    mc = table[table.scenario == "mc"]
+    table = table[table["sample"].isna()]  # the rows' totals (per-sample lines have a sample number)
+    kind = table["controller"].where(table["controller"].isin(_MPC_KINDS), "blocks").str.replace(" ", "_")
+    out = {f"rows_{k}_s": float(v) for k, v in table["wall_s"].groupby(kind).sum().items()}
+    mc = table[table["scenario"] == "mc"]
     for label in _MPC_KINDS:
-        rows = mc[mc.controller == label]
+        rows = mc[mc["controller"] == label]
         if len(rows):
-            out[f"mc_rows_{label.replace(' ', '_')}_s"] = float(rows.wall_s.sum())
+            out[f"mc_rows_{label.replace(' ', '_')}_s"] = float(rows["wall_s"].sum())
     return out
 
 
@@ -254,7 +255,7 @@ def run_studies_command(*arguments: str) -> dict:
     on a shared machine the wall time grows with the load, this much less); peak_mb, the largest
     resident set of any one process of the command (ru_maxrss of RUSAGE_CHILDREN, children
     included); tree_peak_mb, the largest sum over its processes at once; rows_<kind>_s, the rows'
-    wall_s summed per kind (blocks, linear_MPC, nonlinear_MPC; the Monte Carlo rows of the MPCs
+    wall_s (timings.csv) summed per kind (blocks, linear_MPC, nonlinear_MPC; the Monte Carlo rows of the MPCs
     also alone, mc_rows_<kind>_s)
     """
     repo = Path(__file__).resolve().parent.parent
@@ -279,7 +280,10 @@ def run_studies_command(*arguments: str) -> dict:
         wall = time.perf_counter() - start
         done.set()
         sampler.join()
-        rows = _wall_by_kind(workdir / "results") if process.returncode == 0 else {}
+        try:  # a secondary figure: never lose the run's time and memory over it
+            rows = _wall_by_kind(workdir / "results") if process.returncode == 0 else {}
+        except (OSError, ValueError, KeyError) as err:
+            rows = {"rows_unavailable": f"{type(err).__name__}: {err}"}
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     if process.returncode != 0:
