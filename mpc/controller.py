@@ -534,6 +534,7 @@ class NonlinearMPC(_PlanFollower):
             commands[j] = followed[-1][1]
         with np.errstate(invalid="ignore", over="ignore"):
             x_next = self._mapped_call(self.step_model, m)(x_hat.T, (commands + d_hat).T, np.tile(p[:, None], m))[0].T
+        solver = f"{self.nlp.iteration}/{self.nlp.qp_solver}"
         for j in range(m):
             new_plan, u, fallback, excess, success, status = followed[j]
             solution = solutions[j]
@@ -543,7 +544,7 @@ class NonlinearMPC(_PlanFollower):
             g = self._soft_rows @ x_hat[j]
             now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
             records.append({
-                "solver": f"{self.nlp.iteration}/{self.nlp.qp_solver}", "status": status, "success": success,
+                "solver": solver, "status": status, "success": success,
                 "iterations": solution.iterations, "solve_time": solution.solve_time,
                 "preparation_time": solution.preparation_time, "feedback_time": solution.feedback_time,
                 "qp_status": solution.qp_status, "fallback": fallback, "input_excess": excess,
