@@ -20,7 +20,9 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   (``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss``, children included, the
   measure of the 2 GB limit), and ``*_tree_peak_mb``, the largest sum of the
   resident sets of the run's processes at once (the command and its worker
-  processes), sampled every 0.2 s from /proc.
+  processes), sampled every 0.2 s from /proc. Also the processor time of the run (``*_cpu_s``,
+  children included) and the table's wall_s summed per controller kind (Blocks, linear MPC,
+  nonlinear MPC).
 - ``dask``: the studies' Monte Carlo on Dask. Every Block controller of the
   pendulum study (designed on the +5 % known model), 2,000 samples of the ±5 %
   box, 20 s each, 2 RK4 sub-steps, CasADi's virtual machine (no JIT, so no
@@ -213,7 +215,31 @@ def _tree_rss_bytes(root: int) -> int:
 #: Runs a command and prints its children's peak resident set (KiB): a fresh process per command, so
 #: RUSAGE_CHILDREN covers that command's processes only.
 _PEAK_OF_CHILDREN = ("import resource, subprocess, sys; code = subprocess.call(sys.argv[1:]); "
-                     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(code)")
+                     "usage = resource.getrusage(resource.RUSAGE_CHILDREN); "
+                     "print(usage.ru_utime + usage.ru_stime, usage.ru_maxrss); sys.exit(code)")
+
+#: The MPC rows of the table, each summed on its own; every other controller is a Block.
+_MPC_KINDS = ("linear MPC", "nonlinear MPC")
+
+
+def _wall_by_kind(results: Path) -> dict:
+    """Seconds of the run's rows (timings.csv's wall_s, summed over plants) per controller kind, the
+    MPCs' Monte Carlo rows also alone."""
+    import pandas as pd
+
+    tables = [pd.read_csv(path) for path in sorted(results.glob("*/timings.csv"))]
+    if not tables:
+        return {}
+    table = pd.concat(tables, ignore_index=True)
+    table = table[table["sample"].isna()]  # the rows' totals (per-sample lines have a sample number)
+    kind = table["controller"].where(table["controller"].isin(_MPC_KINDS), "blocks").str.replace(" ", "_")
+    out = {f"rows_{k}_s": float(v) for k, v in table["wall_s"].groupby(kind).sum().items()}
+    mc = table[table["scenario"] == "mc"]
+    for label in _MPC_KINDS:
+        rows = mc[mc["controller"] == label]
+        if len(rows):
+            out[f"mc_rows_{label.replace(' ', '_')}_s"] = float(rows["wall_s"].sum())
+    return out
 
 
 def run_studies_command(*arguments: str) -> dict:
@@ -221,8 +247,12 @@ def run_studies_command(*arguments: str) -> dict:
 
     Returns
     -------
-    dict: wall_s; peak_mb, the largest resident set of any one process of the command (ru_maxrss of
-    RUSAGE_CHILDREN, children included); tree_peak_mb, the largest sum over its processes at once
+    dict: wall_s; cpu_s, the processor time of the command and its worker processes (user + system:
+    on a shared machine the wall time grows with the load, this much less); peak_mb, the largest
+    resident set of any one process of the command (ru_maxrss of RUSAGE_CHILDREN, children
+    included); tree_peak_mb, the largest sum over its processes at once; rows_<kind>_s, the rows'
+    wall_s (timings.csv) summed per kind (blocks, linear_MPC, nonlinear_MPC; the Monte Carlo rows of the MPCs
+    also alone, mc_rows_<kind>_s)
     """
     repo = Path(__file__).resolve().parent.parent
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])),
@@ -246,11 +276,17 @@ def run_studies_command(*arguments: str) -> dict:
         wall = time.perf_counter() - start
         done.set()
         sampler.join()
+        try:  # a secondary figure: never lose the run's time and memory over it
+            rows = _wall_by_kind(workdir / "results") if process.returncode == 0 else {}
+        except (OSError, ValueError, KeyError) as err:
+            rows = {"rows_unavailable": f"{type(err).__name__}: {err}"}
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     if process.returncode != 0:
         raise RuntimeError(f"python -m studies {' '.join(arguments)} exited {process.returncode}: {err[-2000:]}")
-    return {"wall_s": wall, "peak_mb": int(out.split()[-1]) / 1024, "tree_peak_mb": tree_peak[0] / 2**20}
+    cpu, peak = out.split()[-2:]
+    return {"wall_s": wall, "cpu_s": float(cpu), "peak_mb": int(peak) / 1024, "tree_peak_mb": tree_peak[0] / 2**20,
+            **rows}
 
 
 def _measure_command(name: str, arguments: tuple) -> dict:

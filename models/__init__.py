@@ -17,6 +17,7 @@ from .closed_loop import (
     monte_carlo,
     monte_carlo_chunks,
     simulate_closed_loop,
+    simulate_closed_loop_many,
 )
 from .linear import LinearModel
 from .plant import Param, Physics, Plant, declare, get, names
@@ -28,4 +29,5 @@ __all__ = [
     "Param", "Physics", "Plant", "ResourceLimitError", "SimulationError", "Trajectory",
     "closed_loop_function", "corner_params", "declare", "get", "monte_carlo", "monte_carlo_chunks", "names",
     "perturbed", "sample_params", "saturate", "signals", "simulate", "simulate_closed_loop",
+    "simulate_closed_loop_many",
 ]

@@ -302,6 +302,39 @@ class LinearMPC(_PlanFollower):
             predicted = self._A_aug @ estimate + self._B_aug @ (u - self._ue)
         return np.concatenate((predicted, new_plan.ravel())), u
 
+    @property
+    def lockstep(self) -> bool:
+        """Whether `step_many` can run (the solver's warm start can be saved and restored)."""
+        return hasattr(self.solver, "warm_start")
+
+    def initial_states(self, y0, r0) -> np.ndarray:
+        """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state)."""
+        if not self.lockstep:
+            raise TypeError(f"{self.name}: the {self.solver.name} solver's warm start cannot be kept per sample "
+                            "(no warm_start attribute); step the samples one by one")
+        y0 = real_array(y0, f"{self.name}: first measurements").reshape(-1, self.plant.ny)
+        rows, self._warm_starts = [], []
+        for y in y0:
+            rows.append(self.initial_state(y, r0))
+            self._warm_starts.append(self.solver.warm_start)  # a fresh one each (initial_state resets)
+        self.solver.reset()
+        return np.array(rows)
+
+    def step_many(self, xc, y, r, index) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+        """`step` of the samples `index` (rows of the `initial_states` batch), each from its own warm start.
+
+        Returns (x_c next (m, n_state), commands (m, nu), step records (m dicts, as `step_info()`)).
+        """
+        xc_next, commands, records = [], [], []
+        for row, measured, i in zip(xc, y, index):
+            self.solver.warm_start = self._warm_starts[i]
+            state, command = self.step(row, measured, r)
+            self._warm_starts[i] = self.solver.warm_start
+            xc_next.append(state)
+            commands.append(command)
+            records.append(self.step_info())
+        return np.array(xc_next), np.array(commands), records
+
     def _violation_now(self, x_hat) -> float:
         """Violation of the MPC's (backed-off) soft bounds by the current estimate."""
         if not self.problem.n_soft:
@@ -407,6 +440,122 @@ class NonlinearMPC(_PlanFollower):
             if interrupts.is_interrupt(err):
                 raise KeyboardInterrupt from err
             raise
+
+    #: `step_many` can run (see `models.simulate_closed_loop_many`)
+    lockstep = True
+
+    def initial_states(self, y0, r0) -> np.ndarray:
+        """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state).
+
+        Forgets every warm start, that of `step` included."""
+        interrupts.watch()
+        interrupts.clear()
+        y0 = real_array(y0, f"{self.name}: first measurements").reshape(-1, self.plant.ny)
+        rows = []
+        for y in y0:
+            x0, u0 = self._start(y, r0)
+            rows.append(np.concatenate([x0, np.zeros(self.plant.nu), np.tile(u0, self.horizon)]))
+        self.nlp.reset_many(len(rows))
+        self._info = {}
+        self._many_calls: dict = {}
+        return np.array(rows)
+
+    def step_many(self, xc, y, r, index) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+        """`step` of the samples `index` (rows of the `initial_states` batch), all at once.
+
+        Each sample's numbers are those `step` gives it alone, from its own warm start; the
+        real-time iterations of the samples run mapped over them (`NonlinearMPCProblem.solve_many`).
+
+        Parameters
+        ----------
+        xc : (m, n_state);  y : (m, ny) measurements;  r : (1,) reference, shared;  index : (m,) int
+
+        Returns
+        -------
+        (x_c next (m, n_state), commands (m, nu), step records (m dicts, as `step_info()`))
+        """
+        interrupts.check()
+        try:
+            with interrupts.deferred():
+                return self._step_many(xc, y, r, index)
+        except KeyboardInterrupt:
+            interrupts.clear()
+            raise
+        except Exception as err:
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
+            raise
+
+    def _mapped_call(self, fun, m: int) -> NumpyCall:
+        key = (fun.name(), m)
+        if key not in self._many_calls:
+            self._many_calls[key] = NumpyCall(fun.map(m))
+        return self._many_calls[key]
+
+    def _step_many(self, xc, y, r, index):
+        sx, sd, splan = self._slices
+        xc, y = np.asarray(xc, dtype=float), np.asarray(y, dtype=float)
+        index = np.asarray(index, dtype=int)
+        m, N, nu, nx = len(index), self.horizon, self.plant.nu, self.plant.nx
+        if xc.shape != (m, self.n_state) or y.shape != (m, self.plant.ny):
+            raise ValueError(f"{self.name}: step_many takes x_c ({m}, {self.n_state}) and y ({m}, {self.plant.ny}) "
+                             f"for {m} samples, got {xc.shape} and {y.shape}")
+        r = _finite_vector(r, 1, f"{self.name}: reference")
+        p = self._known_params
+        plans = xc[:, splan].reshape(m, N, nu)
+        x_hat, d_hat = xc[:, sx].copy(), xc[:, sd].copy()
+        faults: list = [None] * m
+        measured = np.all(np.isfinite(y), axis=1)
+        for j in np.flatnonzero(~measured):  # a lost measurement: the prediction stands as the estimate
+            faults[j] = "non-finite measurement"
+        rows = np.flatnonzero(measured)
+        if rows.size:
+            known = np.tile(p[:, None], rows.size)
+            predicted = self._mapped_call(self.plant.casadi_h, rows.size)(x_hat[rows].T, known)[0].T
+            for j, h in zip(rows, predicted):
+                x_hat[j], d_hat[j] = self.observer.correct(x_hat[j], d_hat[j], y[j] - h)
+                if not (_finite(x_hat[j]) and _finite(d_hat[j])):
+                    faults[j] = "non-finite estimate"
+        solutions: list = [None] * m
+        good = np.array([f is None for f in faults], dtype=bool)
+        if good.any():
+            x_target, v_target, P = self.target(r[0])
+            g = np.flatnonzero(good)
+            for j, solution in zip(g, self.nlp.solve_many(index[g], x_hat[g], d_hat[g], x_target,
+                                                          v_target - d_hat[g], P, plans[g, 0], plans[g])):
+                solutions[j] = solution
+        xc_next, commands, records = np.empty_like(xc), np.empty((m, nu)), []
+        followed = []
+        for j in range(m):
+            solution = solutions[j]
+            if solution is None:
+                solution = NLPSolution(np.full((N, nu), np.nan), np.full((N + 1, nx), np.nan),
+                                       np.zeros((N, len(self.soft_bounds))), False, faults[j], 0, 0.0)
+                solutions[j] = solution
+            followed.append(self._follow(solution.inputs, solution.success, solution.status, plans[j]))
+            commands[j] = followed[-1][1]
+        with np.errstate(invalid="ignore", over="ignore"):
+            x_next = self._mapped_call(self.step_model, m)(x_hat.T, (commands + d_hat).T, np.tile(p[:, None], m))[0].T
+        solver = f"{self.nlp.iteration}/{self.nlp.qp_solver}"
+        for j in range(m):
+            new_plan, u, fallback, excess, success, status = followed[j]
+            solution = solutions[j]
+            if not _finite(x_next[j]) and _finite(x_hat[j]) and _finite(u):
+                x_next[j] = x_hat[j]
+                status += "; non-finite model prediction, estimate held"
+            g = self._soft_rows @ x_hat[j]
+            now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
+            records.append({
+                "solver": solver, "status": status, "success": success,
+                "iterations": solution.iterations, "solve_time": solution.solve_time,
+                "preparation_time": solution.preparation_time, "feedback_time": solution.feedback_time,
+                "qp_status": solution.qp_status, "fallback": fallback, "input_excess": excess,
+                "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
+                "soft_violation_now": float(np.max(now)) if now.size else 0.0,
+            })
+            xc_next[j, sx], xc_next[j, sd], xc_next[j, splan] = x_next[j], d_hat[j], new_plan.ravel()
+        self._info = dict(records[-1]) if records else {}
+        return xc_next, commands, records
 
     def _step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
         sx, sd, _ = self._slices

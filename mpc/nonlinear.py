@@ -158,8 +158,103 @@ class NonlinearMPCProblem:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the warm start."""
+        """Forget the warm start (of `solve`; `reset_many` forgets those of `solve_many`)."""
         self._guess = None
+
+    def reset_many(self, count: int) -> None:
+        """Forget every warm start and keep one per sample for `solve_many` on `count` samples."""
+        self.reset()
+        count = integer(count, "count", minimum=1)
+        self._guesses = np.zeros((count, self.transcription.layout.size))
+        self._has_guess = np.zeros(count, dtype=bool)
+
+    def solve_many(self, index, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous, plans) \
+            -> list[NLPSolution]:
+        """`solve` for the samples `index` of the `reset_many` batch at once, each from its own warm start.
+
+        The samples with a warm start take their real-time iteration together (the compiled
+        preparation and feedback mapped over them); the others (first samples, after a failure,
+        or with ``iteration="sqp"``) are solved one by one by `solve`. Every sample's numbers are
+        those `solve` gives it alone; solve_time, preparation_time and feedback_time are the
+        batch's shared by its samples.
+
+        Parameters
+        ----------
+        index : (m,) int, rows of the batch
+        x_hat, d_hat : (m, nx), (m, nu);  u_target, u_previous : (m, nu);  plans : (m, N, nu)
+        x_target : (nx,), terminal_weight : (nx, nx), shared by the samples
+        """
+        index = np.asarray(index, dtype=int)
+        m = len(index)
+        out: list = [None] * m
+        warm = self._has_guess[index] & (self.iteration == "rti")
+        for j in np.flatnonzero(~warm):  # as alone: the SQP from the rolled-out plan
+            self._guess = None
+            out[j] = self.solve(x_hat[j], d_hat[j], x_target, u_target[j], terminal_weight, u_previous[j], plans[j])
+            i = index[j]
+            self._has_guess[i] = self._guess is not None
+            if self._has_guess[i]:
+                self._guesses[i] = self._guess
+        self._guess = None
+        hot = np.flatnonzero(warm)
+        if hot.size:
+            for j, solution in zip(hot, self._iterate_many(index[hot], x_hat[hot], d_hat[hot], x_target,
+                                                              u_target[hot], terminal_weight, u_previous[hot])):
+                out[j] = solution
+        return out
+
+    def _iterate_many(self, rows, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous) -> list:
+        """One real-time iteration of the batch rows `rows` from their warm starts, mapped over them."""
+        start = time.perf_counter()
+        m, s = len(rows), self._slices
+        P = np.tile(self._parameters, (m, 1))
+        P[:, s["x0"]], P[:, s["d_hat"]], P[:, s["x_s"]], P[:, s["u_s"]] = x_hat, d_hat, x_target, u_target
+        P[:, s["P"]] = np.asarray(terminal_weight, dtype=float).T.ravel()
+        P[:, s["u_prev"]] = u_previous
+        guesses = self._guesses[rows]
+        try:
+            began = time.perf_counter()
+            data = self.rti.prepare_many(guesses, P)
+            prepared = time.perf_counter()
+            W, residuals = self.rti.feedback_many(data, x_hat)
+            fed = time.perf_counter()
+        except Exception as err:  # CasADi raises on NaN in a function evaluation: each sample alone, as solve
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
+            return self._each_alone(rows, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous)
+        share = 1.0 / m
+        preparation, feedback = (prepared - began) * share, (fed - prepared) * share
+        out = []
+        for j, i in enumerate(rows):
+            w = W[j]
+            qp = self.rti.report(residuals[j])
+            success = qp.success and bool(np.all(np.isfinite(w)))
+            if success:
+                status = "solved"
+                self._guesses[i] = self.rti.shift(w)
+            else:
+                status = qp.status if not qp.success else "non-finite iterate"
+            self._has_guess[i] = success
+            states = w[self._states] * self.rti.state_scale
+            inputs = w[self._inputs] * self._input_scale
+            slacks = w[self._slacks] * self.transcription.scale[self._slacks] if self.n_soft else \
+                np.zeros((self.horizon, 0))
+            out.append(NLPSolution(inputs, states, slacks, success, status, 1, (time.perf_counter() - start) * share,
+                                   preparation, feedback, qp.status))
+        return out
+
+    def _each_alone(self, rows, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous) -> list:
+        """The real-time iteration of each row by `solve`, from its warm start (after a batch raised)."""
+        out = []
+        for j, i in enumerate(rows):
+            self._guess = self._guesses[i]
+            out.append(self.solve(x_hat[j], d_hat[j], x_target, u_target[j], terminal_weight, u_previous[j],
+                                  np.zeros((self.horizon, self.nu))))
+            self._has_guess[i] = self._guess is not None
+            if self._has_guess[i]:
+                self._guesses[i] = self._guess
+        self._guess = None
+        return out
 
     def parameters(self, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous) -> np.ndarray:
         """The NLP parameter vector for these values (see `mpc_problem`)."""

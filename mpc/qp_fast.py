@@ -237,6 +237,16 @@ class CondensedDaqpSolver:
         return QPSolution(np.full((N, nu), np.nan), np.full((N, ns), np.nan), False, status, 0,
                           time.perf_counter() - start)
 
+    @property
+    def warm_start(self) -> tuple:
+        """What the next solve starts from (DAQP's model with its factorization and active set);
+        assign a value read here to continue from it, so one solver can serve many runs in turn."""
+        return self._model, self._set_up
+
+    @warm_start.setter
+    def warm_start(self, value: tuple) -> None:
+        self._model, self._set_up = value
+
     def reset(self) -> None:
         """Forget the warm start (the next solve sets DAQP up from scratch)."""
         self._model = daqp.Model()

@@ -564,6 +564,27 @@ class RealTimeIteration:
         w_next, residuals = self._feedback_call(data, x0)
         return w_next.ravel(), self.report(residuals.ravel())
 
+    def prepare_many(self, decisions, P) -> np.ndarray:
+        """`prepare` of m samples at once: decisions (m, nw), P (m, np) -> QP data (m, n_data).
+
+        The compiled preparation mapped over the samples: each row's numbers are `prepare`'s."""
+        decisions, P = np.asarray(decisions, dtype=float), np.asarray(P, dtype=float)
+        return self._mapped(self.prepare_function, len(decisions))(decisions.T, P.T)[0].T
+
+    def feedback_many(self, data, x0) -> tuple[np.ndarray, np.ndarray]:
+        """`feedback` of m samples at once: data (m, n_data), x0 (m, nx) -> (decisions (m, nw),
+        residuals (m, 2)); `report(residuals[i])` is sample i's QPReport."""
+        data, x0 = np.asarray(data, dtype=float), np.asarray(x0, dtype=float)
+        w_next, residuals = self._mapped(self.feedback_function, len(data))(data.T, x0.T)
+        return w_next.T, residuals.T
+
+    def _mapped(self, fun: ca.Function, m: int) -> models.compile.NumpyCall:
+        calls = self.__dict__.setdefault("_mapped_calls", {})
+        key = (fun.name(), m)
+        if key not in calls:
+            calls[key] = models.compile.NumpyCall(fun.map(m))
+        return calls[key]
+
     @staticmethod
     def report(residuals) -> QPReport:
         """QPReport from the (stationarity, violation) residuals a feedback returns."""
