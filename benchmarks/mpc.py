@@ -173,34 +173,49 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
     controller = case_mpc("linear", case, known, solver=factory, **overrides)
     assert controller.horizon == 50 and controller.sample_period == 0.01
     duration = steps * controller.sample_period
-    result = models.simulate_closed_loop(plant, controller, case.step, duration,
-                                         input_disturbance=case.input_disturbance)
+    result = models.simulate_closed_loop(
+        plant, controller, case.step, duration, input_disturbance=case.input_disturbance
+    )
     solver = interleaved["solver"]
     # The whole controller step (estimator, target, QP, clipping) with path (d) alone.
-    alone = models.simulate_closed_loop(plant, case_mpc("linear", case, known, **overrides), case.step, duration,
-                                        input_disturbance=case.input_disturbance)
+    alone = models.simulate_closed_loop(
+        plant,
+        case_mpc("linear", case, known, **overrides),
+        case.step,
+        duration,
+        input_disturbance=case.input_disturbance,
+    )
     interleaved = {key: 1e3 * float(np.median(solver.times[key])) for key in PATHS}
     times, first_moves, status = replay_in_blocks(controller.problem, solver.params)
     medians = {key: 1e3 * float(np.median(times[key])) for key in PATHS}
     reference = np.array(first_moves["a"])
     diffs = {key: float(np.max(np.abs(np.array(first_moves[key]) - reference))) for key in "bcd"}
     interleaved_reference = np.array(solver.first_moves["a"])
-    interleaved_diffs = {key: float(np.max(np.abs(np.array(solver.first_moves[key]) - interleaved_reference)))
-                         for key in "bcd"}
+    interleaved_diffs = {
+        key: float(np.max(np.abs(np.array(solver.first_moves[key]) - interleaved_reference))) for key in "bcd"
+    }
     step_ms = 1e3 * float(np.median(alone.step_time))
     try:
         compiled = export_linear_mpc(case_mpc("linear", case, known, **overrides), "benchmark_mpc").load()
-        in_c = models.simulate_closed_loop(plant, compiled, case.step, duration,
-                                           input_disturbance=case.input_disturbance)
-        exported = {"exported_c_step_median_ms": 1e3 * float(np.median(in_c.step_time)),
-                    "exported_c_max_command_diff": float(np.max(np.abs(in_c.u - alone.u)))}
+        in_c = models.simulate_closed_loop(
+            plant, compiled, case.step, duration, input_disturbance=case.input_disturbance
+        )
+        exported = {
+            "exported_c_step_median_ms": 1e3 * float(np.median(in_c.step_time)),
+            "exported_c_max_command_diff": float(np.max(np.abs(in_c.u - alone.u))),
+        }
     except CompilationError as err:
         exported = {"exported_c_step_median_ms": None, "exported_c_unavailable": str(err)}
     return {
-        "plant": name, "steps": steps, "soft_bounds": soft, "horizon": controller.horizon,
-        "sample_period": controller.sample_period, "block": BLOCK,
+        "plant": name,
+        "steps": steps,
+        "soft_bounds": soft,
+        "horizon": controller.horizon,
+        "sample_period": controller.sample_period,
+        "block": BLOCK,
         **{f"median_ms_{key}": medians[key] for key in PATHS},
-        "ratio_b_over_d": medians["b"] / medians["d"], "ratio_c_over_d": medians["c"] / medians["d"],
+        "ratio_b_over_d": medians["b"] / medians["d"],
+        "ratio_c_over_d": medians["c"] / medians["d"],
         "ratio_a_over_d": medians["a"] / medians["d"],
         "max_first_move_diff": max(diffs.values()),
         **{f"max_first_move_diff_{key}": diffs[key] for key in "bcd"},
@@ -209,8 +224,10 @@ def linear_benchmark(steps: int, soft: bool) -> dict:
         "interleaved_ratio_c_over_d": interleaved["c"] / interleaved["d"],
         "interleaved_max_first_move_diff": max(interleaved_diffs.values()),
         "interleaved_failures": {key: int(np.sum(~np.array(solver.status[key]))) for key in PATHS},
-        "controller_step_median_ms": step_ms, "linear_median_ms": step_ms,
-        "ratio_c_over_linear_step": medians["c"] / step_ms, **exported,
+        "controller_step_median_ms": step_ms,
+        "linear_median_ms": step_ms,
+        "ratio_c_over_linear_step": medians["c"] / step_ms,
+        **exported,
         "saturated_steps": int(np.sum(np.abs(result.u) >= plant.input_limit)),
         "max_abs_u": float(np.max(np.abs(result.u))),
     }
@@ -223,14 +240,20 @@ def nonlinear_benchmark(name: str, steps: int) -> dict:
     xe = plant.equilibrium()[0]
     reference = xe[plant.state_names.index(case.tracked)] + case.step
     duration = min(steps * controller.sample_period, case.duration)
-    result = models.simulate_closed_loop(plant, controller, reference, duration,
-                                         input_disturbance=case.input_disturbance)
+    result = models.simulate_closed_loop(
+        plant, controller, reference, duration, input_disturbance=case.input_disturbance
+    )
     solve = np.array([s["solve_time"] for s in result.status])
     iterations = np.array([s["iterations"] for s in result.status])
     return {
-        "plant": name, "steps": len(solve), "horizon": controller.horizon, "sample_period": controller.sample_period,
-        "median_ms": 1e3 * float(np.median(solve)), "p90_ms": 1e3 * float(np.percentile(solve, 90)),
-        "max_ms": 1e3 * float(np.max(solve)), "median_iterations": float(np.median(iterations)),
+        "plant": name,
+        "steps": len(solve),
+        "horizon": controller.horizon,
+        "sample_period": controller.sample_period,
+        "median_ms": 1e3 * float(np.median(solve)),
+        "p90_ms": 1e3 * float(np.percentile(solve, 90)),
+        "max_ms": 1e3 * float(np.max(solve)),
+        "median_iterations": float(np.median(iterations)),
         "failures": int(sum(not s["success"] for s in result.status)),
         "controller_step_median_ms": 1e3 * float(np.median(result.step_time)),
     }
@@ -240,10 +263,22 @@ def nonlinear_benchmark(name: str, steps: int) -> dict:
 #: Python templates of the CasADi operations the plants' equations use (for the acados process,
 #: whose older CasADi cannot read a Function serialized by ours).
 OPERATIONS = {
-    ca.OP_ADD: "{0} + {1}", ca.OP_SUB: "{0} - {1}", ca.OP_MUL: "{0} * {1}", ca.OP_DIV: "{0} / {1}",
-    ca.OP_NEG: "-{0}", ca.OP_SQ: "{0} * {0}", ca.OP_TWICE: "2 * {0}", ca.OP_SIN: "ca.sin({0})",
-    ca.OP_COS: "ca.cos({0})", ca.OP_TAN: "ca.tan({0})", ca.OP_SQRT: "ca.sqrt({0})", ca.OP_EXP: "ca.exp({0})",
-    ca.OP_LOG: "ca.log({0})", ca.OP_POW: "{0} ** {1}", ca.OP_ATAN: "ca.atan({0})", ca.OP_FABS: "ca.fabs({0})",
+    ca.OP_ADD: "{0} + {1}",
+    ca.OP_SUB: "{0} - {1}",
+    ca.OP_MUL: "{0} * {1}",
+    ca.OP_DIV: "{0} / {1}",
+    ca.OP_NEG: "-{0}",
+    ca.OP_SQ: "{0} * {0}",
+    ca.OP_TWICE: "2 * {0}",
+    ca.OP_SIN: "ca.sin({0})",
+    ca.OP_COS: "ca.cos({0})",
+    ca.OP_TAN: "ca.tan({0})",
+    ca.OP_SQRT: "ca.sqrt({0})",
+    ca.OP_EXP: "ca.exp({0})",
+    ca.OP_LOG: "ca.log({0})",
+    ca.OP_POW: "{0} ** {1}",
+    ca.OP_ATAN: "ca.atan({0})",
+    ca.OP_FABS: "ca.fabs({0})",
     ca.OP_INV: "1 / {0}",
 }
 
@@ -277,11 +312,18 @@ def run_acados(problem: dict) -> dict:
     """benchmarks/acados_pendulum.py on `problem` in a subprocess; its result, or why it could not run."""
     python = acados_python()
     if not os.path.exists(python):
-        return {"available": False, "reason": f"no acados environment at {python} (set ACADOS_PYTHON; see "
-                                              "benchmarks/acados_pendulum.py)"}
+        return {
+            "available": False,
+            "reason": f"no acados environment at {python} (set ACADOS_PYTHON; see benchmarks/acados_pendulum.py)",
+        }
     try:
-        where = subprocess.run([python, "-c", "import acados, os; print(os.path.dirname(acados.__file__))"],
-                               check=True, capture_output=True, text=True, timeout=120).stdout.strip()
+        where = subprocess.run(
+            [python, "-c", "import acados, os; print(os.path.dirname(acados.__file__))"],
+            check=True,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError) as err:
         return {"available": False, "reason": f"{python} cannot import acados: {err}"}
     environment = dict(os.environ)
@@ -289,14 +331,20 @@ def run_acados(problem: dict) -> dict:
     environment["PATH"] = os.pathsep.join(filter(None, [os.path.dirname(python), environment.get("PATH", "")]))
     # The generated solver loads acados' shared libraries from the wheel.
     environment["LD_LIBRARY_PATH"] = os.pathsep.join(
-        filter(None, [os.path.join(where, "install", "lib"), environment.get("LD_LIBRARY_PATH", "")]))
+        filter(None, [os.path.join(where, "install", "lib"), environment.get("LD_LIBRARY_PATH", "")])
+    )
     with tempfile.TemporaryDirectory(prefix="acados-problem-") as folder:
         problem_path, result_path = os.path.join(folder, "problem.json"), os.path.join(folder, "result.json")
         with open(problem_path, "w") as handle:
             json.dump(problem, handle)
         try:
-            done = subprocess.run([python, os.path.join(_HERE, "acados_pendulum.py"), problem_path, result_path],
-                                  env=environment, capture_output=True, text=True, timeout=1800)
+            done = subprocess.run(
+                [python, os.path.join(_HERE, "acados_pendulum.py"), problem_path, result_path],
+                env=environment,
+                capture_output=True,
+                text=True,
+                timeout=1800,
+            )
         except subprocess.SubprocessError as err:
             return {"available": False, "reason": f"the acados process did not finish: {err}"}
         if not os.path.exists(result_path):
@@ -322,8 +370,12 @@ def do_mpc_run(plant, known, case, settings: dict, recorded: list) -> dict:
     model.set_rhs("x", known.casadi_f(x, u + d_hat, known.param_vector()))
     model.setup()
     controller = do_mpc.controller.MPC(model)
-    controller.set_param(n_horizon=settings["horizon"], t_step=settings["sample_period"], store_full_solution=False,
-                         nlpsol_opts={"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0})
+    controller.set_param(
+        n_horizon=settings["horizon"],
+        t_step=settings["sample_period"],
+        store_full_solution=False,
+        nlpsol_opts={"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0},
+    )
     Q, R, P = (ca.DM(settings[k]) for k in ("Q", "R", "P"))
     error = x - x_s
     controller.set_objective(lterm=ca.bilin(Q, error) + ca.bilin(R, u - u_s), mterm=ca.bilin(P, error))
@@ -371,15 +423,22 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
     solve = controller.nlp.solve
 
     def recording(x_hat, d_hat, x_target, u_target, terminal, u_previous, plan):
-        recorded.append({"x_hat": np.asarray(x_hat).tolist(), "d_hat": np.asarray(d_hat).tolist(),
-                         "x_s": np.asarray(x_target).tolist(), "u_s": np.asarray(u_target).tolist(),
-                         "P": np.asarray(terminal).tolist()})
+        recorded.append(
+            {
+                "x_hat": np.asarray(x_hat).tolist(),
+                "d_hat": np.asarray(d_hat).tolist(),
+                "x_s": np.asarray(x_target).tolist(),
+                "u_s": np.asarray(u_target).tolist(),
+                "P": np.asarray(terminal).tolist(),
+            }
+        )
         return solve(x_hat, d_hat, x_target, u_target, terminal, u_previous, plan)
 
     controller.nlp.solve = recording
     duration = steps * controller.sample_period
-    result = models.simulate_closed_loop(plant, controller, case.step, duration,
-                                         input_disturbance=case.input_disturbance)
+    result = models.simulate_closed_loop(
+        plant, controller, case.step, duration, input_disturbance=case.input_disturbance
+    )
     info = result.status
     ours = 1e3 * np.array([s["preparation_time"] + s["feedback_time"] for s in info[1:]])  # the first is cold
     feedback = 1e3 * np.array([s["feedback_time"] for s in info[1:]])
@@ -387,11 +446,19 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
     our_moves = np.asarray(result.u)[:, 0]
     if np.unique([json.dumps(r["P"]) for r in recorded]).size != 1:
         raise RuntimeError("the terminal weight changed along the run; acados is given one")
-    settings = {"horizon": controller.horizon, "sample_period": controller.sample_period,
-                "Q": controller.Q.tolist(), "R": controller.R.tolist(), "P": recorded[0]["P"]}
+    settings = {
+        "horizon": controller.horizon,
+        "sample_period": controller.sample_period,
+        "Q": controller.Q.tolist(),
+        "R": controller.R.tolist(),
+        "P": recorded[0]["P"],
+    }
     figures = {
-        "nmpc_plant": name, "nmpc_steps": len(ours), "nmpc_soft_bounds": soft,
-        "nmpc_median_ms": float(np.median(ours)), "nmpc_p99_ms": float(np.percentile(ours, 99)),
+        "nmpc_plant": name,
+        "nmpc_steps": len(ours),
+        "nmpc_soft_bounds": soft,
+        "nmpc_median_ms": float(np.median(ours)),
+        "nmpc_p99_ms": float(np.percentile(ours, 99)),
         "nmpc_max_ms": float(np.max(ours)),
         "nmpc_feedback_median_ms": float(np.median(feedback)),
         "nmpc_preparation_median_ms": float(np.median(preparation)),
@@ -404,39 +471,73 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
     sqp_times = []
     for record in recorded[1:]:
         begin = time.perf_counter()
-        sqp.nlp.solve(record["x_hat"], record["d_hat"], record["x_s"], record["u_s"], np.array(record["P"]),
-                      np.zeros(plant.nu), np.zeros((controller.horizon, plant.nu)))
+        sqp.nlp.solve(
+            record["x_hat"],
+            record["d_hat"],
+            record["x_s"],
+            record["u_s"],
+            np.array(record["P"]),
+            np.zeros(plant.nu),
+            np.zeros((controller.horizon, plant.nu)),
+        )
         sqp_times.append(time.perf_counter() - begin)
     figures["sqp_median_ms"] = 1e3 * float(np.median(sqp_times))
 
-    problem = {"nx": plant.nx, "nu": plant.nu, "horizon": controller.horizon, "sample_period": controller.sample_period,
-               "substeps": case.mpc.substeps, "params": known.param_vector().tolist(),
-               "model_code": casadi_to_python(known.casadi_f), "input_limit": known.input_limit.tolist(),
-               "Q": settings["Q"], "R": settings["R"], "P": settings["P"], "steps": recorded,
-               "soft": [{"row": b.row.tolist(), "lower": b.lower, "upper": b.upper,
-                         "linear_weight": b.linear_weight, "quadratic_weight": b.quadratic_weight}
-                        for b in controller.soft_bounds]}
+    problem = {
+        "nx": plant.nx,
+        "nu": plant.nu,
+        "horizon": controller.horizon,
+        "sample_period": controller.sample_period,
+        "substeps": case.mpc.substeps,
+        "params": known.param_vector().tolist(),
+        "model_code": casadi_to_python(known.casadi_f),
+        "input_limit": known.input_limit.tolist(),
+        "Q": settings["Q"],
+        "R": settings["R"],
+        "P": settings["P"],
+        "steps": recorded,
+        "soft": [
+            {
+                "row": b.row.tolist(),
+                "lower": b.lower,
+                "upper": b.upper,
+                "linear_weight": b.linear_weight,
+                "quadratic_weight": b.quadratic_weight,
+            }
+            for b in controller.soft_bounds
+        ],
+    }
     acados = run_acados(problem)
     if acados.get("available"):
         step_ms = np.array(acados["step_ms"])
         moves = np.array(acados["first_moves"])[:, 0]
-        figures |= {"acados_median_ms": float(np.median(step_ms)), "acados_p99_ms": float(np.percentile(step_ms, 99)),
-                    "acados_time_tot_median_ms": float(np.median(acados["time_tot_ms"])),
-                    "acados_wrapper": acados["wrapper"], "acados_build_s": acados["build_s"],
-                    "acados_max_first_move_diff": float(np.max(np.abs(moves - our_moves))),
-                    "acados_failures": int(sum(code not in (0,) for code in acados["status"]))}
+        figures |= {
+            "acados_median_ms": float(np.median(step_ms)),
+            "acados_p99_ms": float(np.percentile(step_ms, 99)),
+            "acados_time_tot_median_ms": float(np.median(acados["time_tot_ms"])),
+            "acados_wrapper": acados["wrapper"],
+            "acados_build_s": acados["build_s"],
+            "acados_max_first_move_diff": float(np.max(np.abs(moves - our_moves))),
+            "acados_failures": int(sum(code not in (0,) for code in acados["status"])),
+        }
         figures["ratio_nmpc_vs_acados"] = figures["acados_median_ms"] / figures["nmpc_median_ms"]
     else:
-        figures |= {"acados_median_ms": None, "acados_unavailable": acados.get("reason", "unknown"),
-                    "ratio_nmpc_vs_acados": None,
-                    "ratio_nmpc_vs_sqp": figures["sqp_median_ms"] / figures["nmpc_median_ms"]}
-    subset = recorded[:max(2, do_mpc_steps)]
+        figures |= {
+            "acados_median_ms": None,
+            "acados_unavailable": acados.get("reason", "unknown"),
+            "ratio_nmpc_vs_acados": None,
+            "ratio_nmpc_vs_sqp": figures["sqp_median_ms"] / figures["nmpc_median_ms"],
+        }
+    subset = recorded[: max(2, do_mpc_steps)]
     try:
         done = do_mpc_run(plant, known, case, settings, subset)
         moves = np.array(done["first_moves"])[:, 0]
-        figures |= {"do_mpc_median_ms": float(np.median(done["step_ms"])), "do_mpc_steps": len(done["step_ms"]),
-                    "do_mpc_max_first_move_diff": float(np.max(np.abs(moves - our_moves[:len(moves)]))),
-                    "ratio_do_mpc_over_nmpc": float(np.median(done["step_ms"])) / figures["nmpc_median_ms"]}
+        figures |= {
+            "do_mpc_median_ms": float(np.median(done["step_ms"])),
+            "do_mpc_steps": len(done["step_ms"]),
+            "do_mpc_max_first_move_diff": float(np.max(np.abs(moves - our_moves[: len(moves)]))),
+            "ratio_do_mpc_over_nmpc": float(np.median(done["step_ms"])) / figures["nmpc_median_ms"],
+        }
     except Exception as err:  # do-mpc is an optional extra
         figures |= {"do_mpc_median_ms": None, "do_mpc_unavailable": f"{type(err).__name__}: {err}"[:300]}
     return figures
@@ -452,21 +553,30 @@ def settling_table() -> dict:
         for kind in ("linear", "nonlinear"):
             for sign in (1, -1):
                 controller = case_mpc(kind, case, models.perturbed(plant, case.known_rel, sign))
-                result = models.simulate_closed_loop(plant, controller, reference, case.duration,
-                                                     input_disturbance=case.input_disturbance)
+                result = models.simulate_closed_loop(
+                    plant, controller, reference, case.duration, input_disturbance=case.input_disturbance
+                )
                 error = np.abs(result.x[:, index] - reference)
                 outside = np.flatnonzero(error >= 1e-3)
-                settle = float(result.t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(result.t) \
+                settle = (
+                    float(result.t[outside[-1] + 1])
+                    if outside.size and outside[-1] + 1 < len(result.t)
                     else (0.0 if not outside.size else float("inf"))
-                margins = [min(value.min() - lower, upper - value.max()) for _, row, lower, upper
-                           in mpc.physical_soft_bounds(case.mpc, plant) for value in [result.x @ row]]
+                )
+                margins = [
+                    min(value.min() - lower, upper - value.max())
+                    for _, row, lower, upper in mpc.physical_soft_bounds(case.mpc, plant)
+                    for value in [result.x @ row]
+                ]
                 solve = np.array([s["solve_time"] for s in result.status])
                 rows[f"{name} {kind} {sign:+d}"] = {
-                    "settling_time_s": settle, "duration_s": case.duration,
-                    "final_error": float(error[-1]), "peak_command_over_limit": float(np.max(np.abs(result.u)) /
-                                                                                       plant.input_limit[0]),
+                    "settling_time_s": settle,
+                    "duration_s": case.duration,
+                    "final_error": float(error[-1]),
+                    "peak_command_over_limit": float(np.max(np.abs(result.u)) / plant.input_limit[0]),
                     "soft_bound_margin": min(margins) if margins else None,
-                    "median_solve_ms": 1e3 * float(np.median(solve)), "max_solve_ms": 1e3 * float(np.max(solve)),
+                    "median_solve_ms": 1e3 * float(np.median(solve)),
+                    "max_solve_ms": 1e3 * float(np.max(solve)),
                     "failed_steps": int(sum(not s["success"] for s in result.status)),
                 }
     return rows
@@ -483,70 +593,100 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     linear = linear_benchmark(args.steps, args.soft)
-    print(f"Linear MPC, pendulum: N = {linear['horizon']}, Ts = {linear['sample_period']} s, "
-          f"{linear['steps']} closed-loop steps ({linear['saturated_steps']} saturated), "
-          f"{'soft |theta| bound' if args.soft else 'input bounds only'}")
-    print(f"{'path':32s} {'median ms':>10s} {'x slower than (d)':>18s} {'max |u0 - u0(a)|':>18s} {'failed':>7s}"
-          f" {'interleaved ms':>15s}")
+    print(
+        f"Linear MPC, pendulum: N = {linear['horizon']}, Ts = {linear['sample_period']} s, "
+        f"{linear['steps']} closed-loop steps ({linear['saturated_steps']} saturated), "
+        f"{'soft |theta| bound' if args.soft else 'input bounds only'}"
+    )
+    print(
+        f"{'path':32s} {'median ms':>10s} {'x slower than (d)':>18s} {'max |u0 - u0(a)|':>18s} {'failed':>7s}"
+        f" {'interleaved ms':>15s}"
+    )
     for key, label in PATHS.items():
         ms = linear[f"median_ms_{key}"]
         diff = "reference" if key == "a" else f"{linear[f'max_first_move_diff_{key}']:.2e}"
-        print(f"({key}) {label:28s} {ms:10.4f} {ms / linear['median_ms_d']:18.1f} {diff:>18s} "
-              f"{linear['failures'][key]:7d} {linear[f'interleaved_median_ms_{key}']:15.4f}")
-    print(f"ratio (b)/(d) = {linear['ratio_b_over_d']:.1f}, (c)/(d) = {linear['ratio_c_over_d']:.1f} "
-          f"(interleaved every step: {linear['interleaved_ratio_c_over_d']:.1f}); whole linear MPC step with (d): "
-          f"median {linear['linear_median_ms']:.4f} ms, OSQP's solve alone / that = "
-          f"{linear['ratio_c_over_linear_step']:.1f}")
+        print(
+            f"({key}) {label:28s} {ms:10.4f} {ms / linear['median_ms_d']:18.1f} {diff:>18s} "
+            f"{linear['failures'][key]:7d} {linear[f'interleaved_median_ms_{key}']:15.4f}"
+        )
+    print(
+        f"ratio (b)/(d) = {linear['ratio_b_over_d']:.1f}, (c)/(d) = {linear['ratio_c_over_d']:.1f} "
+        f"(interleaved every step: {linear['interleaved_ratio_c_over_d']:.1f}); whole linear MPC step with (d): "
+        f"median {linear['linear_median_ms']:.4f} ms, OSQP's solve alone / that = "
+        f"{linear['ratio_c_over_linear_step']:.1f}"
+    )
     if linear["exported_c_step_median_ms"] is not None:
-        print(f"exported to C (mpc.export), called through ctypes: median step "
-              f"{linear['exported_c_step_median_ms']:.4f} ms, commands within "
-              f"{linear['exported_c_max_command_diff']:.1e} of the Python controller's")
+        print(
+            f"exported to C (mpc.export), called through ctypes: median step "
+            f"{linear['exported_c_step_median_ms']:.4f} ms, commands within "
+            f"{linear['exported_c_max_command_diff']:.1e} of the Python controller's"
+        )
     else:
         print(f"exported to C: not measured ({linear['exported_c_unavailable']})")
 
     rti = nmpc_pendulum_benchmark(args.steps, args.soft, args.do_mpc_steps)
-    print(f"\nNonlinear MPC, pendulum: N = 50, Ts = 0.01 s, {rti['nmpc_steps']} closed-loop steps "
-          f"({rti['nmpc_saturated_steps']} saturated), {'soft |theta| bound' if args.soft else 'input bounds only'}")
+    print(
+        f"\nNonlinear MPC, pendulum: N = 50, Ts = 0.01 s, {rti['nmpc_steps']} closed-loop steps "
+        f"({rti['nmpc_saturated_steps']} saturated), {'soft |theta| bound' if args.soft else 'input bounds only'}"
+    )
     print(f"{'path':44s} {'median ms':>10s} {'p99 ms':>8s} {'max |u0 - ours|':>16s}")
-    print(f"{'(e) ours: real-time iteration (prep + feedback)':44s} {rti['nmpc_median_ms']:10.4f} "
-          f"{rti['nmpc_p99_ms']:8.4f} {'-':>16s}")
-    print(f"{'    preparation / feedback alone':44s} {rti['nmpc_preparation_median_ms']:10.4f} "
-          f"{rti['nmpc_feedback_median_ms']:8.4f}")
+    print(
+        f"{'(e) ours: real-time iteration (prep + feedback)':44s} {rti['nmpc_median_ms']:10.4f} "
+        f"{rti['nmpc_p99_ms']:8.4f} {'-':>16s}"
+    )
+    print(
+        f"{'    preparation / feedback alone':44s} {rti['nmpc_preparation_median_ms']:10.4f} "
+        f"{rti['nmpc_feedback_median_ms']:8.4f}"
+    )
     print(f"{'    ours: SQP to convergence':44s} {rti['sqp_median_ms']:10.4f}")
     if rti["acados_median_ms"] is not None:
-        print(f"{'(f) acados SQP-RTI (' + rti['acados_wrapper'][:10] + ')':44s} {rti['acados_median_ms']:10.4f} "
-              f"{rti['acados_p99_ms']:8.4f} {rti['acados_max_first_move_diff']:16.2e}")
+        print(
+            f"{'(f) acados SQP-RTI (' + rti['acados_wrapper'][:10] + ')':44s} {rti['acados_median_ms']:10.4f} "
+            f"{rti['acados_p99_ms']:8.4f} {rti['acados_max_first_move_diff']:16.2e}"
+        )
         print(f"ratio acados / ours = {rti['ratio_nmpc_vs_acados']:.2f}")
     else:
-        print(f"(f) acados: not measured ({rti['acados_unavailable']}); converged SQP / RTI = "
-              f"{rti['ratio_nmpc_vs_sqp']:.2f}")
+        print(
+            f"(f) acados: not measured ({rti['acados_unavailable']}); converged SQP / RTI = "
+            f"{rti['ratio_nmpc_vs_sqp']:.2f}"
+        )
     if rti["do_mpc_median_ms"] is not None:
-        print(f"{'(g) do-mpc default (collocation, IPOPT)':44s} {rti['do_mpc_median_ms']:10.4f} {'':8s} "
-              f"{rti['do_mpc_max_first_move_diff']:16.2e}")
+        print(
+            f"{'(g) do-mpc default (collocation, IPOPT)':44s} {rti['do_mpc_median_ms']:10.4f} {'':8s} "
+            f"{rti['do_mpc_max_first_move_diff']:16.2e}"
+        )
     else:
         print(f"(g) do-mpc: not measured ({rti['do_mpc_unavailable']})")
 
     names = studies.names() if args.all else ["arm", "pendulum"]
     nonlinear = {}
     print("\nNonlinear MPC (real-time iteration, condensed DAQP QPs), solve time per sample")
-    print(f"{'plant':10s} {'N':>4s} {'Ts s':>6s} {'median ms':>10s} {'p90 ms':>8s} {'max ms':>8s} {'SQP it':>7s} "
-          f"{'fails':>6s}")
+    print(
+        f"{'plant':10s} {'N':>4s} {'Ts s':>6s} {'median ms':>10s} {'p90 ms':>8s} {'max ms':>8s} {'SQP it':>7s} "
+        f"{'fails':>6s}"
+    )
     for name in names:
         row = nonlinear_benchmark(name, args.steps)
         nonlinear[name] = row
-        print(f"{name:10s} {row['horizon']:4d} {row['sample_period']:6.2f} {row['median_ms']:10.3f} "
-              f"{row['p90_ms']:8.3f} {row['max_ms']:8.1f} {row['median_iterations']:7.1f} {row['failures']:6d}")
+        print(
+            f"{name:10s} {row['horizon']:4d} {row['sample_period']:6.2f} {row['median_ms']:10.3f} "
+            f"{row['p90_ms']:8.3f} {row['max_ms']:8.1f} {row['median_iterations']:7.1f} {row['failures']:6d}"
+        )
 
     settling = settling_table() if args.settling else None
     if settling:
         print("\nStep with known parameters ±5 % and the input disturbance (settled: |e| < 1e-3 from then on)")
-        print(f"{'run':24s} {'settles s':>10s} {'of s':>5s} {'|u|max/limit':>13s} {'soft margin':>12s} "
-              f"{'solve ms':>9s} {'max ms':>8s} {'failed':>7s}")
+        print(
+            f"{'run':24s} {'settles s':>10s} {'of s':>5s} {'|u|max/limit':>13s} {'soft margin':>12s} "
+            f"{'solve ms':>9s} {'max ms':>8s} {'failed':>7s}"
+        )
         for run, row in settling.items():
             margin = "-" if row["soft_bound_margin"] is None else f"{row['soft_bound_margin']:.4f}"
-            print(f"{run:24s} {row['settling_time_s']:10.2f} {row['duration_s']:5.0f} "
-                  f"{row['peak_command_over_limit']:13.4f} {margin:>12s} {row['median_solve_ms']:9.3f} "
-                  f"{row['max_solve_ms']:8.1f} {row['failed_steps']:7d}")
+            print(
+                f"{run:24s} {row['settling_time_s']:10.2f} {row['duration_s']:5.0f} "
+                f"{row['peak_command_over_limit']:13.4f} {margin:>12s} {row['median_solve_ms']:9.3f} "
+                f"{row['max_solve_ms']:8.1f} {row['failed_steps']:7d}"
+            )
 
     if args.json:
         figures = dict(linear) | rti

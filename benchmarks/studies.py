@@ -74,12 +74,24 @@ def python_control_loop(plant: models.Plant, block: StateFeedback) -> control.In
     step = plant.step_function(SAMPLE_PERIOD, SUBSTEPS)
     limit = float(plant.input_limit[0])
     states = list(plant.state_names)
-    truth = control.nlsys(lambda t, x, u, params: np.asarray(step(x, u, params["p"])).ravel(),
-                          lambda t, x, u, params: x, inputs=["F"], outputs=states, states=len(states),
-                          dt=SAMPLE_PERIOD, name="plant", params={"p": plant.param_vector()})
-    controller = control.nlsys(None, lambda t, x, u, params: np.clip(block.step(np.zeros(0), u[:-1], u[-1:])[1],
-                                                                      -limit, limit),
-                               inputs=[*states, "r"], outputs=["F"], dt=SAMPLE_PERIOD, name="controller")
+    truth = control.nlsys(
+        lambda t, x, u, params: np.asarray(step(x, u, params["p"])).ravel(),
+        lambda t, x, u, params: x,
+        inputs=["F"],
+        outputs=states,
+        states=len(states),
+        dt=SAMPLE_PERIOD,
+        name="plant",
+        params={"p": plant.param_vector()},
+    )
+    controller = control.nlsys(
+        None,
+        lambda t, x, u, params: np.clip(block.step(np.zeros(0), u[:-1], u[-1:])[1], -limit, limit),
+        inputs=[*states, "r"],
+        outputs=["F"],
+        dt=SAMPLE_PERIOD,
+        name="controller",
+    )
     return control.interconnect([truth, controller], inplist=["r"], outlist=[*states, "F"])
 
 
@@ -90,8 +102,7 @@ def _consume(batch: models.MonteCarloResult) -> float:
 
 def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[float, models.MonteCarloResult]:
     start = time.perf_counter()
-    batch = models.monte_carlo(plant, block, reference, DURATION, samples, substeps=SUBSTEPS, threads=THREADS,
-                               jit=jit)
+    batch = models.monte_carlo(plant, block, reference, DURATION, samples, substeps=SUBSTEPS, threads=THREADS, jit=jit)
     _consume(batch)
     return time.perf_counter() - start, batch
 
@@ -117,11 +128,13 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
     diff, baseline_s = 0.0, 0.0
     for i in range(baseline_samples):
         start = time.perf_counter()
-        response = control.input_output_response(loop, t, reference(t), X0=batch.x[i, 0],
-                                                 params={"p": params[i]})
+        response = control.input_output_response(loop, t, reference(t), X0=batch.x[i, 0], params={"p": params[i]})
         baseline_s += time.perf_counter() - start
-        diff = max(diff, float(np.max(np.abs(response.states.T - batch.x[i]))),
-                   float(np.max(np.abs(response.outputs[-1, :-1] - batch.u[i, :, 0]))))
+        diff = max(
+            diff,
+            float(np.max(np.abs(response.states.T - batch.x[i]))),
+            float(np.max(np.abs(response.outputs[-1, :-1] - batch.u[i, :, 0]))),
+        )
     per_s = samples / statistics.median(times)
     baseline_per_s = baseline_samples / baseline_s
     return {
@@ -133,16 +146,22 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
         "mc_ratio_vs_python_control": per_s / baseline_per_s,
         "mc_max_diff_vs_python_control": diff,
         "mc_diverged_samples": int(np.sum(~np.isnan(batch.diverged_at))),
-        "mc_samples": samples, "mc_baseline_samples": baseline_samples, "mc_substeps": SUBSTEPS,
-        "mc_threads": THREADS, "mc_duration_s": DURATION,
+        "mc_samples": samples,
+        "mc_baseline_samples": baseline_samples,
+        "mc_substeps": SUBSTEPS,
+        "mc_threads": THREADS,
+        "mc_duration_s": DURATION,
     }
 
 
 def _digest(batch: models.MonteCarloResult) -> str:
     import hashlib
 
-    return hashlib.sha256(np.ascontiguousarray(batch.x).tobytes() + np.ascontiguousarray(batch.u).tobytes()
-                          + np.nan_to_num(batch.diverged_at, nan=-1.0).tobytes()).hexdigest()
+    return hashlib.sha256(
+        np.ascontiguousarray(batch.x).tobytes()
+        + np.ascontiguousarray(batch.u).tobytes()
+        + np.nan_to_num(batch.diverged_at, nan=-1.0).tobytes()
+    ).hexdigest()
 
 
 def dask_monte_carlo(samples: int = 2000, workers=(1, 2)) -> dict:
@@ -160,21 +179,35 @@ def dask_monte_carlo(samples: int = 2000, workers=(1, 2)) -> dict:
     kwargs = dict(substeps=case.substeps, jit=False)
     digests, seconds = {}, {}
     start = time.perf_counter()
-    digests["in-process"] = [_digest(models.monte_carlo(plant, block, reference, DURATION, params, threads=THREADS,
-                                                        **kwargs)) for block in blocks.values()]
+    digests["in-process"] = [
+        _digest(models.monte_carlo(plant, block, reference, DURATION, params, threads=THREADS, **kwargs))
+        for block in blocks.values()
+    ]
     seconds["in-process"] = time.perf_counter() - start
     for count in workers:
         with distributed.connect(workers=count) as executor:
-            distributed.monte_carlo(executor, plant, next(iter(blocks.values())), reference, 1.0,  # warm-up
-                                    params[:4 * count * distributed.MIN_SAMPLES_PER_TASK], **kwargs)
+            distributed.monte_carlo(
+                executor,
+                plant,
+                next(iter(blocks.values())),
+                reference,
+                1.0,  # warm-up
+                params[: 4 * count * distributed.MIN_SAMPLES_PER_TASK],
+                **kwargs,
+            )
             start = time.perf_counter()
-            digests[count] = [_digest(distributed.monte_carlo(executor, plant, block, reference, DURATION, params,
-                                                              **kwargs)) for block in blocks.values()]
+            digests[count] = [
+                _digest(distributed.monte_carlo(executor, plant, block, reference, DURATION, params, **kwargs))
+                for block in blocks.values()
+            ]
             seconds[count] = time.perf_counter() - start
     first, last = workers[0], workers[-1]
     return {
-        "dask_mc_samples": samples, "dask_mc_controllers": len(blocks), "dask_mc_duration_s": DURATION,
-        "dask_in_process_s": seconds["in-process"], "dask_in_process_threads": THREADS,
+        "dask_mc_samples": samples,
+        "dask_mc_controllers": len(blocks),
+        "dask_mc_duration_s": DURATION,
+        "dask_in_process_s": seconds["in-process"],
+        "dask_in_process_threads": THREADS,
         **{f"dask_{count}_workers_s": seconds[count] for count in workers},
         f"dask_speedup_{last}_vs_{first}_workers": seconds[first] / seconds[last],
         "dask_samples_per_s": samples * len(blocks) / seconds[last],
@@ -193,7 +226,7 @@ def _tree_rss_bytes(root: int) -> int:
         if entry.name.isdigit():
             try:
                 stat = (entry / "stat").read_text()
-                parents[int(entry.name)] = int(stat[stat.rindex(")") + 2:].split()[1])
+                parents[int(entry.name)] = int(stat[stat.rindex(")") + 2 :].split()[1])
             except (OSError, ValueError):
                 continue
     tree, grew = {root}, True
@@ -214,9 +247,11 @@ def _tree_rss_bytes(root: int) -> int:
 
 #: Runs a command and prints its children's peak resident set (KiB): a fresh process per command, so
 #: RUSAGE_CHILDREN covers that command's processes only.
-_PEAK_OF_CHILDREN = ("import resource, subprocess, sys; code = subprocess.call(sys.argv[1:]); "
-                     "usage = resource.getrusage(resource.RUSAGE_CHILDREN); "
-                     "print(usage.ru_utime + usage.ru_stime, usage.ru_maxrss); sys.exit(code)")
+_PEAK_OF_CHILDREN = (
+    "import resource, subprocess, sys; code = subprocess.call(sys.argv[1:]); "
+    "usage = resource.getrusage(resource.RUSAGE_CHILDREN); "
+    "print(usage.ru_utime + usage.ru_stime, usage.ru_maxrss); sys.exit(code)"
+)
 
 #: The MPC rows of the table, each summed on its own; every other controller is a Block.
 _MPC_KINDS = ("linear MPC", "nonlinear MPC")
@@ -255,15 +290,34 @@ def run_studies_command(*arguments: str) -> dict:
     also alone, mc_rows_<kind>_s)
     """
     repo = Path(__file__).resolve().parent.parent
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])),
-               MPLBACKEND="Agg")
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])),
+        MPLBACKEND="Agg",
+    )
     workdir = Path(tempfile.mkdtemp(prefix="studies-benchmark-"))
     tree_peak = [0]
     try:
         start = time.perf_counter()
-        process = subprocess.Popen([sys.executable, "-c", _PEAK_OF_CHILDREN, sys.executable, "-m", "studies",
-                                    *arguments, "--quiet", "--out", str(workdir / "results")], cwd=workdir, env=env,
-                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        process = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                _PEAK_OF_CHILDREN,
+                sys.executable,
+                "-m",
+                "studies",
+                *arguments,
+                "--quiet",
+                "--out",
+                str(workdir / "results"),
+            ],
+            cwd=workdir,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         done = threading.Event()
 
         def sample():
@@ -285,8 +339,13 @@ def run_studies_command(*arguments: str) -> dict:
     if process.returncode != 0:
         raise RuntimeError(f"python -m studies {' '.join(arguments)} exited {process.returncode}: {err[-2000:]}")
     cpu, peak = out.split()[-2:]
-    return {"wall_s": wall, "cpu_s": float(cpu), "peak_mb": int(peak) / 1024, "tree_peak_mb": tree_peak[0] / 2**20,
-            **rows}
+    return {
+        "wall_s": wall,
+        "cpu_s": float(cpu),
+        "peak_mb": int(peak) / 1024,
+        "tree_peak_mb": tree_peak[0] / 2**20,
+        **rows,
+    }
 
 
 def _measure_command(name: str, arguments: tuple) -> dict:
@@ -299,18 +358,25 @@ def _measure_dask(args) -> dict:
 
 
 #: name -> function(parsed arguments) -> {figure: value}
-MEASUREMENTS = {"mc": _measure_mc,
-                "quick": lambda args: _measure_command("quick", ("--quick",)),
-                "full": lambda args: _measure_command("full", ()),
-                "dask": _measure_dask}
+MEASUREMENTS = {
+    "mc": _measure_mc,
+    "quick": lambda args: _measure_command("quick", ("--quick",)),
+    "full": lambda args: _measure_command("full", ()),
+    "dask": _measure_dask,
+}
 
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", metavar="PATH", help="write every figure as one JSON object")
-    parser.add_argument("--only", nargs="*", choices=list(MEASUREMENTS), default=["mc", "quick"],
-                        help="measurements to run (default mc and quick; full, the default run of python -m "
-                             "studies, takes minutes: ask for it)")
+    parser.add_argument(
+        "--only",
+        nargs="*",
+        choices=list(MEASUREMENTS),
+        default=["mc", "quick"],
+        help="measurements to run (default mc and quick; full, the default run of python -m "
+        "studies, takes minutes: ask for it)",
+    )
     parser.add_argument("--samples", type=int, default=1000, help="Monte Carlo samples (mc)")
     parser.add_argument("--repeat", type=int, default=3, help="timed repeats of the Monte Carlo (mc)")
     parser.add_argument("--baseline-samples", type=int, default=3, help="python-control samples (mc)")

@@ -125,8 +125,9 @@ class MonteCarloResult(Sequence):
     y : (M, N+1, ny) noise-free outputs, computed on first use
     """
 
-    def __init__(self, *, plant: Plant, controller: str, t, r, d, x, xc, u, measured, params, diverged_at,
-                 first_sample: int = 0):
+    def __init__(
+        self, *, plant: Plant, controller: str, t, r, d, x, xc, u, measured, params, diverged_at, first_sample: int = 0
+    ):
         self._plant = plant
         self.controller = controller
         self.t, self.r, self.d = t, r, d
@@ -134,12 +135,22 @@ class MonteCarloResult(Sequence):
         self.params, self.diverged_at = params, diverged_at
         self.first_sample = first_sample
         self.input_limit = plant.input_limit.copy()
-        self.state_names, self.output_names, self.input_names = \
-            plant.state_names, plant.output_names, plant.input_names
+        self.state_names, self.output_names, self.input_names = plant.state_names, plant.output_names, plant.input_names
         self._y = None
         self._step_time = np.full(len(t) - 1, np.nan)
-        for arr in (self.t, self.r, self.d, self.x, self.xc, self.u, self.measured, self.params,
-                    self.diverged_at, self.input_limit, self._step_time):
+        for arr in (
+            self.t,
+            self.r,
+            self.d,
+            self.x,
+            self.xc,
+            self.u,
+            self.measured,
+            self.params,
+            self.diverged_at,
+            self.input_limit,
+            self._step_time,
+        ):
             arr.setflags(write=False)
 
     @property
@@ -161,18 +172,31 @@ class MonteCarloResult(Sequence):
         i %= len(self)
         k = self.diverged_at[i]
         return ClosedLoopResult(
-            t=self.t, x=self.x[i], y=self.y[i], r=self.r, u=self.u[i], d=self.d, measured=self.measured[i],
-            xc=self.xc[i], step_time=self._step_time, status=None, input_limit=self.input_limit,
-            state_names=self.state_names, output_names=self.output_names, input_names=self.input_names,
-            controller=self.controller, diverged_at=None if np.isnan(k) else float(k), params=self.params[i])
+            t=self.t,
+            x=self.x[i],
+            y=self.y[i],
+            r=self.r,
+            u=self.u[i],
+            d=self.d,
+            measured=self.measured[i],
+            xc=self.xc[i],
+            step_time=self._step_time,
+            status=None,
+            input_limit=self.input_limit,
+            state_names=self.state_names,
+            output_names=self.output_names,
+            input_names=self.input_names,
+            controller=self.controller,
+            diverged_at=None if np.isnan(k) else float(k),
+            params=self.params[i],
+        )
 
     def __iter__(self) -> Iterator[ClosedLoopResult]:
         return (self[i] for i in range(len(self)))
 
     def __repr__(self) -> str:
         diverged = int(np.sum(~np.isnan(self.diverged_at)))
-        return (f"MonteCarloResult({self.controller!r}, {len(self)} samples x {len(self.t)} times, "
-                f"{diverged} diverged)")
+        return f"MonteCarloResult({self.controller!r}, {len(self)} samples x {len(self.t)} times, {diverged} diverged)"
 
 
 def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray:
@@ -185,8 +209,9 @@ def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray
     return y
 
 
-def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps: int = 10,
-                         jit: bool = False, smooth: bool = False) -> ca.Function:
+def closed_loop_function(
+    plant: Plant, controller: Block, n_steps: int, substeps: int = 10, jit: bool = False, smooth: bool = False
+) -> ca.Function:
     """The whole run as one CasADi Function, differentiable in the gains and parameters.
 
     Signature ``(x0, xc0, R, noise, D, p, gains) -> (X, XC, U, measured)`` with
@@ -214,8 +239,11 @@ def closed_loop_function(plant: Plant, controller: Block, n_steps: int, substeps
     if key in cache:
         return cache[key][1]
     _check_sizes(plant, controller)
-    check_memory(8.0 * n_steps * _doubles_per_step(plant, controller),
-                 f"closed_loop_function of {n_steps} steps of {plant.name}", "use fewer steps")
+    check_memory(
+        8.0 * n_steps * _doubles_per_step(plant, controller),
+        f"closed_loop_function of {n_steps} steps of {plant.name}",
+        "use fewer steps",
+    )
     rk4 = plant.step_function(controller.sample_period, substeps)
     nx, nc = plant.nx, controller.n_state
     s = ca.SX.sym("s", nx + nc)
@@ -257,9 +285,14 @@ def release(plant: Plant, controller: Block) -> int:
     the controller's runs on this plant are done.
     """
     step = controller.casadi_step
-    keys = [key for key, value in plant.function_cache.items()
-            if isinstance(key, tuple) and key[0] in ("closed_loop", "closed_loop_batch")
-            and isinstance(value, tuple) and value[0] is step]
+    keys = [
+        key
+        for key, value in plant.function_cache.items()
+        if isinstance(key, tuple)
+        and key[0] in ("closed_loop", "closed_loop_batch")
+        and isinstance(value, tuple)
+        and value[0] is step
+    ]
     for key in keys:
         del plant.function_cache[key]
     return len(keys)
@@ -272,26 +305,47 @@ def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit
     return plant.function_cache[key][2]
 
 
-def _batch_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool, size: int,
-               threads: int, noisy: bool) -> NumpyCall:
+def _batch_run(
+    plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool, size: int, threads: int, noisy: bool
+) -> NumpyCall:
     """`size` closed-loop runs in one call, `threads` at a time; cached on the plant.
 
     ``(x0 (nx,), XC0 (n_state, size), R (n_reference, N), noise, D (nu, N), P (n_params, size), gains)
     -> (X (nx, N size), XC, U, measured)``, noise (n_measured, N size) when `noisy`, else
     (n_measured, N) shared. Output columns are sample-major: sample i owns columns i N .. (i+1) N - 1.
     """
-    key = ("closed_loop_batch", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit,
-           size, threads, noisy)
+    key = (
+        "closed_loop_batch",
+        id(controller.casadi_step),
+        controller.sample_period,
+        n_steps,
+        substeps,
+        jit,
+        size,
+        threads,
+        noisy,
+    )
     cache = plant.function_cache
     if key not in cache:
         run = closed_loop_function(plant, controller, n_steps, substeps, jit)
         mapped = run.map(size, "thread", min(threads, size)) if size > 1 else run
         nx, nc, nm = plant.nx, controller.n_state, controller.n_measured
-        args = [ca.MX.sym("x0", nx), ca.MX.sym("xc0", nc, size), ca.MX.sym("R", controller.n_reference, n_steps),
-                ca.MX.sym("noise", nm, n_steps * size if noisy else n_steps), ca.MX.sym("D", plant.nu, n_steps),
-                ca.MX.sym("p", plant.n_params, size), ca.MX.sym("gains", controller.gain_vector().size)]
-        fun = ca.Function("closed_loop_batch", args, mapped.call(args),
-                          ["x0", "xc0", "R", "noise", "D", "p", "gains"], ["X", "XC", "U", "measured"])
+        args = [
+            ca.MX.sym("x0", nx),
+            ca.MX.sym("xc0", nc, size),
+            ca.MX.sym("R", controller.n_reference, n_steps),
+            ca.MX.sym("noise", nm, n_steps * size if noisy else n_steps),
+            ca.MX.sym("D", plant.nu, n_steps),
+            ca.MX.sym("p", plant.n_params, size),
+            ca.MX.sym("gains", controller.gain_vector().size),
+        ]
+        fun = ca.Function(
+            "closed_loop_batch",
+            args,
+            mapped.call(args),
+            ["x0", "xc0", "R", "noise", "D", "p", "gains"],
+            ["X", "XC", "U", "measured"],
+        )
         cache[key] = (controller.casadi_step, NumpyCall(fun))
     return cache[key][1]
 
@@ -300,8 +354,10 @@ def _check_sizes(plant: Plant, controller) -> None:
     n_meas = plant.ny if controller.measures == "outputs" else plant.nx
     if isinstance(controller, Block):
         if controller.n_measured != n_meas:
-            raise ValueError(f"{controller.name} reads {controller.n_measured} measurements but "
-                             f"{plant.name} provides {n_meas} ({controller.measures})")
+            raise ValueError(
+                f"{controller.name} reads {controller.n_measured} measurements but "
+                f"{plant.name} provides {n_meas} ({controller.measures})"
+            )
         if controller.n_input != plant.nu:
             raise ValueError(f"{controller.name} gives {controller.n_input} inputs, {plant.name} takes {plant.nu}")
 
@@ -338,17 +394,20 @@ def _setup(plant, controller, reference, duration, x0, input_disturbance, noise_
     if not isinstance(plant, Plant):
         raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
     if not isinstance(controller, Controller):
-        raise TypeError(f"{controller!r} is not a controller: it needs sample_period, measures, "
-                        "n_reference, initial_state and step")
+        raise TypeError(
+            f"{controller!r} is not a controller: it needs sample_period, measures, n_reference, initial_state and step"
+        )
     _check_sizes(plant, controller)
     ts = controller.sample_period
     duration = positive(duration, "duration (s)")
     n = int(round(duration / ts))
     if n < 1:
         raise ValueError(f"duration {duration} s is shorter than one sample ({ts} s)")
-    check_memory(8.0 * (n + 1) * _doubles_per_step(plant, controller),
-                 f"a closed loop of {n} samples ({duration:g} s at Ts = {ts:g} s) of {plant.name}",
-                 "shorten the run or lengthen the sample period")
+    check_memory(
+        8.0 * (n + 1) * _doubles_per_step(plant, controller),
+        f"a closed loop of {n} samples ({duration:g} s at Ts = {ts:g} s) of {plant.name}",
+        "shorten the run or lengthen the sample period",
+    )
     t = ts * np.arange(n + 1)
     x0 = plant.equilibrium()[0] if x0 is None else as_vector(x0, plant.nx, f"{plant.name} initial state")
     r = sample(reference, t, controller.n_reference, "reference")
@@ -356,8 +415,9 @@ def _setup(plant, controller, reference, duration, x0, input_disturbance, noise_
     n_meas = plant.ny if controller.measures == "outputs" else plant.nx
     std = real_array(noise_std, "noise_std")
     if std.ndim > 1 or std.size not in (1, n_meas):
-        raise ValueError(f"noise_std must be one number or {n_meas} numbers (one per measurement), "
-                         f"got shape {std.shape}")
+        raise ValueError(
+            f"noise_std must be one number or {n_meas} numbers (one per measurement), got shape {std.shape}"
+        )
     std = np.broadcast_to(std, (n_meas,))
     if not np.all(np.isfinite(std)) or np.any(std < 0):
         raise ValueError(f"noise_std must be finite and >= 0, got {noise_std}")
@@ -371,8 +431,9 @@ def _noise(setup: _Setup, seed) -> np.ndarray:
     return np.random.default_rng(seed).standard_normal((n, setup.n_meas)) * setup.noise_std
 
 
-def first_faults(x: np.ndarray, u: np.ndarray, xc: np.ndarray | None = None,
-                 bound: float = DIVERGENCE_BOUND) -> np.ndarray:
+def first_faults(
+    x: np.ndarray, u: np.ndarray, xc: np.ndarray | None = None, bound: float = DIVERGENCE_BOUND
+) -> np.ndarray:
     """Index k of the first fault of each run, -1 where there is none.
 
     A fault at sample k: x_k non-finite or beyond `bound`, u_k non-finite, or xc_k non-finite.
@@ -385,6 +446,7 @@ def first_faults(x: np.ndarray, u: np.ndarray, xc: np.ndarray | None = None,
     -------
     ndarray of int, (M,)
     """
+
     def clean(arr, bound=None) -> np.ndarray:
         # Per run: finite (and within bound); two reductions, no temporary copy. NaN propagates
         # through max and min, so a NaN anywhere makes the run suspect.
@@ -415,10 +477,23 @@ def _fault_cause(x, u, xc, k: int) -> str:
     return f"the state left |x| <= {DIVERGENCE_BOUND:g} or became non-finite"
 
 
-def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *, x0=None,
-                         params=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0,
-                         seed: int | None = 0, xc0=None, compiled: bool | None = None,
-                         allow_divergence: bool = False, jit: bool = False) -> ClosedLoopResult:
+def simulate_closed_loop(
+    plant: Plant,
+    controller,
+    reference,
+    duration: float,
+    *,
+    x0=None,
+    params=None,
+    substeps: int = 10,
+    input_disturbance=0.0,
+    noise_std=0.0,
+    seed: int | None = 0,
+    xc0=None,
+    compiled: bool | None = None,
+    allow_divergence: bool = False,
+    jit: bool = False,
+) -> ClosedLoopResult:
     """Run `controller` on `plant` for `duration` s.
 
     Parameters
@@ -451,8 +526,7 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
     p = plant.param_vector(params)
     noise = _noise(setup, seed)
     n = len(setup.t) - 1
-    y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + \
-        (noise[0] if n else 0.0)
+    y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + (noise[0] if n else 0.0)
     name = getattr(controller, "name", "controller")
     if xc0 is not None:
         size = controller.n_state if isinstance(controller, Block) else np.size(xc0)
@@ -460,8 +534,7 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
     else:
         xc_init = np.asarray(controller.initial_state(y0, setup.r[0]), dtype=float).ravel()
         if isinstance(controller, Block) and xc_init.size != controller.n_state:
-            raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has "
-                             f"{controller.n_state}")
+            raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has {controller.n_state}")
     use_compiled = isinstance(controller, Block) if compiled is None else boolean(compiled, "compiled")
     if use_compiled and not isinstance(controller, Block):
         raise TypeError("only a Block can run compiled")
@@ -475,19 +548,36 @@ def simulate_closed_loop(plant: Plant, controller, reference, duration: float, *
         status = None
         xc_check = xc
     else:
-        x, u, measured, step_time, status, xc, xc_check = _python_loop(plant, controller, setup, p, noise,
-                                                                        xc_init, substeps)
+        x, u, measured, step_time, status, xc, xc_check = _python_loop(
+            plant, controller, setup, p, noise, xc_init, substeps
+        )
     k = int(first_faults(x[None], u[None], None if xc_check is None else xc_check[None])[0])
     diverged_at = None if k < 0 else float(setup.t[k])
     if diverged_at is not None and not allow_divergence:
-        raise SimulationError(f"{plant.name} under {name}: closed loop diverged at t = {diverged_at:.4g} s "
-                              f"({_fault_cause(x, u, xc_check, k)})")
+        raise SimulationError(
+            f"{plant.name} under {name}: closed loop diverged at t = {diverged_at:.4g} s "
+            f"({_fault_cause(x, u, xc_check, k)})"
+        )
     y = batch_outputs(plant, x[None], p[None])[0]
-    return ClosedLoopResult(t=setup.t, x=x, y=y, r=setup.r, u=u, d=setup.d, measured=measured, xc=xc,
-                            step_time=step_time, status=status, input_limit=plant.input_limit.copy(),
-                            state_names=plant.state_names, output_names=plant.output_names,
-                            input_names=plant.input_names, controller=getattr(controller, "name", ""),
-                            diverged_at=diverged_at, params=p)
+    return ClosedLoopResult(
+        t=setup.t,
+        x=x,
+        y=y,
+        r=setup.r,
+        u=u,
+        d=setup.d,
+        measured=measured,
+        xc=xc,
+        step_time=step_time,
+        status=status,
+        input_limit=plant.input_limit.copy(),
+        state_names=plant.state_names,
+        output_names=plant.output_names,
+        input_names=plant.input_names,
+        controller=getattr(controller, "name", ""),
+        diverged_at=diverged_at,
+        params=p,
+    )
 
 
 def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
@@ -533,8 +623,11 @@ def _python_loop(plant, controller, setup, p, noise, xc, substeps):
         if not np.all(np.isfinite(uk)):
             break  # the plant's input is undefined: its state stays NaN from here on
         x[k + 1] = np.asarray(rk4(x[k], saturate(uk, limit) + setup.d[k], p)).ravel()
-        if not np.all(np.isfinite(states[-1])) or not np.all(np.isfinite(x[k + 1])) or \
-                np.any(np.abs(x[k + 1]) > DIVERGENCE_BOUND):
+        if (
+            not np.all(np.isfinite(states[-1]))
+            or not np.all(np.isfinite(x[k + 1]))
+            or np.any(np.abs(x[k + 1]) > DIVERGENCE_BOUND)
+        ):
             break
     padded = None
     try:
@@ -564,9 +657,20 @@ class _MappedCalls:
         return call(*args)
 
 
-def simulate_closed_loop_many(plant: Plant, controller, reference, duration: float, param_samples, *,
-                              x0=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0,
-                              seed: int | None = 0, chunk: int = LOCKSTEP_SAMPLES) -> Iterator[ClosedLoopResult]:
+def simulate_closed_loop_many(
+    plant: Plant,
+    controller,
+    reference,
+    duration: float,
+    param_samples,
+    *,
+    x0=None,
+    substeps: int = 10,
+    input_disturbance=0.0,
+    noise_std=0.0,
+    seed: int | None = 0,
+    chunk: int = LOCKSTEP_SAMPLES,
+) -> Iterator[ClosedLoopResult]:
     """`simulate_closed_loop(..., allow_divergence=True)` of a non-Block controller on many parameter
     samples, stepped in lockstep: each sample's run, in order, with the same numbers.
 
@@ -590,9 +694,11 @@ def simulate_closed_loop_many(plant: Plant, controller, reference, duration: flo
     ClosedLoopResult per sample, in the order of `param_samples` (xc None, as for any non-Block)
     """
     if isinstance(controller, Block) or not getattr(controller, "lockstep", False):
-        raise TypeError(f"{getattr(controller, 'name', controller)!r} cannot step many samples at once "
-                        "(it needs lockstep True, initial_states and step_many); use simulate_closed_loop, or "
-                        "monte_carlo for a Block")
+        raise TypeError(
+            f"{getattr(controller, 'name', controller)!r} cannot step many samples at once "
+            "(it needs lockstep True, initial_states and step_many); use simulate_closed_loop, or "
+            "monte_carlo for a Block"
+        )
     setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
     substeps = integer(substeps, "substeps", minimum=1)
     chunk = integer(chunk, "chunk", minimum=1)
@@ -602,7 +708,7 @@ def simulate_closed_loop_many(plant: Plant, controller, reference, duration: flo
     rk4 = _MappedCalls(plant.step_function(controller.sample_period, substeps))
     measure = _MappedCalls(plant.casadi_h)
     for first in range(0, len(samples), chunk):
-        params = samples[first:first + chunk]
+        params = samples[first : first + chunk]
         yield from _lockstep(plant, controller, setup, params, noise, rk4, measure)
 
 
@@ -644,28 +750,56 @@ def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[Clo
         command_ok = np.all(np.isfinite(uk), axis=1)
         moving = active[command_ok]  # a NaN command leaves the plant's input undefined: its state stays NaN
         if moving.size:
-            x[moving, k + 1] = rk4(moving.size, x[moving, k].T, (saturate(u[moving, k], limit) + setup.d[k]).T,
-                                   params[moving].T)[0].T
+            x[moving, k + 1] = rk4(
+                moving.size, x[moving, k].T, (saturate(u[moving, k], limit) + setup.d[k]).T, params[moving].T
+            )[0].T
         nxt = x[active, k + 1]
         with np.errstate(invalid="ignore"):
-            going = command_ok & np.all(np.isfinite(xc_next), axis=1) & np.all(np.abs(nxt) <= DIVERGENCE_BOUND,
-                                                                                  axis=1)
+            going = command_ok & np.all(np.isfinite(xc_next), axis=1) & np.all(np.abs(nxt) <= DIVERGENCE_BOUND, axis=1)
         active = active[going]
     first = first_faults(x, u, xc_fault)
     y = batch_outputs(plant, x, params)
     results = []
     for i in range(m):
-        results.append(ClosedLoopResult(
-            t=setup.t, x=x[i], y=y[i], r=setup.r, u=u[i], d=setup.d, measured=measured[i], xc=None,
-            step_time=step_time[i], status=records[i], input_limit=plant.input_limit.copy(),
-            state_names=plant.state_names, output_names=plant.output_names, input_names=plant.input_names,
-            controller=getattr(controller, "name", ""),
-            diverged_at=None if first[i] < 0 else float(setup.t[first[i]]), params=params[i]))
+        results.append(
+            ClosedLoopResult(
+                t=setup.t,
+                x=x[i],
+                y=y[i],
+                r=setup.r,
+                u=u[i],
+                d=setup.d,
+                measured=measured[i],
+                xc=None,
+                step_time=step_time[i],
+                status=records[i],
+                input_limit=plant.input_limit.copy(),
+                state_names=plant.state_names,
+                output_names=plant.output_names,
+                input_names=plant.input_names,
+                controller=getattr(controller, "name", ""),
+                diverged_at=None if first[i] < 0 else float(setup.t[first[i]]),
+                params=params[i],
+            )
+        )
     return results
 
 
-def _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps, input_disturbance,
-                      noise_std, seed, threads, jit, chunk_size):
+def _monte_carlo_plan(
+    plant,
+    controller,
+    reference,
+    duration,
+    param_samples,
+    x0,
+    substeps,
+    input_disturbance,
+    noise_std,
+    seed,
+    threads,
+    jit,
+    chunk_size,
+):
     """Validate a Monte Carlo request; returns everything a chunk needs."""
     if not isinstance(controller, Block):
         raise TypeError("monte_carlo batches Blocks; run other controllers with simulate_closed_loop")
@@ -687,15 +821,24 @@ def _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0,
     seed = integer(seed, "seed", minimum=0)
     n, m, nc = len(setup.t) - 1, samples.shape[0], controller.n_state
     noisy = bool(np.any(setup.noise_std))
-    work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if noisy else 2) * setup.n_meas
-                      + controller.n_reference)
+    work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if noisy else 2) * setup.n_meas + controller.n_reference)
     if chunk_size is None:
         by_steps = max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
         chunk = int(min(m, max(1, min(by_steps, MONTE_CARLO_CHUNK_BYTES // work))))
     else:
         chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
-    return dict(setup=setup, samples=samples, substeps=substeps, threads=threads, jit=jit, seed=seed, n=n,
-                noisy=noisy, chunk=chunk, chunk_bytes=chunk * work)
+    return dict(
+        setup=setup,
+        samples=samples,
+        substeps=substeps,
+        threads=threads,
+        jit=jit,
+        seed=seed,
+        n=n,
+        noisy=noisy,
+        chunk=chunk,
+        chunk_bytes=chunk * work,
+    )
 
 
 def _run_chunk(plant, controller, plan, start, stop, out) -> None:
@@ -715,13 +858,15 @@ def _run_chunk(plant, controller, plan, start, stop, out) -> None:
         y0 = y0 + noise[:, 0]
     # One initial_state call per distinct first measurement (all samples share it without noise).
     rows, inverse = np.unique(y0, axis=0, return_inverse=True)
-    initial = np.array([np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel()
-                        for row in rows]).reshape(len(rows), nc)
+    initial = np.array(
+        [np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel() for row in rows]
+    ).reshape(len(rows), nc)
     xc0 = initial[np.ravel(inverse)]
     call = _batch_run(plant, controller, n, plan["substeps"], plan["jit"], c, plan["threads"], plan["noisy"])
     noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
-    X, XC, U, M = call(setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, samples[start:stop].T,
-                       controller.gain_vector())
+    X, XC, U, M = call(
+        setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, samples[start:stop].T, controller.gain_vector()
+    )
     x, xc, u, measured, diverged_at = out
     x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
     xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
@@ -733,14 +878,32 @@ def _run_chunk(plant, controller, plan, start, stop, out) -> None:
 
 def _allocate(plant, controller, plan, m) -> tuple:
     n, nm = plan["n"], plan["setup"].n_meas
-    return (np.empty((m, n + 1, plant.nx)), np.empty((m, n + 1, controller.n_state)), np.empty((m, n, plant.nu)),
-            np.empty((m, n, nm)), np.empty(m))
+    return (
+        np.empty((m, n + 1, plant.nx)),
+        np.empty((m, n + 1, controller.n_state)),
+        np.empty((m, n, plant.nu)),
+        np.empty((m, n, nm)),
+        np.empty(m),
+    )
 
 
-def monte_carlo(plant: Plant, controller: Block, reference, duration: float, param_samples, *,
-                x0=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0, seed: int = 0,
-                threads: int = 2, jit: bool = False, chunk_size: int | None = None,
-                first_sample: int = 0) -> MonteCarloResult:
+def monte_carlo(
+    plant: Plant,
+    controller: Block,
+    reference,
+    duration: float,
+    param_samples,
+    *,
+    x0=None,
+    substeps: int = 10,
+    input_disturbance=0.0,
+    noise_std=0.0,
+    seed: int = 0,
+    threads: int = 2,
+    jit: bool = False,
+    chunk_size: int | None = None,
+    first_sample: int = 0,
+) -> MonteCarloResult:
     """Run `controller` on every parameter sample, a chunk of samples per batched CasADi map.
 
     Parameters
@@ -765,14 +928,29 @@ def monte_carlo(plant: Plant, controller: Block, reference, duration: float, par
         Before any work, when the results would need more than `models.checks.MEMORY_LIMIT_BYTES`;
         `monte_carlo_chunks` then runs the same samples holding one chunk at a time.
     """
-    plan = _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps,
-                             input_disturbance, noise_std, seed, threads, jit, chunk_size)
+    plan = _monte_carlo_plan(
+        plant,
+        controller,
+        reference,
+        duration,
+        param_samples,
+        x0,
+        substeps,
+        input_disturbance,
+        noise_std,
+        seed,
+        threads,
+        jit,
+        chunk_size,
+    )
     plan["first_sample"] = integer(first_sample, "first_sample", minimum=0)
     m, n, nm = plan["samples"].shape[0], plan["n"], plan["setup"].n_meas
     per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
-    check_memory(m * per_sample + plan["chunk_bytes"],
-                 f"monte_carlo of {m} samples x {n} steps ({format_bytes(per_sample)} per sample)",
-                 "run them with models.monte_carlo_chunks, which holds one chunk at a time")
+    check_memory(
+        m * per_sample + plan["chunk_bytes"],
+        f"monte_carlo of {m} samples x {n} steps ({format_bytes(per_sample)} per sample)",
+        "run them with models.monte_carlo_chunks, which holds one chunk at a time",
+    )
     out = _allocate(plant, controller, plan, m)
     for start in range(0, m, plan["chunk"]):
         stop = min(m, start + plan["chunk"])
@@ -780,10 +958,22 @@ def monte_carlo(plant: Plant, controller: Block, reference, duration: float, par
     return _result(plant, controller, plan, out, plan["samples"], plan["first_sample"])
 
 
-def monte_carlo_chunks(plant: Plant, controller: Block, reference, duration: float, param_samples, *,
-                       x0=None, substeps: int = 10, input_disturbance=0.0, noise_std=0.0, seed: int = 0,
-                       threads: int = 2, jit: bool = False, chunk_size: int | None = None
-                       ) -> Iterator[MonteCarloResult]:
+def monte_carlo_chunks(
+    plant: Plant,
+    controller: Block,
+    reference,
+    duration: float,
+    param_samples,
+    *,
+    x0=None,
+    substeps: int = 10,
+    input_disturbance=0.0,
+    noise_std=0.0,
+    seed: int = 0,
+    threads: int = 2,
+    jit: bool = False,
+    chunk_size: int | None = None,
+) -> Iterator[MonteCarloResult]:
     """`monte_carlo`, one chunk of samples at a time: memory stays bounded by the chunk.
 
     Arguments as `monte_carlo`; every argument is checked before the first chunk runs. Sample i
@@ -794,12 +984,28 @@ def monte_carlo_chunks(plant: Plant, controller: Block, reference, duration: flo
     ------
     MonteCarloResult of samples first_sample .. first_sample + len - 1
     """
-    plan = _monte_carlo_plan(plant, controller, reference, duration, param_samples, x0, substeps,
-                             input_disturbance, noise_std, seed, threads, jit, chunk_size)
+    plan = _monte_carlo_plan(
+        plant,
+        controller,
+        reference,
+        duration,
+        param_samples,
+        x0,
+        substeps,
+        input_disturbance,
+        noise_std,
+        seed,
+        threads,
+        jit,
+        chunk_size,
+    )
     n, nm = plan["n"], plan["setup"].n_meas
     per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
-    check_memory(plan["chunk"] * per_sample + plan["chunk_bytes"],
-                 f"a Monte Carlo chunk of {plan['chunk']} samples x {n} steps", "give a smaller chunk_size")
+    check_memory(
+        plan["chunk"] * per_sample + plan["chunk_bytes"],
+        f"a Monte Carlo chunk of {plan['chunk']} samples x {n} steps",
+        "give a smaller chunk_size",
+    )
 
     def chunks():
         m = plan["samples"].shape[0]
@@ -815,6 +1021,17 @@ def monte_carlo_chunks(plant: Plant, controller: Block, reference, duration: flo
 def _result(plant, controller, plan, out, samples, first_sample) -> MonteCarloResult:
     setup = plan["setup"]
     x, xc, u, measured, diverged_at = out
-    return MonteCarloResult(plant=plant, controller=controller.name, t=setup.t, r=setup.r, d=setup.d, x=x, xc=xc,
-                            u=u, measured=measured, params=np.array(samples), diverged_at=diverged_at,
-                            first_sample=first_sample)
+    return MonteCarloResult(
+        plant=plant,
+        controller=controller.name,
+        t=setup.t,
+        r=setup.r,
+        d=setup.d,
+        x=x,
+        xc=xc,
+        u=u,
+        measured=measured,
+        params=np.array(samples),
+        diverged_at=diverged_at,
+        first_sample=first_sample,
+    )

@@ -59,12 +59,14 @@ def make_solver(solver, problem: MPCProblem):
     """The QP solver object for `solver`: a name in `SOLVERS` or a callable problem -> solver."""
     if isinstance(solver, str):
         if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))} or a callable "
-                             f"problem -> solver, got {solver!r}")
+            raise ValueError(
+                f"solver must be one of {', '.join(map(repr, SOLVERS))} or a callable problem -> solver, got {solver!r}"
+            )
         return SOLVERS[solver](problem)
     if not callable(solver):
-        raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))} or a callable problem -> solver, "
-                         f"got {solver!r}")
+        raise ValueError(
+            f"solver must be one of {', '.join(map(repr, SOLVERS))} or a callable problem -> solver, got {solver!r}"
+        )
     made = solver(problem)
     missing = [m for m in ("solve", "reset") if not callable(getattr(made, m, None))]
     if missing:
@@ -116,16 +118,19 @@ class _PlanFollower:
         sample_period = positive(sample_period, "sample_period (s)")
         horizon = integer(horizon, "horizon", minimum=1)
         if known.nu != 1:
-            raise ValueError(f"{known.name} has {known.nu} inputs; these controllers track one coordinate "
-                             "with one input")
+            raise ValueError(
+                f"{known.name} has {known.nu} inputs; these controllers track one coordinate with one input"
+            )
         self.plant = known
         self.sample_period = float(sample_period)
         self.horizon = int(horizon)
         self.name = name
         self.tracked = tracked
         if self.tracked not in known.coordinate_names:
-            raise ValueError(f"{known.name} has no coordinate {self.tracked!r} to track; coordinates are "
-                             f"{', '.join(known.coordinate_names)}")
+            raise ValueError(
+                f"{known.name} has no coordinate {self.tracked!r} to track; coordinates are "
+                f"{', '.join(known.coordinate_names)}"
+            )
         self.tracked_index = known.state_names.index(self.tracked)
         self.input_limit = known.input_limit.copy()
         self._known_params = known.param_vector()
@@ -166,8 +171,9 @@ class _PlanFollower:
             r = _finite_vector(r, 1, f"{self.name}: reference")
         return xc, y, r, xc[self._slices[2]].reshape(self._plan_shape)
 
-    def _follow(self, solution_inputs, success: bool, status: str, plan: np.ndarray) \
-            -> tuple[np.ndarray, np.ndarray, bool, float, bool, str]:
+    def _follow(
+        self, solution_inputs, success: bool, status: str, plan: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, bool, float, bool, str]:
         """The plan to follow (clipped), the command, whether the fallback was used, the clipped
         excess, and the step's success and status.
 
@@ -222,10 +228,24 @@ class LinearMPC(_PlanFollower):
     name : str
     """
 
-    def __init__(self, known: Plant, *, sample_period: float, horizon: int, state_weight, input_weight,
-                 soft_bounds=(), rate_limit=None, solver="daqp", tracked: str,
-                 operating_point=None, input_noise_std=None, disturbance_step_std=None,
-                 measurement_std=1e-3, name: str = "linear MPC"):
+    def __init__(
+        self,
+        known: Plant,
+        *,
+        sample_period: float,
+        horizon: int,
+        state_weight,
+        input_weight,
+        soft_bounds=(),
+        rate_limit=None,
+        solver="daqp",
+        tracked: str,
+        operating_point=None,
+        input_noise_std=None,
+        disturbance_step_std=None,
+        measurement_std=1e-3,
+        name: str = "linear MPC",
+    ):
         self._setup_common(known, sample_period, horizon, tracked, name)
         xe, ue = known.equilibrium() if operating_point is None else operating_point
         self.model = known.linearize(xe, ue).discretize(self.sample_period)
@@ -233,15 +253,24 @@ class LinearMPC(_PlanFollower):
         self._rate_per_sample = per_sample_rate
         self.soft_bounds = _soft_bounds(soft_bounds)
         self.problem: MPCProblem = problem_from_model(
-            self.model, state_weight, input_weight, self.horizon, self.input_limit,
-            rate_limit=per_sample_rate, soft_bounds=self.soft_bounds)
+            self.model,
+            state_weight,
+            input_weight,
+            self.horizon,
+            self.input_limit,
+            rate_limit=per_sample_rate,
+            soft_bounds=self.soft_bounds,
+        )
         self.solver = make_solver(solver, self.problem)
         nu = known.nu
         self.observer = DisturbanceObserver(
-            self.model.A, self.model.B, self.model.C,
+            self.model.A,
+            self.model.B,
+            self.model.C,
             self.input_limit * 1e-2 if input_noise_std is None else input_noise_std,
             self.input_limit * 1e-3 if disturbance_step_std is None else disturbance_step_std,
-            measurement_std)
+            measurement_std,
+        )
         tracked_row = np.zeros((nu, known.nx))
         tracked_row[0, self.tracked_index] = 1.0
         self.target = SteadyStateTarget(self.model.A, self.model.B, tracked_row)
@@ -285,14 +314,20 @@ class LinearMPC(_PlanFollower):
                 fault = f"solver raised {type(err).__name__}: {err}"
         if solution is None:
             assert fault is not None  # the solve was skipped or raised
-            solution = QPSolution(np.full_like(plan, np.nan), np.zeros((self.horizon, self.problem.n_soft)), False,
-                                  fault)
-        new_plan, u, fallback, excess, success, status = self._follow(solution.inputs + self._ue, solution.success,
-                                                                      solution.status, plan)
+            solution = QPSolution(
+                np.full_like(plan, np.nan), np.zeros((self.horizon, self.problem.n_soft)), False, fault
+            )
+        new_plan, u, fallback, excess, success, status = self._follow(
+            solution.inputs + self._ue, solution.success, solution.status, plan
+        )
         ns = self.problem.n_soft
         self._info = {
-            "solver": self.solver.name, "status": status, "success": success,
-            "iterations": solution.iterations, "solve_time": solution.solve_time, "fallback": fallback,
+            "solver": self.solver.name,
+            "status": status,
+            "success": success,
+            "iterations": solution.iterations,
+            "solve_time": solution.solve_time,
+            "fallback": fallback,
             "input_excess": excess,
             "soft_violation": float(solution.slacks.max()) if ns and success else 0.0,
             "soft_violation_now": self._violation_now(x_hat) if ns else 0.0,
@@ -310,8 +345,10 @@ class LinearMPC(_PlanFollower):
     def initial_states(self, y0, r0) -> np.ndarray:
         """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state)."""
         if not self.lockstep:
-            raise TypeError(f"{self.name}: the {self.solver.name} solver's warm start cannot be kept per sample "
-                            "(no warm_start attribute); step the samples one by one")
+            raise TypeError(
+                f"{self.name}: the {self.solver.name} solver's warm start cannot be kept per sample "
+                "(no warm_start attribute); step the samples one by one"
+            )
         y0 = real_array(y0, f"{self.name}: first measurements").reshape(-1, self.plant.ny)
         rows, self._warm_starts = [], []
         for y in y0:
@@ -372,10 +409,27 @@ class NonlinearMPC(_PlanFollower):
     input_noise_std, disturbance_step_std, measurement_std : estimator tuning, as `LinearMPC`
     """
 
-    def __init__(self, known: Plant, *, sample_period: float, horizon: int, state_weight, input_weight,
-                 soft_bounds=(), rate_limit=None, tracked: str, substeps: int = 1, iteration: str = "rti",
-                 max_iterations: int = 50, tolerance: float = 1e-8, compiled: bool = True, input_noise_std=None,
-                 disturbance_step_std=None, measurement_std=1e-3, name: str = "nonlinear MPC"):
+    def __init__(
+        self,
+        known: Plant,
+        *,
+        sample_period: float,
+        horizon: int,
+        state_weight,
+        input_weight,
+        soft_bounds=(),
+        rate_limit=None,
+        tracked: str,
+        substeps: int = 1,
+        iteration: str = "rti",
+        max_iterations: int = 50,
+        tolerance: float = 1e-8,
+        compiled: bool = True,
+        input_noise_std=None,
+        disturbance_step_std=None,
+        measurement_std=1e-3,
+        name: str = "nonlinear MPC",
+    ):
         interrupts.watch()  # Ctrl-C stops a run even where CasADi swallows it (see models.interrupts)
         self._setup_common(known, sample_period, horizon, tracked, name)
         nx = known.nx
@@ -384,19 +438,32 @@ class NonlinearMPC(_PlanFollower):
         per_sample_rate = None if rate_limit is None else real_array(rate_limit, "rate_limit") * self.sample_period
         self._rate_per_sample = per_sample_rate
         self.soft_bounds = _soft_bounds(soft_bounds)
-        self.nlp = NonlinearMPCProblem(known, self.sample_period, self.horizon, self.Q, self.R,
-                                       soft_bounds=self.soft_bounds, rate_limit=per_sample_rate,
-                                       substeps=substeps, iteration=iteration, max_iterations=max_iterations,
-                                       tolerance=tolerance, compiled=compiled)
+        self.nlp = NonlinearMPCProblem(
+            known,
+            self.sample_period,
+            self.horizon,
+            self.Q,
+            self.R,
+            soft_bounds=self.soft_bounds,
+            rate_limit=per_sample_rate,
+            substeps=substeps,
+            iteration=iteration,
+            max_iterations=max_iterations,
+            tolerance=tolerance,
+            compiled=compiled,
+        )
         self.step_model = known.step_function(self.sample_period, substeps)
         # Numeric calls without CasADi's DM conversions (half the cost of these small calls).
         self._predict, self._output = NumpyCall(self.step_model), NumpyCall(known.casadi_h)
         linear = known.linearize().discretize(self.sample_period)
         self.observer = DisturbanceObserver(
-            linear.A, linear.B, linear.C,
+            linear.A,
+            linear.B,
+            linear.C,
             self.input_limit * 1e-2 if input_noise_std is None else input_noise_std,
             self.input_limit * 1e-3 if disturbance_step_std is None else disturbance_step_std,
-            measurement_std)
+            measurement_std,
+        )
         self._targets: dict = {}
         self._soft_rows = np.array([b.row for b in self.soft_bounds]).reshape(-1, nx)
         self._soft_lower = np.array([b.lower for b in self.soft_bounds])
@@ -498,8 +565,10 @@ class NonlinearMPC(_PlanFollower):
         index = np.asarray(index, dtype=int)
         m, N, nu, nx = len(index), self.horizon, self.plant.nu, self.plant.nx
         if xc.shape != (m, self.n_state) or y.shape != (m, self.plant.ny):
-            raise ValueError(f"{self.name}: step_many takes x_c ({m}, {self.n_state}) and y ({m}, {self.plant.ny}) "
-                             f"for {m} samples, got {xc.shape} and {y.shape}")
+            raise ValueError(
+                f"{self.name}: step_many takes x_c ({m}, {self.n_state}) and y ({m}, {self.plant.ny}) "
+                f"for {m} samples, got {xc.shape} and {y.shape}"
+            )
         r = _finite_vector(r, 1, f"{self.name}: reference")
         p = self._known_params
         plans = xc[:, splan].reshape(m, N, nu)
@@ -521,16 +590,27 @@ class NonlinearMPC(_PlanFollower):
         if good.any():
             x_target, v_target, P = self.target(r[0])
             g = np.flatnonzero(good)
-            for j, solution in zip(g, self.nlp.solve_many(index[g], x_hat[g], d_hat[g], x_target,
-                                                          v_target - d_hat[g], P, plans[g, 0], plans[g])):
+            for j, solution in zip(
+                g,
+                self.nlp.solve_many(
+                    index[g], x_hat[g], d_hat[g], x_target, v_target - d_hat[g], P, plans[g, 0], plans[g]
+                ),
+            ):
                 solutions[j] = solution
         xc_next, commands, records = np.empty_like(xc), np.empty((m, nu)), []
         followed = []
         for j in range(m):
             solution = solutions[j]
             if solution is None:
-                solution = NLPSolution(np.full((N, nu), np.nan), np.full((N + 1, nx), np.nan),
-                                       np.zeros((N, len(self.soft_bounds))), False, faults[j], 0, 0.0)
+                solution = NLPSolution(
+                    np.full((N, nu), np.nan),
+                    np.full((N + 1, nx), np.nan),
+                    np.zeros((N, len(self.soft_bounds))),
+                    False,
+                    faults[j],
+                    0,
+                    0.0,
+                )
                 solutions[j] = solution
             followed.append(self._follow(solution.inputs, solution.success, solution.status, plans[j]))
             commands[j] = followed[-1][1]
@@ -545,14 +625,22 @@ class NonlinearMPC(_PlanFollower):
                 status += "; non-finite model prediction, estimate held"
             g = self._soft_rows @ x_hat[j]
             now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
-            records.append({
-                "solver": solver, "status": status, "success": success,
-                "iterations": solution.iterations, "solve_time": solution.solve_time,
-                "preparation_time": solution.preparation_time, "feedback_time": solution.feedback_time,
-                "qp_status": solution.qp_status, "fallback": fallback, "input_excess": excess,
-                "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
-                "soft_violation_now": float(np.max(now)) if now.size else 0.0,
-            })
+            records.append(
+                {
+                    "solver": solver,
+                    "status": status,
+                    "success": success,
+                    "iterations": solution.iterations,
+                    "solve_time": solution.solve_time,
+                    "preparation_time": solution.preparation_time,
+                    "feedback_time": solution.feedback_time,
+                    "qp_status": solution.qp_status,
+                    "fallback": fallback,
+                    "input_excess": excess,
+                    "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
+                    "soft_violation_now": float(np.max(now)) if now.size else 0.0,
+                }
+            )
             xc_next[j, sx], xc_next[j, sd], xc_next[j, splan] = x_next[j], d_hat[j], new_plan.ravel()
         self._info = dict(records[-1]) if records else {}
         return xc_next, commands, records
@@ -575,10 +663,18 @@ class NonlinearMPC(_PlanFollower):
             solution = self.nlp.solve(x_hat, d_hat, x_target, v_target - d_hat, P, plan[0], plan)
         else:
             N, nu = self.horizon, self.plant.nu
-            solution = NLPSolution(np.full((N, nu), np.nan), np.full((N + 1, self.plant.nx), np.nan),
-                                   np.zeros((N, len(self.soft_bounds))), False, fault, 0, 0.0)
-        new_plan, u, fallback, excess, success, status = self._follow(solution.inputs, solution.success,
-                                                                      solution.status, plan)
+            solution = NLPSolution(
+                np.full((N, nu), np.nan),
+                np.full((N + 1, self.plant.nx), np.nan),
+                np.zeros((N, len(self.soft_bounds))),
+                False,
+                fault,
+                0,
+                0.0,
+            )
+        new_plan, u, fallback, excess, success, status = self._follow(
+            solution.inputs, solution.success, solution.status, plan
+        )
         x_next = self._predict(x_hat, u + d_hat, p)[0].ravel()
         if not _finite(x_next) and _finite(x_hat) and _finite(u):
             # The model's prediction blew up from a finite estimate: hold the estimate, say so.
@@ -587,10 +683,16 @@ class NonlinearMPC(_PlanFollower):
         g = self._soft_rows @ x_hat
         now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
         self._info = {
-            "solver": f"{self.nlp.iteration}/{self.nlp.qp_solver}", "status": status, "success": success,
-            "iterations": solution.iterations, "solve_time": solution.solve_time,
-            "preparation_time": solution.preparation_time, "feedback_time": solution.feedback_time,
-            "qp_status": solution.qp_status, "fallback": fallback, "input_excess": excess,
+            "solver": f"{self.nlp.iteration}/{self.nlp.qp_solver}",
+            "status": status,
+            "success": success,
+            "iterations": solution.iterations,
+            "solve_time": solution.solve_time,
+            "preparation_time": solution.preparation_time,
+            "feedback_time": solution.feedback_time,
+            "qp_status": solution.qp_status,
+            "fallback": fallback,
+            "input_excess": excess,
             "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
             "soft_violation_now": float(np.max(now)) if now.size else 0.0,
         }

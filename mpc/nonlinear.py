@@ -63,8 +63,9 @@ class NLPSolution:
     qp_status: str = ""
 
 
-def mpc_problem(plant: Plant, sample_period: float, horizon: int, state_weight, input_weight, *,
-                soft_bounds=(), rate_limit=None) -> OptimalControlProblem:
+def mpc_problem(
+    plant: Plant, sample_period: float, horizon: int, state_weight, input_weight, *, soft_bounds=(), rate_limit=None
+) -> OptimalControlProblem:
     """The NMPC's optimal control problem (see the module docstring) on `plant`.
 
     Parameters ``x0`` (start_from), ``d_hat`` (nu), ``x_s`` (nx), ``u_s`` (nu), ``P`` (nx², column-major)
@@ -91,8 +92,9 @@ def mpc_problem(plant: Plant, sample_period: float, horizon: int, state_weight, 
         stage += bound.linear_weight * slack + bound.quadratic_weight * slack**2
     if rate_limit is not None:
         ocp.input_before(u_prev)
-        ocp.subject_to(ocp.bounded(-ca.DM(rate_limit), ocp.input - ocp.input_previous, ca.DM(rate_limit)),
-                       label="input rate limit")
+        ocp.subject_to(
+            ocp.bounded(-ca.DM(rate_limit), ocp.input - ocp.input_previous, ca.DM(rate_limit)), label="input rate limit"
+        )
     ocp.minimize(ocp.sum(stage) + ocp.at_end(ca.bilin(ca.reshape(terminal, nx, nx), ocp.state - x_s)))
     return ocp
 
@@ -121,9 +123,22 @@ class NonlinearMPCProblem:
         For a horizon < 1, non-finite or indefinite weights, substeps < 1, an unknown iteration.
     """
 
-    def __init__(self, plant: Plant, sample_period: float, horizon: int, state_weight, input_weight, *,
-                 soft_bounds=(), rate_limit=None, substeps: int = 1, iteration: str = "rti",
-                 max_iterations: int = 50, tolerance: float = 1e-8, compiled: bool = True):
+    def __init__(
+        self,
+        plant: Plant,
+        sample_period: float,
+        horizon: int,
+        state_weight,
+        input_weight,
+        *,
+        soft_bounds=(),
+        rate_limit=None,
+        substeps: int = 1,
+        iteration: str = "rti",
+        max_iterations: int = 50,
+        tolerance: float = 1e-8,
+        compiled: bool = True,
+    ):
         N = integer(horizon, "horizon", minimum=1)
         self.max_iterations = integer(max_iterations, "max_iterations", minimum=1)
         substeps = integer(substeps, "substeps", minimum=1)
@@ -137,14 +152,17 @@ class NonlinearMPCProblem:
         ns = len(soft)
         self.plant, self.nx, self.nu, self.horizon, self.n_soft = plant, nx, nu, N, ns
         self.sample_period, self.input_limit, self.soft_bounds = float(sample_period), plant.input_limit.copy(), soft
-        self.rate_limit = None if rate_limit is None else \
-            np.broadcast_to(real_array(rate_limit, "rate_limit"), (nu,)).copy()
+        self.rate_limit = (
+            None if rate_limit is None else np.broadcast_to(real_array(rate_limit, "rate_limit"), (nu,)).copy()
+        )
         if self.rate_limit is not None and (not np.all(np.isfinite(self.rate_limit)) or np.any(self.rate_limit <= 0)):
             raise ValueError(f"rate_limit must be finite and > 0 per sample, got {self.rate_limit}")
-        self.ocp = mpc_problem(plant, self.sample_period, N, state_weight, input_weight, soft_bounds=soft,
-                               rate_limit=self.rate_limit)
-        self.rti = RealTimeIteration(Transcription(self.ocp, MultipleShooting(intervals=N, substeps=substeps)),
-                                     compiled=compiled)
+        self.ocp = mpc_problem(
+            plant, self.sample_period, N, state_weight, input_weight, soft_bounds=soft, rate_limit=self.rate_limit
+        )
+        self.rti = RealTimeIteration(
+            Transcription(self.ocp, MultipleShooting(intervals=N, substeps=substeps)), compiled=compiled
+        )
         tr = self.transcription = self.rti.transcription
         self.qp_solver = "daqp (condensed)"
         self._slices = tr.parameter_slices
@@ -168,8 +186,9 @@ class NonlinearMPCProblem:
         self._guesses = np.zeros((count, self.transcription.layout.size))
         self._has_guess = np.zeros(count, dtype=bool)
 
-    def solve_many(self, index, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous, plans) \
-            -> list[NLPSolution]:
+    def solve_many(
+        self, index, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous, plans
+    ) -> list[NLPSolution]:
         """`solve` for the samples `index` of the `reset_many` batch at once, each from its own warm start.
 
         The samples with a warm start take their real-time iteration together (the compiled
@@ -198,8 +217,12 @@ class NonlinearMPCProblem:
         self._guess = None
         hot = np.flatnonzero(warm)
         if hot.size:
-            for j, solution in zip(hot, self._iterate_many(index[hot], x_hat[hot], d_hat[hot], x_target,
-                                                              u_target[hot], terminal_weight, u_previous[hot])):
+            for j, solution in zip(
+                hot,
+                self._iterate_many(
+                    index[hot], x_hat[hot], d_hat[hot], x_target, u_target[hot], terminal_weight, u_previous[hot]
+                ),
+            ):
                 out[j] = solution
         return out
 
@@ -237,10 +260,23 @@ class NonlinearMPCProblem:
             self._has_guess[i] = success
             states = w[self._states] * self.rti.state_scale
             inputs = w[self._inputs] * self._input_scale
-            slacks = w[self._slacks] * self.transcription.scale[self._slacks] if self.n_soft else \
-                np.zeros((self.horizon, 0))
-            out.append(NLPSolution(inputs, states, slacks, success, status, 1, (time.perf_counter() - start) * share,
-                                   preparation, feedback, qp.status))
+            slacks = (
+                w[self._slacks] * self.transcription.scale[self._slacks] if self.n_soft else np.zeros((self.horizon, 0))
+            )
+            out.append(
+                NLPSolution(
+                    inputs,
+                    states,
+                    slacks,
+                    success,
+                    status,
+                    1,
+                    (time.perf_counter() - start) * share,
+                    preparation,
+                    feedback,
+                    qp.status,
+                )
+            )
         return out
 
     def _each_alone(self, rows, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous) -> list:
@@ -248,8 +284,17 @@ class NonlinearMPCProblem:
         out = []
         for j, i in enumerate(rows):
             self._guess = self._guesses[i]
-            out.append(self.solve(x_hat[j], d_hat[j], x_target, u_target[j], terminal_weight, u_previous[j],
-                                  np.zeros((self.horizon, self.nu))))
+            out.append(
+                self.solve(
+                    x_hat[j],
+                    d_hat[j],
+                    x_target,
+                    u_target[j],
+                    terminal_weight,
+                    u_previous[j],
+                    np.zeros((self.horizon, self.nu)),
+                )
+            )
             self._has_guess[i] = self._guess is not None
             if self._has_guess[i]:
                 self._guesses[i] = self._guess
@@ -267,8 +312,9 @@ class NonlinearMPCProblem:
 
     def initial_guess(self, x_hat, d_hat, plan) -> np.ndarray:
         """A starting point from scratch (scaled decisions): the plan (N, nu) rolled out from x̂ through the model."""
-        plan = np.clip(np.asarray(plan, dtype=float).reshape(self.horizon, self.nu), -self.input_limit,
-                       self.input_limit)
+        plan = np.clip(
+            np.asarray(plan, dtype=float).reshape(self.horizon, self.nu), -self.input_limit, self.input_limit
+        )
         X = np.asarray(self._rollout(x_hat, (plan + d_hat).T, self._known))
         X = np.hstack([np.asarray(x_hat, dtype=float).reshape(-1, 1), X])
         if not np.all(np.isfinite(X)):
@@ -303,32 +349,55 @@ class NonlinearMPCProblem:
                 raise KeyboardInterrupt from err
             self.reset()
             status = f"solver error: {err}".splitlines()[0]
-            return NLPSolution(np.full((self.horizon, self.nu), np.nan), np.full((self.horizon + 1, self.nx), np.nan),
-                               np.zeros((self.horizon, self.n_soft)), False, status, 0, time.perf_counter() - start)
+            return NLPSolution(
+                np.full((self.horizon, self.nu), np.nan),
+                np.full((self.horizon + 1, self.nx), np.nan),
+                np.zeros((self.horizon, self.n_soft)),
+                False,
+                status,
+                0,
+                time.perf_counter() - start,
+            )
         w = result.decision
         success = result.qp.success and result.converged and bool(np.all(np.isfinite(w)))
         if success:
             status = "solved" if result.iterations == 1 else f"converged in {result.iterations} iterations"
             self._guess = self.rti.shift(w)
         else:
-            status = (result.qp.status if not result.qp.success else
-                      "non-finite iterate" if not np.all(np.isfinite(w)) else
-                      f"not converged in {result.iterations} iterations (step {result.step:.1e})")
+            status = (
+                result.qp.status
+                if not result.qp.success
+                else "non-finite iterate"
+                if not np.all(np.isfinite(w))
+                else f"not converged in {result.iterations} iterations (step {result.step:.1e})"
+            )
             self.reset()  # next time start over from the plan the controller actually follows
         states = w[self._states] * self.rti.state_scale
         inputs = w[self._inputs] * self._input_scale
-        slacks = w[self._slacks] * self.transcription.scale[self._slacks] if self.n_soft else \
-            np.zeros((self.horizon, 0))
-        return NLPSolution(inputs, states, slacks, success, status, result.iterations, time.perf_counter() - start,
-                           result.preparation_time, result.feedback_time, result.qp.status)
+        slacks = (
+            w[self._slacks] * self.transcription.scale[self._slacks] if self.n_soft else np.zeros((self.horizon, 0))
+        )
+        return NLPSolution(
+            inputs,
+            states,
+            slacks,
+            success,
+            status,
+            result.iterations,
+            time.perf_counter() - start,
+            result.preparation_time,
+            result.feedback_time,
+            result.qp.status,
+        )
 
 
 def _weight(value, n, what, definite) -> np.ndarray:
     arr = real_array(value, what)
     arr = arr * np.eye(n) if arr.ndim == 0 else (np.diag(arr) if arr.ndim == 1 else arr)
     if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), "
-                         f"got {np.shape(value)}")
+        raise ValueError(
+            f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), got {np.shape(value)}"
+        )
     arr = (arr + arr.T) / 2
     smallest = np.min(np.linalg.eigvalsh(arr))
     if smallest < 0 or (definite and smallest == 0):

@@ -32,9 +32,17 @@ from models.checks import integer
 from .linear import INFINITY, MPCProblem, QPParameters, QPSolution
 
 #: DAQP exit flags (daqp/include/constants.h).
-DAQP_STATUS = {1: "optimal", 2: "soft optimal", -1: "primal infeasible", -2: "cycling detected",
-               -3: "unbounded", -4: "iteration limit", -5: "nonconvex problem", -6: "overdetermined initial active set",
-               -7: "time limit"}
+DAQP_STATUS = {
+    1: "optimal",
+    2: "soft optimal",
+    -1: "primal infeasible",
+    -2: "cycling detected",
+    -3: "unbounded",
+    -4: "iteration limit",
+    -5: "nonconvex problem",
+    -6: "overdetermined initial active set",
+    -7: "time limit",
+}
 
 #: Constraint violation DAQP accepts, in the scaled variables.
 PRIMAL_TOLERANCE = 1e-10
@@ -135,7 +143,7 @@ def condense(problem: MPCProblem) -> CondensedQP:
         rows.append(np.hstack([difference, np.zeros((n_inputs, n_slacks))]))
         rate = np.tile(problem.rate_limit, N)
         previous = np.zeros((n_inputs, n_p))
-        previous[:nu, n_p - nu:] = np.eye(nu)  # the first row's bounds move with u_{-1}
+        previous[:nu, n_p - nu :] = np.eye(nu)  # the first row's bounds move with u_{-1}
         lower_constant.append(-rate)
         upper_constant.append(rate)
         lower_matrix.append(previous)
@@ -144,10 +152,12 @@ def condense(problem: MPCProblem) -> CondensedQP:
     # Jacobi scaling z = D z̄: a unit Hessian diagonal, so newtons and kilonewtons look alike.
     scale = 1 / np.sqrt(np.diag(H))
     F = np.zeros((n, n_p))
-    F[:n_inputs, :n_p - nu] = F_theta * scale[:n_inputs, None]
-    stack = (lambda parts, width: np.vstack(parts) if parts else np.zeros((0, width)))
+    F[:n_inputs, : n_p - nu] = F_theta * scale[:n_inputs, None]
+    stack = lambda parts, width: np.vstack(parts) if parts else np.zeros((0, width))
     return CondensedQP(
-        H=H * np.outer(scale, scale), scale=scale, F=F,
+        H=H * np.outer(scale, scale),
+        scale=scale,
+        F=F,
         f=np.concatenate([np.zeros(n_inputs), f_slacks * scale[n_inputs:]]),
         lower=np.concatenate([np.tile(problem.input_lower, N) / scale[:n_inputs], np.zeros(n_slacks)]),
         upper=np.concatenate([np.tile(problem.input_upper, N) / scale[:n_inputs], np.full(n_slacks, INFINITY)]),
@@ -156,7 +166,9 @@ def condense(problem: MPCProblem) -> CondensedQP:
         row_lower_matrix=stack(lower_matrix, n_p),
         row_upper_constant=np.concatenate(upper_constant) if upper_constant else np.zeros(0),
         row_upper_matrix=stack(upper_matrix, n_p),
-        n_inputs=n_inputs, n_slacks=n_slacks)
+        n_inputs=n_inputs,
+        n_slacks=n_slacks,
+    )
 
 
 class CondensedDaqpSolver:
@@ -183,21 +195,31 @@ class CondensedDaqpSolver:
         self._bounds_vary = qp.rows_vary
         # Buffers the hot path writes into: p = (x0, d, x_s, u_s, u_previous), f, the row bounds.
         self._p = np.zeros(qp.n_parameters)
-        self._p_parts = (slice(0, nx), slice(nx, nx + nu), slice(nx + nu, 2 * nx + nu),
-                         slice(2 * nx + nu, 2 * nx + 2 * nu), slice(2 * nx + 2 * nu, None))
+        self._p_parts = (
+            slice(0, nx),
+            slice(nx, nx + nu),
+            slice(nx + nu, 2 * nx + nu),
+            slice(2 * nx + nu, 2 * nx + 2 * nu),
+            slice(2 * nx + 2 * nu, None),
+        )
         self._f = qp.f.copy()
-        self._f_inputs = self._f[:self.n_inputs]
-        self._f_per_p = np.ascontiguousarray(qp.F[:self.n_inputs])
-        self._row_upper = self.bupper[qp.n:]
-        self._row_lower = self.blower[qp.n:]
+        self._f_inputs = self._f[: self.n_inputs]
+        self._f_per_p = np.ascontiguousarray(qp.F[: self.n_inputs])
+        self._row_upper = self.bupper[qp.n :]
+        self._row_lower = self.blower[qp.n :]
         self._shapes = ((N, nu), (N, ns))
         self._set_up: bool = False  # whether DAQP holds this QP's matrices (reset() starts over)
         self.reset()
 
     def _update_vectors(self, params: QPParameters) -> None:
         p, (x0, d, xs, us, previous) = self._p, self._p_parts
-        p[x0], p[d], p[xs], p[us], p[previous] = (params.x0, params.disturbance, params.x_target, params.u_target,
-                                                  params.u_previous)
+        p[x0], p[d], p[xs], p[us], p[previous] = (
+            params.x0,
+            params.disturbance,
+            params.x_target,
+            params.u_target,
+            params.u_previous,
+        )
         np.dot(self._f_per_p, p, out=self._f_inputs)
         if self._bounds_vary:
             qp = self.qp
@@ -228,14 +250,20 @@ class CondensedDaqpSolver:
         z *= self.scale  # DAQP returns a fresh array
         success = flag > 0 and bool(np.isfinite(z).all())
         n, (inputs, slacks) = self.n_inputs, self._shapes
-        return QPSolution(z[:n].reshape(inputs), z[n:].reshape(slacks), success,
-                          DAQP_STATUS.get(flag, f"exit flag {flag}"), info["iterations"],
-                          time.perf_counter() - start)
+        return QPSolution(
+            z[:n].reshape(inputs),
+            z[n:].reshape(slacks),
+            success,
+            DAQP_STATUS.get(flag, f"exit flag {flag}"),
+            info["iterations"],
+            time.perf_counter() - start,
+        )
 
     def _failure(self, status: str, start: float) -> QPSolution:
         N, nu, ns = self.problem.horizon, self.problem.nu, self.problem.n_soft
-        return QPSolution(np.full((N, nu), np.nan), np.full((N, ns), np.nan), False, status, 0,
-                          time.perf_counter() - start)
+        return QPSolution(
+            np.full((N, nu), np.nan), np.full((N, ns), np.nan), False, status, 0, time.perf_counter() - start
+        )
 
     @property
     def warm_start(self) -> tuple:

@@ -104,8 +104,14 @@ def _daqp_flags() -> tuple[str, ...]:
     """Compiler flags for generated code that calls DAQP through CasADi's conic (headers and
     library shipped with CasADi; the library path is recorded in the compiled library)."""
     root = os.path.dirname(ca.__file__)
-    return (*COMPILE_FLAGS, f"-I{os.path.join(root, 'include')}", f"-L{root}", f"-Wl,-rpath,{root}",
-            "-Wl,--no-as-needed", "-ldaqp")
+    return (
+        *COMPILE_FLAGS,
+        f"-I{os.path.join(root, 'include')}",
+        f"-L{root}",
+        f"-Wl,-rpath,{root}",
+        "-Wl,--no-as-needed",
+        "-ldaqp",
+    )
 
 
 class RealTimeIteration:
@@ -140,8 +146,10 @@ class RealTimeIteration:
             raise TypeError(f"transcription must be a mpc.Transcription, got {type(transcription).__name__}")
         tr = self.transcription = transcription
         if tr.dynamics_rows is None:
-            raise ValueError("the real-time iteration needs a MultipleShooting transcription (collocation states "
-                             "cannot be eliminated stage by stage)")
+            raise ValueError(
+                "the real-time iteration needs a MultipleShooting transcription (collocation states "
+                "cannot be eliminated stage by stage)"
+            )
         if tr.layout.chosen or tr.layout.final_time is not None:
             raise ValueError("the real-time iteration needs a fixed final time and no chosen plant parameters")
         if "x0" not in tr.parameter_slices:
@@ -151,8 +159,9 @@ class RealTimeIteration:
         stage_q = np.hstack([layout.inputs, layout.controls])
         nq = stage_q.shape[1]
         self.intervals, self.nx, self.nq = N, nx, nq
-        expected = np.concatenate([np.concatenate([layout.states[k], stage_q[k]]) for k in range(N)]
-                                  + [layout.states[N]])
+        expected = np.concatenate(
+            [np.concatenate([layout.states[k], stage_q[k]]) for k in range(N)] + [layout.states[N]]
+        )
         if not np.array_equal(expected, np.arange(layout.size)):
             raise ValueError("unexpected decision layout: the real-time iteration needs w = (x_0, u_0, c_0, ..., x_N)")
         self.state_index, self.stage_index = layout.states, stage_q
@@ -175,8 +184,10 @@ class RealTimeIteration:
             raise ValueError("the real-time iteration needs x(0) = x0 fixed by ocp.start_from() alone")
         later = layout.states[1:].ravel()
         if np.any(np.isfinite(low[later])) or np.any(np.isfinite(high[later])):
-            raise ValueError("the real-time iteration takes no state bounds after t = 0: write them as soft "
-                             "constraints with a slack control")
+            raise ValueError(
+                "the real-time iteration takes no state bounds after t = 0: write them as soft "
+                "constraints with a slack control"
+            )
         self.parameter_size, self.decision_size = n_p, nw
 
         # ------------------------------------------------------------- linearization (SX, per interval)
@@ -215,8 +226,13 @@ class RealTimeIteration:
         for k in range(N):
             for i in range(nd):
                 selections[i, k * nz + nx + 1 + k * nd + i] = 1
-        G, Am, Bm, am, Em = (ca.MX.sym("Gamma", nx, nz), ca.MX.sym("A", nx, nx), ca.MX.sym("B", nx, nd),
-                             ca.MX.sym("a", nx), ca.MX.sym("E", nd, nz))
+        G, Am, Bm, am, Em = (
+            ca.MX.sym("Gamma", nx, nz),
+            ca.MX.sym("A", nx, nx),
+            ca.MX.sym("B", nx, nd),
+            ca.MX.sym("a", nx),
+            ca.MX.sym("E", nd, nz),
+        )
         one = ca.DM(1, nz)
         one[0, nx] = 1  # z's constant entry: a_k enters Γ_{k+1} as a_k e₁ᵀ
         forward = ca.Function("rti_forward", [G, Am, Bm, am, Em], [Am @ G + Bm @ Em + am @ one])
@@ -231,18 +247,29 @@ class RealTimeIteration:
         Wn, Hm, gm = ca.MX.sym("W", nx, nz + 1), ca.MX.sym("H", nx + nq, nx + nq), ca.MX.sym("grad", nx + nq)
         Gk = ca.MX.sym("Gamma", nx, nz)
         sx, sd, ss = list(range(nx)), [nx + i for i in dyn], [nx + i for i in stat]
-        backward = ca.Function("rti_backward", [Wn, Gk, Am, Bm, Em, Hm, gm],
-                               [ca.horzcat(Hm[sx, sx] @ Gk + Hm[sx, sd] @ Em, gm[sx]) + Am.T @ Wn,
-                                ca.horzcat(Hm[sd, sx] @ Gk + Hm[sd, sd] @ Em, gm[sd]) + Bm.T @ Wn,
-                                ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em, gm[ss])])
+        backward = ca.Function(
+            "rti_backward",
+            [Wn, Gk, Am, Bm, Em, Hm, gm],
+            [
+                ca.horzcat(Hm[sx, sx] @ Gk + Hm[sx, sd] @ Em, gm[sx]) + Am.T @ Wn,
+                ca.horzcat(Hm[sd, sx] @ Gk + Hm[sd, sd] @ Em, gm[sd]) + Bm.T @ Wn,
+                ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em, gm[ss]),
+            ],
+        )
         W_N = ca.horzcat(lin[N]["H"] @ Gamma[N], lin[N]["grad"])
         order = list(reversed(range(N)))
         H_seq = ca.horzcat(*[lin[k]["H"] for k in order])
         g_seq = ca.horzcat(*[lin[k]["grad"] for k in order])
-        reverse = lambda blocks, width: ca.horzcat(*[blocks[:, k * width:(k + 1) * width] for k in order])
+        reverse = lambda blocks, width: ca.horzcat(*[blocks[:, k * width : (k + 1) * width] for k in order])
         _, Hd_all, Hs_all = backward.mapaccum("rti_backward_all", N)(
-            W_N, ca.horzcat(*[Gamma[k] for k in order]), reverse(A_seq, nx), reverse(B_seq, nd),
-            reverse(E_seq, nz), H_seq, g_seq)
+            W_N,
+            ca.horzcat(*[Gamma[k] for k in order]),
+            reverse(A_seq, nx),
+            reverse(B_seq, nd),
+            reverse(E_seq, nz),
+            H_seq,
+            g_seq,
+        )
         Hd_all = ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz + 1)))  # interval 0 first, (N nd, nz + 1)
         Hs_all = ca.vertcat(*reversed(ca.horzsplit(Hs_all, nz + 1))) if nst else ca.MX(0, nz + 1)
         # Back to the QP's variables Δq (interval by interval, as in w) with constant selections.
@@ -256,11 +283,12 @@ class RealTimeIteration:
         dcols = list(range(nx + 1, nz))
         H_ss_blocks = ca.diagcat(*[lin[k]["H"][ss, ss] for k in range(N)]) if nst else ca.MX(0, 0)
         S_d = Hs_all[:, dcols]
-        H_qq = ca.densify(T_d @ Hd_all[:, dcols] @ T_d.T + T_s @ S_d @ T_d.T + T_d @ S_d.T @ T_s.T
-                          + T_s @ H_ss_blocks @ T_s.T)
+        H_qq = ca.densify(
+            T_d @ Hd_all[:, dcols] @ T_d.T + T_s @ S_d @ T_d.T + T_d @ S_d.T @ T_s.T + T_s @ H_ss_blocks @ T_s.T
+        )
         H_q0 = ca.densify(T_d @ Hd_all[:, :nx] + T_s @ Hs_all[:, :nx])
         h_const = ca.densify(T_d @ (Hd_all[:, nz] + Hd_all[:, nx]) + T_s @ (Hs_all[:, nz] + Hs_all[:, nx]))
-        E = [E_seq[:, k * nz:(k + 1) * nz] for k in range(N)]
+        E = [E_seq[:, k * nz : (k + 1) * nz] for k in range(N)]
         # Rows of interval k: J (s_k, q_k, s_{k+1}, q_{k-1}) with Δs = Γ z, Δd = E z and Δσ in place;
         # the end's rows J (s_N, q_{N-1}).
         qd = lambda offset: [offset + i for i in dyn]
@@ -284,16 +312,20 @@ class RealTimeIteration:
             J, Gk, Gn = ca.MX.sym("J", pattern), ca.MX.sym("Gamma", nx, nz), ca.MX.sym("Gamma_next", nx, nz)
             Ek, Ep = ca.MX.sym("E", nd, nz), ca.MX.sym("E_prev", nd, nz)
             Sk, Sp = ca.MX.sym("S", nst, N * nst), ca.MX.sym("S_prev", nst, N * nst)
-            block = J[:, :nx] @ Gk + J[:, qd(nx)] @ Ek + J[:, nx + nq:2 * nx + nq] @ Gn + J[:, qd(2 * nx + nq)] @ Ep
+            block = J[:, :nx] @ Gk + J[:, qd(nx)] @ Ek + J[:, nx + nq : 2 * nx + nq] @ Gn + J[:, qd(2 * nx + nq)] @ Ep
             static = J[:, qs(nx)] @ Sk + J[:, qs(2 * nx + nq)] @ Sp if nst else ca.MX(pattern.size1(), 0)
             rows_fn = ca.Function("rti_rows", [J, Gk, Gn, Ek, Ep, Sk, Sp], [block.T, static.T])
             mapped = rows_fn.map("rti_rows_map", "serial", len(members), [], []) if len(members) > 1 else rows_fn
             selections_static = [static_at(k) if nst else ca.DM(0, N * nst) for k in range(N)]
             blocks_t, statics_t = mapped(
-                ca.horzcat(*[lin[k]["J_g"] for k in members]), ca.horzcat(*[Gamma[k] for k in members]),
-                ca.horzcat(*[Gamma[k + 1] for k in members]), ca.horzcat(*[E[k] for k in members]),
-                ca.horzcat(*[E[k - 1] for k in members]), ca.horzcat(*[selections_static[k] for k in members]),
-                ca.horzcat(*[selections_static[k - 1] for k in members]))
+                ca.horzcat(*[lin[k]["J_g"] for k in members]),
+                ca.horzcat(*[Gamma[k] for k in members]),
+                ca.horzcat(*[Gamma[k + 1] for k in members]),
+                ca.horzcat(*[E[k] for k in members]),
+                ca.horzcat(*[E[k - 1] for k in members]),
+                ca.horzcat(*[selections_static[k] for k in members]),
+                ca.horzcat(*[selections_static[k - 1] for k in members]),
+            )
             row_blocks.append(blocks_t.T)
             row_static.append(statics_t.T)
             row_values += [lin[k]["g"] for k in members]
@@ -306,7 +338,7 @@ class RealTimeIteration:
             block = J[:, :nx] @ Gamma[k]
             static = ca.MX(len(index), N * nst)
             if k < N:
-                block = block + J[:, qd(nx)] @ E[k] + J[:, nx + nq:2 * nx + nq] @ Gamma[k + 1]
+                block = block + J[:, qd(nx)] @ E[k] + J[:, nx + nq : 2 * nx + nq] @ Gamma[k + 1]
                 if nst:
                     static = static + J[:, qs(nx)] @ static_at(k)
             else:
@@ -330,10 +362,21 @@ class RealTimeIteration:
         row_lo = ca.densify(lbg_o - g_o - rows[:, nx])
         row_hi = ca.densify(ubg_o - g_o - rows[:, nx])
         w_q = ca.vertcat(*[wm[q_idx[k]] for k in range(N)])
-        stacked = [ca.vec(H_qq), h_const, ca.vec(H_q0), ca.vec(C_q), row_lo, row_hi, ca.vec(C_0),
-                   ca.densify(lbq - w_q), ca.densify(ubq - w_q),
-                   ca.vertcat(*[ca.vec(ca.densify(m)) for m in A]), ca.vertcat(*[ca.vec(ca.densify(m)) for m in B]),
-                   ca.vertcat(*a), wm]
+        stacked = [
+            ca.vec(H_qq),
+            h_const,
+            ca.vec(H_q0),
+            ca.vec(C_q),
+            row_lo,
+            row_hi,
+            ca.vec(C_0),
+            ca.densify(lbq - w_q),
+            ca.densify(ubq - w_q),
+            ca.vertcat(*[ca.vec(ca.densify(m)) for m in A]),
+            ca.vertcat(*[ca.vec(ca.densify(m)) for m in B]),
+            ca.vertcat(*a),
+            wm,
+        ]
         sizes = [int(v.numel()) for v in stacked]
         self._data_sizes = sizes
         self.n_rows = int(C_q.size1())
@@ -342,8 +385,7 @@ class RealTimeIteration:
         # lower bound (see `feedback`).
         self.soft_rows = sorted(set(rows_static.sparsity().row())) if m and nst else []
         static_entries = set(stage_q[:, stat].ravel().tolist()) if nst else set()
-        coupled = any((i in static_entries) != (j in static_entries)
-                      for i, j in zip(*stages["hessian"].get_triplet()))
+        coupled = any((i in static_entries) != (j in static_entries) for i, j in zip(*stages["hessian"].get_triplet()))
         lower_static = np.asarray(probe(values)[0], dtype=float).ravel()[stage_q[:, stat].ravel()] if nst else []
         self.reduced_first = bool(slack_shortcut and nst and not coupled and np.all(np.isfinite(lower_static)))
         prepare = ca.Function("rti_prepare", [wm, Pm], [ca.vertcat(*stacked)], ["w", "P"], ["data"])
@@ -374,16 +416,22 @@ class RealTimeIteration:
         violation = ca.mmax(ca.vertcat(0, lba - Cdq, Cdq - uba, lbq_f - dq, dq - ubq_f))
         ds, pieces_w = ds0, []
         for k in range(N):
-            dq_k = dq[k * nq:(k + 1) * nq]
+            dq_k = dq[k * nq : (k + 1) * nq]
             pieces_w += [ds, dq_k]
             ds = A_f[k] @ ds + B_f[k] @ dq_k[self.dynamic_columns] + a_f[k]
         pieces_w.append(ds)
         delta = ca.vertcat(*pieces_w)
-        feedback = ca.Function("rti_feedback", [data, x0m], [w_bar + delta, ca.vertcat(stationarity, violation)],
-                               ["data", "x0"], ["w_next", "qp"])
+        feedback = ca.Function(
+            "rti_feedback",
+            [data, x0m],
+            [w_bar + delta, ca.vertcat(stationarity, violation)],
+            ["data", "x0"],
+            ["w_next", "qp"],
+        )
         w_s, P_s, x_s = ca.MX.sym("w", nw), ca.MX.sym("P", n_p), ca.MX.sym("x0", nx)
-        self.step_function = ca.Function("rti_step", [w_s, P_s, x_s], feedback(prepare(w_s, P_s), x_s),
-                                         ["w", "P", "x0"], ["w_next", "qp"])
+        self.step_function = ca.Function(
+            "rti_step", [w_s, P_s, x_s], feedback(prepare(w_s, P_s), x_s), ["w", "P", "x0"], ["w_next", "qp"]
+        )
         self.compiled = bool(compiled)
         if compiled:
             prepare = models.compile.jit(prepare, COMPILE_FLAGS)
@@ -413,8 +461,10 @@ class RealTimeIteration:
         hessian = ca.hessian(f, w)[0]
         rows_h, cols_h = hessian.sparsity().get_triplet()
         if any(stage_of[i] != stage_of[j] for i, j in zip(rows_h, cols_h)):
-            raise ValueError("the objective couples decisions of different intervals; the real-time iteration "
-                             "needs a stage-wise objective (sum, integral, end terms)")
+            raise ValueError(
+                "the objective couples decisions of different intervals; the real-time iteration "
+                "needs a stage-wise objective (sum, integral, end terms)"
+            )
         # Which interval each other row belongs to: its decisions' (a row on x_{k+1} and interval k's
         # input belongs to interval k).
         rows_by_stage: list[list[int]] = [[] for _ in range(N + 1)]
@@ -434,8 +484,10 @@ class RealTimeIteration:
                 candidates = [k for k in range(N + 1) if columns <= allowed(k)]
                 if not candidates:
                     owners = sorted({int(stage_of[c]) for c in columns})
-                    raise ValueError(f"the real-time iteration needs each constraint on one interval (with x_{{k+1}} "
-                                     f"and u_{{k-1}}); row {row} spans mesh points {owners}")
+                    raise ValueError(
+                        f"the real-time iteration needs each constraint on one interval (with x_{{k+1}} "
+                        f"and u_{{k-1}}); row {row} spans mesh points {owners}"
+                    )
                 rows_by_stage[max(candidates)].append(int(row))
         indices = lambda array: list(map(int, array))
         functions = []
@@ -443,19 +495,41 @@ class RealTimeIteration:
             s_k, q_k, s_next = w[indices(layout.states[k])], w[indices(stage_q[k])], w[indices(layout.states[k + 1])]
             q_prev = w[indices(stage_q[k - 1])] if k else ca.SX.sym("q_before", stage_q.shape[1])
             v = indices(np.concatenate([layout.states[k], stage_q[k]]))
-            gap = g[indices(dynamics[k * nx:(k + 1) * nx])]
+            gap = g[indices(dynamics[k * nx : (k + 1) * nx])]
             g_k = g[rows_by_stage[k]] if rows_by_stage[k] else ca.SX(0, 1)
-            outputs = [-gap, -ca.jacobian(gap, s_k), -ca.jacobian(gap, q_k), ca.jacobian(gap, s_next), g_k,
-                       ca.jacobian(g_k, ca.vertcat(s_k, q_k, s_next, q_prev)), grad[v], ca.densify(hessian[v, v])]
-            functions.append(ca.Function(f"rti_interval_{k}", [s_k, q_k, s_next, q_prev, P], outputs,
-                                         ["s", "q", "s_next", "q_prev", "P"],
-                                         ["a", "A", "B", "I", "g", "J_g", "grad", "H"], {"cse": True}))
+            outputs = [
+                -gap,
+                -ca.jacobian(gap, s_k),
+                -ca.jacobian(gap, q_k),
+                ca.jacobian(gap, s_next),
+                g_k,
+                ca.jacobian(g_k, ca.vertcat(s_k, q_k, s_next, q_prev)),
+                grad[v],
+                ca.densify(hessian[v, v]),
+            ]
+            functions.append(
+                ca.Function(
+                    f"rti_interval_{k}",
+                    [s_k, q_k, s_next, q_prev, P],
+                    outputs,
+                    ["s", "q", "s_next", "q_prev", "P"],
+                    ["a", "A", "B", "I", "g", "J_g", "grad", "H"],
+                    {"cse": True},
+                )
+            )
         s_N, v = w[indices(layout.states[N])], indices(layout.states[N])
         q_last = w[indices(stage_q[N - 1])]
         g_N = g[rows_by_stage[N]] if rows_by_stage[N] else ca.SX(0, 1)
-        functions.append(ca.Function("rti_end", [s_N, q_last, P], [g_N, ca.jacobian(g_N, ca.vertcat(s_N, q_last)),
-                                                                     grad[v], ca.densify(hessian[v, v])],
-                                     ["s", "q_prev", "P"], ["g", "J_g", "grad", "H"], {"cse": True}))
+        functions.append(
+            ca.Function(
+                "rti_end",
+                [s_N, q_last, P],
+                [g_N, ca.jacobian(g_N, ca.vertcat(s_N, q_last)), grad[v], ca.densify(hessian[v, v])],
+                ["s", "q_prev", "P"],
+                ["g", "J_g", "grad", "H"],
+                {"cse": True},
+            )
+        )
         rng = np.random.default_rng(1)
         common: dict = {}
         groups: dict = {}
@@ -465,11 +539,18 @@ class RealTimeIteration:
             out = fun(*point)
             if not np.allclose(np.asarray(out[3], dtype=float), np.eye(nx), atol=1e-12):
                 raise ValueError(f"shooting gap {k} is not x_{{k+1}} - F(x_k, u_k) (scaled)")
-            key = (len(rows_by_stage[k]), tuple(str(fun.sparsity_out(i)) for i in range(fun.n_out())),
-                   tuple(np.round(np.asarray(o, dtype=float).ravel(), 10).tobytes() for o in out))
+            key = (
+                len(rows_by_stage[k]),
+                tuple(str(fun.sparsity_out(i)) for i in range(fun.n_out())),
+                tuple(np.round(np.asarray(o, dtype=float).ravel(), 10).tobytes() for o in out),
+            )
             groups.setdefault(key, []).append(k)
-        return {"functions": functions, "groups": list(groups.values()), "rows": rows_by_stage,
-                "hessian": hessian.sparsity()}
+        return {
+            "functions": functions,
+            "groups": list(groups.values()),
+            "rows": rows_by_stage,
+            "hessian": hessian.sparsity(),
+        }
 
     @staticmethod
     def _evaluate_stages(stages, wm, Pm, s_idx, q_idx) -> list[dict]:
@@ -489,7 +570,7 @@ class RealTimeIteration:
             for name, value in zip(names, outs):
                 width = value.size2() // n
                 for i, k in enumerate(group):
-                    lin[k][name] = value[:, i * width:(i + 1) * width]
+                    lin[k][name] = value[:, i * width : (i + 1) * width]
         g, J_g, grad, H = stages["functions"][N](wm[s_idx[N]], wm[q_idx[N - 1]], Pm)
         lin[N] = {"g": g, "J_g": J_g, "grad": grad, "H": H}
         return lin
@@ -497,8 +578,12 @@ class RealTimeIteration:
     @staticmethod
     def _qp(n: int, m: int, name: str) -> ca.Function:
         """(H, g, A, lba, uba, lbx, ubx) -> (x, lam_a, lam_x) of DAQP on a dense QP of n variables, m rows."""
-        solver = ca.conic(name, "daqp", {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(m, n)},
-                          {"error_on_fail": False, "daqp": {"primal_tol": PRIMAL_TOLERANCE}})
+        solver = ca.conic(
+            name,
+            "daqp",
+            {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(m, n)},
+            {"error_on_fail": False, "daqp": {"primal_tol": PRIMAL_TOLERANCE}},
+        )
         H, g, A = ca.MX.sym("H", n, n), ca.MX.sym("g", n), ca.MX.sym("A", m, n)
         lba, uba, lbx, ubx = ca.MX.sym("lba", m), ca.MX.sym("uba", m), ca.MX.sym("lbx", n), ca.MX.sym("ubx", n)
         answer = solver(h=H, g=g, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
@@ -527,8 +612,15 @@ class RealTimeIteration:
         sigma = lbq[sig]
         reduced = self._qp(len(dyn), len(hard), "rti_qp_reduced")
         shift = C[hard, sig] @ sigma if hard else ca.MX(0, 1)
-        x_r, lam_a_r, lam_x_r = reduced(H[dyn, dyn], h[dyn] + H[dyn, sig] @ sigma, C[hard, dyn],
-                                        lba[hard] - shift, uba[hard] - shift, lbq[dyn], ubq[dyn])
+        x_r, lam_a_r, lam_x_r = reduced(
+            H[dyn, dyn],
+            h[dyn] + H[dyn, sig] @ sigma,
+            C[hard, dyn],
+            lba[hard] - shift,
+            uba[hard] - shift,
+            lbq[dyn],
+            ubq[dyn],
+        )
         dq_r = T_dyn @ x_r + T_sig @ sigma
         gradient = H @ dq_r + h
         rows = C[soft, :] @ dq_r
@@ -539,9 +631,21 @@ class RealTimeIteration:
         if hard:
             lam_a[hard] = lam_a_r
         lam_x = T_dyn @ lam_x_r - T_sig @ gradient[sig]
-        inputs = [ca.MX.sym(name, *value.shape) for name, value in
-                  (("H", H), ("h", h), ("C", C), ("lba", lba), ("uba", uba), ("lbq", lbq), ("ubq", ubq),
-                   ("dq", dq_r), ("lam_a", lam_a), ("lam_x", lam_x))]
+        inputs = [
+            ca.MX.sym(name, *value.shape)
+            for name, value in (
+                ("H", H),
+                ("h", h),
+                ("C", C),
+                ("lba", lba),
+                ("uba", uba),
+                ("lbq", lbq),
+                ("ubq", ubq),
+                ("dq", dq_r),
+                ("lam_a", lam_a),
+                ("lam_x", lam_x),
+            )
+        ]
         whole = ca.Function("rti_whole_qp", inputs, full(*inputs[:7]))
         kept = ca.Function("rti_reduced_answer", inputs, inputs[7:])
         choice = ca.Function.if_else("rti_qp_choice", kept, whole)
@@ -550,8 +654,9 @@ class RealTimeIteration:
     def compiled_step(self) -> ca.Function:
         """`step_function` compiled (cached here and in `models.compile`'s cache)."""
         if getattr(self, "_compiled_step", None) is None:
-            self._compiled_step = models.compile.jit(self.step_function, _daqp_flags()) if self.compiled \
-                else self.step_function
+            self._compiled_step = (
+                models.compile.jit(self.step_function, _daqp_flags()) if self.compiled else self.step_function
+            )
         return self._compiled_step
 
     # ------------------------------------------------------------------ phases

@@ -42,6 +42,7 @@ from .case import CaseStudy, Scenario
 #: virtual machine about 35 ns per instruction; measured break-even about 1e8 (pendulum, 20 samples).
 JIT_THRESHOLD = 1.5e8
 
+
 @dataclass(frozen=True)
 class Options:
     """How much to run.
@@ -90,8 +91,9 @@ def scenario_names(value, what: str = "scenarios") -> tuple | None:
     if value is None:
         return None
     if isinstance(value, str) or not isinstance(value, (list, tuple)):
-        raise TypeError(f"{what} must be a list of scenario names such as ['step'], got "
-                        f"{type(value).__name__} {value!r}")
+        raise TypeError(
+            f"{what} must be a list of scenario names such as ['step'], got {type(value).__name__} {value!r}"
+        )
     if not value:
         raise ValueError(f"{what} is empty; give None for every scenario or some of: {', '.join(SCENARIO_NAMES)}")
     unknown = [s for s in value if s not in SCENARIO_NAMES]
@@ -250,11 +252,13 @@ def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) 
     return results, notes
 
 
-def design_controllers(study: CaseStudy, known: models.Plant, providers: Sequence[str] | None = None,
-                       strict: bool = False) -> tuple[dict, list]:
+def design_controllers(
+    study: CaseStudy, known: models.Plant, providers: Sequence[str] | None = None, strict: bool = False
+) -> tuple[dict, list]:
     """The study's controllers designed from `known`, in table order, and notes on what is missing."""
-    found, notes = call_providers(study.providers if providers is None else providers, study.plant,
-                                  strict=strict, known=known)
+    found, notes = call_providers(
+        study.providers if providers is None else providers, study.plant, strict=strict, known=known
+    )
     collected: dict = {}
     for spec, returned in found:
         if not isinstance(returned, Mapping):
@@ -266,8 +270,10 @@ def design_controllers(study: CaseStudy, known: models.Plant, providers: Sequenc
             elif not isinstance(controller, models.Controller):
                 notes.append(f"{spec}: {label!r} is a {type(controller).__name__}, not a controller; skipped")
             elif controller.n_reference != 1:
-                notes.append(f"{spec}: {label!r} takes {controller.n_reference} references; the studies "
-                             "command the tracked coordinate only; skipped")
+                notes.append(
+                    f"{spec}: {label!r} takes {controller.n_reference} references; the studies "
+                    "command the tracked coordinate only; skipped"
+                )
             else:
                 collected[str(label)] = controller
     ordered = {label: collected[label] for label in study.controllers if label in collected}
@@ -373,13 +379,16 @@ def _solver_issues(result) -> float:
     return float(solver_counts(result.status)[1])
 
 
-def use_jit(options: Options, plant: models.Plant, controller: Block, samples: int, steps: int,
-            substeps: int = 10) -> bool:
+def use_jit(
+    options: Options, plant: models.Plant, controller: Block, samples: int, steps: int, substeps: int = 10
+) -> bool:
     """Whether to JIT-compile a Monte Carlo map of `samples` runs of `steps` (`Options.jit`, `JIT_THRESHOLD`)."""
     if options.jit != "auto":
         return bool(options.jit)
-    instructions = (plant.step_function(controller.sample_period, substeps).n_instructions()
-                    + controller.casadi_step.n_instructions())
+    instructions = (
+        plant.step_function(controller.sample_period, substeps).n_instructions()
+        + controller.casadi_step.n_instructions()
+    )
     compiler = shutil.which("cc") or shutil.which("gcc")
     return samples * steps * instructions >= JIT_THRESHOLD and compiler is not None
 
@@ -397,8 +406,7 @@ def _envelope(t: np.ndarray, reference: np.ndarray, tracked: list, inputs: list,
     return Envelope(t, quantiles, y, u, reference, samples, samples - len(tracked))
 
 
-def monte_carlo_bytes(study: CaseStudy, options: Options, n_params: int, sample_period: float | None = None
-                      ) -> float:
+def monte_carlo_bytes(study: CaseStudy, options: Options, n_params: int, sample_period: float | None = None) -> float:
     """Estimated bytes the runner holds for the Monte Carlo of one controller on `study`.
 
     Per sample: the tracked coordinate and the first input over the run, kept for the envelope (and
@@ -421,16 +429,22 @@ def monte_carlo_bytes(study: CaseStudy, options: Options, n_params: int, sample_
 def check_resources(study: CaseStudy, options: Options, n_params: int) -> None:
     """Refuse, before any work, a study whose Monte Carlo would hold more than
     `models.checks.MEMORY_LIMIT_BYTES` (ResourceLimitError naming the samples and the limit)."""
-    needed = monte_carlo_bytes(study, options, n_params,
-                               min(study.sample_period, study.observer_sample_period))
+    needed = monte_carlo_bytes(study, options, n_params, min(study.sample_period, study.observer_sample_period))
     if needed:
-        checks.check_memory(needed, f"a Monte Carlo of {options.mc} samples on {study.plant}",
-                            "give fewer samples (mc)")
+        checks.check_memory(
+            needed, f"a Monte Carlo of {options.mc} samples on {study.plant}", "give fewer samples (mc)"
+        )
 
 
-def run_study(study: CaseStudy, options: Options | None = None, *, providers: Sequence[str] | None = None,
-              controllers: Mapping | None = None, progress: Callable[[int, int, str], None] | None = None,
-              executor=None) -> StudyResult:
+def run_study(
+    study: CaseStudy,
+    options: Options | None = None,
+    *,
+    providers: Sequence[str] | None = None,
+    controllers: Mapping | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
+    executor=None,
+) -> StudyResult:
     """Run every controller of `study` through its scenarios on the nonlinear plant.
 
     Parameters
@@ -498,17 +512,33 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
             row = {"controller": label, "scenario": scenario.name, "kind": "python" if python else "block"}
             try:
                 if scenario.monte_carlo:
-                    row |= _monte_carlo(study, truth, controller, scenario, options, base, tracked_index,
-                                        sample_rows, envelopes, label, executor)
+                    row |= _monte_carlo(
+                        study,
+                        truth,
+                        controller,
+                        scenario,
+                        options,
+                        base,
+                        tracked_index,
+                        sample_rows,
+                        envelopes,
+                        label,
+                        executor,
+                    )
                 else:
                     result = simulate_scenario(truth, controller, scenario, case, options, base, study.substeps)
                     runs[(label, scenario.name)] = result
                     judged = study.specs_for(scenario.name, truth.params)
                     row |= metrics.run_metrics(result, case.tracked, judged.state_bounds)
-                    row |= {"status": _status(result), "diverged_at_s": result.diverged_at, "samples": 1,
-                            "solver_issues": _solver_issues(result)}
-                    row |= verdict_columns(specs.judge(judged, result, case.tracked, case.step, row["status"],
-                                                       measured=row))
+                    row |= {
+                        "status": _status(result),
+                        "diverged_at_s": result.diverged_at,
+                        "samples": 1,
+                        "solver_issues": _solver_issues(result),
+                    }
+                    row |= verdict_columns(
+                        specs.judge(judged, result, case.tracked, case.step, row["status"], measured=row)
+                    )
             except distributed.RunFailed:
                 raise
             except Exception as err:
@@ -542,23 +572,46 @@ def run_study(study: CaseStudy, options: Options | None = None, *, providers: Se
 
     answers, answer_notes = collect(study, options.strict)
     notes += answer_notes
-    return StudyResult(study, options, plant, known, table, runs, envelopes, samples, designed, notes, timing,
-                       answers, truths, tuple(study.providers if providers is None else providers))
+    return StudyResult(
+        study,
+        options,
+        plant,
+        known,
+        table,
+        runs,
+        envelopes,
+        samples,
+        designed,
+        notes,
+        timing,
+        answers,
+        truths,
+        tuple(study.providers if providers is None else providers),
+    )
 
 
-def simulate_scenario(plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int,
-                      params=None):
+def simulate_scenario(
+    plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int, params=None
+):
     """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed."""
     noise = measurement_noise_std(plant, controller, scenario.noise) if scenario.noise else 0.0
     return models.simulate_closed_loop(
-        plant, controller, scenario.reference(case, base), scenario.duration(case), params=params,
+        plant,
+        controller,
+        scenario.reference(case, base),
+        scenario.duration(case),
+        params=params,
         substeps=substeps,
         input_disturbance=case.input_disturbance if scenario.input_disturbance else 0.0,
-        noise_std=noise, seed=options.seed, allow_divergence=True)
+        noise_std=noise,
+        seed=options.seed,
+        allow_divergence=True,
+    )
 
 
-def _monte_carlo(study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes,
-                 label, executor=None) -> dict:
+def _monte_carlo(
+    study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes, label, executor=None
+) -> dict:
     """The Monte Carlo row of one controller; its per-sample rows are appended to `sample_rows` (one
     DataFrame) and its envelope stored in `envelopes`. Samples are consumed as they are simulated
     (a chunk at a time for a Block in this process): only the tracked coordinate and the first input stay."""
@@ -567,29 +620,57 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
     duration = scenario.duration(case)
     steps = int(round(duration / controller.sample_period))
     count = options.mc
-    checks.check_memory(monte_carlo_bytes(study, options, plant.n_params, controller.sample_period),
-                        f"the Monte Carlo of {label} ({count} samples of {steps} steps)", "give fewer samples (mc)")
+    checks.check_memory(
+        monte_carlo_bytes(study, options, plant.n_params, controller.sample_period),
+        f"the Monte Carlo of {label} ({count} samples of {steps} steps)",
+        "give fewer samples (mc)",
+    )
     # The same seeded samples for every controller.
     samples = models.sample_params(plant, count, rel=scenario.rel, seed=options.seed)
     if batched and isinstance(executor, distributed.Local):
-        chunks = models.monte_carlo_chunks(plant, controller, scenario.reference(case, base), duration, samples,
-                                           seed=options.seed, threads=options.threads, substeps=study.substeps,
-                                           jit=use_jit(options, plant, controller, count, steps, study.substeps))
+        chunks = models.monte_carlo_chunks(
+            plant,
+            controller,
+            scenario.reference(case, base),
+            duration,
+            samples,
+            seed=options.seed,
+            threads=options.threads,
+            substeps=study.substeps,
+            jit=use_jit(options, plant, controller, count, steps, study.substeps),
+        )
         results = (run for chunk in chunks for run in chunk)
     elif batched:
-        results = distributed.monte_carlo(executor, plant, controller, scenario.reference(case, base), duration,
-                                          samples, seed=options.seed, threads=options.threads,
-                                          substeps=study.substeps,
-                                          jit=use_jit(options, plant, controller, count, steps, study.substeps))
+        results = distributed.monte_carlo(
+            executor,
+            plant,
+            controller,
+            scenario.reference(case, base),
+            duration,
+            samples,
+            seed=options.seed,
+            threads=options.threads,
+            substeps=study.substeps,
+            jit=use_jit(options, plant, controller, count, steps, study.substeps),
+        )
     elif getattr(controller, "lockstep", False):  # the samples stepped together: the same runs, faster
         noise = measurement_noise_std(plant, controller, scenario.noise) if scenario.noise else 0.0
         results = models.simulate_closed_loop_many(
-            plant, controller, scenario.reference(case, base), duration, samples, substeps=study.substeps,
-            input_disturbance=case.input_disturbance if scenario.input_disturbance else 0.0, noise_std=noise,
-            seed=options.seed)
+            plant,
+            controller,
+            scenario.reference(case, base),
+            duration,
+            samples,
+            substeps=study.substeps,
+            input_disturbance=case.input_disturbance if scenario.input_disturbance else 0.0,
+            noise_std=noise,
+            seed=options.seed,
+        )
     else:
-        results = (simulate_scenario(plant, controller, scenario, case, options, base, study.substeps, params=row)
-                   for row in samples)
+        results = (
+            simulate_scenario(plant, controller, scenario, case, options, base, study.substeps, params=row)
+            for row in samples
+        )
     per_sample, verdicts, diverged_at, tracked, inputs, step_times = [], [], [], [], [], []
     names = list(plant.params)
     counts = np.zeros(3, dtype=int)
@@ -624,8 +705,12 @@ def _monte_carlo(study, plant, controller, scenario, options, base, tracked_inde
         status = f"diverged: {len(diverged)} of {count} samples, first at t = {min(diverged):.3g} s"
     else:
         status = degraded_status(*counts, what=f"steps of {count} samples") or "ok"
-    out |= {"status": status, "samples": count, "diverged_samples": len(diverged),
-            "diverged_at_s": min(diverged) if diverged else None}
+    out |= {
+        "status": status,
+        "samples": count,
+        "diverged_samples": len(diverged),
+        "diverged_at_s": min(diverged) if diverged else None,
+    }
     out |= verdict_columns(specs.combine(verdicts))
     if not batched:
         out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate(step_times)))
@@ -639,10 +724,24 @@ def verdict_columns(verdict: specs.Verdict) -> dict:
     return {"verdict": verdict.label, "verdict_detail": verdict.detail}
 
 
-TABLE_COLUMNS = ("controller", "scenario", "status", "verdict", "verdict_detail", *metrics.METRIC_COLUMNS,
-                 "solver_issues", "samples", "diverged_samples", "diverged_at_s",
-                 *(f"{k}_std" for k in metrics.SPREAD_COLUMNS), "kind",
-                 "tracked", "tracked_unit", "input_unit", "wall_s")
+TABLE_COLUMNS = (
+    "controller",
+    "scenario",
+    "status",
+    "verdict",
+    "verdict_detail",
+    *metrics.METRIC_COLUMNS,
+    "solver_issues",
+    "samples",
+    "diverged_samples",
+    "diverged_at_s",
+    *(f"{k}_std" for k in metrics.SPREAD_COLUMNS),
+    "kind",
+    "tracked",
+    "tracked_unit",
+    "input_unit",
+    "wall_s",
+)
 
 
 def _frame(rows: list, study: CaseStudy, case) -> pd.DataFrame:

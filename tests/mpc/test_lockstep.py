@@ -24,14 +24,21 @@ def _assert_same_runs(alone, together):
             np.testing.assert_array_equal(getattr(many, key), getattr(one, key), err_msg=key)
         assert many.diverged_at == one.diverged_at
         assert _without_times(many.status) == _without_times(one.status)
-        assert np.all(np.isfinite(many.step_time[:len(many.status)]))
+        assert np.all(np.isfinite(many.step_time[: len(many.status)]))
 
 
 def _runs(plant, controller, params, duration, chunk, reference=0.3, **kwargs):
-    alone = [models.simulate_closed_loop(plant, controller, reference, duration, params=p, allow_divergence=True,
-                                         substeps=2, seed=3, **kwargs) for p in params]
-    together = list(models.simulate_closed_loop_many(plant, controller, reference, duration, params, substeps=2,
-                                                     seed=3, chunk=chunk, **kwargs))
+    alone = [
+        models.simulate_closed_loop(
+            plant, controller, reference, duration, params=p, allow_divergence=True, substeps=2, seed=3, **kwargs
+        )
+        for p in params
+    ]
+    together = list(
+        models.simulate_closed_loop_many(
+            plant, controller, reference, duration, params, substeps=2, seed=3, chunk=chunk, **kwargs
+        )
+    )
     return alone, together
 
 
@@ -54,8 +61,9 @@ def test_lockstep_keeps_each_samples_warm_start_and_fallback(build_mpc):
     alone, together = [], []
     for p in params:  # the failing solver counts its calls: from 0 in every run on both sides
         controller.solver.calls = 0
-        alone.append(models.simulate_closed_loop(plant, controller, 0.3, 0.5, params=p, substeps=2,
-                                                 allow_divergence=True))
+        alone.append(
+            models.simulate_closed_loop(plant, controller, 0.3, 0.5, params=p, substeps=2, allow_divergence=True)
+        )
         controller.solver.calls = 0
         together += models.simulate_closed_loop_many(plant, controller, 0.3, 0.5, p[None], substeps=2)
     _assert_same_runs(alone, together)
@@ -92,7 +100,10 @@ def test_a_run_that_diverges_stops_alone(build_mpc):
 def test_controllers_that_cannot_step_in_lockstep_are_refused(build_mpc):
     plant = models.get("arm")
     with pytest.raises(TypeError, match="lockstep"):
-        next(models.simulate_closed_loop_many(plant, build_mpc("linear", "arm", solver="osqp"), 0.3, 0.1,
-                                              plant.param_vector()[None]))
+        next(
+            models.simulate_closed_loop_many(
+                plant, build_mpc("linear", "arm", solver="osqp"), 0.3, 0.1, plant.param_vector()[None]
+            )
+        )
     assert not build_mpc("linear", "arm", solver="osqp").lockstep
     assert build_mpc("linear", "arm").lockstep and mpc.NonlinearMPC.lockstep
