@@ -96,7 +96,7 @@ class ClosedLoopResult:
     input_names: tuple
     controller: str = ""
     diverged_at: float | None = None
-    params: np.ndarray = field(default=None, repr=False)
+    params: np.ndarray | None = field(default=None, repr=False)
 
     def output(self, name: str) -> np.ndarray:
         """The named (noise-free) output over time, (N+1,)."""
@@ -136,7 +136,7 @@ class MonteCarloResult(Sequence):
         self.first_sample = first_sample
         self.input_limit = plant.input_limit.copy()
         self.state_names, self.output_names, self.input_names = plant.state_names, plant.output_names, plant.input_names
-        self._y = None
+        self._y: np.ndarray | None = None
         self._step_time = np.full(len(t) - 1, np.nan)
         for arr in (
             self.t,
@@ -156,8 +156,9 @@ class MonteCarloResult(Sequence):
     @property
     def y(self) -> np.ndarray:
         if self._y is None:
-            self._y = batch_outputs(self._plant, self.x, self.params)
-            self._y.setflags(write=False)
+            y = batch_outputs(self._plant, self.x, self.params)
+            y.setflags(write=False)
+            self._y = y
         return self._y
 
     def __len__(self) -> int:
@@ -233,7 +234,7 @@ def closed_loop_function(
     jit, smooth = boolean(jit, "jit"), boolean(smooth, "smooth")
     if not isinstance(controller, Block):
         raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
-    key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
+    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
     key += ("smooth",) if smooth else ()
     cache = plant.function_cache
     if key in cache:
@@ -301,7 +302,7 @@ def release(plant: Plant, controller: Block) -> int:
 def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool) -> NumpyCall:
     """The cached `closed_loop_function` wrapped for fast numpy evaluation."""
     closed_loop_function(plant, controller, n_steps, substeps, jit)
-    key = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
+    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
     return plant.function_cache[key][2]
 
 
@@ -648,7 +649,8 @@ class _MappedCalls:
     """`fun` mapped over m samples, as a NumpyCall built once per m (m changes only when runs stop)."""
 
     def __init__(self, fun: ca.Function):
-        self.fun, self._calls = fun, {}
+        self.fun = fun
+        self._calls: dict[int, NumpyCall] = {}
 
     def __call__(self, m: int, *args) -> list[np.ndarray]:
         call = self._calls.get(m)
@@ -727,7 +729,7 @@ def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[Clo
     # histories would take hundreds of MB).
     xc_fault = np.zeros((m, n + 1, 1))
     xc_fault[:, 0, 0] = np.where(np.all(np.isfinite(xc), axis=1), 0.0, np.nan)
-    records = [[] for _ in range(m)]
+    records: list[list] = [[] for _ in range(m)]
     limit = plant.input_limit
     active = np.flatnonzero(np.all(np.isfinite(xc), axis=1))
     for k in range(n):
@@ -743,8 +745,8 @@ def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[Clo
         uk = np.asarray(uk, dtype=float).reshape(count, -1)
         if uk.shape[1] != plant.nu:
             raise ValueError(f"{controller.name} returned {uk.shape[1]} inputs, {plant.name} takes {plant.nu}")
-        for i, info in zip(active, infos):
-            records[i].append(info)
+        for j, info in zip(active, infos):
+            records[j].append(info)
         u[active, k], measured[active, k], xc[active] = uk, meas, xc_next
         xc_fault[active, k + 1, 0] = np.where(np.all(np.isfinite(xc_next), axis=1), 0.0, np.nan)
         command_ok = np.all(np.isfinite(uk), axis=1)
@@ -847,7 +849,7 @@ def _run_chunk(plant, controller, plan, start, stop, out) -> None:
     c = stop - start
     nx, nc, nm = plant.nx, controller.n_state, setup.n_meas
     noise = np.zeros((c, n, nm)) if plan["noisy"] else None
-    if plan["noisy"]:
+    if noise is not None:
         for j in range(c):
             noise[j] = _noise(setup, np.random.SeedSequence([plan["seed"], plan.get("first_sample", 0) + start + j]))
     if controller.measures == "outputs":

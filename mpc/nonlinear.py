@@ -177,7 +177,7 @@ class NonlinearMPCProblem:
 
     def reset(self) -> None:
         """Forget the warm start (of `solve`; `reset_many` forgets those of `solve_many`)."""
-        self._guess = None
+        self._guess: np.ndarray | None = None
 
     def reset_many(self, count: int) -> None:
         """Forget every warm start and keep one per sample for `solve_many` on `count` samples."""

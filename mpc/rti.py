@@ -48,6 +48,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from typing import cast
 
 import casadi as ca
 import numpy as np
@@ -270,8 +271,9 @@ class RealTimeIteration:
             H_seq,
             g_seq,
         )
-        Hd_all = ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz + 1)))  # interval 0 first, (N nd, nz + 1)
-        Hs_all = ca.vertcat(*reversed(ca.horzsplit(Hs_all, nz + 1))) if nst else ca.MX(0, nz + 1)
+        # interval 0 first, (N nd, nz + 1); cast: CasADi's stubs give vertcat a union with Sparsity
+        Hd_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz + 1))))
+        Hs_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hs_all, nz + 1))) if nst else ca.MX(0, nz + 1))
         # Back to the QP's variables Δq (interval by interval, as in w) with constant selections.
         T_d, T_s = ca.DM(N * nq, N * nd), ca.DM(N * nq, N * nst)
         for k in range(N):
@@ -279,7 +281,7 @@ class RealTimeIteration:
                 T_d[k * nq + i, k * nd + j] = 1
             for j, i in enumerate(stat):
                 T_s[k * nq + i, k * nst + j] = 1
-        T_d, T_s = ca.sparsify(T_d), ca.sparsify(T_s)
+        T_d, T_s = ca.DM(ca.sparsify(T_d)), ca.DM(ca.sparsify(T_s))
         dcols = list(range(nx + 1, nz))
         H_ss_blocks = ca.diagcat(*[lin[k]["H"][ss, ss] for k in range(N)]) if nst else ca.MX(0, 0)
         S_d = Hs_all[:, dcols]
@@ -430,7 +432,7 @@ class RealTimeIteration:
         )
         w_s, P_s, x_s = ca.MX.sym("w", nw), ca.MX.sym("P", n_p), ca.MX.sym("x0", nx)
         self.step_function = ca.Function(
-            "rti_step", [w_s, P_s, x_s], feedback(prepare(w_s, P_s), x_s), ["w", "P", "x0"], ["w_next", "qp"]
+            "rti_step", [w_s, P_s, x_s], list(feedback(prepare(w_s, P_s), x_s)), ["w", "P", "x0"], ["w_next", "qp"]
         )
         self.compiled = bool(compiled)
         if compiled:

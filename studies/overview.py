@@ -155,9 +155,9 @@ def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
             [],
             color=style.of(label).color,
             marker=style.of(label).marker if marker else None,
-            linestyle="none" if marker else style.of(label).linestyle,
+            linestyle="none" if marker else style.of(label).linestyle,  # type: ignore[arg-type]  # a str of the style table
             markersize=7,
-        )  # type: ignore[arg-type]
+        )
         for label in labels
     ]
     ncol = style.legend_columns(labels, fig.get_figwidth(), fontsize=8)

@@ -23,7 +23,7 @@ import math
 import shutil
 import time
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -500,7 +500,10 @@ def run_study(
     xe, base = tracked_equilibrium(plant, case)
     tracked_index = plant.state_names.index(case.tracked)
 
-    rows, sample_rows, runs, envelopes = [], [], {}, {}
+    rows: list[dict] = []
+    sample_rows: list[pd.DataFrame] = []
+    runs: dict = {}
+    envelopes: dict[str, Envelope] = {}
     total, done = len(designed) * len(scenarios), 0
     sim_time = mc_time = 0.0
     truths = {}
@@ -639,7 +642,7 @@ def _monte_carlo(
             substeps=study.substeps,
             jit=use_jit(options, plant, controller, count, steps, study.substeps),
         )
-        results = (run for chunk in chunks for run in chunk)
+        results: Iterable[models.ClosedLoopResult] = (run for chunk in chunks for run in chunk)
     elif batched:
         results = distributed.monte_carlo(
             executor,
@@ -674,7 +677,8 @@ def _monte_carlo(
     per_sample, verdicts, diverged_at, tracked, inputs, step_times = [], [], [], [], [], []
     names = list(plant.params)
     counts = np.zeros(3, dtype=int)
-    t = reference = None
+    t: np.ndarray | None = None
+    reference: np.ndarray | None = None
     for result, row in zip(results, samples):
         judged = study.specs_for(scenario.name, dict(zip(names, row)))
         values = metrics.run_metrics(result, case.tracked, judged.state_bounds)
@@ -699,12 +703,15 @@ def _monte_carlo(
         frame[key] = [verdict_columns(v)[key] for v in verdicts]
     sample_rows.append(frame)
     diverged = [t for t in diverged_at if not math.isnan(t)]
+    if t is None or reference is None:
+        raise ValueError(f"the Monte Carlo of {label} ran no sample")
     envelopes[label] = _envelope(t, reference, tracked, inputs, count)
     out = metrics.aggregate(per_sample)
     if diverged:
         status = f"diverged: {len(diverged)} of {count} samples, first at t = {min(diverged):.3g} s"
     else:
-        status = degraded_status(*counts, what=f"steps of {count} samples") or "ok"
+        steps_run, failed, fallback = (int(c) for c in counts)
+        status = degraded_status(steps_run, failed, fallback, what=f"steps of {count} samples") or "ok"
     out |= {
         "status": status,
         "samples": count,
