@@ -5,4 +5,11 @@ import sys
 from .cli import main
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        # A Ctrl-C that CasADi held back and re-raised after the run had already stopped (or one before
+        # the run began): nothing more is written, and the exit status is the interrupt's.
+        print("python -m studies: interrupted", file=sys.stderr)
+        code = 130
+    sys.exit(code)
