@@ -366,7 +366,8 @@ def degraded_status(steps: int, failed: int, fallback: int, what: str = "steps")
     return "degraded: " + ", ".join(parts)
 
 
-def _status(result) -> str:
+def run_status(result) -> str:
+    """A run's status as the study tables write it: "diverged at t = ... s", "degraded: ..." or "ok"."""
     if result.diverged_at is not None:
         return f"diverged at t = {result.diverged_at:.3g} s"
     return degraded_status(*solver_counts(result.status)) or "ok"
@@ -534,7 +535,7 @@ def run_study(
                     judged = study.specs_for(scenario.name, truth.params)
                     row |= metrics.run_metrics(result, case.tracked, judged.state_bounds)
                     row |= {
-                        "status": _status(result),
+                        "status": run_status(result),
                         "diverged_at_s": result.diverged_at,
                         "samples": 1,
                         "solver_issues": _solver_issues(result),

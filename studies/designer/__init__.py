@@ -230,11 +230,6 @@ class Update:
         return self.status if self.diverged else str(self.verdict)
 
 
-def run_status(result) -> str:
-    """A Block run's status as the study tables write it: "ok" or "diverged at t = ... s"."""
-    return "ok" if result.diverged_at is None else f"diverged at t = {result.diverged_at:.3g} s"
-
-
 def loop_margins(design: loops.LoopGain, omega: np.ndarray, response: np.ndarray | None = None) -> dict:
     """Gain margin (dB), phase margin (deg) and crossovers (rad/s) of a discrete loop gain, as
     `studies.loops.LoopGain.margins` gives them, in about 1 ms instead of 40-150 ms.
@@ -488,7 +483,7 @@ class Designer:
         gains = {c.key: float(np.asarray(block.gains[c.gain])[c.index]) for c in self.controls}
         with self.lock:  # CasADi Functions cached on the plant are not safe to call from two threads
             run = self.simulate(block, scenario)
-            status = run_status(run)
+            status = runner.run_status(run)
             judged = self.case.specs_for(scenario, self.plant.params)
             measured = metrics.run_metrics(run, self.case.tracked, judged.state_bounds)
             verdict = specs.judge(judged, run, self.case.tracked, self.case.step, status, measured=measured)
