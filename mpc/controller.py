@@ -527,6 +527,27 @@ class NonlinearMPC(_PlanFollower):
         self._many_calls: dict = {}
         return np.array(rows)
 
+    def _record(
+        self, solver: str, status: str, success: bool, solution, fallback: bool, excess: float, x_hat: np.ndarray
+    ) -> dict:
+        """One step's solver record (see `step_info`); x_hat (nx,) the estimate the soft rows are read at."""
+        g = self._soft_rows @ x_hat
+        now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
+        return {
+            "solver": solver,
+            "status": status,
+            "success": success,
+            "iterations": solution.iterations,
+            "solve_time": solution.solve_time,
+            "preparation_time": solution.preparation_time,
+            "feedback_time": solution.feedback_time,
+            "qp_status": solution.qp_status,
+            "fallback": fallback,
+            "input_excess": excess,
+            "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
+            "soft_violation_now": float(np.max(now)) if now.size else 0.0,
+        }
+
     def step_many(self, xc, y, r, index) -> tuple[np.ndarray, np.ndarray, list[dict]]:
         """`step` of the samples `index` (rows of the `initial_states` batch), all at once.
 
@@ -623,24 +644,7 @@ class NonlinearMPC(_PlanFollower):
             if not _finite(x_next[j]) and _finite(x_hat[j]) and _finite(u):
                 x_next[j] = x_hat[j]
                 status += "; non-finite model prediction, estimate held"
-            g = self._soft_rows @ x_hat[j]
-            now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
-            records.append(
-                {
-                    "solver": solver,
-                    "status": status,
-                    "success": success,
-                    "iterations": solution.iterations,
-                    "solve_time": solution.solve_time,
-                    "preparation_time": solution.preparation_time,
-                    "feedback_time": solution.feedback_time,
-                    "qp_status": solution.qp_status,
-                    "fallback": fallback,
-                    "input_excess": excess,
-                    "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
-                    "soft_violation_now": float(np.max(now)) if now.size else 0.0,
-                }
-            )
+            records.append(self._record(solver, status, success, solution, fallback, excess, x_hat[j]))
             xc_next[j, sx], xc_next[j, sd], xc_next[j, splan] = x_next[j], d_hat[j], new_plan.ravel()
         self._info = dict(records[-1]) if records else {}
         return xc_next, commands, records
@@ -680,20 +684,6 @@ class NonlinearMPC(_PlanFollower):
             # The model's prediction blew up from a finite estimate: hold the estimate, say so.
             x_next = x_hat
             status += "; non-finite model prediction, estimate held"
-        g = self._soft_rows @ x_hat
-        now = np.maximum(0.0, np.maximum(self._soft_lower - g, g - self._soft_upper))
-        self._info = {
-            "solver": f"{self.nlp.iteration}/{self.nlp.qp_solver}",
-            "status": status,
-            "success": success,
-            "iterations": solution.iterations,
-            "solve_time": solution.solve_time,
-            "preparation_time": solution.preparation_time,
-            "feedback_time": solution.feedback_time,
-            "qp_status": solution.qp_status,
-            "fallback": fallback,
-            "input_excess": excess,
-            "soft_violation": float(np.max(solution.slacks)) if solution.slacks.size and success else 0.0,
-            "soft_violation_now": float(np.max(now)) if now.size else 0.0,
-        }
+        solver = f"{self.nlp.iteration}/{self.nlp.qp_solver}"
+        self._info = self._record(solver, status, success, solution, fallback, excess, x_hat)
         return np.concatenate([x_next, d_hat, new_plan.ravel()]), u
