@@ -74,7 +74,10 @@ def test_iterated_on_a_fixed_state_the_rti_converges_to_ipopts_solution(soft_rti
     np.testing.assert_allclose(solved.decision, w, atol=1e-9)
 
 
-def test_preparation_then_feedback_is_the_single_call(soft_rti):
+def test_preparation_then_feedback_is_the_single_call_on_the_whole_qp(soft_rti):
+    """The two phases with the slack-first QPs (the `daqp` package, from Python) and the single
+    CasADi Function that solves the whole QP with CasADi's DAQP node: the same step, both with
+    KKT residuals below the QP tolerance."""
     ocp, ipopt, rti = soft_rti
     tr = ipopt.transcription
     P = tr.parameter_values(X_HAT, values(X_HAT))
@@ -84,9 +87,10 @@ def test_preparation_then_feedback_is_the_single_call(soft_rti):
     data = rti.prepare(w, P)
     split, report = rti.feedback(data, x0)
     single, residuals = (np.asarray(v).ravel() for v in rti.step_function(w, P, x0))
-    np.testing.assert_allclose(split, single, rtol=0, atol=1e-13)
-    assert report.success
-    assert rti.report(residuals) == report
+    assert split[tr.layout.controls].max() > 1e-3  # the soft bound is violated: slacks are freed
+    np.testing.assert_allclose(split, single, rtol=0, atol=1e-9)
+    assert report.success, report.status
+    assert max(residuals) <= mpc.rti.QP_TOLERANCE
 
 
 @pytest.mark.parametrize("state", ["soft bound inactive", "soft bound violated"])
