@@ -8,6 +8,7 @@ real-time iteration along a closed loop, and the previous implementation's recor
 import json
 from pathlib import Path
 
+import daqp
 import numpy as np
 import pytest
 
@@ -221,3 +222,61 @@ def test_the_rti_controller_stops_the_pendulum_at_the_step(pendulum_case):
     assert abs(result.x[-1, 0] - 2.0) < 1e-2
     assert np.max(np.abs(result.u)) <= 5.0
     assert all(s["success"] for s in result.status)
+
+
+# --------------------------------------------------------------------------- the slack-first QP
+def soft_qp(rng, stages, scale, width):
+    """A random QP shaped like the condensed one: one dense-coupled input per stage, |u| <= 1, and
+    two slacks per stage, each in the two rows c u + s >= lo, c u - s <= hi of a soft bound; a hard
+    row on the inputs' sum; `scale` sizes the inputs' gradient, `width` the soft bounds. Returns (H, h, C, lba, uba, lbq, ubq, static, static_rows)."""
+    nd, ns = stages, 2 * stages
+    L = rng.normal(size=(nd, nd))
+    H = np.zeros((nd + ns, nd + ns))
+    H[:nd, :nd] = L @ L.T / nd + np.eye(nd)
+    H[nd:, nd:] = np.diag(rng.uniform(0.1, 1.0, ns))
+    h = np.concatenate([rng.normal(scale=scale, size=nd), rng.uniform(0.0, 1.0, ns)])
+    rows, lba, uba, static_rows = [], [], [], []
+    for j in range(ns):
+        c = rng.normal(size=nd)
+        bound = width * rng.uniform(0.05, 0.5)
+        for sign in (1.0, -1.0):
+            row = np.concatenate([c, np.zeros(ns)])
+            row[nd + j] = sign
+            rows.append(row)
+            lba.append(-bound if sign > 0 else -np.inf)
+            uba.append(np.inf if sign > 0 else bound)
+        static_rows.append([2 * j, 2 * j + 1])
+    rows.append(np.concatenate([np.ones(nd), np.zeros(ns)]))
+    lba.append(-0.5 * nd)
+    uba.append(0.5 * nd)
+    lbq = np.concatenate([-np.ones(nd), np.zeros(ns)])
+    ubq = np.concatenate([np.ones(nd), np.full(ns, np.inf)])
+    return H, h, np.array(rows), np.array(lba), np.array(uba), lbq, ubq, np.arange(nd, nd + ns), static_rows
+
+
+def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer():
+    """Random soft-bounded QPs: the slack-first sequence returns a point and multipliers that satisfy
+    the whole QP's KKT conditions (stationarity, feasibility, multiplier signs, complementarity; a
+    certificate of the optimum of a convex QP) and the answer of DAQP on the whole QP, whether it
+    needed one QP (every soft row holds), two or more (freeing slacks moves the inputs into other
+    rows)."""
+    rng = np.random.default_rng(7)
+    seen = set()
+    for trial in range(40):
+        H, h, C, lba, uba, lbq, ubq, static, static_rows = soft_qp(rng, 12, [0.1, 3.0, 10.0][trial % 3], [20.0, 1.0, 1.0][trial % 3])
+        solver = mpc.rti.SlackFirstQP(len(h), len(C), static, static_rows, {"primal_tol": 1e-10}, 1e-9)
+        dq, lam_a, lam_x, flag, solves = solver.solve(H, h, C, lba, uba, lbq, ubq)
+        seen.add(min(solves, 3))
+        assert flag > 0
+        rows = C @ dq
+        assert np.max(np.abs(H @ dq + h + C.T @ lam_a + lam_x)) < 1e-9
+        assert np.all(rows >= lba - 1e-9) and np.all(rows <= uba + 1e-9)
+        assert np.all(dq >= lbq - 1e-9) and np.all(dq <= ubq + 1e-9)
+        # Signs: a multiplier is > 0 only at an upper bound, < 0 only at a lower bound.
+        for lam, value, low, high in ((lam_a, rows, lba, uba), (lam_x, dq, lbq, ubq)):
+            assert np.all((lam <= 1e-9) | (value >= high - 1e-8))
+            assert np.all((lam >= -1e-9) | (value <= low + 1e-8))
+        whole, _, whole_flag, _ = daqp.solve(H, h, C, np.concatenate([ubq, uba]), np.concatenate([lbq, lba]))
+        assert whole_flag > 0
+        np.testing.assert_allclose(dq, whole, atol=1e-6)
+    assert seen == {1, 2, 3}
