@@ -228,7 +228,8 @@ def test_the_rti_controller_stops_the_pendulum_at_the_step(pendulum_case):
 def soft_qp(rng, stages, scale, width):
     """A random QP shaped like the condensed one: one dense-coupled input per stage, |u| <= 1, and
     two slacks per stage, each in the two rows c u + s >= lo, c u - s <= hi of a soft bound; a hard
-    row on the inputs' sum; `scale` sizes the inputs' gradient, `width` the soft bounds. Returns (H, h, C, lba, uba, lbq, ubq, static, static_rows)."""
+    row on the inputs' sum; `scale` sizes the inputs' gradient, `width` the soft bounds.
+    Returns (H, h, C, lba, uba, lbq, ubq, static, static_rows)."""
     nd, ns = stages, 2 * stages
     L = rng.normal(size=(nd, nd))
     H = np.zeros((nd + ns, nd + ns))
@@ -263,7 +264,8 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
     rng = np.random.default_rng(7)
     seen = set()
     for trial in range(40):
-        H, h, C, lba, uba, lbq, ubq, static, static_rows = soft_qp(rng, 12, [0.1, 3.0, 10.0][trial % 3], [20.0, 1.0, 1.0][trial % 3])
+        scale, width = [(0.1, 20.0), (3.0, 1.0), (10.0, 1.0)][trial % 3]
+        H, h, C, lba, uba, lbq, ubq, static, static_rows = soft_qp(rng, 12, scale, width)
         solver = mpc.rti.SlackFirstQP(len(h), len(C), static, static_rows, {"primal_tol": 1e-10}, 1e-9)
         dq, lam_a, lam_x, flag, solves = solver.solve(H, h, C, lba, uba, lbq, ubq)
         seen.add(min(solves, 3))
