@@ -107,114 +107,166 @@ class IterationResult:
 
 
 class SlackFirstQP:
-    """A dense QP whose slacks (static controls) are fixed at their lower bounds until the KKT
-    conditions say otherwise; the exact optimum of the whole QP, by a sequence of smaller QPs.
+    """The condensed QP in v = (d, σ), dynamic inputs then slacks (static controls), slacks first
+    held at their lower bounds: the exact optimum of the whole QP by a sequence of smaller QPs.
 
-        minimize    ½ dqᵀ H dq + hᵀ dq
-        subject to  lba ≤ C dq ≤ uba,   lbq ≤ dq ≤ ubq
+        minimize    ½ vᵀ H v + hᵀ v,        H = [[H_dd, H_σdᵀ], [H_σd, H_σσ]]
+        subject to  lba ≤ C v ≤ uba,        C = [C_d, C_σ]
+                    lbv ≤ v ≤ ubv
 
-    The variables split into `dynamic` ones, always free, and slacks, each held by a few soft rows
-    (`static_rows`). A restricted QP frees some slacks, keeps the soft rows holding them, and fixes
-    every other slack at its lower bound, its soft rows left out. Its answer is the whole QP's
-    when (KKT of the whole QP; the restricted QP's own hold already)
+    H_σσ and C_σ are sparse with fixed patterns (their nonzeros change every sample); H_σd is
+    absent (zero) unless the slacks couple with the inputs. A slack is held by the rows whose C_σ
+    has an entry in its column (its soft rows).
+
+    A restricted QP frees some slacks, keeps the soft rows holding them, and fixes every other
+    slack at its lower bound, its soft rows left out. Its answer is the whole QP's when (KKT of the
+    whole QP; the restricted QP's own conditions hold already)
 
     - every left-out soft row holds (zero multiplier), and
-    - every fixed slack's Lagrangian gradient (H dq + h + Cᵀ λ)_j is >= 0 (its lower bound's
+    - every fixed slack's Lagrangian gradient (H v + h + Cᵀ λ)_j is >= 0 (its lower bound's
       multiplier has the right sign).
 
     Otherwise the slacks of the violated rows and those with a negative gradient are freed and the
     restricted QP solved again: at most one QP per slack, the last the whole QP, usually one or
-    two. The first is the QP in the dynamic variables alone. This replaces solving the whole QP
-    from DAQP's empty working set, where each of the N ns slack bounds that ends up active costs
-    one active-set iteration of O(n²) on all N (nu + ns) variables (measured on the crane, N = 80,
-    240 variables, 320 soft rows: 17 ms per whole QP against 1.1 ms for this sequence, one or two
-    QPs per sample).
+    two. The first is the QP in the dynamic inputs alone. This replaces solving the whole QP from
+    DAQP's empty working set, where each of the N ns slack bounds that ends up active costs one
+    active-set iteration of O(n²) on all N (nu + ns) variables (measured on the crane, N = 80, 240
+    variables, 320 soft rows: 17 ms per whole QP against 1.1 ms for this sequence, one or two QPs
+    per sample).
 
-    With no slacks (`static` empty) it is one DAQP call on the whole QP.
+    Without slacks, with slacks that couple with the inputs (H_σd), or with `slack_first` False,
+    it is one DAQP call on the whole QP.
 
     Parameters
     ----------
-    n : number of variables;  m : number of rows of C
-    static : slack variables (indices into dq), each with a finite lower bound
-    static_rows : for each slack, the rows of C that hold it (its soft rows)
+    n_dynamic, n_static : sizes of d and σ;  m : rows of C
+    hessian_pattern, row_pattern : (rows, columns) of the nonzeros of H_σσ and C_σ, in the order
+        their values are passed to `solve`
+    coupled : H_σd is given (else zero)
+    slack_first : try the slacks at their lower bounds first (they must be finite)
     settings : DAQP settings of every solve
     tolerance : violation of a left-out row, and negative gradient of a fixed slack, accepted
     """
 
-    def __init__(self, n: int, m: int, static, static_rows, settings: dict, tolerance: float):
-        self.n, self.m = int(n), int(m)
-        self.static = np.asarray(static, dtype=int)
-        self.dynamic = np.setdiff1d(np.arange(self.n), self.static)
-        self.static_rows = [np.asarray(rows, dtype=int) for rows in static_rows]
-        if len(self.static_rows) != len(self.static):
-            raise ValueError(f"static_rows must name the rows of each of the {len(self.static)} slacks")
-        soft = np.unique(np.concatenate(self.static_rows)) if self.static_rows else np.zeros(0, int)
-        self.soft_rows = soft
-        self.hard_rows = np.setdiff1d(np.arange(self.m), soft)
-        # For each soft row, the slacks (positions in `static`) it holds.
-        holders: dict[int, list[int]] = {}
-        for j, rows in enumerate(self.static_rows):
-            for r in rows:
-                holders.setdefault(int(r), []).append(j)
-        self.row_statics = [np.array(holders[int(r)], dtype=int) for r in soft]
+    def __init__(
+        self,
+        n_dynamic: int,
+        n_static: int,
+        m: int,
+        hessian_pattern,
+        row_pattern,
+        *,
+        coupled: bool,
+        slack_first: bool,
+        settings: dict,
+        tolerance: float,
+    ):
+        self.n_dynamic, self.n_static, self.m = int(n_dynamic), int(n_static), int(m)
+        self.hessian_rows, self.hessian_columns = (np.asarray(v, dtype=int) for v in hessian_pattern)
+        self.row_rows, self.row_columns = (np.asarray(v, dtype=int) for v in row_pattern)
+        self.coupled = bool(coupled)
+        self.slack_first = bool(slack_first and self.n_static and not coupled)
+        self.soft_rows = np.unique(self.row_rows)
+        self.hard_rows = np.setdiff1d(np.arange(self.m), self.soft_rows)
+        # The rows holding each slack, and the slacks each soft row holds.
+        order = np.argsort(self.row_columns, kind="stable")
+        starts = np.searchsorted(self.row_columns[order], np.arange(self.n_static + 1))
+        self.static_rows = [np.unique(self.row_rows[order[a:b]]) for a, b in zip(starts[:-1], starts[1:])]
+        order = np.argsort(self.row_rows, kind="stable")
+        starts = np.searchsorted(self.row_rows[order], self.soft_rows)
+        ends = np.searchsorted(self.row_rows[order], self.soft_rows, side="right")
+        self.row_statics = [self.row_columns[order[a:b]] for a, b in zip(starts, ends)]
         self.settings, self.tolerance = dict(settings), float(tolerance)
 
     def _daqp(self, H, f, A, lower, upper, lba, uba):
-        x, _, flag, info = daqp.solve(
-            H, f, A, np.concatenate([upper, uba]), np.concatenate([lower, lba]), **self.settings
-        )
+        bounds = np.concatenate([upper, uba]), np.concatenate([lower, lba])
+        x, _, flag, info = daqp.solve(H, f, A, *bounds, **self.settings)
         lam = info["lam"]
         return x, lam[: len(f)], lam[len(f) :], int(flag)
 
-    def solve(self, H, h, C, lba, uba, lbq, ubq) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
-        """(dq, lam_a, lam_x, DAQP exit flag of the last QP, QPs solved); multipliers in CasADi's
-        convention (H dq + h + Cᵀ lam_a + lam_x = 0, positive on an active upper bound)."""
-        n, m, tol = self.n, self.m, self.tolerance
-        if not len(self.static):
-            x, lam_x, lam_a, flag = self._daqp(H, h, C, lbq, ubq, lba, uba)
+    def _sparse(self, pattern, values, rows, columns) -> np.ndarray:
+        """The dense submatrix (rows, columns) of the sparse matrix with nonzeros `values` at `pattern`."""
+        (r, c), n_rows = pattern, max(self.m, self.n_static)
+        row_at, column_at = np.full(n_rows, -1), np.full(self.n_static, -1)
+        row_at[rows], column_at[columns] = np.arange(len(rows)), np.arange(len(columns))
+        keep = (row_at[r] >= 0) & (column_at[c] >= 0)
+        out = np.zeros((len(rows), len(columns)))
+        out[row_at[r[keep]], column_at[c[keep]]] = values[keep]
+        return out
+
+    def whole(self, H_dd, H_sd, hessian_values, C_d, row_values):
+        """The whole QP's dense H and C."""
+        everything, slacks = np.arange(self.m), np.arange(self.n_static)
+        H_ss = self._sparse((self.hessian_rows, self.hessian_columns), hessian_values, slacks, slacks)
+        H_sd = H_sd if self.coupled else np.zeros((self.n_static, self.n_dynamic))
+        C_s = self._sparse((self.row_rows, self.row_columns), row_values, everything, slacks)
+        return np.block([[H_dd, H_sd.T], [H_sd, H_ss]]), np.hstack([C_d, C_s])
+
+    def solve(self, H_dd, H_sd, hessian_values, C_d, row_values, h, lba, uba, lbv, ubv):
+        """(v, lam_a, lam_x, DAQP exit flag of the last QP, QPs solved) of the QP with these numbers
+        (H_sd None unless `coupled`); multipliers in CasADi's convention (H v + h + Cᵀ lam_a + lam_x
+        = 0, positive on an active upper bound)."""
+        nD, nS, m, tol = self.n_dynamic, self.n_static, self.m, self.tolerance
+        if not nS:
+            x, lam_x, lam_a, flag = self._daqp(H_dd, h, C_d, lbv, ubv, lba, uba)
             return x, lam_a, lam_x, flag, 1
-        static, soft = self.static, self.soft_rows
-        freed = np.zeros(len(static), dtype=bool)
+        if not self.slack_first:
+            H, C = self.whole(H_dd, H_sd, hessian_values, C_d, row_values)
+            x, lam_x, lam_a, flag = self._daqp(H, h, C, lbv, ubv, lba, uba)
+            return x, lam_a, lam_x, flag, 1
+        hr, hc, cr, cc = self.hessian_rows, self.hessian_columns, self.row_rows, self.row_columns
+        h_d, h_s, low_s, high_s = h[:nD], h[nD:], lbv[nD:], ubv[nD:]
+        C_d_full = C_d  # (m, nD), row-major
+        freed = np.zeros(nS, dtype=bool)
         solves = 0
         while True:
             solves += 1
-            fixed = static[~freed]
-            variables = np.concatenate([self.dynamic, static[freed]])
-            held = [self.static_rows[j] for j in np.flatnonzero(freed)]
+            free, fixed = np.flatnonzero(freed), np.flatnonzero(~freed)
+            held = [self.static_rows[j] for j in free]
             rows = np.unique(np.concatenate([self.hard_rows, *held])) if held else self.hard_rows
-            pinned = np.zeros(n)  # the fixed slacks at their lower bounds, the rest 0
-            pinned[fixed] = lbq[fixed]
-            # Full matrix-vector products and then a selection: cheaper than selecting submatrices.
-            f = (h + H @ pinned)[variables]
-            shift = (C @ pinned)[rows]
+            sigma = np.zeros(nS)
+            sigma[fixed] = low_s[fixed]
+            # The fixed slacks' contributions: to the free slacks' gradient (H_σσ, within a stage) and
+            # to the kept rows (C_σ).
+            H_sigma = np.bincount(hr, weights=hessian_values * sigma[hc], minlength=nS)
+            shift = np.bincount(cr, weights=row_values * sigma[cc], minlength=m)[rows]
+            k = len(free)
+            H = np.zeros((nD + k, nD + k))
+            H[:nD, :nD] = H_dd
+            H[nD:, nD:] = self._sparse((hr, hc), hessian_values, free, free)
+            A = np.hstack([C_d_full[rows], self._sparse((cr, cc), row_values, rows, free)])
             x, lam_v, lam_r, flag = self._daqp(
-                H[np.ix_(variables, variables)],
-                f,
-                C[np.ix_(rows, variables)],
-                lbq[variables],
-                ubq[variables],
+                H,
+                np.concatenate([h_d, h_s[free] + H_sigma[free]]),
+                A,
+                np.concatenate([lbv[:nD], low_s[free]]),
+                np.concatenate([ubv[:nD], high_s[free]]),
                 lba[rows] - shift,
                 uba[rows] - shift,
             )
-            dq = pinned
-            dq[variables] = x
-            lam_a, lam_x = np.zeros(m), np.zeros(n)
+            sigma[free] = x[nD:]
+            v = np.concatenate([x[:nD], sigma])
+            lam_a, lam_x = np.zeros(m), np.zeros(nD + nS)
             lam_a[rows] = lam_r
-            lam_x[variables] = lam_v
+            lam_x[:nD], lam_x[nD + free] = lam_v[:nD], lam_v[nD:]
             if flag < 0 or freed.all():
-                return dq, lam_a, lam_x, flag, solves
-            gradient = (H @ dq + h + C.T @ lam_a)[fixed]
-            lam_x[fixed] = -gradient
-            left_out = np.setdiff1d(soft, rows, assume_unique=True)
-            values = (C @ dq)[left_out]
+                return v, lam_a, lam_x, flag, solves
+            gradient = (
+                np.bincount(hr, weights=hessian_values * sigma[hc], minlength=nS)
+                + h_s
+                + np.bincount(cc, weights=row_values * lam_a[cr], minlength=nS)
+            )[fixed]
+            lam_x[nD + fixed] = -gradient
+            left_out = np.setdiff1d(self.soft_rows, rows, assume_unique=True)
+            values = (C_d_full @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m))[left_out]
             violated = (values < lba[left_out] - tol) | (values > uba[left_out] + tol)
-            free_now = np.zeros(len(static), dtype=bool)
-            free_now[np.flatnonzero(~freed)[(gradient < -tol) & (ubq[fixed] > lbq[fixed])]] = True
-            for position in np.searchsorted(soft, left_out[violated]):
+            free_now = np.zeros(nS, dtype=bool)
+            free_now[fixed[(gradient < -tol) & (high_s[fixed] > low_s[fixed])]] = True
+            for position in np.searchsorted(self.soft_rows, left_out[violated]):
                 free_now[self.row_statics[position]] = True
             free_now &= ~freed
             if not free_now.any():
-                return dq, lam_a, lam_x, flag, solves
+                return v, lam_a, lam_x, flag, solves
             freed |= free_now
 
 
@@ -241,7 +293,7 @@ class RealTimeIteration:
         ``prepare(w, P) -> data``, compiled when asked
     vectors_function, recover_function : casadi.Function
         The feedback's two compiled halves around the QP (`qp_solver`): ``vectors(data, x0) ->
-        (h, lba, uba)``, the QP's vectors for this x0, and ``recover(data, x0, dq, lam_a, lam_x) ->
+        (h, lba, uba)``, the QP's vectors for this x0, and ``recover(data, x0, dv, lam_a, lam_x) ->
         (w_next, qp)``, the new decisions and `qp` = (stationarity, violation) residuals of the QP.
     qp_solver : SlackFirstQP
     step_function : casadi.Function
@@ -356,13 +408,16 @@ class RealTimeIteration:
         Wn, Hm, gm = ca.MX.sym("W", nx, nz + 1), ca.MX.sym("H", nx + nq, nx + nq), ca.MX.sym("grad", nx + nq)
         Gk = ca.MX.sym("Gamma", nx, nz)
         sx, sd, ss = list(range(nx)), [nx + i for i in dyn], [nx + i for i in stat]
+        # Static controls that couple with states or dynamic inputs in the Hessian (else H_σs, H_σd = 0).
+        static_entries = set(stage_q[:, stat].ravel().tolist())
+        coupled = any((i in static_entries) != (j in static_entries) for i, j in zip(*stages["hessian"].get_triplet()))
         backward = ca.Function(
             "rti_backward",
             [Wn, Gk, Am, Bm, Em, Hm, gm],
             [
                 ca.horzcat(Hm[sx, sx] @ Gk + Hm[sx, sd] @ Em, gm[sx]) + Am.T @ Wn,
                 ca.horzcat(Hm[sd, sx] @ Gk + Hm[sd, sd] @ Em, gm[sd]) + Bm.T @ Wn,
-                ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em, gm[ss]),
+                ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em if coupled else ca.MX(nst, nz), gm[ss]),
             ],
         )
         W_N = ca.horzcat(lin[N]["H"] @ Gamma[N], lin[N]["grad"])
@@ -382,48 +437,35 @@ class RealTimeIteration:
         # interval 0 first, (N nd, nz + 1); cast: CasADi's stubs give vertcat a union with Sparsity
         Hd_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz + 1))))
         Hs_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hs_all, nz + 1))) if nst else ca.MX(0, nz + 1))
-        # Back to the QP's variables Δq (interval by interval, as in w) with constant selections.
-        T_d, T_s = ca.DM(N * nq, N * nd), ca.DM(N * nq, N * nst)
-        for k in range(N):
-            for j, i in enumerate(dyn):
-                T_d[k * nq + i, k * nd + j] = 1
-            for j, i in enumerate(stat):
-                T_s[k * nq + i, k * nst + j] = 1
-        T_d, T_s = ca.DM(ca.sparsify(T_d)), ca.DM(ca.sparsify(T_s))
+        # The QP's variables v = (Δd_0, ..., Δd_{N-1}, Δσ_0, ..., Δσ_{N-1}): the dynamic inputs, then the
+        # static controls. Every block of the Hessian and the rows is a slice of the recursions' results
+        # or of the stage Jacobians, stored without selection products; H_σσ (block diagonal) and the
+        # rows' σ columns C_σ (each row holds the static controls of its interval and the one before)
+        # as their nonzeros.
+        nD, nS = N * nd, N * nst
         dcols = list(range(nx + 1, nz))
-        H_ss_blocks = ca.diagcat(*[lin[k]["H"][ss, ss] for k in range(N)]) if nst else ca.MX(0, 0)
-        S_d = Hs_all[:, dcols]
-        H_qq = ca.densify(
-            T_d @ Hd_all[:, dcols] @ T_d.T + T_s @ S_d @ T_d.T + T_d @ S_d.T @ T_s.T + T_s @ H_ss_blocks @ T_s.T
-        )
-        H_q0 = ca.densify(T_d @ Hd_all[:, :nx] + T_s @ Hs_all[:, :nx])
-        h_const = ca.densify(T_d @ (Hd_all[:, nz] + Hd_all[:, nx]) + T_s @ (Hs_all[:, nz] + Hs_all[:, nx]))
+        H_dd = Hd_all[:, dcols]
+        H_sd = Hs_all[:, dcols] if coupled else ca.MX(nS, 0)
+        H_ss = ca.diagcat(*[lin[k]["H"][ss, ss] for k in range(N)]) if nst else ca.MX(0, 0)
+        H_v0 = ca.densify(ca.vertcat(Hd_all[:, :nx], Hs_all[:, :nx]))
+        h_const = ca.densify(ca.vertcat(Hd_all[:, nz] + Hd_all[:, nx], Hs_all[:, nz] + Hs_all[:, nx]))
         E = [E_seq[:, k * nz : (k + 1) * nz] for k in range(N)]
         # Rows of interval k: J (s_k, q_k, s_{k+1}, q_{k-1}) with Δs = Γ z, Δd = E z and Δσ in place;
         # the end's rows J (s_N, q_{N-1}).
         qd = lambda offset: [offset + i for i in dyn]
         qs = lambda offset: [offset + i for i in stat]
 
-        def static_at(k):
-            selection = ca.DM(nst, N * nst)
-            for j in range(nst):
-                selection[j, k * nst + j] = 1
-            return ca.sparsify(selection)
-
-        def slacks_held(k, pattern, current, previous):
-            """Per row of interval k's J_g (`pattern`), the static controls it holds, numbered k nst + j:
-            q_k's from column `current` on, q_{k-1}'s from `previous` (None: not in J_g)."""
-            mask = np.asarray(ca.DM(pattern, 1).full()) != 0
-            held = []
-            for i in range(pattern.size1()):
-                mine = [k * nst + j for j, c in enumerate(stat) if mask[i, current + c]]
-                if previous is not None:
-                    mine += [(k - 1) * nst + j for j, c in enumerate(stat) if mask[i, previous + c]]
-                held.append(mine)
-            return held
+        def static_part(k, J, current, previous):
+            """Interval k's rows' entries on the static controls, in their columns of C_σ (r, N nst):
+            q_k's read from J's column `current` on, q_{k-1}'s from `previous` (None: not in J)."""
+            r = J.size1()
+            if not nst:
+                return ca.MX(r, 0)
+            before = ca.MX(r, (k - 1) * nst) if previous is not None else ca.MX(r, k * nst)
+            mine = [J[:, qs(previous)]] if previous is not None else []
+            return ca.horzcat(before, *mine, J[:, qs(current)], ca.MX(r, (N - k - 1) * nst))
 
         row_blocks, row_static, row_values, row_index = [], [], [], []
-        row_slacks: list[list[int]] = []  # per row of C_q, the static controls it holds
 
         interior = {k for k in range(1, N) if stages["rows"][k]}
         # Intervals 1..N-1 whose Functions agree share one mapped row Function (compact code).
@@ -434,69 +476,63 @@ class RealTimeIteration:
             pattern = stages["functions"][members[0]].sparsity_out("J_g")
             J, Gk, Gn = ca.MX.sym("J", pattern), ca.MX.sym("Gamma", nx, nz), ca.MX.sym("Gamma_next", nx, nz)
             Ek, Ep = ca.MX.sym("E", nd, nz), ca.MX.sym("E_prev", nd, nz)
-            Sk, Sp = ca.MX.sym("S", nst, N * nst), ca.MX.sym("S_prev", nst, N * nst)
             block = J[:, :nx] @ Gk + J[:, qd(nx)] @ Ek + J[:, nx + nq : 2 * nx + nq] @ Gn + J[:, qd(2 * nx + nq)] @ Ep
-            static = J[:, qs(nx)] @ Sk + J[:, qs(2 * nx + nq)] @ Sp if nst else ca.MX(pattern.size1(), 0)
-            rows_fn = ca.Function("rti_rows", [J, Gk, Gn, Ek, Ep, Sk, Sp], [block.T, static.T])
+            rows_fn = ca.Function("rti_rows", [J, Gk, Gn, Ek, Ep], [block.T])
             mapped = rows_fn.map("rti_rows_map", "serial", len(members), [], []) if len(members) > 1 else rows_fn
-            selections_static = [static_at(k) if nst else ca.DM(0, N * nst) for k in range(N)]
-            blocks_t, statics_t = mapped(
+            blocks_t = mapped(
                 ca.horzcat(*[lin[k]["J_g"] for k in members]),
                 ca.horzcat(*[Gamma[k] for k in members]),
                 ca.horzcat(*[Gamma[k + 1] for k in members]),
                 ca.horzcat(*[E[k] for k in members]),
                 ca.horzcat(*[E[k - 1] for k in members]),
-                ca.horzcat(*[selections_static[k] for k in members]),
-                ca.horzcat(*[selections_static[k - 1] for k in members]),
             )
             row_blocks.append(blocks_t.T)
-            row_static.append(statics_t.T)
+            row_static += [static_part(k, lin[k]["J_g"], nx, 2 * nx + nq) for k in members]
             row_values += [lin[k]["g"] for k in members]
             for k in members:
                 row_index += stages["rows"][k]
-                row_slacks += slacks_held(k, pattern, nx, 2 * nx + nq)
         for k in (0, N):
             J, value, index = lin[k]["J_g"], lin[k]["g"], stages["rows"][k]
             if not index:
                 continue
             block = J[:, :nx] @ Gamma[k]
-            static = ca.MX(len(index), N * nst)
             if k < N:
                 block = block + J[:, qd(nx)] @ E[k] + J[:, nx + nq : 2 * nx + nq] @ Gamma[k + 1]
-                if nst:
-                    static = static + J[:, qs(nx)] @ static_at(k)
             else:
                 block = block + J[:, qd(nx)] @ E[N - 1]
-                if nst:
-                    static = static + J[:, qs(nx)] @ static_at(N - 1)
             row_blocks.append(block)
-            row_static.append(static)
+            row_static.append(static_part(min(k, N - 1), J, nx, None))
             row_values.append(value)
             row_index += index
-            row_slacks += slacks_held(k if k < N else N - 1, J.sparsity(), nx, None)
         m = len(row_index)
         if m:
-            rows, rows_static = ca.vertcat(*row_blocks), ca.vertcat(*row_static)
+            rows, C_s = ca.vertcat(*row_blocks), ca.vertcat(*row_static)
             g_o = ca.vertcat(*row_values)
             lbg_o, ubg_o = lbg_all[row_index], ubg_all[row_index]
-            C_q = ca.densify(rows[:, dcols] @ T_d.T + (rows_static @ T_s.T if nst else 0))
         else:
-            rows, g_o, lbg_o, ubg_o = ca.MX(0, nz), ca.MX(0, 1), ca.MX(0, 1), ca.MX(0, 1)
-            C_q = ca.MX(0, N * nq)
+            rows, C_s, g_o, lbg_o, ubg_o = ca.MX(0, nz), ca.MX(0, nS), ca.MX(0, 1), ca.MX(0, 1), ca.MX(0, 1)
+        C_d = rows[:, dcols]
         C_0 = ca.densify(rows[:, :nx])
         row_lo = ca.densify(lbg_o - g_o - rows[:, nx])
         row_hi = ca.densify(ubg_o - g_o - rows[:, nx])
+        d_of_q = [k * nq + i for k in range(N) for i in dyn]
+        s_of_q = [k * nq + i for k in range(N) for i in stat]
         w_q = ca.vertcat(*[wm[q_idx[k]] for k in range(N)])
+        lbv, ubv = (ca.densify(bound - w_q)[d_of_q + s_of_q] for bound in (lbq, ubq))
+        nonzeros = lambda M: M.nz[:] if M.nnz() else ca.MX(0, 1)
         stacked = [
-            ca.vec(H_qq),
+            ca.vec(ca.densify(H_dd).T),  # row-major, as numpy reads it
+            ca.vec(ca.densify(H_sd).T),
+            nonzeros(H_ss),
             h_const,
-            ca.vec(H_q0),
-            ca.vec(C_q),
+            ca.vec(H_v0),
+            ca.vec(ca.densify(C_d).T),
+            nonzeros(C_s),
             row_lo,
             row_hi,
             ca.vec(C_0),
-            ca.densify(lbq - w_q),
-            ca.densify(ubq - w_q),
+            lbv,
+            ubv,
             ca.vertcat(*[ca.vec(ca.densify(m)) for m in A]),
             ca.vertcat(*[ca.vec(ca.densify(m)) for m in B]),
             ca.vertcat(*a),
@@ -504,40 +540,46 @@ class RealTimeIteration:
         ]
         sizes = [int(v.numel()) for v in stacked]
         self._data_sizes = sizes
-        self.n_rows = int(C_q.size1())
-        # Rows that hold a static control (a soft bound's slack) and whether those controls couple with the
-        # dynamic inputs in the condensed Hessian: the feedback first tries every static control at its
-        # lower bound (see `feedback`).
-        self.soft_rows = sorted(r for r, held in enumerate(row_slacks) if held)
-        static_entries = set(stage_q[:, stat].ravel().tolist()) if nst else set()
-        coupled = any((i in static_entries) != (j in static_entries) for i, j in zip(*stages["hessian"].get_triplet()))
+        self._offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self.n_rows = m
+        # Rows that hold a static control (a soft bound's slack): the feedback first tries every static
+        # control at its lower bound (see `SlackFirstQP`), where they do not couple with the rest.
+        hessian_pattern, row_pattern = H_ss.sparsity(), C_s.sparsity()
+        self.soft_rows = sorted(set(row_pattern.row()))
         lower_static = np.asarray(probe(values)[0], dtype=float).ravel()[stage_q[:, stat].ravel()] if nst else []
         self.reduced_first = bool(slack_shortcut and nst and not coupled and np.all(np.isfinite(lower_static)))
         prepare = ca.Function("rti_prepare", [wm, Pm], [ca.vertcat(*stacked)], ["w", "P"], ["data"])
 
         # ------------------------------------------------------------- feedback (MX around the QP)
         data, x0m = ca.MX.sym("data", sum(sizes)), ca.MX.sym("x0", nx)
-        pieces = ca.vertsplit(data, list(np.concatenate([[0], np.cumsum(sizes)]).astype(int)))
-        nQ, m = N * nq, self.n_rows
-        self._offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
-        H_qq_f = ca.reshape(pieces[0], nQ, nQ)
-        h_c, H_q0_f = pieces[1], ca.reshape(pieces[2], nQ, nx)
-        C_q_f = ca.reshape(pieces[3], m, nQ)
-        lo_f, hi_f, C_0_f = pieces[4], pieces[5], ca.reshape(pieces[6], m, nx)
-        lbq_f, ubq_f = pieces[7], pieces[8]
-        A_f = [ca.reshape(v, nx, nx) for v in ca.vertsplit(pieces[9], nx * nx)] if N else []
-        nd = len(self.dynamic_columns)
-        B_f = [ca.reshape(v, nx, nd) for v in ca.vertsplit(pieces[10], nx * nd)] if nd else [ca.MX(nx, 0)] * N
-        a_f = ca.vertsplit(pieces[11], nx)
-        w_bar = pieces[12]
+        pieces = ca.vertsplit(data, list(self._offsets))
+        nQ = N * nq
+        H_dd_f = ca.reshape(pieces[0], nD, nD).T
+        H_sd_f = ca.reshape(pieces[1], nD, nS).T if coupled else None
+        H_ss_f = ca.MX(hessian_pattern, pieces[2])
+        h_c, H_v0_f = pieces[3], ca.reshape(pieces[4], nQ, nx)
+        C_d_f, C_s_f = ca.reshape(pieces[5], nD, m).T, ca.MX(row_pattern, pieces[6])
+        lo_f, hi_f, C_0_f = pieces[7], pieces[8], ca.reshape(pieces[9], m, nx)
+        lbv_f, ubv_f = pieces[10], pieces[11]
+        A_f = [ca.reshape(v, nx, nx) for v in ca.vertsplit(pieces[12], nx * nx)] if N else []
+        B_f = [ca.reshape(v, nx, nd) for v in ca.vertsplit(pieces[13], nx * nd)] if nd else [ca.MX(nx, 0)] * N
+        a_f = ca.vertsplit(pieces[14], nx)
+        w_bar = pieces[15]
         ds0 = x0m / ca.DM(self.state_scale) - w_bar[s_idx[0]]
-        h = h_c + H_q0_f @ ds0
+        h = h_c + H_v0_f @ ds0
         lba, uba = lo_f - C_0_f @ ds0, hi_f - C_0_f @ ds0
         vectors = ca.Function("rti_qp_vectors", [data, x0m], [h, lba, uba], ["data", "x0"], ["h", "lba", "uba"])
-        dq, lam_a, lam_x = ca.MX.sym("dq", nQ), ca.MX.sym("lam_a", m), ca.MX.sym("lam_x", nQ)
-        stationarity = ca.mmax(ca.fabs(H_qq_f @ dq + h + C_q_f.T @ lam_a + lam_x))
-        Cdq = C_q_f @ dq
-        violation = ca.mmax(ca.vertcat(0, lba - Cdq, Cdq - uba, lbq_f - dq, dq - ubq_f))
+        dv, lam_a, lam_x = ca.MX.sym("dv", nQ), ca.MX.sym("lam_a", m), ca.MX.sym("lam_x", nQ)
+        dv_d, dv_s = dv[:nD], dv[nD:]
+        H_dv = ca.vertcat(H_dd_f @ dv_d, H_ss_f @ dv_s)
+        if coupled:
+            H_dv += ca.vertcat(H_sd_f.T @ dv_s, H_sd_f @ dv_d)
+        C_dv = C_d_f @ dv_d + C_s_f @ dv_s
+        stationarity = ca.mmax(ca.fabs(H_dv + h + ca.vertcat(C_d_f.T @ lam_a, C_s_f.T @ lam_a) + lam_x))
+        violation = ca.mmax(ca.vertcat(0, lba - C_dv, C_dv - uba, lbv_f - dv, dv - ubv_f))
+        v_of_q = np.empty(nQ, dtype=int)
+        v_of_q[d_of_q + s_of_q] = np.arange(nQ)
+        dq = dv[list(map(int, v_of_q))]
         ds, pieces_w = ds0, []
         for k in range(N):
             dq_k = dq[k * nq : (k + 1) * nq]
@@ -547,13 +589,21 @@ class RealTimeIteration:
         delta = ca.vertcat(*pieces_w)
         recover = ca.Function(
             "rti_recover",
-            [data, x0m, dq, lam_a, lam_x],
+            [data, x0m, dv, lam_a, lam_x],
             [w_bar + delta, ca.vertcat(stationarity, violation)],
-            ["data", "x0", "dq", "lam_a", "lam_x"],
+            ["data", "x0", "dv", "lam_a", "lam_x"],
             ["w_next", "qp"],
         )
         # The whole QP by CasADi's DAQP node in one Function: a second path to the same answer.
-        whole = self._qp(nQ, m, "rti_qp")(H_qq_f, h, C_q_f, lba, uba, lbq_f, ubq_f)
+        H_whole = ca.blockcat(
+            [
+                [H_dd_f, H_sd_f.T if coupled else ca.MX(nD, nS)],
+                [H_sd_f if coupled else ca.MX(nS, nD), H_ss_f],
+            ]
+        )
+        whole = self._qp(nQ, m, "rti_qp")(
+            ca.densify(H_whole), h, ca.densify(ca.horzcat(C_d_f, C_s_f)), lba, uba, lbv_f, ubv_f
+        )
         w_s, P_s, x_s = ca.MX.sym("w", nw), ca.MX.sym("P", n_p), ca.MX.sym("x0", nx)
         data_s = prepare(w_s, P_s)
         self.step_function = ca.Function(
@@ -563,19 +613,16 @@ class RealTimeIteration:
             ["w", "P", "x0"],
             ["w_next", "qp"],
         )
-        # The QP's slacks (static controls, q-numbering) and the rows holding each: what the slack-first
-        # solve frees together. Without the shortcut, no slacks: the whole QP at once.
-        static_rows: list[list[int]] = [[] for _ in range(N * nst)]
-        for r, held in enumerate(row_slacks):
-            for p in held:
-                static_rows[p].append(r)
         self.qp_solver = SlackFirstQP(
-            nQ,
+            nD,
+            nS,
             m,
-            [k * nq + i for k in range(N) for i in stat] if self.reduced_first else [],
-            static_rows if self.reduced_first else [],
-            {"primal_tol": PRIMAL_TOLERANCE},
-            10 * PRIMAL_TOLERANCE,
+            hessian_pattern.get_triplet(),
+            row_pattern.get_triplet(),
+            coupled=coupled,
+            slack_first=self.reduced_first,
+            settings={"primal_tol": PRIMAL_TOLERANCE},
+            tolerance=10 * PRIMAL_TOLERANCE,
         )
         self.compiled = bool(compiled)
         if compiled:
@@ -745,17 +792,27 @@ class RealTimeIteration:
         """Solve the prepared QP for the initial state x0 (physical, (nx,)): new decisions and the QP report."""
         data = np.asarray(data, dtype=float).ravel()
         h, lba, uba = (v.ravel() for v in self._vectors_call(data, x0))
-        dq, lam_a, lam_x, flag = self._solve_qp(data, h, lba, uba)
-        w_next, residuals = self._recover_call(data, x0, dq, lam_a, lam_x)
+        dv, lam_a, lam_x, flag = self._solve_qp(data, h, lba, uba)
+        w_next, residuals = self._recover_call(data, x0, dv, lam_a, lam_x)
         return w_next.ravel(), self.report(np.append(residuals.ravel(), flag))
 
     def _solve_qp(self, data, h, lba, uba) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """The QP of one sample's `data` with the vectors h, lba, uba: (dq, lam_a, lam_x, DAQP exit flag)."""
-        o, nQ, m = self._offsets, self.intervals * self.nq, self.n_rows
-        H = data[o[0] : o[1]].reshape(nQ, nQ, order="F")
-        C = data[o[3] : o[4]].reshape(m, nQ, order="F")
-        dq, lam_a, lam_x, flag, _ = self.qp_solver.solve(H, h, C, lba, uba, data[o[7] : o[8]], data[o[8] : o[9]])
-        return dq, lam_a, lam_x, flag
+        """The QP of one sample's `data` with the vectors h, lba, uba: (dv, lam_a, lam_x, DAQP exit flag)."""
+        o, qp = self._offsets, self.qp_solver
+        nD, nS, m = qp.n_dynamic, qp.n_static, qp.m
+        dv, lam_a, lam_x, flag, _ = qp.solve(
+            data[o[0] : o[1]].reshape(nD, nD),
+            data[o[1] : o[2]].reshape(nS, nD) if qp.coupled else None,
+            data[o[2] : o[3]],
+            data[o[5] : o[6]].reshape(m, nD),
+            data[o[6] : o[7]],
+            h,
+            lba,
+            uba,
+            data[o[10] : o[11]],
+            data[o[11] : o[12]],
+        )
+        return dv, lam_a, lam_x, flag
 
     def prepare_many(self, decisions, P) -> np.ndarray:
         """`prepare` of m samples at once: decisions (m, nw), P (m, np) -> QP data (m, n_data).
@@ -773,8 +830,8 @@ class RealTimeIteration:
         count = len(data)
         h, lba, uba = (v.T for v in self._mapped(self.vectors_function, count)(data.T, x0.T))
         solved = [self._solve_qp(data[i], h[i], lba[i], uba[i]) for i in range(count)]
-        dq, lam_a, lam_x = (np.array([s[j] for s in solved]).reshape(count, -1) for j in range(3))
-        w_next, residuals = self._mapped(self.recover_function, count)(data.T, x0.T, dq.T, lam_a.T, lam_x.T)
+        dv, lam_a, lam_x = (np.array([s[j] for s in solved]).reshape(count, -1) for j in range(3))
+        w_next, residuals = self._mapped(self.recover_function, count)(data.T, x0.T, dv.T, lam_a.T, lam_x.T)
         return w_next.T, np.column_stack([residuals.T, [s[3] for s in solved]])
 
     def _mapped(self, fun: ca.Function, m: int) -> models.compile.NumpyCall:

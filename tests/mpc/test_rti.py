@@ -11,6 +11,7 @@ from pathlib import Path
 import daqp
 import numpy as np
 import pytest
+import scipy.sparse
 
 import models
 import mpc
@@ -226,17 +227,20 @@ def test_the_rti_controller_stops_the_pendulum_at_the_step(pendulum_case):
 
 # --------------------------------------------------------------------------- the slack-first QP
 def soft_qp(rng, stages, scale, width):
-    """A random QP shaped like the condensed one: one dense-coupled input per stage, |u| <= 1, and
-    two slacks per stage, each in the two rows c u + s >= lo, c u - s <= hi of a soft bound; a hard
-    row on the inputs' sum; `scale` sizes the inputs' gradient, `width` the soft bounds.
-    Returns (H, h, C, lba, uba, lbq, ubq, static, static_rows)."""
+    """A random QP shaped like the condensed one, in v = (u, s): one dense-coupled input per stage,
+    |u| <= 1, two slacks s >= 0 per stage (a 2 x 2 Hessian block), each in the two rows
+    c u + s >= lo, c u - s <= hi of a soft bound; a hard row on the inputs' sum. `scale` sizes the
+    inputs' gradient, `width` the soft bounds. Returns the dense (H, h, C, lba, uba, lbv, ubv) and
+    SlackFirstQP's pieces (H_dd, H_ss, C_d, C_s) with H_ss and C_s as scipy COO matrices."""
     nd, ns = stages, 2 * stages
     L = rng.normal(size=(nd, nd))
     H = np.zeros((nd + ns, nd + ns))
     H[:nd, :nd] = L @ L.T / nd + np.eye(nd)
-    H[nd:, nd:] = np.diag(rng.uniform(0.1, 1.0, ns))
+    for k in range(stages):
+        block = rng.normal(scale=0.3, size=(2, 2))
+        H[nd + 2 * k : nd + 2 * k + 2, nd + 2 * k : nd + 2 * k + 2] = block @ block.T + 0.1 * np.eye(2)
     h = np.concatenate([rng.normal(scale=scale, size=nd), rng.uniform(0.0, 1.0, ns)])
-    rows, lba, uba, static_rows = [], [], [], []
+    rows, lba, uba = [], [], []
     for j in range(ns):
         c = rng.normal(size=nd)
         bound = width * rng.uniform(0.05, 0.5)
@@ -246,13 +250,14 @@ def soft_qp(rng, stages, scale, width):
             rows.append(row)
             lba.append(-bound if sign > 0 else -np.inf)
             uba.append(np.inf if sign > 0 else bound)
-        static_rows.append([2 * j, 2 * j + 1])
     rows.append(np.concatenate([np.ones(nd), np.zeros(ns)]))
     lba.append(-0.5 * nd)
     uba.append(0.5 * nd)
-    lbq = np.concatenate([-np.ones(nd), np.zeros(ns)])
-    ubq = np.concatenate([np.ones(nd), np.full(ns, np.inf)])
-    return H, h, np.array(rows), np.array(lba), np.array(uba), lbq, ubq, np.arange(nd, nd + ns), static_rows
+    C = np.array(rows)
+    lbv = np.concatenate([-np.ones(nd), np.zeros(ns)])
+    ubv = np.concatenate([np.ones(nd), np.full(ns, np.inf)])
+    pieces = H[:nd, :nd], scipy.sparse.coo_matrix(H[nd:, nd:]), C[:, :nd], scipy.sparse.coo_matrix(C[:, nd:])
+    return (H, h, C, np.array(lba), np.array(uba), lbv, ubv), pieces
 
 
 def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer():
@@ -265,20 +270,33 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
     seen = set()
     for trial in range(40):
         scale, width = [(0.1, 20.0), (3.0, 1.0), (10.0, 1.0)][trial % 3]
-        H, h, C, lba, uba, lbq, ubq, static, static_rows = soft_qp(rng, 12, scale, width)
-        solver = mpc.rti.SlackFirstQP(len(h), len(C), static, static_rows, {"primal_tol": 1e-10}, 1e-9)
-        dq, lam_a, lam_x, flag, solves = solver.solve(H, h, C, lba, uba, lbq, ubq)
+        (H, h, C, lba, uba, lbv, ubv), (H_dd, H_ss, C_d, C_s) = soft_qp(rng, 12, scale, width)
+        solver = mpc.rti.SlackFirstQP(
+            len(H_dd),
+            H_ss.shape[0],
+            len(C),
+            (H_ss.row, H_ss.col),
+            (C_s.row, C_s.col),
+            coupled=False,
+            slack_first=True,
+            settings={"primal_tol": 1e-10},
+            tolerance=1e-9,
+        )
+        v, lam_a, lam_x, flag, solves = solver.solve(H_dd, None, H_ss.data, C_d, C_s.data, h, lba, uba, lbv, ubv)
         seen.add(min(solves, 3))
         assert flag > 0
-        rows = C @ dq
-        assert np.max(np.abs(H @ dq + h + C.T @ lam_a + lam_x)) < 1e-9
+        rows = C @ v
+        assert np.max(np.abs(H @ v + h + C.T @ lam_a + lam_x)) < 1e-9
         assert np.all(rows >= lba - 1e-9) and np.all(rows <= uba + 1e-9)
-        assert np.all(dq >= lbq - 1e-9) and np.all(dq <= ubq + 1e-9)
+        assert np.all(v >= lbv - 1e-9) and np.all(v <= ubv + 1e-9)
         # Signs: a multiplier is > 0 only at an upper bound, < 0 only at a lower bound.
-        for lam, value, low, high in ((lam_a, rows, lba, uba), (lam_x, dq, lbq, ubq)):
+        for lam, value, low, high in ((lam_a, rows, lba, uba), (lam_x, v, lbv, ubv)):
             assert np.all((lam <= 1e-9) | (value >= high - 1e-8))
             assert np.all((lam >= -1e-9) | (value <= low + 1e-8))
-        whole, _, whole_flag, _ = daqp.solve(H, h, C, np.concatenate([ubq, uba]), np.concatenate([lbq, lba]))
+        whole, _, whole_flag, _ = daqp.solve(H, h, C, np.concatenate([ubv, uba]), np.concatenate([lbv, lba]))
         assert whole_flag > 0
-        np.testing.assert_allclose(dq, whole, atol=1e-6)
+        np.testing.assert_allclose(v, whole, atol=1e-6)
+        assembled = solver.whole(H_dd, None, H_ss.data, C_d, C_s.data)
+        np.testing.assert_array_equal(assembled[0], H)
+        np.testing.assert_array_equal(assembled[1], C)
     assert seen == {1, 2, 3}
