@@ -180,6 +180,7 @@ class SlackFirstQP:
 
     def _daqp(self, H, f, A, lower, upper, lba, uba):
         bounds = np.concatenate([upper, uba]), np.concatenate([lower, lba])
+        H, A = np.ascontiguousarray(H), np.ascontiguousarray(A)  # DAQP reads the arrays' memory row by row
         x, _, flag, info = daqp.solve(H, f, A, *bounds, **self.settings)
         lam = info["lam"]
         return x, lam[: len(f)], lam[len(f) :], int(flag)
@@ -216,7 +217,6 @@ class SlackFirstQP:
             return x, lam_a, lam_x, flag, 1
         hr, hc, cr, cc = self.hessian_rows, self.hessian_columns, self.row_rows, self.row_columns
         h_d, h_s, low_s, high_s = h[:nD], h[nD:], lbv[nD:], ubv[nD:]
-        C_d_full = C_d  # (m, nD), row-major
         freed = np.zeros(nS, dtype=bool)
         solves = 0
         while True:
@@ -224,26 +224,27 @@ class SlackFirstQP:
             free, fixed = np.flatnonzero(freed), np.flatnonzero(~freed)
             held = [self.static_rows[j] for j in free]
             rows = np.unique(np.concatenate([self.hard_rows, *held])) if held else self.hard_rows
-            sigma = np.zeros(nS)
-            sigma[fixed] = low_s[fixed]
-            # The fixed slacks' contributions: to the free slacks' gradient (H_σσ, within a stage) and
-            # to the kept rows (C_σ).
-            H_sigma = np.bincount(hr, weights=hessian_values * sigma[hc], minlength=nS)
-            shift = np.bincount(cr, weights=row_values * sigma[cc], minlength=m)[rows]
-            k = len(free)
-            H = np.zeros((nD + k, nD + k))
-            H[:nD, :nD] = H_dd
-            H[nD:, nD:] = self._sparse((hr, hc), hessian_values, free, free)
-            A = np.hstack([C_d_full[rows], self._sparse((cr, cc), row_values, rows, free)])
-            x, lam_v, lam_r, flag = self._daqp(
-                H,
-                np.concatenate([h_d, h_s[free] + H_sigma[free]]),
-                A,
-                np.concatenate([lbv[:nD], low_s[free]]),
-                np.concatenate([ubv[:nD], high_s[free]]),
-                lba[rows] - shift,
-                uba[rows] - shift,
-            )
+            sigma = np.where(freed, 0.0, low_s)
+            if free.size:
+                # The fixed slacks' contributions: to the free slacks' gradient (H_σσ, within a stage)
+                # and to the kept rows (C_σ).
+                H_sigma = np.bincount(hr, weights=hessian_values * sigma[hc], minlength=nS)
+                shift = np.bincount(cr, weights=row_values * sigma[cc], minlength=m)[rows]
+                k = len(free)
+                H = np.zeros((nD + k, nD + k))
+                H[:nD, :nD] = H_dd
+                H[nD:, nD:] = self._sparse((hr, hc), hessian_values, free, free)
+                x, lam_v, lam_r, flag = self._daqp(
+                    H,
+                    np.concatenate([h_d, h_s[free] + H_sigma[free]]),
+                    np.hstack([C_d[rows], self._sparse((cr, cc), row_values, rows, free)]),
+                    np.concatenate([lbv[:nD], low_s[free]]),
+                    np.concatenate([ubv[:nD], high_s[free]]),
+                    lba[rows] - shift,
+                    uba[rows] - shift,
+                )
+            else:  # the QP in d alone with the hard rows, which hold no slack
+                x, lam_v, lam_r, flag = self._daqp(H_dd, h_d, C_d[rows], lbv[:nD], ubv[:nD], lba[rows], uba[rows])
             sigma[free] = x[nD:]
             v = np.concatenate([x[:nD], sigma])
             lam_a, lam_x = np.zeros(m), np.zeros(nD + nS)
@@ -258,7 +259,7 @@ class SlackFirstQP:
             )[fixed]
             lam_x[nD + fixed] = -gradient
             left_out = np.setdiff1d(self.soft_rows, rows, assume_unique=True)
-            values = (C_d_full @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m))[left_out]
+            values = (C_d @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m))[left_out]
             violated = (values < lba[left_out] - tol) | (values > uba[left_out] + tol)
             free_now = np.zeros(nS, dtype=bool)
             free_now[fixed[(gradient < -tol) & (high_s[fixed] > low_s[fixed])]] = True
