@@ -16,9 +16,11 @@ The work is split as in Diehl's real-time iteration:
 
 - **preparation** (`prepare`, before the measurement): linearize, and
   condense: eliminate the states with the forward recursion
-  Γ_{k+1} = A_k Γ_k + B_k E_k + a_k e₁ᵀ over z = (Δs_0, 1, Δq) and form the
-  dense Hessian and constraint rows of Δq with a backward (adjoint) recursion,
-  O(N² nx²) instead of the O(N³) of multiplying the stacked matrices;
+  Γ_{k+1} = A_k Γ_k + B_k E_k + a_k e₁ᵀ over z = (Δs_0, 1, Δd) (Δd: the
+  inputs and controls that enter the dynamics) and form the dense Hessian
+  with the backward recursion P_k = Q_k + A_kᵀ P_{k+1} A_k (the row of Δd_k
+  is then B_kᵀ P_{k+1} Γ_{k+1} + S_k Γ_k + R_k E_k), O(N² nx nd + N nx³)
+  instead of the O(N³) of multiplying the stacked matrices;
 - **feedback** (`feedback`, once x0 is known): the gradient and row bounds are
   affine in Δs_0 (two matrix-vector products), DAQP's dual active-set method
   solves the dense QP, slacks first held at their bounds (`SlackFirstQP`), and
@@ -403,40 +405,54 @@ class RealTimeIteration:
         E_seq = ca.DM(selections)
         Gammas = forward.mapaccum("rti_forward_all", N)(Gamma0, A_seq, B_seq, a_seq, E_seq)
         Gamma = [Gamma0] + ca.horzsplit(Gammas, nz)
-        # Backward, with the stage Hessian's blocks over (s, d, σ):
-        # W_k = [H_ss Γ_k + H_sd E_k, ∇_s f] + A_kᵀ W_{k+1}; interval k's condensed Hessian rows and
-        # gradient of d, [H_ds Γ_k + H_dd E_k, ∇_d f] + B_kᵀ W_{k+1}, and of σ, [H_σs Γ_k + H_σd E_k, ∇_σ f].
-        Wn, Hm, gm = ca.MX.sym("W", nx, nz + 1), ca.MX.sym("H", nx + nq, nx + nq), ca.MX.sym("grad", nx + nq)
-        Gk = ca.MX.sym("Gamma", nx, nz)
+        # Backward, with the stage Hessian's blocks Q_k = H_ss, S_k = H_ds, R_k = H_dd and gradient (q_k, r_k)
+        # over (s, d), and c_k = Γ_k's constant column (the states' offset from the gaps a_j):
+        #   P_k = Q_k + A_kᵀ P_{k+1} A_k,   λ_k = Q_k c_k + q_k + A_kᵀ λ_{k+1}   (P_N = Q_N, λ_N = Q_N c_N + q_N).
+        # The condensed Hessian's row of Δd_k over Δs_0 and Δd_j, j <= k, is
+        #   B_kᵀ P_{k+1} Γ_{k+1} + S_k Γ_k + R_k E_k
+        # (later stages see those columns only through Φ(m, k+1) Γ_{k+1}; the columns j > k of this
+        # expression are zero), its gradient r_k + S_k c_k + B_kᵀ λ_{k+1}: O(N² nx nd) after the
+        # O(N nx³) recursion, against O(N² nx²) for an adjoint of every column. The rows of the static
+        # controls σ: [H_σs Γ_k + H_σd E_k, ∇_σ f] (no products where σ does not couple).
+        Yn, Hm, gm = ca.MX.sym("Y", nx, nx + 1), ca.MX.sym("H", nx + nq, nx + nq), ca.MX.sym("grad", nx + nq)
+        Gk, Gn = ca.MX.sym("Gamma", nx, nz), ca.MX.sym("Gamma_next", nx, nz)
         sx, sd, ss = list(range(nx)), [nx + i for i in dyn], [nx + i for i in stat]
         # Static controls that couple with states or dynamic inputs in the Hessian (else H_σs, H_σd = 0).
         static_entries = set(stage_q[:, stat].ravel().tolist())
         coupled = any((i in static_entries) != (j in static_entries) for i, j in zip(*stages["hessian"].get_triplet()))
+        P_next, lam_next, offset = Yn[:, :nx], Yn[:, nx], Gk[:, nx]
+        row = Bm.T @ P_next @ Gn + Hm[sd, sx] @ Gk + Hm[sd, sd] @ Em
+        gradient_d = gm[sd] + Hm[sd, sx] @ offset + Bm.T @ lam_next
         backward = ca.Function(
             "rti_backward",
-            [Wn, Gk, Am, Bm, Em, Hm, gm],
+            [Yn, Gk, Gn, Am, Bm, Em, Hm, gm],
             [
-                ca.horzcat(Hm[sx, sx] @ Gk + Hm[sx, sd] @ Em, gm[sx]) + Am.T @ Wn,
-                ca.horzcat(Hm[sd, sx] @ Gk + Hm[sd, sd] @ Em, gm[sd]) + Bm.T @ Wn,
+                ca.horzcat(
+                    Hm[sx, sx] + Am.T @ P_next @ Am, Hm[sx, sx] @ offset + gm[sx] + Am.T @ lam_next
+                ),
+                ca.horzcat(row[:, :nx], gradient_d, row[:, nx + 1 :]),
                 ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em if coupled else ca.MX(nst, nz), gm[ss]),
             ],
         )
-        W_N = ca.horzcat(lin[N]["H"] @ Gamma[N], lin[N]["grad"])
+        Q_N = lin[N]["H"]
+        Y_N = ca.horzcat(Q_N, Q_N @ Gamma[N][:, nx] + lin[N]["grad"])
         order = list(reversed(range(N)))
         H_seq = ca.horzcat(*[lin[k]["H"] for k in order])
         g_seq = ca.horzcat(*[lin[k]["grad"] for k in order])
         reverse = lambda blocks, width: ca.horzcat(*[blocks[:, k * width : (k + 1) * width] for k in order])
         _, Hd_all, Hs_all = backward.mapaccum("rti_backward_all", N)(
-            W_N,
+            Y_N,
             ca.horzcat(*[Gamma[k] for k in order]),
+            ca.horzcat(*[Gamma[k + 1] for k in order]),
             reverse(A_seq, nx),
             reverse(B_seq, nd),
             reverse(E_seq, nz),
             H_seq,
             g_seq,
         )
-        # interval 0 first, (N nd, nz + 1); cast: CasADi's stubs give vertcat a union with Sparsity
-        Hd_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz + 1))))
+        # interval 0 first: Hd_all (N nd, nz) with the gradient in the constant's column, Hs_all (N nst, nz + 1);
+        # cast: CasADi's stubs give vertcat a union with Sparsity
+        Hd_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hd_all, nz))))
         Hs_all = cast(ca.MX, ca.vertcat(*reversed(ca.horzsplit(Hs_all, nz + 1))) if nst else ca.MX(0, nz + 1))
         # The QP's variables v = (Δd_0, ..., Δd_{N-1}, Δσ_0, ..., Δσ_{N-1}): the dynamic inputs, then the
         # static controls. Every block of the Hessian and the rows is a slice of the recursions' results
@@ -445,11 +461,14 @@ class RealTimeIteration:
         # as their nonzeros.
         nD, nS = N * nd, N * nst
         dcols = list(range(nx + 1, nz))
-        H_dd = Hd_all[:, dcols]
+        # Hd_all holds the lower block triangle of H_dd (zeros above): mirror it.
+        lower = Hd_all[:, dcols]
+        diagonal = ca.diagcat(*[lower[k * nd : (k + 1) * nd, k * nd : (k + 1) * nd] for k in range(N)]) if nd else lower
+        H_dd = lower + (lower - diagonal).T
         H_sd = Hs_all[:, dcols] if coupled else ca.MX(nS, 0)
         H_ss = ca.diagcat(*[lin[k]["H"][ss, ss] for k in range(N)]) if nst else ca.MX(0, 0)
         H_v0 = ca.densify(ca.vertcat(Hd_all[:, :nx], Hs_all[:, :nx]))
-        h_const = ca.densify(ca.vertcat(Hd_all[:, nz] + Hd_all[:, nx], Hs_all[:, nz] + Hs_all[:, nx]))
+        h_const = ca.densify(ca.vertcat(Hd_all[:, nx], Hs_all[:, nz] + Hs_all[:, nx]))
         E = [E_seq[:, k * nz : (k + 1) * nz] for k in range(N)]
         # Rows of interval k: J (s_k, q_k, s_{k+1}, q_{k-1}) with Δs = Γ z, Δd = E z and Δσ in place;
         # the end's rows J (s_N, q_{N-1}).
