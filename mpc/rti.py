@@ -303,6 +303,9 @@ class RealTimeIteration:
         ``step(w, P, x0) -> (w_next, qp)``, both phases at once with the whole QP solved by
         CasADi's DAQP node (not compiled; a second path to the feedback's answer).
     shift_index : (nw,) int, ``w[shift_index]`` is w one interval later (the last repeated)
+    qp_variables : (N nq,) int, the decisions (indices into w) the QP's variables v step, in v's
+        order: the inputs and controls that enter the dynamics, then the others (slacks)
+    row_index : (m,) int, the NLP's constraint rows (indices into g) of the QP's rows, in order
     """
 
     def __init__(self, transcription: Transcription, *, compiled: bool = True, slack_shortcut: bool = True):
@@ -336,7 +339,6 @@ class RealTimeIteration:
         dynamics = tr.dynamics_rows.ravel()
         others = np.setdiff1d(np.arange(g.numel()), dynamics)
         lbx, ubx, lbg, ubg = tr.bounds(P)
-        self.row_index: list = []
 
         # Bounds: x_0 = x0 exactly; no other state bound (checked on random parameters).
         probe = ca.Function("probe", [P], [lbx, ubx])
@@ -537,6 +539,8 @@ class RealTimeIteration:
         row_hi = ca.densify(ubg_o - g_o - rows[:, nx])
         d_of_q = [k * nq + i for k in range(N) for i in dyn]
         s_of_q = [k * nq + i for k in range(N) for i in stat]
+        self.qp_variables = stage_q.ravel()[d_of_q + s_of_q]
+        self.row_index = np.array(row_index, dtype=int)
         w_q = ca.vertcat(*[wm[q_idx[k]] for k in range(N)])
         lbv, ubv = (ca.densify(bound - w_q)[d_of_q + s_of_q] for bound in (lbq, ubq))
         nonzeros = lambda M: M.nz[:] if M.nnz() else ca.MX(0, 1)
@@ -816,21 +820,27 @@ class RealTimeIteration:
         w_next, residuals = self._recover_call(data, x0, dv, lam_a, lam_x)
         return w_next.ravel(), self.report(np.append(residuals.ravel(), flag))
 
-    def _solve_qp(self, data, h, lba, uba) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """The QP of one sample's `data` with the vectors h, lba, uba: (dv, lam_a, lam_x, DAQP exit flag)."""
+    def qp_pieces(self, data) -> dict:
+        """The QP's fixed pieces in one sample's prepared `data` (views, no copies): H_dd (nD, nD), H_sd
+        (nS, nD) or None, hessian_values (H_σσ's nonzeros), C_d (m, nD), row_values (C_σ's nonzeros),
+        lbv, ubv (nD + nS,): the arguments of `qp_solver`'s `solve` besides h, lba, uba."""
         o, qp = self._offsets, self.qp_solver
         nD, nS, m = qp.n_dynamic, qp.n_static, qp.m
-        dv, lam_a, lam_x, flag, _ = qp.solve(
-            data[o[0] : o[1]].reshape(nD, nD),
-            data[o[1] : o[2]].reshape(nS, nD) if qp.coupled else None,
-            data[o[2] : o[3]],
-            data[o[5] : o[6]].reshape(m, nD),
-            data[o[6] : o[7]],
-            h,
-            lba,
-            uba,
-            data[o[10] : o[11]],
-            data[o[11] : o[12]],
+        return {
+            "H_dd": data[o[0] : o[1]].reshape(nD, nD),
+            "H_sd": data[o[1] : o[2]].reshape(nS, nD) if qp.coupled else None,
+            "hessian_values": data[o[2] : o[3]],
+            "C_d": data[o[5] : o[6]].reshape(m, nD),
+            "row_values": data[o[6] : o[7]],
+            "lbv": data[o[10] : o[11]],
+            "ubv": data[o[11] : o[12]],
+        }
+
+    def _solve_qp(self, data, h, lba, uba) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """The QP of one sample's `data` with the vectors h, lba, uba: (dv, lam_a, lam_x, DAQP exit flag)."""
+        p = self.qp_pieces(data)
+        dv, lam_a, lam_x, flag, _ = self.qp_solver.solve(
+            p["H_dd"], p["H_sd"], p["hessian_values"], p["C_d"], p["row_values"], h, lba, uba, p["lbv"], p["ubv"]
         )
         return dv, lam_a, lam_x, flag
 

@@ -8,6 +8,7 @@ real-time iteration along a closed loop, and the previous implementation's recor
 import json
 from pathlib import Path
 
+import casadi as ca
 import daqp
 import numpy as np
 import pytest
@@ -300,3 +301,48 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
         np.testing.assert_array_equal(assembled[0], H)
         np.testing.assert_array_equal(assembled[1], C)
     assert seen == {1, 2, 3}
+
+
+def test_condensing_equals_eliminating_the_states_from_the_stacked_qp():
+    """The prepared QP (condensed by the forward and Riccati-like backward recursions) against the
+    stacked QP of the transcription (Hessian of the objective, Jacobian of the constraints, by
+    CasADi's AD) with the linearized gaps solved for the states by a dense linear solve: the same
+    Hessian, gradient, rows and row bounds, on the pendulum with the soft bound and a rate limit."""
+    _, ocp = pendulum_problem(soft=True, rate=np.array([0.3]))
+    tr = mpc.Transcription(ocp, mpc.MultipleShooting(intervals=30))
+    rti = RealTimeIteration(tr, compiled=False)
+    rng = np.random.default_rng(5)
+    w = rng.normal(scale=0.2, size=tr.layout.size)
+    x0 = X_HAT + rng.normal(scale=0.01, size=4)
+    P = tr.parameter_values(x0, values(x0))
+    data = rti.prepare(w, P)
+    h, lba, uba = (np.asarray(v).ravel() for v in rti.vectors_function(data, x0))
+    p = rti.qp_pieces(data)
+    H, C = rti.qp_solver.whole(p["H_dd"], p["H_sd"], p["hessian_values"], p["C_d"], p["row_values"])
+
+    w_s, P_s, f, g_s = tr.nlp["x"], tr.nlp["p"], tr.nlp["f"], tr.nlp["g"]
+    stacked = ca.Function(
+        "stacked", [w_s, P_s], [ca.hessian(f, w_s)[0], ca.gradient(f, w_s), g_s, ca.jacobian(g_s, w_s)]
+    )
+    Hf, gf, g, J = (np.asarray(ca.densify(v).full()) for v in stacked(w, P))
+    gf, g = gf.ravel(), g.ravel()
+    _, _, lbg, ubg = (np.asarray(v).ravel() for v in ca.Function("bounds", [P_s], list(tr.bounds(P_s)))(P))
+    # Δw = M v + m: the QP's variables v, Δs_0 = x0 / scale - s̄_0, the later states from the gaps.
+    states, first = tr.layout.states[1:].ravel(), tr.layout.states[0]
+    gaps = tr.dynamics_rows.ravel()
+    M, offset = np.zeros((tr.layout.size, len(h))), np.zeros(tr.layout.size)
+    M[rti.qp_variables, np.arange(len(h))] = 1.0
+    offset[first] = x0 / rti.state_scale - w[first]
+    solve = np.linalg.solve(J[np.ix_(gaps, states)], np.eye(len(states)))
+    M[states] = -solve @ J[gaps] @ M
+    offset[states] = -solve @ (g[gaps] + J[gaps] @ offset)
+    np.testing.assert_allclose(H, M.T @ Hf @ M, rtol=1e-10, atol=1e-10 * np.abs(H).max())
+    np.testing.assert_allclose(h, M.T @ (Hf @ offset + gf), rtol=1e-10, atol=1e-10 * np.abs(h).max())
+    rows = rti.row_index
+    assert len(rows) == len(g) - len(gaps) and len(rti.soft_rows) > 0 and len(rti.soft_rows) < len(rows)
+    np.testing.assert_allclose(C, J[rows] @ M, rtol=1e-10, atol=1e-12)
+    moved = g[rows] + J[rows] @ offset
+    finite = np.isfinite(lbg[rows])
+    np.testing.assert_allclose(lba[finite], (lbg[rows] - moved)[finite], rtol=1e-10, atol=1e-10)
+    finite = np.isfinite(ubg[rows])
+    np.testing.assert_allclose(uba[finite], (ubg[rows] - moved)[finite], rtol=1e-10, atol=1e-10)
