@@ -70,8 +70,8 @@ def controllers(name: str, baseline_class):
 
 def compare(name: str, steps: int, baseline_class) -> dict:
     plant, case, current, baseline = controllers(name, baseline_class)
-    cpu = {"current": [], "baseline": []}
-    info = {"current": [], "baseline": []}
+    cpu: dict[str, list[float]] = {"current": [], "baseline": []}
+    info: dict[str, list[dict]] = {"current": [], "baseline": []}
     first_moves = []
 
     class Both:

@@ -599,7 +599,7 @@ class RealTimeIteration:
         pieces = ca.vertsplit(data, list(self._offsets))
         nQ = N * nq
         H_dd_f = ca.reshape(pieces[0], nD, nD).T
-        H_sd_f = ca.reshape(pieces[1], nD, nS).T if coupled else None
+        H_sd_f = ca.reshape(pieces[1], nD, nS).T if coupled else ca.MX(nS, nD)  # structurally zero if not
         H_ss_f = ca.MX(hessian_pattern, pieces[2])
         h_c, H_v0_f = pieces[3], ca.reshape(pieces[4], nQ, nx)
         C_d_f, C_s_f = ca.reshape(pieces[5], nD, m).T, ca.MX(row_pattern, pieces[6])
@@ -615,9 +615,7 @@ class RealTimeIteration:
         vectors = ca.Function("rti_qp_vectors", [data, x0m], [h, lba, uba], ["data", "x0"], ["h", "lba", "uba"])
         dv, lam_a, lam_x = ca.MX.sym("dv", nQ), ca.MX.sym("lam_a", m), ca.MX.sym("lam_x", nQ)
         dv_d, dv_s = dv[:nD], dv[nD:]
-        H_dv = ca.vertcat(H_dd_f @ dv_d, H_ss_f @ dv_s)
-        if coupled:
-            H_dv += ca.vertcat(H_sd_f.T @ dv_s, H_sd_f @ dv_d)
+        H_dv = ca.vertcat(H_dd_f @ dv_d + H_sd_f.T @ dv_s, H_sd_f @ dv_d + H_ss_f @ dv_s)
         C_dv = C_d_f @ dv_d + C_s_f @ dv_s
         stationarity = ca.mmax(ca.fabs(H_dv + h + ca.vertcat(C_d_f.T @ lam_a, C_s_f.T @ lam_a) + lam_x))
         violation = ca.mmax(ca.vertcat(0, lba - C_dv, C_dv - uba, lbv_f - dv, dv - ubv_f))
@@ -639,12 +637,7 @@ class RealTimeIteration:
             ["w_next", "qp"],
         )
         # The whole QP by CasADi's DAQP node in one Function: a second path to the same answer.
-        H_whole = ca.blockcat(
-            [
-                [H_dd_f, H_sd_f.T if coupled else ca.MX(nD, nS)],
-                [H_sd_f if coupled else ca.MX(nS, nD), H_ss_f],
-            ]
-        )
+        H_whole = ca.vertcat(ca.horzcat(H_dd_f, H_sd_f.T), ca.horzcat(H_sd_f, H_ss_f))
         whole = self._qp(nQ, m, "rti_qp")(
             ca.densify(H_whole), h, ca.densify(ca.horzcat(C_d_f, C_s_f)), lba, uba, lbv_f, ubv_f
         )
