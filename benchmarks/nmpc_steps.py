@@ -13,7 +13,7 @@ step of both and their ratio, the preparation and feedback medians (wall
 clock, as `step_info` reports them), the largest feedback time, and the
 largest difference between the two first moves (relative to the input limit).
 
-Run: ``PYTHONPATH=$PWD python benchmarks/nmpc_steps.py [--steps 300] [--against REV] [plant ...]``
+Run: ``PYTHONPATH=$PWD python benchmarks/nmpc_steps.py [--steps 300] [--against REV] [--no-soft] [plant ...]``
 """
 
 from __future__ import annotations
@@ -54,22 +54,22 @@ def baseline_rti(revision: str):
     return module.RealTimeIteration
 
 
-def controllers(name: str, baseline_class):
-    """(plant, case, this tree's NMPC, the baseline's NMPC) of the case `name`."""
+def controllers(name: str, baseline_class, overrides: dict):
+    """(plant, case, this tree's NMPC, the baseline's NMPC) of the case `name`, settings `overrides`."""
     plant, case = models.get(name), studies.get(name)
     known = case.known_plant(plant)
-    current = mpc.nonlinear_mpc(known, case.mpc, tracked=case.tracked)
+    current = mpc.nonlinear_mpc(known, case.mpc, tracked=case.tracked, **overrides)
     original = mpc.nonlinear.RealTimeIteration
     mpc.nonlinear.RealTimeIteration = baseline_class
     try:
-        baseline = mpc.nonlinear_mpc(known, case.mpc, tracked=case.tracked)
+        baseline = mpc.nonlinear_mpc(known, case.mpc, tracked=case.tracked, **overrides)
     finally:
         mpc.nonlinear.RealTimeIteration = original
     return plant, case, current, baseline
 
 
-def compare(name: str, steps: int, baseline_class) -> dict:
-    plant, case, current, baseline = controllers(name, baseline_class)
+def compare(name: str, steps: int, baseline_class, overrides: dict) -> dict:
+    plant, case, current, baseline = controllers(name, baseline_class, overrides)
     cpu: dict[str, list[float]] = {"current": [], "baseline": []}
     info: dict[str, list[dict]] = {"current": [], "baseline": []}
     first_moves = []
@@ -118,17 +118,22 @@ def main(argv=None):
     parser.add_argument("plants", nargs="*", default=list(PLANTS))
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--against", default="HEAD", help="git revision whose mpc/rti.py is the baseline")
+    parser.add_argument("--no-soft", action="store_true", help="without the cases' soft bounds (input bounds only)")
     parser.add_argument("--json", metavar="PATH", help="write the rows as JSON")
     args = parser.parse_args(argv)
     baseline_class = baseline_rti(args.against)
-    print(f"NMPC CPU ms per step (process time), this tree against {args.against}, {args.steps} steps, interleaved")
+    overrides = {"soft_bounds": ()} if args.no_soft else {}
+    print(
+        f"NMPC CPU ms per step (process time), this tree against {args.against}, {args.steps} steps, interleaved"
+        f"{', without soft bounds' if args.no_soft else ''}"
+    )
     print(
         f"{'plant':10s} {'N':>3s} {'base med':>9s} {'base mean':>10s} {'now med':>8s} {'now mean':>9s} "
         f"{'mean x':>7s} {'prep b/n':>13s} {'fb b/n':>13s} {'fb max b/n':>14s} {'|du0|/lim':>10s} {'fails':>6s}"
     )
     rows = []
     for name in args.plants:
-        r = compare(name, args.steps, baseline_class)
+        r = compare(name, args.steps, baseline_class, overrides)
         rows.append(r)
         print(
             f"{name:10s} {r['horizon']:3d} {r['baseline_cpu_median_ms']:9.3f} {r['baseline_cpu_mean_ms']:10.3f} "
