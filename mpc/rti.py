@@ -145,13 +145,15 @@ class SlackFirstQP:
       multiplier has the right sign).
 
     Otherwise the slacks of the violated rows and those with a negative gradient are freed and the
-    restricted QP solved again: at most one QP per slack, the last the whole QP, usually one or
-    two. The first is the QP in the dynamic inputs alone. This replaces solving the whole QP from
-    DAQP's empty working set, where each of the N ns slack bounds that ends up active costs one
-    active-set iteration of O(n²) on all N (nu + ns) variables. Measured on the 306 QPs of a 30 s
-    crane run (N = 80, 240 variables, 320 soft rows; one or two QPs each here): 17 ms on average
-    for DAQP on the whole QP, 1.1 ms for this sequence; the crane's largest feedback time over
-    300 samples fell from 24-70 ms to 2-10 ms (benchmarks/nmpc_steps.py, loaded machine).
+    restricted QP solved again (all of them, the whole QP, once more than half are free): at most
+    one QP per slack, usually one or two. The first is the QP in the dynamic inputs alone.
+
+    This replaces solving the whole QP from DAQP's empty working set, where each of the N ns
+    slack bounds that ends up active costs one active-set iteration of O(n²) on all N (nu + ns)
+    variables. Measured on the 306 QPs of a 30 s crane run (N = 80, 240 variables, 320 soft rows;
+    one or two QPs each here): 17 ms on average for DAQP on the whole QP, 1.1 ms for this
+    sequence; the crane's largest feedback time over 300 samples fell from 24-70 ms to 2-10 ms
+    (benchmarks/nmpc_steps.py, loaded machine).
 
     Without slacks, with slacks that couple with the inputs (H_σd), or with `slack_first` False,
     it is one DAQP call on the whole QP.
@@ -288,6 +290,8 @@ class SlackFirstQP:
             if not free_now.any():
                 return v, lam_a, lam_x, flag, solves
             freed |= free_now
+            if 2 * freed.sum() > nS:  # about the whole QP already: solve it, not a sequence growing to it
+                freed[:] = True
 
 
 class RealTimeIteration:

@@ -270,7 +270,7 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
     rng = np.random.default_rng(7)
     seen = set()
     for trial in range(40):
-        scale, width = [(0.1, 20.0), (3.0, 1.0), (10.0, 1.0)][trial % 3]
+        scale, width = [(0.1, 20.0), (3.0, 1.0), (10.0, 10.0)][trial % 3]
         (H, h, C, lba, uba, lbv, ubv), (H_dd, H_ss, C_d, C_s) = soft_qp(rng, 12, scale, width)
         solver = mpc.rti.SlackFirstQP(
             len(H_dd),
