@@ -23,8 +23,9 @@ objective (the change from the previous stage's answer is within
 `AGREEMENT`, relative) and where the exact nonsmooth loop's objective agrees
 with the smoothed one to `AGREEMENT` with the same specs violated. The choice
 was measured (`python benchmarks/tuning.py --compare`) on the saturating 2 m
-pendulum step against the exact loop in single shooting, which stops at IPOPT's iteration limit because quasi-Newton steps stall on the
-kinks, and multiple shooting of the exact loop, which makes each interval's
+pendulum step against the exact loop in single shooting, which stops at
+IPOPT's iteration limit because quasi-Newton steps stall on the kinks, and
+multiple shooting of the exact loop, which makes each interval's
 gradient local but keeps every kink, adds (n_x + n_c) variables and
 constraints per interval, and was slower to a worse cost. A complementarity
 reformulation needs each switch of each sample as a variable pair with a
