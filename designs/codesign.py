@@ -42,6 +42,7 @@ from models.checks import boolean, integer, positive, real
 
 from .tuning import (
     MAX_ITER,
+    TOL,
     WIDTHS,
     Cost,
     Specs,
@@ -183,7 +184,7 @@ def codesign(
     samples=None,
     robust: str = "mean",
     max_iter: int = MAX_ITER,
-    tol: float = 1e-8,
+    tol: float = TOL,
     jit: bool = False,
     methods: Sequence[str] = METHODS,
     nested_tol: float = 1e-3,
@@ -576,7 +577,7 @@ def size_actuator_simultaneous(
     bounds=None,
     cost_weight: float = 1e-3,
     max_iter: int = MAX_ITER,
-    tol: float = 1e-8,
+    tol: float = TOL,
     jit: bool = False,
     substeps: int = 10,
     widths=WIDTHS,

@@ -17,17 +17,15 @@ Saturation, conditional integration and anti-windup make the closed-loop
 cost piecewise smooth in the gains (its gradient jumps wherever a sample
 enters or leaves a limit). `tune` therefore solves a continuation of smoothed
 problems (`models.smooth`: every switch blended over a band of relative width
-w, w = 0.1, 0.01, ..., each solve warm-started from the last; the criteria's
-|e| is blended over w |e_0| the same way, since its kinks where e changes
-sign stall the search as much) and stops when
+w, w = 0.01, 0.001, ..., each solve warm-started from the last) and stops when
 IPOPT has converged on a stage whose answer no longer moves the exact
 objective (the change from the previous stage's answer is within
 `AGREEMENT`, relative) and where the exact nonsmooth loop's objective agrees
-with the smoothed one to `AGREEMENT` with the same specs violated. The choice was
-measured (`docs/codesign.md`, "Tuning through saturation"; `benchmarks/tuning.py`) on
-the saturating 2 m pendulum step against the exact loop in single shooting,
-which stops at IPOPT's iteration limit because quasi-Newton steps stall on the
-kinks, and multiple shooting of the exact loop, which makes each interval's
+with the smoothed one to `AGREEMENT` with the same specs violated. The choice
+was measured (`python benchmarks/tuning.py --compare`) on the saturating 2 m
+pendulum step against the exact loop in single shooting, which stops at
+IPOPT's iteration limit because quasi-Newton steps stall on the kinks, and
+multiple shooting of the exact loop, which makes each interval's
 gradient local but keeps every kink, adds (n_x + n_c) variables and
 constraints per interval, and was slower to a worse cost. A complementarity
 reformulation needs each switch of each sample as a variable pair with a
@@ -35,6 +33,12 @@ complementarity constraint, which IPOPT handles only through a relaxation
 driven to zero, the same continuation on a problem a thousand times larger,
 and needs every switch exposed by the blocks, which write them inside their
 CasADi step: not measured, for that reason.
+
+Only the switches are blended, not the criteria's |e|: blending |e| over
+w |e_0| as well (tried) biased the settled tail, so the smoothed and exact
+objectives agreed only to about 20 w and the continuation had to go below
+w = 1e-5, where IPOPT stalled. The criteria carry their own fixed resolution
+instead (`Cost.resolution`), part of the objective's definition.
 """
 
 from __future__ import annotations
@@ -57,13 +61,18 @@ ROBUST = ("mean", "worst")
 METHODS = ("smooth", "exact")
 HESSIANS = ("limited-memory", "exact")
 #: Relative smoothing widths of the continuation (see `models.smooth`), largest first.
-WIDTHS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+WIDTHS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 #: The continuation stops when the exact and smoothed objectives agree to this, relative.
 AGREEMENT = 1e-6
 #: IPOPT statuses that mean it converged (to `tol`, or to 100 `tol` held for 10 iterations).
 CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: IPOPT iterations per solve: a safety cap, not the stopping rule (a stop here is reported).
 MAX_ITER = 3000
+#: IPOPT's default convergence tolerance here (scaled NLP error). Measured on the saturating 2 m
+#: pendulum step (`benchmarks/tuning.py`): with 1e-8 the third stage (width 1e-4) stopped at the
+#: 3000-iteration cap, its L-BFGS steps stalled on the narrow blends; with 1e-6 every stage
+#: converged (104 iterations in all), at an exact objective equal to Nelder-Mead's to 1e-7.
+TOL = 1e-6
 #: IPOPT options of every solve (`tol` sets tol and acceptable_tol = 100 tol).
 IPOPT_OPTIONS = {"print_level": 0, "sb": "yes", "acceptable_iter": 10}
 #: IPOPT statuses of a numerical failure, retried once from the failed solve's last point.
@@ -174,8 +183,14 @@ class Cost:
     signal : what the criterion measures: "error" (reference − tracked coordinate), or the
         name of a state, output or input (measured from its target)
     energy_weight : weight (>= 0) on Σ u² Ts
-    smoothing : |s| is evaluated as sqrt(s² + smoothing²) so the cost is differentiable;
-        in units of the signal (> 0)
+    smoothing, resolution : |s| is evaluated as sqrt(s² + δ²), δ = max(smoothing, resolution × S),
+        so the criterion is differentiable with a curvature a quasi-Newton method can follow;
+        `smoothing` in units of the signal (> 0), `resolution` relative (>= 0) to the signal's
+        scale S (its size at the start, or the reference's largest change for "error"; 0 where
+        both are zero). The criterion exceeds the exact Σ w|s| Ts by at most δ Σ w Ts (ITAE:
+        δ T² / 2). Measured on the saturating 2 m pendulum step: with δ = 1e-6 m IPOPT stalls on
+        the sign changes of the settled error (each a kink of curvature 1/δ) without meeting its
+        tolerance; with resolution 1e-4 (δ = 0.2 mm) it converges in about 100 iterations.
     state_weights, output_weights, input_weights, terminal_weights : Q, Q_y, R and P: a
         symmetric positive semidefinite matrix, a vector of its diagonal, or a dict
         name -> weight (diagonal, the others zero); None for no term
@@ -188,6 +203,7 @@ class Cost:
     kind: str | None = "itae"
     energy_weight: float = 0.0
     smoothing: float = 1e-6
+    resolution: float = 1e-4
     signal: str = "error"
     state_weights: object = None
     input_weights: object = None
@@ -203,6 +219,9 @@ class Cost:
         if not np.isfinite(weight) or weight < 0:
             raise ValueError(f"energy_weight must be finite and >= 0, got {self.energy_weight}")
         positive(self.smoothing, "smoothing")
+        resolution = real(self.resolution, "resolution", finite=False)
+        if not np.isfinite(resolution) or resolution < 0:
+            raise ValueError(f"resolution must be finite and >= 0, got {self.resolution}")
         if not isinstance(self.signal, str):
             raise TypeError(f"signal must be 'error' or a state, output or input name, got {self.signal!r}")
         terms = (self.kind, self.state_weights, self.input_weights, self.output_weights, self.terminal_weights)
@@ -404,7 +423,7 @@ class _Run:
     input_target: np.ndarray
     weights: dict
     label: str
-    signal_size: float = 1.0
+    signal_size: float = 0.0
 
 
 def _scenarios(value) -> tuple[Scenario, ...]:
@@ -612,10 +631,10 @@ class TuningProblem:
             default_target[k] = r[-1, 0]
         target = _named_vector(cost.target, plant.state_names, default_target, "target")
         input_target = _named_vector(cost.input_target, plant.input_names, np.zeros(plant.nu), "input_target")
-        size = 0.0  # the criterion signal's size at the start (inputs: unknown before the run)
+        size = 0.0  # the criterion signal's scale (see Cost.resolution; inputs: unknown before the run)
         if cost.kind is not None:
             if cost.signal == "error":
-                size = abs(r[0, 0] - x0[k])
+                size = max(abs(r[0, 0] - x0[k]), float(np.max(np.abs(r[:, 0] - r[0, 0]))))
             elif cost.signal in plant.state_names:
                 i = plant.state_names.index(cost.signal)
                 size = abs(x0[i] - target[i])
@@ -638,7 +657,7 @@ class TuningProblem:
             input_target,
             weights,
             label,
-            float(size) if size > 0 else 1.0,
+            float(size),
         )
 
     def _params(self, j: int, param_index) -> ca.MX:
@@ -734,12 +753,7 @@ class TuningProblem:
         return ca.vertcat(*rows), g, u_runs, lbg, ubg, names
 
     def _cost(self, run: _Run, states: ca.MX, U: ca.MX, p, width=None) -> ca.MX:
-        """The scenario's cost of one run: states (nx, N+1), commands U (nu, N).
-
-        With a smoothing `width` (the continuation's), |s| of the criterion is blended over
-        width × |s_0| as well (|s_0| the criterion signal's initial size, 1 where it is zero):
-        its kinks where s changes sign are the same obstacle as a saturation's.
-        """
+        """The scenario's cost of one run: states (nx, N+1), commands U (nu, N)."""
         plant, cost, n = self.plant, run.cost, run.n
         ts = self.block.sample_period
         X = states[:, :n]
@@ -768,10 +782,8 @@ class TuningProblem:
             if cost.kind == "ise":
                 per_sample = s**2
             else:
-                floor = cost.smoothing**2
-                if width is not None:
-                    floor = floor + (width * run.signal_size) ** 2
-                per_sample = ca.sqrt(s**2 + floor)
+                floor = max(cost.smoothing, cost.resolution * run.signal_size)
+                per_sample = ca.sqrt(s**2 + floor**2)
                 if cost.kind == "itae":
                     per_sample = ca.DM(run.t[:-1]).T * per_sample
             total += ts * ca.sum2(per_sample)
@@ -912,7 +924,7 @@ def tune(
     bounds=None,
     substeps: int = 10,
     max_iter: int = MAX_ITER,
-    tol: float = 1e-8,
+    tol: float = TOL,
     hessian: str = "limited-memory",
     jit: bool = False,
     progress=None,
@@ -1017,7 +1029,7 @@ def solve(
     max_iter: int = MAX_ITER,
     jit: bool = False,
     plant_cost=None,
-    tol: float = 1e-8,
+    tol: float = TOL,
     hessian: str = "limited-memory",
     progress=None,
     method: str = "smooth",

@@ -17,6 +17,10 @@ row. Code that calls CasADi in a loop
   (raises KeyboardInterrupt if a counted SIGINT was never delivered);
 - re-raises in every ``except Exception`` around a CasADi call:
   ``if is_interrupt(err): raise KeyboardInterrupt from err``.
+
+A command that must stop as cleanly on SIGTERM (``kill``, a job scheduler)
+calls `terminate_as_interrupt()`: SIGTERM then becomes a SIGINT to the same
+process, and `terminated()` tells the exit status apart (143 instead of 130).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from collections.abc import Iterator
 
 _received = 0
 _handled = 0
+_terminated = False
 
 
 def _count(signum, frame) -> None:
@@ -113,3 +118,23 @@ def is_interrupt(err: BaseException) -> bool:
     if found:
         clear()
     return found
+
+
+def _terminate(signum, frame) -> None:
+    global _terminated
+    _terminated = True
+    signal.raise_signal(signal.SIGINT)
+
+
+def terminate_as_interrupt() -> bool:
+    """Handle SIGTERM as a SIGINT from now on (main thread, where SIGTERM still has its default
+    action); True when it does. `terminated()` says whether one arrived."""
+    if _in_main_thread() and signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, _terminate):
+        signal.signal(signal.SIGTERM, _terminate)
+        return True
+    return False
+
+
+def terminated() -> bool:
+    """Whether a SIGTERM arrived since `terminate_as_interrupt()` (the exit status is then 143)."""
+    return _terminated

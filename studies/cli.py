@@ -633,6 +633,7 @@ def main(argv=None) -> int:
     staging = writers.new_staging(args.out, run_id)
     progress = Progress(progress_slots(plants, scenarios, settings), disable=args.quiet)
     interrupts.watch()
+    interrupts.terminate_as_interrupt()  # kill / a scheduler's SIGTERM: stop as on Ctrl-C, workers included
     published = False
     try:
         with connect(args.scheduler, args.workers) as executor:
@@ -670,7 +671,7 @@ def main(argv=None) -> int:
             ),
             file=sys.stderr,
         )
-        return 130
+        return 143 if interrupts.terminated() else 130
     finished = sorted(finished, key=lambda d: registered.index(d["name"]))
     for done in finished:
         if done["answers"]:

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 import models
-from designs.tuning import CONVERGED, MAX_ITER, Cost, Scenario, Specs, TuningProblem, tune
+from designs.tuning import CONVERGED, MAX_ITER, TOL, Cost, Scenario, Specs, TuningProblem, tune
 from models import files, metrics
 
 from . import cases
@@ -265,6 +265,7 @@ def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progr
             "improvement": result.improvement,
             "feasible": result.feasible,
             "status": result.status,
+            "tol": TOL,
             "converged": result.converged,
             "method": result.method,
             "stages": result.stages,

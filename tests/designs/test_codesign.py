@@ -229,13 +229,15 @@ def _arm_saturation_pd(plant):
     return ArmPD(plant, kp=kp, kd=kd)
 
 
-def _meets(arm, limit, block):
+def _meets(arm, limit, block, tol=1e-6):
+    """The rise-time and overshoot specs on a fresh simulation, to `tol` of the step (an optimal
+    design sits on a spec's edge, which IPOPT holds to its constraint tolerance)."""
     plant = arm.with_input_limit(limit)
     res = models.simulate_closed_loop(plant, block, np.deg2rad(50), 3.0)
     assert np.max(np.abs(res.u)) <= limit * (1 + 1e-12)
-    theta = res.state("theta")
+    theta = res.state("theta") / np.deg2rad(50)
     risen = np.flatnonzero(res.t >= 0.8)
-    return bool(np.all(theta[risen] >= 0.9 * np.deg2rad(50)) and np.max(theta) <= 1.05 * np.deg2rad(50))
+    return bool(np.all(theta[risen] >= 0.9 - tol) and np.max(theta) <= 1.05 + tol)
 
 
 def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
@@ -267,11 +269,6 @@ def test_a_decided_limit_is_the_same_loop_as_a_block_built_for_it():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    run=False,
-    reason="issue 16 open: the nested sizing's inner tunings do not all converge yet (some stop at the iteration "
-    "cap), so 'converged' is false; not run (minutes each) until the continuation's stopping rule is reworked",
-)
 def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")

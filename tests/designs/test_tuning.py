@@ -221,11 +221,13 @@ def test_a_violated_spec_reports_its_excess_from_a_fresh_simulation(arm):
 
 # ----------------------------------------------------------------- through saturation
 def _itae_by_simulation(plant, block, reference, duration, energy_weight=0.0, **kwargs):
-    """ITAE (+ energy) of a fresh `simulate_closed_loop` run, in numpy: Ts Σ t_k |r − θ_k| over k = 0..N-1."""
+    """ITAE (+ energy) of a fresh `simulate_closed_loop` run, in numpy: Ts Σ t_k |r − θ_k| over k = 0..N-1,
+    |e| as sqrt(e² + δ²) with Cost's default δ = max(1e-6, 1e-4 |step|) (the step from rest at 0)."""
     run = models.simulate_closed_loop(plant, block, reference, duration, **kwargs)
     ts = block.sample_period
     e = run.r[:-1, 0] - run.x[:-1, 0]
-    return ts * (np.sum(run.t[:-1] * np.sqrt(e**2 + 1e-12)) + energy_weight * np.sum(run.u**2)), run
+    delta = max(1e-6, 1e-4 * abs(reference))
+    return ts * (np.sum(run.t[:-1] * np.sqrt(e**2 + delta**2)) + energy_weight * np.sum(run.u**2)), run
 
 
 def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agree(arm):

@@ -114,10 +114,10 @@ def alive(pids: set) -> set:
     return running
 
 
-def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str) -> tuple:
+def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str, sent_signal=signal.SIGINT) -> tuple:
     """Start `python -m studies` on the arm (and the UUV with 2 jobs), wait until a nonlinear MPC run
-    started, send SIGINT `offset` seconds later. Returns (exit code, seconds to stop, stderr, processes
-    it started that are still running)."""
+    started, send `sent_signal` (SIGINT) `offset` seconds later. Returns (exit code, seconds to stop,
+    stderr, processes it started that are still running)."""
     plants = ["arm"] if jobs == 1 else ["arm", "uuv"]
     log = workdir / f"stderr-{tag}.txt"
     with open(log, "w") as stream:
@@ -153,7 +153,7 @@ def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str) -> tuple:
             time.sleep(0.05)
         time.sleep(offset)
         children = descendants(process.pid)
-        process.send_signal(signal.SIGINT)
+        process.send_signal(sent_signal)
         sent = time.monotonic()
         code = process.wait(timeout=120)
         delay = time.monotonic() - sent
@@ -166,9 +166,9 @@ def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str) -> tuple:
         log.unlink()
 
 
-def assert_interrupted_cleanly(workdir: Path, before: dict, outcome: tuple, what: str) -> None:
+def assert_interrupted_cleanly(workdir: Path, before: dict, outcome: tuple, what: str, status: int = 130) -> None:
     code, delay, err, left = outcome
-    assert code == 130, f"{what}: exit {code}\n{err[-3000:]}"
+    assert code == status, f"{what}: exit {code}\n{err[-3000:]}"
     assert "python -m studies: interrupted; nothing of this run was written to out" in err, err[-3000:]
     assert delay < 30.0, f"{what}: stopped {delay:.1f} s after the signal"
     assert not left, f"{what}: processes of the run still running: {left}"
@@ -181,6 +181,15 @@ def test_ctrl_c_during_a_nonlinear_mpc_row_stops_the_run_and_writes_nothing(work
     before = previous_run(workdir / "out")
     outcome = interrupted_run(workdir, 0.4, 1, "one")
     assert_interrupted_cleanly(workdir, before, outcome, "offset 0.4 s, one job")
+
+
+@pytest.mark.slow
+def test_sigterm_with_two_jobs_ends_the_workers_and_writes_nothing(workdir):
+    """SIGTERM (kill, a job scheduler) to the command while two worker processes run plants: it ends
+    them as on Ctrl-C, leaves the earlier files, and exits 143 (128 + SIGTERM)."""
+    before = previous_run(workdir / "out")
+    outcome = interrupted_run(workdir, 0.4, 2, "term", signal.SIGTERM)
+    assert_interrupted_cleanly(workdir, before, outcome, "SIGTERM, two jobs", status=143)
 
 
 @pytest.mark.slow

@@ -153,11 +153,6 @@ def test_a_case_without_stored_gains_has_no_tuned_row():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=False,
-    reason="issue 16 open: after the merges (tuning compiled through models.compile) re-tuning the arm did not "
-    "reproduce its stored cost to 1e-3 once in this stop's run; cause not yet found",
-)
 def test_retuning_the_arm_reproduces_its_stored_record(records):
     fresh = tuner.tune_case(studies.get("arm"))
     assert fresh["tuning"]["cost"] == pytest.approx(records["arm"]["tuning"]["cost"], rel=1e-3)
