@@ -255,9 +255,10 @@ def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agre
     )
     assert float(smoothed) == pytest.approx(exact, rel=AGREEMENT)
     assert result.cost == pytest.approx(exact, rel=1e-9)
-    # Stopped because the last two widths gave the same exact cost, not because the widths ran out.
-    assert len(result.stages) >= 2
-    assert result.stages[-1]["exact"] == pytest.approx(result.stages[-2]["exact"], rel=AGREEMENT)
+    # Stopped on the rule, not because the widths ran out: the last two widths gave the same exact cost,
+    # or the last answer has every switch outside its band (smoothed and exact costs equal).
+    last = result.stages[-1]
+    assert last["gap"] == 0.0 or last["exact"] == pytest.approx(result.stages[-2]["exact"], rel=AGREEMENT)
     assert all(stage["status"] == "Solve_Succeeded" for stage in result.stages)
 
 
