@@ -454,9 +454,7 @@ class RealTimeIteration:
             "rti_backward",
             [Yn, Gk, Gn, Am, Bm, Em, Hm, gm],
             [
-                ca.horzcat(
-                    Hm[sx, sx] + Am.T @ P_next @ Am, Hm[sx, sx] @ offset + gm[sx] + Am.T @ lam_next
-                ),
+                ca.horzcat(Hm[sx, sx] + Am.T @ P_next @ Am, Hm[sx, sx] @ offset + gm[sx] + Am.T @ lam_next),
                 ca.horzcat(row[:, :nx], gradient_d, row[:, nx + 1 :]),
                 ca.horzcat(Hm[ss, sx] @ Gk + Hm[ss, sd] @ Em if coupled else ca.MX(nst, nz), gm[ss]),
             ],
