@@ -244,6 +244,8 @@ def test_specs_the_scenario_cannot_judge_are_refused(arm, monkeypatch, scenario,
         (lambda: Cost(energy_weight=math.nan), ValueError, "energy_weight must be finite and >= 0, got nan"),
         (lambda: Cost(energy_weight=-1.0), ValueError, "energy_weight must be finite and >= 0, got -1.0"),
         (lambda: Cost(smoothing=0.0), ValueError, "smoothing must be a finite number > 0, got 0.0"),
+        (lambda: Cost(resolution=-1e-4), ValueError, "resolution must be finite and >= 0, got -0.0001"),
+        (lambda: Cost(resolution=math.inf), ValueError, "resolution must be finite and >= 0, got inf"),
         (lambda: Cost(kind=None), ValueError, "the cost has no term"),
     ],
 )
