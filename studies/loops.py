@@ -9,7 +9,7 @@ With the plant linearized about the same point and discretized with a zero-order
 hold at the controller's sample period (exact), the loop broken at the plant
 input (or, for a `models.Cascade`, at the inner loop's reference) is a discrete
 state-space system L(z) with the convention that the closed loop is
-1 + L(z) = 0 (negative feedback), as `control.stability_margins` assumes.
+1 + L(z) = 0 (negative feedback), as `designs.analysis.margins` and `control.stability_margins` assume.
 
 This is for plots and margins only: the study tables come from the nonlinear
 simulation. The operating point is where the closed loop comes to rest under
@@ -142,10 +142,9 @@ class LoopGain:
     def margins(self) -> dict:
         """Gain margin (dB), phase margin (deg) and their crossover frequencies (rad/s).
 
-        python-control's `stability_margins` of the discrete loop's state space
-        (through `designs.analysis.margins`, the one margins computation): with
-        several crossings the smallest margin is reported; inf and nan when a
-        crossover does not exist.
+        `designs.analysis.margins` of the discrete loop's state space (the one
+        margins computation): with several crossings the smallest margin is
+        reported; inf and nan when a crossover does not exist.
         """
         m = an.margins(self.system())
         return {

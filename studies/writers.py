@@ -522,7 +522,8 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
                 [("controller", "controller", format_number), ("loop", "loop", format_number)]
                 + [(k, k.replace("_", " "), format_number) for k in keys + extra],
             ),
-            "Margins from `control.stability_margins` of the discrete loop L(z) (closed loop 1 + L = 0); "
+            "Margins of the discrete loop L(z) (`designs.analysis.margins`: crossings of the exact "
+            "L(e^{jωTs}) located on a grid and refined; closed loop 1 + L = 0); "
             "slowest pole: largest real part of s = ln(z)/Ts of the closed loop.",
             "",
         ]

@@ -119,6 +119,53 @@ def test_margins_of_a_type_one_loop():
     assert m["gm"] == np.inf
 
 
+def test_margins_of_a_sampled_type_one_loop_in_closed_form():
+    # L(z) = k Ts / (z − 1): |L| = k Ts / (2 sin(ω Ts / 2)), ∠L = −90° − ω Ts / 2, so
+    # ω_c = (2 / Ts) asin(k Ts / 2), PM = 90° − ω_c Ts / 2; L(−1) = −k Ts / 2, GM = 2 / (k Ts) at π/Ts,
+    # the grid's end (0.999 π/Ts), so none is found.
+    k, ts = 20.0, 0.01
+    m = margins(control.tf([k * ts], [1.0, -1.0], ts))
+    wc = 2 / ts * np.arcsin(k * ts / 2)
+    assert m["gain_crossover"] == pytest.approx(wc, rel=1e-10)
+    assert m["pm_deg"] == pytest.approx(90 - np.degrees(wc * ts / 2), rel=1e-10)
+    assert m["gm"] == np.inf
+    # Its state space gives the same.
+    assert margins(control.ss(control.tf([k * ts], [1.0, -1.0], ts)))["pm_deg"] == pytest.approx(m["pm_deg"], rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_sampled_margins_against_a_dense_scan_and_python_control(seed):
+    """Random stable sampled loops: the margins against a 400,000-point linear scan of L(e^{jωTs})
+    (a second method), and against python-control's spline-based 'frd' method where it finds the same
+    crossing."""
+    ts = 0.01
+    rng = np.random.default_rng(seed)
+    np.random.seed(seed)  # control.drss draws from numpy's global generator
+    G = control.drss(int(rng.integers(2, 9)), 1, 1, dt=ts)
+    L = control.ss(G.A, G.B, G.C, G.D, ts) * float(10 ** rng.uniform(-1, 2))
+    ours = margins(L)
+    w = np.linspace(0, np.pi / ts, 400_001)[:-1]
+    values = L(np.exp(1j * w * ts)).ravel()
+    i = np.flatnonzero(np.diff(np.sign(np.abs(values) - 1)))
+    pms = np.remainder(np.angle(values[i], deg=True), 360) - 180
+    j = np.flatnonzero(np.diff(np.sign(values.imag)))
+    j = j[values.real[j] < 0]
+    gms = 1 / np.abs(values[np.r_[[0] if values.real[0] < 0 else [], j].astype(int)])
+    scan_pm = pms[np.argmin(np.abs(pms))] if pms.size else np.inf
+    scan_gm = gms[np.argmin(np.abs(np.log(gms)))] if gms.size else np.inf
+    assert ours["pm_deg"] == pytest.approx(scan_pm, rel=1e-3, abs=1e-3)
+    assert ours["gm"] == pytest.approx(scan_gm, rel=1e-3)
+    if np.isfinite(ours["gain_crossover"]):
+        at = L(np.exp(1j * ours["gain_crossover"] * ts))
+        assert abs(at) == pytest.approx(1.0, rel=1e-10)
+    if np.isfinite(ours["phase_crossover"]) and ours["phase_crossover"] > 0:
+        at = complex(L(np.exp(1j * ours["phase_crossover"] * ts)))
+        assert at.real < 0 and abs(at.imag) < 1e-10 * abs(at)
+    gm, pm, _, _, wgc, _ = control.stability_margins(L, method="frd")
+    if np.isfinite(wgc) and np.isclose(wgc, ours["gain_crossover"], rtol=1e-3):
+        assert ours["pm_deg"] == pytest.approx(pm, rel=1e-5, abs=1e-5)
+
+
 def test_step_response_and_overshoot_of_a_second_order_loop():
     zeta, wn = 0.4, 3.0
     T = tf([wn**2], [1.0, 2 * zeta * wn, wn**2])

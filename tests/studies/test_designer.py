@@ -69,13 +69,28 @@ def test_the_verdict_names_the_overshoot_exactly_when_the_run_exceeds_the_bound(
     assert seen == {True, False}, "the two gains should fall on both sides of the overshoot bound"
 
 
-def test_margins_agree_with_python_control_on_the_arm_uuv_and_pendulum(arm):
+def test_margins_hold_on_the_loops_frequency_response_on_the_arm_uuv_and_pendulum(arm):
+    """The page's margins against L(e^{jωTs}) computed here by a second method (z I − A solved per
+    frequency): |L| = 1 at the gain crossover, the phase margin 180° + ∠L there; L real and negative at
+    the phase crossover (at ω = 0 too: an open-loop unstable arm's lower gain margin), gm = 1/|L|."""
     for session in (arm, designer.Designer.for_case("uuv", "PID"), designer.Designer.for_case("pendulum", "PD")):
         block = session.block_for()
-        loop = session.loop_gain(block, session.simulate(block, "step"))
-        ours, theirs = designer.loop_margins(loop, session.omega), loop.margins()
-        for key in ("gain_margin_db", "phase_margin_deg", "phase_crossover_rad_s", "gain_crossover_rad_s"):
-            assert ours[key] == pytest.approx(theirs[key], rel=1e-5), (session.case.plant, key)
+        run = session.simulate(block, "step")
+        loop = session.loop_gain(block, run)
+        ours = session.update({}).margins
+        ts, A, B, C = loop.sample_period, loop.A, loop.B, loop.C
+
+        def L(w, ts=ts, A=A, B=B, C=C):
+            return complex((C @ np.linalg.solve(np.exp(1j * w * ts) * np.eye(A.shape[0]) - A, B))[0, 0])
+
+        wgc, wpc = ours["gain_crossover_rad_s"], ours["phase_crossover_rad_s"]
+        assert np.isfinite(wgc), session.case.plant
+        assert abs(L(wgc)) == pytest.approx(1.0, rel=1e-9)
+        assert ours["phase_margin_deg"] == pytest.approx((np.degrees(np.angle(L(wgc))) + 360) % 360 - 180, abs=1e-6)
+        if np.isfinite(ours["gain_margin_db"]):
+            value = L(wpc)
+            assert value.real < 0 and abs(value.imag) <= 1e-9 * abs(value), session.case.plant
+            assert ours["gain_margin_db"] == pytest.approx(-20 * np.log10(abs(value)), rel=1e-9)
 
 
 def test_root_locus_at_unit_gain_is_the_closed_loop_of_the_update(arm):
