@@ -65,17 +65,13 @@ import models
 from models import interrupts
 from models.checks import integer, positive
 
-from .qp_fast import DAQP_STATUS
+from .qp_fast import DAQP_STATUS, PRIMAL_TOLERANCE
 from .transcription import Transcription
 
 #: Compiler flags of the generated phases: models.compile's -O3 -march=native. Measured on the pendulum
 #: (N = 50, a loaded 2-core machine): the preparation 1.7x faster than with -O1 (0.31 against 0.53 ms,
 #: interleaved), its first compile 2x longer (99 against 54 s; cached afterwards).
 COMPILE_FLAGS = models.compile.FLAGS
-
-#: DAQP's tolerance on constraint violation (its default, 1e-6, moved first moves by 1e-3 N where the
-#: cost is flat along an active bound: pendulum, mid-swing).
-PRIMAL_TOLERANCE = 1e-10
 
 #: Largest QP residual (stationarity and bound violation, in scaled units) a solve may leave.
 QP_TOLERANCE = 1e-6
