@@ -19,7 +19,6 @@ angle, that is rad per 100 N m, as the text's questions count it).
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import asdict, dataclass, field
 
 import control
@@ -50,6 +49,7 @@ __all__ = [
     "margins",
     "crossover_margins",
     "discrete_grid",
+    "sampled_response",
     "bode_data",
     "step_info",
     "step_response",
@@ -483,6 +483,14 @@ def crossover_margins(response, omega, values=None) -> dict:
 SLOWEST = 1e-6
 
 
+def sampled_response(A, B, C, D, sample_period: float, omega) -> np.ndarray:
+    """C (zI − A)⁻¹ B + D at z = e^{jωTs} of a SISO sampled state space: complex (F,) at omega (F,) rad/s."""
+    omega = np.asarray(omega, dtype=float)
+    z = np.exp(1j * omega * sample_period)
+    rhs = np.broadcast_to(np.asarray(B, dtype=complex), (len(z), *np.shape(B)))
+    return (C @ np.linalg.solve(z[:, None, None] * np.eye(np.shape(A)[0]) - A, rhs))[:, 0, 0] + np.asarray(D)[0, 0]
+
+
 def discrete_grid(poles_zeros, sample_period: float, points_per_decade: int = 200) -> np.ndarray:
     """A grid (rad/s) below the Nyquist frequency for a sampled loop's crossings.
 
@@ -538,12 +546,9 @@ def margins(L) -> dict:
             features = np.concatenate([np.roots(num), poles])
         else:
             A, B, C, D = (np.asarray(m, dtype=float) for m in (L.A, L.B, L.C, L.D))
-            eye = np.eye(A.shape[0])
 
             def response(w):
-                z = np.exp(1j * w * ts)
-                rhs = np.broadcast_to(B.astype(complex), (len(z), *B.shape))
-                return (C @ np.linalg.solve(z[:, None, None] * eye - A, rhs))[:, 0, 0] + D[0, 0]
+                return sampled_response(A, B, C, D, ts, w)
 
             poles = np.linalg.eigvals(A)
             # Transmission zeros: the finite generalized eigenvalues of ([[A, B], [C, D]], diag(I, 0)).
@@ -558,9 +563,7 @@ def margins(L) -> dict:
         if np.any(near_one):
             grid = grid[1:]  # a pole at z = 1 (an integrator): L(1) is infinite, not a phase crossover
         return crossover_margins(response, grid)
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="stability_margins: Falling back", category=UserWarning)
-        gm, pm, _, w_pc, w_gc, _ = control.stability_margins(L)
+    gm, pm, _, w_pc, w_gc, _ = control.stability_margins(L)
     gm = float(gm)
     return {
         "gm": gm,

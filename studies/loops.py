@@ -132,12 +132,7 @@ class LoopGain:
 
     def frequency_response(self, omega) -> np.ndarray:
         """L(e^{jωTs}) at the frequencies `omega` (rad/s), complex (len(omega),)."""
-        omega = np.asarray(omega, dtype=float)
-        z = np.exp(1j * omega * self.sample_period)
-        n = self.A.shape[0]
-        stacked = z[:, None, None] * np.eye(n) - self.A
-        rhs = np.broadcast_to(self.B.astype(complex), (len(z), n, self.B.shape[1]))
-        return (self.C @ np.linalg.solve(stacked, rhs))[:, 0, 0]
+        return an.sampled_response(self.A, self.B, self.C, np.zeros((1, 1)), self.sample_period, omega)
 
     def margins(self) -> dict:
         """Gain margin (dB), phase margin (deg) and their crossover frequencies (rad/s).
