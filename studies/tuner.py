@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 import models
-from designs.tuning import CONVERGED, MAX_ITER, TOL, Cost, Scenario, Specs, TuningProblem, tune
+from designs.tuning import CONVERGED, MAX_ITER, TOL, WIDTHS, Cost, Scenario, Specs, TuningProblem, tune
 from models import files, metrics
 
 from . import cases
@@ -216,8 +216,11 @@ def specs_from_record(record: dict) -> dict:
     }
 
 
-def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progress=None) -> dict:
-    """Tune the case's hand design, validate on fresh samples; the record its stored-gains file keeps."""
+def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progress=None, widths=WIDTHS) -> dict:
+    """Tune the case's hand design, validate on fresh samples; the record its stored-gains file keeps.
+
+    widths : the smoothing continuation's widths (`designs.tuning.tune`), stored in the record
+    """
     started = time.perf_counter()
     block = hand_design(case)
     train, chosen = tuning_samples(case)
@@ -237,6 +240,7 @@ def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progr
         max_iter=max_iter,
         jit=jit,
         progress=progress,
+        widths=widths,
     )
     record = {
         "plant": case.plant,
@@ -266,6 +270,7 @@ def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progr
             "feasible": result.feasible,
             "status": result.status,
             "tol": TOL,
+            "widths": [float(w) for w in widths],
             "converged": result.converged,
             "method": result.method,
             "stages": result.stages,
@@ -360,6 +365,17 @@ def write(case: CaseStudy, record: dict, folder: Path = STORE_DIR) -> Path:
     return files.write_json(Path(folder) / store_name(case), record)
 
 
+def _widths(text: str) -> tuple[float, ...]:
+    """--widths: comma-separated numbers > 0, strictly decreasing."""
+    try:
+        values = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"widths must be comma-separated numbers, got {text!r}") from None
+    if not all(0 < v < float("inf") for v in values) or any(b >= a for a, b in zip(values, values[1:])):
+        raise argparse.ArgumentTypeError(f"widths must be numbers > 0, strictly decreasing, got {text!r}")
+    return values
+
+
 def main(argv=None) -> int:
     names = [n for n in cases.names() if cases.get(n).classical is not None]
     parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
@@ -374,6 +390,13 @@ def main(argv=None) -> int:
         "--validate", action="store_true", help="re-validate the stored gains on the fresh samples, without tuning"
     )
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
+    parser.add_argument(
+        "--widths",
+        type=_widths,
+        default=WIDTHS,
+        help="the smoothing continuation's widths, comma-separated, strictly decreasing (default "
+        f"{','.join(f'{w:g}' for w in WIDTHS)}; the pendulum and the satellite start at 0.1)",
+    )
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in names]
     if unknown:
@@ -391,7 +414,7 @@ def main(argv=None) -> int:
             record = record | {"validation": validate(case, record)}
         else:
             print(f"tuning {name} ...", flush=True)
-            record = tune_case(case, args.max_iter, not args.no_jit, progress=_report_every(10))
+            record = tune_case(case, args.max_iter, not args.no_jit, progress=_report_every(10), widths=args.widths)
         write(case, record)
         t, v = record["tuning"], record["validation"]
         if t["status"] not in CONVERGED or not t["converged"]:

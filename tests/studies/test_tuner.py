@@ -13,7 +13,7 @@ import pytest
 
 import models
 import studies
-from designs.tuning import AGREEMENT, CONVERGED
+from designs.tuning import AGREEMENT, CONVERGED, WIDTHS
 from models import metrics
 from studies import tuner
 
@@ -115,6 +115,9 @@ def test_stored_record_is_consistent_and_converged(name, records):
     assert all(stage["status"] in CONVERGED for stage in tuning["stages"])
     assert tuning["smoothing_gap"] <= AGREEMENT and "Maximum_Iterations" not in tuning["message"]
     assert tuning["stages"][-1]["exact"] == pytest.approx(tuning["cost"], rel=1e-9)
+    # The stages ran the recorded widths in order (the default ones where none are recorded).
+    widths = tuning.get("widths", list(WIDTHS))
+    assert [stage["width"] for stage in tuning["stages"]] == widths[: len(tuning["stages"])]
     assert validation["tuned_mean"] < validation["hand_mean"] and not validation["tuned_violations"]
     assert validation["seed"] == tuner.VALIDATION_SEED != tuner.TUNING_SEED
     assert CHECK_SEED not in (tuner.TUNING_SEED, validation["seed"])
@@ -154,6 +157,18 @@ def test_a_case_without_stored_gains_has_no_tuned_row():
 
 @pytest.mark.slow
 def test_retuning_the_arm_reproduces_its_stored_record(records):
-    fresh = tuner.tune_case(studies.get("arm"))
+    fresh = tuner.tune_case(studies.get("arm"), widths=records["arm"]["tuning"].get("widths", WIDTHS))
     assert fresh["tuning"]["cost"] == pytest.approx(records["arm"]["tuning"]["cost"], rel=1e-3)
     assert fresh["validation"]["tuned_better_on"] == fresh["validation"]["samples"]
+
+
+@pytest.mark.parametrize("text", ["0.1,x", "0.01,0.1", "0.1,0", "-1", "inf,1"])
+def test_widths_option_refuses_bad_values(text, capsys):
+    with pytest.raises(SystemExit) as stop:
+        tuner.main(["arm", "--widths", text])
+    assert stop.value.code == 2
+    assert "widths must be" in capsys.readouterr().err
+
+
+def test_widths_option_reads_a_decreasing_list():
+    assert tuner._widths("0.1,0.01,1e-3") == (0.1, 0.01, 1e-3)
