@@ -21,7 +21,7 @@ What an update computes, with the project's one mechanism for each:
   `models.metrics.run_metrics`, as `studies.runner` judges a row;
 * the loop gain about the end of the run (`studies.loops.loop`, exact
   Jacobians of the block and the plant): its Bode plot, its gain and phase
-  margins (`loop_margins`), the case's loopshaping specs
+  margins (`studies.loops.LoopGain.margins`), the case's loopshaping specs
   (`studies.case.LoopSpec`) and the root locus: the closed-loop poles
   eig(A - k B C) of the loop gain scaled by k (`LOCUS_GAINS`), in the s-plane
   (s = ln z / Ts), with the current poles (k = 1).
