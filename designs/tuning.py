@@ -900,19 +900,24 @@ def _check_options(max_iter, tol, hessian, jit, progress, method, widths):
         raise TypeError(f"progress must be callable(iteration, objective, seconds) or None, got {progress!r}")
     if method not in METHODS:
         raise ValueError(f"method must be 'smooth' or 'exact', got {method!r}")
-    widths = real_array(widths, "widths")
+    return max_iter, tol, jit, check_widths(widths)
+
+
+def check_widths(widths) -> tuple[float, ...]:
+    """The continuation's widths as a tuple; ValueError unless a non-empty, strictly decreasing
+    sequence of finite numbers > 0."""
+    values = real_array(widths, "widths")
     if (
-        widths.ndim != 1
-        or widths.size == 0
-        or not np.all(np.isfinite(widths))
-        or np.any(widths <= 0)
-        or np.any(np.diff(widths) >= 0)
+        values.ndim != 1
+        or values.size == 0
+        or not np.all(np.isfinite(values))
+        or np.any(values <= 0)
+        or np.any(np.diff(values) >= 0)
     ):
         raise ValueError(
-            f"widths must be a non-empty, strictly decreasing sequence of numbers > 0, got "
-            f"{np.asarray(widths).tolist()}"
+            f"widths must be a non-empty, strictly decreasing sequence of numbers > 0, got {values.tolist()}"
         )
-    return max_iter, tol, jit, tuple(float(w) for w in widths)
+    return tuple(float(w) for w in values)
 
 
 def tune(

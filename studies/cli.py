@@ -31,7 +31,7 @@ from . import SCENARIO_NAMES, listing
 #: Defaults of a full run and of --quick: Monte Carlo samples of every controller (MPC included).
 FULL = {"mc": 200}
 QUICK = {"mc": 10}
-#: Seconds each plant's study took in a default run here (its run.json: timing total_s + files_s), used
+#: Seconds each plant's study took in a --quick run here (its run.json: timing total_s + files_s), used
 #: only to hand the longest plants to the --jobs workers first, so that they finish together.
 RUN_SECONDS = {"crane": 80.0, "pendulum": 58.0, "ballbeam": 43.0, "satellite": 36.0, "arm": 15.0, "uuv": 12.0}
 
