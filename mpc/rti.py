@@ -185,18 +185,14 @@ class SlackFirstQP:
         self.slack_first = bool(slack_first and self.n_static and not coupled)
         self.soft_rows = np.unique(self.row_rows)
         self.hard_rows = np.setdiff1d(np.arange(self.m), self.soft_rows)
-        # The rows holding each slack, and the slacks each soft row holds.
-        order = np.argsort(self.row_columns, kind="stable")
-        starts = np.searchsorted(self.row_columns[order], np.arange(self.n_static + 1))
-        self.static_rows = [np.unique(self.row_rows[order[a:b]]) for a, b in zip(starts[:-1], starts[1:])]
-        order = np.argsort(self.row_rows, kind="stable")
-        starts = np.searchsorted(self.row_rows[order], self.soft_rows)
-        ends = np.searchsorted(self.row_rows[order], self.soft_rows, side="right")
-        self.row_statics = [self.row_columns[order[a:b]] for a, b in zip(starts, ends)]
+        self.hard_mask = np.zeros(self.m, dtype=bool)
+        self.hard_mask[self.hard_rows] = True
+        self.every_slack, self.no_slacks = np.arange(self.n_static), np.zeros(0, dtype=int)
         self.settings, self.tolerance = dict(settings), float(tolerance)
 
     def _daqp(self, H, f, A, lower, upper, lba, uba):
-        bounds = np.concatenate([upper, uba]), np.concatenate([lower, lba])
+        """DAQP on lower ≤ v ≤ upper, lba ≤ A v ≤ uba: (v, bound multipliers, row multipliers, exit flag)."""
+        bounds = (np.concatenate([upper, uba]), np.concatenate([lower, lba])) if len(lba) else (upper, lower)
         H, A = np.ascontiguousarray(H), np.ascontiguousarray(A)  # DAQP reads the arrays' memory row by row
         x, _, flag, info = daqp.solve(H, f, A, *bounds, **self.settings)
         lam = info["lam"]
@@ -234,14 +230,13 @@ class SlackFirstQP:
             return x, lam_a, lam_x, flag, 1
         hr, hc, cr, cc = self.hessian_rows, self.hessian_columns, self.row_rows, self.row_columns
         h_d, h_s, low_s, high_s = h[:nD], h[nD:], lbv[nD:], ubv[nD:]
-        freed = np.zeros(nS, dtype=bool)
+        # Masks, not index sets, so each round costs a few vector operations whatever is freed.
+        freed, kept = np.zeros(nS, dtype=bool), self.hard_mask.copy()  # kept: the rows in the QP
+        free, fixed, rows = self.no_slacks, self.every_slack, self.hard_rows
+        sigma = low_s.copy()
         solves = 0
         while True:
             solves += 1
-            free, fixed = np.flatnonzero(freed), np.flatnonzero(~freed)
-            held = [self.static_rows[j] for j in free]
-            rows = np.unique(np.concatenate([self.hard_rows, *held])) if held else self.hard_rows
-            sigma = np.where(freed, 0.0, low_s)
             if free.size:
                 # The fixed slacks' contributions: to the free slacks' gradient (H_σσ, within a stage)
                 # and to the kept rows (C_σ).
@@ -267,27 +262,30 @@ class SlackFirstQP:
             lam_a, lam_x = np.zeros(m), np.zeros(nD + nS)
             lam_a[rows] = lam_r
             lam_x[:nD], lam_x[nD + free] = lam_v[:nD], lam_v[nD:]
-            if flag < 0 or freed.all():
+            if flag < 0 or not fixed.size:
                 return v, lam_a, lam_x, flag, solves
-            gradient = (
-                np.bincount(hr, weights=hessian_values * sigma[hc], minlength=nS)
-                + h_s
-                + np.bincount(cc, weights=row_values * lam_a[cr], minlength=nS)
-            )[fixed]
+            gradient = np.bincount(hr, weights=hessian_values * sigma[hc], minlength=nS) + h_s
+            if free.size:  # multipliers only on kept rows, and the hard rows hold no slack
+                gradient += np.bincount(cc, weights=row_values * lam_a[cr], minlength=nS)
+            gradient = gradient[fixed]
             lam_x[nD + fixed] = -gradient
-            left_out = np.setdiff1d(self.soft_rows, rows, assume_unique=True)
-            values = (C_d @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m))[left_out]
-            violated = (values < lba[left_out] - tol) | (values > uba[left_out] + tol)
+            left_out = self.soft_rows[~kept[self.soft_rows]]
+            values = C_d[left_out] @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m)[left_out]
+            violated = np.zeros(m, dtype=bool)
+            violated[left_out] = (values < lba[left_out] - tol) | (values > uba[left_out] + tol)
             free_now = np.zeros(nS, dtype=bool)
             free_now[fixed[(gradient < -tol) & (high_s[fixed] > low_s[fixed])]] = True
-            for position in np.searchsorted(self.soft_rows, left_out[violated]):
-                free_now[self.row_statics[position]] = True
+            free_now[cc[violated[cr]]] = True  # the slacks the violated rows hold
             free_now &= ~freed
             if not free_now.any():
                 return v, lam_a, lam_x, flag, solves
             freed |= free_now
             if 2 * freed.sum() > nS:  # about the whole QP already: solve it, not a sequence growing to it
                 freed[:] = True
+            free, fixed = np.flatnonzero(freed), np.flatnonzero(~freed)
+            kept[cr[freed[cc]]] = True  # the rows holding a free slack
+            rows = np.flatnonzero(kept)
+            sigma[free] = 0.0  # σ holds the fixed slacks' values alone
 
 
 class RealTimeIteration:
