@@ -16,8 +16,9 @@ the same step with the case's input disturbance from t = 0:
   that scenario (or `OVERSHOOT_FLOOR`, 0.1 % of the step, where it has none),
   2 % settling no later than the hand design's worst when it settles, and a
   locally stable loop at the end of the run; tuning enforces them with a
-  margin (`MARGIN` times the bounds) on every tuning sample, so that fresh
-  samples meet the hand design's own figures;
+  margin (`MARGIN` times the bounds; no overshoot at all where the bound is
+  the floor) on every tuning sample, so that fresh samples meet the hand
+  design's own figures;
 * each gain stays within a factor `GAIN_RANGE` of the hand design's, with
   its sign (a sign flip is a different design, and far outside the box the
   loop diverges, where IPOPT's derivatives are NaN);
@@ -63,9 +64,12 @@ MAX_CORNERS, N_TUNING, TUNING_SEED = 16, 8, 1
 N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
 MARGIN = 0.75
-#: Overshoot (fraction of the step) below which a response counts as not overshooting: a hand design that
-#: never passes the reference would give a bound of exactly 0, which no margin can tighten, and a tuned
-#: design that then settles (the pendulum's disturbance run) passed it by up to 9e-5 of the step on fresh samples.
+#: Overshoot (fraction of the step) below which a response counts as not overshooting, on fresh samples: a
+#: hand design that never passes the reference gives a bound of exactly 0, which no margin can tighten; the
+#: pendulum tuned to overshoot nowhere on its tuning samples (disturbance run) passed the reference by up to
+#: 9e-5 of the step on fresh ones. Tuning itself enforces no overshoot there (`with_margin`): enforcing the
+#: floor instead left IPOPT hovering at the width 1e-4 (over 220 iterations, cost 14.97-15.00, where the
+#: zero bound converged in 76), the answer riding along the bound.
 OVERSHOOT_FLOOR = 1e-3
 GAIN_RANGE = 100.0
 SUBSTEPS = 2
@@ -193,10 +197,11 @@ def gain_bounds(block) -> dict:
 
 
 def with_margin(specs: Specs) -> Specs:
-    """The specs tuning enforces on its few samples: tighter, so that fresh samples still meet `specs`."""
+    """The specs tuning enforces on its few samples: tighter, so that fresh samples still meet `specs`
+    (no overshoot where `specs` allows only the floor's)."""
     assert specs.max_overshoot is not None, "measured_specs always sets max_overshoot"
     return Specs(
-        max_overshoot=MARGIN * specs.max_overshoot,
+        max_overshoot=MARGIN * specs.max_overshoot if specs.max_overshoot > OVERSHOOT_FLOOR else 0.0,
         settling_band=specs.settling_band,
         settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time,
         max_spectral_abscissa=specs.max_spectral_abscissa,

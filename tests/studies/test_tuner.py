@@ -13,7 +13,7 @@ import pytest
 
 import models
 import studies
-from designs.tuning import AGREEMENT, CONVERGED, WIDTHS
+from designs.tuning import AGREEMENT, CONVERGED, WIDTHS, Specs
 from models import metrics
 from studies import tuner
 
@@ -99,7 +99,9 @@ def test_tuned_design_beats_the_hand_design_and_is_never_worse_on_any_scenarios_
                         assert m["settling_time_s"] <= specs["settling_time_s"] + 1e-9, scenario_name
                 else:
                     hand_total += cost
-        assert worst["tuned"]["overshoot"] <= worst["hand"]["overshoot"] + 1e-9, scenario_name
+        # Overshoot below the floor counts as none (`tuner.OVERSHOOT_FLOOR`).
+        no_worse = max(worst["hand"]["overshoot"], tuner.OVERSHOOT_FLOOR)
+        assert worst["tuned"]["overshoot"] <= no_worse + 1e-9, scenario_name
         assert worst["tuned"]["settling"] <= worst["hand"]["settling"] + 1e-9, scenario_name
     assert tuned_total < hand_total
 
@@ -172,3 +174,11 @@ def test_widths_option_refuses_bad_values(text, capsys):
 
 def test_widths_option_reads_a_decreasing_list():
     assert tuner._widths("0.1,0.01,1e-3") == (0.1, 0.01, 1e-3)
+
+
+def test_tuning_enforces_the_specs_with_a_margin_and_no_overshoot_where_only_the_floor_allows_some():
+    floor = tuner.OVERSHOOT_FLOOR
+    some = tuner.with_margin(Specs(max_overshoot=0.2, settling_time=4.0))
+    assert (some.max_overshoot, some.settling_time) == (tuner.MARGIN * 0.2, tuner.MARGIN * 4.0)
+    assert tuner.with_margin(Specs(max_overshoot=floor)).max_overshoot == 0.0
+    assert tuner.with_margin(Specs(max_overshoot=2 * floor)).max_overshoot == tuner.MARGIN * 2 * floor
