@@ -303,14 +303,17 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
     assert seen == {1, 2, 3}
 
 
-def test_condensing_equals_eliminating_the_states_from_the_stacked_qp():
-    """The prepared QP (condensed by the forward and Riccati-like backward recursions) against the
-    stacked QP of the transcription (Hessian of the objective, Jacobian of the constraints, by
-    CasADi's AD) with the linearized gaps solved for the states by a dense linear solve: the same
-    Hessian, gradient, rows and row bounds, on the pendulum with the soft bound and a rate limit."""
+@pytest.mark.parametrize("compiled", [False, True], ids=["CasADi expressions", "generated C"])
+def test_condensing_equals_eliminating_the_states_from_the_stacked_qp(compiled):
+    """The prepared QP (condensed by the forward and Riccati-like backward recursions: CasADi's
+    expressions, or `mpc.condensing`'s C) against the stacked QP of the transcription (Hessian of
+    the objective, Jacobian of the constraints, by CasADi's AD) with the linearized gaps solved for
+    the states by a dense linear solve: the same Hessian, gradient, rows and row bounds, on the
+    pendulum with the soft bound and a rate limit."""
     _, ocp = pendulum_problem(soft=True, rate=np.array([0.3]))
     tr = mpc.Transcription(ocp, mpc.MultipleShooting(intervals=30))
-    rti = RealTimeIteration(tr, compiled=False)
+    rti = RealTimeIteration(tr, compiled=compiled)
+    assert (rti.condensing is not None) == compiled
     rng = np.random.default_rng(5)
     w = rng.normal(scale=0.2, size=tr.layout.size)
     x0 = X_HAT + rng.normal(scale=0.01, size=4)
@@ -346,3 +349,29 @@ def test_condensing_equals_eliminating_the_states_from_the_stacked_qp():
     np.testing.assert_allclose(lba[finite], (lbg[rows] - moved)[finite], rtol=1e-10, atol=1e-10)
     finite = np.isfinite(ubg[rows])
     np.testing.assert_allclose(uba[finite], (ubg[rows] - moved)[finite], rtol=1e-10, atol=1e-10)
+
+
+def test_generated_condensing_equals_casadis_where_a_slack_couples_with_the_states():
+    """`mpc.condensing`'s C against the CasADi expressions it replaces, entry by entry, on a problem
+    whose slack enters the stage cost with a state and the input ((σ + θ/2 + F/10)²: H_σs, H_σd ≠ 0,
+    the coupled case no case study has) and a rate limit (rows on the previous interval's input), at
+    random points."""
+    plant = models.perturbed(models.get("pendulum"), 0.05)
+    ocp = mpc.OptimalControlProblem(plant, 0.01)
+    ocp.start_from()
+    slack = ocp.control("slack", 0.0)
+    theta, force = ocp.x.theta, ocp.u.F
+    ocp.subject_to(theta - slack <= 0.1)
+    ocp.input_before(ocp.parameter("u_prev", 1))
+    ocp.subject_to(ocp.bounded(-0.3, force - ocp.u_previous.F, 0.3))
+    ocp.minimize(ocp.sum(ocp.x.z**2 + theta**2 + 1e-2 * force**2 + 10 * (slack + 0.5 * theta + 0.1 * force) ** 2))
+    tr = mpc.Transcription(ocp, mpc.MultipleShooting(intervals=12))
+    reference, generated = (RealTimeIteration(tr, compiled=c) for c in (False, True))
+    assert generated.condensing is not None and reference.qp_solver.coupled and reference.qp_solver.n_static
+    rng = np.random.default_rng(8)
+    for _ in range(3):
+        w = rng.normal(scale=0.2, size=tr.layout.size)
+        P = tr.parameter_values(X_HAT + rng.normal(scale=0.01, size=4), {"u_prev": [1.0]})
+        ours, theirs = generated.prepare(w, P), reference.prepare(w, P)
+        same = ours == theirs  # equal infinite bounds included
+        np.testing.assert_allclose(ours[~same], theirs[~same], rtol=1e-12, atol=1e-12 * np.abs(theirs[~same]).max())
