@@ -227,11 +227,12 @@ def test_the_rti_controller_stops_the_pendulum_at_the_step(pendulum_case):
 
 
 # --------------------------------------------------------------------------- the slack-first QP
-def soft_qp(rng, stages, scale, width):
+def soft_qp(rng, stages, scale, width, crossed=False):
     """A random QP shaped like the condensed one, in v = (u, s): one dense-coupled input per stage,
     |u| <= 1, two slacks s >= 0 per stage (a 2 x 2 Hessian block), each in the two rows
     c u + s >= lo, c u - s <= hi of a soft bound; a hard row on the inputs' sum. `scale` sizes the
-    inputs' gradient, `width` the soft bounds. Returns the dense (H, h, C, lba, uba, lbv, ubv) and
+    inputs' gradient, `width` the soft bounds; `crossed`: the first slack's rows have lo = -hi > 0
+    (infeasible without the slack). Returns the dense (H, h, C, lba, uba, lbv, ubv) and
     SlackFirstQP's pieces (H_dd, H_ss, C_d, C_s) with H_ss and C_s as scipy COO matrices."""
     nd, ns = stages, 2 * stages
     L = rng.normal(size=(nd, nd))
@@ -249,8 +250,9 @@ def soft_qp(rng, stages, scale, width):
             row = np.concatenate([c, np.zeros(ns)])
             row[nd + j] = sign
             rows.append(row)
-            lba.append(-bound if sign > 0 else -np.inf)
-            uba.append(np.inf if sign > 0 else bound)
+            flip = -1.0 if crossed and j == 0 else 1.0
+            lba.append(-flip * bound if sign > 0 else -np.inf)
+            uba.append(np.inf if sign > 0 else flip * bound)
     rows.append(np.concatenate([np.ones(nd), np.zeros(ns)]))
     lba.append(-0.5 * nd)
     uba.append(0.5 * nd)
@@ -261,17 +263,22 @@ def soft_qp(rng, stages, scale, width):
     return (H, h, C, np.array(lba), np.array(uba), lbv, ubv), pieces
 
 
-def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer():
+@pytest.mark.parametrize("near", [None, mpc.rti.NEAR, 0.5, np.inf])
+def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(near, monkeypatch):
     """Random soft-bounded QPs: the slack-first sequence returns a point and multipliers that satisfy
     the whole QP's KKT conditions (stationarity, feasibility, multiplier signs, complementarity; a
     certificate of the optimum of a convex QP) and the answer of DAQP on the whole QP, whether it
     needed one QP (every soft row holds), two or more (freeing slacks moves the inputs into other
-    rows)."""
+    rows); with no soft row kept in the first QP, those near a bound, or all of them (infeasible
+    together with their slacks fixed, on some: the sequence then starts over without them)."""
     rng = np.random.default_rng(7)
-    seen = set()
+    seen, starts = set(), []
+    sequence = mpc.rti.SlackFirstQP._sequence
+    monkeypatch.setattr(mpc.rti.SlackFirstQP, "_sequence", lambda self, *a: starts.append(a[-1]) or sequence(self, *a))
     for trial in range(40):
         scale, width = [(0.1, 20.0), (3.0, 1.0), (10.0, 10.0)][trial % 3]
-        (H, h, C, lba, uba, lbv, ubv), (H_dd, H_ss, C_d, C_s) = soft_qp(rng, 12, scale, width)
+        crossed = trial % 4 == 3
+        (H, h, C, lba, uba, lbv, ubv), (H_dd, H_ss, C_d, C_s) = soft_qp(rng, 12, scale, width, crossed)
         solver = mpc.rti.SlackFirstQP(
             len(H_dd),
             H_ss.shape[0],
@@ -283,6 +290,7 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
             settings={"primal_tol": 1e-10},
             tolerance=1e-9,
         )
+        solver.near = near
         v, lam_a, lam_x, flag, solves = solver.solve(H_dd, None, H_ss.data, C_d, C_s.data, h, lba, uba, lbv, ubv)
         seen.add(min(solves, 3))
         assert flag > 0
@@ -300,7 +308,10 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
         assembled = solver.whole(H_dd, None, H_ss.data, C_d, C_s.data)
         np.testing.assert_array_equal(assembled[0], H)
         np.testing.assert_array_equal(assembled[1], C)
-    assert seen == {1, 2, 3}
+    if near is None:
+        assert seen == {1, 2, 3}
+    restarts = starts.count(None) if near is not None else 0
+    assert (restarts > 0) == (near is not None)  # the crossed rows held hard are infeasible
 
 
 @pytest.mark.parametrize("compiled", [False, True], ids=["CasADi expressions", "generated C"])
