@@ -247,37 +247,35 @@ class NonlinearMPCProblem:
             return self._each_alone(rows, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous)
         share = 1.0 / m
         preparation, feedback = (prepared - began) * share, (fed - prepared) * share
-        out = []
-        for j, i in enumerate(rows):
-            w = W[j]
-            qp = self.rti.report(residuals[j])
-            success = qp.success and bool(np.all(np.isfinite(w)))
-            if success:
-                status = "solved"
-                self._guesses[i] = self.rti.shift(w)
-            else:
-                status = qp.status if not qp.success else "non-finite iterate"
-            self._has_guess[i] = success
-            states = w[self._states] * self.rti.state_scale
-            inputs = w[self._inputs] * self._input_scale
-            slacks = (
-                w[self._slacks] * self.transcription.scale[self._slacks] if self.n_soft else np.zeros((self.horizon, 0))
+        # The batch's bookkeeping at once (gathers and elementwise products: each row's numbers are
+        # those of the sample alone).
+        reports = [self.rti.report(r) for r in residuals]
+        success = np.array([qp.success for qp in reports], dtype=bool) & np.all(np.isfinite(W), axis=1)
+        self._guesses[rows[success]] = W[success][:, self.rti.shift_index]
+        self._has_guess[rows] = success
+        states = W[:, self._states] * self.rti.state_scale
+        inputs = W[:, self._inputs] * self._input_scale
+        slacks = (
+            W[:, self._slacks] * self.transcription.scale[self._slacks]
+            if self.n_soft
+            else np.zeros((m, self.horizon, 0))
+        )
+        solve_time = (time.perf_counter() - start) * share
+        return [
+            NLPSolution(
+                inputs[j],
+                states[j],
+                slacks[j],
+                bool(success[j]),
+                "solved" if success[j] else (qp.status if not qp.success else "non-finite iterate"),
+                1,
+                solve_time,
+                preparation,
+                feedback,
+                qp.status,
             )
-            out.append(
-                NLPSolution(
-                    inputs,
-                    states,
-                    slacks,
-                    success,
-                    status,
-                    1,
-                    (time.perf_counter() - start) * share,
-                    preparation,
-                    feedback,
-                    qp.status,
-                )
-            )
-        return out
+            for j, qp in enumerate(reports)
+        ]
 
     def _each_alone(self, rows, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous) -> list:
         """The real-time iteration of each row by `solve`, from its warm start (after a batch raised)."""

@@ -308,7 +308,7 @@ class SlackFirstQP:
             gradient = gradient[fixed]
             lam_x[nD + fixed] = -gradient
             left_out = self.soft_rows[~kept[self.soft_rows]]
-            values = C_d[left_out] @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m)[left_out]
+            values = (C_d @ x[:nD] + np.bincount(cr, weights=row_values * sigma[cc], minlength=m))[left_out]
             violated = np.zeros(m, dtype=bool)
             violated[left_out] = (values < lba[left_out] - tol) | (values > uba[left_out] + tol)
             free_now = np.zeros(nS, dtype=bool)
