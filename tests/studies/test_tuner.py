@@ -116,7 +116,13 @@ def test_stored_record_is_consistent_and_converged(name, records):
     assert tuning["converged"] and tuning["status"] in CONVERGED, tuning["message"]
     assert all(stage["status"] in CONVERGED for stage in tuning["stages"])
     assert tuning["smoothing_gap"] <= AGREEMENT and "Maximum_Iterations" not in tuning["message"]
-    assert tuning["stages"][-1]["exact"] == pytest.approx(tuning["cost"], rel=1e-9)
+    # The stored design is the last stage's answer, or an iterate met on the way that is feasible on
+    # the exact loop and clearly cheaper there (`tune` returns it and says so).
+    final = tuning["stages"][-1]["exact"]
+    if "best feasible point found (the iterate)" in tuning["message"]:
+        assert tuning["cost"] < final * (1 - 1e-6)
+    else:
+        assert final == pytest.approx(tuning["cost"], rel=1e-9)
     # The stages ran the recorded widths in order (the default ones where none are recorded).
     widths = tuning.get("widths", list(WIDTHS))
     assert [stage["width"] for stage in tuning["stages"]] == widths[: len(tuning["stages"])]
