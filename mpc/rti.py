@@ -70,9 +70,17 @@ from .qp_fast import DAQP_STATUS, PRIMAL_TOLERANCE
 from .transcription import Transcription
 
 #: Compiler flags of the generated phases: models.compile's -O3 -march=native. Measured on the pendulum
-#: (N = 50, a loaded 2-core machine): the preparation 1.7x faster than with -O1 (0.31 against 0.53 ms,
-#: interleaved), its first compile 2x longer (99 against 54 s; cached afterwards).
+#: (N = 50, a loaded 2-core machine) when the whole preparation was CasADi's code: 1.7x faster than
+#: with -O1 (0.31 against 0.53 ms, interleaved), its first compile 2x longer (99 against 54 s).
 COMPILE_FLAGS = models.compile.FLAGS
+
+#: The linearization is straight-line code (one CasADi SX Function per group of alike intervals); past
+#: LARGE_CODE instructions in those Functions it is compiled with LARGE_CODE_FLAGS. Measured (loaded
+#: machine, 20 samples per call): the crane's (7 groups, 32,700 instructions, 943 kB of C) compiles in
+#: 57.5 s with -O3 -march=native and 7.9 s with -O1 -march=native, both 0.17 ms per sample; the
+#: pendulum's (one group, 2,100) in 5.9 and 2.1 s, 0.042 against 0.057 ms: there -O3 stays.
+LARGE_CODE = 10_000
+LARGE_CODE_FLAGS = ("-O1", "-march=native")
 
 #: Largest QP residual (stationarity and bound violation, in scaled units) a solve may leave.
 QP_TOLERANCE = 1e-6
@@ -737,7 +745,9 @@ class RealTimeIteration:
         if compiled and nd:
             self.condensing = condensing.Condensing.compiled(structure, self._offsets)
         if self.condensing is not None:
-            self.linearize_function = models.compile.jit(linearize, COMPILE_FLAGS)
+            size = sum(stages["functions"][group[0]].n_instructions() for group in stages["groups"])
+            flags = COMPILE_FLAGS if size <= LARGE_CODE else LARGE_CODE_FLAGS
+            self.linearize_function = models.compile.jit(linearize, flags)
             self._linearize_call = models.compile.NumpyCall(self.linearize_function)
         elif compiled:
             prepare = models.compile.jit(prepare, COMPILE_FLAGS)
