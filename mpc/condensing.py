@@ -348,7 +348,8 @@ class Condensing:
     """The compiled kernel of one `Structure`: ``condense(lin)`` -> data, lin (m, layout size) row-major.
 
     Build with `Condensing.compiled(...)`, which returns None when no library can be built (no
-    compiler, no private cache: `models.compile.build_library`'s fallback)."""
+    compiler, no private cache: `models.compile.build_library`'s fallback). Not re-entrant: one
+    call at a time per instance (the work vector is the instance's)."""
 
     def __init__(self, library, structure: Structure, data_size: int):
         self._library = ctypes.CDLL(str(library))

@@ -251,7 +251,7 @@ class NonlinearMPCProblem:
         # those of the sample alone).
         reports = [self.rti.report(r) for r in residuals]
         success = np.array([qp.success for qp in reports], dtype=bool) & np.all(np.isfinite(W), axis=1)
-        self._guesses[rows[success]] = W[success][:, self.rti.shift_index]
+        self._guesses[rows[success]] = self.rti.shift(W[success])
         self._has_guess[rows] = success
         states = W[:, self._states] * self.rti.state_scale
         inputs = W[:, self._inputs] * self._input_scale

@@ -1040,5 +1040,6 @@ class RealTimeIteration:
         return IterationResult(w, result.step, result.qp, max_iterations, prep, back, False)
 
     def shift(self, decision) -> np.ndarray:
-        """`decision` one interval later: stages move up, the last input and control repeated."""
-        return np.asarray(decision)[self.shift_index]
+        """`decision` one interval later: stages move up, the last input and control repeated;
+        (nw,) or a batch (m, nw)."""
+        return np.asarray(decision)[..., self.shift_index]
