@@ -149,10 +149,11 @@ def source(s: Structure, data_offsets) -> str:
 
 
 def work_size(s: Structure) -> int:
-    """Doubles of the kernel's work vector: the Γ_k, the condensed rows of H, P and λ, one row."""
+    """Doubles of the kernel's work vector: the Γ_k, the condensed rows of H, P (with its next value and
+    P A) and λ (with its next value), one row, Bᵀ P."""
     N, nx, nd, nst = s.N, s.nx, len(s.dynamic), len(s.static)
     nz = nx + 1 + N * nd
-    return (N + 1) * nx * nz + N * nd * nz + N * nst * nz + 4 * nx * nx + 2 * nx + nz + nd * nx
+    return (N + 1) * nx * nz + N * nd * nz + N * nst * nz + 3 * nx * nx + 2 * nx + nz + nd * nx
 
 
 # Γ_k row-major (NX, NZ), its columns from NCOL(k) on zero and never read; HD row k*ND+i: the condensed
@@ -171,8 +172,7 @@ static void one(const double* L, double* D, double* w) {
     double* P = HS + N * NST * NZ;              /* NX x NX, row-major */
     double* Pn = P + NX * NX;
     double* PA = Pn + NX * NX;
-    double* Q = PA + NX * NX;
-    double* lam = Q + NX * NX;
+    double* lam = PA + NX * NX;
     double* lamn = lam + NX;
     double* row = lamn + NX;                    /* NZ */
     double* BP = row + NZ;                      /* ND x NX */
