@@ -5,7 +5,18 @@ import numpy as np
 import pytest
 
 import models
-from designs.tuning import AGREEMENT, Cost, Scenario, Specs, TuningProblem, closed_loop_spectral_abscissa, tune
+from designs import tuning
+from designs.tuning import (
+    AGREEMENT,
+    STAGE_TOL_FACTOR,
+    TOL,
+    Cost,
+    Scenario,
+    Specs,
+    TuningProblem,
+    closed_loop_spectral_abscissa,
+    tune,
+)
 from models import metrics
 
 
@@ -260,6 +271,22 @@ def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agre
     last = result.stages[-1]
     assert last["gap"] == 0.0 or last["exact"] == pytest.approx(result.stages[-2]["exact"], rel=AGREEMENT)
     assert all(stage["status"] == "Solve_Succeeded" for stage in result.stages)
+
+
+def test_loose_intermediate_stages_end_where_tight_ones_do(arm, monkeypatch):
+    """The continuation's intermediate widths are solved to STAGE_TOL_FACTOR x tol and the last one to tol:
+    on the saturating arm loop it ends at the answer of the continuation solved to tol at every width."""
+    block, scenario = ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    kwargs = dict(cost=Cost("itae", energy_weight=0.01), bounds={"kp": (0, 5.0), "kd": (0, 1.0)})
+    loose = tune(arm, block, scenario, **kwargs)
+    monkeypatch.setattr(tuning, "STAGE_TOL_FACTOR", 1.0)
+    tight = tune(arm, block, scenario, **kwargs)
+    assert loose.converged and tight.converged, (loose.message, tight.message)
+    assert len(loose.stages) >= 2 and loose.stages[-1]["tol"] == TOL
+    assert all(stage["tol"] == STAGE_TOL_FACTOR * TOL for stage in loose.stages[:-1])
+    assert all(stage["tol"] == TOL for stage in tight.stages)
+    assert loose.cost == pytest.approx(tight.cost, rel=AGREEMENT)
+    np.testing.assert_allclose(loose.decision, tight.decision, rtol=1e-3)
 
 
 def test_smoothed_gradient_equals_central_differences(arm):
