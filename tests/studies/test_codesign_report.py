@@ -71,12 +71,18 @@ def test_arm_sizing_short_run_reports_what_it_designed():
     assert result.specs == arm.SIZING_SPECS == Specs(rise_time=0.6, max_overshoot=0.05)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", ["arm", "uuv", "ballbeam"])
-@pytest.mark.xfail(
+NOT_CONVERGED = pytest.mark.xfail(
     run=False,
-    reason="issue 16 open: the nested sizing's inner tunings do not all converge yet (some stop at the iteration "
-    "cap), so 'converged' is false; not run (minutes each) until the continuation's stopping rule is reworked",
+    reason="issue 16 open: in the last run (python -m studies.codesign_report --only uuv ballbeam) an inner "
+    "tuning of the nested sizing ended in Error_In_Step_Computation (uuv; ball on beam: that and two "
+    "Maximum_Iterations_Exceeded) and the ball on beam's simultaneous sizing in Restoration_Failed, so "
+    "'converged' is false; not run (4 and 33 minutes here)",
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "name", ["arm", pytest.param("uuv", marks=NOT_CONVERGED), pytest.param("ballbeam", marks=NOT_CONVERGED)]
 )
 def test_full_sizing_every_method_converges_and_simultaneous_is_no_worse_than_nested(name):
     result = SIZING[name].actuator_sizing()
