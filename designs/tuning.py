@@ -1190,11 +1190,11 @@ def solve(
         status, stage_iterations = run_stage(w, tight)
         while True:
             exact, seen, gap, same = judge_stage(w)
-            if stages and np.isfinite(exact):
-                settled = abs(stages[-1]["exact"] - exact) <= AGREEMENT * abs(exact)
-            # gap exactly 0: every switch at the answer lies outside its band, so near it the smoothed
-            # problem is the exact one and IPOPT's convergence on it is convergence on the exact problem.
-            settled = settled or gap == 0.0
+            # Settled: the exact objective no longer moved from the previous stage's answer, or gap exactly
+            # 0: every switch at the answer lies outside its band, so near it the smoothed problem is the
+            # exact one and IPOPT's convergence on it is convergence on the exact problem.
+            moved = abs(stages[-1]["exact"] - exact) if stages and np.isfinite(exact) else np.inf
+            settled = not continuation or gap == 0.0 or moved <= AGREEMENT * abs(exact)
             ends = gap <= AGREEMENT and same and settled
             if tight or not (np.isfinite(exact) and _status_converged(status)) or not (ends or w == widths[-1]):
                 break
