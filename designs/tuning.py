@@ -1145,10 +1145,10 @@ def solve(
         nonlocal z_now, multipliers
         done, status = 0, "not solved"
         for attempt in range(2):
-            # A numerical failure (not an iteration cap) is retried once from its last point, cold and
-            # tight: a fresh quasi-Newton memory often gets past it.
+            # A numerical failure (not an iteration cap) is retried once from its last point, cold, to the
+            # stage's own tolerance: a fresh quasi-Newton memory often gets past it.
             warm_now = bool(multipliers) and attempt == 0
-            this = solvers[warm_now, not tight and attempt == 0]
+            this = solvers[warm_now, not tight]
             sol = this(
                 x0=z_now,
                 lbx=lbz / scale,
