@@ -19,8 +19,8 @@ row. Code that calls CasADi in a loop
   ``if is_interrupt(err): raise KeyboardInterrupt from err``.
 
 A command that must stop as cleanly on SIGTERM (``kill``, a job scheduler)
-calls `terminate_as_interrupt()`: SIGTERM then becomes a SIGINT to the same
-process, and `terminated()` tells the exit status apart (143 instead of 130).
+calls `terminate_as_interrupt()`: SIGTERM then acts as a SIGINT (even where SIGINT
+is ignored), and `terminated()` tells the exit status apart (143 instead of 130).
 """
 
 from __future__ import annotations
@@ -123,7 +123,14 @@ def is_interrupt(err: BaseException) -> bool:
 def _terminate(signum, frame) -> None:
     global _terminated
     _terminated = True
-    signal.raise_signal(signal.SIGINT)
+    # What SIGINT's Python handler would do (count, or raise KeyboardInterrupt). A process started in the
+    # background by a script (`cmd &`, nohup) has SIGINT ignored: re-sending SIGINT there did nothing and
+    # a killed run went on to exit 0, so without a Python handler the interrupt is raised here.
+    handler = signal.getsignal(signal.SIGINT)
+    if callable(handler):
+        handler(signal.SIGINT, frame)
+    else:
+        raise KeyboardInterrupt
 
 
 def terminate_as_interrupt() -> bool:

@@ -1,0 +1,33 @@
+"""SIGTERM stops a run as Ctrl-C does, also where SIGINT is ignored."""
+
+import signal
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+CHILD = textwrap.dedent(
+    """
+    import signal, sys, time
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as in a run started with `nohup cmd &`
+    from models import interrupts
+    assert interrupts.terminate_as_interrupt()
+    print("ready", flush=True)
+    try:
+        time.sleep(20)
+    except KeyboardInterrupt:
+        print("interrupted", interrupts.terminated(), flush=True)
+        sys.exit(143)
+    print("slept on", flush=True)
+    """
+)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_sigterm_interrupts_a_process_whose_sigint_is_ignored():
+    child = subprocess.Popen([sys.executable, "-c", CHILD], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert child.stdout.readline().strip() == "ready"
+    child.send_signal(signal.SIGTERM)
+    out, err = child.communicate(timeout=30)
+    assert (child.returncode, out.strip()) == (143, "interrupted True"), err
