@@ -365,6 +365,8 @@ def actuator_sizing(
             status = "bisection to rel_tol {:g}; inner IPOPT: {}".format(
                 rel_tol, ", ".join(f"{s} x{c}" for s, c in counts.items())
             )
+            if nested["retries"]:
+                status += f" ({nested['retries']} after a numerical stop, repeated from the best gains so far)"
             result.designs["nested"] = _sizing_design(
                 "nested",
                 plant.with_input_limit(nested["limit"]),

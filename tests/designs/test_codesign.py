@@ -1,5 +1,7 @@
 """Co-design against the closed form of the classic first-order problem, fresh evaluations and simulations."""
 
+import types
+
 import numpy as np
 import pytest
 import scipy.optimize
@@ -295,3 +297,38 @@ def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
     assert sim["converged"] and sim["feasible"], sim["message"]
     assert sim["limit"] <= nested["limit"] * 1.01
     assert _meets(arm, sim["limit"], sim["block"]) and _meets(arm, nested["limit"], nested["block"])
+
+
+def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(monkeypatch):
+    """Fake inner tunings, feasible from 1.2 N m: the first tuning at every limit in (1.2, 2) ends in
+    Restoration_Failed, its repeat starts from the gains of the smallest feasible limit so far."""
+    import designs.codesign as dc
+
+    edge, calls = 1.2, []
+
+    def fake_tune(plant, block, scenario, *, specs, **options):
+        limit = float(plant.input_limit[0])
+        first = all(c[0] != limit for c in calls)
+        calls.append((limit, float(block.gains["kp"])))
+        feasible = limit >= edge
+        status = "Restoration_Failed" if first and edge < limit < 2 else "Solve_Succeeded"
+        status = status if feasible or not first else "Infeasible_Problem_Detected"
+        return types.SimpleNamespace(
+            feasible=feasible,
+            block=block.with_gains(kp=limit),  # the "tuned" gains record the limit they were tuned at
+            violations=[] if feasible else ["rise time"],
+            status=status,
+            stopped_on_test=status != "Restoration_Failed",
+        )
+
+    monkeypatch.setattr(dc, "tune", fake_tune)
+    arm = models.get("arm")
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    sized = size_actuator(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0, retune=True)
+    assert sized["converged"] and "Restoration_Failed" not in sized["statuses"]
+    assert edge <= sized["limit"] <= edge * 1.01 and sized["block"].gains["kp"] == sized["limit"]
+    repeats = [(limit, kp) for k, (limit, kp) in enumerate(calls) if any(c[0] == limit for c in calls[:k])]
+    assert sized["retries"] == len(repeats) > 0
+    for limit, kp in repeats:  # each repeat started from the smallest feasible limit tuned before it
+        earlier = [c[0] for c in calls[: calls.index((limit, kp))] if c[0] >= edge and c[0] != limit]
+        assert kp == min(earlier)
