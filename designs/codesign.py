@@ -537,8 +537,8 @@ def size_actuator(
             result = tune(sized, block, scenario, specs=specs, **(tune_options or {}))
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
-                # specs at the smallest feasible limit so far (UUV: two limits of nine ended in
-                # Restoration_Failed from the hand gains).
+                # specs at the smallest feasible limit so far (seen in a case's sizing: Restoration_Failed
+                # from the design's own gains, Solve_Succeeded from those).
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
                 again = tune(sized, block.with_gains(**known), scenario, specs=specs, **(tune_options or {}))

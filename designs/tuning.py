@@ -1199,8 +1199,8 @@ def solve(
             if tight or not (np.isfinite(exact) and _status_converged(status)) or not (ends or w == widths[-1]):
                 break
             # This stage ends the continuation: finished at tol from where it stopped, started as the stage
-            # was. A cold stage's loose answer is centred for a large barrier; warm from it (barrier 1e-6),
-            # the arm's simultaneous sizing crept for 1141 iterations (3000 with one BLAS thread), cold: 112.
+            # was. A cold stage's loose answer is centred for a large barrier; warm from it (barrier 1e-6), a
+            # case's simultaneous sizing crept for 1141 iterations (3000 with one BLAS thread), cold: 112.
             tight = True
             status, more = run_stage(w, tight, warm)
             stage_iterations += more
