@@ -509,7 +509,7 @@ def size_actuator(
     evaluations (number of limits tried), history [(limit, feasible)], statuses
     [IPOPT status per tuned limit], retries (tunings that stopped neither converged nor
     infeasible, repeated from the gains of the smallest feasible limit so far; the repeat
-    is kept when it stopped on its test or alone is feasible), converged (every kept inner
+    is kept when it alone is feasible, or is as feasible and alone stopped on its test), converged (every kept inner
     tuning converged or proved its limit infeasible: `TuningResult.stopped_on_test`).
 
     Raises
@@ -542,7 +542,8 @@ def size_actuator(
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
                 again = tune(sized, block.with_gains(**known), scenario, specs=specs, **(tune_options or {}))
-                if again.stopped_on_test or (again.feasible and not result.feasible):
+                # A feasible design decides the limit whatever the other start claims; then a stop on the test.
+                if (again.feasible, again.stopped_on_test) > (result.feasible, result.stopped_on_test):
                     result = again
             ok, block, violations = result.feasible, result.block, result.violations
             statuses.append(result.status)

@@ -375,8 +375,9 @@ class TuningResult:
 
     @property
     def stopped_on_test(self) -> bool:
-        """Converged, or IPOPT proved the specs locally infeasible (its restoration converged): not a cap."""
-        return self.converged or self.status == "Infeasible_Problem_Detected"
+        """Converged, or IPOPT proved the specs locally infeasible (its restoration converged) and no point
+        it returned meets them: not a cap, and not a claim of infeasibility a feasible answer contradicts."""
+        return self.converged or (self.status == "Infeasible_Problem_Detected" and not self.feasible)
 
 
 class _Recorder(ca.Callback):

@@ -332,3 +332,47 @@ def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(mo
     for limit, kp in repeats:  # each repeat started from the smallest feasible limit tuned before it
         earlier = [c[0] for c in calls[: calls.index((limit, kp))] if c[0] >= edge and c[0] != limit]
         assert kp == min(earlier)
+
+
+def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatch):
+    """Fake inner tunings, feasible from 1.2 N m: at every limit in (1.2, 2) the first tuning finds a feasible
+    design but stops at its iteration cap, the repeat claims local infeasibility. The feasible design is
+    kept (the sizing still finds the edge), and the sizing does not count as converged."""
+    import designs.codesign as dc
+
+    edge, seen = 1.2, set()
+
+    def fake_tune(plant, block, scenario, *, specs, **options):
+        limit = float(plant.input_limit[0])
+        first, feasible = limit not in seen, limit >= edge
+        seen.add(limit)
+        if edge < limit < 2:
+            status, feasible = (
+                ("Maximum_Iterations_Exceeded", True) if first else ("Infeasible_Problem_Detected", False)
+            )
+        else:
+            status = "Solve_Succeeded" if feasible else "Infeasible_Problem_Detected"
+        stopped = status == "Solve_Succeeded" or (status == "Infeasible_Problem_Detected" and not feasible)
+        return types.SimpleNamespace(
+            feasible=feasible, block=block, violations=[] if feasible else ["rise time"], status=status,
+            stopped_on_test=stopped,
+        )  # fmt: skip
+
+    monkeypatch.setattr(dc, "tune", fake_tune)
+    arm = models.get("arm")
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    sized = size_actuator(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0, retune=True)
+    assert edge <= sized["limit"] <= edge * 1.01
+    assert sized["retries"] > 0 and not sized["converged"]
+    assert "Maximum_Iterations_Exceeded" in sized["statuses"]
+
+
+def test_a_claim_of_infeasibility_with_a_feasible_answer_is_not_a_stop_on_the_test():
+    from designs.tuning import TuningResult
+
+    stopped = TuningResult.stopped_on_test.fget
+    ns = types.SimpleNamespace
+    assert stopped(ns(converged=False, status="Infeasible_Problem_Detected", feasible=False))
+    assert not stopped(ns(converged=False, status="Infeasible_Problem_Detected", feasible=True))
+    assert stopped(ns(converged=True, status="Solve_Succeeded", feasible=True))
+    assert not stopped(ns(converged=False, status="Maximum_Iterations_Exceeded", feasible=True))
