@@ -13,8 +13,8 @@ CHILD = textwrap.dedent(
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # as in a run started with `nohup cmd &`
     from models import interrupts
     assert interrupts.terminate_as_interrupt()
-    print("ready", flush=True)
     try:
+        print("ready", flush=True)  # inside the try: the signal may arrive as soon as it is out
         time.sleep(20)
     except KeyboardInterrupt:
         print("interrupted", interrupts.terminated(), flush=True)
