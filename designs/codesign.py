@@ -509,8 +509,9 @@ def size_actuator(
     evaluations (number of limits tried), history [(limit, feasible)], statuses
     [IPOPT status per tuned limit], retries (tunings that stopped neither converged nor
     infeasible, repeated from the gains of the smallest feasible limit so far; the repeat
-    is kept when it alone is feasible, or is as feasible and alone stopped on its test), converged (every kept inner
-    tuning converged or proved its limit infeasible: `TuningResult.stopped_on_test`).
+    is kept when it alone is feasible, or is as feasible and alone stopped on its test),
+    converged (every kept inner tuning converged or proved its limit infeasible:
+    `TuningResult.stopped_on_test`).
 
     Raises
     ------
@@ -534,14 +535,15 @@ def size_actuator(
         sized = plant.with_input_limit(limit)
         block = design(sized)
         if retune:
-            result = tune(sized, block, scenario, specs=specs, **(tune_options or {}))
+            options = dict(tune_options or {})
+            result = tune(sized, block, scenario, specs=specs, **options)
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
                 # specs at the smallest feasible limit so far (seen in a case's sizing: Restoration_Failed
                 # from the design's own gains, Solve_Succeeded from those).
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
-                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **(tune_options or {}))
+                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **options)
                 # A feasible design decides the limit whatever the other start claims; then a stop on the test.
                 if (again.feasible, again.stopped_on_test) > (result.feasible, result.stopped_on_test):
                     result = again
@@ -555,8 +557,7 @@ def size_actuator(
         history.append((float(limit), bool(ok)))
         return ok, block, violations
 
-    ok, block, violations = attempt(high)
-    best_block = block
+    ok, best_block, violations = attempt(high)
     if not ok:
         raise ValueError(f"even the largest limit {high:g} misses the specs: " + "; ".join(violations))
     best = high
