@@ -183,6 +183,22 @@ def test_ctrl_c_during_a_nonlinear_mpc_row_stops_the_run_and_writes_nothing(work
     assert_interrupted_cleanly(workdir, before, outcome, "offset 0.4 s, one job")
 
 
+def test_a_sigint_after_the_status_is_decided_does_not_change_it(tmp_path):
+    """The command's exit status, once decided, is the process's: a SIGINT during shutdown (here from an
+    exit handler, which runs after the status is chosen) neither kills the process nor raises."""
+    script = (
+        "import atexit, os, signal\n"
+        "from studies.__main__ import _exit_with\n"
+        "atexit.register(lambda: os.kill(os.getpid(), signal.SIGINT))\n"
+        "_exit_with(130)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, env=subprocess_env(), capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 130, done.stderr
+    assert "KeyboardInterrupt" not in done.stderr, done.stderr
+
+
 @pytest.mark.slow
 def test_sigterm_with_two_jobs_ends_the_workers_and_writes_nothing(workdir):
     """SIGTERM (kill, a job scheduler) to the command while two worker processes run plants: it ends
