@@ -49,7 +49,19 @@ from pathlib import Path
 import numpy as np
 
 import models
-from designs.tuning import CONVERGED, MAX_ITER, TOL, WIDTHS, Cost, Scenario, Specs, TuningProblem, check_widths, tune
+from designs.tuning import (
+    CONVERGED,
+    MAX_ITER,
+    PATHS,
+    TOL,
+    WIDTHS,
+    Cost,
+    Scenario,
+    Specs,
+    TuningProblem,
+    check_widths,
+    tune,
+)
 from models import files, metrics
 
 from . import cases
@@ -227,10 +239,13 @@ def specs_from_record(record: dict) -> dict:
     }
 
 
-def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progress=None, widths=WIDTHS) -> dict:
+def tune_case(
+    case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progress=None, widths=WIDTHS, paths="pointwise"
+) -> dict:
     """Tune the case's hand design, validate on fresh samples; the record its stored-gains file keeps.
 
-    widths : the smoothing continuation's widths (`designs.tuning.tune`), stored in the record
+    widths, paths : the smoothing continuation's widths and the specs' form (`designs.tuning.tune`), stored
+        in the record
     """
     started = time.perf_counter()
     block = hand_design(case)
@@ -252,6 +267,7 @@ def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progr
         jit=jit,
         progress=progress,
         widths=widths,
+        paths=paths,
     )
     record = {
         "plant": case.plant,
@@ -282,6 +298,7 @@ def tune_case(case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progr
             "status": result.status,
             "tol": TOL,
             "widths": [float(w) for w in widths],
+            "paths": paths,
             "converged": result.converged,
             "method": result.method,
             "stages": result.stages,
@@ -407,6 +424,13 @@ def main(argv=None) -> int:
         help="the smoothing continuation's widths, comma-separated, strictly decreasing (default "
         f"{','.join(f'{w:g}' for w in WIDTHS)}; a start far from the answer may need 0.1 first)",
     )
+    parser.add_argument(
+        "--paths",
+        choices=PATHS,
+        default="pointwise",
+        help="each spec as one inequality per sample (default) or, on the smoothed stages, one soft maximum per "
+        "run (for many parameter samples and long runs)",
+    )
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in names]
     if unknown:
@@ -424,7 +448,9 @@ def main(argv=None) -> int:
             record = record | {"validation": validate(case, record)}
         else:
             print(f"tuning {name} ...", flush=True)
-            record = tune_case(case, args.max_iter, not args.no_jit, progress=_report_every(10), widths=args.widths)
+            record = tune_case(
+                case, args.max_iter, not args.no_jit, progress=_report_every(10), widths=args.widths, paths=args.paths
+            )
         write(case, record)
         t, v = record["tuning"], record["validation"]
         if t["status"] not in CONVERGED or not t["converged"]:

@@ -524,3 +524,43 @@ def test_worst_case_tuning_minimizes_the_largest_sample_cost_of_the_closed_form(
     assert result.converged, result.message
     assert float(result.gains["k"]) == pytest.approx(best.x, rel=1e-5)
     assert result.cost == pytest.approx(best.fun, rel=1e-8)
+
+
+def test_soft_max_excess_lies_within_the_width_below_the_largest_excess_and_has_its_gradient():
+    """The aggregated inequality of `paths="aggregated"`: between max v - width and max v (v the relative
+    excesses of both bounds), and its gradient equals central differences."""
+    rng = np.random.default_rng(4)
+    values = rng.normal(size=40)
+    lo, hi = -0.5, np.full(40, 0.3)
+    x, w = ca.MX.sym("x", 40), ca.MX.sym("w")
+    soft = tuning._soft_max_excess(x, lo, hi, w)
+    f = ca.Function("f", [x, w], [soft, ca.gradient(soft, x)])
+    scale = 1 + max(abs(lo), 0.3)
+    largest = max(np.max(values - hi), np.max(lo - values)) / scale
+    for width in (0.3, 1e-2, 1e-5, 1e-9):
+        value = float(f(values, width)[0])
+        assert largest - width - 1e-15 <= value <= largest + 1e-15
+    width = 0.05
+    gradient = np.asarray(f(values, width)[1]).ravel()
+    h = 1e-6
+    fd = [(float(f(values + h * e, width)[0]) - float(f(values - h * e, width)[0])) / (2 * h) for e in np.eye(40)]
+    np.testing.assert_allclose(gradient, fd, rtol=1e-5, atol=1e-9)
+
+
+def test_aggregated_path_specs_reach_the_pointwise_answer(arm):
+    """The arm's PD with an active overshoot spec and a settling spec: one soft-maximum inequality per spec
+    on the smoothed stages instead of one per sample, the same converged answer, judged pointwise."""
+    block = ArmPD(arm)
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    kwargs = dict(specs=Specs(max_overshoot=0.02, settling_time=1.5), bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    pointwise = tune(arm, block, scenario, **kwargs)
+    aggregated = tune(arm, block, scenario, paths="aggregated", **kwargs)
+    problem = TuningProblem(arm, block, scenario, specs=kwargs["specs"], paths="aggregated")
+    _, g = problem.smoothed()
+    assert g.numel() == len(problem.constraint_names) == 2 and problem.g.numel() > 100
+    for result in (pointwise, aggregated):
+        assert result.converged and result.feasible, result.message
+    assert aggregated.cost == pytest.approx(pointwise.cost, rel=1e-5)
+    np.testing.assert_allclose(aggregated.decision, pointwise.decision, rtol=1e-3)
+    with pytest.raises(ValueError, match="paths must be"):
+        TuningProblem(arm, block, scenario, paths="sampled")
