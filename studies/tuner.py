@@ -51,6 +51,7 @@ import numpy as np
 import models
 from designs.tuning import (
     CONVERGED,
+    HESSIANS,
     MAX_ITER,
     PATHS,
     TOL,
@@ -240,12 +241,18 @@ def specs_from_record(record: dict) -> dict:
 
 
 def tune_case(
-    case: CaseStudy, max_iter: int = MAX_ITER, jit: bool = True, progress=None, widths=WIDTHS, paths="pointwise"
+    case: CaseStudy,
+    max_iter: int = MAX_ITER,
+    jit: bool = True,
+    progress=None,
+    widths=WIDTHS,
+    paths="pointwise",
+    hessian="limited-memory",
 ) -> dict:
     """Tune the case's hand design, validate on fresh samples; the record its stored-gains file keeps.
 
-    widths, paths : the smoothing continuation's widths and the specs' form (`designs.tuning.tune`), stored
-        in the record
+    widths, paths, hessian : the smoothing continuation's widths, the specs' form and IPOPT's Hessian
+        (`designs.tuning.tune`), stored in the record
     """
     started = time.perf_counter()
     block = hand_design(case)
@@ -268,6 +275,7 @@ def tune_case(
         progress=progress,
         widths=widths,
         paths=paths,
+        hessian=hessian,
     )
     record = {
         "plant": case.plant,
@@ -299,6 +307,7 @@ def tune_case(
             "tol": TOL,
             "widths": [float(w) for w in widths],
             "paths": paths,
+            "hessian": hessian,
             "converged": result.converged,
             "method": result.method,
             "stages": result.stages,
@@ -431,6 +440,12 @@ def main(argv=None) -> int:
         help="each spec as one inequality per sample (default) or, on the smoothed stages, one soft maximum per "
         "run (for many parameter samples and long runs)",
     )
+    parser.add_argument(
+        "--hessian",
+        choices=HESSIANS,
+        default="limited-memory",
+        help="IPOPT's Hessian: L-BFGS (default) or CasADi's exact second derivatives (few gains, hard problems)",
+    )
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in names]
     if unknown:
@@ -449,7 +464,13 @@ def main(argv=None) -> int:
         else:
             print(f"tuning {name} ...", flush=True)
             record = tune_case(
-                case, args.max_iter, not args.no_jit, progress=_report_every(10), widths=args.widths, paths=args.paths
+                case,
+                args.max_iter,
+                not args.no_jit,
+                progress=_report_every(10),
+                widths=args.widths,
+                paths=args.paths,
+                hessian=args.hessian,
             )
         write(case, record)
         t, v = record["tuning"], record["validation"]

@@ -167,7 +167,10 @@ def test_a_case_without_stored_gains_has_no_tuned_row():
 def test_retuning_the_arm_reproduces_its_stored_record(records):
     stored = records["arm"]["tuning"]
     fresh = tuner.tune_case(
-        studies.get("arm"), widths=stored.get("widths", WIDTHS), paths=stored.get("paths", "pointwise")
+        studies.get("arm"),
+        widths=stored.get("widths", WIDTHS),
+        paths=stored.get("paths", "pointwise"),
+        hessian=stored.get("hessian", "limited-memory"),
     )
     assert fresh["tuning"]["cost"] == pytest.approx(records["arm"]["tuning"]["cost"], rel=1e-3)
     assert fresh["validation"]["tuned_better_on"] == fresh["validation"]["samples"]
