@@ -1200,12 +1200,10 @@ def solve(
     )
     opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
     nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
-    # Compiled without a shell and cached (models.compile); CasADi's virtual machine when impossible.
-    build = models.compile.jit_nlpsol if jit else ca.nlpsol
     continuation = smooth and len(widths) > 1
     # Solvers by (warm, loose). Later stages start at the last answer and its multipliers, with the
     # barrier already small; the continuation's intermediate stages are solved loosely.
-    solvers = {(False, False): build("tuning", "ipopt", nlp, opts)}
+    variants = {(False, False): ("tuning", ipopt)}
     loose: dict[str, float] = {}
     if continuation:
         loose = {"tol": STAGE_TOL_FACTOR * ipopt["tol"], "acceptable_tol": STAGE_TOL_FACTOR * ipopt["acceptable_tol"]}
@@ -1214,8 +1212,14 @@ def solve(
             (True, True, "tuning_warm"),
             (True, False, "tuning_warm_loose"),
         ):
-            options = ipopt | (WARM_START if warm else {}) | ({} if tight else loose)
-            solvers[warm, not tight] = build(name, "ipopt", nlp, dict(opts, ipopt=options))
+            variants[warm, not tight] = (name, ipopt | (WARM_START if warm else {}) | ({} if tight else loose))
+    options = {name: dict(opts, ipopt=settings) for name, settings in variants.values()}
+    # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
+    if jit:
+        built = models.compile.jit_nlpsols("ipopt", nlp, options)
+    else:
+        built = {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in options.items()}
+    solvers = {key: built[name] for key, (name, _) in variants.items()}
     z_now = start_z / scale
     multipliers: dict[str, ca.DM] = {}
 

@@ -310,21 +310,33 @@ def jit_nlpsol(name: str, plugin: str, problem: dict, options: dict, flags=FLAGS
     which the returned solver loads. The virtual-machine solver (after one
     warning) when compiling is impossible.
     """
-    solver = ca.nlpsol(name, plugin, problem, options)
+    return jit_nlpsols(plugin, problem, {name: options}, flags)[name]
+
+
+def jit_nlpsols(plugin: str, problem: dict, options: dict[str, dict], flags=FLAGS) -> dict[str, ca.Function]:
+    """Several solvers of one problem, name -> solver, that differ only in options not changing which
+    functions they evaluate (tolerances, warm starts; not the Hessian's kind): `jit_nlpsol`'s library is
+    generated and compiled once and loaded by each. Generating it takes minutes for a large problem
+    with exact second derivatives."""
+    names = list(options)
+    solver = ca.nlpsol(names[0], plugin, problem, options[names[0]])
     functions = [solver.oracle()] + [solver.get_function(f) for f in solver.get_function()]
     library = build_library({"nlp.c": _generated(functions, "codesign_nlp")}, flags)
     if library is None:
-        return solver
-    # "expand" already shaped the generated code; on a loaded library it would try to expand
-    # the compiled oracle, which has no symbolic graph.
-    loaded_options = {key: value for key, value in options.items() if key != "expand"}
-    try:
-        return ca.nlpsol(name, plugin, str(library), loaded_options)
-    except RuntimeError as err:
-        if interrupts.is_interrupt(err):
-            raise KeyboardInterrupt from err
-        _warn_once("load", f"cannot load the compiled library {str(library)!r}: {str(err).splitlines()[0]}")
-        return solver
+        return {name: solver if name == names[0] else ca.nlpsol(name, plugin, problem, options[name]) for name in names}
+    solvers = {}
+    for name in names:
+        # "expand" already shaped the generated code; on a loaded library it would try to expand
+        # the compiled oracle, which has no symbolic graph.
+        loaded_options = {key: value for key, value in options[name].items() if key != "expand"}
+        try:
+            solvers[name] = ca.nlpsol(name, plugin, str(library), loaded_options)
+        except RuntimeError as err:
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
+            _warn_once("load", f"cannot load the compiled library {str(library)!r}: {str(err).splitlines()[0]}")
+            solvers[name] = ca.nlpsol(name, plugin, problem, options[name])
+    return solvers
 
 
 # ---------------------------------------------------------------------------- fast numeric calls

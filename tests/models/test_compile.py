@@ -222,6 +222,28 @@ def test_jit_nlpsol_solves_like_the_virtual_machine(private_cache):
     assert compiled.stats()["success"] and x_opt.sum() <= 1 + 1e-8
 
 
+def test_solvers_that_differ_in_options_share_one_generated_library(private_cache, monkeypatch):
+    """`jit_nlpsols`: the code is generated once (a large problem's takes minutes), every solver loads
+    it with its own options, and each solves like its virtual-machine twin."""
+    x, p = ca.MX.sym("x", 2), ca.MX.sym("p")
+    problem = {"x": x, "p": p, "f": (x[0] - p) ** 2 + 10 * (x[1] - x[0] ** 2) ** 2, "g": x[0] + x[1]}
+    options = {
+        name: {"ipopt": {"print_level": 0, "sb": "yes", "tol": tol}, "print_time": False}
+        for name, tol in (("tight", 1e-12), ("loose", 1e-3))
+    }
+    generated = []
+    real = mc._generated
+    monkeypatch.setattr(mc, "_generated", lambda functions, prefix: generated.append(prefix) or real(functions, prefix))
+    solvers = mc.jit_nlpsols("ipopt", problem, options)
+    assert list(solvers) == ["tight", "loose"] and len(generated) == 1
+    args = dict(x0=[0.0, 0.0], p=0.7, lbg=-np.inf, ubg=1.0)
+    for name, solver in solvers.items():
+        plain = ca.nlpsol(name, "ipopt", problem, options[name])
+        np.testing.assert_allclose(np.asarray(solver(**args)["x"]), np.asarray(plain(**args)["x"]), atol=1e-10)
+        assert solver.stats()["iter_count"] == plain.stats()["iter_count"]
+    assert solvers["loose"].stats()["iter_count"] < solvers["tight"].stats()["iter_count"]
+
+
 def test_an_interrupted_compilation_leaves_no_build_folder(private_cache, monkeypatch):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
