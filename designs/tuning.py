@@ -899,8 +899,7 @@ class TuningProblem:
         """Each constraint's violation relative to 1 + |its bound| (<= 0 where it holds; inf if non-finite).
         bounds : (lbg, ubg) of `g` when it is not the exact problem's (the smoothed problem's)"""
         lbg, ubg = (self.lbg, self.ubg) if bounds is None else bounds
-        scale = 1 + np.maximum(np.abs(lbg), np.abs(ubg))
-        scale = np.where(np.isfinite(scale), scale, 1.0)
+        scale = _bound_scale(lbg, ubg)
         with np.errstate(invalid="ignore"):
             out = np.maximum(lbg - g, g - ubg) / scale
         return np.where(np.isfinite(g), out, np.inf)
@@ -938,14 +937,20 @@ def _outputs(plant: Plant, X: ca.MX, p) -> ca.MX:
     return h.map(X.shape[1])(X, p)
 
 
+def _bound_scale(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """What a constraint's violation is measured relative to: 1 + max(|lo|, |hi|) when both bounds are
+    finite, else 1."""
+    scale = 1 + np.maximum(np.abs(lo), np.abs(hi))
+    return np.where(np.isfinite(scale), scale, 1.0)
+
+
 def _soft_max_excess(expr: ca.MX, lo, hi, width: ca.MX) -> ca.MX:
     """One smooth inequality (<= 0) for ``lo <= expr <= hi`` elementwise: the soft maximum of the
     relative excesses v (as in `TuningProblem.excess`), m + τ log(mean exp((v - m)/τ)), m = max v,
     τ = width / max(log n, 1): between max v - width and max v, exact as the width goes to 0."""
     n = expr.numel()
     lo, hi = np.broadcast_to(lo, (n,)).astype(float), np.broadcast_to(hi, (n,)).astype(float)
-    scale = 1 + np.maximum(np.abs(lo), np.abs(hi))
-    scale = np.where(np.isfinite(scale), scale, 1.0)
+    scale = _bound_scale(lo, hi)
     sides = []
     upper, lower = np.flatnonzero(np.isfinite(hi)), np.flatnonzero(np.isfinite(lo))
     if upper.size:
