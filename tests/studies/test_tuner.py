@@ -5,9 +5,6 @@ Each claim is re-checked by plain simulation of the nonlinear plant
 not by the CasADi expressions the tuner optimized.
 """
 
-import json
-from importlib import resources
-
 import numpy as np
 import pytest
 
@@ -20,23 +17,6 @@ from studies import tuner
 PLANTS = studies.names()
 
 
-def _stored_tuning(name: str) -> dict:
-    return json.loads((resources.files("studies") / "cases" / f"{name}_tuned_gains.json").read_text())["tuning"]
-
-
-#: The stored designs, each expected to fail (strictly) while its file says it was not re-tuned with the
-#: current tuner: the claims below are the current tuner's, which those gains never had (issue 16 is open).
-RECORDED = [
-    name
-    if _stored_tuning(name).get("re_tuned", True)
-    else pytest.param(
-        name,
-        marks=pytest.mark.xfail(
-            strict=True, reason=f"{name}: stored gains not re-tuned: " + _stored_tuning(name).get("note", "")[:200]
-        ),
-    )
-    for name in PLANTS
-]
 CHECK_SEED, N_CHECK = 3, 4
 
 
@@ -67,7 +47,7 @@ def records():
     return {name: tuner.stored(studies.get(name)) for name in PLANTS}
 
 
-@pytest.mark.parametrize("name", RECORDED)
+@pytest.mark.parametrize("name", PLANTS)
 def test_tuned_design_beats_the_hand_design_and_is_never_worse_on_any_scenarios_spec(name, records):
     """On samples neither tuning nor validation used, for each of the tuning scenarios (the step and the
     disturbance): the tuned design meets the hand design's own figures (its worst overshoot and settling
@@ -106,7 +86,7 @@ def test_tuned_design_beats_the_hand_design_and_is_never_worse_on_any_scenarios_
     assert tuned_total < hand_total
 
 
-@pytest.mark.parametrize("name", RECORDED)
+@pytest.mark.parametrize("name", PLANTS)
 def test_stored_record_is_consistent_and_converged(name, records):
     assert records[name] is not None, f"no tuned gains stored for {name}; run python -m studies.tuner {name}"
     record = records[name]
