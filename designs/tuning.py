@@ -52,7 +52,9 @@ pointwise specs still judge every stage. Measured on the satellite's stored-gain
 problem (16 parameter corners, two runs, 336,256 inequalities for 5 gains): with
 zero-overshoot bounds thousands of them approach activity together in the settled
 tail, and IPOPT crept (cost 23.7 → 21.0 over 300 iterations of its first stage,
-3-5 s each, 60 % of it in MUMPS).
+3-5 s each, 60 % of it in MUMPS). Aggregated, L-BFGS hovered (170 iterations of the
+first stage without meeting its tolerance); aggregated with ``hessian="exact"`` (5
+gains, so second derivatives are cheap) it converged: six stages, 225 iterations.
 """
 
 from __future__ import annotations
