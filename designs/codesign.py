@@ -190,6 +190,8 @@ def codesign(
     nested_tol: float = 1e-3,
     substeps: int = 10,
     widths=WIDTHS,
+    paths: str = "pointwise",
+    hessian: str = "limited-memory",
 ) -> dict[str, CodesignResult]:
     """Co-design the named plant parameters with the block's gains: sequential, nested, simultaneous.
 
@@ -203,7 +205,7 @@ def codesign(
         objective (for example ``lambda p: 0.1 * p["k"]``); default zero
     plant_objective : the sequential method's plant-only objective, same form (default
         `plant_cost`; one of the two must be given)
-    specs, cost, free, bounds, samples, robust, max_iter, tol, jit, substeps, widths
+    specs, cost, free, bounds, samples, robust, max_iter, tol, jit, substeps, widths, paths, hessian
         As in `designs.tuning.tune`; `bounds` holds in every method. Parameters listed
         in `samples` rows are overwritten by the decision for the designed names.
     methods : which of `METHODS` to run (the simultaneous start from the sequential
@@ -229,8 +231,8 @@ def codesign(
     if plant_objective is None and plant_cost is None and "sequential" in methods:
         raise ValueError("the sequential method needs a plant-only objective: give plant_objective or plant_cost")
     names = tuple(ranges)
-    options = {"specs": specs, "cost": cost, "samples": samples, "robust": robust, "substeps": substeps}
-    solve_options = {"max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths}
+    options = {"specs": specs, "cost": cost, "samples": samples, "robust": robust, "substeps": substeps, "paths": paths}
+    solve_options = {"max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths, "hessian": hessian}
     # Validate everything once, before any solve: the joint problem and its bounds.
     joint = TuningProblem(plant, block, scenarios, free=free, extra_params=names, **options)
     lbx, ubx = _joint_bounds(joint, bounds, names, ranges)
@@ -510,8 +512,9 @@ def size_actuator(
     [IPOPT status per tuned limit], retries (tunings that stopped neither converged nor
     infeasible, repeated from the gains of the smallest feasible limit so far; the repeat
     is kept when it alone is feasible, or is as feasible and alone stopped on its test),
-    converged (every kept inner tuning converged or proved its limit infeasible:
-    `TuningResult.stopped_on_test`).
+    converged (every limit's verdict is decided: gains meeting the specs were found there, or
+    the tuning proved it infeasible, `TuningResult.stopped_on_test`; the sizing's objective is
+    the limit, so a feasible limit needs no converged cost).
 
     Raises
     ------
@@ -526,7 +529,7 @@ def size_actuator(
         raise TypeError(f"specs must be a designs.tuning.Specs, got {type(specs).__name__}")
     if tune_options is not None and not isinstance(tune_options, Mapping):
         raise TypeError(f"tune_options must be a dict of keyword arguments for tune, got {tune_options!r}")
-    history, statuses, stopped = [], [], []
+    history, statuses, decided = [], [], []
     best_block: Block | None = None
     retries = 0
 
@@ -549,7 +552,7 @@ def size_actuator(
                     result = again
             ok, block, violations = result.feasible, result.block, result.violations
             statuses.append(result.status)
-            stopped.append(result.stopped_on_test)
+            decided.append(result.feasible or result.stopped_on_test)
         else:
             problem = TuningProblem(sized, block, scenario, specs=specs)
             violations = problem.values(problem.start())[2]
@@ -577,7 +580,7 @@ def size_actuator(
         "history": history,
         "statuses": statuses,
         "retries": retries,
-        "converged": all(stopped),
+        "converged": all(decided),
     }
 
 
@@ -599,6 +602,8 @@ def size_actuator_simultaneous(
     jit: bool = False,
     substeps: int = 10,
     widths=WIDTHS,
+    paths: str = "pointwise",
+    hessian: str = "limited-memory",
 ) -> dict:
     """Smallest limit and its gains in one IPOPT problem: minimize the limit subject to the specs.
 
@@ -616,7 +621,7 @@ def size_actuator_simultaneous(
     start_block : the gains to start from (default ``design(plant at start_limit)``)
     free, bounds : gains to tune (default all of the design's) and their boxes
     cost_weight : >= 0, weight of the closed-loop cost relative to the limit
-    max_iter, tol, jit, substeps, widths : as in `designs.tuning.tune`
+    max_iter, tol, jit, substeps, widths, paths, hessian : as in `designs.tuning.tune`
 
     Returns
     -------
@@ -638,14 +643,25 @@ def size_actuator_simultaneous(
         base = base.with_gains(**{k: v for k, v in start_block.gains.items() if k in base.gains})
     wrapped = ActuatorLimit(base, start_limit)
     free = tuple(base.gain_names if free is None else free) + ("actuator_limit",)
-    problem = TuningProblem(top, wrapped, scenario, specs=specs, cost=Cost("itae"), free=free, substeps=substeps)
+    problem = TuningProblem(
+        top, wrapped, scenario, specs=specs, cost=Cost("itae"), free=free, substeps=substeps, paths=paths
+    )
     lbx, ubx = gain_bounds(problem, (bounds or {}) | {"actuator_limit": (low, high)})
     index = list(problem.free).index("actuator_limit")
     offset = sum(np.asarray(wrapped.gains[g]).size for g in problem.free[:index])
     j0 = problem.values(problem.start())[0]
     weight = cost_weight * start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
     result = solve(
-        problem, lbx, ubx, max_iter, jit, plant_cost=lambda x: x[offset], cost_weight=weight, tol=tol, widths=widths
+        problem,
+        lbx,
+        ubx,
+        max_iter,
+        jit,
+        plant_cost=lambda x: x[offset],
+        cost_weight=weight,
+        tol=tol,
+        widths=widths,
+        hessian=hessian,
     )
     assert result.decision is not None, "tuning.solve always returns its decision vector"
     limit = float(result.decision[offset])

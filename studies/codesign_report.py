@@ -203,6 +203,8 @@ def _listed(gains: dict) -> dict:
 # ----------------------------------------------------------------- actuator sizing
 #: Bisection stops when high / low − 1 < this.
 SIZING_REL_TOL = 0.01
+#: The `tune_options` that the simultaneous sizing (`size_actuator_simultaneous`) also takes.
+SIMULTANEOUS_OPTIONS = ("max_iter", "tol", "jit", "widths", "paths", "hessian")
 
 
 @dataclass(frozen=True)
@@ -399,7 +401,7 @@ def actuator_sizing(
             start_limit=start_limit,
             start_block=start_block,
             free=sizing.free,
-            **{k: v for k, v in (tune_options or {}).items() if k in ("max_iter", "tol", "jit", "widths")},
+            **{k: v for k, v in (tune_options or {}).items() if k in SIMULTANEOUS_OPTIONS},
         )
         where = (
             "from the middle of the range and the hand gains" if start_block is None else "from the sequential answer"

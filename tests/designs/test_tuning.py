@@ -15,6 +15,8 @@ from designs.tuning import (
     Specs,
     TuningProblem,
     closed_loop_spectral_abscissa,
+    gain_bounds,
+    phase_one,
     tune,
 )
 from models import metrics
@@ -564,3 +566,39 @@ def test_aggregated_path_specs_reach_the_pointwise_answer(arm):
     np.testing.assert_allclose(aggregated.decision, pointwise.decision, rtol=1e-3)
     with pytest.raises(ValueError, match="paths must be"):
         TuningProblem(arm, block, scenario, paths="sampled")
+
+
+def test_phase_one_certifies_unreachable_specs_no_worse_than_a_grid(arm):
+    """A 50 deg step risen in 0.05 s is beyond the 1 N m arm: phase one converges outside the spec, at an
+    excess no grid point of the gain box beats (the bang-bang start bounds how far the arm can rise)."""
+    problem = TuningProblem(
+        arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"), specs=Specs(rise_time=0.05)
+    )
+    lbx, ubx = gain_bounds(problem, {"kp": (0, 1.0), "kd": (0, 0.2)})
+    found = phase_one(problem, lbx, ubx, problem.start())
+    assert found.converged and found.infeasible, found
+    grid = [
+        np.max(problem.excess(np.asarray(problem.evaluate([kp, kd])[1]).ravel()))
+        for kp in np.linspace(0.05, 1.0, 8)
+        for kd in np.linspace(0.0, 0.2, 6)
+    ]
+    assert 0 < found.excess <= min(grid) * (1 + 1e-6)
+    exact = np.max(problem.excess(np.asarray(problem.evaluate(found.decision)[1]).ravel()))
+    assert exact == pytest.approx(found.excess, rel=1e-12)
+
+
+def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges(arm):
+    """Without the phase one, this tuning ended at IPOPT's 3000-iteration cap (its restoration wandering
+    along a feasible set of one corner); the answer must meet the specs on a fresh simulation."""
+    target = np.deg2rad(50)
+    specs = Specs(max_overshoot=0.0, settling_time=0.8)
+    scenario = Scenario(reference=target, duration=3.0, tracked="theta")
+    start = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
+    assert start.values(start.start())[2]  # the start misses both specs
+    result = tune(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    assert result.phase_one is not None and result.phase_one.converged and not result.phase_one.infeasible
+    assert result.converged and result.feasible and result.stopped_on_test, result.message
+    assert "phase one" in result.message
+    res = models.simulate_closed_loop(arm, result.block, target, 3.0)
+    over, settle = _overshoot_and_settling(res, 0.0, target)
+    assert over * target <= 1e-6 and settle <= 0.8 + 0.01  # the specs are judged to 1e-6 rad
