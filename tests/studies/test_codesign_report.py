@@ -82,9 +82,7 @@ NOT_CONVERGED = pytest.mark.xfail(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "name", ["arm", pytest.param("uuv", marks=NOT_CONVERGED), pytest.param("ballbeam", marks=NOT_CONVERGED)]
-)
+@pytest.mark.parametrize("name", ["arm", "uuv", pytest.param("ballbeam", marks=NOT_CONVERGED)])
 def test_full_sizing_every_method_converges_and_simultaneous_is_no_worse_than_nested(name):
     result = SIZING[name].actuator_sizing()
     _check_reported(result)
