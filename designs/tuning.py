@@ -965,7 +965,10 @@ def _relative_excess(g: ca.MX, lbg: np.ndarray, ubg: np.ndarray) -> ca.MX:
     """Each finite bound's excess relative to its scale (as `TuningProblem.excess`), <= 0 where it holds."""
     scale = _bound_scale(lbg, ubg)
     up, low = np.flatnonzero(np.isfinite(ubg)), np.flatnonzero(np.isfinite(lbg))
-    return ca.vertcat((g[up.tolist()] - ubg[up]) / scale[up], (lbg[low] - g[low.tolist()]) / scale[low])
+    parts = [(g[up.tolist()] - ca.DM(ubg[up])) / ca.DM(scale[up])] if up.size else []
+    if low.size:
+        parts.append((ca.DM(lbg[low]) - g[low.tolist()]) / ca.DM(scale[low]))
+    return ca.vertcat(*parts) if parts else ca.MX(0, 1)
 
 
 def _soft_max_excess(expr: ca.MX, lo, hi, width: ca.MX) -> ca.MX:

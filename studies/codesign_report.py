@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 import models
-from designs.codesign import codesign, size_actuator, size_actuator_simultaneous
+from designs.codesign import SIZING_COST_WEIGHT, codesign, size_actuator, size_actuator_simultaneous
 from designs.pid import PID, max_equilibrium_input
 from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
 from models import files
@@ -523,9 +523,15 @@ convergence (see each case's co-design problem in `studies/cases/<name>.py`):
    plant-only objective (actuator sizing: the smallest limit that holds the target at rest;
    a plant parameter: its price alone), then the best controller for that plant;
 2. **nested**: an outer optimizer on the plant (bisection on the limit; bounded Brent on a
-   parameter), each of its evaluations a converged tuning of the gains;
+   parameter), each of its evaluations a converged tuning of the gains (actuator sizing
+   minimizes the limit, so each limit's verdict is what must be settled: gains meeting the
+   specs found there, or a proof that none near the tuning's path do);
 3. **simultaneous**: plant and gains in one IPOPT problem, from a neutral start (the middle
-   of the range, the hand design's gains) and, in "(3) from (1)", from the sequential answer.
+   of the range, the hand design's gains) and, in "(3) from (1)", from the sequential answer
+   (actuator sizing: the limit plus a tie-break of {weight:g} times the ITAE, scaled, as the objective).
+
+A solve that starts outside the specs first runs a phase one (minimize the largest relative
+spec excess); one that converges with the specs still missed is a local proof of infeasibility.
 
 Columns:
 
@@ -539,9 +545,11 @@ Columns:
   objective of (1) and (2)); positive: simultaneous better.
 - **wall time**: seconds per method on the machine that ran the command.
 - **all converged**: every optimizer behind every answer stopped on its convergence test
-  (IPOPT's tolerance with the smoothing continuation settled, or IPOPT's proof that a limit
-  cannot meet the specs; the bisection's or Brent's resolution), none at an iteration cap;
-  each answer's statuses are listed under Notes.
+  (IPOPT's tolerance with the smoothing continuation settled, or a proof that a limit
+  cannot meet the specs: IPOPT's or the phase one's; the bisection's or Brent's resolution),
+  none at an iteration cap; a sizing's limit where gains meeting the specs were found is
+  settled even when the ITAE tuning there stopped short (its status is still listed); each
+  answer's statuses are listed under Notes.
 """
 
 
@@ -601,7 +609,7 @@ def notes(results: list[CaseResult]) -> str:
 
 #: The document's sections in order: each a callable (results, command) -> Markdown.
 SECTIONS = (
-    lambda results, command: HEADER.format(command=command),
+    lambda results, command: HEADER.format(command=command, weight=SIZING_COST_WEIGHT),
     lambda results, command: "\n" + table(results) + "\n",
     lambda results, command: notes(results),
 )

@@ -602,3 +602,24 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
     res = models.simulate_closed_loop(arm, result.block, target, 3.0)
     over, settle = _overshoot_and_settling(res, 0.0, target)
     assert over * target <= 1e-6 and settle <= 0.8 + 0.01  # the specs are judged to 1e-6 rad
+
+
+@pytest.mark.parametrize(
+    "lbg, ubg",
+    [
+        ([-1.0, -np.inf, 0.5, -2.0], [1.0, 2.0, np.inf, 2.0]),  # both sides, upper only, lower only
+        ([-np.inf] * 4, [0.0] * 4),  # aggregated specs: upper bounds only
+        ([0.9] * 4, [np.inf] * 4),  # a rise-time spec: lower bounds only
+    ],
+)
+def test_relative_excess_rows_are_the_judges_excess(arm, lbg, ubg):
+    """The phase one's symbolic excess rows (one per finite bound): their largest is the judge's largest excess."""
+    lbg, ubg = np.array(lbg), np.array(ubg)
+    problem = TuningProblem(arm, ArmPD(arm), Scenario(reference=0.5, duration=0.1, tracked="theta"))
+    g = ca.MX.sym("g", 4)
+    rows = ca.Function("rows", [g], [tuning._relative_excess(g, lbg, ubg)])
+    for value in ([3.0, 5.0, 0.0, -1.0], [0.0, 0.0, 0.9, 2.5]):
+        got = np.asarray(rows(value)).ravel()
+        judged = problem.excess(np.array(value), (lbg, ubg))
+        assert got.size == np.isfinite(lbg).sum() + np.isfinite(ubg).sum()
+        assert np.max(got) == pytest.approx(np.max(judged), rel=1e-15)
