@@ -56,10 +56,12 @@ from .tuning import (
 METHODS = ("sequential", "nested", "simultaneous", "simultaneous from sequential")
 #: Statuses of an IPOPT solve that stopped on a convergence test (local infeasibility included).
 STOPPED_BY_TEST = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Infeasible_Problem_Detected")
-#: The simultaneous sizing's tie-break weight (`size_actuator_simultaneous`). Minimizing the limit alone
-#: leaves the gains nearly free at the answer, and IPOPT crept: on the UUV's sizing with 1e-3, 1928
-#: iterations at the first width, then Restoration_Failed; with 0.03, Solve_Succeeded in 42 iterations
-#: at a limit 0.035 % larger (61.47 against 61.44 N m), and the arm's in 48.
+#: The simultaneous sizing's regularizing tie-break weight (`size_actuator_simultaneous` solves with it
+#: first, then at its own smaller `cost_weight` from that answer). Minimizing the limit with a weak
+#: tie-break leaves the gains nearly free at the answer, and IPOPT crept: on the UUV's sizing with 1e-3,
+#: 1928 iterations at the first width, then Restoration_Failed; with 0.03, Solve_Succeeded in 42
+#: iterations at a limit 0.035 % larger. But 0.03 alone trades limit for cost where the gains can use a
+#: larger limit (an arm PD with kp up to 5: 0.867 N m against 0.767 N m at 1e-3), hence the second solve.
 SIZING_COST_WEIGHT = 0.03
 #: Most limits `size_actuator` may try (a bisection of 2^-60 relative resolution needs fewer).
 MAX_BISECTIONS = 60
@@ -601,7 +603,7 @@ def size_actuator_simultaneous(
     start_block: Block | None = None,
     free=None,
     bounds=None,
-    cost_weight: float = SIZING_COST_WEIGHT,
+    cost_weight: float = 1e-3,
     max_iter: int = MAX_ITER,
     tol: float = TOL,
     jit: bool = False,
@@ -625,7 +627,9 @@ def size_actuator_simultaneous(
     start_limit : the limit to start from, in [low, high]
     start_block : the gains to start from (default ``design(plant at start_limit)``)
     free, bounds : gains to tune (default all of the design's) and their boxes
-    cost_weight : >= 0, weight of the closed-loop cost relative to the limit (see `SIZING_COST_WEIGHT`)
+    cost_weight : >= 0, weight of the closed-loop cost relative to the limit; below
+        `SIZING_COST_WEIGHT` the problem is solved at that weight first, then at this one from its
+        answer, and the last converged feasible answer kept (its weight in "cost_weight")
     max_iter, tol, jit, substeps, widths, paths, hessian : as in `designs.tuning.tune`
 
     Returns
@@ -655,19 +659,20 @@ def size_actuator_simultaneous(
     index = list(problem.free).index("actuator_limit")
     offset = sum(np.asarray(wrapped.gains[g]).size for g in problem.free[:index])
     j0 = problem.values(problem.start())[0]
-    weight = cost_weight * start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
-    result = solve(
-        problem,
-        lbx,
-        ubx,
-        max_iter,
-        jit,
-        plant_cost=lambda x: x[offset],
-        cost_weight=weight,
-        tol=tol,
-        widths=widths,
-        hessian=hessian,
+    scaled = start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
+    options = {"plant_cost": lambda x: x[offset], "tol": tol, "widths": widths, "hessian": hessian}
+    # First with the regularizing weight, then at `cost_weight` from that answer; the last converged,
+    # feasible answer is kept (the first one when the second creeps or fails).
+    weights = (
+        (max(cost_weight, SIZING_COST_WEIGHT), cost_weight) if cost_weight < SIZING_COST_WEIGHT else (cost_weight,)
     )
+    result, point, used = None, None, cost_weight
+    for w in weights:
+        trial = solve(problem, lbx, ubx, max_iter, jit, cost_weight=w * scaled, start=point, **options)
+        if result is None or (trial.converged and trial.feasible):
+            result, used = trial, w
+        point = trial.decision
+    assert result is not None
     assert result.decision is not None, "tuning.solve always returns its decision vector"
     limit = float(result.decision[offset])
     sized = plant.with_input_limit(limit)
@@ -682,6 +687,7 @@ def size_actuator_simultaneous(
         "violations": violations,
         "converged": result.converged,
         "status": f"IPOPT: {result.status}",
-        "message": result.message,
+        "message": f"tie-break weight {used:g}: {result.message}",
         "result": result,
+        "cost_weight": used,
     }

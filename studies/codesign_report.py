@@ -528,7 +528,8 @@ convergence (see each case's co-design problem in `studies/cases/<name>.py`):
    specs found there, or a proof that none near the tuning's path do);
 3. **simultaneous**: plant and gains in one IPOPT problem, from a neutral start (the middle
    of the range, the hand design's gains) and, in "(3) from (1)", from the sequential answer
-   (actuator sizing: the limit plus a tie-break of {weight:g} times the ITAE, scaled, as the objective).
+   (actuator sizing: the limit plus a tie-break of 0.001 times the ITAE, scaled, as the objective,
+   solved first with a tie-break of {weight:g} and then from that answer).
 
 A solve that starts outside the specs first runs a phase one (minimize the largest relative
 spec excess); one that converges with the specs still missed is a local proof of infeasibility.
