@@ -239,7 +239,7 @@ def codesign(
         raise ValueError("the sequential method needs a plant-only objective: give plant_objective or plant_cost")
     names = tuple(ranges)
     options = {"specs": specs, "cost": cost, "samples": samples, "robust": robust, "substeps": substeps, "paths": paths}
-    solve_options = {"max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths, "hessian": hessian}
+    solve_options = {"max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths, "hessian": hessian, "phase": True}
     # Validate everything once, before any solve: the joint problem and its bounds.
     joint = TuningProblem(plant, block, scenarios, free=free, extra_params=names, **options)
     lbx, ubx = _joint_bounds(joint, bounds, names, ranges)
@@ -546,14 +546,14 @@ def size_actuator(
         block = design(sized)
         if retune:
             options = dict(tune_options or {})
-            result = tune(sized, block, scenario, specs=specs, **options)
+            result = tune(sized, block, scenario, specs=specs, phase=True, **options)
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
                 # specs at the smallest feasible limit so far (seen in a case's sizing: Restoration_Failed
                 # from the design's own gains, Solve_Succeeded from those).
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
-                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **options)
+                again = tune(sized, block.with_gains(**known), scenario, specs=specs, phase=True, **options)
                 # A feasible design decides the limit whatever the other start claims; then a stop on the test.
                 if (again.feasible, again.stopped_on_test) > (result.feasible, result.stopped_on_test):
                     result = again
@@ -660,7 +660,7 @@ def size_actuator_simultaneous(
     offset = sum(np.asarray(wrapped.gains[g]).size for g in problem.free[:index])
     j0 = problem.values(problem.start())[0]
     scaled = start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
-    options = {"plant_cost": lambda x: x[offset], "tol": tol, "widths": widths, "hessian": hessian}
+    options = {"plant_cost": lambda x: x[offset], "tol": tol, "widths": widths, "hessian": hessian, "phase": True}
     # First with the regularizing weight, then at `cost_weight` from that answer; the last converged,
     # feasible answer is kept (the first one when the second creeps or fails).
     weights = (

@@ -56,7 +56,7 @@ tail, and IPOPT crept (cost 23.7 → 21.0 over 300 iterations of its first stage
 first stage without meeting its tolerance); aggregated with ``hessian="exact"`` (5
 gains, so second derivatives are cheap) it converged: six stages, 225 iterations.
 
-A start that misses a spec is first moved by a phase one (`phase_one`: minimize
+With ``phase=True`` a start that misses a spec is first moved by a phase one (`phase_one`: minimize
 the largest relative excess of the specs, a problem every decision is feasible
 for), and the tuning starts from its answer. Measured on the arm's PD with zero
 overshoot and 0.8 s settling from gains that miss both: IPOPT's own restoration
@@ -1044,6 +1044,7 @@ def tune(
     widths=WIDTHS,
     ipopt_options=None,
     paths: str = "pointwise",
+    phase: bool = False,
 ) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
@@ -1063,6 +1064,8 @@ def tune(
     method : "smooth" (continuation over `widths`, see the module docstring) or "exact"
         (one solve on the exact loop)
     widths : the continuation's relative smoothing widths, strictly decreasing
+    phase : run a phase one first when the start misses a spec (see `solve`); off by default: on
+        the README's two-scenario, four-sample PID tuning it ran for over 28 minutes
     ipopt_options : dict of further IPOPT options (for example ``{"print_level": 5}``); they
         override `IPOPT_OPTIONS` and the ones set from the arguments above
 
@@ -1100,6 +1103,7 @@ def tune(
         method=method,
         widths=widths,
         ipopt_options=ipopt_options,
+        phase=phase,
     )
 
 
@@ -1268,7 +1272,7 @@ def solve(
     start=None,
     cost_weight: float = 1.0,
     ipopt_options=None,
-    phase: bool = True,
+    phase: bool = False,
 ) -> TuningResult:
     """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
 
@@ -1280,7 +1284,7 @@ def solve(
     start : decision vector to start from (default `problem.start()`), clipped to the bounds
     cost_weight : >= 0, the closed-loop objective's weight (0: the plant cost alone, under the specs)
     ipopt_options : as in `tune`
-    phase : when the start misses a spec, run `phase_one` first and tune from its answer; if it
+    phase : (opt-in) when the start misses a spec, run `phase_one` first and tune from its answer; if it
         ends outside the specs, tune from its answer and from the start and keep the better
         (feasible first, then converged, then cost)
     max_iter, jit, tol, hessian, progress, method, widths : as in `tune`

@@ -337,7 +337,7 @@ def actuator_sizing(
     if "sequential" in methods:
         started = time.perf_counter()
         sized = plant.with_input_limit(floor)
-        tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, **options)
+        tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, phase=True, **options)
         result.designs["sequential"] = _sizing_design(
             "sequential",
             sized,

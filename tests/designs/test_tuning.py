@@ -595,7 +595,7 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
     start = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
     assert start.values(start.start())[2]  # the start misses both specs
-    result = tune(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    result = tune(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}, phase=True)
     assert result.phase_one is not None and result.phase_one.converged and not result.phase_one.infeasible
     assert result.converged and result.feasible and result.stopped_on_test, result.message
     assert "phase one" in result.message
