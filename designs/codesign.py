@@ -63,6 +63,8 @@ STOPPED_BY_TEST = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Infeasible_
 #: iterations at a limit 0.035 % larger. But 0.03 alone trades limit for cost where the gains can use a
 #: larger limit (an arm PD with kp up to 5: 0.867 N m against 0.767 N m at 1e-3), hence the second solve.
 SIZING_COST_WEIGHT = 0.03
+#: The simultaneous sizing's own tie-break weight (the default `cost_weight`), reached from the above.
+SIZING_TIE_BREAK = 1e-3
 #: Most limits `size_actuator` may try (a bisection of 2^-60 relative resolution needs fewer).
 MAX_BISECTIONS = 60
 
@@ -545,15 +547,15 @@ def size_actuator(
         sized = plant.with_input_limit(limit)
         block = design(sized)
         if retune:
-            options = dict(tune_options or {})
-            result = tune(sized, block, scenario, specs=specs, phase=True, **options)
+            options = {"phase": True} | dict(tune_options or {})
+            result = tune(sized, block, scenario, specs=specs, **options)
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
                 # specs at the smallest feasible limit so far (seen in a case's sizing: Restoration_Failed
                 # from the design's own gains, Solve_Succeeded from those).
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
-                again = tune(sized, block.with_gains(**known), scenario, specs=specs, phase=True, **options)
+                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **options)
                 # A feasible design decides the limit whatever the other start claims; then a stop on the test.
                 if (again.feasible, again.stopped_on_test) > (result.feasible, result.stopped_on_test):
                     result = again
@@ -603,7 +605,7 @@ def size_actuator_simultaneous(
     start_block: Block | None = None,
     free=None,
     bounds=None,
-    cost_weight: float = 1e-3,
+    cost_weight: float = SIZING_TIE_BREAK,
     max_iter: int = MAX_ITER,
     tol: float = TOL,
     jit: bool = False,
@@ -663,9 +665,7 @@ def size_actuator_simultaneous(
     options = {"plant_cost": lambda x: x[offset], "tol": tol, "widths": widths, "hessian": hessian, "phase": True}
     # First with the regularizing weight, then at `cost_weight` from that answer; the last converged,
     # feasible answer is kept (the first one when the second creeps or fails).
-    weights = (
-        (max(cost_weight, SIZING_COST_WEIGHT), cost_weight) if cost_weight < SIZING_COST_WEIGHT else (cost_weight,)
-    )
+    weights = (SIZING_COST_WEIGHT, cost_weight) if cost_weight < SIZING_COST_WEIGHT else (cost_weight,)
     result, point, used = None, None, cost_weight
     for w in weights:
         trial = solve(problem, lbx, ubx, max_iter, jit, cost_weight=w * scaled, start=point, **options)

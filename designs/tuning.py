@@ -1174,6 +1174,11 @@ class PhaseOne:
         return self.converged and self.excess > AGREEMENT
 
 
+def _largest_excess(problem: TuningProblem, decision) -> float:
+    """The largest relative excess of the exact specs at a decision (<= 0: all hold; -inf: no specs)."""
+    return float(np.max(problem.excess(np.asarray(problem.evaluate(decision)[1]).ravel()), initial=-np.inf))
+
+
 def _decision_scale(start: np.ndarray) -> np.ndarray:
     """IPOPT works on z = x / scale, each decision scaled by its own start, so gains of different
     magnitudes (a crane cascade's 0.2 outer and 8000 inner) all move on the order of one; a zero
@@ -1205,6 +1210,7 @@ def phase_one(
     test (a local minimum of the largest excess), where the tuning problem itself, started
     outside its specs, can end in Restoration_Failed.
     """
+    max_iter, tol, jit, widths = _check_options(max_iter, tol, "limited-memory", jit, None, method, widths)
     lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
     start = np.clip(as_vector(start, problem.decision.numel(), "start"), lbx, ubx)
     smooth = method == "smooth"
@@ -1230,11 +1236,7 @@ def phase_one(
         else ca.nlpsol("phase_one", "ipopt", nlp, options)
     )
 
-    def exact_excess(decision) -> float:
-        values = problem.excess(np.asarray(problem.evaluate(decision)[1]).ravel())
-        return float(np.max(values, initial=-np.inf))
-
-    decision, worst = start, exact_excess(start)
+    decision, worst = start, np.inf  # widths is never empty: the loop sets both
     status, iterations = "not solved", 0
     z_now = start / scale
     for w in widths if smooth else (None,):
@@ -1251,7 +1253,7 @@ def phase_one(
         status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
         z_now = np.asarray(sol["x"]).ravel()[:n]
         decision = np.clip(scale * z_now, lbx, ubx)
-        worst = exact_excess(decision)
+        worst = _largest_excess(problem, decision)
         if worst <= 0 or not _status_converged(status):
             break
     return PhaseOne(decision, worst, status, _status_converged(status), iterations)
@@ -1290,6 +1292,7 @@ def solve(
     max_iter, jit, tol, hessian, progress, method, widths : as in `tune`
     """
     max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
+    phase = boolean(phase, "phase")
     if ipopt_options is not None and not isinstance(ipopt_options, Mapping):
         raise TypeError(f"ipopt_options must be a dict of IPOPT options, got {ipopt_options!r}")
     start_time = time.perf_counter()
@@ -1305,8 +1308,7 @@ def solve(
     smooth = method == "smooth"
     # Started outside the specs: a phase one first (see `phase_one`), and the tuning from its answer.
     found, begin = None, start
-    missed = np.max(problem.excess(np.asarray(problem.evaluate(start)[1]).ravel()), initial=-np.inf)
-    if phase and missed > AGREEMENT:
+    if phase and _largest_excess(problem, start) > AGREEMENT:
         found = phase_one(problem, lbx, ubx, start, method=method, widths=widths, tol=tol, max_iter=max_iter, jit=jit)
         if found.excess > AGREEMENT:
             # A local verdict only: IPOPT's own restoration from the start may still find the specs (the arm's

@@ -42,7 +42,13 @@ from typing import Any
 import numpy as np
 
 import models
-from designs.codesign import SIZING_COST_WEIGHT, codesign, size_actuator, size_actuator_simultaneous
+from designs.codesign import (
+    SIZING_COST_WEIGHT,
+    SIZING_TIE_BREAK,
+    codesign,
+    size_actuator,
+    size_actuator_simultaneous,
+)
 from designs.pid import PID, max_equilibrium_input
 from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
 from models import files
@@ -314,7 +320,7 @@ def actuator_sizing(
     specs = sizing.specs
     unit = case.input_unit
     floor = holding_limit(case, sizing)
-    options: dict[str, Any] = {"free": sizing.free} | dict(tune_options or {})
+    options: dict[str, Any] = {"free": sizing.free, "phase": True} | dict(tune_options or {})
     result = CaseResult(
         key=case.plant,
         problem=f"actuator sizing: {case.plant}",
@@ -337,7 +343,7 @@ def actuator_sizing(
     if "sequential" in methods:
         started = time.perf_counter()
         sized = plant.with_input_limit(floor)
-        tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, phase=True, **options)
+        tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, **options)
         result.designs["sequential"] = _sizing_design(
             "sequential",
             sized,
@@ -528,7 +534,7 @@ convergence (see each case's co-design problem in `studies/cases/<name>.py`):
    specs found there, or a proof that none near the tuning's path do);
 3. **simultaneous**: plant and gains in one IPOPT problem, from a neutral start (the middle
    of the range, the hand design's gains) and, in "(3) from (1)", from the sequential answer
-   (actuator sizing: the limit plus a tie-break of 0.001 times the ITAE, scaled, as the objective,
+   (actuator sizing: the limit plus a tie-break of {tie_break:g} times the ITAE, scaled, as the objective,
    solved first with a tie-break of {weight:g} and then from that answer).
 
 A solve that starts outside the specs first runs a phase one (minimize the largest relative
@@ -610,7 +616,7 @@ def notes(results: list[CaseResult]) -> str:
 
 #: The document's sections in order: each a callable (results, command) -> Markdown.
 SECTIONS = (
-    lambda results, command: HEADER.format(command=command, weight=SIZING_COST_WEIGHT),
+    lambda results, command: HEADER.format(command=command, weight=SIZING_COST_WEIGHT, tie_break=SIZING_TIE_BREAK),
     lambda results, command: "\n" + table(results) + "\n",
     lambda results, command: notes(results),
 )

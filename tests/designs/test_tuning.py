@@ -623,3 +623,13 @@ def test_relative_excess_rows_are_the_judges_excess(arm, lbg, ubg):
         judged = problem.excess(np.array(value), (lbg, ubg))
         assert got.size == np.isfinite(lbg).sum() + np.isfinite(ubg).sum()
         assert np.max(got) == pytest.approx(np.max(judged), rel=1e-15)
+
+
+def test_bad_phase_one_input_is_named(arm):
+    scenario = Scenario(reference=0.5, duration=0.2, tracked="theta")
+    problem = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1))
+    lbx, ubx = gain_bounds(problem, None)
+    with pytest.raises(ValueError, match="method must be 'smooth' or 'exact'"):
+        phase_one(problem, lbx, ubx, problem.start(), method="fast")
+    with pytest.raises(TypeError, match="phase"):
+        tune(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1), phase="yes")
