@@ -312,7 +312,8 @@ def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFE
     swings 0.15 rad at ℓ = 10 m and 0.18 rad at 5 m, so it is feasible over the
     whole range. Uses crane1: the two-load crane doubles the state and cost of
     every solve. `methods` (default all of `studies.codesign_report.METHODS`)
-    and `tune_options` (max_iter, jit, ...; JIT by default) go to `codesign_case`.
+    and `tune_options` (max_iter, jit, ...; by default
+    `studies.codesign_report.CODESIGN_TUNE_OPTIONS`) go to `codesign_case`.
     """
     from studies import codesign_report as cr
     from studies.homework import statespace_controllers
@@ -343,7 +344,7 @@ def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFE
         *CABLE_RANGE,
         hoist_cost,
         methods=methods or cr.METHODS,
-        tune_options={"jit": True} | dict(tune_options or {}),
+        tune_options=cr.CODESIGN_TUNE_OPTIONS | dict(tune_options or {}),
     )
 
 

@@ -248,7 +248,7 @@ def panel_stiffness(*, methods=None, tune_options=None, duration: float = STIFFN
     2 % settling by 23 s, which the hand design meets at the text's k = 0.15
     N m/rad (4.4 %, 22 s). `methods` (default all of
     `studies.codesign_report.METHODS`) and `tune_options` (max_iter, jit, ...;
-    JIT by default) go to `codesign_case`.
+    by default `studies.codesign_report.CODESIGN_TUNE_OPTIONS`) go to `codesign_case`.
     """
     from studies import codesign_report as cr
     from studies.homework import statespace_controllers
@@ -280,7 +280,7 @@ def panel_stiffness(*, methods=None, tune_options=None, duration: float = STIFFN
         *STIFFNESS_RANGE,
         stiffness_cost,
         methods=methods or cr.METHODS,
-        tune_options={"jit": True} | dict(tune_options or {}),
+        tune_options=cr.CODESIGN_TUNE_OPTIONS | dict(tune_options or {}),
     )
 
 
