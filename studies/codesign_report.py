@@ -166,18 +166,23 @@ RECORDED = ("method", "value", "objective", "closed_loop_cost", "plant_cost", "f
 RECORDED_CASE = ("key", "problem", "plant", "parameter", "unit", "text_value", "objective", "notes")
 
 
-def to_record(result: CaseResult, run: dict) -> dict:
-    """`result` as JSON-able data (what the report prints) with `run`: how, when and from which code."""
+def to_record(result: CaseResult, run: dict, kept: dict | None = None) -> dict:
+    """`result` as JSON-able data (what the report prints), each design with `run`: how, when and from
+    which code it was solved. `kept`: an earlier record of the problem whose designs of methods not in
+    `result` are kept, each with its own run."""
+    designs = dict((kept or {}).get("designs", {}))
+    designs |= {
+        m: {name: getattr(d, name) for name in RECORDED} | {"run": dict(run)} for m, d in result.designs.items()
+    }
     return {
-        "run": dict(run),
         **{name: getattr(result, name) for name in RECORDED_CASE},
-        "designs": {m: {name: getattr(d, name) for name in RECORDED} for m, d in result.designs.items()},
+        "designs": {m: designs[m] for m in METHODS if m in designs},
     }
 
 
 def from_record(record: dict) -> CaseResult:
-    """The `CaseResult` of a `to_record` record (plants, controllers and scenario left None), its
-    provenance added to the notes."""
+    """The `CaseResult` of a `to_record` record (plants, controllers and scenario left None), the
+    runs its designs come from added to the notes."""
     numbers = ("value", "objective", "closed_loop_cost", "plant_cost", "wall_time")
     designs = {
         method: Design(
@@ -189,7 +194,6 @@ def from_record(record: dict) -> CaseResult:
         )
         for method, saved in record["designs"].items()
     }
-    run = record["run"]
     result = CaseResult(
         **{name: record[name] for name in RECORDED_CASE if name != "notes"},
         scenario=None,
@@ -199,7 +203,11 @@ def from_record(record: dict) -> CaseResult:
         notes=list(record["notes"]),
     )
     result.text_value = float(result.text_value)
-    result.notes.append(f"run by `{run['command']}` on {run['date']} (commit {run['commit']})")
+    runs: dict[tuple, list] = {}
+    for method, saved in record["designs"].items():
+        runs.setdefault(tuple(saved["run"][k] for k in ("command", "date", "commit")), []).append(method)
+    for (command, date, commit), methods in runs.items():
+        result.notes.append(f"{', '.join(methods)}: run by `{command}` on {date} (commit {commit})")
     return result
 
 
@@ -383,6 +391,11 @@ def actuator_sizing(
     methods : which of `METHODS` to run
     tune_options : keyword arguments for every `designs.tuning.tune` call (max_iter, ...)
     """
+    bad = [m for m in methods if m not in METHODS]
+    if bad or isinstance(methods, str):
+        raise ValueError(f"unknown co-design method {bad or methods}; choose from {', '.join(METHODS)}")
+    if "simultaneous from sequential" in methods and "sequential" not in methods:
+        raise ValueError("'simultaneous from sequential' needs 'sequential' among the methods")
     plant = models.get(case.plant)
     scenario = sizing_scenario(case, sizing)
     specs = sizing.specs
@@ -695,6 +708,10 @@ def report(results: list[CaseResult], command: str, sections=SECTIONS) -> str:
     return "".join(section(results, command) for section in sections)
 
 
+def _listed_methods(methods) -> str:
+    return "" if methods is None else " --methods " + " ".join(f"'{m}'" if " " in m else m for m in methods)
+
+
 def main(argv=None) -> int:
     found = problems()
     parser = argparse.ArgumentParser(prog="python -m studies.codesign_report", description=__doc__.split("\n")[0])
@@ -709,6 +726,12 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--reuse", action="store_true", help="read the problems that have a record instead of solving them again"
     )
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        choices=METHODS,
+        help="solve only these methods; the problem's record keeps its other methods' designs",
+    )
     args = parser.parse_args(argv)
     keys = args.only or list(found)
     records = args.records or args.out.with_suffix("")
@@ -716,17 +739,20 @@ def main(argv=None) -> int:
     results = []
     for i, key in enumerate(keys, 1):
         saved = records / f"{key}.json"
-        if args.reuse and saved.exists():
-            results.append(from_record(json.loads(saved.read_text())))
+        earlier = json.loads(saved.read_text()) if saved.exists() else None
+        if args.reuse and earlier is not None:
+            results.append(from_record(earlier))
             print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
             continue
         print(f"[{i}/{len(keys)}] {key} ...", end=" ", flush=True)
         started = time.perf_counter()
-        r = found[key]()
-        results.append(r)
-        files.write_json(saved, to_record(r, _provenance(f"python -m studies.codesign_report --only {key}")))
+        r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
         values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
         print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
+        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
+        record = to_record(r, run, earlier if args.methods else None)
+        files.write_json(saved, record)
+        results.append(from_record(record) if args.methods else r)
     text = report(results, command + (" --reuse" if args.reuse else ""))
     print(table(results))
     files.write_text(args.out, text)

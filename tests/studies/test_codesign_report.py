@@ -1,5 +1,7 @@
 """Co-design of the case studies: every reported number re-checked on a fresh simulation or evaluation."""
 
+import json
+
 import numpy as np
 import pytest
 from case_designs import classical_controllers
@@ -243,12 +245,74 @@ def test_table_and_cli_write_the_document_atomically(tmp_path, monkeypatch, caps
     doc = out.read_text()
     assert doc.startswith("# Co-design") and "`python -m studies.codesign_report`" in doc and "a note" in doc
     assert cr.table([result]) in doc and "status: IPOPT: Solve_Succeeded" in doc
-    assert [p.name for p in out.parent.iterdir()] == ["codesign.md"]  # no temporary file left
+    # The document and its records beside it, no temporary file left.
+    assert sorted(p.name for p in out.parent.iterdir()) == ["codesign", "codesign.md"]
+    assert [p.name for p in (out.parent / "codesign").iterdir()] == ["fake.json"]
     printed = capsys.readouterr().out
     assert "[1/1] fake ..." in printed and f"wrote {out}" in printed
     # A section appended by another report lands after the notes.
     extra = cr.report([result], "cmd", cr.SECTIONS + (lambda results, command: "\n## Open-loop co-design\n",))
     assert extra.endswith("## Open-loop co-design\n") and extra.startswith(cr.report([result], "cmd"))
+
+
+def test_records_rebuild_the_document_without_solving(tmp_path, monkeypatch):
+    result = _fake_result()
+    result.designs["simultaneous"].measured["rise_time_s"] = float("inf")  # never rose: kept through JSON
+    result.designs["nested"].converged = False
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda: result, "other": lambda: _fake_result("other")})
+    out, records = tmp_path / "codesign.md", tmp_path / "saved"
+    assert cr.main(["--out", str(out), "--records", str(records), "--only", "fake"]) == 1  # nested unconverged
+    saved = json.loads((records / "fake.json").read_text())
+    assert {d["run"]["command"] for d in saved["designs"].values()} == {"python -m studies.codesign_report --only fake"}
+
+    def unsolvable():
+        raise AssertionError("a problem with a record is read, not solved, with --reuse")
+
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": unsolvable, "other": lambda: _fake_result("other")})
+    assert cr.main(["--out", str(out), "--records", str(records), "--reuse"]) == 1
+    doc = out.read_text()
+    read = cr.from_record(saved)
+    assert read.designs["simultaneous"].measured["rise_time_s"] == float("inf") and not read.converged
+    for name in cr.RECORDED:
+        assert [getattr(d, name) for d in read.designs.values()] == [getattr(d, name) for d in result.designs.values()]
+    # Both problems in the document, the read one with the same table row as when it was solved.
+    assert cr.table([result]).splitlines()[2] in doc and "| problem other |" in doc
+    date = saved["designs"]["nested"]["run"]["date"]
+    assert "--reuse" in doc and f"run by `python -m studies.codesign_report --only fake` on {date}" in doc
+    assert (records / "other.json").exists()
+
+
+def test_methods_solved_again_replace_only_theirs_in_the_record(tmp_path, monkeypatch):
+    first = _fake_result()
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda **options: first})
+    out, records = tmp_path / "codesign.md", tmp_path / "saved"
+    cr.main(["--out", str(out), "--records", str(records)])
+    again = _fake_result()
+    again.designs = {"simultaneous": again.designs["simultaneous"]}
+    again.designs["simultaneous"].value = again.designs["simultaneous"].objective = 0.7
+    asked = []
+
+    def solve(**options):
+        asked.append(options)
+        return again
+
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": solve})
+    cr.main(["--out", str(out), "--records", str(records), "--methods", "simultaneous"])
+    assert asked == [{"methods": ("simultaneous",)}]
+    read = cr.from_record(json.loads((records / "fake.json").read_text()))
+    assert list(read.designs) == list(cr.METHODS)
+    assert [d.value for d in read.designs.values()] == [1.0, 0.9, 0.7, 0.85]
+    again_run = "simultaneous: run by `python -m studies.codesign_report --only fake --methods simultaneous`"
+    assert any(n.startswith(again_run) for n in read.notes)
+    assert any(n.startswith("sequential, nested, simultaneous from sequential: run by") for n in read.notes)
+    assert "0.7 → 0.7" in out.read_text()
+
+
+def test_sizing_methods_checked_before_solving():
+    with pytest.raises(ValueError, match="needs 'sequential'"):
+        cr.actuator_sizing(arm.CASE, arm.SIZING, methods=("simultaneous from sequential",))
+    with pytest.raises(ValueError, match="unknown co-design method"):
+        cr.actuator_sizing(arm.CASE, arm.SIZING, methods=("bisection",))
 
 
 @pytest.mark.xfail(
