@@ -201,6 +201,7 @@ def codesign(
     widths=WIDTHS,
     paths: str = "pointwise",
     hessian: str = "limited-memory",
+    progress: Callable[[CodesignResult], None] | None = None,
 ) -> dict[str, CodesignResult]:
     """Co-design the named plant parameters with the block's gains: sequential, nested, simultaneous.
 
@@ -220,6 +221,7 @@ def codesign(
     methods : which of `METHODS` to run (the simultaneous start from the sequential
         answer needs "sequential")
     nested_tol : the nested outer optimizer's tolerance on each parameter, a fraction of its range
+    progress : called with each method's answer as soon as it is found (the methods can take hours)
 
     Returns
     -------
@@ -246,24 +248,34 @@ def codesign(
     joint = TuningProblem(plant, block, scenarios, free=free, extra_params=names, **options)
     lbx, ubx = _joint_bounds(joint, bounds, names, ranges)
     cost_fn = _plant_cost_function(names, plant_cost)
-    answers = {}
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be callable with a CodesignResult, got {progress!r}")
+    answers: dict[str, CodesignResult] = {}
+
+    def found(answer: CodesignResult) -> None:
+        answers[answer.method] = answer
+        if progress is not None:
+            progress(answer)
+
     if "sequential" in methods:
-        answers["sequential"] = _sequential(
-            plant,
-            block,
-            scenarios,
-            names,
-            ranges,
-            plant_objective or plant_cost,
-            cost_fn,
-            free,
-            bounds,
-            options,
-            solve_options,
+        found(
+            _sequential(
+                plant,
+                block,
+                scenarios,
+                names,
+                ranges,
+                plant_objective or plant_cost,
+                cost_fn,
+                free,
+                bounds,
+                options,
+                solve_options,
+            )
         )
     if "nested" in methods:
-        answers["nested"] = _nested(
-            plant, block, scenarios, names, ranges, cost_fn, free, bounds, options, solve_options, nested_tol
+        found(
+            _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, options, solve_options, nested_tol)
         )
     if "simultaneous" in methods:
         started = time.perf_counter()
@@ -272,17 +284,19 @@ def codesign(
         result = solve(
             joint, lbx, ubx, plant_cost=lambda x: cost_fn(x[joint.n_gains :]), start=neutral, **solve_options
         )
-        answers["simultaneous"] = _answer(
-            "simultaneous",
-            joint,
-            result,
-            names,
-            cost_fn,
-            started,
-            f"IPOPT: {result.status}",
-            result.converged,
-            len(result.stages),
-            "from the middle of the ranges: ",
+        found(
+            _answer(
+                "simultaneous",
+                joint,
+                result,
+                names,
+                cost_fn,
+                started,
+                f"IPOPT: {result.status}",
+                result.converged,
+                len(result.stages),
+                "from the middle of the ranges: ",
+            )
         )
     if "simultaneous from sequential" in methods:
         started = time.perf_counter()
@@ -290,17 +304,19 @@ def codesign(
         problem = TuningProblem(seq.plant, seq.block, scenarios, free=free, extra_params=names, **options)
         lb, ub = _joint_bounds(problem, bounds, names, ranges)
         result = solve(problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains :]), **solve_options)
-        answers["simultaneous from sequential"] = _answer(
-            "simultaneous from sequential",
-            problem,
-            result,
-            names,
-            cost_fn,
-            started,
-            f"IPOPT: {result.status}",
-            result.converged,
-            len(result.stages),
-            "from the sequential answer: ",
+        found(
+            _answer(
+                "simultaneous from sequential",
+                problem,
+                result,
+                names,
+                cost_fn,
+                started,
+                f"IPOPT: {result.status}",
+                result.converged,
+                len(result.stages),
+                "from the sequential answer: ",
+            )
         )
     return answers
 

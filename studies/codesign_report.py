@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 import time
 from collections.abc import Callable
@@ -57,6 +58,7 @@ from models import files
 from . import cases
 from .case import CaseStudy
 
+log = logging.getLogger(__name__)
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign.md"
 #: `tune` options of the plant-parameter problems (crane, satellite; `codesign_case`): compiled, each spec
 #: aggregated over the run (one constraint per bound, not one per sample) and IPOPT on the exact Hessian.
@@ -376,6 +378,21 @@ def _sizing_design(method, plant, block, scenario, specs, wall_time, message, co
     )
 
 
+def _announce(problem: str, design) -> None:
+    """Log one method's answer as soon as it is found (a `Design` or a `CodesignResult`)."""
+    value = design.value if isinstance(design, Design) else next(iter(design.params.values()))
+    log.info(
+        "  %s, %s: %s → objective %s%s; %s; %.0f s",
+        problem,
+        design.method,
+        _number(value),
+        _number(design.objective),
+        "" if design.feasible else " (infeasible)",
+        design.status if design.converged else f"not converged ({design.status})",
+        design.wall_time,
+    )
+
+
 def actuator_sizing(
     case: CaseStudy, sizing: ActuatorSizing, *, rel_tol: float = SIZING_REL_TOL, methods=METHODS, tune_options=None
 ) -> CaseResult:
@@ -436,6 +453,7 @@ def actuator_sizing(
             tuned.stopped_on_test,
             f"IPOPT: {tuned.status}",
         )
+        _announce(result.problem, result.designs["sequential"])
     if "nested" in methods:
         started = time.perf_counter()
         try:
@@ -467,6 +485,7 @@ def actuator_sizing(
                 nested["converged"],
                 status,
             )
+            _announce(result.problem, result.designs["nested"])
         except ValueError as err:
             result.notes.append(f"nested: {err}")
     for method in ("simultaneous", "simultaneous from sequential"):
@@ -504,6 +523,7 @@ def actuator_sizing(
             sim["converged"],
             sim["status"],
         )
+        _announce(result.problem, result.designs[method])
     result.notes.append(_hand_rule_note(case, sizing, plant, scenario, specs, rel_tol))
     return result
 
@@ -567,6 +587,7 @@ def codesign_case(
         specs=result.specs,
         cost=result.cost,
         methods=tuple(methods),
+        progress=lambda answer: _announce(result.problem, answer),
         **(tune_options or {}),
     )
     for method, answer in answers.items():
@@ -733,6 +754,7 @@ def main(argv=None) -> int:
         help="solve only these methods; the problem's record keeps its other methods' designs",
     )
     args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
     keys = args.only or list(found)
     records = args.records or args.out.with_suffix("")
     command = "python -m studies.codesign_report" + ("" if args.only is None else " --only " + " ".join(keys))
@@ -744,7 +766,7 @@ def main(argv=None) -> int:
             results.append(from_record(earlier))
             print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
             continue
-        print(f"[{i}/{len(keys)}] {key} ...", end=" ", flush=True)
+        print(f"[{i}/{len(keys)}] {key} ...", flush=True)
         started = time.perf_counter()
         r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
         values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())

@@ -7,7 +7,7 @@ import pytest
 import scipy.optimize
 
 import models
-from designs.codesign import ActuatorLimit, codesign, size_actuator, size_actuator_simultaneous
+from designs.codesign import METHODS, ActuatorLimit, codesign, size_actuator, size_actuator_simultaneous
 from designs.tuning import Cost, Scenario, Specs, TuningProblem
 
 Q, R, W = 1.0, 1.0, 0.5
@@ -155,6 +155,7 @@ def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_d
 def test_gain_bounds_hold_in_every_method_when_free_is_left_at_its_default():
     """Issue 12: with free=None the simultaneous solve dropped the bounds (seen: k <= 1, answer 1.30)."""
     plant, block, scenario, cost = _problem(0.1)
+    told: list = []
     answers = codesign(
         plant,
         block,
@@ -165,7 +166,10 @@ def test_gain_bounds_hold_in_every_method_when_free_is_left_at_its_default():
         bounds={"k": (0.0, 0.3)},
         free=None,
         nested_tol=1e-3,
+        progress=told.append,
     )
+    # Each answer was told as soon as it was found, in the methods' order.
+    assert told == list(answers.values()) and [a.method for a in told] == list(METHODS)
     for method, a in answers.items():
         assert float(a.block.gains["k"]) <= 0.3 + 1e-9, method
     # The bound is active: the unbounded optimum has k = 0.57.
