@@ -186,16 +186,12 @@ def from_record(record: dict) -> CaseResult:
     """The `CaseResult` of a `to_record` record (plants, controllers and scenario left None), the
     runs its designs come from added to the notes."""
     numbers = ("value", "objective", "closed_loop_cost", "plant_cost", "wall_time")
-    designs = {
-        method: Design(
-            **{name: saved[name] for name in RECORDED if name not in numbers and name != "measured"},
-            **{name: float(saved[name]) for name in numbers},
-            measured={k: float(v) for k, v in saved["measured"].items()},
-            plant=None,
-            block=None,
-        )
-        for method, saved in record["designs"].items()
-    }
+    designs = {}
+    for method, saved in record["designs"].items():
+        fields: dict[str, Any] = {name: saved[name] for name in RECORDED}
+        fields |= {name: float(saved[name]) for name in numbers}
+        fields["measured"] = {k: float(v) for k, v in saved["measured"].items()}
+        designs[method] = Design(**fields, plant=None, block=None)
     result = CaseResult(
         **{name: record[name] for name in RECORDED_CASE if name != "notes"},
         scenario=None,
@@ -549,6 +545,7 @@ def _hand_rule_note(case, sizing, plant, scenario, specs, rel_tol) -> str:
 
 # ----------------------------------------------------------------- plant + controller (codesign)
 def _codesign_design(res, name, result: CaseResult) -> Design:
+    assert result.scenario is not None and result.specs is not None, "a solved problem, not a record"
     return Design(
         method=res.method,
         value=float(res.params[name]),
