@@ -523,20 +523,23 @@ def size_actuator(
     ----------
     design : callable Plant -> Block, the design at the plant's limit (for example a
         saturation-rule PD whose gains depend on the limit)
-    retune : False checks `design` as designed (the hand rule at each limit); True also tunes
-        the gains at each limit with `designs.tuning.tune` (the nested co-design: an outer
-        bisection on the limit, an inner converged tuning)
+    retune : False checks `design` as designed (the hand rule at each limit); True also decides
+        each limit by searching the gains with `designs.tuning.tune(phase=True, until_feasible=True)`
+        (the nested co-design: an outer bisection on the limit, an inner converged feasibility
+        problem, the phase one), then tunes the gains for the cost at the limit found
     rel_tol : fraction in (0, 1); bisection stops when high / low - 1 < rel_tol (at most
         `MAX_BISECTIONS` limits)
     tune_options : keyword arguments for `tune` when retuning (cost, bounds, ...)
 
     Returns
     -------
-    dict: limit (the smallest feasible limit found), block (the design at that limit),
-    evaluations (number of limits tried), history [(limit, feasible)], statuses
-    [IPOPT status per tuned limit], retries (tunings that stopped neither converged nor
-    infeasible, repeated from the gains of the smallest feasible limit so far; the repeat
-    is kept when it alone is feasible, or is as feasible and alone stopped on its test),
+    dict: limit (the smallest feasible limit found), block (the design at that limit; retuned: with
+    the gains tuned for the cost there when that tuning stays feasible), evaluations (number of
+    limits tried), history [(limit, feasible)], statuses [status per searched limit], final (the
+    `TuningResult` of the cost tuning at the limit; None without retune), retries (searches that
+    stopped neither converged nor infeasible, repeated from the gains of the smallest feasible
+    limit so far; the repeat is kept when it alone is feasible, or is as feasible and alone
+    stopped on its test),
     converged (every limit's verdict is decided: gains meeting the specs were found there, or
     the tuning proved it infeasible, `TuningResult.stopped_on_test`; the sizing's objective is
     the limit, so a feasible limit needs no converged cost).
@@ -563,7 +566,8 @@ def size_actuator(
         sized = plant.with_input_limit(limit)
         block = design(sized)
         if retune:
-            options = {"phase": True} | dict(tune_options or {})
+            # Only the verdict matters to the bisection: feasibility first, the cost tuned once at the answer.
+            options = {"phase": True} | dict(tune_options or {}) | {"until_feasible": True}
             result = tune(sized, block, scenario, specs=specs, **options)
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
@@ -598,6 +602,14 @@ def size_actuator(
             high, best, best_block = mid, mid, block
         else:
             low = mid
+    final = None
+    if retune:
+        # The gains at the limit found, tuned for the cost from the feasible ones the verdict found there.
+        sized = plant.with_input_limit(best)
+        options = {"phase": True} | dict(tune_options or {})
+        final = tune(sized, best_block, scenario, specs=specs, **options)
+        if final.feasible:
+            best_block = final.block
     return {
         "limit": best,
         "block": best_block,
@@ -606,6 +618,7 @@ def size_actuator(
         "statuses": statuses,
         "retries": retries,
         "converged": all(decided),
+        "final": final,
     }
 
 

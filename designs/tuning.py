@@ -1045,6 +1045,7 @@ def tune(
     ipopt_options=None,
     paths: str = "pointwise",
     phase: bool = False,
+    until_feasible: bool = False,
 ) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
@@ -1066,6 +1067,7 @@ def tune(
     widths : the continuation's relative smoothing widths, strictly decreasing
     phase : run a phase one first when the start misses a spec (see `solve`); off by default: on
         the README's two-scenario, four-sample PID tuning it ran for over 28 minutes
+    until_feasible : with `phase`, a feasibility verdict rather than a tuning (see `solve`)
     ipopt_options : dict of further IPOPT options (for example ``{"print_level": 5}``); they
         override `IPOPT_OPTIONS` and the ones set from the arguments above
 
@@ -1104,6 +1106,7 @@ def tune(
         widths=widths,
         ipopt_options=ipopt_options,
         phase=phase,
+        until_feasible=until_feasible,
     )
 
 
@@ -1259,6 +1262,34 @@ def phase_one(
     return PhaseOne(decision, worst, status, _status_converged(status), iterations)
 
 
+def _feasible_answer(problem: TuningProblem, start, found: PhaseOne | None, total, started, method) -> TuningResult:
+    """`solve`'s answer with `until_feasible`: the start, or the phase one's answer, meeting the specs."""
+    decision = start if found is None else np.asarray(found.decision)
+    value, start_value = float(total(decision)), float(total(start))
+    block = problem.block_at(decision)
+    where = "the start meets the specs" if found is None else (
+        f"phase one (IPOPT: {found.status}, {found.iterations} iterations) met the specs"
+    )  # fmt: skip
+    return TuningResult(
+        block=block,
+        gains={k: v.copy() for k, v in block.gains.items()},
+        initial_gains={k: v.copy() for k, v in problem.block.gains.items()},
+        cost=value,
+        initial_cost=start_value,
+        improvement=1 - value / start_value if start_value else 0.0,
+        feasible=True,
+        success=True,
+        status=found.status if found is not None else "not solved: the start meets the specs",
+        message=f"{where}; stopped there (until_feasible: a verdict on the specs, the cost not tuned)",
+        iterations=0 if found is None else found.iterations,
+        wall_time=time.perf_counter() - started,
+        decision=np.array(decision),
+        converged=True,
+        method=method,
+        phase_one=found,
+    )
+
+
 def solve(
     problem: TuningProblem,
     lbx,
@@ -1275,6 +1306,7 @@ def solve(
     cost_weight: float = 1.0,
     ipopt_options=None,
     phase: bool = False,
+    until_feasible: bool = False,
 ) -> TuningResult:
     """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
 
@@ -1289,10 +1321,17 @@ def solve(
     phase : (opt-in) when the start misses a spec, run `phase_one` first and tune from its answer; if it
         ends outside the specs, tune from its answer and from the start and keep the better
         (feasible first, then converged, then cost)
+    until_feasible : with `phase`, stop at the first decision that meets the specs: the start itself
+        (no solve) or the phase one's answer, returned as converged (the feasibility problem's test);
+        when the phase one ends outside the specs, as `phase`. A verdict on the specs, not a tuned
+        cost: what an outer search over the plant needs when only feasibility decides (`size_actuator`)
     max_iter, jit, tol, hessian, progress, method, widths : as in `tune`
     """
     max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
     phase = boolean(phase, "phase")
+    until_feasible = boolean(until_feasible, "until_feasible")
+    if until_feasible and not phase:
+        raise ValueError("until_feasible needs phase=True: the verdict comes from the phase one")
     if ipopt_options is not None and not isinstance(ipopt_options, Mapping):
         raise TypeError(f"ipopt_options must be a dict of IPOPT options, got {ipopt_options!r}")
     start_time = time.perf_counter()
@@ -1310,6 +1349,9 @@ def solve(
     found, begin = None, start
     if phase and _largest_excess(problem, start) > AGREEMENT:
         found = phase_one(problem, lbx, ubx, start, method=method, widths=widths, tol=tol, max_iter=max_iter, jit=jit)
+    if until_feasible and (found is None or found.excess <= AGREEMENT):
+        return _feasible_answer(problem, start, found, exact_total, start_time, method)
+    if found is not None:
         if found.excess > AGREEMENT:
             # A local verdict only: IPOPT's own restoration from the start may still find the specs (the arm's
             # sizing from its holding limit did, where the phase one stopped 0.77 outside), or not where the

@@ -8,7 +8,9 @@ Every problem is answered with `designs.codesign` and `designs.tuning` only
    holds the target at rest; a plant parameter: its price alone), then the best
    controller for that plant (a converged tuning);
 2. nested: an outer optimizer on the plant (actuator sizing: bisection on the
-   limit; a plant parameter: bounded Brent), each evaluation a converged tuning;
+   limit, each limit decided by a converged feasibility search, the gains tuned
+   once at the answer; a plant parameter: bounded Brent, each evaluation a
+   converged tuning);
 3. simultaneous: plant and gains in one IPOPT problem, started from a neutral
    point (the middle of the range, the hand design's gains) and from (1).
 
@@ -465,11 +467,12 @@ def actuator_sizing(
                 tune_options=options,
             )
             counts = {s: nested["statuses"].count(s) for s in dict.fromkeys(nested["statuses"])}
-            status = "bisection to rel_tol {:g}; inner IPOPT: {}".format(
+            status = "bisection to rel_tol {:g}; each limit decided by a feasibility search, its status: {}".format(
                 rel_tol, ", ".join(f"{s} x{c}" for s, c in counts.items())
             )
             if nested["retries"]:
                 status += f" ({nested['retries']} after a numerical stop, repeated from the best gains so far)"
+            status += f"; the gains at the limit found tuned for ITAE: IPOPT: {nested['final'].status}"
             result.designs["nested"] = _sizing_design(
                 "nested",
                 plant.with_input_limit(nested["limit"]),
@@ -628,9 +631,10 @@ convergence (see each case's co-design problem in `studies/cases/<name>.py`):
    plant-only objective (actuator sizing: the smallest limit that holds the target at rest;
    a plant parameter: its price alone), then the best controller for that plant;
 2. **nested**: an outer optimizer on the plant (bisection on the limit; bounded Brent on a
-   parameter), each of its evaluations a converged tuning of the gains (actuator sizing
-   minimizes the limit, so each limit's verdict is what must be settled: gains meeting the
-   specs found there, or a proof that none near the tuning's path do);
+   parameter), each of its evaluations a converged inner problem: a tuning of the gains
+   (Brent), or, since actuator sizing minimizes the limit and only each limit's verdict
+   matters, a feasibility search (gains meeting the specs found there, or a proof that none
+   near the search's path do), the gains then tuned for ITAE once at the limit found;
 3. **simultaneous**: plant and gains in one IPOPT problem, from a neutral start (the middle
    of the range, the hand design's gains) and, in "(3) from (1)", from the sequential answer
    (actuator sizing: the limit plus a tie-break of {tie_break:g} times the ITAE, scaled, as the objective,

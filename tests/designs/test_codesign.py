@@ -291,10 +291,8 @@ def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
         rel_tol=0.01,
         tune_options={"bounds": bounds},
     )
-    assert nested["converged"] and all(
-        s in ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Infeasible_Problem_Detected")
-        for s in nested["statuses"]
-    )
+    assert nested["converged"] and "Maximum_Iterations_Exceeded" not in nested["statuses"]
+    assert nested["final"].feasible and nested["final"].block is nested["block"]
     sim = size_actuator_simultaneous(
         arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, start_limit=1.5, bounds=bounds
     )
@@ -312,6 +310,8 @@ def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(mo
 
     def fake_tune(plant, block, scenario, *, specs, **options):
         limit = float(plant.input_limit[0])
+        if not options.get("until_feasible"):  # the cost tuning at the limit found
+            return types.SimpleNamespace(feasible=True, block=block)
         first = all(c[0] != limit for c in calls)
         calls.append((limit, float(block.gains["kp"])))
         feasible = limit >= edge
@@ -349,6 +349,8 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
 
     def fake_tune(plant, block, scenario, *, specs, **options):
         limit = float(plant.input_limit[0])
+        if not options.get("until_feasible"):  # the cost tuning at the limit found
+            return types.SimpleNamespace(feasible=True, block=block)
         first, feasible = limit not in seen, limit >= edge
         seen.add(limit)
         if edge < limit < 2:

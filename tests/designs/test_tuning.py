@@ -604,6 +604,28 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
     assert over * target <= 1e-6 and settle <= 0.8 + 0.01  # the specs are judged to 1e-6 rad
 
 
+def test_until_feasible_stops_at_the_first_decision_meeting_the_specs(arm):
+    """The feasibility verdict of an outer search: the same problem as above, stopped where the specs hold."""
+    target = np.deg2rad(50)
+    specs = Specs(max_overshoot=0.0, settling_time=0.8)
+    scenario = Scenario(reference=target, duration=3.0, tracked="theta")
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    found = tune(arm, ArmPD(arm), scenario, specs=specs, bounds=bounds, phase=True, until_feasible=True)
+    assert found.feasible and found.converged and found.stopped_on_test and found.phase_one is not None
+    assert found.iterations == found.phase_one.iterations and "cost not tuned" in found.message
+    res = models.simulate_closed_loop(arm, found.block, target, 3.0)
+    over, settle = _overshoot_and_settling(res, 0.0, target)
+    assert over * target <= 1e-6 and settle <= 0.8 + 0.01
+    # A start that already meets the specs is the verdict itself: no solve, its gains returned.
+    again = tune(arm, found.block, scenario, specs=specs, bounds=bounds, phase=True, until_feasible=True)
+    assert again.iterations == 0 and again.phase_one is None and again.feasible
+    np.testing.assert_array_equal(again.block.gain_vector(), found.block.gain_vector())
+    fresh = TuningProblem(arm, found.block, scenario, specs=specs)
+    assert again.cost == pytest.approx(fresh.values(fresh.start())[0], rel=1e-12)
+    with pytest.raises(ValueError, match="until_feasible needs phase=True"):
+        tune(arm, ArmPD(arm), scenario, specs=specs, until_feasible=True)
+
+
 @pytest.mark.parametrize(
     "lbg, ubg",
     [
