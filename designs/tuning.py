@@ -24,7 +24,9 @@ agrees with the smoothed one to `AGREEMENT` with the same specs violated, and
 whose answer either no longer moves the exact objective (the change from the
 previous stage's answer is within `AGREEMENT`, relative) or has every switch
 outside its band (smoothed and exact objectives equal: near that answer the
-two problems are one). The choice
+two problems are one). An intermediate stage stopped at IPOPT's iteration cap
+hands its last point to the next width, cold (the verdict rests on the last
+stage); two capped stages in a row end the continuation, unconverged. The choice
 was measured (`python benchmarks/tuning.py --compare`) on the saturating 2 m
 pendulum step against the exact loop in single shooting, which stops at
 IPOPT's iteration limit because quasi-Newton steps stall on the kinks, and
@@ -94,6 +96,8 @@ WIDTHS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 AGREEMENT = 1e-6
 #: IPOPT statuses that mean it converged (to `tol`, or to 100 `tol` held for 10 iterations).
 CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+#: IPOPT's status at its iteration cap.
+CAPPED = "Maximum_Iterations_Exceeded"
 #: IPOPT iterations per solve: a safety cap, not the stopping rule (a stop here is reported).
 MAX_ITER = 3000
 #: IPOPT's default convergence tolerance here (scaled NLP error). Measured on the saturating 2 m
@@ -1516,8 +1520,16 @@ def solve(
                 "gap": gap,
             }
         )
-        if not np.isfinite(exact) or not _status_converged(status):
-            break  # a stage that did not converge ends the continuation: reported, not hidden
+        if not np.isfinite(exact):
+            break  # no closed-loop run to go on from: reported, not hidden
+        if not _status_converged(status):
+            if status == CAPPED and w != widths[-1] and not (len(stages) > 1 and stages[-2]["status"] == CAPPED):
+                # An intermediate stage only gives the next one its start: one stopped at its cap hands its
+                # last point on, cold (the verdict rests on the last stage alone, which must converge); two
+                # capped stages in a row end the continuation.
+                multipliers = {}
+                continue
+            break  # a numerical failure ends the continuation: reported, not hidden
         if gap <= AGREEMENT and same and settled:
             break
     converged = _status_converged(status) and gap <= AGREEMENT and settled

@@ -604,6 +604,22 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
     assert over * target <= 1e-6 and settle <= 0.8 + 0.01  # the specs are judged to 1e-6 rad
 
 
+def test_a_capped_intermediate_stage_hands_its_point_on_and_two_in_a_row_end_the_continuation(arm):
+    """The continuation's verdict rests on its last stage: at 16 iterations per solve the width-1e-3 stage
+    stops at its cap and the next one converges to the answer of the uncapped tuning; at 4 every stage
+    caps, and the continuation stops after two instead of running all seven widths."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    free = tune(arm, ArmPD(arm), scenario, bounds=bounds)
+    capped = tune(arm, ArmPD(arm), scenario, bounds=bounds, max_iter=16)
+    assert free.converged and "Maximum_Iterations_Exceeded" not in [s["status"] for s in free.stages]
+    assert [s["status"] for s in capped.stages][:2] == ["Solve_Succeeded", "Maximum_Iterations_Exceeded"]
+    assert capped.converged and capped.stopped_on_test
+    assert capped.cost == pytest.approx(free.cost, rel=1e-6)
+    stuck = tune(arm, ArmPD(arm), scenario, bounds=bounds, max_iter=4)
+    assert [s["status"] for s in stuck.stages] == ["Maximum_Iterations_Exceeded"] * 2 and not stuck.converged
+
+
 def test_until_feasible_stops_at_the_first_decision_meeting_the_specs(arm):
     """The feasibility verdict of an outer search: the same problem as above, stopped where the specs hold."""
     target = np.deg2rad(50)
