@@ -212,7 +212,7 @@ def from_record(record: dict) -> CaseResult:
 
 
 def _provenance(command: str) -> dict:
-    """The run's command, UTC date and git commit ("+ changes" when the tree differs from it)."""
+    """The run's command, UTC date and git commit ("+ changes" when the tree differs from it), now."""
     import datetime
     import subprocess
 
@@ -480,7 +480,7 @@ def actuator_sizing(
                 scenario,
                 specs,
                 time.perf_counter() - started,
-                f"bisection over [{floor:.4g}, {sizing.high:g}], {nested['evaluations']} limits tuned",
+                f"bisection over [{floor:.4g}, {sizing.high:g}], {nested['evaluations']} limits decided",
                 nested["converged"],
                 status,
             )
@@ -667,6 +667,11 @@ def _number(value: float) -> str:
     return f"{value:.4g}"
 
 
+def _percent(fraction: float) -> str:
+    """One decimal, or two significant digits below 0.1 % (a tie shows its size, not "-0.0 %")."""
+    return f"{100 * fraction:.1f} %" if abs(fraction) >= 1e-3 else f"{100 * fraction:.2g} %"
+
+
 def _cell(design: Design | None) -> str:
     if design is None:
         return "—"
@@ -685,7 +690,7 @@ def table(results: list[CaseResult]) -> str:
             f"{r.parameter} ({r.unit})",
             _number(r.text_value),
             *(_cell(d.get(m)) for m in METHODS),
-            "—" if gain is None else f"{100 * gain:.1f} %",
+            "—" if gain is None else _percent(gain),
             times,
             "yes" if r.converged else "no",
         ]
@@ -768,11 +773,12 @@ def main(argv=None) -> int:
             print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
             continue
         print(f"[{i}/{len(keys)}] {key} ...", flush=True)
+        # Taken before solving: the code that runs is the one checked out now.
+        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
         started = time.perf_counter()
         r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
         values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
         print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
-        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
         record = to_record(r, run, earlier if args.methods else None)
         files.write_json(saved, record)
         results.append(from_record(record) if args.methods else r)
