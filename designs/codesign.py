@@ -178,6 +178,18 @@ def _answer(
     )
 
 
+def check_methods(methods) -> None:
+    """Raise unless `methods` is a non-empty sequence of `METHODS` whose start from the sequential
+    answer comes with "sequential"."""
+    if isinstance(methods, str) or not isinstance(methods, Sequence) or not methods:
+        raise TypeError(f"methods must be a non-empty sequence of {METHODS}, got {methods!r}")
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise ValueError(f"unknown co-design method {bad}; choose from {', '.join(METHODS)}")
+    if "simultaneous from sequential" in methods and "sequential" not in methods:
+        raise ValueError("'simultaneous from sequential' needs 'sequential' among the methods")
+
+
 def codesign(
     plant: Plant,
     block: Block,
@@ -229,13 +241,7 @@ def codesign(
     """
     ranges = check_ranges(plant, design_params)
     max_iter, tol, jit = _check_common(max_iter, tol, jit, plant_cost, plant_objective)
-    if isinstance(methods, str) or not isinstance(methods, Sequence) or not methods:
-        raise TypeError(f"methods must be a non-empty sequence of {METHODS}, got {methods!r}")
-    bad = [m for m in methods if m not in METHODS]
-    if bad:
-        raise ValueError(f"unknown co-design method {bad}; choose from {', '.join(METHODS)}")
-    if "simultaneous from sequential" in methods and "sequential" not in methods:
-        raise ValueError("'simultaneous from sequential' needs 'sequential' among the methods")
+    check_methods(methods)
     nested_tol = positive(nested_tol, "nested_tol")
     if nested_tol >= 1:
         raise ValueError(f"nested_tol must be a fraction of the range below 1, got {nested_tol}")
@@ -277,47 +283,28 @@ def codesign(
         found(
             _nested(plant, block, scenarios, names, ranges, cost_fn, free, bounds, options, solve_options, nested_tol)
         )
-    if "simultaneous" in methods:
+
+    def simultaneous(method, problem, lb, ub, start, where):
         started = time.perf_counter()
-        neutral = joint.start()
-        neutral[joint.n_gains :] = [(ranges[n][0] + ranges[n][1]) / 2 for n in names]
         result = solve(
-            joint, lbx, ubx, plant_cost=lambda x: cost_fn(x[joint.n_gains :]), start=neutral, **solve_options
+            problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains :]), start=start, **solve_options
         )
+        status = f"IPOPT: {result.status}"
         found(
             _answer(
-                "simultaneous",
-                joint,
-                result,
-                names,
-                cost_fn,
-                started,
-                f"IPOPT: {result.status}",
-                result.converged,
-                len(result.stages),
-                "from the middle of the ranges: ",
+                method, problem, result, names, cost_fn, started, status, result.converged, len(result.stages), where
             )
         )
+
+    if "simultaneous" in methods:
+        neutral = joint.start()
+        neutral[joint.n_gains :] = [(ranges[n][0] + ranges[n][1]) / 2 for n in names]
+        simultaneous("simultaneous", joint, lbx, ubx, neutral, "from the middle of the ranges: ")
     if "simultaneous from sequential" in methods:
-        started = time.perf_counter()
         seq = answers["sequential"]
         problem = TuningProblem(seq.plant, seq.block, scenarios, free=free, extra_params=names, **options)
         lb, ub = _joint_bounds(problem, bounds, names, ranges)
-        result = solve(problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains :]), **solve_options)
-        found(
-            _answer(
-                "simultaneous from sequential",
-                problem,
-                result,
-                names,
-                cost_fn,
-                started,
-                f"IPOPT: {result.status}",
-                result.converged,
-                len(result.stages),
-                "from the sequential answer: ",
-            )
-        )
+        simultaneous("simultaneous from sequential", problem, lb, ub, None, "from the sequential answer: ")
     return answers
 
 
@@ -560,6 +547,7 @@ def size_actuator(
     history, statuses, decided = [], [], []
     best_block: Block | None = None
     retries = 0
+    options = {"phase": True} | dict(tune_options or {})
 
     def attempt(limit):
         nonlocal retries
@@ -567,15 +555,15 @@ def size_actuator(
         block = design(sized)
         if retune:
             # Only the verdict matters to the bisection: feasibility first, the cost tuned once at the answer.
-            options = {"phase": True} | dict(tune_options or {}) | {"until_feasible": True}
-            result = tune(sized, block, scenario, specs=specs, **options)
+            verdict = options | {"until_feasible": True}
+            result = tune(sized, block, scenario, specs=specs, **verdict)
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
                 # specs at the smallest feasible limit so far (seen in a case's sizing: Restoration_Failed
                 # from the design's own gains, Solve_Succeeded from those).
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
-                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **options)
+                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **verdict)
                 # A feasible design decides the limit whatever the other start claims; then a stop on the test.
                 if (again.feasible, again.stopped_on_test) > (result.feasible, result.stopped_on_test):
                     result = again
@@ -606,7 +594,6 @@ def size_actuator(
     if retune:
         # The gains at the limit found, tuned for the cost from the feasible ones the verdict found there.
         sized = plant.with_input_limit(best)
-        options = {"phase": True} | dict(tune_options or {})
         final = tune(sized, best_block, scenario, specs=specs, **options)
         if final.feasible:
             best_block = final.block

@@ -1269,7 +1269,8 @@ def phase_one(
 def _feasible_answer(problem: TuningProblem, start, found: PhaseOne | None, total, started, method) -> TuningResult:
     """`solve`'s answer with `until_feasible`: the start, or the phase one's answer, meeting the specs."""
     decision = start if found is None else np.asarray(found.decision)
-    value, start_value = float(total(decision)), float(total(start))
+    start_value = float(total(start))
+    value = start_value if found is None else float(total(decision))
     block = problem.block_at(decision)
     where = "the start meets the specs" if found is None else (
         f"phase one (IPOPT: {found.status}, {found.iterations} iterations) met the specs"

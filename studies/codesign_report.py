@@ -34,8 +34,10 @@ co-design reports can be appended to it.
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import logging
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -47,8 +49,10 @@ import numpy as np
 
 import models
 from designs.codesign import (
+    METHODS,
     SIZING_COST_WEIGHT,
     SIZING_TIE_BREAK,
+    check_methods,
     codesign,
     size_actuator,
     size_actuator_simultaneous,
@@ -67,8 +71,6 @@ DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign.md"
 #: On the satellite's panel stiffness this converged (nested and simultaneous agreeing on the objective to
 #: 2e-6) where the pointwise specs with L-BFGS were still in the first method's tuning after 40 minutes.
 CODESIGN_TUNE_OPTIONS = {"jit": True, "paths": "aggregated", "hessian": "exact"}
-#: The methods of every problem, in table order.
-METHODS = ("sequential", "nested", "simultaneous", "simultaneous from sequential")
 
 
 # ----------------------------------------------------------------- records
@@ -213,8 +215,6 @@ def from_record(record: dict) -> CaseResult:
 
 def _provenance(command: str) -> dict:
     """The run's command, UTC date and git commit ("+ changes" when the tree differs from it), now."""
-    import datetime
-    import subprocess
 
     def git(*args):
         done = subprocess.run(["git", *args], cwd=DOC.parent, capture_output=True, text=True, check=False)
@@ -406,11 +406,7 @@ def actuator_sizing(
     methods : which of `METHODS` to run
     tune_options : keyword arguments for every `designs.tuning.tune` call (max_iter, ...)
     """
-    bad = [m for m in methods if m not in METHODS]
-    if bad or isinstance(methods, str):
-        raise ValueError(f"unknown co-design method {bad or methods}; choose from {', '.join(METHODS)}")
-    if "simultaneous from sequential" in methods and "sequential" not in methods:
-        raise ValueError("'simultaneous from sequential' needs 'sequential' among the methods")
+    check_methods(methods)
     plant = models.get(case.plant)
     scenario = sizing_scenario(case, sizing)
     specs = sizing.specs
