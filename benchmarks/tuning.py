@@ -11,8 +11,9 @@ start within the same box, in one process:
 
 - nelder_mead: scipy.optimize.minimize(method="Nelder-Mead") on the objective's values;
 - gradient: `designs.tuning.tune` (IPOPT, exact gradients by CasADi, the smoothing
-  continuation through the saturation); each iterate's exact objective is evaluated
-  after the run, and the time it was reached counted;
+  continuation through the saturation, first on the coarsely integrated loop and then
+  on this one); each iterate's exact objective (on this loop, whatever level it came
+  from) is evaluated after the run, and the time it was reached counted;
 - with --compare, the alternatives `tune`'s method was chosen against: "exact loop"
   (IPOPT on the exact loop, single shooting: `tune(method="exact")`) and "multiple
   shooting" (IPOPT on the exact loop cut into `SEGMENTS` intervals whose start states

@@ -39,6 +39,14 @@ driven to zero, the same continuation on a problem a thousand times larger,
 and needs every switch exposed by the blocks, which write them inside their
 CasADi step: not measured, for that reason.
 
+On a problem without specs the continuation runs twice: first on the same loop
+integrated coarsely (`COARSE_SUBSTEPS` RK4 steps per sample, every stage
+loose), then on the problem's own loop from the coarse answer, starting at the
+width where the coarse one settled; only the second decides convergence. Most
+quasi-Newton iterations go to the first, widest stage, and there a coarse run
+costs a fraction of a fine one (measured in `COARSE_SUBSTEPS`). Skipped where the
+coarse loop's objective at the start is off by more than `COARSE_AGREEMENT`.
+
 Only the switches are blended, not the criteria's |e|: blending |e| over
 w |e_0| as well (tried) biased the settled tail, so the smoothed and exact
 objectives agreed only to about 20 w and the continuation had to go below
@@ -111,6 +119,18 @@ TOL = 1e-6
 #: after 12.4 s (125 iterations in all), 100 after 9.7 s, 1000 after 8.9 s (92), 10^4 after 8.7 s, all
 #: at the same converged answer (exact cost equal to 1e-10).
 STAGE_TOL_FACTOR = 1000.0
+#: RK4 sub-steps per sample of the coarser level `solve` runs first (its whole continuation, loosely, every
+#: stage to `STAGE_TOL_FACTOR` x tol), whose answer starts the problem's own continuation at the width where
+#: the coarser one settled. Measured on the saturating 2 m pendulum step (`benchmarks/tuning.py`): one
+#: sub-step instead of ten makes an objective 4.2x and a gradient about as much cheaper, and the coarse
+#: level's answer is already within 1e-7 of the fine optimum on the fine loop; the first stage's 60
+#: quasi-Newton iterations, most of the work, are then spent on the cheap loop. Only on problems without
+#: specs: the coarse answer sits on the coarse loop's spec boundary, which the fine loop may place a hair
+#: away, and from there the arm's zero-overshoot tuning crept to IPOPT's 3000-iteration cap (a test).
+COARSE_SUBSTEPS = 1
+#: The coarser level runs only where its objective at the start is within this (relative) of the problem's:
+#: a sample period too long for one RK4 step (a fast or stiff plant) fails it and is tuned at full fidelity.
+COARSE_AGREEMENT = 1e-2
 #: IPOPT options of every solve (`tol` sets tol and acceptable_tol = 100 tol).
 #: MUMPS orders the KKT system by QAMD (approximate minimum degree that detects quasi-dense rows): every
 #: constraint depends on every gain, so the system has a few dense columns, and MUMPS's automatic choice
@@ -542,6 +562,9 @@ class TuningProblem:
         if paths not in PATHS:
             raise ValueError(f"paths must be 'pointwise' or 'aggregated', got {paths!r}")
         self.paths = paths
+        self._arguments = dict(
+            specs=specs, cost=cost, samples=samples, robust=robust, free=free, extra_params=extra_params, paths=paths
+        )
         if specs is not None and not isinstance(specs, Specs):
             raise TypeError(f"specs must be a designs.tuning.Specs, got {type(specs).__name__}")
         if cost is not None and not isinstance(cost, Cost):
@@ -597,6 +620,10 @@ class TuningProblem:
         self.x0, self.reference, self.n_steps = first.x0, first.r, first.n
         self.step = first.step if first.step is not None else 0.0
         self.tracked = first.scenario.tracked
+
+    def with_substeps(self, substeps: int) -> TuningProblem:
+        """The same problem integrated with `substeps` RK4 sub-steps per sample."""
+        return TuningProblem(self.plant, self.block, self.scenarios, substeps=substeps, **self._arguments)
 
     # ------------------------------------------------------------ building
     def _free_index(self) -> np.ndarray:
@@ -1050,6 +1077,7 @@ def tune(
     paths: str = "pointwise",
     phase: bool = False,
     until_feasible: bool = False,
+    coarse_substeps: int | None = COARSE_SUBSTEPS,
 ) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
@@ -1072,6 +1100,9 @@ def tune(
     phase : run a phase one first when the start misses a spec (see `solve`); off by default: on
         the README's two-scenario, four-sample PID tuning it ran for over 28 minutes
     until_feasible : with `phase`, a feasibility verdict rather than a tuning (see `solve`)
+    coarse_substeps : RK4 sub-steps per sample of a coarser problem whose continuation runs first and
+        starts this one's (`COARSE_SUBSTEPS`; skipped where it disagrees at the start, see
+        `COARSE_AGREEMENT`); None: none
     ipopt_options : dict of further IPOPT options (for example ``{"print_level": 5}``); they
         override `IPOPT_OPTIONS` and the ones set from the arguments above
 
@@ -1111,6 +1142,7 @@ def tune(
         ipopt_options=ipopt_options,
         phase=phase,
         until_feasible=until_feasible,
+        coarse_substeps=coarse_substeps,
     )
 
 
@@ -1312,6 +1344,7 @@ def solve(
     ipopt_options=None,
     phase: bool = False,
     until_feasible: bool = False,
+    coarse_substeps: int | None = COARSE_SUBSTEPS,
 ) -> TuningResult:
     """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
 
@@ -1330,11 +1363,14 @@ def solve(
         (no solve) or the phase one's answer, returned as converged (the feasibility problem's test);
         when the phase one ends outside the specs, as `phase`. A verdict on the specs, not a tuned
         cost: what an outer search over the plant needs when only feasibility decides (`size_actuator`)
+    coarse_substeps : RK4 sub-steps of a coarser level solved first (see `COARSE_SUBSTEPS`), None for none
     max_iter, jit, tol, hessian, progress, method, widths : as in `tune`
     """
     max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
     phase = boolean(phase, "phase")
     until_feasible = boolean(until_feasible, "until_feasible")
+    if coarse_substeps is not None:
+        coarse_substeps = integer(coarse_substeps, "coarse_substeps", minimum=1)
     if until_feasible and not phase:
         raise ValueError("until_feasible needs phase=True: the verdict comes from the phase one")
     if ipopt_options is not None and not isinstance(ipopt_options, Mapping):
@@ -1364,6 +1400,7 @@ def solve(
             options = dict(
                 max_iter=max_iter, jit=jit, plant_cost=plant_cost, tol=tol, hessian=hessian, progress=progress,
                 method=method, widths=widths, cost_weight=cost_weight, ipopt_options=ipopt_options, phase=False,
+                coarse_substeps=coarse_substeps,
             )  # fmt: skip
             tries = [solve(problem, lbx, ubx, start=point, **options) for point in (found.decision, start)]
             best = max(tries, key=lambda r: (r.feasible, r.converged, -r.cost if np.isfinite(r.cost) else -np.inf))
@@ -1382,38 +1419,28 @@ def solve(
             )
         begin = found.decision
     scale = _decision_scale(begin)
-    per_sample, g = problem.smoothed() if smooth else (problem.costs, problem.g)
-    width = problem.width if smooth else ca.MX.sym("unused", 0)
-    if smooth:
-        assert problem.smooth_bounds is not None, "set by smoothed()"
-        lbg, ubg, _ = problem.smooth_bounds
-    else:
-        lbg, ubg = problem.lbg, problem.ubg
     worst = problem.robust == "worst"
     m = problem.samples.shape[0]
+    width = problem.width if smooth else ca.MX.sym("unused", 0)
+    # The levels of fidelity: a coarser integration first where it agrees with the problem's at the start,
+    # on problems without specs (see `COARSE_SUBSTEPS`).
+    levels = [problem]
+    if smooth and coarse_substeps is not None and coarse_substeps < problem.substeps and not problem.g.numel():
+        lower = problem.with_substeps(coarse_substeps)
+        fine_value, coarse_value = problem.values(begin)[0], lower.values(begin)[0]
+        if abs(coarse_value - fine_value) <= COARSE_AGREEMENT * abs(fine_value):
+            levels.insert(0, lower)
     if worst:
-        # Epigraph: minimize τ subject to every sample's total <= τ (max is not smooth).
-        tau = ca.MX.sym("tau")
-        variables = ca.vertcat(x, tau)
-        objective = cost_weight * tau + extra_cost
-        g = ca.vertcat(g, per_sample - tau)
-        lbg, ubg = np.concatenate([lbg, np.full(m, -np.inf)]), np.concatenate([ubg, np.zeros(m)])
-        tau0 = float(ca.mmax(ca.Function("c", [x, width], [per_sample])(begin, widths[0] if smooth else [])))
+        totals = ca.Function("c", [x, width], [problem.smoothed()[0] if smooth else problem.costs])
+        tau0 = float(ca.mmax(totals(begin, widths[0] if smooth else [])))
         start_z = np.concatenate([begin, [tau0]])
         scale = np.concatenate([scale, [max(abs(tau0), 1e-12)]])
         lbz, ubz = np.concatenate([lbx, [-np.inf]]), np.concatenate([ubx, [np.inf]])
     else:
-        variables, objective = x, cost_weight * problem.aggregate(per_sample) + extra_cost
         start_z, lbz, ubz = begin, lbx, ubx
-    z = ca.MX.sym("z", variables.numel())
-    f_of = ca.Function("objective", [variables, width], [objective])
-    g_of = ca.Function("constraints", [variables, width], [g])
-    smoothed_total = ca.Function(
-        "smoothed_total", [x, width], [cost_weight * problem.aggregate(per_sample) + extra_cost]
-    )
-    smoothed_g = ca.Function("smoothed_constraints", [x, width], [problem.smoothed()[1] if smooth else problem.g])
-
-    recorder = _Recorder(variables.numel(), g.numel(), width.numel(), progress, start_time)
+    z = ca.MX.sym("z", start_z.size)
+    n_g = (problem.smoothed()[1] if smooth else problem.g).numel() + (m if worst else 0)
+    recorder = _Recorder(start_z.size, n_g, width.numel(), progress, start_time)
     ipopt: dict[str, Any] = (
         IPOPT_OPTIONS
         | (AGGREGATED_IPOPT_OPTIONS if smooth and problem.paths == "aggregated" else {})
@@ -1421,7 +1448,6 @@ def solve(
         | dict(ipopt_options or {})
     )
     opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
-    nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
     continuation = smooth and len(widths) > 1
     # Solvers by (warm, loose). Later stages start at the last answer and its multipliers, with the
     # barrier already small; the continuation's intermediate stages are solved loosely.
@@ -1436,16 +1462,49 @@ def solve(
         ):
             variants[warm, not tight] = (name, ipopt | (WARM_START if warm else {}) | ({} if tight else loose))
     options = {name: dict(opts, ipopt=settings) for name, settings in variants.values()}
-    # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
-    if jit:
-        built = models.compile.jit_nlpsols("ipopt", nlp, options)
-    else:
-        built = {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in options.items()}
-    solvers = {key: built[name] for key, (name, _) in variants.items()}
+
+    def build(level: TuningProblem) -> dict[str, Any]:
+        """The level's solvers by (warm, loose), its bounds on g, and its total, smoothed total and smoothed g."""
+        xl = level.decision
+        per_sample, g = level.smoothed() if smooth else (level.costs, level.g)
+        if smooth:
+            assert level.smooth_bounds is not None, "set by smoothed()"
+            lbg, ubg, _ = level.smooth_bounds
+        else:
+            lbg, ubg = level.lbg, level.ubg
+        extra = ca.MX(0) if plant_cost is None else plant_cost(xl)
+        if worst:
+            # Epigraph: minimize τ subject to every sample's total <= τ (max is not smooth).
+            tau = ca.MX.sym("tau")
+            variables, objective = ca.vertcat(xl, tau), cost_weight * tau + extra
+            g = ca.vertcat(g, per_sample - tau)
+            lbg, ubg = np.concatenate([lbg, np.full(m, -np.inf)]), np.concatenate([ubg, np.zeros(m)])
+        else:
+            variables, objective = xl, cost_weight * level.aggregate(per_sample) + extra
+        f_of = ca.Function("objective", [variables, level.width], [objective])
+        g_of = ca.Function("constraints", [variables, level.width], [g])
+        nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
+        # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
+        if jit:
+            built = models.compile.jit_nlpsols("ipopt", nlp, options)
+        else:
+            built = {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in options.items()}
+        total = cost_weight * level.aggregate(per_sample) + extra
+        spec_rows = level.smoothed()[1] if smooth else level.g
+        return {
+            "problem": level,
+            "solvers": {key: built[name] for key, (name, _) in variants.items()},
+            "lbg": lbg,
+            "ubg": ubg,
+            "exact_total": ca.Function("total", [xl], [cost_weight * level.objective + extra]),
+            "smoothed_total": ca.Function("smoothed_total", [xl, level.width], [total]),
+            "smoothed_g": ca.Function("smoothed_constraints", [xl, level.width], [spec_rows]),
+        }
+
     z_now = start_z / scale
     multipliers: dict[str, ca.DM] = {}
 
-    def run_stage(w, tight: bool, warm: bool) -> tuple[str, int]:
+    def run_stage(level: dict, w, tight: bool, warm: bool) -> tuple[str, int]:
         """One IPOPT solve at width w from z_now (warm: with its multipliers, barrier small); (status, iterations)."""
         nonlocal z_now, multipliers
         done, status = 0, "not solved"
@@ -1453,13 +1512,13 @@ def solve(
             # A numerical failure (not an iteration cap) is retried once from its last point, cold, to the
             # stage's own tolerance: a fresh quasi-Newton memory often gets past it.
             warm_now = warm and attempt == 0
-            this = solvers[warm_now, not tight]
+            this = level["solvers"][warm_now, not tight]
             sol = this(
                 x0=z_now,
                 lbx=lbz / scale,
                 ubx=ubz / scale,
-                lbg=lbg,
-                ubg=ubg,
+                lbg=level["lbg"],
+                ubg=level["ubg"],
                 p=[] if w is None else w,
                 **(multipliers if warm_now else {}),
             )
@@ -1472,67 +1531,86 @@ def solve(
                 break
         return status, done
 
-    def judge_stage(w) -> tuple[float, float, float, bool]:
+    def judge_stage(level: dict, w) -> tuple[float, float, float, bool]:
         """At z_now: (exact objective, smoothed objective, their relative gap, same specs violated)."""
         decision = np.clip(scale[:n] * z_now[:n], lbx, ubx)
-        exact = float(exact_total(decision))
-        seen = float(smoothed_total(decision, [] if w is None else w))
+        exact = float(level["exact_total"](decision))
+        seen = float(level["smoothed_total"](decision, [] if w is None else w))
         gap = abs(exact - seen) / max(abs(exact), 1e-300) if np.isfinite(exact) and np.isfinite(seen) else np.inf
         same = True
-        if smooth and problem.g.numel():
-            g_exact = np.asarray(problem.evaluate(decision)[1]).ravel()
-            g_smooth = np.asarray(smoothed_g(decision, [] if w is None else w)).ravel()
-            same = problem.violated_names(g_exact) == problem.violated_names(g_smooth, smoothed=True)
+        at = level["problem"]
+        if smooth and at.g.numel():
+            g_exact = np.asarray(at.evaluate(decision)[1]).ravel()
+            g_smooth = np.asarray(level["smoothed_g"](decision, [] if w is None else w)).ravel()
+            same = at.violated_names(g_exact) == at.violated_names(g_smooth, smoothed=True)
         return exact, seen, gap, same
 
     stages: list[dict[str, Any]] = []
     iterations = 0
     status, gap, settled = "not solved", 0.0, not continuation
-    for w in widths if smooth else (None,):
-        # Intermediate stages only start the next one: solved to STAGE_TOL_FACTOR x tol; the stage
-        # that ends the continuation is then finished at tol from where it stopped.
-        tight, warm = not continuation, bool(multipliers)
-        status, stage_iterations = run_stage(w, tight, warm)
-        while True:
-            exact, seen, gap, same = judge_stage(w)
-            # Settled: the exact objective no longer moved from the previous stage's answer, or gap exactly
-            # 0: every switch at the answer lies outside its band, so near it the smoothed problem is the
-            # exact one and IPOPT's convergence on it is convergence on the exact problem.
-            moved = abs(stages[-1]["exact"] - exact) if stages and np.isfinite(exact) else np.inf
-            settled = not continuation or gap == 0.0 or moved <= AGREEMENT * abs(exact)
-            ends = gap <= AGREEMENT and same and settled
-            if tight or not (np.isfinite(exact) and _status_converged(status)) or not (ends or w == widths[-1]):
+    first = 0  # the width a level starts at: where the coarser one settled
+    for number, at in enumerate(levels):
+        level, last = build(at), number == len(levels) - 1
+        own: list[dict[str, Any]] = []
+        for w in widths[first:] if smooth else (None,):
+            # Intermediate stages only start the next one: solved to STAGE_TOL_FACTOR x tol; the stage
+            # that ends the continuation is then finished at tol from where it stopped (a coarser
+            # level's never: it only gives the next level its start).
+            tight, warm = not continuation, bool(multipliers)
+            status, stage_iterations = run_stage(level, w, tight, warm)
+            while True:
+                exact, seen, gap, same = judge_stage(level, w)
+                # Settled: the exact objective no longer moved from the previous stage's answer, or gap
+                # exactly 0: every switch at the answer lies outside its band, so near it the smoothed
+                # problem is the exact one and IPOPT's convergence on it is convergence on the exact problem.
+                moved = abs(own[-1]["exact"] - exact) if own and np.isfinite(exact) else np.inf
+                settled = not continuation or gap == 0.0 or moved <= AGREEMENT * abs(exact)
+                ends = gap <= AGREEMENT and same and settled
+                if (
+                    tight
+                    or not last
+                    or not (np.isfinite(exact) and _status_converged(status))
+                    or not (ends or w == widths[-1])
+                ):
+                    break
+                # This stage ends the continuation: finished at tol from where it stopped, started as the
+                # stage was. A cold stage's loose answer is centred for a large barrier; warm from it
+                # (barrier 1e-6), a case's simultaneous sizing crept for 1141 iterations (3000 with one
+                # BLAS thread), cold: 112.
+                tight = True
+                status, more = run_stage(level, w, tight, warm)
+                stage_iterations += more
+            iterations += stage_iterations
+            own.append(
+                {
+                    "width": w,
+                    "substeps": at.substeps,
+                    "status": status,
+                    "tol": ipopt["tol"] if tight else loose["tol"],
+                    "iterations": stage_iterations,
+                    "smoothed": seen,
+                    "exact": exact,
+                    "gap": gap,
+                }
+            )
+            if not np.isfinite(exact):
+                break  # no closed-loop run to go on from: reported, not hidden
+            if not _status_converged(status):
+                if status == CAPPED and w != widths[-1] and not (len(own) > 1 and own[-2]["status"] == CAPPED):
+                    # An intermediate stage only gives the next one its start: one stopped at its cap hands
+                    # its last point on, cold (the verdict rests on the last stage alone, which must
+                    # converge); two capped stages in a row end the continuation.
+                    multipliers = {}
+                    continue
+                break  # a numerical failure ends the continuation: reported, not hidden
+            if ends:
                 break
-            # This stage ends the continuation: finished at tol from where it stopped, started as the stage
-            # was. A cold stage's loose answer is centred for a large barrier; warm from it (barrier 1e-6), a
-            # case's simultaneous sizing crept for 1141 iterations (3000 with one BLAS thread), cold: 112.
-            tight = True
-            status, more = run_stage(w, tight, warm)
-            stage_iterations += more
-        iterations += stage_iterations
-        stages.append(
-            {
-                "width": w,
-                "status": status,
-                "tol": ipopt["tol"] if tight else loose["tol"],
-                "iterations": stage_iterations,
-                "smoothed": seen,
-                "exact": exact,
-                "gap": gap,
-            }
-        )
-        if not np.isfinite(exact):
-            break  # no closed-loop run to go on from: reported, not hidden
-        if not _status_converged(status):
-            if status == CAPPED and w != widths[-1] and not (len(stages) > 1 and stages[-2]["status"] == CAPPED):
-                # An intermediate stage only gives the next one its start: one stopped at its cap hands its
-                # last point on, cold (the verdict rests on the last stage alone, which must converge); two
-                # capped stages in a row end the continuation.
-                multipliers = {}
-                continue
-            break  # a numerical failure ends the continuation: reported, not hidden
-        if gap <= AGREEMENT and same and settled:
-            break
+        stages += own
+        if not last:
+            if not (np.isfinite(exact) and _status_converged(status)):
+                z_now, multipliers = start_z / scale, {}  # the coarse level failed: the next starts afresh
+            else:
+                first = widths.index(own[-1]["width"])
     converged = _status_converged(status) and gap <= AGREEMENT and settled
     final = np.clip(scale[:n] * z_now[:n], lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
 

@@ -166,6 +166,7 @@ def test_iteration_limit_returns_the_best_feasible_point_and_says_it_did_not_con
         progress=lambda *a: calls.append(a),
     )
     assert result.status == "Maximum_Iterations_Exceeded"
+    assert {s["substeps"] for s in result.stages} == {10}  # with specs, no coarse level first
     # A capped stage hands its point on once; two capped stages in a row end the continuation.
     assert not result.converged and [s["status"] for s in result.stages] == ["Maximum_Iterations_Exceeded"] * 2
     # Each of the two IPOPT solves reports its iterations 0, 1, 2.
@@ -609,17 +610,50 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
 def test_a_capped_intermediate_stage_hands_its_point_on_and_two_in_a_row_end_the_continuation(arm):
     """The continuation's verdict rests on its last stage: at 16 iterations per solve the width-1e-3 stage
     stops at its cap and the next one converges to the answer of the uncapped tuning; at 4 every stage
-    caps, and the continuation stops after two instead of running all seven widths."""
+    caps, and the continuation stops after two instead of running all seven widths. One level of
+    fidelity (no coarse level first): the rule is the continuation's."""
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
-    free = tune(arm, ArmPD(arm), scenario, bounds=bounds)
-    capped = tune(arm, ArmPD(arm), scenario, bounds=bounds, max_iter=16)
+    free = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None)
+    capped = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None, max_iter=16)
     assert free.converged and "Maximum_Iterations_Exceeded" not in [s["status"] for s in free.stages]
     assert [s["status"] for s in capped.stages][:2] == ["Solve_Succeeded", "Maximum_Iterations_Exceeded"]
     assert capped.converged and capped.stopped_on_test
     assert capped.cost == pytest.approx(free.cost, rel=1e-6)
-    stuck = tune(arm, ArmPD(arm), scenario, bounds=bounds, max_iter=4)
+    stuck = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None, max_iter=4)
     assert [s["status"] for s in stuck.stages] == ["Maximum_Iterations_Exceeded"] * 2 and not stuck.converged
+
+
+def test_a_coarse_level_first_ends_at_the_one_level_answer_on_the_fine_loop(arm):
+    """Without specs, a coarse level (one RK4 step per sample) runs its continuation first, loosely, and
+    starts the problem's own (ten sub-steps) where it settled; the converged answer is the one-level
+    tuning's, whose iterates never saw the coarse loop."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    one = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None)
+    two = tune(arm, ArmPD(arm), scenario, bounds=bounds)
+    levels = [s["substeps"] for s in two.stages]
+    assert levels[0] == tuning.COARSE_SUBSTEPS == 1 and levels[-1] == 10 and levels == sorted(levels)
+    assert {s["substeps"] for s in one.stages} == {10}
+    assert all(s["tol"] == STAGE_TOL_FACTOR * TOL for s in two.stages if s["substeps"] == 1)
+    fine = [s for s in two.stages if s["substeps"] == 10]
+    coarse_end = [s for s in two.stages if s["substeps"] == 1][-1]
+    assert fine[0]["width"] == coarse_end["width"]  # the fine continuation starts where the coarse settled
+    assert one.converged and two.converged and two.stopped_on_test
+    assert two.cost == pytest.approx(one.cost, rel=1e-6)
+    fresh = TuningProblem(arm, ArmPD(arm), scenario)
+    assert fresh.values(two.decision)[0] == pytest.approx(two.cost, rel=1e-12)  # judged on the fine loop
+
+
+def test_no_coarse_level_where_it_disagrees_at_the_start(arm, monkeypatch):
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    problem = TuningProblem(arm, ArmPD(arm), scenario)
+    coarse = problem.with_substeps(1)
+    gap = abs(coarse.values(problem.start())[0] / problem.values(problem.start())[0] - 1)
+    assert 0 < gap < tuning.COARSE_AGREEMENT  # it runs by default (the test above)
+    monkeypatch.setattr(tuning, "COARSE_AGREEMENT", gap / 2)
+    result = tune(arm, ArmPD(arm), scenario, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}, max_iter=2)
+    assert {s["substeps"] for s in result.stages} == {10}
 
 
 def test_until_feasible_stops_at_the_first_decision_meeting_the_specs(arm):
