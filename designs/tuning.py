@@ -106,6 +106,8 @@ AGREEMENT = 1e-6
 CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: IPOPT's status at its iteration cap.
 CAPPED = "Maximum_Iterations_Exceeded"
+#: IPOPT's verdict of local infeasibility (its restoration converged outside the constraints).
+INFEASIBLE = "Infeasible_Problem_Detected"
 #: IPOPT iterations per solve: a safety cap, not the stopping rule (a stop here is reported).
 MAX_ITER = 3000
 #: IPOPT's default convergence tolerance here (scaled NLP error). Measured on the saturating 2 m
@@ -436,9 +438,7 @@ class TuningResult:
         """Converged, or the specs were proved locally infeasible (IPOPT's restoration converged, or the
         phase one converged outside them) and no point returned meets them: not a cap, and not a claim of
         infeasibility a feasible answer contradicts."""
-        proved = self.status == "Infeasible_Problem_Detected" or (
-            self.phase_one is not None and self.phase_one.infeasible
-        )
+        proved = self.status == INFEASIBLE or (self.phase_one is not None and self.phase_one.infeasible)
         return self.converged or (proved and not self.feasible)
 
 
@@ -1510,8 +1510,11 @@ def solve(
         done, status = 0, "not solved"
         for attempt in range(2):
             # A numerical failure (not an iteration cap) is retried once from its last point, cold, to the
-            # stage's own tolerance: a fresh quasi-Newton memory often gets past it.
+            # stage's own tolerance: a fresh quasi-Newton memory often gets past it. A verdict of local
+            # infeasibility that one of the solve's own iterates contradicts (it meets the specs on the
+            # exact loop) is retried once from the last such iterate, cold.
             warm_now = warm and attempt == 0
+            mark = len(recorder.iterates)
             this = level["solvers"][warm_now, not tight]
             sol = this(
                 x0=z_now,
@@ -1527,6 +1530,18 @@ def solve(
             done += int(stats.get("iter_count", 0))
             z_now = np.asarray(sol["x"]).ravel()
             multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+            if status == INFEASIBLE and attempt == 0:
+                at = level["problem"]
+                met = (
+                    zz
+                    for zz, _, _ in reversed(recorder.iterates[mark:])
+                    if not at.values(np.clip(scale[:n] * zz[:n], lbx, ubx))[2]
+                )
+                witness = next(met, None)
+                if witness is None:
+                    break
+                z_now = witness
+                continue
             if status not in RETRIED:
                 break
         return status, done
