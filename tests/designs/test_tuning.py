@@ -155,6 +155,46 @@ def test_infeasible_specs_are_named(arm):
     assert "infeasible" in result.message
 
 
+def test_an_infeasibility_verdict_contradicted_by_its_own_iterates_is_retried_from_the_last_feasible_one(
+    arm, monkeypatch
+):
+    """IPOPT made to claim local infeasibility (ending elsewhere) after a solve whose iterates met the
+    specs: `solve` solves once more from the last of those iterates, whose answer stands."""
+    real, starts, seen, progress = ca.nlpsol, [], [], []
+
+    class Claims:
+        def __init__(self, solver):
+            self.solver, self.lie = solver, False
+
+        def __call__(self, **kw):
+            starts.append(np.asarray(kw["x0"], dtype=float).ravel())
+            seen.append(len(progress))
+            sol = self.solver(**kw)
+            self.lie = len(starts) == 1
+            return dict(sol, x=3 * sol["x"]) if self.lie else sol
+
+        def stats(self):
+            stats = dict(self.solver.stats())
+            return stats | ({"return_status": "Infeasible_Problem_Detected"} if self.lie else {})
+
+    monkeypatch.setattr(ca, "nlpsol", lambda *a, **k: Claims(real(*a, **k)))
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    specs = Specs(max_overshoot=0.05)
+    problem = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
+    result = tune(
+        arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)},
+        progress=lambda i, f, t: progress.append(i),
+    )  # fmt: skip
+    assert len(starts) >= 2 and result.converged and result.feasible
+    met = [d for d in result.iterates[: seen[1]] if not problem.values(d)[2]]
+    assert met
+    scale = np.abs(problem.start())
+    np.testing.assert_allclose(starts[1] * scale, met[-1], rtol=1e-12)
+    monkeypatch.undo()
+    honest = tune(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    assert honest.converged and result.cost == pytest.approx(honest.cost, rel=1e-6)
+
+
 def test_iteration_limit_returns_the_best_feasible_point_and_says_it_did_not_converge(arm):
     calls = []
     result = tune(
