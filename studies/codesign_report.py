@@ -41,7 +41,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -507,7 +507,7 @@ def actuator_sizing(
         where = (
             "from the middle of the range and the hand gains" if start_block is None else "from the sequential answer"
         )
-        result.designs[method] = _sizing_design(
+        design = _sizing_design(
             method,
             plant.with_input_limit(sim["limit"]),
             sim["block"],
@@ -518,6 +518,15 @@ def actuator_sizing(
             sim["converged"],
             sim["status"],
         )
+        if not design.converged and design.feasible and design.value <= floor * (1 + rel_tol):
+            # The bisection's own test: the smallest limit lies in [floor, limit], narrower than rel_tol.
+            design = replace(
+                design,
+                converged=True,
+                status=f"{design.status}; settled: feasible within rel_tol {rel_tol:g} of the holding limit "
+                f"{floor:.4g} {unit}, below which no limit holds the target at rest",
+            )
+        result.designs[method] = design
         _announce(result.problem, result.designs[method])
     result.notes.append(_hand_rule_note(case, sizing, plant, scenario, specs, rel_tol))
     return result
@@ -654,7 +663,9 @@ Columns:
   (IPOPT's tolerance with the smoothing continuation settled, or a proof that a limit
   cannot meet the specs: IPOPT's or the phase one's; the bisection's or Brent's resolution),
   none at an iteration cap; a sizing's limit where gains meeting the specs were found is
-  settled even when the ITAE tuning there stopped short (its status is still listed); each
+  settled even when the ITAE tuning there stopped short (its status is still listed), and a
+  simultaneous sizing's feasible limit within the bisection's resolution of the holding limit
+  is settled by the bisection's own test (the smallest limit lies between the two); each
   answer's statuses are listed under Notes.
 """
 
