@@ -75,9 +75,9 @@ def test_arm_sizing_short_run_reports_what_it_designed():
 
 NOT_CONVERGED = pytest.mark.xfail(
     run=False,
-    reason="issue 16 open: the ball on beam's simultaneous sizing ends Infeasible_Problem_Detected at width 1e-3 "
-    "(feasible 12.553 N against the 12.54 N holding limit), from the sequential answer infeasible at 15.03 N; "
-    "its full run takes 80 minutes here (docs/codesign/ballbeam.json)",
+    reason="issue 16 open: the ball on beam's simultaneous sizing from the sequential answer ends infeasible at "
+    "15.03 N (its phase one Restoration_Failed from the holding limit's gains); its full run takes 90 minutes here "
+    "(docs/codesign/ballbeam.json)",
 )
 
 
@@ -353,15 +353,16 @@ def test_committed_sizing_records_hold_on_a_fresh_simulation(name):
         assert _meets(sized, block, scenario, case.SIZING.specs) == saved["feasible"], method
         assert np.max(np.abs(u)) == pytest.approx(saved["measured"]["peak_input"], rel=1e-9), method
         assert np.max(y) - 1 == pytest.approx(saved["measured"]["overshoot"], rel=1e-6, abs=1e-9), method
-    # The arm's and the UUV's sizings converged in every method (the ball on beam's did not: issue 16).
+    # The arm's and the UUV's sizings converged in every method (the ball on beam's from the sequential answer
+    # did not: issue 16).
     assert all(d["converged"] for d in record["designs"].values()) == (name != "ballbeam")
 
 
 @pytest.mark.xfail(
     strict=True,
     reason="issue 16 open: in docs/codesign.md the arm's and UUV's sizings converged; the satellite's simultaneous "
-    "solve from the middle stops at IPOPT's cap, the ball on beam's two simultaneous solves end "
-    "Infeasible_Problem_Detected, and the crane's full run (hours here) has no record yet",
+    "solve from the middle stops at IPOPT's cap, the ball on beam's simultaneous solve from the "
+    "sequential answer ends infeasible, and the crane's full run (hours here) has no record yet",
 )
 def test_committed_document_lists_every_problem_converged():
     doc = cr.DOC.read_text()
