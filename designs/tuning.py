@@ -1279,18 +1279,22 @@ def phase_one(
     status, iterations = "not solved", 0
     z_now = start / scale
     for w in widths if smooth else (None,):
-        s0 = float(ca.mmax(excess_of(scale * z_now, [] if w is None else w)))
-        sol = solver(
-            x0=np.concatenate([z_now, [max(s0, 0.0)]]),
-            lbx=np.concatenate([lbx / scale, [-PHASE_ONE_MARGIN]]),
-            ubx=np.concatenate([ubx / scale, [np.inf]]),
-            lbg=-np.inf,
-            ubg=0.0,
-            p=[] if w is None else w,
-        )
-        stats = solver.stats()
-        status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
-        z_now = np.asarray(sol["x"]).ravel()[:n]
+        for attempt in range(2):
+            # A numerical failure is retried once from where it stopped, as the tuning's stages are.
+            s0 = float(ca.mmax(excess_of(scale * z_now, [] if w is None else w)))
+            sol = solver(
+                x0=np.concatenate([z_now, [max(s0, 0.0)]]),
+                lbx=np.concatenate([lbx / scale, [-PHASE_ONE_MARGIN]]),
+                ubx=np.concatenate([ubx / scale, [np.inf]]),
+                lbg=-np.inf,
+                ubg=0.0,
+                p=[] if w is None else w,
+            )
+            stats = solver.stats()
+            status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
+            z_now = np.asarray(sol["x"]).ravel()[:n]
+            if status not in RETRIED:
+                break
         decision = np.clip(scale * z_now, lbx, ubx)
         worst = _largest_excess(problem, decision)
         if worst <= 0 or not _status_converged(status):

@@ -630,6 +630,37 @@ def test_phase_one_certifies_unreachable_specs_no_worse_than_a_grid(arm):
     assert exact == pytest.approx(found.excess, rel=1e-12)
 
 
+def test_a_phase_one_stopped_by_a_numerical_failure_is_retried_from_where_it_stopped(arm, monkeypatch):
+    """IPOPT made to report Restoration_Failed on the phase one's first solve: it is solved once more from
+    that solve's answer, and the verdict (here: a certificate of infeasibility) is the second solve's."""
+    problem = TuningProblem(
+        arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"), specs=Specs(rise_time=0.05)
+    )
+    lbx, ubx = gain_bounds(problem, {"kp": (0, 1.0), "kd": (0, 0.2)})
+    real, starts, answers = ca.nlpsol, [], []
+
+    class FailsOnce:
+        def __init__(self, solver):
+            self.solver = solver
+
+        def __call__(self, **kw):
+            starts.append(np.asarray(kw["x0"], dtype=float).ravel())
+            answers.append(np.asarray(self.solver(**kw)["x"], dtype=float).ravel())
+            return {"x": ca.DM(answers[-1])}
+
+        def stats(self):
+            failed = len(starts) == 1
+            return dict(self.solver.stats()) | ({"return_status": "Restoration_Failed"} if failed else {})
+
+    monkeypatch.setattr(ca, "nlpsol", lambda *a, **k: FailsOnce(real(*a, **k)))
+    found = phase_one(problem, lbx, ubx, problem.start())
+    assert len(starts) >= 2 and found.converged and found.infeasible, found
+    np.testing.assert_allclose(starts[1][:-1], answers[0][:-1], rtol=1e-12)  # the gains it stopped at
+    monkeypatch.undo()
+    honest = phase_one(problem, lbx, ubx, problem.start())
+    assert found.excess == pytest.approx(honest.excess, rel=1e-6)
+
+
 def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges(arm):
     """Without the phase one, this tuning ended at IPOPT's 3000-iteration cap (its restoration wandering
     along a feasible set of one corner); the answer must meet the specs on a fresh simulation."""
