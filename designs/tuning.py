@@ -1279,7 +1279,7 @@ def phase_one(
     status, iterations = "not solved", 0
     z_now = start / scale
     for w in widths if smooth else (None,):
-        for attempt in range(2):
+        for _ in range(2):
             # A numerical failure is retried once from where it stopped, as the tuning's stages are.
             s0 = float(ca.mmax(excess_of(scale * z_now, [] if w is None else w)))
             sol = solver(
