@@ -1263,12 +1263,12 @@ def phase_one(
     excess = _relative_excess(g, lbg, ubg)
     scale = _decision_scale(start)
     n = start.size
-    z, s = ca.MX.sym("z", n), ca.MX.sym("s")
+    z, s, scaling = ca.MX.sym("z", n), ca.MX.sym("s"), ca.MX.sym("scale", n)  # a parameter, as in `solve`
     excess_of = ca.Function("excess", [problem.decision, width], [excess])
-    rows = excess_of(scale * z, width) - s
+    rows = excess_of(scaling * z, width) - s
     ipopt = IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol}
     options: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
-    nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": width, "f": s, "g": rows}
+    nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
     solver = (
         models.compile.jit_nlpsols("ipopt", nlp, {"phase_one": options})["phase_one"]
         if jit
@@ -1288,7 +1288,7 @@ def phase_one(
                 ubx=np.concatenate([ubx / scale, [np.inf]]),
                 lbg=-np.inf,
                 ubg=0.0,
-                p=[] if w is None else w,
+                p=np.concatenate([[] if w is None else [w], scale]),
             )
             stats = solver.stats()
             status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
@@ -1443,8 +1443,11 @@ def solve(
     else:
         start_z, lbz, ubz = begin, lbx, ubx
     z = ca.MX.sym("z", start_z.size)
+    # The scale is a parameter of the compiled NLP, not a constant in it, so a problem solved again from
+    # another start (each evaluation of a nested co-design) reuses the compiled code.
+    scaling = ca.MX.sym("scale", start_z.size)
     n_g = (problem.smoothed()[1] if smooth else problem.g).numel() + (m if worst else 0)
-    recorder = _Recorder(start_z.size, n_g, width.numel(), progress, start_time)
+    recorder = _Recorder(start_z.size, n_g, width.numel() + start_z.size, progress, start_time)
     ipopt: dict[str, Any] = (
         IPOPT_OPTIONS
         | (AGGREGATED_IPOPT_OPTIONS if smooth and problem.paths == "aggregated" else {})
@@ -1487,7 +1490,7 @@ def solve(
             variables, objective = xl, cost_weight * level.aggregate(per_sample) + extra
         f_of = ca.Function("objective", [variables, level.width], [objective])
         g_of = ca.Function("constraints", [variables, level.width], [g])
-        nlp = {"x": z, "p": width, "f": f_of(scale * z, width), "g": g_of(scale * z, width)}
+        nlp = {"x": z, "p": ca.vertcat(width, scaling), "f": f_of(scaling * z, width), "g": g_of(scaling * z, width)}
         # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
         if jit:
             built = models.compile.jit_nlpsols("ipopt", nlp, options)
@@ -1526,7 +1529,7 @@ def solve(
                 ubx=ubz / scale,
                 lbg=level["lbg"],
                 ubg=level["ubg"],
-                p=[] if w is None else w,
+                p=np.concatenate([[] if w is None else [w], scale]),
                 **(multipliers if warm_now else {}),
             )
             stats = this.stats()
