@@ -161,7 +161,8 @@ class CaseResult:
 
     @property
     def converged(self) -> bool:
-        return all(d.converged for d in self.designs.values())
+        """Every method of `METHODS` answered, and each converged (a method not run is not converged)."""
+        return set(self.designs) == set(METHODS) and all(d.converged for d in self.designs.values())
 
 
 # ----------------------------------------------------------------- records on disk

@@ -10,6 +10,7 @@ import models
 from designs.tuning import Cost, Specs, TuningProblem
 from studies import codesign_report as cr
 from studies.cases import arm, ballbeam, crane, satellite, uuv
+from studies.homework import statespace_controllers
 
 #: The actuator-sizing cases by plant.
 SIZING = {"arm": arm, "uuv": uuv, "ballbeam": ballbeam}
@@ -163,8 +164,9 @@ def test_plant_costs_in_their_units():
 @pytest.mark.slow
 @pytest.mark.xfail(
     run=False,
-    reason="issue 16 open: asserts converged co-design for the satellite and the crane (about 15 minutes each "
-    "here), not reached yet; not run until the continuation's stopping rule is reworked",
+    reason="issue 16 open: the satellite's simultaneous solve from the middle stops at IPOPT's cap; the crane's "
+    "sequential and both simultaneous solves converge (docs/codesign/crane.json) but its nested run took over an "
+    "hour here for 6 of Brent's evaluations; not run until both are faster",
 )
 def test_satellite_and_crane_full_runs():
     for result, cost in (
@@ -220,6 +222,14 @@ def _fake_result(key="fake"):
         designs=designs,
         notes=["a note"],
     )
+
+
+def test_a_problem_is_converged_only_when_every_method_answered_and_converged():
+    result = _fake_result()
+    assert result.converged
+    del result.designs["nested"]  # a run cut short: its row must not read "all converged"
+    assert not result.converged
+    assert "| problem fake | torque limit (N m) | 1 |" in cr.table([result]) and "| no |" in cr.table([result])
 
 
 def test_gain_compares_the_best_feasible_answers():
@@ -358,11 +368,42 @@ def test_committed_sizing_records_hold_on_a_fresh_simulation(name):
     assert all(d["converged"] for d in record["designs"].values()) == (name != "ballbeam")
 
 
+PLANT_PARAMETER = {
+    "satellite": (satellite, "k", satellite.stiffness_cost, satellite.STIFFNESS_SPECS, {}),
+    "crane": (crane, "ell", crane.hoist_cost, Specs(state_bounds={"theta": crane.SWING_BOUND}), "one load"),
+}
+
+
+@pytest.mark.parametrize("key", list(PLANT_PARAMETER))
+def test_committed_plant_parameter_records_hold_on_a_fresh_simulation(key):
+    """The document's plant-parameter answers, rebuilt from their recorded values and gains: the
+    objective, summed by hand from a fresh simulation (ITAE as Ts Σ t_k sqrt(e_k² + δ²), δ = 1e-4 of
+    the step, plus the plant's price), is the recorded one, and so is the specs' verdict."""
+    case, name, price, specs, choices = PLANT_PARAMETER[key]
+    record = json.loads((cr.DOC.with_suffix("") / f"{key}.json").read_text())
+    base = models.get(record["plant"])
+    args = (crane.STATESPACE_ONE_LOAD,) if choices else ()
+    block = statespace_controllers(case.CASE, base, *args)["pole placement"]
+    duration = {"satellite": satellite.STIFFNESS_DURATION, "crane": crane.TRANSFER_DURATION}[key]
+    scenario = cr.step_scenario(base, case.CASE.tracked, case.CASE.step, duration)
+    k = base.state_names.index(scenario.tracked)
+    step = scenario.reference - scenario.x0[k]
+    for method, saved in record["designs"].items():
+        plant = base.with_params(**{name: saved["value"]})
+        tuned = block.with_gains(**{g: np.asarray(v) for g, v in saved["gains"].items()})
+        run = models.simulate_closed_loop(plant, tuned, scenario.reference, duration, x0=scenario.x0)
+        error = scenario.reference - run.x[:-1, k]
+        itae = np.diff(run.t)[0] * np.sum(run.t[:-1] * np.sqrt(error**2 + (1e-4 * step) ** 2))
+        assert itae == pytest.approx(saved["closed_loop_cost"], rel=1e-6), method
+        assert itae + price({name: saved["value"]}) == pytest.approx(saved["objective"], rel=1e-6), method
+        assert _meets(plant, tuned, scenario, specs) == saved["feasible"], method
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="issue 16 open: in docs/codesign.md the arm's and UUV's sizings converged; the satellite's simultaneous "
     "solve from the middle stops at IPOPT's cap, the ball on beam's simultaneous solve from the "
-    "sequential answer ends infeasible, and the crane's full run (hours here) has no record yet",
+    "sequential answer ends infeasible, and the crane's nested method was cut short (no answer recorded)",
 )
 def test_committed_document_lists_every_problem_converged():
     doc = cr.DOC.read_text()
