@@ -376,8 +376,9 @@ def _nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol):
         values = np.clip(values, low, high)
         start = joint.start()
         if tried:
-            nearest = min(tried, key=lambda item: float(np.max(np.abs(item[0] - values) / width)))
-            start[:n] = nearest[1].decision[:n]
+            nearest = min(tried, key=lambda item: float(np.max(np.abs(item[0] - values) / width)))[1].decision
+            assert nearest is not None, "tuning.solve always returns its decision vector"
+            start[:n] = nearest[:n]
         start[n:] = values
         fixed_low, fixed_high = lbx.copy(), ubx.copy()
         fixed_low[n:] = fixed_high[n:] = values
