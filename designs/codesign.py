@@ -363,8 +363,8 @@ def _nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol):
     """Outer optimizer on the parameters; each evaluation a converged tuning, warm-started from the nearest.
 
     Each tuning is the joint problem with the parameters fixed by their bounds (IPOPT takes them as
-    constants), so one compiled NLP serves every evaluation: on the plant rebuilt at each value the
-    crane's tunings compiled afresh, about 5 minutes each, 10 times the solve.
+    constants), so one compiled NLP serves every evaluation: on the plant rebuilt at each value every
+    evaluation compiled afresh, minutes each with exact second derivatives, several times its solve.
     """
     started = time.perf_counter()
     n = joint.n_gains
