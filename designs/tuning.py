@@ -79,7 +79,7 @@ the specs still missed is a local certificate of infeasibility
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -442,15 +442,31 @@ class TuningResult:
         return self.converged or (proved and not self.feasible)
 
 
-class _Recorder(ca.Callback):
-    """IPOPT iteration callback keeping every iterate and the objective IPOPT saw there."""
+class _Log:
+    """The iterates of one `solve` call: (x, f, perf_counter) each, reported to `progress` as they come."""
 
-    def __init__(self, nx: int, ng: int, n_p: int, progress=None, started=None):
-        ca.Callback.__init__(self)
+    def __init__(self, progress=None, started=None):
         self.progress = progress
         self.started = time.perf_counter() if started is None else started
+        self.iterates: list[tuple[np.ndarray, float, float]] = []
+
+    def add(self, x: np.ndarray, value: float) -> None:
+        self.iterates.append((x, value, time.perf_counter()))
+        if self.progress is not None:
+            self.progress(len(self.iterates) - 1, value, self.iterates[-1][2] - self.started)
+
+
+class _Recorder(ca.Callback):
+    """IPOPT iteration callback passing every iterate and the objective IPOPT saw there to `log`.
+
+    A solver keeps its callback for life; a cached solver (`_cached`) serves one `solve` call after
+    another, each pointing `log` at its own `_Log`.
+    """
+
+    def __init__(self, nx: int, ng: int, n_p: int):
+        ca.Callback.__init__(self)
+        self.log: _Log | None = None
         self.sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "p": n_p, "lam_p": n_p, "f": 1}
-        self.iterates: list[tuple[np.ndarray, float, float]] = []  # (x, f, perf_counter)
         self.construct("recorder", {})
 
     def get_n_in(self):
@@ -469,12 +485,30 @@ class _Recorder(ca.Callback):
         return ca.Sparsity.dense(self.sizes[ca.nlpsol_out(i)], 1)
 
     def eval(self, arg):
-        x = np.asarray(arg[0]).ravel().copy()
-        value = float(arg[1])
-        self.iterates.append((x, value, time.perf_counter()))
-        if self.progress is not None:
-            self.progress(len(self.iterates) - 1, value, self.iterates[-1][2] - self.started)
+        if self.log is not None:
+            self.log.add(np.asarray(arg[0]).ravel().copy(), float(arg[1]))
         return [0]
+
+
+def _frozen(value):
+    """`value` (nested dicts, lists, scalars, callables) as a hashable key."""
+    if isinstance(value, Mapping):
+        return tuple(sorted((k, _frozen(v)) for k, v in value.items()))
+    if isinstance(value, (list, tuple)):
+        return tuple(_frozen(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return (value.shape, tuple(value.ravel().tolist()))
+    return value
+
+
+def _cached(problem: TuningProblem, key: tuple, make: Callable[[], Any]) -> Any:
+    """`make()`, built once per problem and key: building an IPOPT solver with exact second derivatives
+    (and generating its C code) takes minutes on a long horizon, and a nested co-design solves one
+    problem once per outer evaluation."""
+    key = _frozen(key)
+    if key not in problem._solvers:
+        problem._solvers[key] = make()
+    return problem._solvers[key]
 
 
 # ----------------------------------------------------------------- the problem
@@ -615,6 +649,7 @@ class TuningProblem:
         self._smooth: tuple[ca.MX, ca.MX] | None = None
         #: (lbg, ubg, names) of the smoothed problem's constraints, set by `smoothed()`
         self.smooth_bounds: tuple[np.ndarray, np.ndarray, list[tuple[str, slice]]] | None = None
+        self._solvers: dict[Any, Any] = {}  # built solvers and levels by options (see `_cached`)
         # Back-compatible single-scenario attributes.
         first = self.runs[0]
         self.x0, self.reference, self.n_steps = first.x0, first.r, first.n
@@ -622,8 +657,12 @@ class TuningProblem:
         self.tracked = first.scenario.tracked
 
     def with_substeps(self, substeps: int) -> TuningProblem:
-        """The same problem integrated with `substeps` RK4 sub-steps per sample."""
-        return TuningProblem(self.plant, self.block, self.scenarios, substeps=substeps, **self._arguments)
+        """The same problem integrated with `substeps` RK4 sub-steps per sample (built once per value)."""
+        return _cached(
+            self,
+            ("substeps", substeps),
+            lambda: TuningProblem(self.plant, self.block, self.scenarios, substeps=substeps, **self._arguments),
+        )
 
     # ------------------------------------------------------------ building
     def _free_index(self) -> np.ndarray:
@@ -1269,10 +1308,14 @@ def phase_one(
     ipopt = IPOPT_OPTIONS | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol}
     options: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
-    solver = (
-        models.compile.jit_nlpsols("ipopt", nlp, {"phase_one": options})["phase_one"]
-        if jit
-        else ca.nlpsol("phase_one", "ipopt", nlp, options)
+    solver = _cached(
+        problem,
+        ("phase one", smooth, jit, options),
+        lambda: (
+            models.compile.jit_nlpsols("ipopt", nlp, {"phase_one": options})["phase_one"]
+            if jit
+            else ca.nlpsol("phase_one", "ipopt", nlp, options)
+        ),
     )
 
     decision, worst = start, np.inf  # widths is never empty: the loop sets both
@@ -1442,19 +1485,14 @@ def solve(
         lbz, ubz = np.concatenate([lbx, [-np.inf]]), np.concatenate([ubx, [np.inf]])
     else:
         start_z, lbz, ubz = begin, lbx, ubx
-    z = ca.MX.sym("z", start_z.size)
-    # The scale is a parameter of the compiled NLP, not a constant in it, so a problem solved again from
-    # another start (each evaluation of a nested co-design) reuses the compiled code.
-    scaling = ca.MX.sym("scale", start_z.size)
-    n_g = (problem.smoothed()[1] if smooth else problem.g).numel() + (m if worst else 0)
-    recorder = _Recorder(start_z.size, n_g, width.numel() + start_z.size, progress, start_time)
+    log = _Log(progress, start_time)
     ipopt: dict[str, Any] = (
         IPOPT_OPTIONS
         | (AGGREGATED_IPOPT_OPTIONS if smooth and problem.paths == "aggregated" else {})
         | {"max_iter": int(max_iter), "tol": tol, "acceptable_tol": 100 * tol, "hessian_approximation": hessian}
         | dict(ipopt_options or {})
     )
-    opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "iteration_callback": recorder, "error_on_fail": False}
+    opts: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     continuation = smooth and len(widths) > 1
     # Solvers by (warm, loose). Later stages start at the last answer and its multipliers, with the
     # barrier already small; the continuation's intermediate stages are solved loosely.
@@ -1488,14 +1526,24 @@ def solve(
             lbg, ubg = np.concatenate([lbg, np.full(m, -np.inf)]), np.concatenate([ubg, np.zeros(m)])
         else:
             variables, objective = xl, cost_weight * level.aggregate(per_sample) + extra
-        f_of = ca.Function("objective", [variables, level.width], [objective])
-        g_of = ca.Function("constraints", [variables, level.width], [g])
-        nlp = {"x": z, "p": ca.vertcat(width, scaling), "f": f_of(scaling * z, width), "g": g_of(scaling * z, width)}
-        # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
-        if jit:
-            built = models.compile.jit_nlpsols("ipopt", nlp, options)
-        else:
-            built = {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in options.items()}
+
+        def make() -> tuple[_Recorder, dict[str, Any]]:
+            f_of = ca.Function("objective", [variables, level.width], [objective])
+            g_of = ca.Function("constraints", [variables, level.width], [g])
+            z, scaling = ca.MX.sym("z", start_z.size), ca.MX.sym("scale", start_z.size)
+            decision = scaling * z
+            nlp = {"x": z, "p": ca.vertcat(width, scaling), "f": f_of(decision, width), "g": g_of(decision, width)}
+            recorder = _Recorder(start_z.size, g.numel(), width.numel() + start_z.size)
+            with_recorder = {name: o | {"iteration_callback": recorder} for name, o in options.items()}
+            # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
+            if jit:
+                return recorder, models.compile.jit_nlpsols("ipopt", nlp, with_recorder)
+            return recorder, {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in with_recorder.items()}
+
+        # The scale is a parameter of the NLP, not a constant in it, so the problem solved again from another
+        # start (each evaluation of a nested co-design) reuses the solvers built here.
+        recorder, built = _cached(level, ("tuning", smooth, worst, cost_weight, plant_cost, jit, options), make)
+        recorder.log = log
         total = cost_weight * level.aggregate(per_sample) + extra
         spec_rows = level.smoothed()[1] if smooth else level.g
         return {
@@ -1521,7 +1569,7 @@ def solve(
             # infeasibility that one of the solve's own iterates contradicts (it meets the specs on the
             # exact loop) is retried once from the last such iterate, cold.
             warm_now = warm and attempt == 0
-            mark = len(recorder.iterates)
+            mark = len(log.iterates)
             this = level["solvers"][warm_now, not tight]
             sol = this(
                 x0=z_now,
@@ -1541,7 +1589,7 @@ def solve(
                 at = level["problem"]
                 met = (
                     zz
-                    for zz, _, _ in reversed(recorder.iterates[mark:])
+                    for zz, _, _ in reversed(log.iterates[mark:])
                     if not at.values(np.clip(scale[:n] * zz[:n], lbx, ubx))[2]
                 )
                 witness = next(met, None)
@@ -1665,7 +1713,7 @@ def solve(
     # that answer is infeasible: judge them lazily, lowest objective IPOPT saw first.
     threshold = value - 1e-6 * abs(value) if chosen and not violations else np.inf
     others = sorted(
-        ((f, scale[:n] * zz[:n], "iterate") for zz, f, _ in recorder.iterates if np.isfinite(f) and f < threshold),
+        ((f, scale[:n] * zz[:n], "iterate") for zz, f, _ in log.iterates if np.isfinite(f) and f < threshold),
         key=lambda item: item[0],
     )
     others.append((initial_cost, start, "start"))
@@ -1701,8 +1749,8 @@ def solve(
         iterations=iterations,
         wall_time=time.perf_counter() - start_time,
         decision=np.array(decision),
-        history=[(stamp - start_time, f) for _, f, stamp in recorder.iterates],
-        iterates=[np.clip(scale[:n] * zz[:n], lbx, ubx) for zz, _, _ in recorder.iterates],
+        history=[(stamp - start_time, f) for _, f, stamp in log.iterates],
+        iterates=[np.clip(scale[:n] * zz[:n], lbx, ubx) for zz, _, _ in log.iterates],
         converged=converged,
         stages=stages,
         smoothing_gap=float(gap),

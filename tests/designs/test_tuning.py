@@ -657,8 +657,35 @@ def test_a_phase_one_stopped_by_a_numerical_failure_is_retried_from_where_it_sto
     assert len(starts) >= 2 and found.converged and found.infeasible, found
     np.testing.assert_allclose(starts[1][:-1], answers[0][:-1], rtol=1e-12)  # the gains it stopped at
     monkeypatch.undo()
-    honest = phase_one(problem, lbx, ubx, problem.start())
+    fresh = TuningProblem(
+        arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"), specs=Specs(rise_time=0.05)
+    )  # the first problem keeps its (wrapped) solver
+    honest = phase_one(fresh, lbx, ubx, fresh.start())
     assert found.excess == pytest.approx(honest.excess, rel=1e-6)
+
+
+def test_a_problem_solved_again_reuses_its_solvers_and_answers_as_a_fresh_one(arm, monkeypatch):
+    """The second solve of one problem (another start, as a nested co-design's next evaluation) builds no
+    solver, and its answer and iterate history are those of the same solve on a newly built problem."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta")
+    specs = Specs(max_overshoot=0.05)
+
+    def problem():
+        return TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
+
+    built, real = [], ca.nlpsol
+    monkeypatch.setattr(ca, "nlpsol", lambda *a, **k: built.append(a[0]) or real(*a, **k))
+    again = problem()
+    lbx, ubx = gain_bounds(again, {"kp": (0, 1.0), "kd": (0, 0.2)})
+    tuning.solve(again, lbx, ubx, start=[0.2, 0.05])
+    first = len(built)
+    second = tuning.solve(again, lbx, ubx, start=[0.5, 0.15])
+    assert first > 0 and len(built) == first  # nothing built the second time
+    fresh = tuning.solve(problem(), lbx, ubx, start=[0.5, 0.15])
+    assert second.converged and fresh.converged
+    np.testing.assert_allclose(second.decision, fresh.decision, rtol=1e-12)
+    assert len(second.history) == len(fresh.history) == len(second.iterates)
+    assert [s["iterations"] for s in second.stages] == [s["iterations"] for s in fresh.stages]
 
 
 def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges(arm):
