@@ -658,7 +658,8 @@ def size_actuator_simultaneous(
     Returns
     -------
     dict: limit, block (the design at the limit with the found gains), feasible, violations,
-    converged, status, message, result (the `TuningResult`).
+    converged (the solve converged, or proved the specs locally out of reach), status, message,
+    result (the `TuningResult`).
     """
     low, high, _ = _check_sizing(low, high, 0.5)
     start_limit = real(start_limit, "start_limit")
@@ -706,7 +707,9 @@ def size_actuator_simultaneous(
         "block": block,
         "feasible": not violations,
         "violations": violations,
-        "converged": result.converged,
+        # A proof that no limit and gains near the solve's path meet the specs (IPOPT's restoration or the
+        # phase one converged outside them) is a stop on a convergence test, as for a tuning.
+        "converged": result.stopped_on_test,
         "status": f"IPOPT: {result.status}",
         "message": f"tie-break weight {used:g}: {result.message}",
         "result": result,

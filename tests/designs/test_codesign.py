@@ -319,6 +319,31 @@ def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
     assert _meets(arm, sim["limit"], sim["block"]) and _meets(arm, nested["limit"], nested["block"])
 
 
+def test_simultaneous_sizing_proves_a_rise_time_beyond_the_largest_limit_out_of_reach():
+    """From rest at level the arm's acceleration is at most τ_max / J (gravity only opposes the rise), so 90 %
+    of a 50° step takes at least sqrt(2 · 0.9 · 50° · J / τ_max): 0.089 s at 3 N m. A 0.05 s rise time is
+    out of reach at every limit; the sizing ends on a proof of that (converged) and reports it infeasible."""
+    arm = models.get("arm")
+    p = arm.params
+    inertia, high, step = p["m"] * p["ell"] ** 2 / 3, 3.0, np.deg2rad(50)
+    fastest = np.sqrt(2 * 0.9 * step * inertia / high)
+    specs = Specs(rise_time=0.05)
+    assert specs.rise_time < fastest
+    scenario = Scenario(reference=step, duration=1.0, tracked="theta")
+    sim = size_actuator_simultaneous(
+        arm,
+        _arm_saturation_pd,
+        scenario,
+        specs,
+        low=0.75,
+        high=high,
+        start_limit=1.5,
+        bounds={"kp": (0, 5), "kd": (0, 1)},
+    )
+    assert sim["converged"] and not sim["feasible"], sim["message"]
+    assert any("rise" in v or "90 %" in v for v in sim["violations"]), sim["violations"]
+
+
 def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(monkeypatch):
     """Fake inner tunings, feasible from 1.2 N m: the first tuning at every limit in (1.2, 2) ends in
     Restoration_Failed, its repeat starts from the gains of the smallest feasible limit so far."""
