@@ -1506,6 +1506,8 @@ def solve(
             (True, False, "tuning_warm_loose"),
         ):
             variants[warm, not tight] = (name, ipopt | (WARM_START if warm else {}) | ({} if tight else loose))
+    elif len(levels) > 1:  # one width: the problem's own level starts warm from the coarse level's answer
+        variants[True, False] = ("tuning_warm", ipopt | WARM_START)
     options = {name: dict(opts, ipopt=settings) for name, settings in variants.values()}
 
     def build(level: TuningProblem) -> dict[str, Any]:

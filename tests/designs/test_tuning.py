@@ -743,6 +743,18 @@ def test_a_coarse_level_first_ends_at_the_one_level_answer_on_the_fine_loop(arm)
     assert fresh.values(two.decision)[0] == pytest.approx(two.cost, rel=1e-12)  # judged on the fine loop
 
 
+def test_one_width_with_a_coarse_level_ends_at_the_one_level_answer(arm):
+    """A single width (no continuation) on a problem without specs: the coarse level, then the problem's own
+    from its answer, warm (this raised KeyError: no warm solver was built without a continuation)."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    two = tune(arm, ArmPD(arm), scenario, bounds=bounds, widths=(1e-3,), tol=1e-10)
+    one = tune(arm, ArmPD(arm), scenario, bounds=bounds, widths=(1e-3,), tol=1e-10, coarse_substeps=None)
+    assert [s["substeps"] for s in two.stages] == [1, 10] and two.converged and one.converged
+    assert two.cost == pytest.approx(one.cost, rel=1e-8)
+    np.testing.assert_allclose(two.decision, one.decision, rtol=1e-5)
+
+
 def test_no_coarse_level_where_it_disagrees_at_the_start(arm, monkeypatch):
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     problem = TuningProblem(arm, ArmPD(arm), scenario)
