@@ -213,6 +213,7 @@ def codesign(
     widths=WIDTHS,
     paths: str = "pointwise",
     hessian: str = "limited-memory",
+    relaxed: bool = False,
     progress: Callable[[CodesignResult], None] | None = None,
 ) -> dict[str, CodesignResult]:
     """Co-design the named plant parameters with the block's gains: sequential, nested, simultaneous.
@@ -227,7 +228,7 @@ def codesign(
         objective (for example ``lambda p: 0.1 * p["k"]``); default zero
     plant_objective : the sequential method's plant-only objective, same form (default
         `plant_cost`; one of the two must be given)
-    specs, cost, free, bounds, samples, robust, max_iter, tol, jit, substeps, widths, paths, hessian
+    specs, cost, free, bounds, samples, robust, max_iter, tol, jit, substeps, widths, paths, hessian, relaxed
         As in `designs.tuning.tune`; `bounds` holds in every method. Parameters listed
         in `samples` rows are overwritten by the decision for the designed names.
     methods : which of `METHODS` to run (the simultaneous start from the sequential
@@ -249,7 +250,10 @@ def codesign(
         raise ValueError("the sequential method needs a plant-only objective: give plant_objective or plant_cost")
     names = tuple(ranges)
     options = {"specs": specs, "cost": cost, "samples": samples, "robust": robust, "substeps": substeps, "paths": paths}
-    solve_options = {"max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths, "hessian": hessian, "phase": True}
+    solve_options = {
+        "max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths, "hessian": hessian, "phase": True,
+        "relaxed": relaxed,
+    }  # fmt: skip
     # Validate everything once, before any solve: the joint problem and its bounds.
     joint = TuningProblem(plant, block, scenarios, free=free, extra_params=names, **options)
     lbx, ubx = _joint_bounds(joint, bounds, names, ranges)

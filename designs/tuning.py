@@ -656,6 +656,17 @@ class TuningProblem:
         self.step = first.step if first.step is not None else 0.0
         self.tracked = first.scenario.tracked
 
+    def without_specs(self) -> TuningProblem:
+        """The same problem with no specs (built once): what `solve(relaxed=True)` solves first."""
+
+        def make() -> TuningProblem:
+            scenarios = tuple(replace(sc, specs=None if sc.specs is None else Specs()) for sc in self.scenarios)
+            return TuningProblem(
+                self.plant, self.block, scenarios, substeps=self.substeps, **(self._arguments | {"specs": None})
+            )
+
+        return _cached(self, ("without specs",), make)
+
     def with_substeps(self, substeps: int) -> TuningProblem:
         """The same problem integrated with `substeps` RK4 sub-steps per sample (built once per value)."""
         return _cached(
@@ -1117,6 +1128,7 @@ def tune(
     phase: bool = False,
     until_feasible: bool = False,
     coarse_substeps: int | None = COARSE_SUBSTEPS,
+    relaxed: bool = False,
 ) -> TuningResult:
     """Tune `block`'s gains on the nonlinear closed loop with IPOPT, from its current gains.
 
@@ -1139,6 +1151,7 @@ def tune(
     phase : run a phase one first when the start misses a spec (see `solve`); off by default: on
         the README's two-scenario, four-sample PID tuning it ran for over 28 minutes
     until_feasible : with `phase`, a feasibility verdict rather than a tuning (see `solve`)
+    relaxed : solve without the specs first and keep that answer if it meets them (see `solve`)
     coarse_substeps : RK4 sub-steps per sample of a coarser problem whose continuation runs first and
         starts this one's (`COARSE_SUBSTEPS`; skipped where it disagrees at the start, see
         `COARSE_AGREEMENT`); None: none
@@ -1182,6 +1195,7 @@ def tune(
         phase=phase,
         until_feasible=until_feasible,
         coarse_substeps=coarse_substeps,
+        relaxed=relaxed,
     )
 
 
@@ -1392,6 +1406,7 @@ def solve(
     phase: bool = False,
     until_feasible: bool = False,
     coarse_substeps: int | None = COARSE_SUBSTEPS,
+    relaxed: bool = False,
 ) -> TuningResult:
     """IPOPT on cost_weight × the problem's objective (+ plant_cost(decision)), smoothed by continuation.
 
@@ -1411,6 +1426,12 @@ def solve(
         when the phase one ends outside the specs, as `phase`. A verdict on the specs, not a tuned
         cost: what an outer search over the plant needs when only feasibility decides (`size_actuator`)
     coarse_substeps : RK4 sub-steps of a coarser level solved first (see `COARSE_SUBSTEPS`), None for none
+    relaxed : (opt-in) on a problem with specs, first solve it without them from `start`; a converged answer
+        that meets every spec on the exact loop is returned: a local minimum over the bounds alone that
+        meets the specs is a local minimum under them too. Otherwise the problem is solved as usual. For
+        specs inactive at the answer: on the satellite's panel-stiffness problem IPOPT wandered for
+        thousands of iterations with its two aggregated specs (both 1 % or more inside their bounds),
+        and converged in 15 without them
     max_iter, jit, tol, hessian, progress, method, widths : as in `tune`
     """
     max_iter, tol, jit, widths = _check_options(max_iter, tol, hessian, jit, progress, method, widths)
@@ -1418,6 +1439,7 @@ def solve(
     until_feasible = boolean(until_feasible, "until_feasible")
     if coarse_substeps is not None:
         coarse_substeps = integer(coarse_substeps, "coarse_substeps", minimum=1)
+    relaxed = boolean(relaxed, "relaxed")
     if until_feasible and not phase:
         raise ValueError("until_feasible needs phase=True: the verdict comes from the phase one")
     if ipopt_options is not None and not isinstance(ipopt_options, Mapping):
@@ -1433,6 +1455,27 @@ def solve(
     extra_cost = ca.MX(0) if plant_cost is None else plant_cost(x)
     exact_total = ca.Function("total", [x], [cost_weight * problem.objective + extra_cost])
     smooth = method == "smooth"
+    prefix = ""
+    if relaxed and not until_feasible and problem.g.numel():
+        free = solve(
+            problem.without_specs(), lbx, ubx, max_iter=max_iter, jit=jit, plant_cost=plant_cost, tol=tol,
+            hessian=hessian, progress=progress, method=method, widths=widths, start=start, cost_weight=cost_weight,
+            ipopt_options=ipopt_options, coarse_substeps=coarse_substeps,
+        )  # fmt: skip
+        assert free.decision is not None, "solve always returns its decision vector"
+        missed = problem.values(free.decision)[2] + _spectral_violation(problem, free.decision)
+        if free.converged and np.isfinite(free.cost) and not missed:
+            worst_excess = _largest_excess(problem, free.decision)
+            return replace(
+                free,
+                wall_time=time.perf_counter() - start_time,
+                message=f"solved without the specs: the answer meets them (largest relative excess "
+                f"{worst_excess:.3g}), so it is a local minimum under them too; {free.message}",
+            )
+        prefix = (
+            f"without the specs: {free.status}, {'converged' if free.converged else 'not converged'}"
+            f"{', missing ' + '; '.join(missed) if missed else ''}; then with them: "
+        )
     # Started outside the specs: a phase one first (see `phase_one`), and the tuning from its answer.
     found, begin = None, start
     if phase and _largest_excess(problem, start) > AGREEMENT:
@@ -1460,7 +1503,7 @@ def solve(
                 improvement=1 - best.cost / initial if initial else 0.0,
                 iterations=sum(r.iterations for r in tries),
                 wall_time=time.perf_counter() - start_time,
-                message=f"started outside the specs; phase one (IPOPT: {found.status}, {found.iterations} "
+                message=f"{prefix}started outside the specs; phase one (IPOPT: {found.status}, {found.iterations} "
                 f"iterations) ended {found.excess:.3g} relative outside them; tuned from its answer and from "
                 f"the start, kept the one from {'its answer' if best is tries[0] else 'the start'}: {best.message}",
             )
@@ -1692,7 +1735,7 @@ def solve(
         return value, violations
 
     initial_cost, _ = judge(start)
-    message = f"IPOPT: {status}"
+    message = f"{prefix}IPOPT: {status}"
     if found is not None:
         message = (
             f"started outside the specs; phase one (IPOPT: {found.status}, {found.iterations} iterations) "
