@@ -755,6 +755,28 @@ def test_one_width_with_a_coarse_level_ends_at_the_one_level_answer(arm):
     np.testing.assert_allclose(two.decision, one.decision, rtol=1e-5)
 
 
+def test_relaxed_keeps_the_unconstrained_answer_only_where_it_meets_the_specs(arm):
+    """An overshoot bound of 50 % is inactive at the ITAE optimum: solved without it first, that answer is
+    kept, and the solve with the bound reaches it too. A bound of 0 % is active: the first answer misses
+    it, and the result is the usual solve's, the first one named in its message."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    loose = Specs(max_overshoot=0.5)
+    kept = tune(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds, relaxed=True, tol=1e-10)
+    with_specs = tune(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds, tol=1e-10)
+    assert kept.converged and with_specs.converged and kept.message.startswith("solved without the specs")
+    assert kept.cost == pytest.approx(with_specs.cost, rel=1e-7)
+    np.testing.assert_allclose(kept.decision, with_specs.decision, rtol=1e-4)
+    target = np.deg2rad(50)
+    over, _ = _overshoot_and_settling(models.simulate_closed_loop(arm, kept.block, target, 3.0), 0.0, target)
+    assert 0 < over < 0.5  # overshoots (so the 0 % bound below is active), within the 50 % one
+    tight = Specs(max_overshoot=0.0)
+    fallback = tune(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds, relaxed=True)
+    usual = tune(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds)
+    assert fallback.message.startswith("without the specs: ") and "missing overshoot" in fallback.message
+    assert fallback.cost == usual.cost and fallback.feasible and fallback.converged
+
+
 def test_no_coarse_level_where_it_disagrees_at_the_start(arm, monkeypatch):
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     problem = TuningProblem(arm, ArmPD(arm), scenario)
