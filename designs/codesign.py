@@ -54,6 +54,8 @@ from .tuning import (
 )
 
 METHODS = ("sequential", "nested", "simultaneous", "simultaneous from sequential")
+#: Where the nested method's inner tunings start (`codesign`'s `nested_start`).
+NESTED_STARTS = ("nearest", "neutral")
 #: Statuses of an IPOPT solve that stopped on a convergence test (local infeasibility included).
 STOPPED_BY_TEST = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Infeasible_Problem_Detected")
 #: The simultaneous sizing's regularizing tie-break weight (`size_actuator_simultaneous` solves with it
@@ -209,6 +211,7 @@ def codesign(
     jit: bool = False,
     methods: Sequence[str] = METHODS,
     nested_tol: float = 1e-3,
+    nested_start: str = "nearest",
     substeps: int = 10,
     widths=WIDTHS,
     paths: str = "pointwise",
@@ -234,6 +237,8 @@ def codesign(
     methods : which of `METHODS` to run (the simultaneous start from the sequential
         answer needs "sequential")
     nested_tol : the nested outer optimizer's tolerance on each parameter, a fraction of its range
+    nested_start : where each inner tuning of the nested method starts: "nearest" (the gains of the
+        nearest parameters tuned so far, the block's for the first) or "neutral" (always the block's)
     progress : called with each method's answer as soon as it is found (the methods can take hours)
 
     Returns
@@ -246,6 +251,8 @@ def codesign(
     nested_tol = positive(nested_tol, "nested_tol")
     if nested_tol >= 1:
         raise ValueError(f"nested_tol must be a fraction of the range below 1, got {nested_tol}")
+    if nested_start not in NESTED_STARTS:
+        raise ValueError(f"nested_start must be one of {NESTED_STARTS}, got {nested_start!r}")
     if plant_objective is None and plant_cost is None and "sequential" in methods:
         raise ValueError("the sequential method needs a plant-only objective: give plant_objective or plant_cost")
     names = tuple(ranges)
@@ -284,7 +291,7 @@ def codesign(
             )
         )
     if "nested" in methods:
-        found(_nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol))
+        found(_nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol, nested_start == "nearest"))
 
     def simultaneous(method, problem, lb, ub, start, where):
         started = time.perf_counter()
@@ -363,8 +370,9 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
     )
 
 
-def _nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol):
-    """Outer optimizer on the parameters; each evaluation a converged tuning, warm-started from the nearest.
+def _nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol, from_nearest=True):
+    """Outer optimizer on the parameters; each evaluation a converged tuning, from the gains of the nearest
+    evaluation so far (`from_nearest`) or from the block's.
 
     Each tuning is the joint problem with the parameters fixed by their bounds (IPOPT takes them as
     constants), so one compiled NLP serves every evaluation: on the plant rebuilt at each value every
@@ -379,7 +387,7 @@ def _nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol):
     def inner(values: np.ndarray) -> tuple[TuningResult, float]:
         values = np.clip(values, low, high)
         start = joint.start()
-        if tried:
+        if tried and from_nearest:
             nearest = min(tried, key=lambda item: float(np.max(np.abs(item[0] - values) / width)))[1].decision
             assert nearest is not None, "tuning.solve always returns its decision vector"
             start[:n] = nearest[:n]

@@ -170,6 +170,27 @@ def test_the_nested_methods_tunings_share_one_compiled_problem(tmp_path, monkeyp
     assert compiled.objective == pytest.approx(plain.objective, rel=1e-9)
 
 
+def test_the_nested_method_from_neutral_starts_reaches_the_answer_from_nearest_ones(monkeypatch):
+    """With nested_start="neutral" every inner tuning starts from the block's gains (seen by the solver),
+    and the outer search ends where the nearest starts lead it."""
+    import designs.codesign as dc
+
+    plant, block, scenario, cost = _problem(0.1)
+    kwargs = dict(plant_cost=lambda p: W * p["b"], cost=cost, bounds={"k": K_BOUNDS}, tol=1e-10, methods=("nested",))
+    nearest = codesign(plant, block, scenario, {"b": B_RANGE}, **kwargs)["nested"]
+    starts, real = [], dc.solve
+    monkeypatch.setattr(
+        dc, "solve", lambda *a, start, **k: starts.append(np.array(start)) or real(*a, start=start, **k)
+    )
+    neutral = codesign(plant, block, scenario, {"b": B_RANGE}, nested_start="neutral", **kwargs)["nested"]
+    assert neutral.converged and len(starts) == neutral.evaluations > 3
+    assert all(s[0] == pytest.approx(float(block.gains["k"])) for s in starts)
+    assert neutral.params["b"] == pytest.approx(nearest.params["b"], rel=1e-6)
+    assert neutral.objective == pytest.approx(nearest.objective, rel=1e-9)
+    with pytest.raises(ValueError, match="nested_start must be one of"):
+        codesign(plant, block, scenario, {"b": B_RANGE}, nested_start="closest", **kwargs)
+
+
 def test_gain_bounds_hold_in_every_method_when_free_is_left_at_its_default():
     """Issue 12: with free=None the simultaneous solve dropped the bounds (seen: k <= 1, answer 1.30)."""
     plant, block, scenario, cost = _problem(0.1)
