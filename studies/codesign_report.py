@@ -648,6 +648,8 @@ convergence (see each case's co-design problem in `studies/cases/<name>.py`):
 
 A solve that starts outside the specs first runs a phase one (minimize the largest relative
 spec excess); one that converges with the specs still missed is a local proof of infeasibility.
+A case may solve each tuning without its specs first (`relaxed`, the satellite's): an answer
+that converges and meets them is a local minimum under them too, and is kept.
 
 Columns:
 
@@ -661,8 +663,9 @@ Columns:
   objective of (1) and (2)); positive: simultaneous better.
 - **wall time**: seconds per method on the machine that ran the command.
 - **all converged**: every optimizer behind every answer stopped on its convergence test
-  (IPOPT's tolerance with the smoothing continuation settled, or a proof that a limit
-  cannot meet the specs: IPOPT's or the phase one's; the bisection's or Brent's resolution),
+  (IPOPT's tolerance with the smoothing continuation settled, or a proof that a limit, or the
+  limits and gains near a simultaneous solve's path, cannot meet the specs: IPOPT's or the
+  phase one's, the answer then marked "(infeasible)"; the bisection's or Brent's resolution),
   none at an iteration cap; a sizing's limit where gains meeting the specs were found is
   settled even when the ITAE tuning there stopped short (its status is still listed), and a
   simultaneous sizing's feasible limit within the bisection's resolution of the holding limit
