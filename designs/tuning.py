@@ -1735,12 +1735,13 @@ def solve(
         return value, violations
 
     initial_cost, _ = judge(start)
-    message = f"{prefix}IPOPT: {status}"
+    message = f"IPOPT: {status}"
     if found is not None:
         message = (
             f"started outside the specs; phase one (IPOPT: {found.status}, {found.iterations} iterations) "
             f"met them; {message}"
         )
+    message = prefix + message  # in the order the solves ran
     if smooth:
         message += (
             f"; smoothing continuation in {len(stages)} stage{'s' if len(stages) > 1 else ''} down to "
