@@ -74,16 +74,15 @@ def test_arm_sizing_short_run_reports_what_it_designed():
     assert result.specs == arm.SIZING_SPECS == Specs(rise_time=0.6, max_overshoot=0.05)
 
 
-NOT_CONVERGED = pytest.mark.xfail(
-    run=False,
-    reason="issue 16 open: the ball on beam's simultaneous sizing from the sequential answer ends infeasible at "
-    "13.41 N (its phase one, from the gains the sequential method left at the holding limit, converges 50 relative "
-    "outside the specs); its full run takes 90 minutes here (docs/codesign/ballbeam.json)",
+TOO_LONG = pytest.mark.skip(
+    reason="its full run takes about 90 minutes here, too long for CI; its committed record "
+    "(docs/codesign/ballbeam.json), every method converged, is replayed by "
+    "test_committed_sizing_records_hold_on_a_fresh_simulation"
 )
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["arm", "uuv", pytest.param("ballbeam", marks=NOT_CONVERGED)])
+@pytest.mark.parametrize("name", ["arm", "uuv", pytest.param("ballbeam", marks=TOO_LONG)])
 def test_full_sizing_every_method_converges_and_simultaneous_is_no_worse_than_nested(name):
     result = SIZING[name].actuator_sizing()
     _check_reported(result)
@@ -162,20 +161,26 @@ def test_plant_costs_in_their_units():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    run=False,
-    reason="issue 16 open: the satellite's simultaneous solve from the middle stops at IPOPT's cap; the crane's "
-    "sequential and both simultaneous solves converge (docs/codesign/crane.json) but its nested run took over an "
-    "hour here for 6 of Brent's evaluations; not run until both are faster",
+def test_satellite_full_run_every_method_converges_to_one_stiffness():
+    """All four methods (about 9 minutes here, most of it compiling): converged, and the three that see the
+    controller reach one stiffness, the nested to Brent's resolution (1e-3 of the range)."""
+    result = satellite.panel_stiffness()
+    _check_reported(result, satellite.stiffness_cost)
+    assert result.converged, {m: (d.converged, d.status) for m, d in result.designs.items()}
+    low, high = satellite.STIFFNESS_RANGE
+    values = [result.designs[m].value for m in ("nested", "simultaneous", "simultaneous from sequential")]
+    assert max(values) - min(values) <= 1e-3 * (high - low)
+    assert result.gain is not None and abs(result.gain) <= 1e-6
+
+
+@pytest.mark.skip(
+    reason="its full run takes about 45 minutes here, too long for CI; its committed record "
+    "(docs/codesign/crane.json) is replayed by test_committed_plant_parameter_records_hold_on_a_fresh_simulation"
 )
-def test_satellite_and_crane_full_runs():
-    for result, cost in (
-        (satellite.panel_stiffness(), satellite.stiffness_cost),
-        (crane.cable_transfer(), crane.hoist_cost),
-    ):
-        _check_reported(result, cost)
-        assert result.converged
-        assert result.designs["nested"].feasible and result.best(("simultaneous", "simultaneous from sequential"))
+def test_crane_full_run_every_method_converges():
+    result = crane.cable_transfer()
+    _check_reported(result, crane.hoist_cost)
+    assert result.converged, {m: (d.converged, d.status) for m, d in result.designs.items()}
 
 
 def _fake_result(key="fake"):
@@ -363,9 +368,9 @@ def test_committed_sizing_records_hold_on_a_fresh_simulation(name):
         assert _meets(sized, block, scenario, case.SIZING.specs) == saved["feasible"], method
         assert np.max(np.abs(u)) == pytest.approx(saved["measured"]["peak_input"], rel=1e-9), method
         assert np.max(y) - 1 == pytest.approx(saved["measured"]["overshoot"], rel=1e-6, abs=1e-9), method
-    # The arm's and the UUV's sizings converged in every method (the ball on beam's from the sequential answer
-    # did not: issue 16).
-    assert all(d["converged"] for d in record["designs"].values()) == (name != "ballbeam")
+    # Every method converged, the ball on beam's from the sequential answer on a proof that the specs are out of
+    # reach from there (its recorded answer misses them, checked above).
+    assert all(d["converged"] for d in record["designs"].values())
 
 
 PLANT_PARAMETER = {
