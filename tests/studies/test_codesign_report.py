@@ -404,12 +404,6 @@ def test_committed_plant_parameter_records_hold_on_a_fresh_simulation(key):
         assert _meets(plant, tuned, scenario, specs) == saved["feasible"], method
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 16 open: in docs/codesign.md the arm's and UUV's sizings converged; the satellite's simultaneous "
-    "solve from the middle stops at IPOPT's cap, the ball on beam's simultaneous solve from the "
-    "sequential answer ends infeasible, and the crane's nested method was cut short (no answer recorded)",
-)
 def test_committed_document_lists_every_problem_converged():
     doc = cr.DOC.read_text()
     for problem in (
