@@ -496,8 +496,6 @@ def _frozen(value):
         return tuple(sorted((k, _frozen(v)) for k, v in value.items()))
     if isinstance(value, (list, tuple)):
         return tuple(_frozen(v) for v in value)
-    if isinstance(value, np.ndarray):
-        return (value.shape, tuple(value.ravel().tolist()))
     return value
 
 
@@ -1455,15 +1453,22 @@ def solve(
     extra_cost = ca.MX(0) if plant_cost is None else plant_cost(x)
     exact_total = ca.Function("total", [x], [cost_weight * problem.objective + extra_cost])
     smooth = method == "smooth"
+    # What a further solve from another start (of this problem, or of it without its specs) passes on.
+    again = dict(
+        max_iter=max_iter, jit=jit, plant_cost=plant_cost, tol=tol, hessian=hessian, progress=progress,
+        method=method, widths=widths, cost_weight=cost_weight, ipopt_options=ipopt_options,
+        coarse_substeps=coarse_substeps,
+    )  # fmt: skip
+
+    def violated(decision) -> list[str]:
+        """The specs a decision misses on the exact loop, the spectral bound included."""
+        return problem.values(decision)[2] + _spectral_violation(problem, decision)
+
     prefix = ""
     if relaxed and not until_feasible and problem.g.numel():
-        free = solve(
-            problem.without_specs(), lbx, ubx, max_iter=max_iter, jit=jit, plant_cost=plant_cost, tol=tol,
-            hessian=hessian, progress=progress, method=method, widths=widths, start=start, cost_weight=cost_weight,
-            ipopt_options=ipopt_options, coarse_substeps=coarse_substeps,
-        )  # fmt: skip
+        free = solve(problem.without_specs(), lbx, ubx, start=start, **again)
         assert free.decision is not None, "solve always returns its decision vector"
-        missed = problem.values(free.decision)[2] + _spectral_violation(problem, free.decision)
+        missed = violated(free.decision)
         if free.converged and np.isfinite(free.cost) and not missed:
             worst_excess = _largest_excess(problem, free.decision)
             return replace(
@@ -1487,12 +1492,7 @@ def solve(
             # A local verdict only: IPOPT's own restoration from the start may still find the specs (the arm's
             # sizing from its holding limit did, where the phase one stopped 0.77 outside), or not where the
             # phase one's answer leads it on (the UUV's). Both starts; the better answer is kept.
-            options = dict(
-                max_iter=max_iter, jit=jit, plant_cost=plant_cost, tol=tol, hessian=hessian, progress=progress,
-                method=method, widths=widths, cost_weight=cost_weight, ipopt_options=ipopt_options, phase=False,
-                coarse_substeps=coarse_substeps,
-            )  # fmt: skip
-            tries = [solve(problem, lbx, ubx, start=point, **options) for point in (found.decision, start)]
+            tries = [solve(problem, lbx, ubx, start=point, phase=False, **again) for point in (found.decision, start)]
             best = max(tries, key=lambda r: (r.feasible, r.converged, -r.cost if np.isfinite(r.cost) else -np.inf))
             initial = tries[1].initial_cost
             return replace(
@@ -1730,9 +1730,7 @@ def solve(
     final = np.clip(scale[:n] * z_now[:n], lbx, ubx)  # IPOPT relaxes bounds by ~1e-8
 
     def judge(decision):
-        value = float(exact_total(decision))
-        violations = problem.values(decision)[2] + _spectral_violation(problem, decision)
-        return value, violations
+        return float(exact_total(decision)), violated(decision)
 
     initial_cost, _ = judge(start)
     message = f"IPOPT: {status}"
