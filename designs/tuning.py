@@ -88,7 +88,7 @@ import numpy as np
 
 import models
 from models import Block, Plant
-from models.checks import as_matrix, as_vector, boolean, integer, positive, real, real_array
+from models.checks import as_matrix, as_vector, boolean, integer, positive, real, real_array, weight_matrix
 from models.signals import sample
 
 COSTS = ("itae", "iae", "ise")
@@ -296,37 +296,6 @@ class Cost:
         terms = (self.kind, self.state_weights, self.input_weights, self.output_weights, self.terminal_weights)
         if all(term is None for term in terms) and weight == 0:
             raise ValueError("the cost has no term: give kind, energy_weight or a weight matrix")
-
-
-def weight_matrix(weights, names: Sequence[str], what: str) -> np.ndarray:
-    """Q from a dict name -> weight, a diagonal vector or a full matrix; checked symmetric PSD."""
-    n = len(names)
-    if isinstance(weights, Mapping):
-        unknown = [k for k in weights if k not in names]
-        if unknown:
-            raise ValueError(f"{what}: no signal named {unknown}; the names are {', '.join(names)}")
-        diag = np.zeros(n)
-        for k, v in weights.items():
-            diag[list(names).index(k)] = real(v, f"{what}[{k!r}]")
-        matrix = np.diag(diag)
-    else:
-        arr = real_array(weights, what)
-        if arr.ndim == 1 and arr.size == n:
-            matrix = np.diag(arr)
-        elif arr.shape == (n, n):
-            matrix = arr
-        else:
-            raise ValueError(
-                f"{what} must be a dict, {n} diagonal entries or an ({n}, {n}) matrix, got shape {arr.shape}"
-            )
-    if not np.all(np.isfinite(matrix)):
-        raise ValueError(f"{what} must be finite, got {matrix.tolist()}")
-    if not np.allclose(matrix, matrix.T, rtol=1e-12, atol=0):
-        raise ValueError(f"{what} must be symmetric, got {matrix.tolist()}")
-    lowest = np.min(np.linalg.eigvalsh(matrix)) if n else 0.0
-    if lowest < -1e-12 * max(1.0, np.max(np.abs(matrix))):
-        raise ValueError(f"{what} must be positive semidefinite (lowest eigenvalue {lowest:.3g})")
-    return matrix
 
 
 def _named_vector(value, names: Sequence[str], default: np.ndarray, what: str) -> np.ndarray:
@@ -763,7 +732,7 @@ class TuningProblem:
         ):
             value = getattr(cost, key)
             if value is not None:
-                weights[key] = weight_matrix(value, names, key)
+                weights[key] = weight_matrix(value, len(names), key, names=names)
         default_target = plant.equilibrium()[0].copy()
         if step is not None:
             default_target[k] = r[-1, 0]

@@ -10,6 +10,7 @@ argument, the value given and what is allowed.
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -141,6 +142,64 @@ def as_matrix(value, columns: int, what: str, rows: int | None = None) -> np.nda
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise ValueError(f"{what} has a non-finite entry at row {bad[0]}, column {bad[1]}")
+    return arr
+
+
+def weight_matrix(value, size: int, what: str, *, names=None, definite: bool = False) -> np.ndarray:
+    """A quadratic weight as a (size, size) matrix, checked finite, symmetric and positive (semi)definite.
+
+    The one normalizer of every weight Q, R, P of the LQR, MPC and tuning layers.
+
+    Parameters
+    ----------
+    value : a scalar (times the identity), a diagonal (size,), a matrix (size, size), or, with `names`,
+        a dict {name: diagonal weight} (the names not given weigh 0)
+    size : the matrix's order
+    what : the argument's name, for messages
+    names : (size,) the signal names a dict may use
+    definite : require positive definite (an input weight R) instead of semidefinite
+
+    Returns
+    -------
+    ndarray (size, size), exactly symmetric
+
+    Raises
+    ------
+    TypeError
+        When an entry is not a real number.
+    ValueError
+        Naming `what`: a wrong shape, an unknown name, a non-finite entry, an asymmetric or an
+        indefinite matrix.
+    """
+    if isinstance(value, Mapping):
+        if names is None:
+            raise TypeError(f"{what} must be a scalar, a diagonal or a matrix, got a dict {value!r}")
+        unknown = [k for k in value if k not in names]
+        if unknown:
+            raise ValueError(f"{what}: no signal named {unknown}; the names are {', '.join(names)}")
+        arr = np.diag([real(value.get(k, 0.0), f"{what}[{k!r}]") for k in names])
+    else:
+        arr = real_array(value, what)
+        if arr.ndim == 0:
+            arr = arr * np.eye(size)
+        elif arr.ndim == 1 and arr.size == size:
+            arr = np.diag(arr)
+    if arr.shape != (size, size):
+        raise ValueError(
+            f"{what} must be {'a dict, ' if names is not None else ''}a scalar, {size} diagonal entries or a "
+            f"({size}, {size}) matrix, "
+            f"got shape {np.shape(value)}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what} has non-finite entries: {arr.tolist()}")
+    scale = max(1.0, float(np.max(np.abs(arr), initial=0.0)))
+    if not np.allclose(arr, arr.T, rtol=0.0, atol=1e-12 * scale):
+        raise ValueError(f"{what} must be symmetric, got {arr.tolist()}")
+    arr = (arr + arr.T) / 2
+    lowest = float(np.min(np.linalg.eigvalsh(arr))) if size else 1.0
+    if (definite and lowest <= 0) or lowest < -1e-12 * scale:
+        kind = "definite" if definite else "semidefinite"
+        raise ValueError(f"{what} must be positive {kind} (lowest eigenvalue {lowest:.3g})")
     return arr
 
 

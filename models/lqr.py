@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from .checks import weight_matrix
+
 __all__ = [
     "controllability_matrix",
     "observability_matrix",
@@ -240,20 +242,9 @@ def bryson_weights(state_max, input_max) -> tuple[np.ndarray, np.ndarray]:
 
 def _weights(A, B, Q, R, what: str) -> tuple[np.ndarray, np.ndarray]:
     n, m = B.shape
-    Q = np.eye(n) if Q is None else np.asarray(Q, dtype=float)
-    R = np.eye(m) if R is None else np.asarray(R, dtype=float)
-    R = R.reshape(1, 1) if R.size == 1 and m == 1 else R
-    for name, W, size in (("Q", Q, n), ("R", R, m)):
-        if W.shape != (size, size):
-            raise ValueError(f"{message_prefix(what)}{name} must have shape ({size}, {size}), got {W.shape}")
-        if not np.all(np.isfinite(W)):
-            raise ValueError(f"{message_prefix(what)}weight {name} has non-finite entries")
-        if not np.allclose(W, W.T, rtol=1e-10, atol=1e-14 * np.abs(W).max(initial=0)):
-            raise ValueError(f"{message_prefix(what)}weight {name} must be symmetric")
-    if np.min(np.linalg.eigvalsh(Q)) < -1e-12 * max(1.0, np.abs(Q).max()):
-        raise ValueError(f"{message_prefix(what)}Q must be positive semidefinite")
-    if np.min(np.linalg.eigvalsh(R)) <= 0:
-        raise ValueError(f"{message_prefix(what)}R must be positive definite")
+    prefix = message_prefix(what)
+    Q = np.eye(n) if Q is None else weight_matrix(Q, n, f"{prefix}weight Q")
+    R = np.eye(m) if R is None else weight_matrix(R, m, f"{prefix}weight R", definite=True)
     return Q, R
 
 

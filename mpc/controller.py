@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from models import Plant, interrupts
-from models.checks import integer, positive, real_array
+from models.checks import integer, positive, real_array, weight_matrix
 from models.compile import NumpyCall
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
@@ -433,8 +433,8 @@ class NonlinearMPC(_PlanFollower):
         interrupts.watch()  # Ctrl-C stops a run even where CasADi swallows it (see models.interrupts)
         self._setup_common(known, sample_period, horizon, tracked, name)
         nx = known.nx
-        self.Q = np.diag(state_weight) if np.ndim(state_weight) == 1 else np.asarray(state_weight, dtype=float)
-        self.R = np.diag(input_weight) if np.ndim(input_weight) == 1 else np.atleast_2d(input_weight).astype(float)
+        self.Q = weight_matrix(state_weight, nx, "state_weight Q")
+        self.R = weight_matrix(input_weight, known.nu, "input_weight R", definite=True)
         per_sample_rate = None if rate_limit is None else real_array(rate_limit, "rate_limit") * self.sample_period
         self._rate_per_sample = per_sample_rate
         self.soft_bounds = _soft_bounds(soft_bounds)

@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from models import LinearModel, Plant
-from models.checks import integer, real_array
+from models.checks import integer, real_array, weight_matrix
 from models.lqr import dlqr
 
 #: Stand-in for an infinite bound in solvers that want finite numbers.
@@ -200,24 +200,6 @@ def riccati_terminal_cost(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
     return P, K
 
 
-def _square(value, n: int, what: str) -> np.ndarray:
-    """A weight given as a scalar, a diagonal (n,) or a matrix (n, n), checked finite and symmetric."""
-    arr = real_array(value, what)
-    if arr.ndim == 0:
-        arr = arr * np.eye(n)
-    elif arr.ndim == 1:
-        if arr.size != n:
-            raise ValueError(f"{what} diagonal must have {n} entries, got {arr.size}")
-        arr = np.diag(arr)
-    if arr.shape != (n, n):
-        raise ValueError(f"{what} must be a scalar, ({n},) or ({n}, {n}), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{what} has non-finite entries: {arr}")
-    if not np.allclose(arr, arr.T, atol=1e-12 * max(1.0, np.max(np.abs(arr)))):
-        raise ValueError(f"{what} must be symmetric")
-    return (arr + arr.T) / 2
-
-
 class MPCProblem:
     """The matrices of the linear MPC problem (see the module docstring), built once.
 
@@ -272,12 +254,8 @@ class MPCProblem:
         nu = B.shape[1]
         self.A, self.B = A, B
         self.nx, self.nu, self.horizon = nx, nu, integer(horizon, "horizon", minimum=1)
-        self.Q = _square(state_weight, nx, "state_weight Q")
-        self.R = _square(input_weight, nu, "input_weight R")
-        if np.min(np.linalg.eigvalsh(self.Q)) < -1e-12 * max(1.0, np.max(np.abs(self.Q))):
-            raise ValueError(f"state_weight Q must be positive semidefinite; eigenvalues {np.linalg.eigvalsh(self.Q)}")
-        if np.min(np.linalg.eigvalsh(self.R)) <= 0:
-            raise ValueError(f"input_weight R must be positive definite; eigenvalues {np.linalg.eigvalsh(self.R)}")
+        self.Q = weight_matrix(state_weight, nx, "state_weight Q")
+        self.R = weight_matrix(input_weight, nu, "input_weight R", definite=True)
         self.input_lower = self._vector(input_lower, nu, "input_lower")
         self.input_upper = self._vector(input_upper, nu, "input_upper")
         if np.any(self.input_lower > self.input_upper):
@@ -295,7 +273,7 @@ class MPCProblem:
         if terminal_weight is None:
             self.P, self.lqr_gain = riccati_terminal_cost(A, B, self.Q, self.R)
         else:
-            self.P = _square(terminal_weight, nx, "terminal_weight P")
+            self.P = weight_matrix(terminal_weight, nx, "terminal_weight P")
             self.lqr_gain = np.linalg.solve(self.R + B.T @ self.P @ B, B.T @ self.P @ A)
 
     @staticmethod

@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from models import Plant, interrupts
-from models.checks import integer, positive, real_array
+from models.checks import integer, positive, real_array, weight_matrix
 
 from .ocp import OptimalControlProblem
 from .rti import RealTimeIteration
@@ -72,8 +72,8 @@ def mpc_problem(
     and ``u_prev`` (nu); one control ``slack_i`` per soft bound. Weights as in `NonlinearMPCProblem`.
     """
     nx, nu = plant.nx, plant.nu
-    Q = _weight(state_weight, nx, "state_weight Q", definite=False)
-    R = _weight(input_weight, nu, "input_weight R", definite=True)
+    Q = weight_matrix(state_weight, nx, "state_weight Q")
+    R = weight_matrix(input_weight, nu, "input_weight R", definite=True)
     ocp = OptimalControlProblem(plant, horizon * sample_period)
     ocp.start_from()
     d_hat, x_s = ocp.parameter("d_hat", nu, 0.0), ocp.parameter("x_s", nx, 0.0)
@@ -387,17 +387,3 @@ class NonlinearMPCProblem:
             result.feedback_time,
             result.qp.status,
         )
-
-
-def _weight(value, n, what, definite) -> np.ndarray:
-    arr = real_array(value, what)
-    arr = arr * np.eye(n) if arr.ndim == 0 else (np.diag(arr) if arr.ndim == 1 else arr)
-    if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
-        raise ValueError(
-            f"{what} must be finite with shape ({n}, {n}) (or a scalar or diagonal), got {np.shape(value)}"
-        )
-    arr = (arr + arr.T) / 2
-    smallest = np.min(np.linalg.eigvalsh(arr))
-    if smallest < 0 or (definite and smallest == 0):
-        raise ValueError(f"{what} must be positive {'definite' if definite else 'semidefinite'}")
-    return arr
