@@ -20,11 +20,17 @@ angle, that is rad per 100 N m, as the text's questions count it).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
-import scipy.linalg
-import scipy.optimize
+
+from models import deferred
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
+scipy = deferred.module("scipy")
 
 __all__ = [
     "Loop",

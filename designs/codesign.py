@@ -34,10 +34,9 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-import scipy.optimize
 
 import models
-from models import Block, Plant
+from models import Block, Plant, deferred
 from models.checks import boolean, integer, positive, real
 
 from .tuning import (
@@ -52,6 +51,8 @@ from .tuning import (
     solve,
     tune,
 )
+
+scipy = deferred.module("scipy")
 
 METHODS = ("sequential", "nested", "simultaneous", "simultaneous from sequential")
 #: Where the nested method's inner tunings start (`codesign`'s `nested_start`).

@@ -18,16 +18,23 @@ differentiable in them.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import casadi as ca
-import control
 import numpy as np
 
 import models
+from models import deferred
 from models.checks import positive
 
 from .analysis import as_polynomials, tf
 from .discrete import saturate
 from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
 
 __all__ = [
     "lead",

@@ -20,9 +20,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
+from models import deferred
 from models.checks import positive, real
+
+scipy = deferred.module("scipy")
 
 __all__ = ["Shaper", "bang_bang", "oscillatory_modes", "rest_to_rest_bang_bang", "zero_vibration"]
 
@@ -142,7 +144,7 @@ def rest_to_rest_bang_bang(mass: float, damping: float, force: float, distance: 
     upper = np.sqrt(mass * distance / force)
     while phases(upper)[0] < distance:
         upper *= 2
-    t1 = brentq(lambda t: phases(t)[0] - distance, 0.0, upper, xtol=1e-14, rtol=1e-14)
+    t1 = scipy.optimize.brentq(lambda t: phases(t)[0] - distance, 0.0, upper, xtol=1e-14, rtol=1e-14)
     return float(t1), float(phases(t1)[1])
 
 

@@ -19,19 +19,24 @@ DC gain K_DC. Textbooks often assume K_DC = 1; we use the computed value
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Generic, Literal, TypeVar
 
 import casadi as ca
-import control
 import numpy as np
-import scipy.optimize
 
 import models
+from models import deferred
 from models.linear import LinearModel, chop
 
 from .analysis import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
 from .filters import TustinSection, padded_coefficients
 from .pid import PID, SAMPLE_PERIOD, SIGMA, PDDesign, pd_design, pd_saturation, second_order_coefficients
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
+scipy = deferred.module("scipy")
 
 __all__ = [
     "CascadePlants",

@@ -19,10 +19,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
-import scipy.optimize
+
+from models import deferred
 
 from .analysis import (
     Loop,
@@ -39,6 +40,12 @@ from .analysis import (
     zeros_at_origin,
 )
 from .filters import lag, lead, lead_ratio, low_pass
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
+scipy = deferred.module("scipy")
 
 __all__ = [
     "prototype_crossover",

@@ -17,17 +17,23 @@ s/(σ s + 1) by Tustin, saturation last, and one of two anti-windup schemes.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import casadi as ca
-import control
 import numpy as np
-import scipy.optimize
 
 import models
+from models import deferred
 from models.checks import positive
 
 from .analysis import as_polynomials, dc_gain, tf
 from .discrete import back_calculation, dirty_derivative, integrate_while_slow, saturate, trapezoid
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
+scipy = deferred.module("scipy")
 
 __all__ = [
     "PDDesign",

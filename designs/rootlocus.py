@@ -9,11 +9,18 @@ the plane is found exactly, from the real roots of a polynomial.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
+from models import deferred
+
 from .analysis import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
 
 __all__ = [
     "evans_form",

@@ -25,10 +25,8 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import scipy.linalg
-import scipy.optimize
-import scipy.signal
 
+from models import deferred
 from models.lqr import (
     augment_disturbance,
     bryson_weights,
@@ -52,6 +50,8 @@ from models.lqr import (
     uncontrollable_modes,
     unobservable_modes,
 )
+
+scipy = deferred.module("scipy")
 
 __all__ = [
     "controllability_matrix",

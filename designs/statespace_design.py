@@ -27,11 +27,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 import models
 from designs import statespace as ss
 from designs.statespace_blocks import ObserverFeedback, StateFeedback, TrackingModel
+from models import deferred
+
+scipy = deferred.module("scipy")
 
 __all__ = ["StateSpaceDesign", "design", "controllers", "kalman_noise", "LABELS", "MEASUREMENT_NOISE"]
 

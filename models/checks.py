@@ -171,6 +171,7 @@ def weight_matrix(value, size: int, what: str, *, names=None, definite: bool = F
         Naming `what`: a wrong shape, an unknown name, a non-finite entry, an asymmetric or an
         indefinite matrix.
     """
+    arr: np.ndarray
     if isinstance(value, Mapping):
         if names is None:
             raise TypeError(f"{what} must be a scalar, a diagonal or a matrix, got a dict {value!r}")
@@ -187,8 +188,7 @@ def weight_matrix(value, size: int, what: str, *, names=None, definite: bool = F
     if arr.shape != (size, size):
         raise ValueError(
             f"{what} must be {'a dict, ' if names is not None else ''}a scalar, {size} diagonal entries or a "
-            f"({size}, {size}) matrix, "
-            f"got shape {np.shape(value)}"
+            f"({size}, {size}) matrix, got shape {np.shape(value)}"
         )
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{what} has non-finite entries: {arr.tolist()}")

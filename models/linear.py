@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
-import scipy.linalg
 
+from . import deferred
 from .checks import positive, real_array
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
+scipy = deferred.module("scipy")
 
 
 @dataclass(frozen=True)

@@ -10,9 +10,11 @@ pair can otherwise return a gain that leaves a mode at s = 0 without saying so.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
+from . import deferred
 from .checks import weight_matrix
+
+scipy = deferred.module("scipy")
 
 __all__ = [
     "controllability_matrix",

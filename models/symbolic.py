@@ -15,12 +15,18 @@ from __future__ import annotations
 
 import re
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import casadi as ca
-import sympy
 
+from . import deferred
 from .lagrangian import euler_lagrange
 from .plant import Declaration, Plant
+
+if TYPE_CHECKING:
+    import sympy
+else:
+    sympy = deferred.module("sympy")
 
 _UNARY = {
     ca.OP_NEG: lambda a: -a,

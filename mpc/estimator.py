@@ -20,10 +20,12 @@ has), a constant input disturbance or a parameter error leaves no offset
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
+from models import deferred
 from models.checks import real_array
 from models.lqr import augment_disturbance, dkalman, unobservable_modes
+
+scipy = deferred.module("scipy")
 
 
 class DisturbanceObserver:

@@ -33,8 +33,8 @@ import string
 
 import casadi as ca
 import numpy as np
-import scipy.linalg
 
+from models import deferred
 from models.export import (
     ExportedC,
     UnsupportedExport,
@@ -48,6 +48,8 @@ from models.export import (
 from .controller import LinearMPC
 from .linear import INFINITY
 from .qp_fast import CondensedQP, condense
+
+scipy = deferred.module("scipy")
 
 #: Status codes of ``name_step`` (and ``name_init``, ``name_solve_qp``); a non-finite command adds 16.
 STATUS = {

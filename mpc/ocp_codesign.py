@@ -20,9 +20,12 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
+
+from models import deferred
 
 from .ocp_solution import OCPSolution
+
+scipy = deferred.module("scipy")
 
 
 @dataclass
@@ -99,7 +102,7 @@ def solve_nested(
     outer_status, success, iterations = "", False, 0
     try:
         start = (np.array([ocp.chosen[n].guess for n in names]) - lower) / span
-        result = minimize(
+        result = scipy.optimize.minimize(
             inner,
             start,
             jac=True,

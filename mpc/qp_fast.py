@@ -25,11 +25,13 @@ from dataclasses import dataclass
 
 import daqp
 import numpy as np
-import scipy.linalg
 
+from models import deferred
 from models.checks import integer
 
 from .linear import INFINITY, MPCProblem, QPParameters, QPSolution
+
+scipy = deferred.module("scipy")
 
 #: DAQP exit flags (daqp/include/constants.h).
 DAQP_STATUS = {

@@ -21,10 +21,13 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import osqp
-import scipy.sparse as sparse
+
+from models import deferred
 
 from .linear import INFINITY, MPCProblem, QPParameters, QPSolution
+
+osqp = deferred.module("osqp")
+sparse = deferred.module("scipy.sparse")
 
 #: Tight enough that the first input agrees with the interior-point reference to 1e-5.
 DEFAULT_SETTINGS = dict(eps_abs=1e-7, eps_rel=1e-7, polishing=True, max_iter=20000, verbose=False, warm_starting=True)

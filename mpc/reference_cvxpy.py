@@ -10,10 +10,13 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import cvxpy as cp
 import numpy as np
 
+from models import deferred
+
 from .linear import MPCProblem, QPParameters, QPSolution
+
+cp = deferred.module("cvxpy")
 
 
 def _square_root(weight: np.ndarray) -> np.ndarray:

@@ -14,16 +14,21 @@ import dataclasses
 import functools
 import re
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 import models
-from models import symbolic
+from models import deferred, symbolic
 from models.linear import clean_tf, tf_string
 
 from .case import CaseStudy
 from .runner import call_providers
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
 
 
 def _coordinate_tf(lin: models.LinearModel, coordinate: str, input_name: str) -> control.TransferFunction:

@@ -19,14 +19,19 @@ a constant command at the equilibrium value (found by simulating it).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import casadi as ca
-import control
 import numpy as np
 
 import models
 from designs import analysis as an
-from models import Block, Cascade, interrupts
+from models import Block, Cascade, deferred, interrupts
+
+if TYPE_CHECKING:
+    import control
+else:
+    control = deferred.module("control")
 
 LOOPS = ("input", "inner", "outer")
 

@@ -25,17 +25,22 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 import models
 import models.closed_loop
 from designs.pid import SIGMA
-from models import Block, checks, interrupts, metrics, specs
+from models import Block, checks, deferred, interrupts, metrics, specs
 
 from . import SCENARIO_NAMES, distributed
 from .case import CaseStudy, Scenario
+
+if TYPE_CHECKING:
+    import pandas as pd
+else:
+    pd = deferred.module("pandas")
 
 #: Work (samples x steps x instructions of the plant's RK4 step and the controller's step) from which
 #: a Monte Carlo map is JIT-compiled with jit="auto": compiling costs 0.5-2 s per controller, CasADi's

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import control
 import numpy as np
 
 import models
@@ -30,6 +29,7 @@ from designs.loopshaping import (
 from designs.pid import PID, SIGMA, linearized_input_bound
 from designs.rootlocus import dominant_pair, lead_by_angle
 from designs.tuning import Specs
+from models import deferred
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
@@ -52,6 +52,8 @@ from studies.homework import (
     spec_records,
     tf_record,
 )
+
+control = deferred.module("control")
 
 #: V.13: inner (angle) loop bandwidth 20 rad/s with ζ = 0.7, outer (position) loop 2 rad/s with ζ = 0.6.
 BANDWIDTH_INNER, ZETA_INNER = 20.0, 0.7

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import control
 import numpy as np
 
 import models
@@ -32,6 +31,7 @@ from designs.loopshaping import (
 )
 from designs.pid import pd_design
 from designs.tuning import Cost, Specs
+from models import deferred
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
@@ -50,6 +50,8 @@ from studies.homework import (
     tf_record,
 )
 from studies.trajectories import OpenLoopCommand, TrajectoryProblem, TrajectorySetup
+
+control = deferred.module("control")
 
 #: VI.8(c): 50 % overshoot and a 1 s rise time for the load angle.
 INNER_OVERSHOOT, INNER_RISE_TIME = 0.5, 1.0

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import casadi
-import control
 import numpy as np
 
 import models
@@ -25,6 +24,7 @@ from designs.loopshaping import lead_for_crossover, phase_at
 from designs.pid import pd_saturation
 from designs.rootlocus import lead_lag_for_static_gain
 from designs.tuning import Specs
+from models import deferred
 from mpc import Collocation, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
@@ -46,6 +46,8 @@ from studies.homework import (
     tf_record,
 )
 from studies.trajectories import TrajectorySetup
+
+control = deferred.module("control")
 
 #: IV.11: "assume that we have turbo charged our thrusters so that we can produce a peak torque of 250 N-m".
 THRUSTER_LIMIT = 250.0
