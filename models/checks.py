@@ -161,7 +161,8 @@ def weight_matrix(value, size: int, what: str, *, names=None, definite: bool = F
 
     Returns
     -------
-    ndarray (size, size), exactly symmetric
+    ndarray (size, size), as given when it is a matrix (a computed weight such as a noise covariance
+    G Σ Gᵀ, symmetric only to rounding, is not symmetrized: its solvers' answers stay as they were)
 
     Raises
     ------
@@ -195,7 +196,6 @@ def weight_matrix(value, size: int, what: str, *, names=None, definite: bool = F
     scale = max(1.0, float(np.max(np.abs(arr), initial=0.0)))
     if not np.allclose(arr, arr.T, rtol=0.0, atol=1e-12 * scale):
         raise ValueError(f"{what} must be symmetric, got {arr.tolist()}")
-    arr = (arr + arr.T) / 2
     lowest = float(np.min(np.linalg.eigvalsh(arr))) if size else 1.0
     if (definite and lowest <= 0) or lowest < -1e-12 * scale:
         kind = "definite" if definite else "semidefinite"
