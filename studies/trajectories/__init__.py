@@ -24,7 +24,7 @@ comparing, and the records of the results) and `report` (figures, animations and
 their public names are re-exported here.
 """
 
-from .problem import SETTLE_WINDOW, OpenLoopCommand, Tracking, TrajectoryProblem, TrajectorySetup
+from .problem import SETTLE_WINDOW, OpenLoopCodesign, OpenLoopCommand, Tracking, TrajectoryProblem, TrajectorySetup
 from .report import Motion, markdown, motion, plot_comparison, plot_problem, plot_tracking, write, write_files
 from .solve import (
     DEFECT_TOLERANCE,
@@ -51,6 +51,7 @@ __all__ = [
     "CaseTrajectories",
     "ComparedRun",
     "Motion",
+    "OpenLoopCodesign",
     "OpenLoopCommand",
     "SolvedTrajectory",
     "Tracking",

@@ -3,7 +3,9 @@
 A case lists `TrajectoryProblem`s in ``CaseStudy(trajectories=...)``; each builder returns a
 `TrajectorySetup` (the posed `mpc.OptimalControlProblem`, its transcription and solve options).
 `Tracking` and `OpenLoopCommand` say what else to do with a solved problem: track it in closed
-loop, compare it with other open-loop inputs. Solving is `studies.trajectories.solve`, the
+loop, compare it with other open-loop inputs. `OpenLoopCodesign` is an optimal control problem
+that also chooses a plant parameter (``CaseStudy(open_loop_codesign=...)``, decided by
+`studies.codesign_open_loop`). Solving is `studies.trajectories.solve`, the
 figures and pages `studies.trajectories.report`.
 """
 
@@ -99,3 +101,33 @@ class TrajectoryProblem:
             raise ValueError(f"TrajectoryProblem key must be an identifier (file-safe), got {self.key!r}")
         if not 0 <= (self.tracking.headroom if self.tracking else 0) < 1:
             raise ValueError(f"{self.key}: tracking headroom must be in [0, 1), got {self.tracking.headroom}")
+
+
+@dataclass(frozen=True)
+class OpenLoopCodesign:
+    """One open-loop co-design problem: a plant parameter chosen together with the input history.
+
+    Declared by a case (``CaseStudy(open_loop_codesign=...)``) or by `studies.codesign_open_loop`, which
+    decides it simultaneously and nested and reports both. It lives here, with the other records a case
+    declares, so that a case file imports no engine that lists the cases.
+
+    key : short name;  title : one line
+    plant : the plant's registry name or title, for the table
+    build : (quick) -> `TrajectorySetup` whose problem chooses exactly one plant
+        parameter (`ocp.choose`); quick asks for a coarser mesh
+    parameter, unit : the chosen parameter's name and unit;  text_value : its value in the text, or None
+    maximized : the problem maximizes (its OCP objective is the negative; the report shows the value)
+    sweep : parameter values at which the optimal value J*(p) is tabulated with p fixed
+    reference : () -> {"parameter": value, "objective": value, "how": text}, an independent answer, or None
+    """
+
+    key: str
+    title: str
+    plant: str
+    build: Callable[[bool], TrajectorySetup]
+    parameter: str
+    unit: str
+    text_value: float | None = None
+    maximized: bool = False
+    sweep: tuple = ()
+    reference: Callable[[], dict] | None = None

@@ -76,6 +76,20 @@ def test_spring_mass_matches_the_semi_analytic_answer(results):
     assert result.simultaneous.parameter == pytest.approx(k, rel=0.02)
 
 
+def test_spring_mass_sweep_is_the_closed_form_optimum_at_each_stiffness():
+    """`sweep_optimum` alone, cold: J*(k) with k fixed against s*(k) = [2 √(1 − sin²θ/4) − 1 − cos θ] / k
+    (θ = √(k/m) T, derived in tests/mpc/test_ocp_codesign.py), to the 40-interval held input's accuracy."""
+    problem = {p.key: p for p in col.problems()}["spring_mass"]
+    rows, at_text = col.sweep_optimum(problem, col.spring_mass(True), None, -1.0)
+    assert at_text is None  # the text gives no stiffness
+    assert [row["parameter"] for row in rows] == list(problem.sweep)
+    for row in rows:
+        theta = math.sqrt(row["parameter"] / col.SPRING_MASS) * col.SPRING_TIME
+        exact = (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / row["parameter"]
+        assert row["success"] and row["final_time"] == pytest.approx(col.SPRING_TIME)
+        assert row["objective"] == pytest.approx(exact, rel=1e-3) and row["objective"] <= exact + 1e-9
+
+
 def test_crane_answer_is_the_shortest_cable_and_its_cost_is_the_slope(results):
     result = results("crane_cable")
     assert result.simultaneous.parameter == pytest.approx(crane_case.CABLE_RANGE[0], abs=1e-6)
