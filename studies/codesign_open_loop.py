@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import models
-from models import deferred, files
+from models import catalog, deferred, files
 from models.files import format_number, markdown_table
 from mpc import Collocation, OptimalControlProblem, solve_nested
 
@@ -41,26 +41,15 @@ optimize = deferred.module("scipy.optimize")
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign_open_loop.md"
 
 
-# ---------------------------------------------------------------------------- the issue's spring-mass
-SPRING_MASS, SPRING_TIME, SPRING_RANGE = 1.0, 2.0, (0.1, 2.0)
+# ---------------------------------------------------------------------------- the spring-mass
+#: The mass (kg, the plant's, `models.catalog.spring_mass`), the fixed final time (s) and the stiffness range (N/m).
+SPRING_MASS = next(param.value for param in catalog.spring_mass.params if param.name == "m")
+SPRING_TIME, SPRING_RANGE = 2.0, (0.1, 2.0)
 
 
 def spring_mass_plant() -> models.Plant:
-    """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen."""
-
-    @models.declare(
-        name="spring_mass",
-        title="spring and mass (issue 13)",
-        coordinates=("s",),
-        inputs=("u",),
-        params=(models.Param("m", SPRING_MASS, "kg", "mass"), models.Param("k", 0.5, "N/m", "stiffness")),
-        input_limit=1.0,
-        register=False,
-    )
-    def declaration(q, dq, u, p):
-        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u], outputs={"s": q.s})
-
-    return models.Plant(declaration)
+    """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen (declared in `models.catalog`)."""
+    return models.Plant(catalog.spring_mass)
 
 
 def spring_mass(quick: bool) -> TrajectorySetup:

@@ -53,6 +53,17 @@ def test_simultaneous_and_nested_both_converge_and_agree(key, results):
         assert not better or abs(row["objective"] - s.objective) < 1e-7, row
 
 
+def test_the_spring_mass_is_the_catalogs_and_not_registered():
+    """models.catalog.spring_mass against m s'' = −k s + u by hand, at a few states, stiffnesses and forces."""
+    plant = col.spring_mass_plant()
+    assert plant.declaration is models.catalog.spring_mass
+    assert plant.params == {"m": col.SPRING_MASS, "k": 0.5} and list(plant.input_limit) == [1.0]
+    assert "spring_mass" not in models.names()  # the registry lists the case studies' plants only
+    for s, v, u, k in ((0.3, -0.2, 0.7, 0.5), (-1.0, 0.5, -1.0, 1.7)):
+        xdot = plant.with_params(k=k).f([s, v], [u])
+        np.testing.assert_allclose(xdot, [v, (u - k * s) / col.SPRING_MASS], rtol=1e-14)
+
+
 def spring_mass_bang_bang(k, switch):
     """s(T), s'(T) of m s'' = −k s + u, u = +1 then −1 after `switch`, by SciPy (independent of the formula)."""
     rhs = lambda t, y: [y[1], ((1.0 if t < switch else -1.0) - k * y[0]) / col.SPRING_MASS]
