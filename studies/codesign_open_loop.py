@@ -78,6 +78,7 @@ def spring_mass_semi_analytic() -> dict:
     """
 
     def best(k):
+        """s*(k) (m), the largest displacement with the stiffness k (N/m) fixed."""
         theta = math.sqrt(k / SPRING_MASS) * SPRING_TIME
         return (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / k
 
@@ -424,6 +425,10 @@ def report(results: list[CodesignResult], command: str, machine: str = "") -> st
 
 
 def main(argv=None) -> int:
+    """The command line: decide the problems (all, or --only KEY ...), print each answer, write the report.
+
+    Returns 0 when every problem converged both ways, 1 otherwise; an unknown key is a usage error.
+    """
     parser = argparse.ArgumentParser(prog="python -m studies.codesign_open_loop", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DOC, help=f"Markdown file to write (default {DOC})")
     parser.add_argument("--quick", action="store_true", help="coarser meshes (seconds instead of a minute)")

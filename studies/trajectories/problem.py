@@ -97,6 +97,7 @@ class TrajectoryProblem:
     tracking: Tracking | None = None
 
     def __post_init__(self):
+        """Refuse a key that is no identifier (it names files) and a headroom outside [0, 1)."""
         if not self.key.isidentifier():
             raise ValueError(f"TrajectoryProblem key must be an identifier (file-safe), got {self.key!r}")
         if not 0 <= (self.tracking.headroom if self.tracking else 0) < 1:
