@@ -213,3 +213,20 @@ def crane1(q, dq, u, p):
         forces=[u.F - p.b * dq.x, 0],
         outputs={"x": q.x, "theta": q.theta},
     )
+
+
+# Not a case study's plant: the spring and mass whose stiffness `studies.codesign_open_loop` decides
+# together with the force history. Declared without registering it, so `models.names()` (and every
+# study, test and sweep over the registry) still lists the case studies' plants only.
+@declare(
+    name="spring_mass",
+    title="spring and mass (issue 13)",
+    coordinates=("s",),
+    inputs=("u",),
+    params=(Param("m", 1.0, "kg", "mass"), Param("k", 0.5, "N/m", "stiffness")),
+    input_limit=1.0,
+    register=False,
+)
+def spring_mass(q, dq, u, p):
+    """Mass m on a spring of stiffness k, pushed by the force u: m s'' = −k s + u, s from the spring at rest."""
+    return Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u], outputs={"s": q.s})

@@ -1,8 +1,8 @@
 """Open-loop co-design: plant parameters decided together with the input history, simultaneous and nested.
 
 Each problem is an `mpc.OptimalControlProblem` with chosen plant parameters
-(`ocp.choose`), declared as data (`OpenLoopCodesign`): the issue's spring-mass
-(declared here: it is a user's plant, no case study) and each case's own
+(`ocp.choose`), declared as data (`OpenLoopCodesign`, `studies.trajectories`): the
+spring-mass declared here (a user's plant, no case study) and each case's own
 (``CaseStudy.open_loop_codesign``: the crane's cable length, the UUV's
 centre-of-gravity offset). `solve` decides every problem twice, to convergence:
 
@@ -24,70 +24,36 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import models
+from models import catalog, deferred, files
+from models.files import format_number, markdown_table
+from mpc import Collocation, OptimalControlProblem, solve_nested
 
-from .trajectories import TrajectorySetup
+from . import cases
+from .trajectories import OpenLoopCodesign, TrajectorySetup, describe
+
+optimize = deferred.module("scipy.optimize")
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign_open_loop.md"
 
 
-# ---------------------------------------------------------------------------- what a problem declares
-@dataclass(frozen=True)
-class OpenLoopCodesign:
-    """One open-loop co-design problem.
-
-    key : short name;  title : one line
-    plant : the plant's registry name or title, for the table
-    build : (quick) -> `studies.trajectories.TrajectorySetup` whose problem chooses exactly one plant
-        parameter (`ocp.choose`); quick asks for a coarser mesh
-    parameter, unit : the chosen parameter's name and unit;  text_value : its value in the text, or None
-    maximized : the problem maximizes (its OCP objective is the negative; the report shows the value)
-    sweep : parameter values at which the optimal value J*(p) is tabulated with p fixed
-    reference : () -> {"parameter": value, "objective": value, "how": text}, an independent answer, or None
-    """
-
-    key: str
-    title: str
-    plant: str
-    build: Callable[[bool], TrajectorySetup]
-    parameter: str
-    unit: str
-    text_value: float | None = None
-    maximized: bool = False
-    sweep: tuple = ()
-    reference: Callable[[], dict] | None = None
-
-
-# ---------------------------------------------------------------------------- the issue's spring-mass
-SPRING_MASS, SPRING_TIME, SPRING_RANGE = 1.0, 2.0, (0.1, 2.0)
+# ---------------------------------------------------------------------------- the spring-mass
+#: The mass (kg, the plant's, `models.catalog.spring_mass`), the fixed final time (s) and the stiffness range (N/m).
+SPRING_MASS = next(param.value for param in catalog.spring_mass.params if param.name == "m")
+SPRING_TIME, SPRING_RANGE = 2.0, (0.1, 2.0)
 
 
 def spring_mass_plant() -> models.Plant:
-    """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen."""
-
-    @models.declare(
-        name="spring_mass",
-        title="spring and mass (issue 13)",
-        coordinates=("s",),
-        inputs=("u",),
-        params=(models.Param("m", SPRING_MASS, "kg", "mass"), models.Param("k", 0.5, "N/m", "stiffness")),
-        input_limit=1.0,
-        register=False,
-    )
-    def declaration(q, dq, u, p):
-        return models.Physics(kinetic=p.m * dq.s**2 / 2, potential=p.k * q.s**2 / 2, forces=[u.u], outputs={"s": q.s})
-
-    return models.Plant(declaration)
+    """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen (declared in `models.catalog`)."""
+    return models.Plant(catalog.spring_mass)
 
 
 def spring_mass(quick: bool) -> TrajectorySetup:
     """Maximize s(T) at T = 2 s from rest, with s'(T) = 0 and |u| <= 1, choosing k in [0.1, 2] N/m."""
-    from mpc import Collocation, OptimalControlProblem
-
     ocp = OptimalControlProblem(spring_mass_plant(), SPRING_TIME)
     ocp.choose("k", *SPRING_RANGE)
     ocp.maximize(ocp.at_end(ocp.x.s))
@@ -108,14 +74,17 @@ def spring_mass_semi_analytic() -> dict:
     """One-switch bang-bang (Pontryagin; derived in tests/mpc/test_ocp_codesign.py):
 
     s*(k) = [2 √(1 − sin²θ / 4) − 1 − cos θ] / k with θ = √(k/m) T, maximized over k by a bounded scalar search.
+    Returns {"parameter": k (N/m), "objective": s*(k) (m), "how": text}.
     """
-    from scipy.optimize import minimize_scalar
 
     def best(k):
+        """s*(k) (m), the largest displacement with the stiffness k (N/m) fixed."""
         theta = math.sqrt(k / SPRING_MASS) * SPRING_TIME
         return (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / k
 
-    found = minimize_scalar(lambda k: -best(k), bounds=SPRING_RANGE, method="bounded", options={"xatol": 1e-12})
+    found = optimize.minimize_scalar(
+        lambda k: -best(k), bounds=SPRING_RANGE, method="bounded", options={"xatol": 1e-12}
+    )
     return {
         "parameter": float(found.x),
         "objective": float(-found.fun),
@@ -138,8 +107,6 @@ SPRING_MASS_PROBLEM = OpenLoopCodesign(
 
 def problems() -> list[OpenLoopCodesign]:
     """The spring-mass problem, then every registered case's, in the text's order."""
-    from . import cases
-
     found = [SPRING_MASS_PROBLEM]
     for name in cases.names():
         found += list(cases.get(name).open_loop_codesign)
@@ -189,22 +156,16 @@ def envelope_gradient(solution, name: str) -> float:
     return float(-solution.lam_p[position])
 
 
-def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
-    """Decide `problem` simultaneously and nested, then sweep J*(p); see the module docstring."""
-    from mpc import solve_nested
+def decide_simultaneous(problem: OpenLoopCodesign, setup: TrajectorySetup, sign: float) -> Decision:
+    """The parameter a decision of the transcription itself: one IPOPT solve of `setup`, then `verify()`.
 
-    sign = -1.0 if problem.maximized else 1.0
-    setup = problem.build(quick)
-    if list(setup.problem.chosen) != [problem.parameter]:
-        raise ValueError(
-            f"{problem.key}: the problem must choose exactly {problem.parameter!r}, chooses "
-            f"{list(setup.problem.chosen)}"
-        )
+    sign : −1 when the problem maximizes (its OCP objective is the negative of the reported value), else 1
+    """
     options = dict(setup.solve_options)
     started = time.perf_counter()
     solution = setup.problem.solve(setup.transcription, **options)
     verification = solution.verify() if solution.success else None
-    simultaneous = Decision(
+    return Decision(
         "simultaneous",
         solution.chosen.get(problem.parameter, math.nan),
         sign * solution.objective,
@@ -216,12 +177,18 @@ def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
         solution.final_time,
     )
 
-    fresh = problem.build(quick)
+
+def decide_nested(problem: OpenLoopCodesign, setup: TrajectorySetup, sign: float) -> tuple[Decision, Any]:
+    """`mpc.solve_nested` on `setup`: L-BFGS-B on the parameter around the OCP with it fixed.
+
+    Returns the decision (with dJ*/dp by the envelope theorem at the answer) and the last inner
+    `OCPSolution`, the starting point of the sweep.
+    """
     started = time.perf_counter()
-    nested_result = solve_nested(fresh.problem, fresh.transcription, **dict(fresh.solve_options))
+    nested_result = solve_nested(setup.problem, setup.transcription, **dict(setup.solve_options))
     inner = nested_result.solution
     verification = inner.verify() if nested_result.success else None
-    nested = Decision(
+    decision = Decision(
         "nested",
         nested_result.params[problem.parameter],
         sign * nested_result.objective,
@@ -233,13 +200,23 @@ def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
         inner.final_time,
         sign * envelope_gradient(inner, problem.parameter),
     )
+    return decision, inner
 
+
+def sweep_optimum(
+    problem: OpenLoopCodesign, setup: TrajectorySetup, guess, sign: float
+) -> tuple[list[dict], dict | None]:
+    """J*(p) with p fixed at each of `problem.sweep` and at the text's value, solved warm from `guess`.
+
+    Returns (the sweep's rows, the row at the text's value or None); a row is {"parameter", "objective"
+    (as reported), "success", "final_time" (s), "gradient" (dJ*/dp, per unit of p)}.
+    """
     rows, at_text = [], None
     values = list(problem.sweep) + ([problem.text_value] if problem.text_value is not None else [])
     if values:
-        solver = fresh.problem.solver(fresh.transcription, chosen_as_parameters=True, tolerance=1e-10)
+        solver = setup.problem.solver(setup.transcription, chosen_as_parameters=True, tolerance=1e-10)
         for value in dict.fromkeys(values):
-            point = solver.solve(plant_params={problem.parameter: value}, guess=inner)
+            point = solver.solve(plant_params={problem.parameter: value}, guess=guess)
             row = {
                 "parameter": float(value),
                 "objective": sign * point.objective,
@@ -251,6 +228,25 @@ def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
                 rows.append(row)
             if value == problem.text_value:
                 at_text = row
+    return rows, at_text
+
+
+def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
+    """Decide `problem` simultaneously and nested (each on a fresh build), then sweep J*(p) with p fixed.
+
+    quick : coarser meshes. The problem must choose exactly its `parameter` (ValueError otherwise).
+    """
+    sign = -1.0 if problem.maximized else 1.0
+    setup = problem.build(quick)
+    if list(setup.problem.chosen) != [problem.parameter]:
+        raise ValueError(
+            f"{problem.key}: the problem must choose exactly {problem.parameter!r}, chooses "
+            f"{list(setup.problem.chosen)}"
+        )
+    simultaneous = decide_simultaneous(problem, setup, sign)
+    fresh = problem.build(quick)
+    nested, inner = decide_nested(problem, fresh, sign)
+    rows, at_text = sweep_optimum(problem, fresh, inner, sign)
     reference = problem.reference() if problem.reference else None
     return CodesignResult(problem, setup, simultaneous, nested, rows, reference, at_text)
 
@@ -280,15 +276,12 @@ text's value of the parameter is compared with the co-designed one.
 
 
 def _number(value, digits: int = 6) -> str:
-    from models.files import format_number
-
+    """A number as the report prints it: `digits` significant digits (`models.files.format_number`)."""
     return format_number(value, digits)
 
 
 def section(result: CodesignResult) -> str:
     """One problem: its statement, both decisions, their agreement, the sweep and the independent answer."""
-    from models.files import markdown_table
-
     p = result.problem
     what = result.setup.objective
     lines = [
@@ -296,7 +289,7 @@ def section(result: CodesignResult) -> str:
         "",
         result.setup.description,
         "",
-        f"Plant: {p.plant}. Transcription: {_describe(result.setup.transcription)}. Objective: {what}."
+        f"Plant: {p.plant}. Transcription: {describe(result.setup.transcription)}. Objective: {what}."
         + (f" The text's value: {p.parameter} = {_number(p.text_value)} {p.unit}." if p.text_value is not None else ""),
         "",
     ]
@@ -398,16 +391,11 @@ def _where(result: CodesignResult) -> str:
     )
 
 
-def _describe(transcription) -> str:
-    from .trajectories import describe
-
-    return describe(transcription)
-
-
 def report(results: list[CodesignResult], command: str, machine: str = "") -> str:
-    """The whole Markdown document (a function of the results, so it can be joined into another report)."""
-    from models.files import markdown_table
+    """The whole Markdown document (a function of the results, so it can be joined into another report).
 
+    command : the command line that made it, named in the header;  machine : what the timings are of
+    """
     summary = [
         {
             "problem": r.problem.title,
@@ -437,6 +425,10 @@ def report(results: list[CodesignResult], command: str, machine: str = "") -> st
 
 
 def main(argv=None) -> int:
+    """The command line: decide the problems (all, or --only KEY ...), print each answer, write the report.
+
+    Returns 0 when every problem converged both ways, 1 otherwise; an unknown key is a usage error.
+    """
     parser = argparse.ArgumentParser(prog="python -m studies.codesign_open_loop", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DOC, help=f"Markdown file to write (default {DOC})")
     parser.add_argument("--quick", action="store_true", help="coarser meshes (seconds instead of a minute)")
@@ -446,8 +438,6 @@ def main(argv=None) -> int:
     unknown = [key for key in args.only or () if key not in found]
     if unknown:
         parser.error(f"unknown problem {unknown[0]!r}; problems: {', '.join(found)}")
-    from models import files
-
     files.check_writable(args.out.parent)
     results = []
     for i, key in enumerate(args.only or list(found), 1):

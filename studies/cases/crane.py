@@ -35,7 +35,6 @@ from models import deferred
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
-from studies.codesign_open_loop import OpenLoopCodesign
 from studies.errata import Erratum, Remark
 from studies.homework import (
     ClassicalDesign,
@@ -49,7 +48,7 @@ from studies.homework import (
     spec_records,
     tf_record,
 )
-from studies.trajectories import OpenLoopCommand, TrajectoryProblem, TrajectorySetup
+from studies.trajectories import OpenLoopCodesign, OpenLoopCommand, TrajectoryProblem, TrajectorySetup
 
 control = deferred.module("control")
 

@@ -28,7 +28,6 @@ from models import deferred
 from mpc import Collocation, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
-from studies.codesign_open_loop import OpenLoopCodesign
 from studies.codesign_report import ActuatorSizing
 from studies.codesign_report import actuator_sizing as size_actuator
 from studies.errata import Erratum
@@ -45,7 +44,7 @@ from studies.homework import (
     spec_records,
     tf_record,
 )
-from studies.trajectories import TrajectorySetup
+from studies.trajectories import OpenLoopCodesign, TrajectorySetup
 
 control = deferred.module("control")
 

@@ -53,6 +53,17 @@ def test_simultaneous_and_nested_both_converge_and_agree(key, results):
         assert not better or abs(row["objective"] - s.objective) < 1e-7, row
 
 
+def test_the_spring_mass_is_the_catalogs_and_not_registered():
+    """models.catalog.spring_mass against m s'' = −k s + u by hand, at a few states, stiffnesses and forces."""
+    plant = col.spring_mass_plant()
+    assert plant.declaration is models.catalog.spring_mass
+    assert plant.params == {"m": col.SPRING_MASS, "k": 0.5} and list(plant.input_limit) == [1.0]
+    assert "spring_mass" not in models.names()  # the registry lists the case studies' plants only
+    for s, v, u, k in ((0.3, -0.2, 0.7, 0.5), (-1.0, 0.5, -1.0, 1.7)):
+        xdot = plant.with_params(k=k).f([s, v], [u])
+        np.testing.assert_allclose(xdot, [v, (u - k * s) / col.SPRING_MASS], rtol=1e-14)
+
+
 def spring_mass_bang_bang(k, switch):
     """s(T), s'(T) of m s'' = −k s + u, u = +1 then −1 after `switch`, by SciPy (independent of the formula)."""
     rhs = lambda t, y: [y[1], ((1.0 if t < switch else -1.0) - k * y[0]) / col.SPRING_MASS]
@@ -74,6 +85,20 @@ def test_spring_mass_matches_the_semi_analytic_answer(results):
     assert result.simultaneous.objective == pytest.approx(reference["objective"], rel=1e-3)
     assert result.simultaneous.objective <= reference["objective"] + 1e-9
     assert result.simultaneous.parameter == pytest.approx(k, rel=0.02)
+
+
+def test_spring_mass_sweep_is_the_closed_form_optimum_at_each_stiffness():
+    """`sweep_optimum` alone, cold: J*(k) with k fixed against s*(k) = [2 √(1 − sin²θ/4) − 1 − cos θ] / k
+    (θ = √(k/m) T, derived in tests/mpc/test_ocp_codesign.py), to the 40-interval held input's accuracy."""
+    problem = {p.key: p for p in col.problems()}["spring_mass"]
+    rows, at_text = col.sweep_optimum(problem, col.spring_mass(True), None, -1.0)
+    assert at_text is None  # the text gives no stiffness
+    assert [row["parameter"] for row in rows] == list(problem.sweep)
+    for row in rows:
+        theta = math.sqrt(row["parameter"] / col.SPRING_MASS) * col.SPRING_TIME
+        exact = (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / row["parameter"]
+        assert row["success"] and row["final_time"] == pytest.approx(col.SPRING_TIME)
+        assert row["objective"] == pytest.approx(exact, rel=1e-3) and row["objective"] <= exact + 1e-9
 
 
 def test_crane_answer_is_the_shortest_cable_and_its_cost_is_the_slope(results):
