@@ -15,7 +15,6 @@ Colours, line styles and markers come from `studies.style`.
 
 from __future__ import annotations
 
-import html
 import io
 import math
 import re
@@ -32,7 +31,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 
 from models import specs  # noqa: E402
 
-from . import style  # noqa: E402
+from . import style, templates  # noqa: E402
 
 #: Horizontal box plots: `orientation` from matplotlib 3.10 on, `vert` before (deprecated since).
 _HORIZONTAL = (
@@ -89,44 +88,51 @@ def heat_map(studies) -> str:
     Parameters
     ----------
     studies : list of (plant name, run.json dict, table DataFrame)
+
+    Returns
+    -------
+    The table as one line of HTML (template ``heatmap.html.j2``), every label and title escaped.
     """
     labels = controller_order([t for _, _, t in studies])
     ratios = {name: relative_itae(table) for name, _, table in studies}
     rows = {name: step_rows(table) for name, _, table in studies}
-    head = "".join(f'<th scope="col">{html.escape(info["title"])}</th>' for _, info, _ in studies)
-    body = []
-    for label in labels:
-        look = style.of(label)
-        cells = [
-            f'<th scope="row"><span class="swatch" style="background:{look.color}"></span>{html.escape(label)}</th>'
-        ]
-        for name, _, _ in studies:
-            if label not in rows[name].index:
-                cells.append(f'<td class="absent" data-controller="{html.escape(label)}" data-plant="{name}">—</td>')
-                continue
-            row = rows[name].loc[label]
-            verdict = str(row.get("verdict", "")) if isinstance(row.get("verdict", ""), str) else ""
-            ratio = ratios[name].get(label, math.nan)
-            number = f"{ratio:.3g}×" if np.isfinite(ratio) else ""
-            detail = str(row.get("verdict_detail", "")) if isinstance(row.get("verdict_detail"), str) else ""
-            title = f"{label} on {name}: {verdict}" + (f" ({detail})" if detail else "")
-            cells.append(
-                f'<td data-controller="{html.escape(label)}" data-plant="{name}" '
-                f'data-verdict="{html.escape(verdict)}" title="{html.escape(title)}" '
-                f'style="background:{_ratio_color(ratio)}"><span class="mark" '
-                f'style="color:{style.verdict_color(verdict)}">{style.verdict_symbol(verdict)}</span> '
-                f"{number}</td>"
-            )
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    legend = " ".join(
-        f'<span style="color:{color}">{symbol}</span> {html.escape(label)}'
-        for label, (symbol, color) in style.VERDICTS.items()
+    return templates.render(
+        "heatmap.html.j2",
+        worst_ratio=f"{WORST_RATIO:g}",
+        legend=[
+            {"label": label, "symbol": symbol, "color": color} for label, (symbol, color) in style.VERDICTS.items()
+        ],
+        titles=[info["title"] for _, info, _ in studies],
+        rows=[
+            {
+                "label": label,
+                "color": style.of(label).color,
+                "cells": [_heat_cell(label, name, rows[name], ratios[name]) for name, _, _ in studies],
+            }
+            for label in labels
+        ],
     )
-    return (
-        '<table id="heatmap" class="heatmap"><caption>Step ITAE relative to the best on each plant '
-        f"(1× = best; colour from green to red at {WORST_RATIO:g}× and beyond) and the row's verdict: "
-        f"{legend}</caption><thead><tr><th></th>{head}</tr></thead><tbody>" + "".join(body) + "</tbody></table>"
-    )
+
+
+def _heat_cell(label: str, plant: str, rows, ratios: dict) -> dict:
+    """What the heat map shows of controller `label` on `plant` (`rows`: its step rows by controller;
+    `ratios`: `relative_itae` of the plant): {"absent": True} when the plant has no such controller."""
+    if label not in rows.index:
+        return {"absent": True, "plant": plant}
+    row = rows.loc[label]
+    verdict = str(row.get("verdict", "")) if isinstance(row.get("verdict", ""), str) else ""
+    ratio = ratios.get(label, math.nan)
+    detail = str(row.get("verdict_detail", "")) if isinstance(row.get("verdict_detail"), str) else ""
+    return {
+        "absent": False,
+        "plant": plant,
+        "verdict": verdict,
+        "title": f"{label} on {plant}: {verdict}" + (f" ({detail})" if detail else ""),
+        "background": _ratio_color(ratio),
+        "color": style.verdict_color(verdict),
+        "symbol": style.verdict_symbol(verdict),
+        "number": f"{ratio:.3g}×" if np.isfinite(ratio) else "",
+    }
 
 
 def _svg(fig: Figure, salt: str) -> str:

@@ -1,14 +1,14 @@
 """Every file a study leaves: its tables, answers, plots, animation, summary and index.
 
-Files, JSON and tables go through `models.files` (atomic writes, the JSON
-conventions, Markdown/HTML tables); this module decides what each study writes.
+Files, JSON and Markdown tables go through `models.files` (atomic writes, the
+JSON conventions); the HTML pages are Jinja2 templates (`studies.templates`).
+This module decides what each study writes.
 """
 
 from __future__ import annotations
 
 import datetime
 import hashlib
-import html
 import json
 import math
 import os
@@ -25,7 +25,6 @@ from models.files import (
     escape_markdown,
     format_number,
     fresh_folder,
-    html_table,
     markdown_table,
     replace_folder,
     scaled,
@@ -33,6 +32,8 @@ from models.files import (
     write_json,
     write_text,
 )
+
+from . import templates
 
 #: Columns of the study table that measure compute time: they change from run to run, so they go to
 #: timings.csv, and table.csv and monte_carlo.csv are the same bytes for the same seed and settings.
@@ -651,82 +652,48 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
     return write_text(out / "summary.md", "\n".join(lines) + "\n")
 
 
-def _status_html(table, info: dict, run_id: str | None) -> str:
-    """The run a plant's folder comes from and its rows that are not ok, as HTML."""
-    counts = ", ".join(f"{n} {kind}" for kind, n in status_counts(table).items() if n)
-    parts = [f'<p class="run">{html.escape(_run_of(info, run_id))}. Rows: {html.escape(counts)}.</p>']
-    bad = not_ok_rows(table)
-    if bad:
-        parts.append(
-            '<ul class="not-ok">'
-            + "".join(f"<li><b>{html.escape(c)} / {html.escape(s)}</b>: {html.escape(st)}</li>" for c, s, st in bad)
-            + "</ul>"
-        )
-    return "".join(parts)
-
-
 def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Path:
     """OUT/index.html linking every table, answer file, plot and animation found in `out`; each plant
-    says which run wrote it and lists its rows that are not "ok" (see `write_summary`)."""
-    out = Path(out)
-    studies = _read_studies(out, names)
+    says which run wrote it and lists its rows that are not "ok" (see `write_summary`). The page is the
+    template ``index.html.j2``; every title, label and file name in it is escaped."""
     from . import overview
 
-    body = [
-        "<h1>Case studies: every controller on every plant</h1>",
-        "<p>Tables, plots and animations from nonlinear closed-loop simulations. "
-        '<a href="summary.md">summary.md</a></p>',
-    ]
-    if run_id is not None:
-        body.append(f"<p>Run {html.escape(run_id)}.</p>")
-    body.append("<ul>")
-    body += [f'<li><a href="#{n}">{html.escape(info["title"])}</a></li>' for n, info, _ in studies]
-    body.append("</ul>")
+    out = Path(out)
+    studies = _read_studies(out, names)
+    figures = []
     if studies:
-        body += ['<section id="overview"><h2>At a glance</h2>', overview.heat_map(studies)]
         pictures = [("scatter", overview.scatter(studies)), ("boxplots", overview.boxplots(out, studies))]
-        body += [f'<figure id="{name}">{svg}</figure>' for name, svg in pictures if svg]
-        body.append("</section>")
-    for n, info, table in studies:
-        files = info["files"]
-        links = " · ".join(
-            f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
-            for f in files.values()
-            if not f.endswith(".png") and not f.endswith(".gif")
-        )
-        body += [
-            f'<h2 id="{n}">{html.escape(info["title"])}</h2>',
-            f"<p>{links}</p>",
-            _status_html(table, info, run_id),
-        ]
-        if info.get("best"):
-            body.append(f"<p>Best in the step scenario (lowest ITAE): {html.escape(info['best'])}</p>")
-        if "animation.gif" in files:
-            body.append(
-                f'<p><a href="{n}/animation.html"><img src="{n}/animation.gif" '
-                f'alt="{html.escape(info["title"])} animation"></a></p>'
-            )
-        if "verdict" in table:
-            grid_rows, grid_columns = verdict_grid(table)
-            body += ["<h3>Verdicts against the specs</h3>", html_table(grid_rows, grid_columns)]
-        step_rows = table[table.scenario == "step"].to_dict("records")
-        if step_rows:
-            columns = _unit_columns(info["tracked_unit"], info["input_unit"])
-            body += ["<h3>The step: metrics</h3>", html_table(step_rows, [c for c in columns if c[0] != "scenario"])]
-        for f in files.values():
-            if f.endswith(".png"):
-                body.append(
-                    f'<figure><img src="{n}/{html.escape(f)}" alt="{html.escape(f)}" loading="lazy">'
-                    f"<figcaption>{html.escape(f)}</figcaption></figure>"
-                )
-    page = (
-        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>Case studies</title><style>'
-        "body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1100px}"
-        "table{border-collapse:collapse;font-size:0.8em}td,th{border:1px solid #ccc;padding:2px 6px}"
-        "img{max-width:100%}figure{margin:1em 0}"
-        ".heatmap td{text-align:center;min-width:5.5em}.heatmap th{text-align:left;font-weight:normal}"
-        ".heatmap caption{caption-side:bottom;text-align:left;font-size:0.9em;padding-top:0.4em}"
-        ".swatch{display:inline-block;width:0.8em;height:0.8em;margin-right:0.4em;vertical-align:middle}"
-        ".mark{font-weight:bold}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+        figures = [{"id": name, "svg": svg} for name, svg in pictures if svg]
+    page = templates.render(
+        "index.html.j2",
+        run_id=run_id,
+        plants=[_index_entry(name, info, table, run_id) for name, info, table in studies],
+        heatmap=overview.heat_map(studies) if studies else "",
+        figures=figures,
     )
     return write_text(out / "index.html", page)
+
+
+def _index_entry(name: str, info: dict, table, run_id: str | None) -> dict:
+    """What index.html shows of one plant: its files, the run that wrote them, its rows that are not
+    ok, its best controller, verdict grid, step metrics and pictures (from its run.json and table)."""
+    files = info["files"]
+    step_rows = table[table.scenario == "step"].to_dict("records")
+    columns = _unit_columns(info["tracked_unit"], info["input_unit"])
+    verdicts = None
+    if "verdict" in table:
+        grid_rows, grid_columns = verdict_grid(table)
+        verdicts = {"rows": grid_rows, "columns": grid_columns}
+    return {
+        "name": name,
+        "title": info["title"],
+        "links": [f for f in files.values() if not f.endswith(".png") and not f.endswith(".gif")],
+        "run": _run_of(info, run_id),
+        "counts": ", ".join(f"{n} {kind}" for kind, n in status_counts(table).items() if n),
+        "not_ok": not_ok_rows(table),
+        "best": info.get("best"),
+        "animation": "animation.gif" in files,
+        "verdicts": verdicts,
+        "step": {"rows": step_rows, "columns": [c for c in columns if c[0] != "scenario"]} if step_rows else None,
+        "pictures": [f for f in files.values() if f.endswith(".png")],
+    }

@@ -165,3 +165,50 @@ def test_summary_and_index_link_what_exists(arm_study):
 
     for link in re.findall(r'(?:href|src)="([^"#]+)"', index):
         assert (out / link).exists(), link
+
+
+def test_the_pages_escape_as_the_standard_library_does():
+    # The template engine's rule is html.escape's: quotes as &quot; and &#x27; (not MarkupSafe's &#34;, &#39;).
+    from studies import templates
+
+    assert templates.escape("<b>x</b> & \"q\" 'a'") == "&lt;b&gt;x&lt;/b&gt; &amp; &quot;q&quot; &#x27;a&#x27;"
+    assert templates.escape(templates.Escaped("&amp;")) == "&amp;"  # markup is left as it is
+
+
+def test_a_title_or_label_with_html_in_it_is_escaped_in_every_page(tmp_path):
+    import copy
+    import dataclasses
+    import re
+
+    from example_providers import controllers as example_controllers
+
+    import studies
+    from studies import runner, writers
+
+    label, title = "<b>x</b> & y", "<b>Arm</b> & co"
+    found = example_controllers("arm")
+    case = dataclasses.replace(studies.get("arm"), providers=())
+    result = runner.run_study(
+        case, runner.Options(scenarios=("step",), mc=0), controllers={label: found["LQR fast"], "LQR": found["LQR"]}
+    )
+    plant = copy.copy(result.plant)
+    plant.title = title
+    result = dataclasses.replace(result, plant=plant)
+    out = tmp_path / "out"
+    writers.write_study(result, out, run_id="escaped")
+    writers.write_index(out, ["arm"], "escaped")
+    pages = {name: (out / name).read_text(encoding="utf-8") for name in ("index.html", "arm/animation.html")}
+    for name, page in pages.items():
+        assert "<b>" not in page, name  # neither the title's nor the label's markup is markup
+        assert "&lt;b&gt;Arm&lt;/b&gt; &amp; co" in page, name
+    index = pages["index.html"]
+    assert '<h2 id="arm">&lt;b&gt;Arm&lt;/b&gt; &amp; co</h2>' in index
+    assert 'data-controller="&lt;b&gt;x&lt;/b&gt; &amp; y"' in index  # the heat map
+    assert "<td>&lt;b&gt;x&lt;/b&gt; &amp; y</td>" in index  # the verdict grid and the step's metrics
+    assert "Best in the step scenario (lowest ITAE): &lt;b&gt;x&lt;/b&gt; &amp; y</p>" in index
+    animation = pages["arm/animation.html"]
+    assert re.search(r"<title>(.*)</title>", animation).group(1) == (
+        "&lt;b&gt;Arm&lt;/b&gt; &amp; co: the controllers on the text&#x27;s step"
+    )
+    data = json.loads(re.search(r"const DATA = (\{.*?\});\n", animation).group(1))
+    assert data["selected"] == label and data["order"] == [label, "LQR"]  # the script's data hold the label itself
