@@ -33,7 +33,7 @@ from bokeh.plotting import figure
 
 import models
 from models import specs
-from studies import animation, style
+from studies import animation, style, templates
 from studies.plots import tracked_scale
 
 from . import Designer, GainControl, Update
@@ -67,12 +67,20 @@ def _finite(values: np.ndarray) -> np.ndarray:
     return values
 
 
+def fragment(name: str, *values) -> str:
+    """The page's HTML fragment `name` (a macro of the template ``designer.html.j2``) with `values`
+    escaped: a Bokeh Div shows its text as HTML, so a label or an error message is never markup."""
+    return str(templates.macro("designer.html.j2", name)(*values))
+
+
 class Page:
     """The widgets, figures and data sources of one browser tab, bound to one `Designer`.
 
     Every model the tests read has a name: sources "response", "input", "bode", "locus", "poles",
     "spec_low", "spec_high"; divs "verdict", "margins", "tune_status", "export", "gain_error:KEY";
     inputs "gain:KEY" (text) and "slider:KEY"; the checkbox "envelope_box"; sources also "envelope" and "scene_*".
+    The divs "title", "verdict" and "margins" show HTML, made by `fragment` (values escaped); the others
+    show their text as it is (``render_as_text``), so an error message quoting a typed value stays text.
     """
 
     def __init__(self, catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
@@ -96,15 +104,15 @@ class Page:
         self.gains = column(name="gains")
         self.pool: dict = {}  # (kind, key) -> the row of widgets of that control, kept across designs
         self.rows: dict = {}  # the rows shown
-        self.poles_header = Div(text="<b>desired poles</b> (rad/s; each change redesigns the gains)")
-        self.gains_header = Div(text="<b>gains</b>")
+        self.poles_header = Div(text=fragment("header", "desired poles", "rad/s; each change redesigns the gains"))
+        self.gains_header = Div(text=fragment("header", "gains", ""))
         self.envelope = Checkbox(label="±5 % Monte Carlo envelope", name="envelope_box", active=False)
         self.envelope.on_change("active", lambda attr, old, new: self.refresh())
         self.tune_button = Button(label="Tune", name="tune", button_type="primary", width=80)
         self.reset_button = Button(label="Reset", name="reset", width=80)
         self.export_button = Button(label="Export", name="export_button", width=80)
-        self.tune_status = Div(text="", name="tune_status", width=260)
-        self.export_data = Div(text="", name="export", visible=False)
+        self.tune_status = Div(text="", name="tune_status", width=260, render_as_text=True)
+        self.export_data = Div(text="", name="export", visible=False, render_as_text=True)
         self.export_data.js_on_change("text", CustomJS(code=DOWNLOAD))
         self.verdict = Div(text="", name="verdict", width=WIDTH)
         self.margins = Div(text="", name="margins", width=WIDTH)
@@ -144,7 +152,7 @@ class Page:
         self.playing: Any = None  # the periodic callback while the animation plays
         self.anim_time = Slider(start=0, end=1, value=0, step=0.01, title="t (s)", name="anim_time", width=210)
         self.play_button = Button(label="Play", name="play", width=70)
-        self.readout = Div(text="", name="readout", width=290)
+        self.readout = Div(text="", name="readout", width=290, render_as_text=True)
         self.anim_time.on_change("value", lambda attr, old, new: self.draw_frame())
         self.play_button.on_click(self._on_play)
         self.layout = row(
@@ -276,7 +284,7 @@ class Page:
             width=150,
         )
         text = TextInput(value=f"{c.design:.6g}", name=f"{names[0]}:{c.key}", width=100, title=c.key)
-        error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260)
+        error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260, render_as_text=True)
         # The control is looked up when the widget changes: a pole change redesigns the gains' ranges.
         key = c.key
         # A gain follows its slider while it is dragged (updates coalesced, `_dragged`); a pole, whose every
@@ -296,7 +304,7 @@ class Page:
         self.designer = self.designers(label)
         d = self.designer
         self.scale, self.unit = tracked_scale(d.case.tracked_unit)
-        self.title.text = f"<h3>{d.case.plant}: {label}</h3>"
+        self.title.text = fragment("title", d.case.plant, label)
         self.busy = True
         self.scenario_select.options = list(d.scenarios)
         if self.scenario not in d.scenarios:
@@ -347,7 +355,7 @@ class Page:
         if self.busy:
             return
         doc = self.layout.document
-        self.verdict.text = f"<i>designing the {new} controllers ...</i>"
+        self.verdict.text = fragment("busy", f"designing the {new} controllers ...")
         self.plant.disabled = True
 
         def work():
@@ -363,7 +371,7 @@ class Page:
     def _designed(self, old: str, new: str, found, error: str | None) -> None:
         self.plant.disabled = False
         if found is None:
-            self.verdict.text = f"<b style='color:#cf222e'>{error}</b>"
+            self.verdict.text = fragment("error", error)
             self.busy = True
             self.plant.value = old
             self.busy = False
@@ -381,7 +389,7 @@ class Page:
         try:
             self.load(new)
         except Exception as err:  # shown, never raised; the controller shown stays
-            self.verdict.text = f"<b style='color:#cf222e'>{new}: {type(err).__name__}: {err}</b>"
+            self.verdict.text = fragment("error", f"{new}: {type(err).__name__}: {err}")
             self.busy = True
             self.controller.value = old
             self.busy = False
@@ -523,7 +531,7 @@ class Page:
         try:
             update = self.designer.update(self.values, self.scenario)
         except Exception as err:  # the server never dies on a request
-            self.verdict.text = f"<b style='color:#cf222e'>{type(err).__name__}: {err}</b>"
+            self.verdict.text = fragment("error", f"{type(err).__name__}: {err}")
             return
         self.draw(update)
         self.draw_envelope()
@@ -538,13 +546,11 @@ class Page:
             e = self.designer.envelope(self.values, self.scenario)
         except Exception as err:  # shown, never raised
             self.sources["envelope"].data = empty
-            self.margins.text += f"<br><i>no Monte Carlo envelope: {type(err).__name__}: {err}</i>"
+            self.margins.text += fragment("no_envelope", f"{type(err).__name__}: {err}")
             return
         y = _finite(e["tracked"] * self.scale)
         self.sources["envelope"].data = {"t": e["t"], "min": y[0], "low": y[1], "high": y[3], "max": y[4]}
-        self.margins.text += (
-            f"<br>Monte Carlo envelope: {e['samples']} plants (shaded: all, and 5-95 %), {e['diverged']} diverged"
-        )
+        self.margins.text += fragment("envelope", e["samples"], e["diverged"])
 
     def draw(self, u: Update) -> None:
         s = self.sources
@@ -559,10 +565,7 @@ class Page:
         self.limit_spans[0].location, self.limit_spans[1].location = u.input_limit, -u.input_limit
         label = specs.DIVERGED if u.diverged else u.verdict.label
         color = style.verdict_color(label)
-        self.verdict.text = (
-            f"<b style='color:{color}'>{u.verdict_text()}</b>"
-            f" <span style='color:#6e7781'>({1e3 * u.seconds:.0f} ms)</span>"
-        )
+        self.verdict.text = fragment("verdict", u.verdict_text(), color, f"{1e3 * u.seconds:.0f}")
         s["bode"].data = {"omega": u.omega, "magnitude_db": _finite(u.magnitude_db), "phase_deg": _finite(u.phase_deg)}
         s["locus"].data = {"re": _finite(u.locus.real.ravel()), "im": _finite(u.locus.imag.ravel())}
         s["poles"].data = {"re": _finite(u.poles.real), "im": _finite(u.poles.imag)}
@@ -677,8 +680,10 @@ class Page:
 
 
 def _margins_text(u: Update, spec: dict) -> str:
+    """The margins line under the plots: the loop's gain and phase margins, the closed-loop poles in the
+    right half plane and the loopshaping specs met; the notes of the update when it has no margins."""
     if not u.margins:
-        return "<i>" + "; ".join(u.notes) + "</i>"
+        return fragment("notes", "; ".join(u.notes))
     m = u.margins
     gain = (
         f"gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s"
@@ -690,16 +695,14 @@ def _margins_text(u: Update, spec: dict) -> str:
         if math.isfinite(m["phase_margin_deg"])
         else "no phase margin (|L| does not cross 1)"
     )
-    text = f"{u.loop} loop: {gain}, {phase}"
     unstable = int(np.sum(u.poles.real > 0))
-    text += f"; {unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
-    if spec:
-        checks = ", ".join(
-            f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
-            for name, ok in spec["checks"].items()
-        )
-        text += f"<br>loopshaping specs ({spec['item']}): {checks}"
-    return text
+    poles = f"{unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
+    text = f"{u.loop} loop: {gain}, {phase}; {poles}"
+    checks = ", ".join(
+        f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
+        for name, ok in (spec["checks"].items() if spec else ())
+    )
+    return fragment("margins", text, spec["item"] if spec else None, checks)
 
 
 def application(catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
