@@ -15,24 +15,25 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+from models import deferred, files
 
-import numpy as np  # noqa: E402
-from matplotlib.artist import Artist  # noqa: E402
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Circle, Polygon  # noqa: E402
-from PIL import Image  # noqa: E402
+from . import style, templates
+from .drawing import GROUND, REFERENCE, text
 
-from models import files  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
 
-from . import style, templates  # noqa: E402
-from .drawing import GROUND, REFERENCE, text  # noqa: E402
+# Matplotlib and Pillow are imported at the first GIF, not with the writers; the frames are drawn on an
+# Agg canvas of their own (no pyplot, no global backend).
+mpl_figure = deferred.module("matplotlib.figure")
+mpl_lines = deferred.module("matplotlib.lines")
+mpl_patches = deferred.module("matplotlib.patches")
+backend_agg = deferred.module("matplotlib.backends.backend_agg")
+pil_image = deferred.module("PIL.Image")
 
 
 def draw(case, plant, x, reference: float) -> list:
@@ -162,8 +163,8 @@ def write_gif(
     xmin, xmax, ymin, ymax = view(shapes)
     aspect = (ymax - ymin) / (xmax - xmin)
     height = min(5.0, max(2.2, 5.0 * aspect)) + 0.7
-    fig = Figure(figsize=(5.0, height))
-    canvas = FigureCanvasAgg(fig)
+    fig = mpl_figure.Figure(figsize=(5.0, height))
+    canvas = backend_agg.FigureCanvasAgg(fig)
     ax = fig.add_axes((0.02, 0.02, 0.96, 1 - 0.75 / height))
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
@@ -178,9 +179,9 @@ def write_gif(
         pace = "" if abs(speed - 1) < 0.05 else f", {speed:.3g}x speed"
         title.set_text(f"{plant.title}\n{label}: t = {t:.2f} s{pace}\n{readout}")
         canvas.draw()
-        images.append(Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba()).convert("RGB"))
+        images.append(pil_image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba()).convert("RGB"))
     palette = images[len(images) // 2].quantize(colors=64)
-    frames_p = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
+    frames_p = [im.quantize(palette=palette, dither=pil_image.Dither.NONE) for im in images]
     with files.atomic_path(path) as tmp:
         frames_p[0].save(
             tmp, format="GIF", save_all=True, append_images=frames_p[1:], duration=frame_ms, loop=0, optimize=False
@@ -193,7 +194,7 @@ def _artist(ax, prim: dict, dpi: int) -> Artist:
     artist: Artist
     if prim["k"] == "line":
         points = np.array(prim["p"])
-        artist = Line2D(
+        artist = mpl_lines.Line2D(
             points[:, 0],
             points[:, 1],
             color=prim["c"],
@@ -203,12 +204,12 @@ def _artist(ax, prim: dict, dpi: int) -> Artist:
         )
         ax.add_line(artist)
     elif prim["k"] == "poly":
-        artist = Polygon(prim["p"], closed=True, facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
+        artist = mpl_patches.Polygon(prim["p"], closed=True, facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
         ax.add_patch(artist)
     elif prim["k"] == "text":
         artist = ax.text(*prim["p"], prim["s"], color=prim["c"], fontsize=7, ha="center", va="center")
     else:
-        artist = Circle(prim["p"], prim["r"], facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
+        artist = mpl_patches.Circle(prim["p"], prim["r"], facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
         ax.add_patch(artist)
     return artist
 

@@ -19,26 +19,34 @@ import io
 import math
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+from models import deferred, specs
 
-import numpy as np  # noqa: E402
-from matplotlib.backends.backend_svg import FigureCanvasSVG  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
+from . import style, templates
 
-from models import specs  # noqa: E402
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+else:
+    pd = deferred.module("pandas")
 
-from . import style, templates  # noqa: E402
+# Matplotlib is imported at the first picture, not with the writers; the figures are drawn on an SVG
+# canvas of their own (no pyplot, no global backend).
+matplotlib = deferred.module("matplotlib")
+mpl_figure = deferred.module("matplotlib.figure")
+mpl_lines = deferred.module("matplotlib.lines")
+backend_svg = deferred.module("matplotlib.backends.backend_svg")
 
-#: Horizontal box plots: `orientation` from matplotlib 3.10 on, `vert` before (deprecated since).
-_HORIZONTAL = (
-    {"orientation": "horizontal"}
-    if tuple(int(v) for v in matplotlib.__version__.split(".")[:2]) >= (3, 10)
-    else {"vert": False}
-)
+
+def _horizontal() -> dict:
+    """Keywords of a horizontal box plot: `orientation` from matplotlib 3.10 on, `vert` before
+    (deprecated since)."""
+    version = tuple(int(v) for v in matplotlib.__version__.split(".")[:2])
+    return {"orientation": "horizontal"} if version >= (3, 10) else {"vert": False}
+
 
 #: Relative ITAE at which the heat map's colour is fully "bad" (ten times the best on the plant).
 WORST_RATIO = 10.0
@@ -139,7 +147,7 @@ def _svg(fig: Figure, salt: str) -> str:
     """The figure as an inline SVG element: text kept as text, no date, ids salted per figure."""
     buffer = io.StringIO()
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": salt}):
-        FigureCanvasSVG(fig).print_svg(buffer, metadata={"Date": None})
+        backend_svg.FigureCanvasSVG(fig).print_svg(buffer, metadata={"Date": None})
     text = buffer.getvalue()
     text = text[text.index("<svg") :]
     return re.sub(r'<svg([^>]*?) width="[^"]*" height="[^"]*"', r'<svg\1 style="width:100%;height:auto"', text, count=1)
@@ -147,7 +155,7 @@ def _svg(fig: Figure, salt: str) -> str:
 
 def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure, list]:
     rows = -(-count // columns)
-    fig = Figure(figsize=(width, height * rows + 1.2))
+    fig = mpl_figure.Figure(figsize=(width, height * rows + 1.2))
     axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False)).ravel()
     for ax in axes[count:]:
         ax.set_visible(False)
@@ -156,12 +164,12 @@ def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure
 
 def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
     handles = [
-        Line2D(
+        mpl_lines.Line2D(
             [],
             [],
             color=style.of(label).color,
             marker=style.of(label).marker if marker else None,
-            linestyle="none" if marker else style.of(label).linestyle,  # type: ignore[arg-type]  # a str of the style table
+            linestyle="none" if marker else style.of(label).linestyle,
             markersize=7,
         )
         for label in labels
@@ -227,8 +235,6 @@ def boxplots(out: Path, studies) -> str | None:
     Boxes span the quartiles, whiskers 1.5 IQR, the line is the median; read from
     ``OUT/<plant>/monte_carlo.csv``. Controllers without samples on a plant are not drawn there.
     """
-    import pandas as pd
-
     found = []
     for name, info, _ in studies:
         path = Path(out) / name / "monte_carlo.csv"
@@ -252,7 +258,7 @@ def boxplots(out: Path, studies) -> str | None:
         if not data:
             ax.set_visible(False)
             continue
-        parts = ax.boxplot(data, patch_artist=True, widths=0.6, flierprops={"markersize": 3}, **_HORIZONTAL)
+        parts = ax.boxplot(data, patch_artist=True, widths=0.6, flierprops={"markersize": 3}, **_horizontal())
         for patch, label in zip(parts["boxes"], kept):
             look = style.of(label)
             patch.set_facecolor(look.color)

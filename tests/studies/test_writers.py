@@ -212,3 +212,16 @@ def test_a_title_or_label_with_html_in_it_is_escaped_in_every_page(tmp_path):
     )
     data = json.loads(re.search(r"const DATA = (\{.*?\});\n", animation).group(1))
     assert data["selected"] == label and data["order"] == [label, "LQR"]  # the script's data hold the label itself
+
+
+def test_importing_the_writers_imports_no_matplotlib_pillow_or_jinja2():
+    # They are imported at the first figure, GIF or page: the command line checks its arguments without them.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; import studies.writers, studies.plots, studies.overview, studies.animation; "
+        "print(sorted(m for m in ('matplotlib', 'PIL', 'jinja2') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split("\n")[-2] == "[]", done.stdout + done.stderr
