@@ -57,9 +57,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 import models  # noqa: E402
-from models import Block, Cascade, metrics, specs  # noqa: E402
+from designs import tuning  # noqa: E402
+from models import Block, Cascade, export, metrics, specs  # noqa: E402
 
-from .. import loops, runner  # noqa: E402
+from .. import cases, homework, loops, runner, tuner  # noqa: E402
 from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, Scenario  # noqa: E402
 
 #: Each gain element ranges over [value / RANGE, value * RANGE] (sign kept).
@@ -335,7 +336,7 @@ class Designer:
         """The designer of case `name`'s controller `label` (default its first Block), designed as the
         studies design it: from the model known to the controller (`CaseStudy.known_plant`)."""
         designed = designed_blocks(name)
-        case = name if isinstance(name, CaseStudy) else _case(name)
+        case = name if isinstance(name, CaseStudy) else cases.get(name)
         if not designed:
             raise ValueError(f"{case.plant} has no controller with gains to design")
         if label is None:
@@ -538,10 +539,6 @@ class Designer:
         -------
         (designs.tuning.TuningResult, {control key: tuned value})
         """
-        from designs import tuning
-
-        from .. import tuner
-
         start = self.block_for(values)
         chosen = tuner.scenario(self.case, "disturbance" if scenario == "disturbance" else "step")
         bounds = {}
@@ -573,8 +570,6 @@ class Designer:
 
     def export(self, values: Mapping[str, float] | None = None) -> dict:
         """The gains as JSON-ready data, with the C step function (`models.export.export_block`) when it exports."""
-        from models import export
-
         block = self.block_for(values)
         out = {
             "plant": self.case.plant,
@@ -641,8 +636,6 @@ def pole_placement(case: CaseStudy, label: str) -> dict:
     """{"poles", "placement"} for the case's state-space design `label` (its desired poles, and the
     function redesigning it from other poles with `studies.homework.statespace_controllers`, from the
     model known to the controller); {} for any other controller."""
-    from .. import homework
-
     if case.statespace is None or label not in POLE_LABELS:
         return {}
     known = case.known_plant()
@@ -662,12 +655,6 @@ def s_plane(z: np.ndarray, sample_period: float) -> np.ndarray:
     return out
 
 
-def _case(name: str) -> CaseStudy:
-    import studies
-
-    return studies.get(name)
-
-
 _DESIGNED: dict = {}
 
 
@@ -677,7 +664,7 @@ def catalog(name: str) -> tuple[list[str], Callable[[str], Designer]]:
 
     Raises ValueError when the case has no controller with gains.
     """
-    case = _case(name)
+    case = cases.get(name)
     if name not in _DESIGNED:
         _DESIGNED[name] = designed_blocks(case)
     blocks = _DESIGNED[name]
@@ -696,7 +683,7 @@ def catalog(name: str) -> tuple[list[str], Callable[[str], Designer]]:
 def designed_blocks(name: str | CaseStudy) -> dict:
     """{label: Block} of the case's controllers with gains, designed as `studies.runner` designs them
     (from `CaseStudy.known_plant`), without the providers in `SKIPPED_PROVIDERS`."""
-    case = name if isinstance(name, CaseStudy) else _case(name)
+    case = name if isinstance(name, CaseStudy) else cases.get(name)
     providers = [p for p in case.providers if p not in SKIPPED_PROVIDERS]
     designed, _ = runner.design_controllers(case, case.known_plant(), providers)
     return {label: c for label, c in designed.items() if isinstance(c, Block) and gain_controls(c)}

@@ -23,6 +23,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from bokeh.application import Application
+from bokeh.application.handlers import FunctionHandler
 from bokeh.layouts import column, row
 
 # From their defining modules: bokeh.models re-exports them dynamically, which type checkers cannot follow.
@@ -30,6 +32,11 @@ from bokeh.models import ColumnDataSource, CustomJS, Range1d
 from bokeh.models.annotations import Span
 from bokeh.models.widgets import Button, Checkbox, Div, Select, Slider, TextInput
 from bokeh.plotting import figure
+from bokeh.server.server import BaseServer
+from bokeh.server.tornado import BokehTornado
+from bokeh.server.util import bind_sockets
+from tornado.httpserver import HTTPServer
+from tornado.ioloop import IOLoop
 
 import models
 from models import specs
@@ -707,8 +714,6 @@ def _margins_text(u: Update, spec: dict) -> str:
 
 def application(catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
     """A Bokeh `Application` whose every session is a `Page` of `plant`'s controller `label` (default its first)."""
-    from bokeh.application import Application
-    from bokeh.application.handlers import FunctionHandler
 
     def make(doc):
         page = Page(catalog, plants, plant, label)
@@ -735,12 +740,6 @@ def serve(
     plants : the plant picker's names;  plant, label : what the page opens with
     ready : called with the URL once the server listens (default: print it)
     """
-    from bokeh.server.server import BaseServer
-    from bokeh.server.tornado import BokehTornado
-    from bokeh.server.util import bind_sockets
-    from tornado.httpserver import HTTPServer
-    from tornado.ioloop import IOLoop
-
     # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
     sockets, port = bind_sockets("127.0.0.1", port)
     tornado_app = BokehTornado(

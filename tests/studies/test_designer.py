@@ -437,3 +437,14 @@ def test_the_page_shows_labels_and_messages_as_text_in_its_html():
         "half plane<br>loopshaping specs (&lt;IV.11&gt;): crossover met, phase_margin not checked"
     )
     assert type(app.fragment("busy", "designing")) is str  # a plain str for Bokeh's Div
+
+
+def test_the_command_without_bokeh_says_what_to_install():
+    code = (
+        "import sys; sys.modules['bokeh'] = None\n"  # as if the optional "designer" extra were not installed
+        "from studies.designer.__main__ import main\n"
+        "main(['arm'])"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert "the designer's page needs bokeh (pip install 'codesign-control[designer]')" in done.stderr
