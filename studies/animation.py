@@ -190,6 +190,8 @@ def write_gif(
 
 
 def _artist(ax, prim: dict, dpi: int) -> Artist:
+    """The matplotlib artist of primitive `prim` (`studies.drawing`), added to `ax`; a line `w` wide is
+    drawn `w` pixels wide at `dpi` dots per inch, as the SVG page draws it."""
     width = prim.get("w", 1.0) * 72 / dpi
     artist: Artist
     if prim["k"] == "line":
@@ -215,6 +217,7 @@ def _artist(ax, prim: dict, dpi: int) -> Artist:
 
 
 def _update(artist, prim: dict) -> None:
+    """Move `artist` (made by `_artist` from a primitive of the same kind) to primitive `prim`'s place."""
     if prim["k"] == "line":
         points = np.array(prim["p"])
         artist.set_data(points[:, 0], points[:, 1])
@@ -230,6 +233,8 @@ def _update(artist, prim: dict) -> None:
 
 # ------------------------------------------------------------------------------- HTML
 def _rounded(value, digits: int = 4):
+    """`value` (a float, or lists and dicts of them) with every float rounded to `digits` decimals: the page's
+    data stay small."""
     if isinstance(value, float):
         return round(value, digits)
     if isinstance(value, list):

@@ -154,6 +154,8 @@ def _svg(fig: Figure, salt: str) -> str:
 
 
 def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure, list]:
+    """A figure `width` inches wide of `count` axes in rows of `columns`, each row `height` inches (plus
+    1.2 in for the title and legend); the unused axes of the last row hidden."""
     rows = -(-count // columns)
     fig = mpl_figure.Figure(figsize=(width, height * rows + 1.2))
     axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False)).ravel()
@@ -163,6 +165,8 @@ def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure
 
 
 def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
+    """One legend of `labels` (markers, or line styles when `marker` is False) under the axes, with room
+    made for its rows; each label's text gets the id ``legend-label-<i>`` in the SVG."""
     handles = [
         mpl_lines.Line2D(
             [],

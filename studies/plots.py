@@ -169,6 +169,8 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
 
 
 def _frequency_grid(loops_, spec) -> np.ndarray:
+    """600 log-spaced frequencies (rad/s) from a decade below the spec's lowest mark (at most 1e-3) up to
+    just under the smallest Nyquist frequency π/Ts of the loops."""
     nyquist = min(np.pi / lp.sample_period for lp in loops_)
     marks = [f for f in (spec.low_frequency, spec.high_frequency, spec.crossover) if f]
     low = min([1e-3, *(m / 10 for m in marks)])

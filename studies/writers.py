@@ -211,6 +211,10 @@ DEFINITIONS = (
 
 
 def _loop_rows(loops_found: dict, specs, checks: dict) -> list:
+    """The rows of loops.csv: per controller and loop, its margins (`studies.loops.LoopGain.margins`), the
+    real part of its slowest closed-loop pole in the s-plane (1/s), whether the discrete closed loop is
+    stable, and the verdict of each loopshaping spec of that loop (`checks`: (label, item) -> {check: bool}).
+    """
     rows = []
     for label, found in loops_found.items():
         for which, lp in found.items():
@@ -479,6 +483,8 @@ def status_lines(table) -> list:
 
 
 def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> str:
+    """table.md: the caption, the verdict grid and what each row misses, how the rows ran, the metrics (angles
+    in degrees), the Monte Carlo's worst case and spread, the linear loop analysis, the notes and run time."""
     study, plant = result.study, result.plant
     columns = _unit_columns(study.tracked_unit, study.input_unit)
     rows = result.table.to_dict("records")
@@ -602,6 +608,9 @@ def _run_of(info: dict, run_id: str | None) -> str:
 
 
 def _cell(table, controller: str, scenario: str = "step") -> str:
+    """A cell of summary.md: the verdict's symbol, then settling time (s) / overshoot (%), or the status
+    (up to its first colon) of a row that is not ok and never settled; "—" when the plant has no such
+    controller."""
     rows = table[(table.controller == controller) & (table.scenario == scenario)]
     if rows.empty:
         return "—"

@@ -49,9 +49,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-# The update's small dense linear algebra (a 5 x 5 matrix exponential) takes 15 ms instead of 0.1 ms when
-# OpenBLAS spreads it over threads on a loaded 2-core machine; it only takes effect when numpy is not
-# imported yet (as under ``python -m studies.designer`` and ``benchmarks/designer.py``).
+# One OpenBLAS thread: the update's small matrix exponential is far slower spread over threads on a loaded
+# machine (measured in docs/designer.md). It takes effect only where numpy is not imported yet (as under
+# ``python -m studies.designer`` and ``benchmarks/designer.py``).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
@@ -112,10 +112,12 @@ class GainControl:
 
     @property
     def log_high(self) -> float:
+        """log10 |value| at the range's end farther from zero."""
         return math.log10(max(abs(self.low), abs(self.high)))
 
     @property
     def sign(self) -> float:
+        """+1.0 or -1.0: the design's sign, which every value in the range keeps."""
         return math.copysign(1.0, self.design)
 
     def from_log(self, exponent: float) -> float:
@@ -224,6 +226,7 @@ class Update:
 
     @property
     def diverged(self) -> bool:
+        """Whether the run diverged (its status says at what time)."""
         return self.status.startswith("diverged")
 
     def verdict_text(self) -> str:
@@ -379,6 +382,8 @@ class Designer:
         return self.block
 
     def _which_loop(self) -> str:
+        """Where the loop is broken: the loop of the case's loopshaping spec that names this controller (as its
+        design or baseline), else "outer" for a cascade and "input" for a single loop."""
         for spec in self.case.loops:
             if spec.loop == "input" or isinstance(self.block, Cascade):
                 if spec.design == self.label or spec.baseline == self.label:
@@ -395,6 +400,7 @@ class Designer:
         return with_values(self.block, self.controls, values or {})
 
     def scenario(self, name: str) -> Scenario:
+        """The scenario `name` among those the designer offers (`SCENARIOS`); ValueError naming them otherwise."""
         if name not in self.scenarios:
             raise ValueError(f"scenario must be one of {', '.join(self.scenarios)}, got {name!r}")
         return self.scenarios[name]
@@ -459,6 +465,8 @@ class Designer:
         return out
 
     def _analyse(self, block: Block, run, out: Update) -> None:
+        """Fill `out`'s loop analysis: the Bode plot over `omega`, the margins, the root locus over `LOCUS_GAINS`
+        and the closed-loop poles (s-plane), and the loopshaping spec's checks and bounds."""
         design = self.loop_gain(block, run)
         response = design.frequency_response(self.omega)
         out.loop = self.which

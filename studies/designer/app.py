@@ -185,6 +185,9 @@ class Page:
 
     # ------------------------------------------------------------- layout
     def _figures(self) -> dict:
+        """The page's figures, drawn from the data sources: "response" (with the Monte Carlo envelope), "input"
+        (with the actuator limit), "magnitude" and "phase" of the loop gain (with the spec's bounds), "locus"
+        and "scene" (the animated drawing)."""
         s = self.sources
         response = figure(
             width=WIDTH,
@@ -328,6 +331,7 @@ class Page:
         self.refresh()
 
     def _control(self, kind: str, key: str) -> GainControl:
+        """The designer's current control `key` of `kind` ("gain" or "pole")."""
         controls = self.designer.controls if kind == "gain" else self.designer.pole_controls
         return next(c for c in controls if c.key == key)
 
@@ -376,6 +380,8 @@ class Page:
         threading.Thread(target=work, name="designer-design", daemon=True).start()
 
     def _designed(self, old: str, new: str, found, error: str | None) -> None:
+        """Back in the document's thread after `_on_plant`'s design: show plant `new`'s first controller, or
+        the error and plant `old` again."""
         self.plant.disabled = False
         if found is None:
             self.verdict.text = fragment("error", error)
@@ -391,6 +397,7 @@ class Page:
         self.load(labels[0])
 
     def _on_controller(self, old: str, new: str) -> None:
+        """The controller picker changed: show controller `new` at its design (on an error, `old` stays)."""
         if self.busy:
             return
         try:
@@ -421,15 +428,18 @@ class Page:
             doc.add_next_tick_callback(self._refresh_pending)
 
     def _refresh_pending(self) -> None:
+        """The redraw `_dragged` scheduled: one update for the gains in force."""
         self.pending = False
         self.refresh()
 
     def _on_slider(self, kind: str, c: GainControl, exponent: float) -> None:
+        """A slider was let go at log10 |value| = `exponent`: take that value."""
         if self.busy:
             return
         self._accept(kind, c, c.from_log(exponent))
 
     def _on_text(self, kind: str, c: GainControl, text: str) -> None:
+        """A value was typed: take it if `GainControl.parse` accepts it, else show why and keep the value in force."""
         if self.busy:
             return
         error = self.rows[(kind, c.key)][3]
@@ -444,6 +454,7 @@ class Page:
         self._accept(kind, c, value)
 
     def _accept(self, kind: str, c: GainControl, value: float) -> None:
+        """Put `value` in force for control `c`: a gain, or a desired pole (the gains are then redesigned); redraw."""
         self._set_widgets(kind, c, value)
         if kind == "gain":
             self.values[c.key] = value
@@ -458,6 +469,7 @@ class Page:
         self.refresh()
 
     def _set_widgets(self, kind: str, c: GainControl, value: float) -> None:
+        """Show `value` on control `c`'s slider and text input without their callbacks running."""
         _, slider, text, _ = self.rows[(kind, c.key)]
         self.busy = True
         try:
@@ -467,12 +479,14 @@ class Page:
             self.busy = False
 
     def _on_scenario(self, attr, old, new) -> None:
+        """The scenario picker changed: redraw on scenario `new`."""
         if self.busy:
             return
         self.scenario = new
         self.refresh()
 
     def _on_reset(self) -> None:
+        """Back to the text's design: its poles (for a pole-placement design) and gains."""
         d = self.designer
         if d.pole_controls:
             d.place(None)
@@ -483,6 +497,7 @@ class Page:
         self.refresh()
 
     def _on_export(self) -> None:
+        """Put the gains and C step (`Designer.export`) as JSON into the hidden export div, which downloads it."""
         d = self.designer
         try:
             data = d.export(self.values) | {"file": f"{d.case.plant}_{d.label}_gains.json".replace(" ", "_")}
@@ -492,6 +507,8 @@ class Page:
         self.export_data.text = json.dumps(data, indent=1)
 
     def _on_tune(self) -> None:
+        """Tune from the gains in force in a thread (`Designer.tune`), reporting progress every 5 iterations;
+        `_tuned` shows the result."""
         if self.tuning:
             return
         self.tuning = True
@@ -522,6 +539,8 @@ class Page:
         threading.Thread(target=work, name="designer-tune", daemon=True).start()
 
     def _tuned(self, designer: Designer, tuned: dict | None, message: str) -> None:
+        """Back in the document's thread after tuning: show `message`, and the tuned gains if this designer is
+        still the one shown."""
         self.tuning = False
         self.tune_button.disabled = False
         self.tune_status.text = message
@@ -560,6 +579,8 @@ class Page:
         self.margins.text += fragment("envelope", e["samples"], e["diverged"])
 
     def draw(self, u: Update) -> None:
+        """Draw update `u`: the response (up to a divergence), the input and its limit, the verdict, the Bode
+        plot with the spec's bounds, the root locus and poles, the margins line and the animation."""
         s = self.sources
         keep = np.ones(len(u.t), dtype=bool) if not u.diverged else u.t <= float(u.status.split("= ")[1].split()[0])
         s["response"].data = {
@@ -665,6 +686,7 @@ class Page:
         self.readout.text = f"t = {run.t[k]:.2f} s: {self.designer.case.tracked} = {tracked:.4g} {self.unit}"
 
     def _on_play(self) -> None:
+        """Play the animation in real time from the slider's time (from 0 at the end), or pause it."""
         doc = self.layout.document
         if doc is None:
             return
