@@ -12,29 +12,28 @@ the drawing with the actuator limit. The reference marker carries a label.
 
 from __future__ import annotations
 
-import html
-import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+from models import deferred, files
 
-import numpy as np  # noqa: E402
-from matplotlib.artist import Artist  # noqa: E402
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Circle, Polygon  # noqa: E402
-from PIL import Image  # noqa: E402
+from . import style, templates
+from .drawing import GROUND, REFERENCE, text
 
-from models import files  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
 
-from . import style  # noqa: E402
-from .drawing import GROUND, REFERENCE, text  # noqa: E402
+# Matplotlib and Pillow are imported at the first GIF, not with the writers; the frames are drawn on an
+# Agg canvas of their own (no pyplot, no global backend).
+mpl_figure = deferred.module("matplotlib.figure")
+mpl_lines = deferred.module("matplotlib.lines")
+mpl_patches = deferred.module("matplotlib.patches")
+backend_agg = deferred.module("matplotlib.backends.backend_agg")
+pil_image = deferred.module("PIL.Image")
 
 
 def draw(case, plant, x, reference: float) -> list:
@@ -164,8 +163,8 @@ def write_gif(
     xmin, xmax, ymin, ymax = view(shapes)
     aspect = (ymax - ymin) / (xmax - xmin)
     height = min(5.0, max(2.2, 5.0 * aspect)) + 0.7
-    fig = Figure(figsize=(5.0, height))
-    canvas = FigureCanvasAgg(fig)
+    fig = mpl_figure.Figure(figsize=(5.0, height))
+    canvas = backend_agg.FigureCanvasAgg(fig)
     ax = fig.add_axes((0.02, 0.02, 0.96, 1 - 0.75 / height))
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
@@ -180,9 +179,9 @@ def write_gif(
         pace = "" if abs(speed - 1) < 0.05 else f", {speed:.3g}x speed"
         title.set_text(f"{plant.title}\n{label}: t = {t:.2f} s{pace}\n{readout}")
         canvas.draw()
-        images.append(Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba()).convert("RGB"))
+        images.append(pil_image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba()).convert("RGB"))
     palette = images[len(images) // 2].quantize(colors=64)
-    frames_p = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
+    frames_p = [im.quantize(palette=palette, dither=pil_image.Dither.NONE) for im in images]
     with files.atomic_path(path) as tmp:
         frames_p[0].save(
             tmp, format="GIF", save_all=True, append_images=frames_p[1:], duration=frame_ms, loop=0, optimize=False
@@ -191,11 +190,13 @@ def write_gif(
 
 
 def _artist(ax, prim: dict, dpi: int) -> Artist:
+    """The matplotlib artist of primitive `prim` (`studies.drawing`), added to `ax`; a line `w` wide is
+    drawn `w` pixels wide at `dpi` dots per inch, as the SVG page draws it."""
     width = prim.get("w", 1.0) * 72 / dpi
     artist: Artist
     if prim["k"] == "line":
         points = np.array(prim["p"])
-        artist = Line2D(
+        artist = mpl_lines.Line2D(
             points[:, 0],
             points[:, 1],
             color=prim["c"],
@@ -205,17 +206,18 @@ def _artist(ax, prim: dict, dpi: int) -> Artist:
         )
         ax.add_line(artist)
     elif prim["k"] == "poly":
-        artist = Polygon(prim["p"], closed=True, facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
+        artist = mpl_patches.Polygon(prim["p"], closed=True, facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
         ax.add_patch(artist)
     elif prim["k"] == "text":
         artist = ax.text(*prim["p"], prim["s"], color=prim["c"], fontsize=7, ha="center", va="center")
     else:
-        artist = Circle(prim["p"], prim["r"], facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
+        artist = mpl_patches.Circle(prim["p"], prim["r"], facecolor=prim["f"], edgecolor=prim["c"], linewidth=1)
         ax.add_patch(artist)
     return artist
 
 
 def _update(artist, prim: dict) -> None:
+    """Move `artist` (made by `_artist` from a primitive of the same kind) to primitive `prim`'s place."""
     if prim["k"] == "line":
         points = np.array(prim["p"])
         artist.set_data(points[:, 0], points[:, 1])
@@ -231,6 +233,8 @@ def _update(artist, prim: dict) -> None:
 
 # ------------------------------------------------------------------------------- HTML
 def _rounded(value, digits: int = 4):
+    """`value` (a float, or lists and dicts of them) with every float rounded to `digits` decimals: the page's
+    data stay small."""
     if isinstance(value, float):
         return round(value, digits)
     if isinstance(value, list):
@@ -276,15 +280,8 @@ def write_html(
     }
     for label, run in runs.items():
         data["runs"][label] = run_data(case, plant, run, max_frames)
-    # One pass: a label containing a placeholder is shown as it is, never filled in. '<' is escaped in
-    # the JSON so no label can close the script.
-    page = files.fill_template(
-        _TEMPLATE,
-        {
-            "__TITLE__": html.escape(f"{plant.title}: the controllers on the text's step"),
-            "__CAPTION__": html.escape(caption),
-            "__DATA__": json.dumps(data, separators=(",", ":"), ensure_ascii=False).replace("<", "\\u003c"),
-        },
+    page = templates.render(
+        "animation.html.j2", title=f"{plant.title}: the controllers on the text's step", caption=caption, data=data
     )
     return files.write_text(path, page)
 
@@ -304,219 +301,3 @@ def run_data(case, plant, run, max_frames: int) -> dict:
         "u": [round(float(v), 5) for v in command],
         "limit": float(np.max(run.input_limit)),
     }
-
-
-_TEMPLATE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<title>__TITLE__</title>
-<style>
-  body { font-family: system-ui, sans-serif; margin: 1.5em; color: #222; }
-  .stage { display: flex; gap: 1em; flex-wrap: wrap; align-items: flex-start; }
-  #scene { width: 640px; max-width: 100%; height: 420px; border: 1px solid #ccc; background: #fafafa; display: block; }
-  #input { width: 300px; height: 420px; border: 1px solid #ccc; background: #fff; display: block; }
-  .controls { display: flex; gap: 0.8em; align-items: center; flex-wrap: wrap; max-width: 960px; margin-top: 0.6em; }
-  #slider { flex: 1; min-width: 200px; }
-  #time { font-variant-numeric: tabular-nums; min-width: 6em; }
-  #readout { font-size: 0.9em; color: #444; margin-top: 0.4em; }
-  #verdict { font-size: 0.9em; margin-left: 0.5em; }
-  .caption { font-size: 0.85em; color: #555; max-width: 960px; }
-</style>
-</head>
-<body>
-<h1 style="font-size:1.2em">__TITLE__</h1>
-<p class="caption">__CAPTION__</p>
-<div class="controls">
-  <label>controller <select id="controller"></select></label>
-  <label>ghost <select id="ghost"><option value="">none</option></select></label>
-  <span id="verdict"></span>
-</div>
-<div class="stage">
-<svg id="scene" xmlns="http://www.w3.org/2000/svg" preserveAspectRatio="xMidYMid meet">
-  <g id="world"><g id="ghostframe" opacity="0.3"></g><g id="frame"></g></g>
-</svg>
-<svg id="input" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 300 420">
-  <text x="150" y="18" text-anchor="middle" font-size="13" id="input-title"></text>
-  <g id="input-plot"></g>
-  <line id="cursor" y1="30" y2="390" stroke="#888" stroke-width="1"></line>
-  <text id="input-value" x="150" y="410" text-anchor="middle" font-size="12"></text>
-</svg>
-</div>
-<div class="controls">
-  <button id="play" type="button">Play</button>
-  <input id="slider" type="range" min="0" value="0" step="1" aria-label="time">
-  <span id="time">t = 0.00 s</span>
-  <label>speed <select id="speed"><option value="0.5">0.5x</option><option value="1" selected>1x</option>
-  <option value="2">2x</option><option value="5">5x</option><option value="10">10x</option></select></label>
-</div>
-<div id="readout"></div>
-<script>
-"use strict";
-const DATA = __DATA__;
-const NS = "http://www.w3.org/2000/svg";
-const scene = document.getElementById("scene");
-const world = document.getElementById("world");
-const frameGroup = document.getElementById("frame");
-const ghostGroup = document.getElementById("ghostframe");
-const slider = document.getElementById("slider");
-const playButton = document.getElementById("play");
-const timeLabel = document.getElementById("time");
-const readout = document.getElementById("readout");
-const speedSelect = document.getElementById("speed");
-const picker = document.getElementById("controller");
-const ghostPicker = document.getElementById("ghost");
-const verdictLabel = document.getElementById("verdict");
-const inputPlot = document.getElementById("input-plot");
-const cursor = document.getElementById("cursor");
-const inputValue = document.getElementById("input-value");
-world.setAttribute("transform", "scale(1,-1)");
-for (const label of DATA.order) {
-  for (const select of [picker, ghostPicker]) {
-    const option = document.createElement("option");
-    option.value = label;
-    option.textContent = label;
-    select.appendChild(option);
-  }
-}
-
-function points(list) { return list.map(p => `${p[0]},${p[1]}`).join(" "); }
-
-function element(prim, height) {
-  let el;
-  if (prim.k === "line") {
-    el = document.createElementNS(NS, "polyline");
-    el.setAttribute("points", points(prim.p));
-    el.setAttribute("fill", "none");
-    el.setAttribute("stroke-width", prim.w);
-    el.setAttribute("stroke-linecap", "round");
-    if (prim.d) el.setAttribute("stroke-dasharray", "6 4");
-  } else if (prim.k === "poly") {
-    el = document.createElementNS(NS, "polygon");
-    el.setAttribute("points", points(prim.p));
-    el.setAttribute("fill", prim.f);
-    el.setAttribute("stroke-width", 1);
-  } else if (prim.k === "text") {
-    el = document.createElementNS(NS, "text");
-    el.setAttribute("transform", `translate(${prim.p[0]},${prim.p[1]}) scale(1,-1)`);
-    el.setAttribute("font-size", 0.045 * height);
-    el.setAttribute("text-anchor", "middle");
-    el.setAttribute("dominant-baseline", "middle");
-    el.setAttribute("fill", prim.c);
-    el.setAttribute("class", "label");
-    el.textContent = prim.s;
-    return el;
-  } else {
-    el = document.createElementNS(NS, "circle");
-    el.setAttribute("cx", prim.p[0]);
-    el.setAttribute("cy", prim.p[1]);
-    el.setAttribute("r", prim.r);
-    el.setAttribute("fill", prim.f);
-    el.setAttribute("stroke-width", 1);
-  }
-  el.setAttribute("stroke", prim.c);
-  el.setAttribute("vector-effect", "non-scaling-stroke");
-  return el;
-}
-
-// The input panel: t from 0 to the end across x in [30, 290], u from -1.3 L to 1.3 L up y in [390, 30].
-let run = DATA.runs[DATA.selected], ghost = null, current = 0, scale = {};
-function svg(name, attributes, text) {
-  const el = document.createElementNS(NS, name);
-  for (const [k, v] of Object.entries(attributes)) el.setAttribute(k, v);
-  if (text !== undefined) el.textContent = text;
-  return el;
-}
-function drawInput() {
-  const runs = [run].concat(ghost ? [ghost] : []);
-  const limit = Math.max(...runs.map(r => r.limit));
-  const top = Math.max(1.3 * limit, ...runs.map(r => Math.max(...r.u.map(Math.abs))));
-  const end = Math.max(...runs.map(r => r.t[r.t.length - 1]));
-  scale = { x: t => 30 + 260 * t / end, y: u => 210 - 180 * u / top };
-  const parts = [svg("line", { x1: 30, x2: 290, y1: scale.y(0), y2: scale.y(0), stroke: "#bbb" })];
-  for (const sign of [1, -1]) {
-    parts.push(svg("line", { x1: 30, x2: 290, y1: scale.y(sign * run.limit), y2: scale.y(sign * run.limit),
-                            stroke: "#c00000", "stroke-dasharray": "5 3", class: "limit" }));
-  }
-  parts.push(svg("text", { x: 288, y: scale.y(run.limit) - 4, "text-anchor": "end", "font-size": 11,
-                          fill: "#c00000", id: "limit-label" },
-                 `limit ±${+run.limit.toPrecision(3)} ${DATA.input_unit}`));
-  parts.push(svg("text", { x: 32, y: 402, "font-size": 11, fill: "#555" }, "0 s"));
-  parts.push(svg("text", { x: 290, y: 402, "font-size": 11, fill: "#555", "text-anchor": "end" },
-                 `${end.toFixed(1)} s`));
-  for (const [r, opacity] of runs.map((r, i) => [r, i ? 0.35 : 1])) {
-    const label = r === run ? picker.value : ghostPicker.value;
-    const path = r.u.map((u, i) => `${scale.x(r.t[i]).toFixed(1)},${scale.y(u).toFixed(1)}`).join(" ");
-    parts.push(svg("polyline", { points: path, fill: "none", stroke: DATA.colors[label], "stroke-width": 1.5,
-                                opacity, class: r === run ? "command" : "ghost-command" }));
-  }
-  inputPlot.replaceChildren(...parts);
-  document.getElementById("input-title").textContent = `commanded ${DATA.input} (${DATA.input_unit})`;
-}
-
-function ghostIndex(t) {
-  let k = 0;
-  while (k < ghost.t.length - 1 && ghost.t[k + 1] <= t + 1e-9) k++;
-  return k;
-}
-
-function show(index) {
-  current = Math.max(0, Math.min(run.t.length - 1, index));
-  const height = run.view[3];
-  frameGroup.replaceChildren(...run.frames[current].map(p => element(p, height)));
-  ghostGroup.replaceChildren(...(ghost ? ghost.frames[ghostIndex(run.t[current])].map(p => element(p, height)) : []));
-  slider.value = String(current);
-  timeLabel.textContent = `t = ${run.t[current].toFixed(2)} s`;
-  readout.textContent = run.readouts[current];
-  const x = scale.x(run.t[current]);
-  cursor.setAttribute("x1", x);
-  cursor.setAttribute("x2", x);
-  inputValue.textContent = `${DATA.input} = ${run.u[current].toPrecision(3)} ${DATA.input_unit}`;
-}
-
-function select(label) {
-  const time = run.t[current];
-  run = DATA.runs[label];
-  picker.value = label;
-  const [vx, vy, vw, vh] = run.view;
-  scene.setAttribute("viewBox", `${vx} ${-(vy + vh)} ${vw} ${vh}`);
-  slider.max = String(run.t.length - 1);
-  verdictLabel.textContent = DATA.verdicts[label] || "";
-  drawInput();
-  let k = 0;
-  while (k < run.t.length - 1 && run.t[k + 1] <= time + 1e-9) k++;
-  show(k);
-}
-
-let playing = false, lastStamp = null, simTime = 0;
-function tick(stamp) {
-  if (!playing) return;
-  if (lastStamp !== null) simTime += (stamp - lastStamp) / 1000 * Number(speedSelect.value);
-  lastStamp = stamp;
-  let index = current;
-  while (index < run.t.length - 1 && run.t[index + 1] <= simTime) index++;
-  show(index);
-  if (index >= run.t.length - 1) { stop(); return; }
-  requestAnimationFrame(tick);
-}
-function start() {
-  if (current >= run.t.length - 1) show(0);
-  playing = true; lastStamp = null; simTime = run.t[current];
-  playButton.textContent = "Pause";
-  requestAnimationFrame(tick);
-}
-function stop() { playing = false; playButton.textContent = "Play"; }
-playButton.addEventListener("click", () => (playing ? stop() : start()));
-slider.addEventListener("input", () => { stop(); show(Number(slider.value)); });
-picker.addEventListener("change", () => select(picker.value));
-ghostPicker.addEventListener("change", () => {
-  ghost = ghostPicker.value ? DATA.runs[ghostPicker.value] : null;
-  drawInput();
-  show(current);
-});
-select(DATA.selected);
-show(0);
-</script>
-</body>
-</html>
-"""

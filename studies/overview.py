@@ -15,31 +15,38 @@ Colours, line styles and markers come from `studies.style`.
 
 from __future__ import annotations
 
-import html
 import io
 import math
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+from models import deferred, specs
 
-import numpy as np  # noqa: E402
-from matplotlib.backends.backend_svg import FigureCanvasSVG  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
+from . import style, templates
 
-from models import specs  # noqa: E402
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+else:
+    pd = deferred.module("pandas")
 
-from . import style  # noqa: E402
+# Matplotlib is imported at the first picture, not with the writers; the figures are drawn on an SVG
+# canvas of their own (no pyplot, no global backend).
+matplotlib = deferred.module("matplotlib")
+mpl_figure = deferred.module("matplotlib.figure")
+mpl_lines = deferred.module("matplotlib.lines")
+backend_svg = deferred.module("matplotlib.backends.backend_svg")
 
-#: Horizontal box plots: `orientation` from matplotlib 3.10 on, `vert` before (deprecated since).
-_HORIZONTAL = (
-    {"orientation": "horizontal"}
-    if tuple(int(v) for v in matplotlib.__version__.split(".")[:2]) >= (3, 10)
-    else {"vert": False}
-)
+
+def _horizontal() -> dict:
+    """Keywords of a horizontal box plot: `orientation` from matplotlib 3.10 on, `vert` before
+    (deprecated since)."""
+    version = tuple(int(v) for v in matplotlib.__version__.split(".")[:2])
+    return {"orientation": "horizontal"} if version >= (3, 10) else {"vert": False}
+
 
 #: Relative ITAE at which the heat map's colour is fully "bad" (ten times the best on the plant).
 WORST_RATIO = 10.0
@@ -89,59 +96,68 @@ def heat_map(studies) -> str:
     Parameters
     ----------
     studies : list of (plant name, run.json dict, table DataFrame)
+
+    Returns
+    -------
+    The table as one line of HTML (template ``heatmap.html.j2``), every label and title escaped.
     """
     labels = controller_order([t for _, _, t in studies])
     ratios = {name: relative_itae(table) for name, _, table in studies}
     rows = {name: step_rows(table) for name, _, table in studies}
-    head = "".join(f'<th scope="col">{html.escape(info["title"])}</th>' for _, info, _ in studies)
-    body = []
-    for label in labels:
-        look = style.of(label)
-        cells = [
-            f'<th scope="row"><span class="swatch" style="background:{look.color}"></span>{html.escape(label)}</th>'
-        ]
-        for name, _, _ in studies:
-            if label not in rows[name].index:
-                cells.append(f'<td class="absent" data-controller="{html.escape(label)}" data-plant="{name}">—</td>')
-                continue
-            row = rows[name].loc[label]
-            verdict = str(row.get("verdict", "")) if isinstance(row.get("verdict", ""), str) else ""
-            ratio = ratios[name].get(label, math.nan)
-            number = f"{ratio:.3g}×" if np.isfinite(ratio) else ""
-            detail = str(row.get("verdict_detail", "")) if isinstance(row.get("verdict_detail"), str) else ""
-            title = f"{label} on {name}: {verdict}" + (f" ({detail})" if detail else "")
-            cells.append(
-                f'<td data-controller="{html.escape(label)}" data-plant="{name}" '
-                f'data-verdict="{html.escape(verdict)}" title="{html.escape(title)}" '
-                f'style="background:{_ratio_color(ratio)}"><span class="mark" '
-                f'style="color:{style.verdict_color(verdict)}">{style.verdict_symbol(verdict)}</span> '
-                f"{number}</td>"
-            )
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    legend = " ".join(
-        f'<span style="color:{color}">{symbol}</span> {html.escape(label)}'
-        for label, (symbol, color) in style.VERDICTS.items()
+    return templates.render(
+        "heatmap.html.j2",
+        worst_ratio=f"{WORST_RATIO:g}",
+        legend=[
+            {"label": label, "symbol": symbol, "color": color} for label, (symbol, color) in style.VERDICTS.items()
+        ],
+        titles=[info["title"] for _, info, _ in studies],
+        rows=[
+            {
+                "label": label,
+                "color": style.of(label).color,
+                "cells": [_heat_cell(label, name, rows[name], ratios[name]) for name, _, _ in studies],
+            }
+            for label in labels
+        ],
     )
-    return (
-        '<table id="heatmap" class="heatmap"><caption>Step ITAE relative to the best on each plant '
-        f"(1× = best; colour from green to red at {WORST_RATIO:g}× and beyond) and the row's verdict: "
-        f"{legend}</caption><thead><tr><th></th>{head}</tr></thead><tbody>" + "".join(body) + "</tbody></table>"
-    )
+
+
+def _heat_cell(label: str, plant: str, rows, ratios: dict) -> dict:
+    """What the heat map shows of controller `label` on `plant` (`rows`: its step rows by controller;
+    `ratios`: `relative_itae` of the plant): {"absent": True} when the plant has no such controller."""
+    if label not in rows.index:
+        return {"absent": True, "plant": plant}
+    row = rows.loc[label]
+    verdict = str(row.get("verdict", "")) if isinstance(row.get("verdict", ""), str) else ""
+    ratio = ratios.get(label, math.nan)
+    detail = str(row.get("verdict_detail", "")) if isinstance(row.get("verdict_detail"), str) else ""
+    return {
+        "absent": False,
+        "plant": plant,
+        "verdict": verdict,
+        "title": f"{label} on {plant}: {verdict}" + (f" ({detail})" if detail else ""),
+        "background": _ratio_color(ratio),
+        "color": style.verdict_color(verdict),
+        "symbol": style.verdict_symbol(verdict),
+        "number": f"{ratio:.3g}×" if np.isfinite(ratio) else "",
+    }
 
 
 def _svg(fig: Figure, salt: str) -> str:
     """The figure as an inline SVG element: text kept as text, no date, ids salted per figure."""
     buffer = io.StringIO()
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": salt}):
-        FigureCanvasSVG(fig).print_svg(buffer, metadata={"Date": None})
+        backend_svg.FigureCanvasSVG(fig).print_svg(buffer, metadata={"Date": None})
     text = buffer.getvalue()
     text = text[text.index("<svg") :]
     return re.sub(r'<svg([^>]*?) width="[^"]*" height="[^"]*"', r'<svg\1 style="width:100%;height:auto"', text, count=1)
 
 
 def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure, list]:
+    """A figure `width` inches wide of `count` axes in rows of `columns`, each row `height` inches (plus
+    1.2 in for the title and legend); the unused axes of the last row hidden."""
     rows = -(-count // columns)
-    fig = Figure(figsize=(width, height * rows + 1.2))
+    fig = mpl_figure.Figure(figsize=(width, height * rows + 1.2))
     axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False)).ravel()
     for ax in axes[count:]:
         ax.set_visible(False)
@@ -149,13 +165,15 @@ def _grid(count: int, columns: int, width: float, height: float) -> tuple[Figure
 
 
 def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
+    """One legend of `labels` (markers, or line styles when `marker` is False) under the axes, with room
+    made for its rows; each label's text gets the id ``legend-label-<i>`` in the SVG."""
     handles = [
-        Line2D(
+        mpl_lines.Line2D(
             [],
             [],
             color=style.of(label).color,
             marker=style.of(label).marker if marker else None,
-            linestyle="none" if marker else style.of(label).linestyle,  # type: ignore[arg-type]  # a str of the style table
+            linestyle="none" if marker else style.of(label).linestyle,
             markersize=7,
         )
         for label in labels
@@ -221,8 +239,6 @@ def boxplots(out: Path, studies) -> str | None:
     Boxes span the quartiles, whiskers 1.5 IQR, the line is the median; read from
     ``OUT/<plant>/monte_carlo.csv``. Controllers without samples on a plant are not drawn there.
     """
-    import pandas as pd
-
     found = []
     for name, info, _ in studies:
         path = Path(out) / name / "monte_carlo.csv"
@@ -246,7 +262,7 @@ def boxplots(out: Path, studies) -> str | None:
         if not data:
             ax.set_visible(False)
             continue
-        parts = ax.boxplot(data, patch_artist=True, widths=0.6, flierprops={"markersize": 3}, **_HORIZONTAL)
+        parts = ax.boxplot(data, patch_artist=True, widths=0.6, flierprops={"markersize": 3}, **_horizontal())
         for patch, label in zip(parts["boxes"], kept):
             look = style.of(label)
             patch.set_facecolor(look.color)

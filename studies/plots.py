@@ -9,26 +9,30 @@ labelled so.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
+from models import deferred, files
 
-import numpy as np  # noqa: E402
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+from . import style
 
-from models import files  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
-from . import style  # noqa: E402
+# Matplotlib is imported at the first figure, not with the writers. Each figure draws on its own Agg
+# canvas (the object-oriented API): no pyplot, so no global backend to choose.
+mpl_figure = deferred.module("matplotlib.figure")
+backend_agg = deferred.module("matplotlib.backends.backend_agg")
 
 #: Commands beyond this multiple of the actuator limit are cut off in input plots (and the plot says so).
 INPUT_PLOT_RANGE = 3.0
 
 
 def figure(width: float, height: float) -> Figure:
-    fig = Figure(figsize=(width, height))
-    FigureCanvasAgg(fig)
+    """A new figure of `width` × `height` inches on its own Agg canvas."""
+    fig = mpl_figure.Figure(figsize=(width, height))
+    backend_agg.FigureCanvasAgg(fig)
     return fig
 
 
@@ -165,6 +169,8 @@ def envelopes(result, path: Path, dpi: int = 110) -> Path | None:
 
 
 def _frequency_grid(loops_, spec) -> np.ndarray:
+    """600 log-spaced frequencies (rad/s) from a decade below the spec's lowest mark (at most 1e-3) up to
+    just under the smallest Nyquist frequency π/Ts of the loops."""
     nyquist = min(np.pi / lp.sample_period for lp in loops_)
     marks = [f for f in (spec.low_frequency, spec.high_frequency, spec.crossover) if f]
     low = min([1e-3, *(m / 10 for m in marks)])

@@ -118,6 +118,7 @@ def verdict_symbol(label: str) -> str:
 
 
 def verdict_color(label: str) -> str:
+    """The colour (hex) of a verdict label (grey for an unknown one)."""
     return VERDICTS.get(str(label), ("?", "#6e7781"))[1]
 
 

@@ -1,14 +1,14 @@
 """Every file a study leaves: its tables, answers, plots, animation, summary and index.
 
-Files, JSON and tables go through `models.files` (atomic writes, the JSON
-conventions, Markdown/HTML tables); this module decides what each study writes.
+Files, JSON and Markdown tables go through `models.files` (atomic writes, the
+JSON conventions); the HTML pages are Jinja2 templates (`studies.templates`).
+This module decides what each study writes.
 """
 
 from __future__ import annotations
 
 import datetime
 import hashlib
-import html
 import json
 import math
 import os
@@ -16,16 +16,16 @@ import secrets
 import shutil
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from models import specs
+from models import deferred, specs
 from models.files import (
     JSON_CONVENTIONS,
     escape_markdown,
     format_number,
     fresh_folder,
-    html_table,
     markdown_table,
     replace_folder,
     scaled,
@@ -33,6 +33,15 @@ from models.files import (
     write_json,
     write_text,
 )
+
+from . import animation, loops, overview, plots, style, templates, trajectories
+from .case import LoopSpec
+from .runner import STATUS_KINDS, status_kind, tracked_equilibrium
+
+if TYPE_CHECKING:
+    import pandas as pd
+else:
+    pd = deferred.module("pandas")
 
 #: Columns of the study table that measure compute time: they change from run to run, so they go to
 #: timings.csv, and table.csv and monte_carlo.csv are the same bytes for the same seed and settings.
@@ -126,9 +135,7 @@ def _unit_columns(tracked_unit: str, input_unit: str) -> list:
 
 
 def verdict_text(label) -> str:
-    """A verdict label with its symbol ("✓ meets specs"); empty for a missing one."""
-    from . import style
-
+    """A verdict label with its symbol ("✓ meets specs"); "—" for a missing one."""
     return f"{style.verdict_symbol(label)} {label}" if isinstance(label, str) and label else "—"
 
 
@@ -204,6 +211,10 @@ DEFINITIONS = (
 
 
 def _loop_rows(loops_found: dict, specs, checks: dict) -> list:
+    """The rows of loops.csv: per controller and loop, its margins (`studies.loops.LoopGain.margins`), the
+    real part of its slowest closed-loop pole in the s-plane (1/s), whether the discrete closed loop is
+    stable, and the verdict of each loopshaping spec of that loop (`checks`: (label, item) -> {check: bool}).
+    """
     rows = []
     for label, found in loops_found.items():
         for which, lp in found.items():
@@ -251,18 +262,41 @@ def write_study(result, out: str | os.PathLike, run_id: str | None = None) -> di
 
 
 def _write_files(result, folder: Path, run_id: str) -> dict:
-    import pandas as pd
+    """Write every file of `result` into `folder` (a fresh one); {kind: file name}, in the order written.
 
-    from . import animation, plots
-    from . import answers as answers_module
-    from . import loops as loops_module
-
+    The steps: the tables and answers (`write_tables`), the time responses (`write_responses`), the
+    linear loop analysis (`write_loop_analysis`), the animation (`write_animation`), the case's
+    trajectories, then table.md, which reports the time the files took, and run.json last, since its
+    manifest holds the SHA-256 of every other file (`run_record`).
+    """
     started = time.perf_counter()
-    study, plant, quick = result.study, result.plant, result.options.quick
-    dpi = 72 if quick else 100
-    files: dict = {}
-    notes = list(result.notes)
+    dpi = 72 if result.options.quick else 100
+    files = write_tables(result, folder)
+    files |= write_responses(result, folder, dpi)
+    loop_files, loop_rows, loop_notes = write_loop_analysis(result, folder, dpi)
+    files |= loop_files
+    animation_files, animation_notes = write_animation(result, folder)
+    files |= animation_files
+    notes = [*result.notes, *loop_notes, *animation_notes]
+    if result.trajectories is not None:
+        files |= trajectories.write_files(result.trajectories, folder)
+    result.timing["files_s"] = time.perf_counter() - started
+    write_text(folder / "table.md", _study_markdown(result, notes, loop_rows, run_id))
+    files["table.md"] = "table.md"
+    write_json(folder / "run.json", run_record(result, folder, files, notes, run_id))
+    return files
 
+
+def write_tables(result, folder: Path) -> dict:
+    """table.csv and monte_carlo.csv (without their compute times), timings.csv, answers.json and
+    answers.md of `result` in `folder`; {kind: file name} of those written (no monte_carlo.csv
+    without Monte Carlo samples)."""
+    # Imported here, not with the writers: studies.answers imports models.symbolic, which imports SymPy
+    # (its operator table), 0.5 to 1.3 s measured after the case registry; importing the writers (as the
+    # command line does to check its arguments) must not wait for it.
+    from .answers import format_answers
+
+    files: dict = {}
     table, samples = result.table, result.samples
     write_csv(folder / "table.csv", table.drop(columns=[c for c in TIMING_COLUMNS if c in table]))
     files["table.csv"] = "table.csv"
@@ -272,102 +306,122 @@ def _write_files(result, folder: Path, run_id: str) -> dict:
     write_csv(folder / "timings.csv", timings_frame(table, samples))
     files["timings.csv"] = "timings.csv"
     write_json(folder / "answers.json", {"_conventions": JSON_CONVENTIONS, **result.answers})
-    write_text(folder / "answers.md", answers_module.format_answers(study, result.answers, plant.title))
-    files |= {"answers.json": "answers.json", "answers.md": "answers.md"}
+    write_text(folder / "answers.md", format_answers(result.study, result.answers, result.plant.title))
+    return files | {"answers.json": "answers.json", "answers.md": "answers.md"}
 
-    for scenario in study.scenarios:
-        if not scenario.monte_carlo and plots.responses(result, scenario.name, folder / f"{scenario.name}.png", dpi):
-            files[f"{scenario.name}.png"] = f"{scenario.name}.png"
+
+def write_responses(result, folder: Path, dpi: int) -> dict:
+    """<scenario>.png of every scenario but the Monte Carlo, and monte_carlo.png (its envelopes), at
+    `dpi` dots per inch; {kind: file name} of those drawn (a scenario no controller ran has none)."""
+    files = {}
+    for scenario in result.study.scenarios:
+        name = f"{scenario.name}.png"
+        if not scenario.monte_carlo and plots.responses(result, scenario.name, folder / name, dpi):
+            files[name] = name
     if plots.envelopes(result, folder / "monte_carlo.png", dpi):
         files["monte_carlo.png"] = "monte_carlo.png"
+    return files
 
-    _, base = _tracked_value(result)
-    found, loop_notes = loops_module.analyse(plant, study, result.controllers, base, result.runs, result.truths)
-    notes += loop_notes
+
+def write_loop_analysis(result, folder: Path, dpi: int) -> tuple[dict, list, list]:
+    """The linear loop analysis of every block controller (`studies.loops`): bode_<loop>.png of each
+    loopshaping spec of the case (bode_input.png when none is at the plant input), loops.csv,
+    root_locus.png and poles.png.
+
+    Returns
+    -------
+    ({kind: file name} of the files written, the rows of loops.csv (dicts), notes on the loops not analysed)
+    """
+    study, quick = result.study, result.options.quick
+    _, base = tracked_equilibrium(result.plant, study)
+    found, notes = loops.analyse(result.plant, study, result.controllers, base, result.runs, result.truths)
+    files = {}
     checks = {}
     for spec in study.loops:
         baseline = found.get(spec.baseline, {}).get(spec.loop) if spec.baseline else None
         for label, loops_of in found.items():
             if spec.loop in loops_of:
-                checks[(label, spec.item)] = loops_module.spec_check(loops_of[spec.loop], spec, baseline)
+                checks[(label, spec.item)] = loops.spec_check(loops_of[spec.loop], spec, baseline)
         verdicts = {label: checks[(label, spec.item)] for label in found if (label, spec.item) in checks}
         name = f"bode_{spec.loop}.png"
         if plots.bode(result, found, spec, folder / name, verdicts, dpi):
             files[name] = name
     if not any(spec.loop == "input" for spec in study.loops):
-        from .case import LoopSpec
-
         plain = LoopSpec("", "input", design="", baseline=None)
         if plots.bode(result, found, plain, folder / "bode_input.png", None, dpi):
             files["bode_input.png"] = "bode_input.png"
-    loop_rows = _loop_rows(found, study.loops, checks)
-    if loop_rows:
-        write_csv(folder / "loops.csv", pd.DataFrame(loop_rows))
+    rows = _loop_rows(found, study.loops, checks)
+    if rows:
+        write_csv(folder / "loops.csv", pd.DataFrame(rows))
         files["loops.csv"] = "loops.csv"
     if plots.root_loci(result, found, folder / "root_locus.png", dpi, gains=100 if quick else 300):
         files["root_locus.png"] = "root_locus.png"
     if plots.pole_map(result, found, folder / "poles.png", dpi):
         files["poles.png"] = "poles.png"
+    return files, rows, notes
 
+
+def write_animation(result, folder: Path) -> tuple[dict, list]:
+    """animation.gif of the best controller in the step scenario (lowest ITAE) and animation.html of
+    every controller whose step did not diverge, the best shown first.
+
+    Returns
+    -------
+    ({kind: file name} of the files written, a note saying why there is no animation (or none))
+    """
+    study, plant, quick = result.study, result.plant, result.options.quick
     best = result.best("step")
     if study.drawing is None:
-        notes.append(f"no animation: the {study.plant} case has no drawing")
-    elif best is not None and (best, "step") in result.runs:
-        run = result.runs[(best, "step")]
-        animation.write_gif(
-            folder / "animation.gif", study, plant, run, best, max_frames=30 if quick else 100, dpi=64 if quick else 80
-        )
-        shown = {label: r for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is None}
-        left_out = [label for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is not None]
-        steps = result.table[result.table.scenario == "step"].set_index("controller")
-        step_verdicts = {label: verdict_text(steps.loc[label, "verdict"]) for label in shown if label in steps.index}
-        text = (
-            f"Nonlinear simulations of the text's step ({study.source}); first shown: {best}, the lowest ITAE. "
-            "Pick a controller, and a second one as a faint ghost; the commanded input is beside the drawing "
-            "with the actuator limit." + (f" Left out (diverged): {', '.join(left_out)}." if left_out else "")
-        )
-        animation.write_html(
-            folder / "animation.html",
-            study,
-            plant,
-            shown,
-            best,
-            text,
-            max_frames=150 if quick else 300,
-            verdicts=step_verdicts,
-        )
-        files |= {"animation.gif": "animation.gif", "animation.html": "animation.html"}
-    else:
-        notes.append("no animation: no controller completed the step scenario")
-
-    if result.trajectories is not None:
-        from . import trajectories
-
-        files |= trajectories.write_files(result.trajectories, folder)
-
-    result.timing["files_s"] = time.perf_counter() - started
-    write_text(folder / "table.md", _study_markdown(result, notes, loop_rows, run_id))
-    files["table.md"] = "table.md"
-    write_json(
-        folder / "run.json",
-        {
-            "plant": plant.name,
-            "title": plant.title,
-            "numeral": study.numeral,
-            "best": best,
-            "run_id": run_id,
-            "settings": run_settings(result),
-            "status": status_counts(result.table),
-            "timing": result.timing,
-            "notes": notes,
-            "files": files,
-            "tracked": study.tracked,
-            "tracked_unit": study.tracked_unit,
-            "input_unit": study.input_unit,
-            "sha256": {name: file_digest(folder / name) for name in sorted(files.values())},
-        },
+        return {}, [f"no animation: the {study.plant} case has no drawing"]
+    if best is None or (best, "step") not in result.runs:
+        return {}, ["no animation: no controller completed the step scenario"]
+    run = result.runs[(best, "step")]
+    animation.write_gif(
+        folder / "animation.gif", study, plant, run, best, max_frames=30 if quick else 100, dpi=64 if quick else 80
     )
-    return files
+    shown = {label: r for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is None}
+    left_out = [label for (label, name), r in result.runs.items() if name == "step" and r.diverged_at is not None]
+    steps = result.table[result.table.scenario == "step"].set_index("controller")
+    step_verdicts = {label: verdict_text(steps.loc[label, "verdict"]) for label in shown if label in steps.index}
+    text = (
+        f"Nonlinear simulations of the text's step ({study.source}); first shown: {best}, the lowest ITAE. "
+        "Pick a controller, and a second one as a faint ghost; the commanded input is beside the drawing "
+        "with the actuator limit." + (f" Left out (diverged): {', '.join(left_out)}." if left_out else "")
+    )
+    animation.write_html(
+        folder / "animation.html",
+        study,
+        plant,
+        shown,
+        best,
+        text,
+        max_frames=150 if quick else 300,
+        verdicts=step_verdicts,
+    )
+    return {"animation.gif": "animation.gif", "animation.html": "animation.html"}, []
+
+
+def run_record(result, folder: Path, files: dict, notes: list, run_id: str) -> dict:
+    """run.json of a study folder: the plant, the run's id, settings, status counts, timing (s), notes,
+    files ({kind: file name}) and units, with the SHA-256 of every file in `files` as written in
+    `folder` (the manifest `check_study_folder` checks)."""
+    study, plant = result.study, result.plant
+    return {
+        "plant": plant.name,
+        "title": plant.title,
+        "numeral": study.numeral,
+        "best": result.best("step"),
+        "run_id": run_id,
+        "settings": run_settings(result),
+        "status": status_counts(result.table),
+        "timing": result.timing,
+        "notes": notes,
+        "files": files,
+        "tracked": study.tracked,
+        "tracked_unit": study.tracked_unit,
+        "input_unit": study.input_unit,
+        "sha256": {name: file_digest(folder / name) for name in sorted(files.values())},
+    }
 
 
 def run_settings(result) -> dict:
@@ -387,16 +441,12 @@ def run_settings(result) -> dict:
 
 def status_counts(table) -> dict:
     """Rows of each status kind (`studies.runner.STATUS_KINDS`), in that order."""
-    from .runner import STATUS_KINDS, status_kind
-
     kinds = [status_kind(s) for s in table.status] if len(table) else []
     return {kind: kinds.count(kind) for kind in STATUS_KINDS}
 
 
 def not_ok_rows(table) -> list:
     """(controller, scenario, status) of every row whose status is not "ok", in table order."""
-    from .runner import status_kind
-
     return [
         (str(r.controller), str(r.scenario), str(r.status)) for r in table.itertuples() if status_kind(r.status) != "ok"
     ]
@@ -404,8 +454,6 @@ def not_ok_rows(table) -> list:
 
 def timings_frame(table, samples):
     """timings.csv: compute times of each row (and of each Monte Carlo sample that has one)."""
-    import pandas as pd
-
     keep = ["controller", "scenario"]
     rows = table[keep + [c for c in TIMING_COLUMNS if c in table]].assign(sample=pd.NA)
     frames = [rows[keep + ["sample"] + [c for c in TIMING_COLUMNS if c in rows]]]
@@ -414,12 +462,6 @@ def timings_frame(table, samples):
         per = per[per.drop(columns=["controller", "sample"]).notna().any(axis=1)].assign(scenario="mc")
         frames.append(per[keep + ["sample"] + [c for c in TIMING_COLUMNS if c in per]])
     return pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
-
-
-def _tracked_value(result):
-    from .runner import tracked_equilibrium
-
-    return tracked_equilibrium(result.plant, result.study)
 
 
 def status_lines(table) -> list:
@@ -441,6 +483,8 @@ def status_lines(table) -> list:
 
 
 def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> str:
+    """table.md: the caption, the verdict grid and what each row misses, how the rows ran, the metrics (angles
+    in degrees), the Monte Carlo's worst case and spread, the linear loop analysis, the notes and run time."""
     study, plant = result.study, result.plant
     columns = _unit_columns(study.tracked_unit, study.input_unit)
     rows = result.table.to_dict("records")
@@ -538,8 +582,6 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
 def _read_studies(out: Path, names) -> list:
     """(name, run.json, table with its timings) of every study folder found in `out`; run.json gains
     "problems", what `check_study_folder` found wrong with the folder."""
-    import pandas as pd
-
     found = []
     for name in names:
         folder = out / name
@@ -566,6 +608,9 @@ def _run_of(info: dict, run_id: str | None) -> str:
 
 
 def _cell(table, controller: str, scenario: str = "step") -> str:
+    """A cell of summary.md: the verdict's symbol, then settling time (s) / overshoot (%), or the status
+    (up to its first colon) of a row that is not ok and never settled; "—" when the plant has no such
+    controller."""
     rows = table[(table.controller == controller) & (table.scenario == scenario)]
     if rows.empty:
         return "—"
@@ -598,8 +643,6 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
     labels = []
     for _, _, table in studies:
         labels += [c for c in table.controller.unique() if c not in labels]
-    from . import style
-
     legend = ", ".join(f"{symbol} {label}" for label, (symbol, _) in style.VERDICTS.items())
     lines = ["# Summary: every controller on every plant", ""]
     if run_id is not None:
@@ -651,82 +694,46 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
     return write_text(out / "summary.md", "\n".join(lines) + "\n")
 
 
-def _status_html(table, info: dict, run_id: str | None) -> str:
-    """The run a plant's folder comes from and its rows that are not ok, as HTML."""
-    counts = ", ".join(f"{n} {kind}" for kind, n in status_counts(table).items() if n)
-    parts = [f'<p class="run">{html.escape(_run_of(info, run_id))}. Rows: {html.escape(counts)}.</p>']
-    bad = not_ok_rows(table)
-    if bad:
-        parts.append(
-            '<ul class="not-ok">'
-            + "".join(f"<li><b>{html.escape(c)} / {html.escape(s)}</b>: {html.escape(st)}</li>" for c, s, st in bad)
-            + "</ul>"
-        )
-    return "".join(parts)
-
-
 def write_index(out: str | os.PathLike, names, run_id: str | None = None) -> Path:
     """OUT/index.html linking every table, answer file, plot and animation found in `out`; each plant
-    says which run wrote it and lists its rows that are not "ok" (see `write_summary`)."""
+    says which run wrote it and lists its rows that are not "ok" (see `write_summary`). The page is the
+    template ``index.html.j2``; every title, label and file name in it is escaped."""
     out = Path(out)
     studies = _read_studies(out, names)
-    from . import overview
-
-    body = [
-        "<h1>Case studies: every controller on every plant</h1>",
-        "<p>Tables, plots and animations from nonlinear closed-loop simulations. "
-        '<a href="summary.md">summary.md</a></p>',
-    ]
-    if run_id is not None:
-        body.append(f"<p>Run {html.escape(run_id)}.</p>")
-    body.append("<ul>")
-    body += [f'<li><a href="#{n}">{html.escape(info["title"])}</a></li>' for n, info, _ in studies]
-    body.append("</ul>")
+    figures = []
     if studies:
-        body += ['<section id="overview"><h2>At a glance</h2>', overview.heat_map(studies)]
         pictures = [("scatter", overview.scatter(studies)), ("boxplots", overview.boxplots(out, studies))]
-        body += [f'<figure id="{name}">{svg}</figure>' for name, svg in pictures if svg]
-        body.append("</section>")
-    for n, info, table in studies:
-        files = info["files"]
-        links = " · ".join(
-            f'<a href="{n}/{html.escape(f)}">{html.escape(f)}</a>'
-            for f in files.values()
-            if not f.endswith(".png") and not f.endswith(".gif")
-        )
-        body += [
-            f'<h2 id="{n}">{html.escape(info["title"])}</h2>',
-            f"<p>{links}</p>",
-            _status_html(table, info, run_id),
-        ]
-        if info.get("best"):
-            body.append(f"<p>Best in the step scenario (lowest ITAE): {html.escape(info['best'])}</p>")
-        if "animation.gif" in files:
-            body.append(
-                f'<p><a href="{n}/animation.html"><img src="{n}/animation.gif" '
-                f'alt="{html.escape(info["title"])} animation"></a></p>'
-            )
-        if "verdict" in table:
-            grid_rows, grid_columns = verdict_grid(table)
-            body += ["<h3>Verdicts against the specs</h3>", html_table(grid_rows, grid_columns)]
-        step_rows = table[table.scenario == "step"].to_dict("records")
-        if step_rows:
-            columns = _unit_columns(info["tracked_unit"], info["input_unit"])
-            body += ["<h3>The step: metrics</h3>", html_table(step_rows, [c for c in columns if c[0] != "scenario"])]
-        for f in files.values():
-            if f.endswith(".png"):
-                body.append(
-                    f'<figure><img src="{n}/{html.escape(f)}" alt="{html.escape(f)}" loading="lazy">'
-                    f"<figcaption>{html.escape(f)}</figcaption></figure>"
-                )
-    page = (
-        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>Case studies</title><style>'
-        "body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1100px}"
-        "table{border-collapse:collapse;font-size:0.8em}td,th{border:1px solid #ccc;padding:2px 6px}"
-        "img{max-width:100%}figure{margin:1em 0}"
-        ".heatmap td{text-align:center;min-width:5.5em}.heatmap th{text-align:left;font-weight:normal}"
-        ".heatmap caption{caption-side:bottom;text-align:left;font-size:0.9em;padding-top:0.4em}"
-        ".swatch{display:inline-block;width:0.8em;height:0.8em;margin-right:0.4em;vertical-align:middle}"
-        ".mark{font-weight:bold}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+        figures = [{"id": name, "svg": svg} for name, svg in pictures if svg]
+    page = templates.render(
+        "index.html.j2",
+        run_id=run_id,
+        plants=[_index_entry(name, info, table, run_id) for name, info, table in studies],
+        heatmap=overview.heat_map(studies) if studies else "",
+        figures=figures,
     )
     return write_text(out / "index.html", page)
+
+
+def _index_entry(name: str, info: dict, table, run_id: str | None) -> dict:
+    """What index.html shows of one plant: its files, the run that wrote them, its rows that are not
+    ok, its best controller, verdict grid, step metrics and pictures (from its run.json and table)."""
+    files = info["files"]
+    step_rows = table[table.scenario == "step"].to_dict("records")
+    columns = _unit_columns(info["tracked_unit"], info["input_unit"])
+    verdicts = None
+    if "verdict" in table:
+        grid_rows, grid_columns = verdict_grid(table)
+        verdicts = {"rows": grid_rows, "columns": grid_columns}
+    return {
+        "name": name,
+        "title": info["title"],
+        "links": [f for f in files.values() if not f.endswith(".png") and not f.endswith(".gif")],
+        "run": _run_of(info, run_id),
+        "counts": ", ".join(f"{n} {kind}" for kind, n in status_counts(table).items() if n),
+        "not_ok": not_ok_rows(table),
+        "best": info.get("best"),
+        "animation": "animation.gif" in files,
+        "verdicts": verdicts,
+        "step": {"rows": step_rows, "columns": [c for c in columns if c[0] != "scenario"]} if step_rows else None,
+        "pictures": [f for f in files.values() if f.endswith(".png")],
+    }

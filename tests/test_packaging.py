@@ -107,3 +107,16 @@ def test_the_tests_and_examples_import_only_declared_distributions():
     }
     missing = {m: distributions(m) for m in modules if not distributions(m) & allowed}
     assert not missing, f"imported by tests or examples but not declared (dependencies or the dev extra): {missing}"
+
+
+def test_the_page_templates_are_package_data():
+    # The wheel (.ci/run installs one) carries exactly the files package-data names: every template must match.
+    from fnmatch import fnmatch
+
+    from studies import templates
+
+    patterns = PROJECT["tool"]["setuptools"]["package-data"]["studies"]
+    found = sorted(p.name for p in (ROOT / "studies" / "templates").iterdir() if p.suffix != ".py" and p.is_file())
+    assert found and all(name.endswith(".html.j2") for name in found), found
+    assert all(any(fnmatch(f"templates/{name}", pattern) for pattern in patterns) for name in found)
+    assert all(templates.environment().get_template(name) for name in found)  # each one parses

@@ -49,17 +49,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-# The update's small dense linear algebra (a 5 x 5 matrix exponential) takes 15 ms instead of 0.1 ms when
-# OpenBLAS spreads it over threads on a loaded 2-core machine; it only takes effect when numpy is not
-# imported yet (as under ``python -m studies.designer`` and ``benchmarks/designer.py``).
+# One OpenBLAS thread: the update's small matrix exponential is far slower spread over threads on a loaded
+# machine (measured in docs/designer.md). It takes effect only where numpy is not imported yet (as under
+# ``python -m studies.designer`` and ``benchmarks/designer.py``).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
 import models  # noqa: E402
-from models import Block, Cascade, metrics, specs  # noqa: E402
+from designs import tuning  # noqa: E402
+from models import Block, Cascade, export, metrics, specs  # noqa: E402
 
-from .. import loops, runner  # noqa: E402
+from .. import cases, homework, loops, runner, tuner  # noqa: E402
 from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, Scenario  # noqa: E402
 
 #: Each gain element ranges over [value / RANGE, value * RANGE] (sign kept).
@@ -111,10 +112,12 @@ class GainControl:
 
     @property
     def log_high(self) -> float:
+        """log10 |value| at the range's end farther from zero."""
         return math.log10(max(abs(self.low), abs(self.high)))
 
     @property
     def sign(self) -> float:
+        """+1.0 or -1.0: the design's sign, which every value in the range keeps."""
         return math.copysign(1.0, self.design)
 
     def from_log(self, exponent: float) -> float:
@@ -223,6 +226,7 @@ class Update:
 
     @property
     def diverged(self) -> bool:
+        """Whether the run diverged (its status says at what time)."""
         return self.status.startswith("diverged")
 
     def verdict_text(self) -> str:
@@ -335,7 +339,7 @@ class Designer:
         """The designer of case `name`'s controller `label` (default its first Block), designed as the
         studies design it: from the model known to the controller (`CaseStudy.known_plant`)."""
         designed = designed_blocks(name)
-        case = name if isinstance(name, CaseStudy) else _case(name)
+        case = name if isinstance(name, CaseStudy) else cases.get(name)
         if not designed:
             raise ValueError(f"{case.plant} has no controller with gains to design")
         if label is None:
@@ -378,6 +382,8 @@ class Designer:
         return self.block
 
     def _which_loop(self) -> str:
+        """Where the loop is broken: the loop of the case's loopshaping spec that names this controller (as its
+        design or baseline), else "outer" for a cascade and "input" for a single loop."""
         for spec in self.case.loops:
             if spec.loop == "input" or isinstance(self.block, Cascade):
                 if spec.design == self.label or spec.baseline == self.label:
@@ -394,6 +400,7 @@ class Designer:
         return with_values(self.block, self.controls, values or {})
 
     def scenario(self, name: str) -> Scenario:
+        """The scenario `name` among those the designer offers (`SCENARIOS`); ValueError naming them otherwise."""
         if name not in self.scenarios:
             raise ValueError(f"scenario must be one of {', '.join(self.scenarios)}, got {name!r}")
         return self.scenarios[name]
@@ -458,6 +465,8 @@ class Designer:
         return out
 
     def _analyse(self, block: Block, run, out: Update) -> None:
+        """Fill `out`'s loop analysis: the Bode plot over `omega`, the margins, the root locus over `LOCUS_GAINS`
+        and the closed-loop poles (s-plane), and the loopshaping spec's checks and bounds."""
         design = self.loop_gain(block, run)
         response = design.frequency_response(self.omega)
         out.loop = self.which
@@ -538,10 +547,6 @@ class Designer:
         -------
         (designs.tuning.TuningResult, {control key: tuned value})
         """
-        from designs import tuning
-
-        from .. import tuner
-
         start = self.block_for(values)
         chosen = tuner.scenario(self.case, "disturbance" if scenario == "disturbance" else "step")
         bounds = {}
@@ -573,8 +578,6 @@ class Designer:
 
     def export(self, values: Mapping[str, float] | None = None) -> dict:
         """The gains as JSON-ready data, with the C step function (`models.export.export_block`) when it exports."""
-        from models import export
-
         block = self.block_for(values)
         out = {
             "plant": self.case.plant,
@@ -641,8 +644,6 @@ def pole_placement(case: CaseStudy, label: str) -> dict:
     """{"poles", "placement"} for the case's state-space design `label` (its desired poles, and the
     function redesigning it from other poles with `studies.homework.statespace_controllers`, from the
     model known to the controller); {} for any other controller."""
-    from .. import homework
-
     if case.statespace is None or label not in POLE_LABELS:
         return {}
     known = case.known_plant()
@@ -662,12 +663,6 @@ def s_plane(z: np.ndarray, sample_period: float) -> np.ndarray:
     return out
 
 
-def _case(name: str) -> CaseStudy:
-    import studies
-
-    return studies.get(name)
-
-
 _DESIGNED: dict = {}
 
 
@@ -677,7 +672,7 @@ def catalog(name: str) -> tuple[list[str], Callable[[str], Designer]]:
 
     Raises ValueError when the case has no controller with gains.
     """
-    case = _case(name)
+    case = cases.get(name)
     if name not in _DESIGNED:
         _DESIGNED[name] = designed_blocks(case)
     blocks = _DESIGNED[name]
@@ -696,7 +691,7 @@ def catalog(name: str) -> tuple[list[str], Callable[[str], Designer]]:
 def designed_blocks(name: str | CaseStudy) -> dict:
     """{label: Block} of the case's controllers with gains, designed as `studies.runner` designs them
     (from `CaseStudy.known_plant`), without the providers in `SKIPPED_PROVIDERS`."""
-    case = name if isinstance(name, CaseStudy) else _case(name)
+    case = name if isinstance(name, CaseStudy) else cases.get(name)
     providers = [p for p in case.providers if p not in SKIPPED_PROVIDERS]
     designed, _ = runner.design_controllers(case, case.known_plant(), providers)
     return {label: c for label, c in designed.items() if isinstance(c, Block) and gain_controls(c)}

@@ -5,17 +5,27 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .. import cases
+from . import catalog
+
+#: The module of the optional "designer" extra (Bokeh, Tornado) that is not installed, or "".
+MISSING = ""
+try:
+    from .app import serve
+except ModuleNotFoundError as err:
+    if err.name is None or err.name.split(".")[0] not in ("bokeh", "tornado"):
+        raise
+    MISSING = err.name.split(".")[0]
+
 
 def main(argv=None) -> int:
-    import studies
-
+    """Parse the command line `argv` (default ``sys.argv[1:]``), design the plant's controllers and serve
+    the page until interrupted; exit status 2 (a usage message) for a bad argument."""
     parser = argparse.ArgumentParser(
         prog="python -m studies.designer",
         description="Move a gain, see the nonlinear response, the verdict and the loop.",
     )
-    parser.add_argument(
-        "plant", nargs="?", default="arm", help=f"case study (default arm): {', '.join(studies.names())}"
-    )
+    parser.add_argument("plant", nargs="?", default="arm", help=f"case study (default arm): {', '.join(cases.names())}")
     parser.add_argument(
         "controller",
         nargs="?",
@@ -24,13 +34,12 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default 0: a free port)")
     args = parser.parse_args(argv)
-    if args.plant not in studies.names():
-        parser.error(f"unknown plant {args.plant!r}; choose from {', '.join(studies.names())}")
+    if args.plant not in cases.names():
+        parser.error(f"unknown plant {args.plant!r}; choose from {', '.join(cases.names())}")
     if not 0 <= args.port <= 65535:
         parser.error(f"--port must be in 0..65535, got {args.port}")
-
-    from . import catalog
-    from .app import serve
+    if MISSING:
+        parser.error(f"the designer's page needs {MISSING} (pip install 'codesign-control[designer]')")
 
     print(f"designing the {args.plant} controllers ...", flush=True)
     try:
@@ -40,7 +49,7 @@ def main(argv=None) -> int:
     label = args.controller or labels[0]
     if label not in labels:
         parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(labels)}")
-    serve(catalog, list(studies.names()), args.plant, label, port=args.port)
+    serve(catalog, list(cases.names()), args.plant, label, port=args.port)
     return 0
 
 

@@ -23,6 +23,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from bokeh.application import Application
+from bokeh.application.handlers import FunctionHandler
 from bokeh.layouts import column, row
 
 # From their defining modules: bokeh.models re-exports them dynamically, which type checkers cannot follow.
@@ -30,10 +32,15 @@ from bokeh.models import ColumnDataSource, CustomJS, Range1d
 from bokeh.models.annotations import Span
 from bokeh.models.widgets import Button, Checkbox, Div, Select, Slider, TextInput
 from bokeh.plotting import figure
+from bokeh.server.server import BaseServer
+from bokeh.server.tornado import BokehTornado
+from bokeh.server.util import bind_sockets
+from tornado.httpserver import HTTPServer
+from tornado.ioloop import IOLoop
 
 import models
 from models import specs
-from studies import animation, style
+from studies import animation, style, templates
 from studies.plots import tracked_scale
 
 from . import Designer, GainControl, Update
@@ -67,12 +74,20 @@ def _finite(values: np.ndarray) -> np.ndarray:
     return values
 
 
+def fragment(name: str, *values) -> str:
+    """The page's HTML fragment `name` (a macro of the template ``designer.html.j2``) with `values`
+    escaped: a Bokeh Div shows its text as HTML, so a label or an error message is never markup."""
+    return str(templates.macro("designer.html.j2", name)(*values))
+
+
 class Page:
     """The widgets, figures and data sources of one browser tab, bound to one `Designer`.
 
     Every model the tests read has a name: sources "response", "input", "bode", "locus", "poles",
     "spec_low", "spec_high"; divs "verdict", "margins", "tune_status", "export", "gain_error:KEY";
     inputs "gain:KEY" (text) and "slider:KEY"; the checkbox "envelope_box"; sources also "envelope" and "scene_*".
+    The divs "title", "verdict" and "margins" show HTML, made by `fragment` (values escaped); the others
+    show their text as it is (``render_as_text``), so an error message quoting a typed value stays text.
     """
 
     def __init__(self, catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
@@ -96,15 +111,15 @@ class Page:
         self.gains = column(name="gains")
         self.pool: dict = {}  # (kind, key) -> the row of widgets of that control, kept across designs
         self.rows: dict = {}  # the rows shown
-        self.poles_header = Div(text="<b>desired poles</b> (rad/s; each change redesigns the gains)")
-        self.gains_header = Div(text="<b>gains</b>")
+        self.poles_header = Div(text=fragment("header", "desired poles", "rad/s; each change redesigns the gains"))
+        self.gains_header = Div(text=fragment("header", "gains", ""))
         self.envelope = Checkbox(label="±5 % Monte Carlo envelope", name="envelope_box", active=False)
         self.envelope.on_change("active", lambda attr, old, new: self.refresh())
         self.tune_button = Button(label="Tune", name="tune", button_type="primary", width=80)
         self.reset_button = Button(label="Reset", name="reset", width=80)
         self.export_button = Button(label="Export", name="export_button", width=80)
-        self.tune_status = Div(text="", name="tune_status", width=260)
-        self.export_data = Div(text="", name="export", visible=False)
+        self.tune_status = Div(text="", name="tune_status", width=260, render_as_text=True)
+        self.export_data = Div(text="", name="export", visible=False, render_as_text=True)
         self.export_data.js_on_change("text", CustomJS(code=DOWNLOAD))
         self.verdict = Div(text="", name="verdict", width=WIDTH)
         self.margins = Div(text="", name="margins", width=WIDTH)
@@ -144,7 +159,7 @@ class Page:
         self.playing: Any = None  # the periodic callback while the animation plays
         self.anim_time = Slider(start=0, end=1, value=0, step=0.01, title="t (s)", name="anim_time", width=210)
         self.play_button = Button(label="Play", name="play", width=70)
-        self.readout = Div(text="", name="readout", width=290)
+        self.readout = Div(text="", name="readout", width=290, render_as_text=True)
         self.anim_time.on_change("value", lambda attr, old, new: self.draw_frame())
         self.play_button.on_click(self._on_play)
         self.layout = row(
@@ -170,6 +185,9 @@ class Page:
 
     # ------------------------------------------------------------- layout
     def _figures(self) -> dict:
+        """The page's figures, drawn from the data sources: "response" (with the Monte Carlo envelope), "input"
+        (with the actuator limit), "magnitude" and "phase" of the loop gain (with the spec's bounds), "locus"
+        and "scene" (the animated drawing)."""
         s = self.sources
         response = figure(
             width=WIDTH,
@@ -276,7 +294,7 @@ class Page:
             width=150,
         )
         text = TextInput(value=f"{c.design:.6g}", name=f"{names[0]}:{c.key}", width=100, title=c.key)
-        error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260)
+        error = Div(text="", name=f"{names[2]}:{c.key}", styles={"color": "#cf222e"}, width=260, render_as_text=True)
         # The control is looked up when the widget changes: a pole change redesigns the gains' ranges.
         key = c.key
         # A gain follows its slider while it is dragged (updates coalesced, `_dragged`); a pole, whose every
@@ -296,7 +314,7 @@ class Page:
         self.designer = self.designers(label)
         d = self.designer
         self.scale, self.unit = tracked_scale(d.case.tracked_unit)
-        self.title.text = f"<h3>{d.case.plant}: {label}</h3>"
+        self.title.text = fragment("title", d.case.plant, label)
         self.busy = True
         self.scenario_select.options = list(d.scenarios)
         if self.scenario not in d.scenarios:
@@ -313,6 +331,7 @@ class Page:
         self.refresh()
 
     def _control(self, kind: str, key: str) -> GainControl:
+        """The designer's current control `key` of `kind` ("gain" or "pole")."""
         controls = self.designer.controls if kind == "gain" else self.designer.pole_controls
         return next(c for c in controls if c.key == key)
 
@@ -347,7 +366,7 @@ class Page:
         if self.busy:
             return
         doc = self.layout.document
-        self.verdict.text = f"<i>designing the {new} controllers ...</i>"
+        self.verdict.text = fragment("busy", f"designing the {new} controllers ...")
         self.plant.disabled = True
 
         def work():
@@ -361,9 +380,11 @@ class Page:
         threading.Thread(target=work, name="designer-design", daemon=True).start()
 
     def _designed(self, old: str, new: str, found, error: str | None) -> None:
+        """Back in the document's thread after `_on_plant`'s design: show plant `new`'s first controller, or
+        the error and plant `old` again."""
         self.plant.disabled = False
         if found is None:
-            self.verdict.text = f"<b style='color:#cf222e'>{error}</b>"
+            self.verdict.text = fragment("error", error)
             self.busy = True
             self.plant.value = old
             self.busy = False
@@ -376,12 +397,13 @@ class Page:
         self.load(labels[0])
 
     def _on_controller(self, old: str, new: str) -> None:
+        """The controller picker changed: show controller `new` at its design (on an error, `old` stays)."""
         if self.busy:
             return
         try:
             self.load(new)
         except Exception as err:  # shown, never raised; the controller shown stays
-            self.verdict.text = f"<b style='color:#cf222e'>{new}: {type(err).__name__}: {err}</b>"
+            self.verdict.text = fragment("error", f"{new}: {type(err).__name__}: {err}")
             self.busy = True
             self.controller.value = old
             self.busy = False
@@ -406,15 +428,18 @@ class Page:
             doc.add_next_tick_callback(self._refresh_pending)
 
     def _refresh_pending(self) -> None:
+        """The redraw `_dragged` scheduled: one update for the gains in force."""
         self.pending = False
         self.refresh()
 
     def _on_slider(self, kind: str, c: GainControl, exponent: float) -> None:
+        """A slider was let go at log10 |value| = `exponent`: take that value."""
         if self.busy:
             return
         self._accept(kind, c, c.from_log(exponent))
 
     def _on_text(self, kind: str, c: GainControl, text: str) -> None:
+        """A value was typed: take it if `GainControl.parse` accepts it, else show why and keep the value in force."""
         if self.busy:
             return
         error = self.rows[(kind, c.key)][3]
@@ -429,6 +454,7 @@ class Page:
         self._accept(kind, c, value)
 
     def _accept(self, kind: str, c: GainControl, value: float) -> None:
+        """Put `value` in force for control `c`: a gain, or a desired pole (the gains are then redesigned); redraw."""
         self._set_widgets(kind, c, value)
         if kind == "gain":
             self.values[c.key] = value
@@ -443,6 +469,7 @@ class Page:
         self.refresh()
 
     def _set_widgets(self, kind: str, c: GainControl, value: float) -> None:
+        """Show `value` on control `c`'s slider and text input without their callbacks running."""
         _, slider, text, _ = self.rows[(kind, c.key)]
         self.busy = True
         try:
@@ -452,12 +479,14 @@ class Page:
             self.busy = False
 
     def _on_scenario(self, attr, old, new) -> None:
+        """The scenario picker changed: redraw on scenario `new`."""
         if self.busy:
             return
         self.scenario = new
         self.refresh()
 
     def _on_reset(self) -> None:
+        """Back to the text's design: its poles (for a pole-placement design) and gains."""
         d = self.designer
         if d.pole_controls:
             d.place(None)
@@ -468,6 +497,7 @@ class Page:
         self.refresh()
 
     def _on_export(self) -> None:
+        """Put the gains and C step (`Designer.export`) as JSON into the hidden export div, which downloads it."""
         d = self.designer
         try:
             data = d.export(self.values) | {"file": f"{d.case.plant}_{d.label}_gains.json".replace(" ", "_")}
@@ -477,6 +507,8 @@ class Page:
         self.export_data.text = json.dumps(data, indent=1)
 
     def _on_tune(self) -> None:
+        """Tune from the gains in force in a thread (`Designer.tune`), reporting progress every 5 iterations;
+        `_tuned` shows the result."""
         if self.tuning:
             return
         self.tuning = True
@@ -507,6 +539,8 @@ class Page:
         threading.Thread(target=work, name="designer-tune", daemon=True).start()
 
     def _tuned(self, designer: Designer, tuned: dict | None, message: str) -> None:
+        """Back in the document's thread after tuning: show `message`, and the tuned gains if this designer is
+        still the one shown."""
         self.tuning = False
         self.tune_button.disabled = False
         self.tune_status.text = message
@@ -523,7 +557,7 @@ class Page:
         try:
             update = self.designer.update(self.values, self.scenario)
         except Exception as err:  # the server never dies on a request
-            self.verdict.text = f"<b style='color:#cf222e'>{type(err).__name__}: {err}</b>"
+            self.verdict.text = fragment("error", f"{type(err).__name__}: {err}")
             return
         self.draw(update)
         self.draw_envelope()
@@ -538,15 +572,15 @@ class Page:
             e = self.designer.envelope(self.values, self.scenario)
         except Exception as err:  # shown, never raised
             self.sources["envelope"].data = empty
-            self.margins.text += f"<br><i>no Monte Carlo envelope: {type(err).__name__}: {err}</i>"
+            self.margins.text += fragment("no_envelope", f"{type(err).__name__}: {err}")
             return
         y = _finite(e["tracked"] * self.scale)
         self.sources["envelope"].data = {"t": e["t"], "min": y[0], "low": y[1], "high": y[3], "max": y[4]}
-        self.margins.text += (
-            f"<br>Monte Carlo envelope: {e['samples']} plants (shaded: all, and 5-95 %), {e['diverged']} diverged"
-        )
+        self.margins.text += fragment("envelope", e["samples"], e["diverged"])
 
     def draw(self, u: Update) -> None:
+        """Draw update `u`: the response (up to a divergence), the input and its limit, the verdict, the Bode
+        plot with the spec's bounds, the root locus and poles, the margins line and the animation."""
         s = self.sources
         keep = np.ones(len(u.t), dtype=bool) if not u.diverged else u.t <= float(u.status.split("= ")[1].split()[0])
         s["response"].data = {
@@ -559,10 +593,7 @@ class Page:
         self.limit_spans[0].location, self.limit_spans[1].location = u.input_limit, -u.input_limit
         label = specs.DIVERGED if u.diverged else u.verdict.label
         color = style.verdict_color(label)
-        self.verdict.text = (
-            f"<b style='color:{color}'>{u.verdict_text()}</b>"
-            f" <span style='color:#6e7781'>({1e3 * u.seconds:.0f} ms)</span>"
-        )
+        self.verdict.text = fragment("verdict", u.verdict_text(), color, f"{1e3 * u.seconds:.0f}")
         s["bode"].data = {"omega": u.omega, "magnitude_db": _finite(u.magnitude_db), "phase_deg": _finite(u.phase_deg)}
         s["locus"].data = {"re": _finite(u.locus.real.ravel()), "im": _finite(u.locus.imag.ravel())}
         s["poles"].data = {"re": _finite(u.poles.real), "im": _finite(u.poles.imag)}
@@ -655,6 +686,7 @@ class Page:
         self.readout.text = f"t = {run.t[k]:.2f} s: {self.designer.case.tracked} = {tracked:.4g} {self.unit}"
 
     def _on_play(self) -> None:
+        """Play the animation in real time from the slider's time (from 0 at the end), or pause it."""
         doc = self.layout.document
         if doc is None:
             return
@@ -677,8 +709,10 @@ class Page:
 
 
 def _margins_text(u: Update, spec: dict) -> str:
+    """The margins line under the plots: the loop's gain and phase margins, the closed-loop poles in the
+    right half plane and the loopshaping specs met; the notes of the update when it has no margins."""
     if not u.margins:
-        return "<i>" + "; ".join(u.notes) + "</i>"
+        return fragment("notes", "; ".join(u.notes))
     m = u.margins
     gain = (
         f"gain margin {m['gain_margin_db']:.3g} dB at {m['phase_crossover_rad_s']:.3g} rad/s"
@@ -690,22 +724,18 @@ def _margins_text(u: Update, spec: dict) -> str:
         if math.isfinite(m["phase_margin_deg"])
         else "no phase margin (|L| does not cross 1)"
     )
-    text = f"{u.loop} loop: {gain}, {phase}"
     unstable = int(np.sum(u.poles.real > 0))
-    text += f"; {unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
-    if spec:
-        checks = ", ".join(
-            f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
-            for name, ok in spec["checks"].items()
-        )
-        text += f"<br>loopshaping specs ({spec['item']}): {checks}"
-    return text
+    poles = f"{unstable} closed-loop pole{'s' if unstable != 1 else ''} in the right half plane"
+    text = f"{u.loop} loop: {gain}, {phase}; {poles}"
+    checks = ", ".join(
+        f"{name} {'met' if ok else 'missed' if ok is not None else 'not checked'}"
+        for name, ok in (spec["checks"].items() if spec else ())
+    )
+    return fragment("margins", text, spec["item"] if spec else None, checks)
 
 
 def application(catalog: Catalog, plants: list[str], plant: str, label: str | None = None):
     """A Bokeh `Application` whose every session is a `Page` of `plant`'s controller `label` (default its first)."""
-    from bokeh.application import Application
-    from bokeh.application.handlers import FunctionHandler
 
     def make(doc):
         page = Page(catalog, plants, plant, label)
@@ -732,12 +762,6 @@ def serve(
     plants : the plant picker's names;  plant, label : what the page opens with
     ready : called with the URL once the server listens (default: print it)
     """
-    from bokeh.server.server import BaseServer
-    from bokeh.server.tornado import BokehTornado
-    from bokeh.server.util import bind_sockets
-    from tornado.httpserver import HTTPServer
-    from tornado.ioloop import IOLoop
-
     # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
     sockets, port = bind_sockets("127.0.0.1", port)
     tornado_app = BokehTornado(

@@ -408,3 +408,43 @@ def test_the_page_follows_a_typed_gain_and_refuses_a_bad_one(server, browser, ar
     assert "PID" in read(browser, "D.get_model_by_name('controller').options")
     assert browser.errors() == []
     print(f"page updated {1e3 * page_seconds:.0f} ms after the typed gain (polled every 50 ms)")
+
+
+def test_the_page_shows_labels_and_messages_as_text_in_its_html():
+    pytest.importorskip("bokeh")
+    from types import SimpleNamespace
+
+    from studies.designer import app
+
+    assert app.fragment("title", "<b>arm</b>", "P & D") == "<h3>&lt;b&gt;arm&lt;/b&gt;: P &amp; D</h3>"
+    message = "ValueError: kp: '<img>' is not a number"
+    assert app.fragment("error", message) == (
+        "<b style='color:#cf222e'>ValueError: kp: &#x27;&lt;img&gt;&#x27; is not a number</b>"
+    )
+    assert app._margins_text(SimpleNamespace(margins={}, notes=["a <b> & c", "d"]), {}) == (
+        "<i>a &lt;b&gt; &amp; c; d</i>"
+    )
+    margins = {
+        "gain_margin_db": 6.0,
+        "phase_crossover_rad_s": 10.0,
+        "phase_margin_deg": 45.0,
+        "gain_crossover_rad_s": 3.0,
+    }
+    update = SimpleNamespace(margins=margins, loop="input", poles=np.array([-1.0 + 0j, 2.0 + 0j]), notes=[])
+    spec = {"item": "<IV.11>", "checks": {"crossover": True, "phase_margin": None}}
+    assert app._margins_text(update, spec) == (
+        "input loop: gain margin 6 dB at 10 rad/s, phase margin 45° at 3 rad/s; 1 closed-loop pole in the right "
+        "half plane<br>loopshaping specs (&lt;IV.11&gt;): crossover met, phase_margin not checked"
+    )
+    assert type(app.fragment("busy", "designing")) is str  # a plain str for Bokeh's Div
+
+
+def test_the_command_without_bokeh_says_what_to_install():
+    code = (
+        "import sys; sys.modules['bokeh'] = None\n"  # as if the optional "designer" extra were not installed
+        "from studies.designer.__main__ import main\n"
+        "main(['arm'])"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert "the designer's page needs bokeh (pip install 'codesign-control[designer]')" in done.stderr

@@ -165,3 +165,128 @@ def test_summary_and_index_link_what_exists(arm_study):
 
     for link in re.findall(r'(?:href|src)="([^"#]+)"', index):
         assert (out / link).exists(), link
+
+
+def test_the_pages_escape_as_the_standard_library_does():
+    # The template engine's rule is html.escape's: quotes as &quot; and &#x27; (not MarkupSafe's &#34;, &#39;).
+    from studies import templates
+
+    assert templates.escape("<b>x</b> & \"q\" 'a'") == "&lt;b&gt;x&lt;/b&gt; &amp; &quot;q&quot; &#x27;a&#x27;"
+    assert templates.escape(templates.Escaped("&amp;")) == "&amp;"  # markup is left as it is
+
+
+def test_a_title_or_label_with_html_in_it_is_escaped_in_every_page(tmp_path):
+    import copy
+    import dataclasses
+    import re
+
+    from example_providers import controllers as example_controllers
+
+    import studies
+    from studies import runner, writers
+
+    label, title = "<b>x</b> & y", "<b>Arm</b> & co"
+    found = example_controllers("arm")
+    case = dataclasses.replace(studies.get("arm"), providers=())
+    result = runner.run_study(
+        case, runner.Options(scenarios=("step",), mc=0), controllers={label: found["LQR fast"], "LQR": found["LQR"]}
+    )
+    plant = copy.copy(result.plant)
+    plant.title = title
+    result = dataclasses.replace(result, plant=plant)
+    out = tmp_path / "out"
+    writers.write_study(result, out, run_id="escaped")
+    writers.write_index(out, ["arm"], "escaped")
+    pages = {name: (out / name).read_text(encoding="utf-8") for name in ("index.html", "arm/animation.html")}
+    for name, page in pages.items():
+        assert "<b>" not in page, name  # neither the title's nor the label's markup is markup
+        assert "&lt;b&gt;Arm&lt;/b&gt; &amp; co" in page, name
+    index = pages["index.html"]
+    assert '<h2 id="arm">&lt;b&gt;Arm&lt;/b&gt; &amp; co</h2>' in index
+    assert 'data-controller="&lt;b&gt;x&lt;/b&gt; &amp; y"' in index  # the heat map
+    assert "<td>&lt;b&gt;x&lt;/b&gt; &amp; y</td>" in index  # the verdict grid and the step's metrics
+    assert "Best in the step scenario (lowest ITAE): &lt;b&gt;x&lt;/b&gt; &amp; y</p>" in index
+    animation = pages["arm/animation.html"]
+    assert re.search(r"<title>(.*)</title>", animation).group(1) == (
+        "&lt;b&gt;Arm&lt;/b&gt; &amp; co: the controllers on the text&#x27;s step"
+    )
+    data = json.loads(re.search(r"const DATA = (\{.*?\});\n", animation).group(1))
+    assert data["selected"] == label and data["order"] == [label, "LQR"]  # the script's data hold the label itself
+
+
+def test_importing_the_writers_imports_no_matplotlib_pillow_or_jinja2():
+    # They are imported at the first figure, GIF or page: the command line checks its arguments without them.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; import studies.writers, studies.plots, studies.overview, studies.animation; "
+        "print(sorted(m for m in ('matplotlib', 'PIL', 'jinja2') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split("\n")[-2] == "[]", done.stdout + done.stderr
+
+
+def test_the_tables_step_writes_the_tables_without_compute_times(arm_study, tmp_path):
+    import dataclasses
+
+    from studies import writers
+
+    result, _ = arm_study
+    files = writers.write_tables(result, tmp_path)
+    assert list(files) == ["table.csv", "monte_carlo.csv", "timings.csv", "answers.json", "answers.md"]
+    table = pd.read_csv(tmp_path / "table.csv")
+    assert list(table.columns) == [c for c in result.table.columns if c not in ("wall_s", "step_ms", "step_ms_max")]
+    np.testing.assert_allclose(table.itae, result.table.itae)
+    assert (tmp_path / "answers.md").read_text().startswith(f"# Homework answers: {result.plant.title}\n")
+    without_samples = dataclasses.replace(result, samples=result.samples.iloc[0:0])
+    assert "monte_carlo.csv" not in writers.write_tables(without_samples, tmp_path)
+
+
+def test_the_animation_step_says_why_there_is_no_animation(arm_study, tmp_path):
+    import dataclasses
+
+    from studies import writers
+
+    result, _ = arm_study
+    undrawn = dataclasses.replace(result, study=dataclasses.replace(result.study, drawing=None))
+    assert writers.write_animation(undrawn, tmp_path) == ({}, ["no animation: the arm case has no drawing"])
+    unrun = dataclasses.replace(result, runs={k: r for k, r in result.runs.items() if k[1] != "step"})
+    assert writers.write_animation(unrun, tmp_path) == ({}, ["no animation: no controller completed the step scenario"])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_loop_step_writes_the_rows_it_returns(arm_study, tmp_path):
+    from studies import writers
+
+    result, _ = arm_study
+    files, rows, _ = writers.write_loop_analysis(result, tmp_path, dpi=40)
+    assert {"bode_input.png", "loops.csv", "root_locus.png", "poles.png"} <= set(files)
+    assert all((tmp_path / name).stat().st_size > 0 for name in files.values())
+    written = pd.read_csv(tmp_path / "loops.csv")
+    assert list(written.controller) == [r["controller"] for r in rows] and set(written.controller) <= set(
+        result.controllers
+    )
+    # A closed loop is stable exactly when its slowest pole s = ln(z)/Ts is in the left half plane.
+    assert list(written.stable) == list(written.slowest_pole_real < 0)
+
+
+def test_the_run_record_holds_the_digest_of_every_file(arm_study, tmp_path):
+    import hashlib
+
+    from studies import writers
+
+    result, _ = arm_study
+    (tmp_path / "a.txt").write_text("one")
+    (tmp_path / "b.csv").write_bytes(b"x,y\n1,2\n")
+    record = writers.run_record(result, tmp_path, {"a": "a.txt", "b": "b.csv"}, ["a note"], "some-run")
+    assert record["sha256"] == {
+        "a.txt": hashlib.sha256(b"one").hexdigest(),
+        "b.csv": hashlib.sha256(b"x,y\n1,2\n").hexdigest(),
+    }
+    assert (record["run_id"], record["notes"], record["plant"], record["best"]) == (
+        "some-run",
+        ["a note"],
+        "arm",
+        result.best("step"),
+    )
