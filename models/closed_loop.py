@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 
 from . import interrupts
-from .block import Block, Controller, saturate
+from .block import Block, saturate
 from .checks import (
     SimulationError,
     as_matrix,
@@ -37,13 +37,11 @@ from .checks import (
     check_memory,
     format_bytes,
     integer,
-    positive,
-    real_array,
 )
 from .compile import NumpyCall
 from .compile import jit as compile_jit
 from .plant import Plant
-from .signals import sample
+from .run_setup import RunSetup, check_sizes, doubles_per_step
 from .simulate import DIVERGENCE_BOUND, output_call
 from .smooth import smoothed
 
@@ -239,9 +237,9 @@ def closed_loop_function(
     cache = plant.function_cache
     if key in cache:
         return cache[key][1]
-    _check_sizes(plant, controller)
+    check_sizes(plant, controller)
     check_memory(
-        8.0 * n_steps * _doubles_per_step(plant, controller),
+        8.0 * n_steps * doubles_per_step(plant, controller),
         f"closed_loop_function of {n_steps} steps of {plant.name}",
         "use fewer steps",
     )
@@ -351,87 +349,6 @@ def _batch_run(
     return cache[key][1]
 
 
-def _check_sizes(plant: Plant, controller) -> None:
-    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    if isinstance(controller, Block):
-        if controller.n_measured != n_meas:
-            raise ValueError(
-                f"{controller.name} reads {controller.n_measured} measurements but "
-                f"{plant.name} provides {n_meas} ({controller.measures})"
-            )
-        if controller.n_input != plant.nu:
-            raise ValueError(f"{controller.name} gives {controller.n_input} inputs, {plant.name} takes {plant.nu}")
-
-
-@dataclass(frozen=True)
-class _Setup:
-    t: np.ndarray
-    x0: np.ndarray
-    r: np.ndarray
-    d: np.ndarray
-    noise_std: np.ndarray
-    n_meas: int
-
-
-def _doubles_per_step(plant: Plant, controller) -> int:
-    """Doubles one closed-loop sample stores: results (x, y, xc, r, u, d, measured, t, step time) plus
-    CasADi's work arrays of the compiled run (its state and output buffers, the mapped controller
-    step that times the run). An estimate for `check_memory`, about 2x the results alone."""
-    nc = int(getattr(controller, "n_state", 0))
-    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    results = plant.nx + plant.ny + nc + controller.n_reference + 2 * plant.nu + n_meas + 2
-    work = 2 * (plant.nx + nc) + plant.nu + 2 * n_meas + nc + controller.n_reference
-    return results + work
-
-
-def check_seed(seed, what: str = "seed"):
-    """A seed numpy's `default_rng` takes: None, an integer >= 0, a SeedSequence or a Generator."""
-    if seed is None or isinstance(seed, (np.random.SeedSequence, np.random.Generator, np.random.BitGenerator)):
-        return seed
-    return integer(seed, what, minimum=0)
-
-
-def _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std) -> _Setup:
-    if not isinstance(plant, Plant):
-        raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
-    if not isinstance(controller, Controller):
-        raise TypeError(
-            f"{controller!r} is not a controller: it needs sample_period, measures, n_reference, initial_state and step"
-        )
-    _check_sizes(plant, controller)
-    ts = controller.sample_period
-    duration = positive(duration, "duration (s)")
-    n = int(round(duration / ts))
-    if n < 1:
-        raise ValueError(f"duration {duration} s is shorter than one sample ({ts} s)")
-    check_memory(
-        8.0 * (n + 1) * _doubles_per_step(plant, controller),
-        f"a closed loop of {n} samples ({duration:g} s at Ts = {ts:g} s) of {plant.name}",
-        "shorten the run or lengthen the sample period",
-    )
-    t = ts * np.arange(n + 1)
-    x0 = plant.equilibrium()[0] if x0 is None else as_vector(x0, plant.nx, f"{plant.name} initial state")
-    r = sample(reference, t, controller.n_reference, "reference")
-    d = sample(input_disturbance, t[:-1], plant.nu, "input disturbance")
-    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    std = real_array(noise_std, "noise_std")
-    if std.ndim > 1 or std.size not in (1, n_meas):
-        raise ValueError(
-            f"noise_std must be one number or {n_meas} numbers (one per measurement), got shape {std.shape}"
-        )
-    std = np.broadcast_to(std, (n_meas,))
-    if not np.all(np.isfinite(std)) or np.any(std < 0):
-        raise ValueError(f"noise_std must be finite and >= 0, got {noise_std}")
-    return _Setup(t, x0, r, d, np.array(std), n_meas)
-
-
-def _noise(setup: _Setup, seed) -> np.ndarray:
-    n = len(setup.t) - 1
-    if not np.any(setup.noise_std):
-        return np.zeros((n, setup.n_meas))
-    return np.random.default_rng(seed).standard_normal((n, setup.n_meas)) * setup.noise_std
-
-
 def first_faults(
     x: np.ndarray, u: np.ndarray, xc: np.ndarray | None = None, bound: float = DIVERGENCE_BOUND
 ) -> np.ndarray:
@@ -520,13 +437,21 @@ def simulate_closed_loop(
     ResourceLimitError
         Before any work, when the run would need more than `models.checks.MEMORY_LIMIT_BYTES`.
     """
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    substeps = integer(substeps, "substeps", minimum=1)
+    setup = RunSetup.build(
+        plant,
+        controller,
+        reference,
+        duration,
+        x0=x0,
+        substeps=substeps,
+        input_disturbance=input_disturbance,
+        noise_std=noise_std,
+        seed=seed,
+    )
     allow_divergence, jit = boolean(allow_divergence, "allow_divergence"), boolean(jit, "jit")
-    seed = check_seed(seed)
     p = plant.param_vector(params)
-    noise = _noise(setup, seed)
-    n = len(setup.t) - 1
+    noise = setup.noise()
+    n = setup.n_steps
     y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + (noise[0] if n else 0.0)
     name = getattr(controller, "name", "controller")
     if xc0 is not None:
@@ -540,7 +465,7 @@ def simulate_closed_loop(
     if use_compiled and not isinstance(controller, Block):
         raise TypeError("only a Block can run compiled")
     if use_compiled:
-        run = _numpy_run(plant, controller, n, substeps, jit)
+        run = _numpy_run(plant, controller, n, setup.substeps, jit)
         X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
         x = np.vstack([setup.x0, X.T])
         xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
@@ -549,9 +474,7 @@ def simulate_closed_loop(
         status = None
         xc_check = xc
     else:
-        x, u, measured, step_time, status, xc, xc_check = _python_loop(
-            plant, controller, setup, p, noise, xc_init, substeps
-        )
+        x, u, measured, step_time, status, xc, xc_check = _python_loop(plant, controller, setup, p, noise, xc_init)
     k = int(first_faults(x[None], u[None], None if xc_check is None else xc_check[None])[0])
     diverged_at = None if k < 0 else float(setup.t[k])
     if diverged_at is not None and not allow_divergence:
@@ -591,23 +514,23 @@ def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
     return np.full(n, (time.perf_counter() - start) / n)
 
 
-def _python_loop(plant, controller, setup, p, noise, xc, substeps):
+def _python_loop(plant, controller, setup: RunSetup, p, noise, xc):
     """Step any controller in Python; stops at the first fault, leaving NaN after it.
 
     Returns (x, u, measured, step_time, status, xc history of a Block or None,
     controller states as an array for fault detection or None).
     """
-    n = len(setup.t) - 1
+    n = setup.n_steps
     # NumpyCall: CasADi's own call converts through DM, about 10 µs a call, as much as the step itself.
-    rk4 = NumpyCall(plant.step_function(controller.sample_period, substeps))
+    rk4 = NumpyCall(plant.step_function(controller.sample_period, setup.substeps))
     h = NumpyCall(plant.casadi_h)
     x = np.full((n + 1, plant.nx), np.nan)
     x[0] = setup.x0
     u = np.full((n, plant.nu), np.nan)
-    measured = np.full((n, setup.n_meas), np.nan)
+    measured = np.full((n, setup.n_measured), np.nan)
     step_time = np.full(n, np.nan)
     states = [np.asarray(xc, dtype=float)]
-    status = [] if hasattr(controller, "step_info") else None
+    status: list | None = [] if hasattr(controller, "step_info") else None
     limit = plant.input_limit
     name = getattr(controller, "name", "controller")
     for k in range(n if np.all(np.isfinite(states[0])) else 0):
@@ -703,13 +626,21 @@ def simulate_closed_loop_many(
             "(it needs lockstep True, initial_states and step_many); use simulate_closed_loop, or "
             "monte_carlo for a Block"
         )
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    substeps = integer(substeps, "substeps", minimum=1)
+    setup = RunSetup.build(
+        plant,
+        controller,
+        reference,
+        duration,
+        x0=x0,
+        substeps=substeps,
+        input_disturbance=input_disturbance,
+        noise_std=noise_std,
+        seed=seed,
+    )
     chunk = integer(chunk, "chunk", minimum=1)
-    seed = check_seed(seed)
     samples = as_matrix(param_samples, plant.n_params, "param_samples")
-    noise = _noise(setup, seed)
-    rk4 = _MappedCalls(plant.step_function(controller.sample_period, substeps))
+    noise = setup.noise()
+    rk4 = _MappedCalls(plant.step_function(controller.sample_period, setup.substeps))
     measure = _MappedCalls(plant.casadi_h)
     for first in range(0, len(samples), chunk):
         params = samples[first : first + chunk]
@@ -718,14 +649,14 @@ def simulate_closed_loop_many(
 
 def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[ClosedLoopResult]:
     """Runs of `params` (m, n_params) stepped together; see `simulate_closed_loop_many`."""
-    m, n, nx = len(params), len(setup.t) - 1, plant.nx
+    m, n, nx = len(params), setup.n_steps, plant.nx
     outputs = controller.measures == "outputs"
     y0 = np.array([plant.output(setup.x0, p) if outputs else setup.x0 for p in params]) + (noise[0] if n else 0.0)
     xc = np.asarray(controller.initial_states(y0, setup.r[0]), dtype=float).reshape(m, -1)
     x = np.full((m, n + 1, nx), np.nan)
     x[:, 0] = setup.x0
     u = np.full((m, n, plant.nu), np.nan)
-    measured = np.full((m, n, setup.n_meas), np.nan)
+    measured = np.full((m, n, setup.n_measured), np.nan)
     step_time = np.full((m, n), np.nan)
     # The controller state's history is only checked for being finite: keep that alone (its runs' full
     # histories would take hundreds of MB).
@@ -789,71 +720,102 @@ def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[Clo
     return results
 
 
-def _monte_carlo_plan(
-    plant,
-    controller,
-    reference,
-    duration,
-    param_samples,
-    x0,
-    substeps,
-    input_disturbance,
-    noise_std,
-    seed,
-    threads,
-    jit,
-    chunk_size,
-):
-    """Validate a Monte Carlo request; returns everything a chunk needs."""
+@dataclass(frozen=True)
+class MonteCarloPlan:
+    """A checked Monte Carlo request: the shared run inputs, the samples and how to batch them.
+
+    Attributes
+    ----------
+    setup : the run inputs every sample shares (its seed an integer >= 0)
+    samples : (M, n_params) actual parameters of each sample
+    threads : evaluations run in parallel within a chunk
+    jit : compile the closed loop to machine code first
+    chunk : samples per batched call
+    chunk_bytes : estimated working memory of one chunk's call, bytes
+    first_sample : index of the first row of `samples` in the whole sample set (it sets the noise)
+    """
+
+    setup: RunSetup
+    samples: np.ndarray
+    threads: int
+    jit: bool
+    chunk: int
+    chunk_bytes: float
+    first_sample: int = 0
+
+    @classmethod
+    def build(
+        cls,
+        plant: Plant,
+        controller: Block,
+        setup: RunSetup,
+        param_samples,
+        *,
+        threads: int = 2,
+        jit: bool = False,
+        chunk_size: int | None = None,
+        first_sample: int = 0,
+    ) -> MonteCarloPlan:
+        """Check the Monte Carlo's own arguments and size its chunks.
+
+        Parameters
+        ----------
+        setup : from `RunSetup.build` for `plant` and `controller`
+        param_samples : (M, n_params), M >= 1, every entry a valid value of its parameter
+        chunk_size : samples per batched call; default the most that keeps one chunk within
+            `MONTE_CARLO_CHUNK_BYTES` and `MONTE_CARLO_CHUNK_STEPS` (at least `threads`)
+        """
+        samples = as_matrix(param_samples, plant.n_params, "param_samples")
+        if samples.shape[0] == 0:
+            raise ValueError("param_samples has no rows; give at least one parameter vector")
+        must_be_positive = np.array([p.positive for p in plant.param_info], dtype=bool)
+        invalid = np.any((samples < 0) | ((samples == 0) & must_be_positive), axis=1)
+        if np.any(invalid):
+            row = int(np.argmax(invalid))
+            try:
+                plant.param_vector(samples[row])
+            except ValueError as err:
+                raise ValueError(f"param_samples row {row}: {err}") from None
+        threads = integer(threads, "threads", minimum=1)
+        jit = boolean(jit, "jit")
+        integer(setup.seed, "seed", minimum=0)  # each sample's noise is seeded with (seed, index)
+        n, m, nc = setup.n_steps, samples.shape[0], controller.n_state
+        nm = setup.n_measured
+        work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if setup.noisy else 2) * nm + controller.n_reference)
+        if chunk_size is None:
+            by_steps = max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
+            chunk = int(min(m, max(1, min(by_steps, MONTE_CARLO_CHUNK_BYTES // work))))
+        else:
+            chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
+        first_sample = integer(first_sample, "first_sample", minimum=0)
+        return cls(setup, samples, threads, jit, chunk, chunk * work, first_sample)
+
+    def sample_bytes(self, plant: Plant, controller: Block) -> float:
+        """Bytes the results of one sample hold: x, xc, y over N+1 samples, u and measured over N."""
+        n, nm = self.setup.n_steps, self.setup.n_measured
+        return 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+
+    def chunks(self) -> Iterator[tuple[int, int]]:
+        """(start, stop) of each chunk of samples, in order."""
+        m = self.samples.shape[0]
+        for start in range(0, m, self.chunk):
+            yield start, min(m, start + self.chunk)
+
+
+def _require_block(controller) -> None:
     if not isinstance(controller, Block):
         raise TypeError("monte_carlo batches Blocks; run other controllers with simulate_closed_loop")
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    samples = as_matrix(param_samples, plant.n_params, "param_samples")
-    if samples.shape[0] == 0:
-        raise ValueError("param_samples has no rows; give at least one parameter vector")
-    must_be_positive = np.array([p.positive for p in plant.param_info], dtype=bool)
-    invalid = np.any((samples < 0) | ((samples == 0) & must_be_positive), axis=1)
-    if np.any(invalid):
-        row = int(np.argmax(invalid))
-        try:
-            plant.param_vector(samples[row])
-        except ValueError as err:
-            raise ValueError(f"param_samples row {row}: {err}") from None
-    substeps = integer(substeps, "substeps", minimum=1)
-    threads = integer(threads, "threads", minimum=1)
-    jit = boolean(jit, "jit")
-    seed = integer(seed, "seed", minimum=0)
-    n, m, nc = len(setup.t) - 1, samples.shape[0], controller.n_state
-    noisy = bool(np.any(setup.noise_std))
-    work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if noisy else 2) * setup.n_meas + controller.n_reference)
-    if chunk_size is None:
-        by_steps = max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
-        chunk = int(min(m, max(1, min(by_steps, MONTE_CARLO_CHUNK_BYTES // work))))
-    else:
-        chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
-    return dict(
-        setup=setup,
-        samples=samples,
-        substeps=substeps,
-        threads=threads,
-        jit=jit,
-        seed=seed,
-        n=n,
-        noisy=noisy,
-        chunk=chunk,
-        chunk_bytes=chunk * work,
-    )
 
 
-def _run_chunk(plant, controller, plan, start, stop, out) -> None:
+def _run_chunk(plant, controller, plan: MonteCarloPlan, start, stop, out) -> None:
     """Run samples start..stop-1 into the arrays `out` (x, xc, u, measured, diverged_at) of stop - start rows."""
-    setup, samples, n = plan["setup"], plan["samples"], plan["n"]
+    setup, samples, n = plan.setup, plan.samples, plan.setup.n_steps
     c = stop - start
-    nx, nc, nm = plant.nx, controller.n_state, setup.n_meas
-    noise = np.zeros((c, n, nm)) if plan["noisy"] else None
+    nx, nc, nm = plant.nx, controller.n_state, setup.n_measured
+    noise = np.zeros((c, n, nm)) if setup.noisy else None
     if noise is not None:
         for j in range(c):
-            noise[j] = _noise(setup, np.random.SeedSequence([plan["seed"], plan.get("first_sample", 0) + start + j]))
+            noise[j] = setup.noise(sample=plan.first_sample + start + j)
     if controller.measures == "outputs":
         y0 = batch_outputs(plant, np.broadcast_to(setup.x0, (c, 1, nx)), samples[start:stop])[:, 0]
     else:
@@ -866,7 +828,7 @@ def _run_chunk(plant, controller, plan, start, stop, out) -> None:
         [np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel() for row in rows]
     ).reshape(len(rows), nc)
     xc0 = initial[np.ravel(inverse)]
-    call = _batch_run(plant, controller, n, plan["substeps"], plan["jit"], c, plan["threads"], plan["noisy"])
+    call = _batch_run(plant, controller, n, setup.substeps, plan.jit, c, plan.threads, setup.noisy)
     noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
     X, XC, U, M = call(
         setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, samples[start:stop].T, controller.gain_vector()
@@ -880,8 +842,8 @@ def _run_chunk(plant, controller, plan, start, stop, out) -> None:
     diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
 
 
-def _allocate(plant, controller, plan, m) -> tuple:
-    n, nm = plan["n"], plan["setup"].n_meas
+def _allocate(plant, controller, plan: MonteCarloPlan, m) -> tuple:
+    n, nm = plan.setup.n_steps, plan.setup.n_measured
     return (
         np.empty((m, n + 1, plant.nx)),
         np.empty((m, n + 1, controller.n_state)),
@@ -932,34 +894,39 @@ def monte_carlo(
         Before any work, when the results would need more than `models.checks.MEMORY_LIMIT_BYTES`;
         `monte_carlo_chunks` then runs the same samples holding one chunk at a time.
     """
-    plan = _monte_carlo_plan(
+    _require_block(controller)
+    setup = RunSetup.build(
         plant,
         controller,
         reference,
         duration,
-        param_samples,
-        x0,
-        substeps,
-        input_disturbance,
-        noise_std,
-        seed,
-        threads,
-        jit,
-        chunk_size,
+        x0=x0,
+        substeps=substeps,
+        input_disturbance=input_disturbance,
+        noise_std=noise_std,
+        seed=seed,
     )
-    plan["first_sample"] = integer(first_sample, "first_sample", minimum=0)
-    m, n, nm = plan["samples"].shape[0], plan["n"], plan["setup"].n_meas
-    per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+    plan = MonteCarloPlan.build(
+        plant,
+        controller,
+        setup,
+        param_samples,
+        threads=threads,
+        jit=jit,
+        chunk_size=chunk_size,
+        first_sample=first_sample,
+    )
+    m, n = plan.samples.shape[0], plan.setup.n_steps
+    per_sample = plan.sample_bytes(plant, controller)
     check_memory(
-        m * per_sample + plan["chunk_bytes"],
+        m * per_sample + plan.chunk_bytes,
         f"monte_carlo of {m} samples x {n} steps ({format_bytes(per_sample)} per sample)",
         "run them with models.monte_carlo_chunks, which holds one chunk at a time",
     )
     out = _allocate(plant, controller, plan, m)
-    for start in range(0, m, plan["chunk"]):
-        stop = min(m, start + plan["chunk"])
+    for start, stop in plan.chunks():
         _run_chunk(plant, controller, plan, start, stop, tuple(a[start:stop] for a in out))
-    return _result(plant, controller, plan, out, plan["samples"], plan["first_sample"])
+    return _result(plant, controller, plan, out, plan.samples, plan.first_sample)
 
 
 def monte_carlo_chunks(
@@ -988,42 +955,38 @@ def monte_carlo_chunks(
     ------
     MonteCarloResult of samples first_sample .. first_sample + len - 1
     """
-    plan = _monte_carlo_plan(
+    _require_block(controller)
+    setup = RunSetup.build(
         plant,
         controller,
         reference,
         duration,
-        param_samples,
-        x0,
-        substeps,
-        input_disturbance,
-        noise_std,
-        seed,
-        threads,
-        jit,
-        chunk_size,
+        x0=x0,
+        substeps=substeps,
+        input_disturbance=input_disturbance,
+        noise_std=noise_std,
+        seed=seed,
     )
-    n, nm = plan["n"], plan["setup"].n_meas
-    per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+    plan = MonteCarloPlan.build(
+        plant, controller, setup, param_samples, threads=threads, jit=jit, chunk_size=chunk_size
+    )
     check_memory(
-        plan["chunk"] * per_sample + plan["chunk_bytes"],
-        f"a Monte Carlo chunk of {plan['chunk']} samples x {n} steps",
+        plan.chunk * plan.sample_bytes(plant, controller) + plan.chunk_bytes,
+        f"a Monte Carlo chunk of {plan.chunk} samples x {plan.setup.n_steps} steps",
         "give a smaller chunk_size",
     )
 
     def chunks():
-        m = plan["samples"].shape[0]
-        for start in range(0, m, plan["chunk"]):
-            stop = min(m, start + plan["chunk"])
+        for start, stop in plan.chunks():
             out = _allocate(plant, controller, plan, stop - start)
             _run_chunk(plant, controller, plan, start, stop, out)
-            yield _result(plant, controller, plan, out, plan["samples"][start:stop], start)
+            yield _result(plant, controller, plan, out, plan.samples[start:stop], start)
 
     return chunks()
 
 
-def _result(plant, controller, plan, out, samples, first_sample) -> MonteCarloResult:
-    setup = plan["setup"]
+def _result(plant, controller, plan: MonteCarloPlan, out, samples, first_sample) -> MonteCarloResult:
+    setup = plan.setup
     x, xc, u, measured, diverged_at = out
     return MonteCarloResult(
         plant=plant,
