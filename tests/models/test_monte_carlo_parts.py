@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import models
-from models.closed_loop import MonteCarloPlan
+from models.monte_carlo_batch import MonteCarloPlan
 from models.run_setup import RunSetup
 
 
