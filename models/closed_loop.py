@@ -82,7 +82,66 @@ class ClosedLoopResult:
         return self.y[:, self.output_names.index(name)]
 
     def state(self, name: str) -> np.ndarray:
+        """The named plant state over time, (N+1,)."""
         return self.x[:, self.state_names.index(name)]
+
+    @classmethod
+    def of_run(
+        cls,
+        plant: Plant,
+        controller,
+        setup: RunSetup,
+        *,
+        x: np.ndarray,
+        y: np.ndarray,
+        u: np.ndarray,
+        measured: np.ndarray,
+        xc: np.ndarray | None,
+        step_time: np.ndarray,
+        status: list | None,
+        diverged_at: float | None,
+        params: np.ndarray,
+    ) -> ClosedLoopResult:
+        """A run's result: its arrays (shapes as the attributes), with the time grid, reference and
+        disturbance of `setup` and the limit and signal names of `plant`."""
+        return cls(
+            t=setup.t,
+            x=x,
+            y=y,
+            r=setup.r,
+            u=u,
+            d=setup.d,
+            measured=measured,
+            xc=xc,
+            step_time=step_time,
+            status=status,
+            input_limit=plant.input_limit.copy(),
+            state_names=plant.state_names,
+            output_names=plant.output_names,
+            input_names=plant.input_names,
+            controller=getattr(controller, "name", ""),
+            diverged_at=diverged_at,
+            params=params,
+        )
+
+
+@dataclass(frozen=True)
+class _Trace:
+    """What one run recorded, before its outputs and its first fault are worked out.
+
+    x : (N+1, nx);  u : (N, nu);  measured : (N, n_measured);  step_time : (N,) s
+    status : the controller's per-step records, or None
+    xc : (N+1, n_state) the controller state of a Block, else None
+    xc_check : the controller states as an array, for the fault check (None when their shape changed)
+    """
+
+    x: np.ndarray
+    u: np.ndarray
+    measured: np.ndarray
+    step_time: np.ndarray
+    status: list | None
+    xc: np.ndarray | None
+    xc_check: np.ndarray | None
 
 
 def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray:
@@ -119,8 +178,7 @@ def closed_loop_function(
     jit, smooth = boolean(jit, "jit"), boolean(smooth, "smooth")
     if not isinstance(controller, Block):
         raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
-    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
-    key += ("smooth",) if smooth else ()
+    key = _cache_key(controller, n_steps, substeps, jit, smooth)
     cache = plant.function_cache
     if key in cache:
         return cache[key][1]
@@ -184,11 +242,16 @@ def release(plant: Plant, controller: Block) -> int:
     return len(keys)
 
 
+def _cache_key(controller: Block, n_steps: int, substeps: int, jit: bool, smooth: bool = False) -> tuple:
+    """The key of a `closed_loop_function` in the plant's function cache."""
+    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
+    return key + (("smooth",) if smooth else ())
+
+
 def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool) -> NumpyCall:
     """The cached `closed_loop_function` wrapped for fast numpy evaluation."""
     closed_loop_function(plant, controller, n_steps, substeps, jit)
-    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
-    return plant.function_cache[key][2]
+    return plant.function_cache[_cache_key(controller, n_steps, substeps, jit)][2]
 
 
 def first_faults(
@@ -230,6 +293,7 @@ def first_faults(
 
 
 def _fault_cause(x, u, xc, k: int) -> str:
+    """Why a run faulted at sample k (x (N+1, nx), u (N, nu), xc (N+1, n_state) or None), for the message."""
     if xc is not None and xc.shape[1] and not np.all(np.isfinite(xc[k])):
         return "the controller's state became non-finite"
     if k < len(u) and not np.all(np.isfinite(u[k])):
@@ -293,57 +357,66 @@ def simulate_closed_loop(
     allow_divergence, jit = boolean(allow_divergence, "allow_divergence"), boolean(jit, "jit")
     p = plant.param_vector(params)
     noise = setup.noise()
-    n = setup.n_steps
-    y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + (noise[0] if n else 0.0)
-    name = getattr(controller, "name", "controller")
-    if xc0 is not None:
-        size = controller.n_state if isinstance(controller, Block) else np.size(xc0)
-        xc_init = as_vector(xc0, size, f"{name}: initial controller state xc0")
-    else:
-        xc_init = np.asarray(controller.initial_state(y0, setup.r[0]), dtype=float).ravel()
-        if isinstance(controller, Block) and xc_init.size != controller.n_state:
-            raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has {controller.n_state}")
+    xc_init = _initial_controller_state(plant, controller, setup, p, noise, xc0)
     use_compiled = isinstance(controller, Block) if compiled is None else boolean(compiled, "compiled")
     if use_compiled and not isinstance(controller, Block):
         raise TypeError("only a Block can run compiled")
     if use_compiled:
-        run = _numpy_run(plant, controller, n, setup.substeps, jit)
-        X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
-        x = np.vstack([setup.x0, X.T])
-        xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
-        u, measured = U.T, M.T
-        step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
-        status = None
-        xc_check = xc
+        trace = _compiled_run(plant, controller, setup, p, noise, xc_init, jit)
     else:
-        x, u, measured, step_time, status, xc, xc_check = _python_loop(plant, controller, setup, p, noise, xc_init)
+        trace = _python_loop(plant, controller, setup, p, noise, xc_init)
+    x, u, xc_check = trace.x, trace.u, trace.xc_check
     k = int(first_faults(x[None], u[None], None if xc_check is None else xc_check[None])[0])
     diverged_at = None if k < 0 else float(setup.t[k])
     if diverged_at is not None and not allow_divergence:
         raise SimulationError(
-            f"{plant.name} under {name}: closed loop diverged at t = {diverged_at:.4g} s "
-            f"({_fault_cause(x, u, xc_check, k)})"
+            f"{plant.name} under {getattr(controller, 'name', 'controller')}: closed loop diverged at "
+            f"t = {diverged_at:.4g} s ({_fault_cause(x, u, xc_check, k)})"
         )
-    y = batch_outputs(plant, x[None], p[None])[0]
-    return ClosedLoopResult(
-        t=setup.t,
+    return ClosedLoopResult.of_run(
+        plant,
+        controller,
+        setup,
         x=x,
-        y=y,
-        r=setup.r,
+        y=batch_outputs(plant, x[None], p[None])[0],
         u=u,
-        d=setup.d,
-        measured=measured,
-        xc=xc,
-        step_time=step_time,
-        status=status,
-        input_limit=plant.input_limit.copy(),
-        state_names=plant.state_names,
-        output_names=plant.output_names,
-        input_names=plant.input_names,
-        controller=getattr(controller, "name", ""),
+        measured=trace.measured,
+        xc=trace.xc,
+        step_time=trace.step_time,
+        status=trace.status,
         diverged_at=diverged_at,
         params=p,
     )
+
+
+def _initial_controller_state(plant: Plant, controller, setup: RunSetup, p, noise, xc0) -> np.ndarray:
+    """x_c at the first sample: `xc0` checked, or the controller's `initial_state` from y_0 and r_0.
+
+    y_0 is the first measurement (with its noise, noise[0]) at the plant's actual parameters p.
+    """
+    name = getattr(controller, "name", "controller")
+    if xc0 is not None:
+        size = controller.n_state if isinstance(controller, Block) else np.size(xc0)
+        return as_vector(xc0, size, f"{name}: initial controller state xc0")
+    y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + (
+        noise[0] if setup.n_steps else 0.0
+    )
+    xc_init = np.asarray(controller.initial_state(y0, setup.r[0]), dtype=float).ravel()
+    if isinstance(controller, Block) and xc_init.size != controller.n_state:
+        raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has {controller.n_state}")
+    return xc_init
+
+
+def _compiled_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc_init, jit: bool) -> _Trace:
+    """The run of a Block as one call of its cached `closed_loop_function`; noise (N, n_measured)."""
+    n = setup.n_steps
+    run = _numpy_run(plant, controller, n, setup.substeps, jit)
+    X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
+    x = np.vstack([setup.x0, X.T])
+    xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
+    u, measured = U.T, M.T
+    step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
+    return _Trace(x, u, measured, step_time, None, xc, xc)
 
 
 def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
@@ -356,12 +429,8 @@ def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
     return np.full(n, (time.perf_counter() - start) / n)
 
 
-def _python_loop(plant, controller, setup: RunSetup, p, noise, xc):
-    """Step any controller in Python; stops at the first fault, leaving NaN after it.
-
-    Returns (x, u, measured, step_time, status, xc history of a Block or None,
-    controller states as an array for fault detection or None).
-    """
+def _python_loop(plant: Plant, controller, setup: RunSetup, p, noise, xc) -> _Trace:
+    """Step any controller in Python from its state `xc`; stops at the first fault, leaving NaN after it."""
     n = setup.n_steps
     # NumpyCall: CasADi's own call converts through DM, about 10 µs a call, as much as the step itself.
     rk4 = NumpyCall(plant.step_function(controller.sample_period, setup.substeps))
@@ -404,4 +473,4 @@ def _python_loop(plant, controller, setup: RunSetup, p, noise, xc):
     except ValueError:  # a controller whose state changes shape: only its commands are checked
         pass
     xc_hist = padded if isinstance(controller, Block) else None
-    return x, u, measured, step_time, status, xc_hist, padded
+    return _Trace(x, u, measured, step_time, status, xc_hist, padded)

@@ -105,8 +105,20 @@ def simulate_closed_loop_many(
         yield from _lockstep(plant, controller, setup, params, noise, rk4, measure)
 
 
-def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[ClosedLoopResult]:
-    """Runs of `params` (m, n_params) stepped together; see `simulate_closed_loop_many`."""
+def _lockstep(
+    plant: Plant,
+    controller,
+    setup: RunSetup,
+    params: np.ndarray,
+    noise: np.ndarray,
+    rk4: _MappedCalls,
+    measure: _MappedCalls,
+) -> list[ClosedLoopResult]:
+    """The runs of the samples `params` (m, n_params) stepped together; see `simulate_closed_loop_many`.
+
+    noise : (N, n_measured), every run's;  rk4, measure : the plant's RK4 step and output map, mapped
+    over the samples still running
+    """
     m, n, nx = len(params), setup.n_steps, plant.nx
     outputs = controller.measures == "outputs"
     y0 = np.array([plant.output(setup.x0, p) if outputs else setup.x0 for p in params]) + (noise[0] if n else 0.0)
@@ -152,27 +164,20 @@ def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[Clo
         active = active[going]
     first = first_faults(x, u, xc_fault)
     y = batch_outputs(plant, x, params)
-    results = []
-    for i in range(m):
-        results.append(
-            ClosedLoopResult(
-                t=setup.t,
-                x=x[i],
-                y=y[i],
-                r=setup.r,
-                u=u[i],
-                d=setup.d,
-                measured=measured[i],
-                xc=None,
-                step_time=step_time[i],
-                status=records[i],
-                input_limit=plant.input_limit.copy(),
-                state_names=plant.state_names,
-                output_names=plant.output_names,
-                input_names=plant.input_names,
-                controller=getattr(controller, "name", ""),
-                diverged_at=None if first[i] < 0 else float(setup.t[first[i]]),
-                params=params[i],
-            )
+    return [
+        ClosedLoopResult.of_run(
+            plant,
+            controller,
+            setup,
+            x=x[i],
+            y=y[i],
+            u=u[i],
+            measured=measured[i],
+            xc=None,
+            step_time=step_time[i],
+            status=records[i],
+            diverged_at=None if first[i] < 0 else float(setup.t[first[i]]),
+            params=params[i],
         )
-    return results
+        for i in range(m)
+    ]

@@ -177,10 +177,12 @@ def _batch_run(
 
 @dataclass(frozen=True)
 class MonteCarloPlan:
-    """A checked Monte Carlo request: the shared run inputs, the samples and how to batch them.
+    """A checked Monte Carlo request: what runs, the inputs every sample shares, and how to batch them.
 
     Attributes
     ----------
+    plant : the truth, simulated at each sample's parameters
+    controller : the Block that runs on every sample
     setup : the run inputs every sample shares (its seed an integer >= 0)
     samples : (M, n_params) actual parameters of each sample
     threads : evaluations run in parallel within a chunk
@@ -190,6 +192,8 @@ class MonteCarloPlan:
     first_sample : index of the first row of `samples` in the whole sample set (it sets the noise)
     """
 
+    plant: Plant
+    controller: Block
     setup: RunSetup
     samples: np.ndarray
     threads: int
@@ -219,6 +223,12 @@ class MonteCarloPlan:
         param_samples : (M, n_params), M >= 1, every entry a valid value of its parameter
         chunk_size : samples per batched call; default the most that keeps one chunk within
             `MONTE_CARLO_CHUNK_BYTES` and `MONTE_CARLO_CHUNK_STEPS` (at least `threads`)
+
+        Raises
+        ------
+        TypeError, ValueError
+            Naming the argument: no sample rows, an invalid parameter (with its row), a seed that is
+            not an integer >= 0, a thread count or chunk size below 1.
         """
         samples = as_matrix(param_samples, plant.n_params, "param_samples")
         if samples.shape[0] == 0:
@@ -243,12 +253,13 @@ class MonteCarloPlan:
         else:
             chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
         first_sample = integer(first_sample, "first_sample", minimum=0)
-        return cls(setup, samples, threads, jit, chunk, chunk * work, first_sample)
+        return cls(plant, controller, setup, samples, threads, jit, chunk, chunk * work, first_sample)
 
-    def sample_bytes(self, plant: Plant, controller: Block) -> float:
+    def sample_bytes(self) -> float:
         """Bytes the results of one sample hold: x, xc, y over N+1 samples, u and measured over N."""
         n, nm = self.setup.n_steps, self.setup.n_measured
-        return 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+        plant = self.plant
+        return 8.0 * ((n + 1) * (plant.nx + self.controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
 
     def chunks(self) -> Iterator[tuple[int, int]]:
         """(start, stop) of each chunk of samples, in order."""
@@ -256,56 +267,86 @@ class MonteCarloPlan:
         for start in range(0, m, self.chunk):
             yield start, min(m, start + self.chunk)
 
+    def allocate(self, m: int) -> tuple:
+        """Uninitialized result arrays of m samples: x (m, N+1, nx), xc (m, N+1, n_state), u (m, N, nu),
+        measured (m, N, n_measured), diverged_at (m,)."""
+        n, nm = self.setup.n_steps, self.setup.n_measured
+        return (
+            np.empty((m, n + 1, self.plant.nx)),
+            np.empty((m, n + 1, self.controller.n_state)),
+            np.empty((m, n, self.plant.nu)),
+            np.empty((m, n, nm)),
+            np.empty(m),
+        )
+
+    def run_chunk(self, start: int, stop: int, out: tuple) -> None:
+        """Run samples start..stop-1 into `out`, arrays as `allocate` gives for stop - start samples.
+
+        One call of the batched closed loop; the controller's initial states come from each sample's
+        first measurement, and diverged_at is the time of each sample's first fault (NaN if none).
+        """
+        plant, controller, setup = self.plant, self.controller, self.setup
+        n, c = setup.n_steps, stop - start
+        nx, nc, nm = plant.nx, controller.n_state, setup.n_measured
+        params = self.samples[start:stop]
+        noise = np.zeros((c, n, nm)) if setup.noisy else None
+        if noise is not None:
+            for j in range(c):
+                noise[j] = setup.noise(sample=self.first_sample + start + j)
+        xc0 = self._initial_states(params, None if noise is None or not n else noise[:, 0])
+        call = _batch_run(plant, controller, n, setup.substeps, self.jit, c, self.threads, setup.noisy)
+        noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
+        X, XC, U, M = call(setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, params.T, controller.gain_vector())
+        x, xc, u, measured, diverged_at = out
+        x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
+        xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
+        u[:] = U.T.reshape(c, n, plant.nu)
+        measured[:] = M.T.reshape(c, n, nm)
+        first = first_faults(x, u, xc)
+        diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
+
+    def _initial_states(self, params: np.ndarray, first_noise: np.ndarray | None) -> np.ndarray:
+        """The controller's x_c at the first sample of each run, (c, n_state), from y_0 at `params` (c, n_params)
+        plus `first_noise` (c, n_measured); one `initial_state` call per distinct y_0 (all samples share it
+        without noise)."""
+        plant, controller, setup = self.plant, self.controller, self.setup
+        c = len(params)
+        if controller.measures == "outputs":
+            y0 = batch_outputs(plant, np.broadcast_to(setup.x0, (c, 1, plant.nx)), params)[:, 0]
+        else:
+            y0 = np.broadcast_to(setup.x0, (c, plant.nx))
+        if first_noise is not None:
+            y0 = y0 + first_noise
+        rows, inverse = np.unique(y0, axis=0, return_inverse=True)
+        initial = np.array(
+            [np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel() for row in rows]
+        ).reshape(len(rows), controller.n_state)
+        return initial[np.ravel(inverse)]
+
+    def result(self, out: tuple, start: int, stop: int) -> MonteCarloResult:
+        """The samples start..stop-1 of the plan, whose arrays `out` holds, as a `MonteCarloResult`
+        (its first sample first_sample + start of the whole sample set)."""
+        x, xc, u, measured, diverged_at = out
+        return MonteCarloResult(
+            plant=self.plant,
+            controller=self.controller.name,
+            t=self.setup.t,
+            r=self.setup.r,
+            d=self.setup.d,
+            x=x,
+            xc=xc,
+            u=u,
+            measured=measured,
+            params=np.array(self.samples[start:stop]),
+            diverged_at=diverged_at,
+            first_sample=self.first_sample + start,
+        )
+
 
 def _require_block(controller) -> None:
+    """Refuse a controller the Monte Carlo cannot batch (TypeError): only a Block is one CasADi step."""
     if not isinstance(controller, Block):
         raise TypeError("monte_carlo batches Blocks; run other controllers with simulate_closed_loop")
-
-
-def _run_chunk(plant, controller, plan: MonteCarloPlan, start, stop, out) -> None:
-    """Run samples start..stop-1 into the arrays `out` (x, xc, u, measured, diverged_at) of stop - start rows."""
-    setup, samples, n = plan.setup, plan.samples, plan.setup.n_steps
-    c = stop - start
-    nx, nc, nm = plant.nx, controller.n_state, setup.n_measured
-    noise = np.zeros((c, n, nm)) if setup.noisy else None
-    if noise is not None:
-        for j in range(c):
-            noise[j] = setup.noise(sample=plan.first_sample + start + j)
-    if controller.measures == "outputs":
-        y0 = batch_outputs(plant, np.broadcast_to(setup.x0, (c, 1, nx)), samples[start:stop])[:, 0]
-    else:
-        y0 = np.broadcast_to(setup.x0, (c, nx))
-    if noise is not None and n:
-        y0 = y0 + noise[:, 0]
-    # One initial_state call per distinct first measurement (all samples share it without noise).
-    rows, inverse = np.unique(y0, axis=0, return_inverse=True)
-    initial = np.array(
-        [np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel() for row in rows]
-    ).reshape(len(rows), nc)
-    xc0 = initial[np.ravel(inverse)]
-    call = _batch_run(plant, controller, n, setup.substeps, plan.jit, c, plan.threads, setup.noisy)
-    noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
-    X, XC, U, M = call(
-        setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, samples[start:stop].T, controller.gain_vector()
-    )
-    x, xc, u, measured, diverged_at = out
-    x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
-    xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
-    u[:] = U.T.reshape(c, n, plant.nu)
-    measured[:] = M.T.reshape(c, n, nm)
-    first = first_faults(x, u, xc)
-    diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
-
-
-def _allocate(plant, controller, plan: MonteCarloPlan, m) -> tuple:
-    n, nm = plan.setup.n_steps, plan.setup.n_measured
-    return (
-        np.empty((m, n + 1, plant.nx)),
-        np.empty((m, n + 1, controller.n_state)),
-        np.empty((m, n, plant.nu)),
-        np.empty((m, n, nm)),
-        np.empty(m),
-    )
 
 
 def monte_carlo(
@@ -372,16 +413,16 @@ def monte_carlo(
         first_sample=first_sample,
     )
     m, n = plan.samples.shape[0], plan.setup.n_steps
-    per_sample = plan.sample_bytes(plant, controller)
+    per_sample = plan.sample_bytes()
     check_memory(
         m * per_sample + plan.chunk_bytes,
         f"monte_carlo of {m} samples x {n} steps ({format_bytes(per_sample)} per sample)",
         "run them with models.monte_carlo_chunks, which holds one chunk at a time",
     )
-    out = _allocate(plant, controller, plan, m)
+    out = plan.allocate(m)
     for start, stop in plan.chunks():
-        _run_chunk(plant, controller, plan, start, stop, tuple(a[start:stop] for a in out))
-    return _result(plant, controller, plan, out, plan.samples, plan.first_sample)
+        plan.run_chunk(start, stop, tuple(a[start:stop] for a in out))
+    return plan.result(out, 0, m)
 
 
 def monte_carlo_chunks(
@@ -426,34 +467,15 @@ def monte_carlo_chunks(
         plant, controller, setup, param_samples, threads=threads, jit=jit, chunk_size=chunk_size
     )
     check_memory(
-        plan.chunk * plan.sample_bytes(plant, controller) + plan.chunk_bytes,
+        plan.chunk * plan.sample_bytes() + plan.chunk_bytes,
         f"a Monte Carlo chunk of {plan.chunk} samples x {plan.setup.n_steps} steps",
         "give a smaller chunk_size",
     )
 
     def chunks():
         for start, stop in plan.chunks():
-            out = _allocate(plant, controller, plan, stop - start)
-            _run_chunk(plant, controller, plan, start, stop, out)
-            yield _result(plant, controller, plan, out, plan.samples[start:stop], start)
+            out = plan.allocate(stop - start)
+            plan.run_chunk(start, stop, out)
+            yield plan.result(out, start, stop)
 
     return chunks()
-
-
-def _result(plant, controller, plan: MonteCarloPlan, out, samples, first_sample) -> MonteCarloResult:
-    setup = plan.setup
-    x, xc, u, measured, diverged_at = out
-    return MonteCarloResult(
-        plant=plant,
-        controller=controller.name,
-        t=setup.t,
-        r=setup.r,
-        d=setup.d,
-        x=x,
-        xc=xc,
-        u=u,
-        measured=measured,
-        params=np.array(samples),
-        diverged_at=diverged_at,
-        first_sample=first_sample,
-    )
