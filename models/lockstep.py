@@ -36,6 +36,7 @@ class _MappedCalls:
         self._calls: dict[int, NumpyCall] = {}
 
     def __call__(self, m: int, *args) -> list[np.ndarray]:
+        """`fun` mapped over m samples on `args` (each input's columns the samples)."""
         call = self._calls.get(m)
         if call is None:
             call = self._calls[m] = NumpyCall(self.fun.map(m))

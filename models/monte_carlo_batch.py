@@ -28,11 +28,9 @@ from .run_setup import RunSetup
 #: on the chunk size. Override by assignment.
 MONTE_CARLO_CHUNK_BYTES = 64 * 2**20
 
-#: Samples x steps per chunk at most. CasADi stores the sparsity of every
-#: mapped input and output explicitly, so building the map of a chunk costs
-#: time superlinear in its size: 0.6 s for 256 pendulum runs of 2000 steps,
-#: 15 ms for 16 (measured); beyond ~64k sample-steps a call's own work
-#: (~30 ms) already dwarfs the per-call overhead.
+#: Samples x steps per chunk at most: building a chunk's map costs time superlinear in its size
+#: (CasADi stores the sparsity of every mapped input and output), while beyond this size a call's own
+#: work already dwarfs the per-call overhead (measurements: docs/notes/models.md).
 MONTE_CARLO_CHUNK_STEPS = 2**16
 
 
@@ -49,7 +47,7 @@ class MonteCarloResult(Sequence):
     xc : (M, N+1, n_state) controller states
     u : (M, N, nu) commands;  measured : (M, N, n_measured)
     params : (M, n_params) the actual parameters of each sample
-    diverged_at : (M,) s, NaN where the sample did not diverge (see the module docstring)
+    diverged_at : (M,) s, NaN where the sample did not diverge (the rule: `models.closed_loop`)
     first_sample : index of this batch's first sample in the whole sample set
         (non-zero for the chunks of `monte_carlo_chunks`)
     y : (M, N+1, ny) noise-free outputs, computed on first use
@@ -85,6 +83,7 @@ class MonteCarloResult(Sequence):
 
     @property
     def y(self) -> np.ndarray:
+        """Noise-free outputs, (M, N+1, ny), computed on first use and kept (read-only)."""
         if self._y is None:
             y = batch_outputs(self._plant, self.x, self.params)
             y.setflags(write=False)
@@ -95,6 +94,7 @@ class MonteCarloResult(Sequence):
         return self.x.shape[0]
 
     def __getitem__(self, index):
+        """Sample `index` as a `ClosedLoopResult` of read-only views (a list of them for a slice)."""
         if isinstance(index, slice):
             return [self[i] for i in range(*index.indices(len(self)))]
         i = int(index)
