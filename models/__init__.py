@@ -10,16 +10,10 @@ from . import catalog as _catalog  # noqa: F401  (registers the case studies' pl
 from . import signals
 from .block import Block, Cascade, Controller, saturate
 from .checks import ResourceLimitError, SimulationError
-from .closed_loop import (
-    ClosedLoopResult,
-    MonteCarloResult,
-    closed_loop_function,
-    monte_carlo,
-    monte_carlo_chunks,
-    simulate_closed_loop,
-    simulate_closed_loop_many,
-)
+from .closed_loop import ClosedLoopResult, closed_loop_function, simulate_closed_loop
 from .linear import LinearModel
+from .lockstep import simulate_closed_loop_many
+from .monte_carlo_batch import MonteCarloResult, monte_carlo, monte_carlo_chunks
 from .plant import Param, Physics, Plant, declare, get, names
 from .simulate import Trajectory, simulate
 from .uncertainty import corner_params, perturbed, sample_params

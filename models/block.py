@@ -39,9 +39,13 @@ class Controller(Protocol):
     measures: str
     n_reference: int
 
-    def initial_state(self, y0: np.ndarray, r0: np.ndarray) -> np.ndarray: ...
+    def initial_state(self, y0: np.ndarray, r0: np.ndarray) -> np.ndarray:
+        """x_c at the first sample from the first measurement y0 and reference r0."""
+        ...
 
-    def step(self, xc: np.ndarray, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+    def step(self, xc: np.ndarray, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One sample: (x_c_next, u (nu,)) from the state x_c, the measurement y and the reference r."""
+        ...
 
 
 def saturate(u, limit):
@@ -112,6 +116,7 @@ class Block(abc.ABC):
 
     # ------------------------------------------------------------- provided
     def _checked_gain(self, name, value) -> np.ndarray:
+        """A gain as a finite float array of at most two dimensions (ValueError naming the gain)."""
         arr = np.array(real_array(value, f"{self.name}: gain {name}"))
         if arr.ndim > 2:
             raise ValueError(f"{self.name}: gain {name} must be a number, vector or matrix, got shape {arr.shape}")
@@ -121,6 +126,7 @@ class Block(abc.ABC):
 
     @property
     def gain_names(self) -> tuple:
+        """The gains' names, in `gain_vector` order."""
         return tuple(self.gains)
 
     def gain_vector(self) -> np.ndarray:
@@ -219,6 +225,7 @@ class Cascade(Block):
         )
 
     def expr(self, xc, y, r, gains):
+        """The outer step gives the inner block's reference; the state is (x_outer, x_inner)."""
         no = self.outer.n_state
         go = {k[6:]: v for k, v in gains.items() if k.startswith("outer.")}
         gi = {k[6:]: v for k, v in gains.items() if k.startswith("inner.")}
@@ -227,11 +234,13 @@ class Cascade(Block):
         return ca.vertcat(xo_next, xi_next), u
 
     def initial_state(self, y0, r0) -> np.ndarray:
+        """(x_outer, x_inner) at the first sample; the inner block starts at the outer step's first reference."""
         xo = self.outer.initial_state(y0, r0)
         _, r_inner = self.outer.step(xo, y0, r0)
         return np.concatenate([xo, self.inner.initial_state(y0, r_inner)])
 
     def with_gains(self, **gains) -> Cascade:
+        """A copy with some prefixed gains (``outer.kp``, ``inner.kd``) replaced, in the blocks too."""
         new = super().with_gains(**gains)
         assert isinstance(new, Cascade)  # Block.with_gains copies the instance
         new.outer = self.outer.with_gains(**{k[6:]: v for k, v in new.gains.items() if k.startswith("outer.")})

@@ -13,6 +13,7 @@ from .plant import Param, Physics, declare
 
 
 def _damping(value: float, unit: str) -> Param:
+    """The viscous damping parameter b, which may be zero."""
     return Param("b", value, unit, "viscous damping", positive=False)
 
 

@@ -29,6 +29,7 @@ class SimulationError(RuntimeError):
 
 
 def _is_real_scalar(value) -> bool:
+    """Whether `value` is one real number (a Python or numpy number, or a 0-d numeric array; not a bool)."""
     if isinstance(value, (bool, np.bool_)):
         return False
     if isinstance(value, numbers.Real):

@@ -1,4 +1,4 @@
-"""The closed-loop simulator: plant (actual parameters) + controller, sampled and held.
+"""The closed-loop simulator: plant (actual parameters) + controller, sampled and held; one run.
 
 Every sample k (t_k = k * Ts, Ts the controller's sample period):
 
@@ -6,10 +6,12 @@ Every sample k (t_k = k * Ts, Ts the controller's sample period):
     x_c,k+1, u_k = controller.step(x_c,k, y_k, r_k)
     x_k+1 = RK4 over Ts of the plant with input clip(u_k, ±input_limit) + d_k
 
-n_k is seeded Gaussian measurement noise, d_k an input disturbance. For a
-`Block` the whole run is one CasADi mapaccum (and a Monte Carlo one map of
-it, in chunks of samples); other controllers (MPC) run the same step in a
-Python loop.
+n_k is seeded Gaussian measurement noise, d_k an input disturbance (their
+arguments are checked once, into a `models.run_setup.RunSetup`). For a
+`Block` the whole run is one CasADi mapaccum (`closed_loop_function`); other
+controllers (MPC) run the same step in a Python loop. Many parameter samples:
+`models.monte_carlo_batch` (a Block, one CasADi map of the run) and
+`models.lockstep` (any controller that steps many samples at once).
 
 Divergence, on every path: a run diverges at the first sample t_k at which
 the plant state x_k is non-finite or beyond `DIVERGENCE_BOUND`, the command
@@ -21,43 +23,20 @@ on, and the states after it are NaN.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
 from . import interrupts
-from .block import Block, Controller, saturate
-from .checks import (
-    SimulationError,
-    as_matrix,
-    as_vector,
-    boolean,
-    check_memory,
-    format_bytes,
-    integer,
-    positive,
-    real_array,
-)
+from .block import Block, saturate
+from .checks import SimulationError, as_vector, boolean, check_memory, integer
 from .compile import NumpyCall
 from .compile import jit as compile_jit
 from .plant import Plant
-from .signals import sample
+from .run_setup import RunSetup, check_sizes, doubles_per_step
 from .simulate import DIVERGENCE_BOUND, output_call
 from .smooth import smoothed
-
-#: Working memory, in bytes, of one chunk of a Monte Carlo batch (CasADi's
-#: output buffers and the noise of the chunk's samples). Results do not depend
-#: on the chunk size. Override by assignment.
-MONTE_CARLO_CHUNK_BYTES = 64 * 2**20
-
-#: Samples x steps per chunk at most. CasADi stores the sparsity of every
-#: mapped input and output explicitly, so building the map of a chunk costs
-#: time superlinear in its size: 0.6 s for 256 pendulum runs of 2000 steps,
-#: 15 ms for 16 (measured); beyond ~64k sample-steps a call's own work
-#: (~30 ms) already dwarfs the per-call overhead.
-MONTE_CARLO_CHUNK_STEPS = 2**16
 
 
 @dataclass(frozen=True)
@@ -103,101 +82,66 @@ class ClosedLoopResult:
         return self.y[:, self.output_names.index(name)]
 
     def state(self, name: str) -> np.ndarray:
+        """The named plant state over time, (N+1,)."""
         return self.x[:, self.state_names.index(name)]
 
-
-class MonteCarloResult(Sequence):
-    """Closed-loop runs of one controller on M parameter samples, held as arrays.
-
-    Indexing gives one sample as a `ClosedLoopResult` whose arrays are
-    read-only views into the batch (no copies); iterating gives every sample.
-
-    Attributes
-    ----------
-    t : (N+1,) s;  r : (N+1, n_reference);  d : (N, nu)   shared by every sample
-    x : (M, N+1, nx) plant states
-    xc : (M, N+1, n_state) controller states
-    u : (M, N, nu) commands;  measured : (M, N, n_measured)
-    params : (M, n_params) the actual parameters of each sample
-    diverged_at : (M,) s, NaN where the sample did not diverge (see the module docstring)
-    first_sample : index of this batch's first sample in the whole sample set
-        (non-zero for the chunks of `monte_carlo_chunks`)
-    y : (M, N+1, ny) noise-free outputs, computed on first use
-    """
-
-    def __init__(
-        self, *, plant: Plant, controller: str, t, r, d, x, xc, u, measured, params, diverged_at, first_sample: int = 0
-    ):
-        self._plant = plant
-        self.controller = controller
-        self.t, self.r, self.d = t, r, d
-        self.x, self.xc, self.u, self.measured = x, xc, u, measured
-        self.params, self.diverged_at = params, diverged_at
-        self.first_sample = first_sample
-        self.input_limit = plant.input_limit.copy()
-        self.state_names, self.output_names, self.input_names = plant.state_names, plant.output_names, plant.input_names
-        self._y: np.ndarray | None = None
-        self._step_time = np.full(len(t) - 1, np.nan)
-        for arr in (
-            self.t,
-            self.r,
-            self.d,
-            self.x,
-            self.xc,
-            self.u,
-            self.measured,
-            self.params,
-            self.diverged_at,
-            self.input_limit,
-            self._step_time,
-        ):
-            arr.setflags(write=False)
-
-    @property
-    def y(self) -> np.ndarray:
-        if self._y is None:
-            y = batch_outputs(self._plant, self.x, self.params)
-            y.setflags(write=False)
-            self._y = y
-        return self._y
-
-    def __len__(self) -> int:
-        return self.x.shape[0]
-
-    def __getitem__(self, index):
-        if isinstance(index, slice):
-            return [self[i] for i in range(*index.indices(len(self)))]
-        i = int(index)
-        if not -len(self) <= i < len(self):
-            raise IndexError(f"sample {index} of a batch of {len(self)}")
-        i %= len(self)
-        k = self.diverged_at[i]
-        return ClosedLoopResult(
-            t=self.t,
-            x=self.x[i],
-            y=self.y[i],
-            r=self.r,
-            u=self.u[i],
-            d=self.d,
-            measured=self.measured[i],
-            xc=self.xc[i],
-            step_time=self._step_time,
-            status=None,
-            input_limit=self.input_limit,
-            state_names=self.state_names,
-            output_names=self.output_names,
-            input_names=self.input_names,
-            controller=self.controller,
-            diverged_at=None if np.isnan(k) else float(k),
-            params=self.params[i],
+    @classmethod
+    def of_run(
+        cls,
+        plant: Plant,
+        controller,
+        setup: RunSetup,
+        *,
+        x: np.ndarray,
+        y: np.ndarray,
+        u: np.ndarray,
+        measured: np.ndarray,
+        xc: np.ndarray | None,
+        step_time: np.ndarray,
+        status: list | None,
+        diverged_at: float | None,
+        params: np.ndarray,
+    ) -> ClosedLoopResult:
+        """A run's result: its arrays (shapes as the attributes), with the time grid, reference and
+        disturbance of `setup` and the limit and signal names of `plant`."""
+        return cls(
+            t=setup.t,
+            x=x,
+            y=y,
+            r=setup.r,
+            u=u,
+            d=setup.d,
+            measured=measured,
+            xc=xc,
+            step_time=step_time,
+            status=status,
+            input_limit=plant.input_limit.copy(),
+            state_names=plant.state_names,
+            output_names=plant.output_names,
+            input_names=plant.input_names,
+            controller=getattr(controller, "name", ""),
+            diverged_at=diverged_at,
+            params=params,
         )
 
-    def __iter__(self) -> Iterator[ClosedLoopResult]:
-        return (self[i] for i in range(len(self)))
 
-    def __repr__(self) -> str:
-        diverged = int(np.sum(~np.isnan(self.diverged_at)))
-        return f"MonteCarloResult({self.controller!r}, {len(self)} samples x {len(self.t)} times, {diverged} diverged)"
+@dataclass(frozen=True)
+class _Trace:
+    """What one run recorded, before its outputs and its first fault are worked out.
+
+    x : (N+1, nx);  u : (N, nu);  measured : (N, n_measured);  step_time : (N,) s
+    status : the controller's per-step records, or None
+    xc : (N+1, n_state) the controller state of a Block, else None
+    xc_check : the controller states as an array, for the fault check (None when their shape changed)
+    """
+
+    x: np.ndarray
+    u: np.ndarray
+    measured: np.ndarray
+    step_time: np.ndarray
+    status: list | None
+    xc: np.ndarray | None
+    xc_check: np.ndarray | None
 
 
 def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray:
@@ -234,14 +178,13 @@ def closed_loop_function(
     jit, smooth = boolean(jit, "jit"), boolean(smooth, "smooth")
     if not isinstance(controller, Block):
         raise TypeError("closed_loop_function needs a Block (a controller written in CasADi)")
-    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
-    key += ("smooth",) if smooth else ()
+    key = _cache_key(controller, n_steps, substeps, jit, smooth)
     cache = plant.function_cache
     if key in cache:
         return cache[key][1]
-    _check_sizes(plant, controller)
+    check_sizes(plant, controller)
     check_memory(
-        8.0 * n_steps * _doubles_per_step(plant, controller),
+        8.0 * n_steps * doubles_per_step(plant, controller),
         f"closed_loop_function of {n_steps} steps of {plant.name}",
         "use fewer steps",
     )
@@ -299,137 +242,16 @@ def release(plant: Plant, controller: Block) -> int:
     return len(keys)
 
 
+def _cache_key(controller: Block, n_steps: int, substeps: int, jit: bool, smooth: bool = False) -> tuple:
+    """The key of a `closed_loop_function` in the plant's function cache."""
+    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
+    return key + (("smooth",) if smooth else ())
+
+
 def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool) -> NumpyCall:
     """The cached `closed_loop_function` wrapped for fast numpy evaluation."""
     closed_loop_function(plant, controller, n_steps, substeps, jit)
-    key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
-    return plant.function_cache[key][2]
-
-
-def _batch_run(
-    plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool, size: int, threads: int, noisy: bool
-) -> NumpyCall:
-    """`size` closed-loop runs in one call, `threads` at a time; cached on the plant.
-
-    ``(x0 (nx,), XC0 (n_state, size), R (n_reference, N), noise, D (nu, N), P (n_params, size), gains)
-    -> (X (nx, N size), XC, U, measured)``, noise (n_measured, N size) when `noisy`, else
-    (n_measured, N) shared. Output columns are sample-major: sample i owns columns i N .. (i+1) N - 1.
-    """
-    key = (
-        "closed_loop_batch",
-        id(controller.casadi_step),
-        controller.sample_period,
-        n_steps,
-        substeps,
-        jit,
-        size,
-        threads,
-        noisy,
-    )
-    cache = plant.function_cache
-    if key not in cache:
-        run = closed_loop_function(plant, controller, n_steps, substeps, jit)
-        mapped = run.map(size, "thread", min(threads, size)) if size > 1 else run
-        nx, nc, nm = plant.nx, controller.n_state, controller.n_measured
-        args = [
-            ca.MX.sym("x0", nx),
-            ca.MX.sym("xc0", nc, size),
-            ca.MX.sym("R", controller.n_reference, n_steps),
-            ca.MX.sym("noise", nm, n_steps * size if noisy else n_steps),
-            ca.MX.sym("D", plant.nu, n_steps),
-            ca.MX.sym("p", plant.n_params, size),
-            ca.MX.sym("gains", controller.gain_vector().size),
-        ]
-        fun = ca.Function(
-            "closed_loop_batch",
-            args,
-            mapped.call(args),
-            ["x0", "xc0", "R", "noise", "D", "p", "gains"],
-            ["X", "XC", "U", "measured"],
-        )
-        cache[key] = (controller.casadi_step, NumpyCall(fun))
-    return cache[key][1]
-
-
-def _check_sizes(plant: Plant, controller) -> None:
-    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    if isinstance(controller, Block):
-        if controller.n_measured != n_meas:
-            raise ValueError(
-                f"{controller.name} reads {controller.n_measured} measurements but "
-                f"{plant.name} provides {n_meas} ({controller.measures})"
-            )
-        if controller.n_input != plant.nu:
-            raise ValueError(f"{controller.name} gives {controller.n_input} inputs, {plant.name} takes {plant.nu}")
-
-
-@dataclass(frozen=True)
-class _Setup:
-    t: np.ndarray
-    x0: np.ndarray
-    r: np.ndarray
-    d: np.ndarray
-    noise_std: np.ndarray
-    n_meas: int
-
-
-def _doubles_per_step(plant: Plant, controller) -> int:
-    """Doubles one closed-loop sample stores: results (x, y, xc, r, u, d, measured, t, step time) plus
-    CasADi's work arrays of the compiled run (its state and output buffers, the mapped controller
-    step that times the run). An estimate for `check_memory`, about 2x the results alone."""
-    nc = int(getattr(controller, "n_state", 0))
-    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    results = plant.nx + plant.ny + nc + controller.n_reference + 2 * plant.nu + n_meas + 2
-    work = 2 * (plant.nx + nc) + plant.nu + 2 * n_meas + nc + controller.n_reference
-    return results + work
-
-
-def check_seed(seed, what: str = "seed"):
-    """A seed numpy's `default_rng` takes: None, an integer >= 0, a SeedSequence or a Generator."""
-    if seed is None or isinstance(seed, (np.random.SeedSequence, np.random.Generator, np.random.BitGenerator)):
-        return seed
-    return integer(seed, what, minimum=0)
-
-
-def _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std) -> _Setup:
-    if not isinstance(plant, Plant):
-        raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
-    if not isinstance(controller, Controller):
-        raise TypeError(
-            f"{controller!r} is not a controller: it needs sample_period, measures, n_reference, initial_state and step"
-        )
-    _check_sizes(plant, controller)
-    ts = controller.sample_period
-    duration = positive(duration, "duration (s)")
-    n = int(round(duration / ts))
-    if n < 1:
-        raise ValueError(f"duration {duration} s is shorter than one sample ({ts} s)")
-    check_memory(
-        8.0 * (n + 1) * _doubles_per_step(plant, controller),
-        f"a closed loop of {n} samples ({duration:g} s at Ts = {ts:g} s) of {plant.name}",
-        "shorten the run or lengthen the sample period",
-    )
-    t = ts * np.arange(n + 1)
-    x0 = plant.equilibrium()[0] if x0 is None else as_vector(x0, plant.nx, f"{plant.name} initial state")
-    r = sample(reference, t, controller.n_reference, "reference")
-    d = sample(input_disturbance, t[:-1], plant.nu, "input disturbance")
-    n_meas = plant.ny if controller.measures == "outputs" else plant.nx
-    std = real_array(noise_std, "noise_std")
-    if std.ndim > 1 or std.size not in (1, n_meas):
-        raise ValueError(
-            f"noise_std must be one number or {n_meas} numbers (one per measurement), got shape {std.shape}"
-        )
-    std = np.broadcast_to(std, (n_meas,))
-    if not np.all(np.isfinite(std)) or np.any(std < 0):
-        raise ValueError(f"noise_std must be finite and >= 0, got {noise_std}")
-    return _Setup(t, x0, r, d, np.array(std), n_meas)
-
-
-def _noise(setup: _Setup, seed) -> np.ndarray:
-    n = len(setup.t) - 1
-    if not np.any(setup.noise_std):
-        return np.zeros((n, setup.n_meas))
-    return np.random.default_rng(seed).standard_normal((n, setup.n_meas)) * setup.noise_std
+    return plant.function_cache[_cache_key(controller, n_steps, substeps, jit)][2]
 
 
 def first_faults(
@@ -471,6 +293,7 @@ def first_faults(
 
 
 def _fault_cause(x, u, xc, k: int) -> str:
+    """Why a run faulted at sample k (x (N+1, nx), u (N, nu), xc (N+1, n_state) or None), for the message."""
     if xc is not None and xc.shape[1] and not np.all(np.isfinite(xc[k])):
         return "the controller's state became non-finite"
     if k < len(u) and not np.all(np.isfinite(u[k])):
@@ -520,65 +343,80 @@ def simulate_closed_loop(
     ResourceLimitError
         Before any work, when the run would need more than `models.checks.MEMORY_LIMIT_BYTES`.
     """
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    substeps = integer(substeps, "substeps", minimum=1)
+    setup = RunSetup.build(
+        plant,
+        controller,
+        reference,
+        duration,
+        x0=x0,
+        substeps=substeps,
+        input_disturbance=input_disturbance,
+        noise_std=noise_std,
+        seed=seed,
+    )
     allow_divergence, jit = boolean(allow_divergence, "allow_divergence"), boolean(jit, "jit")
-    seed = check_seed(seed)
     p = plant.param_vector(params)
-    noise = _noise(setup, seed)
-    n = len(setup.t) - 1
-    y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + (noise[0] if n else 0.0)
-    name = getattr(controller, "name", "controller")
-    if xc0 is not None:
-        size = controller.n_state if isinstance(controller, Block) else np.size(xc0)
-        xc_init = as_vector(xc0, size, f"{name}: initial controller state xc0")
-    else:
-        xc_init = np.asarray(controller.initial_state(y0, setup.r[0]), dtype=float).ravel()
-        if isinstance(controller, Block) and xc_init.size != controller.n_state:
-            raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has {controller.n_state}")
+    noise = setup.noise()
+    xc_init = _initial_controller_state(plant, controller, setup, p, noise, xc0)
     use_compiled = isinstance(controller, Block) if compiled is None else boolean(compiled, "compiled")
     if use_compiled and not isinstance(controller, Block):
         raise TypeError("only a Block can run compiled")
     if use_compiled:
-        run = _numpy_run(plant, controller, n, substeps, jit)
-        X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
-        x = np.vstack([setup.x0, X.T])
-        xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
-        u, measured = U.T, M.T
-        step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
-        status = None
-        xc_check = xc
+        trace = _compiled_run(plant, controller, setup, p, noise, xc_init, jit)
     else:
-        x, u, measured, step_time, status, xc, xc_check = _python_loop(
-            plant, controller, setup, p, noise, xc_init, substeps
-        )
+        trace = _python_loop(plant, controller, setup, p, noise, xc_init)
+    x, u, xc_check = trace.x, trace.u, trace.xc_check
     k = int(first_faults(x[None], u[None], None if xc_check is None else xc_check[None])[0])
     diverged_at = None if k < 0 else float(setup.t[k])
     if diverged_at is not None and not allow_divergence:
         raise SimulationError(
-            f"{plant.name} under {name}: closed loop diverged at t = {diverged_at:.4g} s "
-            f"({_fault_cause(x, u, xc_check, k)})"
+            f"{plant.name} under {getattr(controller, 'name', 'controller')}: closed loop diverged at "
+            f"t = {diverged_at:.4g} s ({_fault_cause(x, u, xc_check, k)})"
         )
-    y = batch_outputs(plant, x[None], p[None])[0]
-    return ClosedLoopResult(
-        t=setup.t,
+    return ClosedLoopResult.of_run(
+        plant,
+        controller,
+        setup,
         x=x,
-        y=y,
-        r=setup.r,
+        y=batch_outputs(plant, x[None], p[None])[0],
         u=u,
-        d=setup.d,
-        measured=measured,
-        xc=xc,
-        step_time=step_time,
-        status=status,
-        input_limit=plant.input_limit.copy(),
-        state_names=plant.state_names,
-        output_names=plant.output_names,
-        input_names=plant.input_names,
-        controller=getattr(controller, "name", ""),
+        measured=trace.measured,
+        xc=trace.xc,
+        step_time=trace.step_time,
+        status=trace.status,
         diverged_at=diverged_at,
         params=p,
     )
+
+
+def _initial_controller_state(plant: Plant, controller, setup: RunSetup, p, noise, xc0) -> np.ndarray:
+    """x_c at the first sample: `xc0` checked, or the controller's `initial_state` from y_0 and r_0.
+
+    y_0 is the first measurement (with its noise, noise[0]) at the plant's actual parameters p.
+    """
+    name = getattr(controller, "name", "controller")
+    if xc0 is not None:
+        size = controller.n_state if isinstance(controller, Block) else np.size(xc0)
+        return as_vector(xc0, size, f"{name}: initial controller state xc0")
+    y0 = (plant.output(setup.x0, p) if controller.measures == "outputs" else setup.x0) + (
+        noise[0] if setup.n_steps else 0.0
+    )
+    xc_init = np.asarray(controller.initial_state(y0, setup.r[0]), dtype=float).ravel()
+    if isinstance(controller, Block) and xc_init.size != controller.n_state:
+        raise ValueError(f"{name}.initial_state returned {xc_init.size} values, its state has {controller.n_state}")
+    return xc_init
+
+
+def _compiled_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc_init, jit: bool) -> _Trace:
+    """The run of a Block as one call of its cached `closed_loop_function`; noise (N, n_measured)."""
+    n = setup.n_steps
+    run = _numpy_run(plant, controller, n, setup.substeps, jit)
+    X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
+    x = np.vstack([setup.x0, X.T])
+    xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
+    u, measured = U.T, M.T
+    step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
+    return _Trace(x, u, measured, step_time, None, xc, xc)
 
 
 def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
@@ -591,23 +429,19 @@ def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
     return np.full(n, (time.perf_counter() - start) / n)
 
 
-def _python_loop(plant, controller, setup, p, noise, xc, substeps):
-    """Step any controller in Python; stops at the first fault, leaving NaN after it.
-
-    Returns (x, u, measured, step_time, status, xc history of a Block or None,
-    controller states as an array for fault detection or None).
-    """
-    n = len(setup.t) - 1
+def _python_loop(plant: Plant, controller, setup: RunSetup, p, noise, xc) -> _Trace:
+    """Step any controller in Python from its state `xc`; stops at the first fault, leaving NaN after it."""
+    n = setup.n_steps
     # NumpyCall: CasADi's own call converts through DM, about 10 µs a call, as much as the step itself.
-    rk4 = NumpyCall(plant.step_function(controller.sample_period, substeps))
+    rk4 = NumpyCall(plant.step_function(controller.sample_period, setup.substeps))
     h = NumpyCall(plant.casadi_h)
     x = np.full((n + 1, plant.nx), np.nan)
     x[0] = setup.x0
     u = np.full((n, plant.nu), np.nan)
-    measured = np.full((n, setup.n_meas), np.nan)
+    measured = np.full((n, setup.n_measured), np.nan)
     step_time = np.full(n, np.nan)
     states = [np.asarray(xc, dtype=float)]
-    status = [] if hasattr(controller, "step_info") else None
+    status: list | None = [] if hasattr(controller, "step_info") else None
     limit = plant.input_limit
     name = getattr(controller, "name", "controller")
     for k in range(n if np.all(np.isfinite(states[0])) else 0):
@@ -639,403 +473,4 @@ def _python_loop(plant, controller, setup, p, noise, xc, substeps):
     except ValueError:  # a controller whose state changes shape: only its commands are checked
         pass
     xc_hist = padded if isinstance(controller, Block) else None
-    return x, u, measured, step_time, status, xc_hist, padded
-
-
-#: Samples stepped together by `simulate_closed_loop_many`: enough to spread the per-step Python work,
-#: few enough that the runs' step records (one dict per sample and step) stay small.
-LOCKSTEP_SAMPLES = 50
-
-
-class _MappedCalls:
-    """`fun` mapped over m samples, as a NumpyCall built once per m (m changes only when runs stop)."""
-
-    def __init__(self, fun: ca.Function):
-        self.fun = fun
-        self._calls: dict[int, NumpyCall] = {}
-
-    def __call__(self, m: int, *args) -> list[np.ndarray]:
-        call = self._calls.get(m)
-        if call is None:
-            call = self._calls[m] = NumpyCall(self.fun.map(m))
-        return call(*args)
-
-
-def simulate_closed_loop_many(
-    plant: Plant,
-    controller,
-    reference,
-    duration: float,
-    param_samples,
-    *,
-    x0=None,
-    substeps: int = 10,
-    input_disturbance=0.0,
-    noise_std=0.0,
-    seed: int | None = 0,
-    chunk: int = LOCKSTEP_SAMPLES,
-) -> Iterator[ClosedLoopResult]:
-    """`simulate_closed_loop(..., allow_divergence=True)` of a non-Block controller on many parameter
-    samples, stepped in lockstep: each sample's run, in order, with the same numbers.
-
-    Every sample k the plants of all running samples take one mapped RK4 step and the controller
-    one `step_many` for all of them, so the Python work per sample is shared. A run stops at its
-    first fault (as in `simulate_closed_loop`); the others go on.
-
-    Parameters
-    ----------
-    controller : a controller with ``lockstep`` True,
-        ``initial_states(Y0 (m, n_measured), r0) -> XC (m, n_state)``
-        (forgetting every warm start) and ``step_many(XC, Y, r, index) -> (XC_next, U (m, nu), records)``,
-        the step of the samples `index` (rows of the `initial_states` batch), one record per sample
-        as `step_info()` gives it
-    param_samples : (M, n_params) actual parameters of each run
-    chunk : samples stepped together (the results do not depend on it)
-    other arguments : as `simulate_closed_loop`; every run gets the same noise (`seed`)
-
-    Yields
-    ------
-    ClosedLoopResult per sample, in the order of `param_samples` (xc None, as for any non-Block)
-    """
-    if isinstance(controller, Block) or not getattr(controller, "lockstep", False):
-        raise TypeError(
-            f"{getattr(controller, 'name', controller)!r} cannot step many samples at once "
-            "(it needs lockstep True, initial_states and step_many); use simulate_closed_loop, or "
-            "monte_carlo for a Block"
-        )
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    substeps = integer(substeps, "substeps", minimum=1)
-    chunk = integer(chunk, "chunk", minimum=1)
-    seed = check_seed(seed)
-    samples = as_matrix(param_samples, plant.n_params, "param_samples")
-    noise = _noise(setup, seed)
-    rk4 = _MappedCalls(plant.step_function(controller.sample_period, substeps))
-    measure = _MappedCalls(plant.casadi_h)
-    for first in range(0, len(samples), chunk):
-        params = samples[first : first + chunk]
-        yield from _lockstep(plant, controller, setup, params, noise, rk4, measure)
-
-
-def _lockstep(plant, controller, setup, params, noise, rk4, measure) -> list[ClosedLoopResult]:
-    """Runs of `params` (m, n_params) stepped together; see `simulate_closed_loop_many`."""
-    m, n, nx = len(params), len(setup.t) - 1, plant.nx
-    outputs = controller.measures == "outputs"
-    y0 = np.array([plant.output(setup.x0, p) if outputs else setup.x0 for p in params]) + (noise[0] if n else 0.0)
-    xc = np.asarray(controller.initial_states(y0, setup.r[0]), dtype=float).reshape(m, -1)
-    x = np.full((m, n + 1, nx), np.nan)
-    x[:, 0] = setup.x0
-    u = np.full((m, n, plant.nu), np.nan)
-    measured = np.full((m, n, setup.n_meas), np.nan)
-    step_time = np.full((m, n), np.nan)
-    # The controller state's history is only checked for being finite: keep that alone (its runs' full
-    # histories would take hundreds of MB).
-    xc_fault = np.zeros((m, n + 1, 1))
-    xc_fault[:, 0, 0] = np.where(np.all(np.isfinite(xc), axis=1), 0.0, np.nan)
-    records: list[list] = [[] for _ in range(m)]
-    limit = plant.input_limit
-    active = np.flatnonzero(np.all(np.isfinite(xc), axis=1))
-    for k in range(n):
-        if not active.size:
-            break
-        interrupts.check()  # a Ctrl-C the previous step's CasADi calls swallowed
-        count = len(active)
-        now = x[active, k]
-        meas = (measure(count, now.T, params[active].T)[0].T if outputs else now) + noise[k]
-        start = time.perf_counter()
-        xc_next, uk, infos = controller.step_many(xc[active], meas, setup.r[k], active)
-        step_time[active, k] = (time.perf_counter() - start) / count
-        uk = np.asarray(uk, dtype=float).reshape(count, -1)
-        if uk.shape[1] != plant.nu:
-            raise ValueError(f"{controller.name} returned {uk.shape[1]} inputs, {plant.name} takes {plant.nu}")
-        for j, info in zip(active, infos):
-            records[j].append(info)
-        u[active, k], measured[active, k], xc[active] = uk, meas, xc_next
-        xc_fault[active, k + 1, 0] = np.where(np.all(np.isfinite(xc_next), axis=1), 0.0, np.nan)
-        command_ok = np.all(np.isfinite(uk), axis=1)
-        moving = active[command_ok]  # a NaN command leaves the plant's input undefined: its state stays NaN
-        if moving.size:
-            x[moving, k + 1] = rk4(
-                moving.size, x[moving, k].T, (saturate(u[moving, k], limit) + setup.d[k]).T, params[moving].T
-            )[0].T
-        nxt = x[active, k + 1]
-        with np.errstate(invalid="ignore"):
-            going = command_ok & np.all(np.isfinite(xc_next), axis=1) & np.all(np.abs(nxt) <= DIVERGENCE_BOUND, axis=1)
-        active = active[going]
-    first = first_faults(x, u, xc_fault)
-    y = batch_outputs(plant, x, params)
-    results = []
-    for i in range(m):
-        results.append(
-            ClosedLoopResult(
-                t=setup.t,
-                x=x[i],
-                y=y[i],
-                r=setup.r,
-                u=u[i],
-                d=setup.d,
-                measured=measured[i],
-                xc=None,
-                step_time=step_time[i],
-                status=records[i],
-                input_limit=plant.input_limit.copy(),
-                state_names=plant.state_names,
-                output_names=plant.output_names,
-                input_names=plant.input_names,
-                controller=getattr(controller, "name", ""),
-                diverged_at=None if first[i] < 0 else float(setup.t[first[i]]),
-                params=params[i],
-            )
-        )
-    return results
-
-
-def _monte_carlo_plan(
-    plant,
-    controller,
-    reference,
-    duration,
-    param_samples,
-    x0,
-    substeps,
-    input_disturbance,
-    noise_std,
-    seed,
-    threads,
-    jit,
-    chunk_size,
-):
-    """Validate a Monte Carlo request; returns everything a chunk needs."""
-    if not isinstance(controller, Block):
-        raise TypeError("monte_carlo batches Blocks; run other controllers with simulate_closed_loop")
-    setup = _setup(plant, controller, reference, duration, x0, input_disturbance, noise_std)
-    samples = as_matrix(param_samples, plant.n_params, "param_samples")
-    if samples.shape[0] == 0:
-        raise ValueError("param_samples has no rows; give at least one parameter vector")
-    must_be_positive = np.array([p.positive for p in plant.param_info], dtype=bool)
-    invalid = np.any((samples < 0) | ((samples == 0) & must_be_positive), axis=1)
-    if np.any(invalid):
-        row = int(np.argmax(invalid))
-        try:
-            plant.param_vector(samples[row])
-        except ValueError as err:
-            raise ValueError(f"param_samples row {row}: {err}") from None
-    substeps = integer(substeps, "substeps", minimum=1)
-    threads = integer(threads, "threads", minimum=1)
-    jit = boolean(jit, "jit")
-    seed = integer(seed, "seed", minimum=0)
-    n, m, nc = len(setup.t) - 1, samples.shape[0], controller.n_state
-    noisy = bool(np.any(setup.noise_std))
-    work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if noisy else 2) * setup.n_meas + controller.n_reference)
-    if chunk_size is None:
-        by_steps = max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
-        chunk = int(min(m, max(1, min(by_steps, MONTE_CARLO_CHUNK_BYTES // work))))
-    else:
-        chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
-    return dict(
-        setup=setup,
-        samples=samples,
-        substeps=substeps,
-        threads=threads,
-        jit=jit,
-        seed=seed,
-        n=n,
-        noisy=noisy,
-        chunk=chunk,
-        chunk_bytes=chunk * work,
-    )
-
-
-def _run_chunk(plant, controller, plan, start, stop, out) -> None:
-    """Run samples start..stop-1 into the arrays `out` (x, xc, u, measured, diverged_at) of stop - start rows."""
-    setup, samples, n = plan["setup"], plan["samples"], plan["n"]
-    c = stop - start
-    nx, nc, nm = plant.nx, controller.n_state, setup.n_meas
-    noise = np.zeros((c, n, nm)) if plan["noisy"] else None
-    if noise is not None:
-        for j in range(c):
-            noise[j] = _noise(setup, np.random.SeedSequence([plan["seed"], plan.get("first_sample", 0) + start + j]))
-    if controller.measures == "outputs":
-        y0 = batch_outputs(plant, np.broadcast_to(setup.x0, (c, 1, nx)), samples[start:stop])[:, 0]
-    else:
-        y0 = np.broadcast_to(setup.x0, (c, nx))
-    if noise is not None and n:
-        y0 = y0 + noise[:, 0]
-    # One initial_state call per distinct first measurement (all samples share it without noise).
-    rows, inverse = np.unique(y0, axis=0, return_inverse=True)
-    initial = np.array(
-        [np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel() for row in rows]
-    ).reshape(len(rows), nc)
-    xc0 = initial[np.ravel(inverse)]
-    call = _batch_run(plant, controller, n, plan["substeps"], plan["jit"], c, plan["threads"], plan["noisy"])
-    noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
-    X, XC, U, M = call(
-        setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, samples[start:stop].T, controller.gain_vector()
-    )
-    x, xc, u, measured, diverged_at = out
-    x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
-    xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
-    u[:] = U.T.reshape(c, n, plant.nu)
-    measured[:] = M.T.reshape(c, n, nm)
-    first = first_faults(x, u, xc)
-    diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
-
-
-def _allocate(plant, controller, plan, m) -> tuple:
-    n, nm = plan["n"], plan["setup"].n_meas
-    return (
-        np.empty((m, n + 1, plant.nx)),
-        np.empty((m, n + 1, controller.n_state)),
-        np.empty((m, n, plant.nu)),
-        np.empty((m, n, nm)),
-        np.empty(m),
-    )
-
-
-def monte_carlo(
-    plant: Plant,
-    controller: Block,
-    reference,
-    duration: float,
-    param_samples,
-    *,
-    x0=None,
-    substeps: int = 10,
-    input_disturbance=0.0,
-    noise_std=0.0,
-    seed: int = 0,
-    threads: int = 2,
-    jit: bool = False,
-    chunk_size: int | None = None,
-    first_sample: int = 0,
-) -> MonteCarloResult:
-    """Run `controller` on every parameter sample, a chunk of samples per batched CasADi map.
-
-    Parameters
-    ----------
-    param_samples : array (M, n_params) of actual parameter vectors (see `models.uncertainty`)
-    seed : integer >= 0; the noise of sample i is drawn from the generator seeded with (seed, i)
-    threads : evaluations run in parallel within a chunk
-    jit : compile the closed loop to machine code first (see `models.compile`)
-    chunk_size : samples per batched call; default from `MONTE_CARLO_CHUNK_BYTES`. Results do not
-        depend on it.
-    first_sample : index of the first row of `param_samples` in a larger sample set: row j gets the
-        noise of sample first_sample + j, so a set split into parts (for other processes) runs as a whole
-
-    Returns
-    -------
-    MonteCarloResult: the batch as arrays; ``result[i]`` is sample i as a `ClosedLoopResult`, and a
-    diverged sample has `diverged_at` set.
-
-    Raises
-    ------
-    ResourceLimitError
-        Before any work, when the results would need more than `models.checks.MEMORY_LIMIT_BYTES`;
-        `monte_carlo_chunks` then runs the same samples holding one chunk at a time.
-    """
-    plan = _monte_carlo_plan(
-        plant,
-        controller,
-        reference,
-        duration,
-        param_samples,
-        x0,
-        substeps,
-        input_disturbance,
-        noise_std,
-        seed,
-        threads,
-        jit,
-        chunk_size,
-    )
-    plan["first_sample"] = integer(first_sample, "first_sample", minimum=0)
-    m, n, nm = plan["samples"].shape[0], plan["n"], plan["setup"].n_meas
-    per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
-    check_memory(
-        m * per_sample + plan["chunk_bytes"],
-        f"monte_carlo of {m} samples x {n} steps ({format_bytes(per_sample)} per sample)",
-        "run them with models.monte_carlo_chunks, which holds one chunk at a time",
-    )
-    out = _allocate(plant, controller, plan, m)
-    for start in range(0, m, plan["chunk"]):
-        stop = min(m, start + plan["chunk"])
-        _run_chunk(plant, controller, plan, start, stop, tuple(a[start:stop] for a in out))
-    return _result(plant, controller, plan, out, plan["samples"], plan["first_sample"])
-
-
-def monte_carlo_chunks(
-    plant: Plant,
-    controller: Block,
-    reference,
-    duration: float,
-    param_samples,
-    *,
-    x0=None,
-    substeps: int = 10,
-    input_disturbance=0.0,
-    noise_std=0.0,
-    seed: int = 0,
-    threads: int = 2,
-    jit: bool = False,
-    chunk_size: int | None = None,
-) -> Iterator[MonteCarloResult]:
-    """`monte_carlo`, one chunk of samples at a time: memory stays bounded by the chunk.
-
-    Arguments as `monte_carlo`; every argument is checked before the first chunk runs. Sample i
-    gets the same noise and the same numbers as in `monte_carlo` (each chunk's `first_sample`
-    says where it starts).
-
-    Yields
-    ------
-    MonteCarloResult of samples first_sample .. first_sample + len - 1
-    """
-    plan = _monte_carlo_plan(
-        plant,
-        controller,
-        reference,
-        duration,
-        param_samples,
-        x0,
-        substeps,
-        input_disturbance,
-        noise_std,
-        seed,
-        threads,
-        jit,
-        chunk_size,
-    )
-    n, nm = plan["n"], plan["setup"].n_meas
-    per_sample = 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
-    check_memory(
-        plan["chunk"] * per_sample + plan["chunk_bytes"],
-        f"a Monte Carlo chunk of {plan['chunk']} samples x {n} steps",
-        "give a smaller chunk_size",
-    )
-
-    def chunks():
-        m = plan["samples"].shape[0]
-        for start in range(0, m, plan["chunk"]):
-            stop = min(m, start + plan["chunk"])
-            out = _allocate(plant, controller, plan, stop - start)
-            _run_chunk(plant, controller, plan, start, stop, out)
-            yield _result(plant, controller, plan, out, plan["samples"][start:stop], start)
-
-    return chunks()
-
-
-def _result(plant, controller, plan, out, samples, first_sample) -> MonteCarloResult:
-    setup = plan["setup"]
-    x, xc, u, measured, diverged_at = out
-    return MonteCarloResult(
-        plant=plant,
-        controller=controller.name,
-        t=setup.t,
-        r=setup.r,
-        d=setup.d,
-        x=x,
-        xc=xc,
-        u=u,
-        measured=measured,
-        params=np.array(samples),
-        diverged_at=diverged_at,
-        first_sample=first_sample,
-    )
+    return _Trace(x, u, measured, step_time, status, xc_hist, padded)

@@ -22,9 +22,10 @@ else ``cc``, ``gcc`` or ``clang`` from the PATH. The cache is
 (``~/.cache/codesign-control``); it must be an absolute path, owned by the
 user and writable by no one else.
 
-Compiling costs 0.3-1.5 s per Function the first time and makes long runs
-3-20x faster than CasADi's virtual machine; a compiled copy has no
-derivatives (differentiate the original).
+Compiling costs time once per Function (then the cache answers) and makes
+long runs several times faster than CasADi's virtual machine, so it is asked
+for (``jit=True``), not assumed; figures in docs/notes/models.md. A compiled
+copy has no derivatives (differentiate the original).
 """
 
 from __future__ import annotations
@@ -162,6 +163,7 @@ def _private_directory(path: Path) -> str | None:
 
 
 def _remove_stale_builds(cache: Path) -> None:
+    """Remove build directories older than `STALE_BUILD_AGE` under `cache` (left by killed processes)."""
     now = time.time()
     for entry in cache.glob(".build-*"):
         try:
@@ -172,6 +174,7 @@ def _remove_stale_builds(cache: Path) -> None:
 
 
 def _warn_once(kind: str, message: str) -> None:
+    """Count a fallback to the virtual machine; warn (`CompilationUnavailable`) the first time for `kind`."""
     STATS.fallbacks += 1
     if kind not in _WARNED:
         _WARNED.add(kind)
@@ -214,6 +217,7 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
     flags = tuple(str(f) for f in flags)
 
     def unavailable(kind: str, message: str) -> None:
+        # No library: raise (fallback=False) or warn once per reason.
         if not fallback:
             raise CompilationError(message)
         _warn_once(kind, message)
@@ -359,6 +363,7 @@ class NumpyCall:
         self._out_sizes = [(fun.size1_out(i), fun.size2_out(i)) for i in range(fun.n_out())]
 
     def __call__(self, *args) -> list[np.ndarray]:
+        """Evaluate on numpy arrays (each read column-major into its input's shape); the outputs as arrays."""
         if len(args) != len(self._in_sizes):
             raise ValueError(f"{self.fun.name()} takes {len(self._in_sizes)} inputs, got {len(args)}")
         keep = []

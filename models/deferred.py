@@ -27,6 +27,7 @@ class Deferred:
         self._module: Any = None
 
     def __getattr__(self, attribute: str) -> Any:
+        """The real module's attribute, importing the module the first time."""
         if self._module is None:
             self._module = importlib.import_module(self._name)
         return getattr(self._module, attribute)

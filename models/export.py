@@ -221,6 +221,8 @@ class ExportedC:
 def _header(
     name: str, described: str, sizes: dict, members: list[str], declarations: list[str], defines: dict | None = None
 ) -> str:
+    """The C header ``name.h``: include guard, ``NAME_<key>`` defines of `sizes` and `defines`, the state
+    struct ``name_state`` of `members`, and the function `declarations`."""
     guard = f"{name.upper()}_H"
     lines = [
         f"/* {name}.h: {described}",
@@ -385,6 +387,7 @@ class CompiledController:
         prefix, pointer = exported.name, ctypes.c_void_p
 
         def function(suffix, argtypes, restype=None):
+            # The library's function prefix_suffix with its ctypes signature.
             fun = getattr(self._library, f"{prefix}_{suffix}")
             fun.argtypes, fun.restype = argtypes, restype
             return fun
@@ -401,6 +404,7 @@ class CompiledController:
         self._code = 0
 
     def _vector(self, value, size: int) -> np.ndarray:
+        """`value` as a contiguous float vector of `size` entries, for a C pointer."""
         return np.ascontiguousarray(np.asarray(value, dtype=float).reshape(size))
 
     def initial_state(self, y0, r0) -> np.ndarray:

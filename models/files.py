@@ -30,6 +30,10 @@ from typing import Any
 
 import numpy as np
 
+from . import deferred
+
+control = deferred.module("control")
+
 JSON_CONVENTIONS = (
     "SI units, angles in rad; complex numbers as [re, im]; non-finite numbers as the strings "
     "'inf', '-inf', 'nan'; transfer functions as {num, den} in descending powers"
@@ -176,8 +180,8 @@ def to_jsonable(value: Any, *, encode: bool = True) -> Any:
 
 
 def _lti_as_dict(value) -> dict | None:
-    import control
-
+    """A SISO python-control transfer function as {num, den[, dt]}, a state space as {A, B, C, D[, dt]},
+    anything else None."""
     if isinstance(value, control.TransferFunction) and value.issiso():
         return {
             "num": np.ravel(value.num[0][0]),
@@ -195,6 +199,7 @@ def dumps(value: Any) -> str:
 
 
 def write_json(path: str | os.PathLike, value: Any) -> Path:
+    """Write `value` as JSON (`dumps`) to `path` atomically; returns the path."""
     return write_text(path, dumps(value))
 
 
@@ -238,6 +243,7 @@ def markdown_table(rows: Sequence[Mapping], columns: Sequence[Column], literal: 
 
 
 def _escape_cell(text: str) -> str:
+    """A Markdown table cell kept on one line: '|' escaped, line breaks as spaces."""
     return text.replace("|", "\\|").replace("\n", " ")
 
 

@@ -3,9 +3,9 @@
 CasADi checks for interrupts inside its solvers and converts numpy arrays
 through Python code that clears errors, so a KeyboardInterrupt raised there
 comes back as a RuntimeError ("... KeyboardInterrupt"), as a SystemError
-("returned a result with an exception set"), or not at all: seen, a run
-that finished with exit status 0 after Ctrl-C, and a spurious solver-failure
-row. Code that calls CasADi in a loop
+("returned a result with an exception set"), or not at all, and a run would
+go on (and end with exit status 0) or record a solver failure that never
+happened. Code that calls CasADi in a loop
 
 - calls `watch()` once: it installs a SIGINT handler that counts the signal and
   then does what Python's default handler does, raise KeyboardInterrupt (only
@@ -36,16 +36,19 @@ _terminated = False
 
 
 def _count(signum, frame) -> None:
+    """SIGINT handler: count the signal only (inside `deferred`)."""
     global _received
     _received += 1
 
 
 def _count_and_interrupt(signum, frame):
+    """SIGINT handler of `watch`: count the signal, then raise KeyboardInterrupt as Python's own does."""
     _count(signum, frame)
     raise KeyboardInterrupt
 
 
 def _in_main_thread() -> bool:
+    """Whether this is the main thread, the only one that may install signal handlers."""
     return threading.current_thread() is threading.main_thread()
 
 
@@ -121,11 +124,13 @@ def is_interrupt(err: BaseException) -> bool:
 
 
 def _terminate(signum, frame) -> None:
+    """SIGTERM handler: remember it, then do what SIGINT's Python handler would (count, or raise).
+
+    A process started in the background by a script (``cmd &``, nohup) has SIGINT ignored, so
+    re-sending SIGINT would do nothing; without a Python SIGINT handler the interrupt is raised here.
+    """
     global _terminated
     _terminated = True
-    # What SIGINT's Python handler would do (count, or raise KeyboardInterrupt). A process started in the
-    # background by a script (`cmd &`, nohup) has SIGINT ignored: re-sending SIGINT there did nothing and
-    # a killed run went on to exit 0, so without a Python handler the interrupt is raised here.
     handler = signal.getsignal(signal.SIGINT)
     if callable(handler):
         handler(signal.SIGINT, frame)

@@ -69,14 +69,17 @@ class LinearModel:
 
     @property
     def nx(self) -> int:
+        """Number of states."""
         return self.A.shape[0]
 
     @property
     def nu(self) -> int:
+        """Number of inputs."""
         return self.B.shape[1]
 
     @property
     def ny(self) -> int:
+        """Number of outputs."""
         return self.C.shape[0]
 
     def output_index(self, name: str) -> int:

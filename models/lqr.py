@@ -191,6 +191,7 @@ def require_observable(A, C, what: str = "") -> int:
 
 
 def _unstable(modes, discrete: bool, margin: float = 1e-9) -> np.ndarray:
+    """The modes with |z| >= 1 − margin (discrete) or Re s >= −margin (continuous)."""
     modes = np.asarray(modes, dtype=complex)
     return modes[np.abs(modes) >= 1 - margin] if discrete else modes[modes.real >= -margin]
 
@@ -243,6 +244,7 @@ def bryson_weights(state_max, input_max) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _weights(A, B, Q, R, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Q (n, n) >= 0 and R (m, m) > 0 for B (n, m), identity when None (`models.checks.weight_matrix`)."""
     n, m = B.shape
     prefix = message_prefix(what)
     Q = np.eye(n) if Q is None else weight_matrix(Q, n, f"{prefix}weight Q")
@@ -251,6 +253,7 @@ def _weights(A, B, Q, R, what: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _weight_root(Q) -> np.ndarray:
+    """A factor Q^½ with (Q^½)ᵀ Q^½ = Q (for Q >= 0), the output whose detectability the LQR needs."""
     vals, vecs = np.linalg.eigh(Q)
     return (vecs * np.sqrt(np.clip(vals, 0, None))).T
 
@@ -273,6 +276,8 @@ def riccati_residual(A, B, Q, R, P, discrete: bool = False) -> float:
 
 
 def _riccati_checked(A, B, Q, R, P, K, discrete: bool, what: str) -> None:
+    """Refuse a Riccati solution P that is not finite, leaves a relative residual >= 1e-8, or whose gain K
+    does not stabilize A − B K (ValueError naming the residual and the closed-loop poles)."""
     res = riccati_residual(A, B, Q, R, P, discrete)
     closed = np.linalg.eigvals(A - B @ K)
     stable = np.all(np.abs(closed) < 1) if discrete else np.all(closed.real < 0)

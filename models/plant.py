@@ -64,6 +64,19 @@ class Physics:
 
 @dataclass(frozen=True)
 class Declaration:
+    """A plant as `declare` records it: names, parameters, limits and the physics function.
+
+    Attributes
+    ----------
+    name, title : the registry name and a one-line description
+    coordinates, inputs, first_order : names of q, u and s
+    params : tuple of Param
+    input_limit : (nu,) symmetric actuator limits
+    physics : (q, dq, u, p[, s]) -> Physics
+    operating_point : p -> dict of the standard equilibrium's fixed values
+    uncertain : names of the parameters the controller knows only to ±5 %
+    """
+
     name: str
     title: str
     coordinates: tuple
@@ -137,6 +150,7 @@ def declare(
         raise TypeError(f"{name}: operating_point must be a callable p -> dict, got {operating_point!r}")
 
     def wrap(physics: Callable) -> Declaration:
+        # The declaration of `physics`, checked, and registered unless register=False.
         if not callable(physics):
             raise TypeError(f"{name}: declare(...) decorates a physics function, got {physics!r}")
         decl = Declaration(
@@ -165,6 +179,7 @@ def declare(
 
 
 def _check_name(value, what: str) -> str:
+    """`value` if it is a non-empty string, else TypeError naming `what`."""
     if not isinstance(value, str) or not value:
         raise TypeError(f"{what} must be a non-empty string, got {value!r}")
     return value
@@ -193,6 +208,8 @@ def _limit_vector(value, size: int, what: str, inputs) -> np.ndarray:
 
 
 def _check_declaration(decl: Declaration) -> None:
+    """Refuse repeated names, a plant without states, an undeclared uncertain parameter and a parameter
+    value out of its range (ValueError naming the plant and what is wrong)."""
     names = [p.name for p in decl.params]
     states = decl.coordinates + tuple("d" + c for c in decl.coordinates) + decl.first_order
     for group, what in (
@@ -465,11 +482,12 @@ class Plant:
         self.casadi_h = self._sym.h
         self.casadi_energy = self._sym.energy
         # Compiled functions of this plant (RK4 steps, simulators), shared by the simulators; public so
-        # that models.simulate and models.closed_loop fill it without reaching into a private attribute.
+        # that models.simulate, closed_loop and monte_carlo_batch fill it without reaching into a private
+        # attribute.
         self.function_cache: dict = {}
 
     def __reduce__(self):
-        # Pickled by name (for worker processes, e.g. Dask): the receiver rebuilds it from its own registry.
+        """Pickled by name (for worker processes, e.g. Dask): the receiver rebuilds it from its own registry."""
         if _REGISTRY.get(self.name) is not self.declaration:
             raise TypeError(
                 f"the plant {self.name!r} is not the registered declaration of that name, so another "
@@ -480,6 +498,7 @@ class Plant:
     # ----------------------------------------------------------------- sizes
     @property
     def nq(self) -> int:
+        """Number of generalized coordinates q."""
         return len(self.coordinate_names)
 
     @property
@@ -489,18 +508,22 @@ class Plant:
 
     @property
     def nx(self) -> int:
+        """Number of states, 2 nq + ns."""
         return 2 * self.nq + self.n_first_order
 
     @property
     def nu(self) -> int:
+        """Number of inputs."""
         return len(self.input_names)
 
     @property
     def ny(self) -> int:
+        """Number of outputs."""
         return len(self.output_names)
 
     @property
     def n_params(self) -> int:
+        """Number of parameters, the length of p."""
         return len(self.param_info)
 
     @property
@@ -537,6 +560,7 @@ class Plant:
         return vec
 
     def _validated(self, values: dict) -> dict:
+        """`values` (name -> number) checked: known names, finite, > 0 (or >= 0 where allowed)."""
         info = {p.name: p for p in self.param_info}
         out = {}
         for key, value in values.items():

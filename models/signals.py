@@ -29,6 +29,7 @@ def steps(levels, period: float, offset: float = 0.0):
     period, offset = positive(period, "period (s)"), real(offset, "offset")
 
     def signal(t):
+        # The level of the period each time falls in (1e-9: a time k * period on the grid starts level k).
         idx = np.clip(np.floor(np.asarray(t) / period + 1e-9).astype(int), 0, levels.size - 1)
         return offset + levels[idx]
 

@@ -187,6 +187,10 @@ def _rk4_run(plant: Plant, sample_period: float, substeps: int, n: int, jit: boo
 
 
 def _adaptive(plant, x0, u, p, sample_period, rtol, atol) -> np.ndarray:
+    """CVODES over each sample with its input held: the states after each sample, (N, nx).
+
+    SimulationError naming the segment where CVODES fails or the state diverges.
+    """
     key = ("cvodes", float(sample_period), rtol, atol)
     cache = plant.function_cache
     if key not in cache:
@@ -251,6 +255,8 @@ def radau_matrices(degree: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _collocation(plant, x0, u, p, sample_period, degree, substeps, tol) -> np.ndarray:
+    """Radau IIA collocation of `degree` points per sample, the whole horizon one Newton solve from an
+    RK4 start: the states after each sample, (N, nx)."""
     n, nx = u.shape[0], plant.nx
     key = ("radau", float(sample_period), degree, n)
     cache = plant.function_cache

@@ -70,6 +70,7 @@ class Specs:
     source: str = ""
 
     def __post_init__(self):
+        """Refuse a negative or non-finite bound, a bound with low >= high, a final value's tolerance <= 0."""
         for name in ("max_rise_time_s", "max_settling_time_s", "max_overshoot_pct", "max_ss_error_pct"):
             value = getattr(self, name)
             if value is not None and not (isinstance(value, (int, float)) and value >= 0 and math.isfinite(value)):
@@ -134,6 +135,7 @@ class Violation:
 
     @property
     def note(self) -> str:
+        """What a % spec is a percentage of, when it is not obvious."""
         return " of the step" if self.spec == "ss error" else ""
 
 
@@ -154,6 +156,7 @@ class Verdict:
 
     @property
     def ok(self) -> bool:
+        """Whether the run meets its specs."""
         return self.label == MEETS
 
     def __str__(self) -> str:
@@ -196,6 +199,7 @@ def check(
     found = []
 
     def over(name, value, bound, unit):
+        # A violation when a measured value exceeds its bound (unjudged when either is missing or NaN).
         if bound is not None and value is not None and not math.isnan(value) and value > bound:
             found.append(Violation(name, float(value), float(bound), unit))
 
@@ -288,6 +292,7 @@ def combine(verdicts: Sequence[Verdict]) -> Verdict:
 
 
 def _relative(violation: Violation) -> float:
+    """How badly a violation misses: excess / bound (the excess itself for a zero bound, inf for an infinite value)."""
     if math.isinf(violation.value):
         return math.inf
     return violation.excess / violation.bound if violation.bound > 0 else violation.excess

@@ -62,6 +62,7 @@ _BINARY = {
 
 
 def _constant(value: float) -> sympy.Expr:
+    """A number as sympy: an Integer when integral, else the simplest rational or surd within 1e-12."""
     if float(value).is_integer():
         return sympy.Integer(int(value))
     return sympy.nsimplify(value, tolerance=1e-12 * max(1.0, abs(value)))
@@ -87,6 +88,7 @@ def to_sympy(expr: ca.SX, symbols: dict[str, sympy.Symbol] | None = None) -> sym
     memo: dict[int, sympy.Expr] = {}
 
     def convert(node: ca.SX) -> sympy.Expr:
+        # Depth first; memo makes a shared subexpression one sympy node.
         key = node.element_hash()
         if key in memo:
             return memo[key]
@@ -153,6 +155,7 @@ class DeclarationSymbols:
             self._name(n, latex_name(n))
 
     def _name(self, name: str, text: str) -> None:
+        """Record the real sympy symbol `name` and its LaTeX `text`."""
         symbol = sympy.Symbol(name, real=True)
         self.symbols[name] = symbol
         self.latex_names[symbol] = text
@@ -163,6 +166,7 @@ class DeclarationSymbols:
 
 
 def _declaration(plant: Plant | Declaration) -> Declaration:
+    """The declaration of a plant, or the declaration itself."""
     return plant.declaration if isinstance(plant, Plant) else plant
 
 

@@ -11,6 +11,7 @@ from .plant import Plant
 
 
 def _indices(plant: Plant, names) -> list[int]:
+    """Positions in p of the named parameters (default the plant's uncertain ones), checked."""
     if not isinstance(plant, Plant):
         raise TypeError(f"plant must be a models.Plant, got {type(plant).__name__} {plant!r}")
     if isinstance(names, str):
@@ -24,6 +25,7 @@ def _indices(plant: Plant, names) -> list[int]:
 
 
 def _relative(rel) -> float:
+    """The relative spread `rel` as a float in [0, 1)."""
     rel = real(rel, "rel", finite=False)
     if not np.isfinite(rel) or not 0 <= rel < 1:
         raise ValueError(f"rel must be in [0, 1), got {rel}")

@@ -417,7 +417,7 @@ def monte_carlo_bytes(study: CaseStudy, options: Options, n_params: int, sample_
 
     Per sample: the tracked coordinate and the first input over the run, kept for the envelope (and
     copied once by its quantiles), and the sample's row of parameters and metrics. The simulator's
-    own working memory is bounded separately (`models.closed_loop.MONTE_CARLO_CHUNK_BYTES`).
+    own working memory is bounded separately (`models.monte_carlo_batch.MONTE_CARLO_CHUNK_BYTES`).
 
     Parameters
     ----------

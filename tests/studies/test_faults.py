@@ -537,9 +537,9 @@ def test_the_estimate_is_the_kept_tracked_coordinate_and_input_of_every_sample()
 def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(monkeypatch):
     """The runner consumes the samples a chunk at a time; forced into chunks of 3 samples, every
     per-sample metric equals those computed from models.monte_carlo's single batch (a second path)."""
-    import models.closed_loop
+    import models.monte_carlo_batch
 
-    monkeypatch.setattr(models.closed_loop, "MONTE_CARLO_CHUNK_BYTES", 1)  # one sample per chunk
+    monkeypatch.setattr(models.monte_carlo_batch, "MONTE_CARLO_CHUNK_BYTES", 1)  # one sample per chunk
     study = arm_study("example_providers:lqr_only")
     options = runner.Options(scenarios=("mc",), mc=7, seed=2, jit=False)
     result = runner.run_study(study, options)
@@ -548,7 +548,7 @@ def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(mon
     scenario = next(s for s in study.scenarios if s.monte_carlo)
     _, base = runner.tracked_equilibrium(plant, study)
     params = models.sample_params(plant, 7, rel=scenario.rel, seed=2)
-    monkeypatch.setattr(models.closed_loop, "MONTE_CARLO_CHUNK_BYTES", 64 * 2**20)
+    monkeypatch.setattr(models.monte_carlo_batch, "MONTE_CARLO_CHUNK_BYTES", 64 * 2**20)
     batch = models.monte_carlo(
         plant, lqr, scenario.reference(study, base), scenario.duration(study), params, seed=2, substeps=study.substeps
     )
