@@ -27,7 +27,7 @@ import models
 from models import deferred
 from models.checks import positive
 
-from .analysis import as_polynomials, tf
+from .analysis.polynomials import as_polynomials, tf
 from .discrete import saturate
 from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
 

@@ -28,7 +28,7 @@ import models
 from models import deferred
 from models.linear import LinearModel, chop
 
-from .analysis import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
+from .analysis.polynomials import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
 from .filters import TustinSection, padded_coefficients
 from .pid import PID, SAMPLE_PERIOD, SIGMA, PDDesign, pd_design, pd_saturation, second_order_coefficients
 

@@ -25,20 +25,18 @@ import numpy as np
 
 from models import deferred
 
-from .analysis import (
-    Loop,
+from .analysis.frequency import band_max
+from .analysis.loop import Loop
+from .analysis.polynomials import as_polynomials, tf, zeros_at_origin
+from .analysis.spec_checks import (
     SpecCheck,
-    as_polynomials,
-    band_max,
     check_band_ratio,
     check_bandwidth,
     check_crossover,
     check_phase_margin,
     check_stable,
-    margins,
-    tf,
-    zeros_at_origin,
 )
+from .analysis.stability_margins import margins
 from .filters import lag, lead, lead_ratio, low_pass
 
 if TYPE_CHECKING:

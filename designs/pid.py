@@ -26,7 +26,7 @@ import models
 from models import deferred
 from models.checks import positive
 
-from .analysis import as_polynomials, dc_gain, tf
+from .analysis.polynomials import as_polynomials, dc_gain, tf
 from .discrete import back_calculation, dirty_derivative, integrate_while_slow, saturate, trapezoid
 
 if TYPE_CHECKING:

@@ -15,7 +15,9 @@ import numpy as np
 
 from models import deferred
 
-from .analysis import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
+from .analysis.loop import Loop
+from .analysis.polynomials import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
+from .analysis.time_response import step_info
 
 if TYPE_CHECKING:
     import control
@@ -139,8 +141,6 @@ def integrator_gain(
     ValueError
         If the PD poles are already below `zeta_min`.
     """
-    from .analysis import Loop, step_info
-
     L = integrator_evans_form(plant, kp, kd)
     start = np.roots(as_polynomials(L)[1])
     start = start[np.abs(start) > 1e-12]
