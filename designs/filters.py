@@ -29,7 +29,7 @@ from models.checks import positive
 
 from .analysis.polynomials import as_polynomials, tf
 from .discrete import saturate
-from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
+from .pid import coordinate_reader, equilibrium_feedforward, reference_feedforward
 
 if TYPE_CHECKING:
     import control
@@ -186,7 +186,7 @@ class TransferFunctionBlock(models.Block):
     coordinate : the controlled coordinate, e.g. "phi"
     controller : C(s), proper (a non-causal C raises)
     prefilter : F(s) on the reference, proper; None for F = 1
-    sample_period : s
+    sample_period : s, no default: the value is the design's (the case study's), never the library's
     output_limit : symmetric saturation of u (actuator limit, or the outer
         loop's bound on the inner reference); None for none
     feedforward : add the known plant's equilibrium input at the measured configuration
@@ -217,7 +217,7 @@ class TransferFunctionBlock(models.Block):
         controller,
         *,
         prefilter=None,
-        sample_period: float = SAMPLE_PERIOD,
+        sample_period: float,
         output_limit: float | None = None,
         feedforward: bool | str = False,
         anti_windup: str = "observer",

@@ -46,14 +46,7 @@ __all__ = [
     "equilibrium_feedforward",
     "reference_feedforward",
     "PID",
-    "SIGMA",
-    "SAMPLE_PERIOD",
 ]
-
-#: The text's dirty-derivative time constant (".11: dirty derivative gain τ = 0.05"), s.
-SIGMA = 0.05
-#: The text's controller sample period (.11), s.
-SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- design
@@ -337,8 +330,8 @@ class PID(models.Block):
     coordinate : name of the controlled coordinate, e.g. "theta"
     kp, kd : gains (tunable)
     ki : integrator gain (tunable), or None for a PD without integrator state
-    sample_period : s (the text's 0.01)
-    sigma : dirty-derivative time constant, s (the text's 0.05)
+    sample_period : s, no default: the value is the design's (the case study's), never the library's
+    sigma : time constant σ of the dirty derivative s/(σ s + 1), s; no default either
     derivative_on : "measurement" (no derivative kick) or "error"
     anti_windup : "back_calculation" (integral bled by T_s/k_i (u − u_unsat)),
         "integrate_while_slow" (integrate only while |ẏ| < `rate_limit`, for
@@ -361,8 +354,8 @@ class PID(models.Block):
         kp: float,
         kd: float = 0.0,
         ki: float | None = None,
-        sample_period: float = SAMPLE_PERIOD,
-        sigma: float = SIGMA,
+        sample_period: float,
+        sigma: float,
         derivative_on: str = "measurement",
         anti_windup: str = "back_calculation",
         rate_limit: float | None = None,

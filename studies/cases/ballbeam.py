@@ -26,7 +26,7 @@ from designs.loopshaping import (
     low_frequency_sign,
     prototype_phase_margin,
 )
-from designs.pid import PID, SIGMA, linearized_input_bound
+from designs.pid import PID, linearized_input_bound
 from designs.rootlocus import dominant_pair, lead_by_angle
 from designs.tuning import Specs
 from models import deferred
@@ -67,6 +67,8 @@ LOOPS = (
 #: V.11 (the text gives only the title "Root locus design"): a lead for the outer loop placing the
 #: closed-loop pair at V.8(i)'s ω_n and ζ, its zero at this fraction of ω_n.
 ROOT_LOCUS_ZERO = 0.5
+#: V.12: the controller sample period, s. `CASE.sample_period`: every block and the MPC of the ball on beam.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (V.8-V.13)
@@ -173,7 +175,14 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     rate = rate_limit(CASE.design_step, slc.outer.wn)
     blocks = {
-        "PD": cascade_blocks(known, slc, feedforward=True, name="PD"),
+        "PD": cascade_blocks(
+            known,
+            slc,
+            feedforward=True,
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PD",
+        ),
         "PID": cascade_blocks(
             known,
             slc,
@@ -182,6 +191,8 @@ def classical(known: models.Plant) -> ClassicalDesign:
             feedforward=True,
             anti_windup="integrate_while_slow",
             rate_limit=rate,
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
             name="PID",
         ),
         "PID (no anti-windup)": cascade_blocks(
@@ -191,6 +202,8 @@ def classical(known: models.Plant) -> ClassicalDesign:
             inner_ki=rl_in["ki"],
             feedforward=True,
             anti_windup="none",
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
             name="PID (no anti-windup)",
         ),
     }
@@ -198,17 +211,27 @@ def classical(known: models.Plant) -> ClassicalDesign:
         known,
         "theta",
         C_in,
+        sample_period=CASE.sample_period,
         output_limit=float(known.input_limit[0]),
         feedforward=True,
         name="loopshaped inner (theta)",
     )
     outer_block = TransferFunctionBlock(
-        known, "z", lead_out.controller, output_limit=slc.inner_limit, name="loopshaped outer (z)"
+        known,
+        "z",
+        lead_out.controller,
+        sample_period=CASE.sample_period,
+        output_limit=slc.inner_limit,
+        name="loopshaped outer (z)",
     )
     blocks["loopshaped"] = models.Cascade(outer_block, inner_block, name="lead-lag (V.13)")
     loops = {
-        "outer PD": Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd, sigma=SIGMA, name="outer PD"),
-        "outer PID": Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd, sigma=SIGMA, name="outer PID"),
+        "outer PD": Loop.pid(
+            G_out, slc.outer.kp, 0, slc.outer.kd, sigma=CASE.derivative_time_constant, name="outer PD"
+        ),
+        "outer PID": Loop.pid(
+            G_out, slc.outer.kp, rl["ki"], slc.outer.kd, sigma=CASE.derivative_time_constant, name="outer PID"
+        ),
         "inner lead-lag": loop_in,
         "outer lead": loop_out,
     }
@@ -298,7 +321,7 @@ STATESPACE = StateSpaceChoices(
 
 # ----------------------------------------------------------------- MPC
 MPC = MPCSettings(
-    0.01,
+    SAMPLE_PERIOD,
     60,
     (100.0, 10.0, 1.0, 1.0),
     1 / 15**2,
@@ -439,6 +462,7 @@ CASE = CaseStudy(
     design_step=0.25,
     step=0.15,
     input_disturbance=1.5,
+    sample_period=SAMPLE_PERIOD,
     observer_sample_period=0.001,
     duration=10.0,
     source="V.8(h) design step 0.25 m; comparison step 0.25 -> 0.40 m keeps the ball on the 0.5 m beam; "

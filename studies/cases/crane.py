@@ -64,6 +64,9 @@ LOOPS = (
     LoopSpec("VI.13(a)", "inner", baseline=None, crossover=BANDWIDTH_INNER, phase_margin=PHASE_MARGIN_INNER),
     LoopSpec("VI.13(b)", "outer", baseline=None, crossover=BANDWIDTH_OUTER),
 )
+#: VI.11: the controller sample period, s. `CASE.sample_period`: every block of the crane, and the MPC at a
+#: multiple of it.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (VI.8-VI.13)
@@ -181,17 +184,44 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     kw: dict[str, Any] = dict(inner_coordinate=inner_name, outer_derivative_on="error")
     blocks = {
-        "PD": cascade_blocks(known, slc, name="PD", **kw),
-        "PID": cascade_blocks(known, slc, ki=rl["ki"], name="PID", **kw),
+        "PD": cascade_blocks(
+            known, slc, sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant, name="PD", **kw
+        ),
+        "PID": cascade_blocks(
+            known,
+            slc,
+            ki=rl["ki"],
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PID",
+            **kw,
+        ),
         "PID (no anti-windup)": cascade_blocks(
-            known, slc, ki=rl["ki"], anti_windup="none", name="PID (no anti-windup)", **kw
+            known,
+            slc,
+            ki=rl["ki"],
+            anti_windup="none",
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PID (no anti-windup)",
+            **kw,
         ),
     }
     inner_block = TransferFunctionBlock(
-        known, inner_name, lead_in.controller, output_limit=limit_force, name=f"loopshaped inner ({inner_name})"
+        known,
+        inner_name,
+        lead_in.controller,
+        sample_period=CASE.sample_period,
+        output_limit=limit_force,
+        name=f"loopshaped inner ({inner_name})",
     )
     outer_block = TransferFunctionBlock(
-        known, "x", lead_out.controller, output_limit=inner_limit, name="loopshaped outer (x)"
+        known,
+        "x",
+        lead_out.controller,
+        sample_period=CASE.sample_period,
+        output_limit=inner_limit,
+        name="loopshaped outer (x)",
     )
     blocks["loopshaped"] = models.Cascade(outer_block, inner_block, name="lead (VI.13)")
     loops = {"outer PD": outer_pd, "outer PID": outer_pid, "inner lead": loop_in, "outer lead": loop_out}
@@ -259,9 +289,10 @@ STATESPACE_ONE_LOAD = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-# The swing modes (0.67 and 1.15 rad/s) and a 10 m move of 10-20 s need horizons of seconds: 0.1 s samples.
+# The swing modes (0.67 and 1.15 rad/s) and a 10 m move of 10-20 s need horizons of seconds: 0.1 s samples
+# (10 of the case's 0.01 s).
 MPC = MPCSettings(
-    0.1,
+    10 * SAMPLE_PERIOD,
     80,
     (1.0, 100.0, 100.0, 1.0, 1000.0, 1000.0),
     1 / 5000**2,
@@ -274,7 +305,7 @@ MPC = MPCSettings(
     "weights damp the 24 m cable mode (time constant 6 s, the best a cart force achieves)",
 )
 MPC_ONE_LOAD = MPCSettings(
-    0.1,
+    10 * SAMPLE_PERIOD,
     80,
     (1.0, 100.0, 1.0, 100.0),
     1 / 5000**2,
@@ -623,6 +654,7 @@ CASE = CaseStudy(
     design_step=10.0,
     step=10.0,
     input_disturbance=500.0,
+    sample_period=SAMPLE_PERIOD,
     observer_sample_period=0.001,
     duration=60.0,
     source="VI.14(e) step 10 m; no disturbance given: 10 % of 5 kN; VI.11 Ts = 0.01 s, VI.15 Ts = 0.001 s",

@@ -19,7 +19,7 @@ from designs import statespace as ss
 from designs.analysis import Loop, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
 from designs.loops import cascade_blocks, outer_plant_seen, successive_loop_closure, zero_cancelling_design
-from designs.pid import SIGMA, linearized_input_bound
+from designs.pid import linearized_input_bound
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CONTROLLERS, CaseStudy, LoopSpec, standard_scenarios
@@ -46,6 +46,8 @@ from studies.trajectories import Tracking, TrajectoryProblem, TrajectorySetup
 
 #: II.14(c), outer loop: 10x better below 0.001 rad/s, 10x more noise attenuation above 20 rad/s.
 LOOPSHAPING = LoopSpec("II.14", "outer", low_frequency=0.001, high_frequency=20.0, factor=10.0)
+#: II.11: the controller sample period, s. `CASE.sample_period`: every block and the MPC of the pendulum.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (II.8-II.14)
@@ -105,10 +107,12 @@ def classical(known: models.Plant) -> ClassicalDesign:
     a["II.10(b)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"), ki=rl_out["ki"])
     # .13 on the implemented loops. The outer loop sees the inner closed loop times the exact outer
     # plant: K_DC (g − ℓ s²)/s² alone has |L| > 1 at high frequency, which the inner loop's roll-off removes.
-    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=SIGMA, name="inner PD")
+    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=CASE.derivative_time_constant, name="inner PD")
     exact_outer = outer_plant_seen(in_pd, slc.plants.outer)
-    in_pid = Loop.pid(G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd, sigma=SIGMA, name="inner PID")
-    out_pd = Loop.pid(exact_outer, slc.outer.kp, 0, slc.outer.kd, sigma=SIGMA, name="outer PD")
+    in_pid = Loop.pid(
+        G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd, sigma=CASE.derivative_time_constant, name="inner PID"
+    )
+    out_pd = Loop.pid(exact_outer, slc.outer.kp, 0, slc.outer.kd, sigma=CASE.derivative_time_constant, name="outer PD")
     a["II.13"] = record(
         **margin_record(in_pd.loop_gain(), "_inner_pd"),
         **margin_record(in_pid.loop_gain(), "_inner_pid"),
@@ -123,17 +127,32 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     a["II.13(d)"] = record(omega=0.1, output_disturbance_percent=an.percent_output_disturbance_below(out_pd, 0.1))
     a["II.13(e)"] = record(slope=2.0, ess_ramp=2.0 * steady_state_errors(out_pd)["ess_ramp"])
-    C_pd = pid_tf(slc.outer.kp, 0.0, slc.outer.kd, SIGMA)
+    C_pd = pid_tf(slc.outer.kp, 0.0, slc.outer.kd, CASE.derivative_time_constant)
     shaped, pre, T_new = loopshaped(exact_outer * C_pd, LOOPSHAPING)
     a["II.14"] = loopshaping_record(shaped, pre, T_new)
     rate = rate_limit(CASE.design_step, slc.outer.wn)
     blocks = {
-        "PD": cascade_blocks(known, slc, name="PD"),
+        "PD": cascade_blocks(
+            known, slc, sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant, name="PD"
+        ),
         "PID": cascade_blocks(
-            known, slc, ki=rl_out["ki"], anti_windup="integrate_while_slow", rate_limit=rate, name="PID"
+            known,
+            slc,
+            ki=rl_out["ki"],
+            anti_windup="integrate_while_slow",
+            rate_limit=rate,
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PID",
         ),
         "PID (no anti-windup)": cascade_blocks(
-            known, slc, ki=rl_out["ki"], anti_windup="none", name="PID (no anti-windup)"
+            known,
+            slc,
+            ki=rl_out["ki"],
+            anti_windup="none",
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PID (no anti-windup)",
         ),
     }
     outer_block = TransferFunctionBlock(
@@ -141,11 +160,18 @@ def classical(known: models.Plant) -> ClassicalDesign:
         "z",
         shaped.controller * C_pd,
         prefilter=pre["prefilter"],
+        sample_period=CASE.sample_period,
         output_limit=slc.inner_limit,
         name="loopshaped outer (z)",
     )
     blocks["loopshaped"] = models.Cascade(outer_block, blocks["PD"].inner, name="loopshaped (II.14)")
-    blocks["PD (zero-cancelling filter)"] = cascade_blocks(known, zc, name="PD (zero-cancelling filter)")
+    blocks["PD (zero-cancelling filter)"] = cascade_blocks(
+        known,
+        zc,
+        sample_period=CASE.sample_period,
+        sigma=CASE.derivative_time_constant,
+        name="PD (zero-cancelling filter)",
+    )
     loops = {
         "inner PD": in_pd,
         "inner PID": in_pid,
@@ -189,7 +215,7 @@ STATESPACE = StateSpaceChoices(
 
 # ----------------------------------------------------------------- MPC
 MPC = MPCSettings(
-    0.01,
+    SAMPLE_PERIOD,
     50,
     (1.0, 10.0, 0.1, 0.1),
     1e-2,
@@ -395,6 +421,7 @@ CASE = CaseStudy(
     design_step=2.0,
     step=2.0,
     input_disturbance=0.5,
+    sample_period=SAMPLE_PERIOD,
     duration=20.0,
     source="II.8(h) step 2 m; II.16(c) disturbance 0.5 N; II.11 Ts = 0.01 s",
     tracked_unit="m",

@@ -19,7 +19,7 @@ from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
 from designs.loops import SuccessiveLoopClosure, cascade_blocks, coupling_tf, successive_loop_closure
-from designs.pid import SIGMA, linearized_input_bound, pd_design
+from designs.pid import linearized_input_bound, pd_design
 from designs.tuning import Cost, Specs
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
@@ -45,6 +45,9 @@ from studies.homework import (
 
 #: III.14(c), outer loop: 10x better below 0.003 rad/s, 10x more noise attenuation above 10 rad/s.
 LOOPSHAPING = LoopSpec("III.14", "outer", low_frequency=0.003, high_frequency=10.0, factor=10.0)
+#: III.11: the controller sample period, s. `CASE.sample_period`: every block of the satellite, and the MPC
+#: at a multiple of it.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (III.8-III.14)
@@ -106,10 +109,14 @@ def classical(known: models.Plant) -> ClassicalDesign:
         **error_record(Loop.pid(G_out, outer_pd.kp, rl_out["ki"], outer_pd.kd), "_pid"),
     )
     a["III.10(e)"] = root_locus_record(G_out, outer_pd.kp, outer_pd.kd, rl_out)
-    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=SIGMA, name="inner PD")
-    in_pid = Loop.pid(G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd, sigma=SIGMA, name="inner PID")
+    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=CASE.derivative_time_constant, name="inner PD")
+    in_pid = Loop.pid(
+        G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd, sigma=CASE.derivative_time_constant, name="inner PID"
+    )
     out_p = Loop.pid(G_out, slc.outer.kp, name="outer P")
-    out_pid = Loop.pid(G_out, outer_pd.kp, rl_out["ki"], outer_pd.kd, sigma=SIGMA, name="outer PID")
+    out_pid = Loop.pid(
+        G_out, outer_pd.kp, rl_out["ki"], outer_pd.kd, sigma=CASE.derivative_time_constant, name="outer PID"
+    )
     a["III.13"] = record(
         **margin_record(in_pd.loop_gain(), "_inner_pd"),
         **margin_record(in_pid.loop_gain(), "_inner_pid"),
@@ -127,7 +134,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
         tracking_error_percent_p=an.percent_tracking_error_below(out_p, 0.01),
     )
     a["III.13(d)"] = record(omega=1.0, noise_percent=an.percent_noise_above(out_pid, 1.0))
-    C_pd = pid_tf(outer_pd.kp, 0.0, outer_pd.kd, SIGMA)
+    C_pd = pid_tf(outer_pd.kp, 0.0, outer_pd.kd, CASE.derivative_time_constant)
     baseline_pm = an.margins(G_out * C_pd)["pm_deg"]
     shaped, pre, T_new = loopshaped(G_out * C_pd, LOOPSHAPING, phase_margin_deg=min(baseline_pm, 60.0))
     a["III.14"] = loopshaping_record(shaped, pre, T_new)
@@ -143,14 +150,31 @@ def classical(known: models.Plant) -> ClassicalDesign:
         full_poles=slc.full_poles,
     )
     blocks = {
-        "PD": cascade_blocks(known, slc, outer_limit=None, name="PD"),
-        "PID": cascade_blocks(known, pid_design, ki=rl_out["ki"], outer_limit_about="theta", name="PID"),
+        "PD": cascade_blocks(
+            known,
+            slc,
+            outer_limit=None,
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PD",
+        ),
+        "PID": cascade_blocks(
+            known,
+            pid_design,
+            ki=rl_out["ki"],
+            outer_limit_about="theta",
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
+            name="PID",
+        ),
         "PID (no anti-windup)": cascade_blocks(
             known,
             pid_design,
             ki=rl_out["ki"],
             outer_limit_about="theta",
             anti_windup="none",
+            sample_period=CASE.sample_period,
+            sigma=CASE.derivative_time_constant,
             name="PID (no anti-windup)",
         ),
     }
@@ -160,6 +184,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
         "phi",
         shaped.controller * C_pd,
         prefilter=pre["prefilter"],
+        sample_period=CASE.sample_period,
         output_limit=slc.inner_limit,
         limit_about="theta",
         name="loopshaped outer (phi)",
@@ -212,9 +237,9 @@ STATESPACE = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-# The panel mode (0.42 rad/s, period 15 s) needs a horizon of seconds: 0.1 s samples, not the text's 0.01 s.
+# The panel mode (0.42 rad/s, period 15 s) needs a horizon of seconds: 0.1 s samples (10 of the case's 0.01 s).
 MPC = MPCSettings(
-    0.1,
+    10 * SAMPLE_PERIOD,
     60,
     (1.0, 10.0, 0.1, 0.1),
     1 / 25,
@@ -393,6 +418,7 @@ CASE = CaseStudy(
     design_step=np.deg2rad(30),
     step=np.deg2rad(30),
     input_disturbance=0.5,
+    sample_period=SAMPLE_PERIOD,
     duration=60.0,
     source="III.8(g) step 30 deg; III.16(c) disturbance 0.5 N m; III.11 Ts = 0.01 s",
     tracked_unit="rad",

@@ -62,6 +62,9 @@ CROSSOVER, PHASE_MARGIN = 2.0, 60.0
 LOOPSHAPING = LoopSpec("IV.13", "input", baseline=None, crossover=CROSSOVER, phase_margin=PHASE_MARGIN)
 #: IV.13(d) notch: the text's zero damping, and our pole damping.
 NOTCH_ZETA_ZERO, NOTCH_ZETA_POLE = 0.05, 0.7
+#: IV.12: the controller sample period, s. `CASE.sample_period`: every block of the UUV, and the MPC at a
+#: multiple of it.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (IV.8-IV.13)
@@ -70,7 +73,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
     G = known.linearize().tf("phi", "tau")
     bound = float(known.input_limit[0])
     pd = pd_saturation(G, input_bound=bound, step=CASE.design_step, zeta=ZETA_UUV)
-    rl, loops = single_loop(G, pd, ZETA_UUV)
+    rl, loops = single_loop(G, pd, ZETA_UUV, CASE.derivative_time_constant)
     ki = rl["ki"]
     a = {}
     a["IV.8(a)"] = record(**tf_record(G, "plant_"), **tf_record(pd.closed_loop, "closed_loop_"))
@@ -96,12 +99,19 @@ def classical(known: models.Plant) -> ClassicalDesign:
     # No anti-windup: the lead-lag has no integrator, and the saturated lead is what keeps the overshoot
     # low; an anti-windup observer would hold the lead's state at the bound and slow the rise (6.6 s).
     lead_block = TransferFunctionBlock(
-        turbo, "phi", lead_alone.lead_tf(), output_limit=THRUSTER_LIMIT, anti_windup="none", name="lead (IV.11)"
+        turbo,
+        "phi",
+        lead_alone.lead_tf(),
+        sample_period=CASE.sample_period,
+        output_limit=THRUSTER_LIMIT,
+        anti_windup="none",
+        name="lead (IV.11)",
     )
     leadlag_block = TransferFunctionBlock(
         turbo,
         "phi",
         leadlag.transfer_function(),
+        sample_period=CASE.sample_period,
         output_limit=THRUSTER_LIMIT,
         anti_windup="none",
         name="lead-lag (IV.11)",
@@ -135,6 +145,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
         turbo,
         "phi",
         leadlag.transfer_function(),
+        sample_period=CASE.sample_period,
         output_limit=THRUSTER_LIMIT,
         anti_windup="none",
         feedforward="reference",
@@ -192,11 +203,19 @@ def classical(known: models.Plant) -> ClassicalDesign:
         overshoot_percent=an.step_info(T_e)["Overshoot"],
         specs=spec_records(checks),
     )
-    blocks = single_loop_blocks(known, "phi", pd, ki, feedforward=False)
+    blocks = single_loop_blocks(
+        known, "phi", pd, ki, feedforward=False, sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant
+    )
     # Anti-windup observer at 1 rad/s (z = 0.99): faster tracking starves the integrator while the
     # lightly damped mode keeps the torque saturated.
     blocks["loopshaped"] = TransferFunctionBlock(
-        known, "phi", C_e, output_limit=bound, tracking_pole=0.99, name="loopshaped (IV.13)"
+        known,
+        "phi",
+        C_e,
+        sample_period=CASE.sample_period,
+        output_limit=bound,
+        tracking_pole=0.99,
+        name="loopshaped (IV.13)",
     )
     blocks["lead-lag (IV.11)"] = leadlag_block
     loops["loopshaped"] = loop_e
@@ -241,8 +260,8 @@ STATESPACE = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-# The roll mode (1.1 rad/s) needs a horizon of seconds: 0.05 s samples, not the text's 0.01 s.
-MPC = MPCSettings(0.05, 40, (100.0, 1.0), 1 / 50**2, notes="2 s horizon, 0.36 of the roll period")
+# The roll mode (1.1 rad/s) needs a horizon of seconds: 0.05 s samples (5 of the case's 0.01 s).
+MPC = MPCSettings(5 * SAMPLE_PERIOD, 40, (100.0, 1.0), 1 / 50**2, notes="2 s horizon, 0.36 of the roll period")
 
 
 # ----------------------------------------------------------------- co-design: the smallest thrusters
@@ -256,6 +275,7 @@ def sizing_hand_design(known: models.Plant) -> models.Block:
         known,
         "phi",
         control.tf(gains["num"], gains["den"]),
+        sample_period=CASE.sample_period,
         output_limit=float(known.input_limit[0]),
         anti_windup="none",
         name="lead-lag (IV.11)",
@@ -438,6 +458,7 @@ CASE = CaseStudy(
     design_step=np.deg2rad(30),
     step=np.deg2rad(30),
     input_disturbance=5.0,
+    sample_period=SAMPLE_PERIOD,
     duration=10.0,
     source="IV.8(b) step 30 deg; no disturbance given: 10 % of 50 N m; IV.12 Ts = 0.01 s",
     tracked_unit="rad",
