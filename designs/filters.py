@@ -148,10 +148,12 @@ class TustinSection:
         self.matrix = ca.DM(tustin_matrix(order, sample_period))
 
     def coefficients(self, num, den):
+        """(b, a): the z-domain coefficients of num/den (continuous, descending) by Tustin, a[0] = 1."""
         b, a = self.matrix @ num, self.matrix @ den
         return b / a[0], a / a[0]
 
     def expr(self, state, signal, num, den):
+        """One sample of the section in transposed direct form II: (state next (order,), output)."""
         b, a = self.coefficients(num, den)
         out = b[0] * signal + (state[0] if self.order else 0)
         nxt = [
@@ -272,6 +274,7 @@ class TransferFunctionBlock(models.Block):
         return tf(self.gains["num"], self.gains["den"])
 
     def expr(self, xc, y, r, gains):
+        """One sample: the prefiltered reference, C(z) on the error, the feedforward, saturation, anti-windup."""
         npf = self._n_prefilter
         if self._prefilter is not None:
             xf_next, r_filtered = self._prefilter.expr(xc[:npf], r[0], gains["prefilter_num"], gains["prefilter_den"])
@@ -294,6 +297,7 @@ class TransferFunctionBlock(models.Block):
         return ca.vertcat(xf_next, xk_next), u
 
     def initial_state(self, y0, r0) -> np.ndarray:
+        """The prefilter at rest at the first reference r0, the controller's state at zero."""
         parts = []
         if self._prefilter is not None:
             parts.append(

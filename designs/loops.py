@@ -532,6 +532,7 @@ class FilteredBlock(models.Block):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: the block's step, then the filter section on its output."""
         nb = self.block.n_state
         own = {k: v for k, v in gains.items() if not k.startswith("filter_")}
         xb_next, v = self.block.expr(xc[:nb], y, r, own)
@@ -539,6 +540,7 @@ class FilteredBlock(models.Block):
         return ca.vertcat(xb_next, xf_next), out
 
     def initial_state(self, y0, r0) -> np.ndarray:
+        """The block's initial state, the filter at rest at the block's first output."""
         xb = self.block.initial_state(y0, r0)
         _, v = self.block.step(xb, y0, r0)
         xf = self._section.steady_state(float(v[0]), self.gains["filter_num"], self.gains["filter_den"])

@@ -66,6 +66,7 @@ __all__ = [
 
 # ----------------------------------------------------------------- prototype relations
 def _check_zeta(zeta):
+    """ValueError unless ζ > 0."""
     if not zeta > 0:
         raise ValueError(f"zeta must be > 0, got {zeta}")
 
@@ -227,6 +228,7 @@ class LoopshapingResult:
 
     @property
     def all_met(self) -> bool:
+        """Every requirement in `specs` is met."""
         return all(s.met for s in self.specs)
 
 
@@ -430,6 +432,7 @@ def improve_loop(
 
 
 def _response(G, omega) -> np.ndarray:
+    """G(jω) at omega (F,) rad/s, complex (F,)."""
     num, den = as_polynomials(G)
     s = 1j * omega
     return np.polyval(num, s) / np.polyval(den, s)

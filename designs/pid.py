@@ -92,6 +92,7 @@ class PDDesign:
     input_bound: float = float("nan")
 
     def as_dict(self) -> dict:
+        """The gains, ω_n, ζ, poles and DC gain as a dict (the homework's numbers)."""
         return {
             "kp": self.kp,
             "kd": self.kd,
@@ -397,6 +398,7 @@ class PID(models.Block):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: the error, the dirty derivative, the integral and feedforward, saturation, anti-windup."""
         ts = self.sample_period
         e_prev, y_prev, rate_prev = xc[0], xc[1], xc[2]
         yc = self._read(y)

@@ -206,14 +206,17 @@ class LeadLagDesign:
     lag_pole: float = 0.0
 
     def lead_tf(self) -> control.TransferFunction:
+        """The lead K (s + z)/(s + p), the gain included."""
         return tf([self.gain, self.gain * self.lead_zero], [1.0, self.lead_pole])
 
     def lag_tf(self) -> control.TransferFunction:
+        """The lag (s + z_lag)/(s + p_lag), or 1 when there is none."""
         if self.lag_zero == 0:
             return tf([1.0], [1.0])
         return tf([1.0, self.lag_zero], [1.0, self.lag_pole])
 
     def transfer_function(self) -> control.TransferFunction:
+        """C(s): the lead times the lag."""
         return self.lead_tf() * self.lag_tf()
 
 

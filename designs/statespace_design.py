@@ -137,10 +137,13 @@ class StateSpaceDesign:
 
     @property
     def observer_rows(self) -> list[int]:
+        """Row indices in the plant's outputs of `observer_outputs`."""
         return self.model.output_rows(self.observer_outputs)
 
 
 def _sampled_poles(model: TrackingModel, K, Ts, what) -> np.ndarray:
+    """eig(A_d − B_d K) of the gain K (1, nx) held over Ts s on the ZOH model; ValueError naming `what`
+    when one leaves the unit circle."""
     disc = model.discrete(Ts)
     z = np.linalg.eigvals(disc.A - disc.B @ np.atleast_2d(K))
     if np.any(np.abs(z) >= 1):

@@ -293,6 +293,7 @@ _CLASSICAL: dict = {}
 
 
 def _known(case: CaseStudy, known: models.Plant | None) -> models.Plant:
+    """`known` (default the case's nominal plant), checked to be the case's plant or one of its design models."""
     known = models.get(case.plant) if known is None else known
     if known.name not in (case.plant, *case.design_models):
         allowed = ", ".join(repr(n) for n in (case.plant, *case.design_models))
@@ -368,6 +369,7 @@ class StateSpaceChoices:
 
 
 def _choices(case: CaseStudy, choices: StateSpaceChoices | None) -> StateSpaceChoices:
+    """`choices`, or the case's own; ValueError when the case has no state-space design."""
     choices = case.statespace if choices is None else choices
     if choices is None:
         raise ValueError(f"the {case.plant} case has no state-space design")

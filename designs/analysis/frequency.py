@@ -27,6 +27,7 @@ __all__ = [
 
 
 def _magnitude(G, omega) -> np.ndarray:
+    """|G(jω)| at omega (F,) rad/s."""
     num, den = as_polynomials(G)
     s = 1j * np.asarray(omega, dtype=float)
     return np.abs(np.polyval(num, s) / np.polyval(den, s))

@@ -105,6 +105,7 @@ class Loop:
 
     # polynomial parts over one controller denominator
     def _parts(self):
+        """(N_P, D_P, N_Cy, N_Cr, D_C): the plant's polynomials and both controller paths over one denominator."""
         n_p, d_p = as_polynomials(self.plant)
         n_y, d_y = as_polynomials(self.feedback)
         n_r, d_r = as_polynomials(self.reference)
@@ -137,6 +138,7 @@ class Loop:
         return _cancel_origin(poly_mul(n_p, n_y), poly_mul(d_p, d_y))
 
     def _closed(self, num) -> control.TransferFunction:
+        """num over the characteristic polynomial: a closed loop of this loop."""
         return tf(num, self.characteristic())
 
     def reference_to_output(self) -> control.TransferFunction:
@@ -182,6 +184,7 @@ class Loop:
 
 
 def _as_tf(G) -> control.TransferFunction:
+    """G (a SISO transfer function or a number) as a validated continuous-time transfer function."""
     num, den = as_polynomials(G)
     return tf(num, den)
 

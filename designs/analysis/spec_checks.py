@@ -62,6 +62,7 @@ class SpecCheck:
     detail: str = field(default="")
 
     def as_dict(self) -> dict:
+        """The check as a plain dict (for the answers' records)."""
         return asdict(self)
 
 
