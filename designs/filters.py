@@ -27,9 +27,9 @@ import models
 from models import deferred
 from models.checks import positive
 
-from .analysis import as_polynomials, tf
+from .analysis.polynomials import as_polynomials, tf
 from .discrete import saturate
-from .pid import SAMPLE_PERIOD, coordinate_reader, equilibrium_feedforward, reference_feedforward
+from .pid import coordinate_reader, equilibrium_feedforward, reference_feedforward
 
 if TYPE_CHECKING:
     import control
@@ -148,10 +148,12 @@ class TustinSection:
         self.matrix = ca.DM(tustin_matrix(order, sample_period))
 
     def coefficients(self, num, den):
+        """(b, a): the z-domain coefficients of num/den (continuous, descending) by Tustin, a[0] = 1."""
         b, a = self.matrix @ num, self.matrix @ den
         return b / a[0], a / a[0]
 
     def expr(self, state, signal, num, den):
+        """One sample of the section in transposed direct form II: (state next (order,), output)."""
         b, a = self.coefficients(num, den)
         out = b[0] * signal + (state[0] if self.order else 0)
         nxt = [
@@ -186,7 +188,7 @@ class TransferFunctionBlock(models.Block):
     coordinate : the controlled coordinate, e.g. "phi"
     controller : C(s), proper (a non-causal C raises)
     prefilter : F(s) on the reference, proper; None for F = 1
-    sample_period : s
+    sample_period : s, no default: the value is the design's (the case study's), never the library's
     output_limit : symmetric saturation of u (actuator limit, or the outer
         loop's bound on the inner reference); None for none
     feedforward : add the known plant's equilibrium input at the measured configuration
@@ -217,7 +219,7 @@ class TransferFunctionBlock(models.Block):
         controller,
         *,
         prefilter=None,
-        sample_period: float = SAMPLE_PERIOD,
+        sample_period: float,
         output_limit: float | None = None,
         feedforward: bool | str = False,
         anti_windup: str = "observer",
@@ -272,6 +274,7 @@ class TransferFunctionBlock(models.Block):
         return tf(self.gains["num"], self.gains["den"])
 
     def expr(self, xc, y, r, gains):
+        """One sample: the prefiltered reference, C(z) on the error, the feedforward, saturation, anti-windup."""
         npf = self._n_prefilter
         if self._prefilter is not None:
             xf_next, r_filtered = self._prefilter.expr(xc[:npf], r[0], gains["prefilter_num"], gains["prefilter_den"])
@@ -294,6 +297,7 @@ class TransferFunctionBlock(models.Block):
         return ca.vertcat(xf_next, xk_next), u
 
     def initial_state(self, y0, r0) -> np.ndarray:
+        """The prefilter at rest at the first reference r0, the controller's state at zero."""
         parts = []
         if self._prefilter is not None:
             parts.append(

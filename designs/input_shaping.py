@@ -37,6 +37,7 @@ class Shaper:
     amplitudes: np.ndarray
 
     def __post_init__(self):
+        """Store the impulses as float arrays: as many times (s, from 0, not decreasing) as amplitudes (> 0, sum 1)."""
         times = np.asarray(self.times, dtype=float).reshape(-1)
         amplitudes = np.asarray(self.amplitudes, dtype=float).reshape(-1)
         if times.size != amplitudes.size or times.size == 0:
@@ -90,6 +91,7 @@ class Shaper:
 
 
 def _damping_ratio(value) -> float:
+    """`value` as a damping ratio of an oscillatory mode, 0 <= ζ < 1 (ValueError otherwise)."""
     zeta = real(value, "damping_ratio")
     if not 0 <= zeta < 1:
         raise ValueError(f"damping_ratio must be in [0, 1) (an oscillatory mode), got {zeta}")

@@ -28,9 +28,9 @@ import models
 from models import deferred
 from models.linear import LinearModel, chop
 
-from .analysis import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
+from .analysis.polynomials import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
 from .filters import TustinSection, padded_coefficients
-from .pid import PID, SAMPLE_PERIOD, SIGMA, PDDesign, pd_design, pd_saturation, second_order_coefficients
+from .pid import PID, PDDesign, pd_design, pd_saturation, second_order_coefficients
 
 if TYPE_CHECKING:
     import control
@@ -446,8 +446,8 @@ def cascade_blocks(
     outer_limit: float | Literal["inner_step"] | None = "inner_step",
     outer_limit_about: str | None = None,
     feedforward: bool = False,
-    sample_period: float = SAMPLE_PERIOD,
-    sigma: float = SIGMA,
+    sample_period: float,
+    sigma: float,
     name: str = "PD",
 ) -> models.Cascade:
     """The two PID blocks of a successive-loop-closure design, composed by `models.Cascade`.
@@ -463,6 +463,8 @@ def cascade_blocks(
     outer_limit : bound on the inner reference; "inner_step" uses the design's A_θ, None for no bound
     outer_limit_about : bound the inner reference about this measured coordinate instead of 0
     feedforward : add `known`'s equilibrium input in the inner block
+    sample_period : s, of both blocks;  sigma : their dirty derivative's time constant σ, s
+    name : the cascade's name; the blocks' names add "outer (x)" and "inner (θ)"
 
     A design with an `outer_filter` (`zero_cancelling_design`) filters the
     outer block's output (after its saturation) before the inner loop.
@@ -530,6 +532,7 @@ class FilteredBlock(models.Block):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: the block's step, then the filter section on its output."""
         nb = self.block.n_state
         own = {k: v for k, v in gains.items() if not k.startswith("filter_")}
         xb_next, v = self.block.expr(xc[:nb], y, r, own)
@@ -537,6 +540,7 @@ class FilteredBlock(models.Block):
         return ca.vertcat(xb_next, xf_next), out
 
     def initial_state(self, y0, r0) -> np.ndarray:
+        """The block's initial state, the filter at rest at the block's first output."""
         xb = self.block.initial_state(y0, r0)
         _, v = self.block.step(xb, y0, r0)
         xf = self._section.steady_state(float(v[0]), self.gains["filter_num"], self.gains["filter_den"])

@@ -25,20 +25,18 @@ import numpy as np
 
 from models import deferred
 
-from .analysis import (
-    Loop,
+from .analysis.frequency import band_max
+from .analysis.loop import Loop
+from .analysis.polynomials import as_polynomials, tf, zeros_at_origin
+from .analysis.spec_checks import (
     SpecCheck,
-    as_polynomials,
-    band_max,
     check_band_ratio,
     check_bandwidth,
     check_crossover,
     check_phase_margin,
     check_stable,
-    margins,
-    tf,
-    zeros_at_origin,
 )
+from .analysis.stability_margins import margins
 from .filters import lag, lead, lead_ratio, low_pass
 
 if TYPE_CHECKING:
@@ -56,6 +54,8 @@ __all__ = [
     "lead_for_crossover",
     "LeadDesign",
     "improve_loop",
+    "lowpass_corner_for_noise",
+    "lag_ratio_for_tracking",
     "LoopshapingResult",
     "flattening_prefilter",
     "phase_at",
@@ -66,6 +66,7 @@ __all__ = [
 
 # ----------------------------------------------------------------- prototype relations
 def _check_zeta(zeta):
+    """ValueError unless ζ > 0."""
     if not zeta > 0:
         raise ValueError(f"zeta must be > 0, got {zeta}")
 
@@ -227,7 +228,112 @@ class LoopshapingResult:
 
     @property
     def all_met(self) -> bool:
+        """Every requirement in `specs` is met."""
         return all(s.met for s in self.specs)
+
+
+def _lowpass_response(omega, corner: float, order: int) -> np.ndarray:
+    """(ω_lp/(jω + ω_lp))^order at omega (F,) rad/s."""
+    return (corner / (1j * omega + corner)) ** order
+
+
+def _lag_response(omega, zero: float, gain: float) -> np.ndarray:
+    """(jω + z)/(jω + z/M) at omega (F,) rad/s: the lag of zero z and ratio M."""
+    return (1j * omega + zero) / (1j * omega + zero / gain)
+
+
+def lowpass_corner_for_noise(baseline, compensator, omega, order: int, target: float, lo: float, hi: float) -> float:
+    """The low-pass corner ω_lp (rad/s) at which the largest noise ratio |T_new/T_old| on `omega` is `target`.
+
+    With the added compensator C = `compensator` · (ω_lp/(s + ω_lp))^order,
+    T_new/T_old = C (1 + L0)/(1 + L0 C); the corner is found by `brentq` in [lo, hi].
+
+    Parameters
+    ----------
+    baseline : L0(jω) on `omega`, complex (F,)
+    compensator : the rest of the compensator (lead · lag) on `omega`, complex (F,)
+    omega : (F,) rad/s, the band the noise requirement covers (above ω_high)
+    order : poles of the low-pass
+    target : the largest ratio allowed, 1 / (factor × margin)
+    lo, hi : rad/s, the search interval
+
+    Returns
+    -------
+    The corner; `lo` when even `lo` leaves the ratio above `target`, `hi` when `hi` already meets it.
+    """
+
+    def noise_ratio(corner):
+        c = compensator * _lowpass_response(omega, corner, order)
+        return np.max(np.abs(c * (1 + baseline) / (1 + baseline * c)))
+
+    if noise_ratio(lo) > target:
+        return lo
+    if noise_ratio(hi) <= target:
+        return hi
+    return scipy.optimize.brentq(lambda w: noise_ratio(w) - target, lo, hi, xtol=1e-12 * hi)
+
+
+def lag_ratio_for_tracking(baseline, compensator, omega, zero: float, need: float) -> tuple[float, bool]:
+    """The lag ratio M at which the smallest sensitivity improvement |S_old/S_new| on `omega` is `need`.
+
+    With the added compensator C = `compensator` · (s + z)/(s + z/M),
+    S_old/S_new = |1 + L0 C|/|1 + L0|. M starts just above 1; the bracket grows
+    by factors of 4 up to 1e12, then `brentq` finds M.
+
+    Parameters
+    ----------
+    baseline : L0(jω) on `omega`, complex (F,)
+    compensator : the rest of the compensator (lead · low-pass) on `omega`, complex (F,)
+    omega : (F,) rad/s, the band the tracking requirement covers (below ω_low)
+    zero : the lag zero z, rad/s
+    need : the improvement asked for, factor × margin
+
+    Returns
+    -------
+    (M, reached) : reached is False when no M up to the bracket's end reaches `need` with this zero
+    (then M is that end); M = 1 + 1e-9 when no lag is needed.
+    """
+
+    def tracking_gain(gain):
+        c = compensator * _lag_response(omega, zero, gain)
+        return np.min(np.abs((1 + baseline * c) / (1 + baseline)))
+
+    if tracking_gain(1.0 + 1e-9) >= need:
+        return 1.0 + 1e-9, True
+    m_hi = 4.0
+    while tracking_gain(m_hi) < need and m_hi < 1e12:
+        m_hi *= 4.0
+    if tracking_gain(m_hi) < need:
+        return m_hi, False
+    return scipy.optimize.brentq(lambda m: tracking_gain(m) - need, 1.0 + 1e-9, m_hi, xtol=1e-12), True
+
+
+def _crossover_and_starting_lag(
+    L0, crossover, low_frequency: float, low_factor: float, high_frequency: float, lag_zero_ratio: float, margin: float
+) -> tuple[float, float, float]:
+    """(crossover ω_c, starting lag zero, starting lag ratio) of `improve_loop`, rad/s and ratio.
+
+    ω_c is `crossover` or L0's own; the lag zero ω_c / `lag_zero_ratio`, raised to the lowest
+    zero that can give `low_factor` at ω_low; the ratio 1.2 × factor × margin.
+
+    Raises
+    ------
+    ValueError
+        If L0 has no crossover and none is given, or unless ω_low < ω_c < ω_high.
+    """
+    base = margins(L0)
+    wc = base["gain_crossover"] if crossover is None else float(crossover)
+    if not np.isfinite(wc):
+        raise ValueError("the baseline loop has no gain crossover; give `crossover`")
+    if not low_frequency < wc < high_frequency:
+        raise ValueError(
+            f"need low_frequency < crossover < high_frequency, got {low_frequency:g}, {wc:g}, {high_frequency:g} rad/s"
+        )
+    lag_zero = wc / lag_zero_ratio
+    floor = low_frequency * np.sqrt(low_factor**2 - 1) * 1.5
+    lag_zero = max(lag_zero, floor)  # a lag zero below this cannot give the factor at ω_low
+    lag_gain = low_factor * margin * 1.2
+    return wc, lag_zero, lag_gain
 
 
 def improve_loop(
@@ -259,6 +365,12 @@ def improve_loop(
     lag_zero_ratio : lag zero at crossover / this (keeps the lag's phase lag small); raised
         towards crossover / 2 when no lag ratio can reach the low-frequency factor (type-0 loops)
     margin : design each factor with this much to spare (1.05: 5 %)
+    iterations : at most this many rounds of lead, low-pass corner and lag ratio
+
+    Each round places the lead for the crossover and phase margin on L0 · lag · low-pass,
+    then the low-pass corner for the noise factor (`lowpass_corner_for_noise`) and the lag
+    ratio for the tracking factor (`lag_ratio_for_tracking`), on fixed frequency grids,
+    until corner and ratio change by less than 1e-9 relative.
 
     The requirements are checked on the exact closed loops: |S_new| ≤ |S_old|/factor
     below ω_low (tracking error and output disturbance), |P S_new| likewise
@@ -270,73 +382,29 @@ def improve_loop(
     ValueError
         If the frequencies are not ordered ω_low < crossover < ω_high.
     """
-    base = margins(L0)
-    wc = base["gain_crossover"] if crossover is None else float(crossover)
-    if not np.isfinite(wc):
-        raise ValueError("the baseline loop has no gain crossover; give `crossover`")
-    if not low_frequency < wc < high_frequency:
-        raise ValueError(
-            f"need low_frequency < crossover < high_frequency, got {low_frequency:g}, {wc:g}, {high_frequency:g} rad/s"
-        )
-    lag_zero = wc / lag_zero_ratio
-    floor = low_frequency * np.sqrt(low_factor**2 - 1) * 1.5
-    lag_zero = max(lag_zero, floor)  # a lag zero below this cannot give the factor at ω_low
-    lag_gain = low_factor * margin * 1.2
+    wc, lag_zero, lag_gain = _crossover_and_starting_lag(
+        L0, crossover, low_frequency, low_factor, high_frequency, lag_zero_ratio, margin
+    )
     corner = high_frequency
     # Frequency responses on fixed grids; the iteration only multiplies arrays.
     w_low = np.logspace(np.log10(low_frequency) - 6, np.log10(low_frequency), 1201)
     w_high = np.logspace(np.log10(high_frequency), np.log10(high_frequency) + 6, 1201)
     L0_low, L0_high = _response(L0, w_low), _response(L0, w_high)
     order = int(lowpass_order)
-
-    def lowpass_response(w, corner_):
-        return (corner_ / (1j * w + corner_)) ** order
-
-    def lag_response(w, gain_):
-        return (1j * w + lag_zero) / (1j * w + lag_zero / gain_)
-
     for _ in range(iterations):
         design = lead_for_crossover(L0 * lag(lag_zero, lag_gain) * low_pass(corner, order), wc, phase_margin_deg)
-        lead_high = _response(design.controller, w_high) * lag_response(w_high, lag_gain)
-        lead_low = _response(design.controller, w_low) * lowpass_response(w_low, corner)
-
-        def noise_ratio(corner_, lead_high=lead_high):
-            # T_new/T_old = C (1 + L0)/(1 + L0 C); the largest above ω_high.
-            c = lead_high * lowpass_response(w_high, corner_)
-            return np.max(np.abs(c * (1 + L0_high) / (1 + L0_high * c)))
-
-        def tracking_gain(gain_, lead_low=lead_low):
-            # S_old/S_new = |1 + L0 C|/|1 + L0|; the smallest below ω_low.
-            c = lead_low * lag_response(w_low, gain_)
-            return np.min(np.abs((1 + L0_low * c) / (1 + L0_low)))
-
+        lead_high = _response(design.controller, w_high) * _lag_response(w_high, lag_zero, lag_gain)
+        lead_low = _response(design.controller, w_low) * _lowpass_response(w_low, corner, order)
         target = 1.0 / (high_factor * margin)
-        lo, hi = wc * 1e-3, high_frequency * 1e3
-        if noise_ratio(lo) > target:
-            new_corner = lo
-        elif noise_ratio(hi) <= target:
-            new_corner = hi
-        else:
-            new_corner = scipy.optimize.brentq(
-                lambda w, target=target: noise_ratio(w) - target, lo, hi, xtol=1e-12 * hi
-            )
-        need = low_factor * margin
-        if tracking_gain(1.0 + 1e-9) >= need:
-            new_gain = 1.0 + 1e-9
-        else:
-            m_hi = 4.0
-            while tracking_gain(m_hi) < need and m_hi < 1e12:
-                m_hi *= 4.0
-            if tracking_gain(m_hi) < need:
-                # No lag ratio reaches the factor with this zero (a type-0 loop): move the zero up.
-                if lag_zero * 1.25 <= wc / 2:
-                    lag_zero *= 1.25
-                    continue
-                new_gain = m_hi  # unreachable: the spec check below reports it
-            else:
-                new_gain = scipy.optimize.brentq(
-                    lambda m, need=need: tracking_gain(m) - need, 1.0 + 1e-9, m_hi, xtol=1e-12
-                )
+        new_corner = lowpass_corner_for_noise(
+            L0_high, lead_high, w_high, order, target, wc * 1e-3, high_frequency * 1e3
+        )
+        new_gain, reached = lag_ratio_for_tracking(L0_low, lead_low, w_low, lag_zero, low_factor * margin)
+        if not reached and lag_zero * 1.25 <= wc / 2:
+            # No lag ratio reaches the factor with this zero (a type-0 loop): move the zero up.
+            lag_zero *= 1.25
+            continue
+        # An unreachable factor keeps the bracket's end: the spec check below reports it.
         converged = abs(new_corner - corner) <= 1e-9 * corner and abs(new_gain - lag_gain) <= 1e-9 * lag_gain
         corner, lag_gain = float(new_corner), float(new_gain)
         if converged:
@@ -364,6 +432,7 @@ def improve_loop(
 
 
 def _response(G, omega) -> np.ndarray:
+    """G(jω) at omega (F,) rad/s, complex (F,)."""
     num, den = as_polynomials(G)
     s = 1j * omega
     return np.polyval(num, s) / np.polyval(den, s)

@@ -26,7 +26,7 @@ import models
 from models import deferred
 from models.checks import positive
 
-from .analysis import as_polynomials, dc_gain, tf
+from .analysis.polynomials import as_polynomials, dc_gain, tf
 from .discrete import back_calculation, dirty_derivative, integrate_while_slow, saturate, trapezoid
 
 if TYPE_CHECKING:
@@ -46,14 +46,7 @@ __all__ = [
     "equilibrium_feedforward",
     "reference_feedforward",
     "PID",
-    "SIGMA",
-    "SAMPLE_PERIOD",
 ]
-
-#: The text's dirty-derivative time constant (".11: dirty derivative gain τ = 0.05"), s.
-SIGMA = 0.05
-#: The text's controller sample period (.11), s.
-SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- design
@@ -99,6 +92,7 @@ class PDDesign:
     input_bound: float = float("nan")
 
     def as_dict(self) -> dict:
+        """The gains, ω_n, ζ, poles and DC gain as a dict (the homework's numbers)."""
         return {
             "kp": self.kp,
             "kd": self.kd,
@@ -337,8 +331,8 @@ class PID(models.Block):
     coordinate : name of the controlled coordinate, e.g. "theta"
     kp, kd : gains (tunable)
     ki : integrator gain (tunable), or None for a PD without integrator state
-    sample_period : s (the text's 0.01)
-    sigma : dirty-derivative time constant, s (the text's 0.05)
+    sample_period : s, no default: the value is the design's (the case study's), never the library's
+    sigma : time constant σ of the dirty derivative s/(σ s + 1), s; no default either
     derivative_on : "measurement" (no derivative kick) or "error"
     anti_windup : "back_calculation" (integral bled by T_s/k_i (u − u_unsat)),
         "integrate_while_slow" (integrate only while |ẏ| < `rate_limit`, for
@@ -361,8 +355,8 @@ class PID(models.Block):
         kp: float,
         kd: float = 0.0,
         ki: float | None = None,
-        sample_period: float = SAMPLE_PERIOD,
-        sigma: float = SIGMA,
+        sample_period: float,
+        sigma: float,
         derivative_on: str = "measurement",
         anti_windup: str = "back_calculation",
         rate_limit: float | None = None,
@@ -404,6 +398,7 @@ class PID(models.Block):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: the error, the dirty derivative, the integral and feedforward, saturation, anti-windup."""
         ts = self.sample_period
         e_prev, y_prev, rate_prev = xc[0], xc[1], xc[2]
         yc = self._read(y)

@@ -15,7 +15,9 @@ import numpy as np
 
 from models import deferred
 
-from .analysis import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
+from .analysis.loop import Loop
+from .analysis.polynomials import as_polynomials, dc_gain, poly_add, poly_mul, polynomial, tf
+from .analysis.time_response import step_info
 
 if TYPE_CHECKING:
     import control
@@ -139,8 +141,6 @@ def integrator_gain(
     ValueError
         If the PD poles are already below `zeta_min`.
     """
-    from .analysis import Loop, step_info
-
     L = integrator_evans_form(plant, kp, kd)
     start = np.roots(as_polynomials(L)[1])
     start = start[np.abs(start) > 1e-12]
@@ -206,14 +206,17 @@ class LeadLagDesign:
     lag_pole: float = 0.0
 
     def lead_tf(self) -> control.TransferFunction:
+        """The lead K (s + z)/(s + p), the gain included."""
         return tf([self.gain, self.gain * self.lead_zero], [1.0, self.lead_pole])
 
     def lag_tf(self) -> control.TransferFunction:
+        """The lag (s + z_lag)/(s + p_lag), or 1 when there is none."""
         if self.lag_zero == 0:
             return tf([1.0], [1.0])
         return tf([1.0, self.lag_zero], [1.0, self.lag_pole])
 
     def transfer_function(self) -> control.TransferFunction:
+        """C(s): the lead times the lag."""
         return self.lead_tf() * self.lag_tf()
 
 

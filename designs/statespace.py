@@ -150,6 +150,8 @@ def second_order_from_specs(rise_time: float, overshoot: float) -> tuple[float, 
 
 # --------------------------------------------------------- pole placement
 def _checked_poles(poles, n: int, n_inputs: int, what: str) -> np.ndarray:
+    """The requested poles as a complex (n,) array: n of them, finite, in conjugate pairs, each repeated
+    at most `n_inputs` times (ValueError naming `what` otherwise)."""
     poles = np.atleast_1d(np.asarray(poles, dtype=complex)).ravel()
     if poles.size != n:
         raise ValueError(f"{message_prefix(what)}need {n} poles (one per state), got {poles.size}")

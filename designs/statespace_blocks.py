@@ -102,10 +102,12 @@ class TrackingModel:
 
     @property
     def name(self) -> str:
+        """The known plant's name."""
         return self.plant.name
 
     @property
     def nx(self) -> int:
+        """Number of states of the linearization."""
         return self.linear.nx
 
     @property
@@ -139,6 +141,7 @@ class TrackingModel:
 
 
 def _row(value, size: int, what: str) -> np.ndarray:
+    """`value` as a (1, size) float row; ValueError naming `what` for another size."""
     arr = np.asarray(value, dtype=float)
     if arr.size != size:
         raise ValueError(f"{what} must have {size} entries, got shape {arr.shape}")
@@ -146,6 +149,7 @@ def _row(value, size: int, what: str) -> np.ndarray:
 
 
 def _scalar(value, what: str) -> np.ndarray:
+    """`value` as a (1,) float array; ValueError naming `what` unless it is one number."""
     arr = np.asarray(value, dtype=float).ravel()
     if arr.size != 1:
         raise ValueError(f"{what} must be one number (one input), got shape {np.shape(value)}")
@@ -156,6 +160,7 @@ class _TrackingBlock(models.Block):
     """Shared pieces: reference feedforward, integrator with anti-windup, saturation."""
 
     def _setup(self, model: TrackingModel, K, kr, ki, rate_limit):
+        """Store the model, the actuator limit and the integrator's settings; return the gains dict (K, kr, ki)."""
         self.model = model
         self.limit = model.plant.input_limit.copy()
         self.has_integrator = ki is not None
@@ -171,6 +176,7 @@ class _TrackingBlock(models.Block):
 
     @property
     def n_integrator_states(self) -> int:
+        """2 (the integral and the previous error) with an integrator, else 0."""
         return 2 if self.has_integrator else 0
 
     def _command(self, xc_int, x_tilde, y_r, r, gains, extra=0):
@@ -195,6 +201,7 @@ class _TrackingBlock(models.Block):
         return ca.vertcat(integral_next, error), u_sat, u_static
 
     def _integrator_initial(self, y_r0: float, r0) -> np.ndarray:
+        """The integrator's initial state: no integral, the current error (empty without an integrator)."""
         if not self.has_integrator:
             return np.zeros(0)
         return np.array([0.0, float(np.ravel(r0)[0]) - y_r0])
@@ -239,11 +246,13 @@ class StateFeedback(_TrackingBlock):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: u from the measured state x̃ = y − x_e, the reference and the integrator."""
         x_tilde = y - self.model.linear.xe
         xc_next, u, _ = self._command(xc, x_tilde, y[self.model.tracked_state], r, gains)
         return xc_next, u
 
     def initial_state(self, y0, r0) -> np.ndarray:
+        """The integrator's initial state at the measured tracked coordinate (empty without one)."""
         return self._integrator_initial(float(np.ravel(y0)[self.model.tracked_state]), r0)
 
 
@@ -317,6 +326,7 @@ class ObserverFeedback(_TrackingBlock):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: the current estimate from the outputs, u from it (minus d̂), then the prediction."""
         model, n = self.model, self.n_estimate
         prior = xc[:n]
         y_tilde = y[self.rows] - model.linear.ye[self.rows]

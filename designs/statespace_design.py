@@ -35,7 +35,20 @@ from models import deferred
 
 scipy = deferred.module("scipy")
 
-__all__ = ["StateSpaceDesign", "design", "controllers", "kalman_noise", "LABELS", "MEASUREMENT_NOISE"]
+__all__ = [
+    "StateSpaceDesign",
+    "design",
+    "feedback_design",
+    "integrator_design",
+    "observer_design",
+    "disturbance_observer_design",
+    "lqr_design",
+    "kalman_design",
+    "controllers",
+    "kalman_noise",
+    "LABELS",
+    "MEASUREMENT_NOISE",
+]
 
 #: Controller labels of `controllers`.
 LABELS = (
@@ -124,10 +137,13 @@ class StateSpaceDesign:
 
     @property
     def observer_rows(self) -> list[int]:
+        """Row indices in the plant's outputs of `observer_outputs`."""
         return self.model.output_rows(self.observer_outputs)
 
 
 def _sampled_poles(model: TrackingModel, K, Ts, what) -> np.ndarray:
+    """eig(A_d − B_d K) of the gain K (1, nx) held over Ts s on the ZOH model; ValueError naming `what`
+    when one leaves the unit circle."""
     disc = model.discrete(Ts)
     z = np.linalg.eigvals(disc.A - disc.B @ np.atleast_2d(K))
     if np.any(np.abs(z) >= 1):
@@ -155,6 +171,166 @@ def _discrete_observer(model, rows, poles, Ts, disturbance: bool, what):
     return ss.discrete_observer_gain(A, C, poles_z, what), poles_z
 
 
+def feedback_design(model: TrackingModel, poles, sample_period: float, name: str) -> dict:
+    """Pole placement with its reference gain (.15): K (1, nx) with eig(A − B K) = `poles`, k_r for unit DC gain.
+
+    Parameters
+    ----------
+    model : the tracking model of the known plant
+    poles : nx state-feedback poles, rad/s
+    sample_period : s; the sampled-data poles eig(A_d − B_d K) must stay inside the unit circle
+    name : names the plant in errors
+
+    Returns
+    -------
+    dict of the `StateSpaceDesign` fields poles, K, kr, poles_sampled_z
+    """
+    A, B = model.linear.A, model.linear.B
+    poles = np.asarray(poles, dtype=complex)
+    K = ss.place(A, B, poles, name)
+    kr = float(ss.reference_gain(A, B, K, model.C_r)[0])
+    return {"poles": poles, "K": K, "kr": kr, "poles_sampled_z": _sampled_poles(model, K, sample_period, name)}
+
+
+def integrator_design(
+    model: TrackingModel, poles, integrator_pole: float | None, sample_period: float, name: str
+) -> dict:
+    """The integrator design (.16): the state feedback and k_i placing `poles` and the integrator's pole.
+
+    u = −K x̃ + k_i x_I with x_I the integral of the tracking error; the reference acts through the
+    integrator only. `integrator_pole` (rad/s) defaults to −min |pᵢ|.
+
+    Returns
+    -------
+    dict of the `StateSpaceDesign` fields integrator_pole, K_integral (1, nx), ki
+    """
+    A, B, nx = model.linear.A, model.linear.B, model.linear.nx
+    p_int = -float(np.min(np.abs(poles))) if integrator_pole is None else float(integrator_pole)
+    A_I, B_I = ss.augment_integrator(A, B, model.C_r)
+    K_int, ki = ss.split_integral_gain(ss.place(A_I, B_I, np.append(poles, p_int), name), nx)
+    _sampled_poles(model, K_int, sample_period, f"{name} (state feedback part of the integrator design)")
+    return {"integrator_pole": p_int, "K_integral": K_int, "ki": float(ki[0])}
+
+
+def observer_design(model: TrackingModel, rows, observer_poles, sample_period: float, K_feedback, name: str) -> dict:
+    """The observer (.17): continuous L (nx, n_used) and its ZOH predictor gain at `sample_period`.
+
+    Parameters
+    ----------
+    rows : indices of the outputs the observer reads
+    observer_poles : nx observer poles, rad/s (z-plane poles exp(p Ts) for the discrete gain)
+    K_feedback : the state feedback the observer-based block runs, for the compensator's poles
+        eig(A − B K − L C)
+
+    Returns
+    -------
+    dict of the `StateSpaceDesign` fields observer_poles, L, observer_poles_z, L_discrete, controller_poles
+    """
+    A, B, C_used = model.linear.A, model.linear.B, model.linear.C[rows]
+    L = ss.observer_gain(A, C_used, observer_poles, name)
+    L_d, obs_z = _discrete_observer(model, rows, observer_poles, sample_period, False, name)
+    return {
+        "observer_poles": observer_poles,
+        "L": L,
+        "observer_poles_z": obs_z,
+        "L_discrete": L_d,
+        "controller_poles": np.linalg.eigvals(A - B @ K_feedback - L @ C_used),
+    }
+
+
+def disturbance_observer_design(
+    model: TrackingModel, rows, observer_poles, disturbance_pole: float | None, sample_period: float, K, name: str
+) -> dict:
+    """The disturbance observer: the state and an input disturbance d estimated, d̂ cancelled in u.
+
+    The observer's poles are `observer_poles` and `disturbance_pole` (rad/s; default half the slowest
+    observer pole); L_disturbance is (nx + 1, n_used), its ZOH predictor gain at `sample_period`.
+
+    Returns
+    -------
+    dict of the `StateSpaceDesign` fields disturbance_observer_poles, L_disturbance,
+    disturbance_observer_poles_z, L_disturbance_discrete, disturbance_controller_poles
+    """
+    A, B, nx = model.linear.A, model.linear.B, model.linear.nx
+    p_dist = -0.5 * np.min(np.abs(observer_poles)) if disturbance_pole is None else float(disturbance_pole)
+    dob_poles = np.append(observer_poles, p_dist)
+    A_d, _, C_d = ss.augment_disturbance(A, B, model.linear.C[rows])
+    L_dob = ss.observer_gain(A_d, C_d, dob_poles, f"{name} with a disturbance state")
+    L_dob_d, dob_z = _discrete_observer(model, rows, dob_poles, sample_period, True, name)
+    # u = −K x̂ + k_r r − d̂ cancels d̂ in the model: x̂' = (A − B K − L_x C) x̂ + …, d̂' = L_d (y − C x̂).
+    dob_controller = np.linalg.eigvals(
+        np.block([[A - B @ K, np.zeros((nx, 1))], [np.zeros((1, nx + 1))]]) - L_dob @ C_d
+    )
+    return {
+        "disturbance_observer_poles": dob_poles,
+        "L_disturbance": L_dob,
+        "disturbance_observer_poles_z": dob_z,
+        "L_disturbance_discrete": L_dob_d,
+        "disturbance_controller_poles": dob_controller,
+    }
+
+
+def lqr_design(model: TrackingModel, Q, R, sample_period: float, name: str) -> dict:
+    """The integrator-augmented LQR, the LQR on the states alone, and the discrete LQR of the ZOH model.
+
+    Parameters
+    ----------
+    Q : (nx + 1, nx + 1) weight of (x̃, x_I);  R : (1, 1) weight of the input
+    sample_period : s; the continuous gain must stay stable when sampled, and the discrete LQR
+        runs the ZOH model with the integrator by forward Euler and weights Q Ts, R Ts
+
+    Returns
+    -------
+    dict of the `StateSpaceDesign` fields Q, R, K_lqr, ki_lqr, P_lqr, lqr_poles, K_lqr_plain,
+    kr_lqr_plain, K_dlqr, dlqr_poles_z
+    """
+    A, B, nx = model.linear.A, model.linear.B, model.linear.nx
+    Ts = sample_period
+    Q = np.asarray(Q, dtype=float)
+    R = np.atleast_2d(np.asarray(R, dtype=float))
+    A_I, B_I = ss.augment_integrator(A, B, model.C_r)
+    K_aug, P = ss.lqr(A_I, B_I, Q, R, f"{name} (integrator-augmented)")
+    K_lqr, ki_lqr = ss.split_integral_gain(K_aug, nx)
+    lqr_poles = np.linalg.eigvals(A_I - B_I @ K_aug)
+    _sampled_poles(model, K_lqr, Ts, f"{name} LQR")
+    K_lqr_plain, _ = ss.lqr(A, B, Q[:nx, :nx], R, name)
+    kr_lqr_plain = float(ss.reference_gain(A, B, K_lqr_plain, model.C_r)[0])
+    disc = model.discrete(Ts)
+    A_Id = np.block([[disc.A, np.zeros((nx, 1))], [-Ts * model.C_r, np.eye(1)]])
+    B_Id = np.vstack([disc.B, np.zeros((1, 1))])
+    K_dlqr, _ = ss.dlqr(A_Id, B_Id, Q * Ts, R * Ts, name)
+    return {
+        "Q": Q,
+        "R": R,
+        "K_lqr": K_lqr,
+        "ki_lqr": float(ki_lqr[0]),
+        "P_lqr": P,
+        "lqr_poles": lqr_poles,
+        "K_lqr_plain": K_lqr_plain,
+        "kr_lqr_plain": kr_lqr_plain,
+        "K_dlqr": K_dlqr,
+        "dlqr_poles_z": np.linalg.eigvals(A_Id - B_Id @ K_dlqr),
+    }
+
+
+def kalman_design(
+    model: TrackingModel, sample_period: float, bandwidth: float, measurement_noise: float, name: str
+) -> dict:
+    """The steady-state Kalman predictor of the ZOH model reading every output (noise model: `kalman_noise`).
+
+    bandwidth : the filter's ω_K, rad/s;  measurement_noise : σ_y per output (m or rad per sample)
+
+    Returns
+    -------
+    dict of the `StateSpaceDesign` fields kalman_W, kalman_V, L_kalman (nx, ny), kalman_poles_z
+    """
+    lin = model.linear
+    disc = model.discrete(sample_period)
+    W, V = kalman_noise(model, sample_period, lin.ny, bandwidth, measurement_noise)
+    L_kf, _ = ss.dkalman(disc.A, lin.C, W, V, name)
+    return {"kalman_W": W, "kalman_V": V, "L_kalman": L_kf, "kalman_poles_z": np.linalg.eigvals(disc.A - L_kf @ lin.C)}
+
+
 def design(
     known: models.Plant,
     tracked: str,
@@ -174,6 +350,9 @@ def design(
     measurement_noise: float = MEASUREMENT_NOISE,
 ) -> StateSpaceDesign:
     """All state-space designs of `known` (the plant the controller believes) about its standard equilibrium.
+
+    The steps, each a function of this module: `feedback_design`, `integrator_design`,
+    `observer_design`, `disturbance_observer_design`, `lqr_design`, `kalman_design`.
 
     Parameters
     ----------
@@ -200,59 +379,17 @@ def design(
     name = known.name
     model = TrackingModel.from_plant(known, tracked)
     lin = model.linear
-    A, B, nx = lin.A, lin.B, lin.nx
     Ts = float(sample_period)
     Ts_obs = Ts if observer_sample_period is None else float(observer_sample_period)
     outputs = tuple(lin.output_names if observer_outputs is None else observer_outputs)
     rows = model.output_rows(outputs)
-    C_used = lin.C[rows]
-    rank_c = ss.require_controllable(A, B, name)
-    rank_o = ss.require_observable(A, C_used, f"{name} measuring {', '.join(outputs)}")
-
-    poles = np.asarray(poles, dtype=complex)
-    K = ss.place(A, B, poles, name)
-    kr = float(ss.reference_gain(A, B, K, model.C_r)[0])
-    sampled = _sampled_poles(model, K, Ts, name)
-
-    p_int = -float(np.min(np.abs(poles))) if integrator_pole is None else float(integrator_pole)
-    A_I, B_I = ss.augment_integrator(A, B, model.C_r)
-    K_int, ki = ss.split_integral_gain(ss.place(A_I, B_I, np.append(poles, p_int), name), nx)
-    _sampled_poles(model, K_int, Ts, f"{name} (state feedback part of the integrator design)")
-
+    rank_c = ss.require_controllable(lin.A, lin.B, name)
+    rank_o = ss.require_observable(lin.A, lin.C[rows], f"{name} measuring {', '.join(outputs)}")
+    feedback = feedback_design(model, poles, Ts, name)
+    poles = feedback["poles"]
+    integral = integrator_design(model, poles, integrator_pole, Ts, name)
     obs_poles = observer_speedup * poles if observer_poles is None else np.asarray(observer_poles, dtype=complex)
-    L = ss.observer_gain(A, C_used, obs_poles, name)
-    L_d, obs_z = _discrete_observer(model, rows, obs_poles, Ts_obs, False, name)
-    K_obs = K_int if observer_uses_integrator else K
-    controller_poles = np.linalg.eigvals(A - B @ K_obs - L @ C_used)
-
-    p_dist = -0.5 * np.min(np.abs(obs_poles)) if disturbance_pole is None else float(disturbance_pole)
-    dob_poles = np.append(obs_poles, p_dist)
-    A_d, _, C_d = ss.augment_disturbance(A, B, C_used)
-    L_dob = ss.observer_gain(A_d, C_d, dob_poles, f"{name} with a disturbance state")
-    L_dob_d, dob_z = _discrete_observer(model, rows, dob_poles, Ts, True, name)
-    # u = −K x̂ + k_r r − d̂ cancels d̂ in the model: x̂' = (A − B K − L_x C) x̂ + …, d̂' = L_d (y − C x̂).
-    dob_controller = np.linalg.eigvals(
-        np.block([[A - B @ K, np.zeros((nx, 1))], [np.zeros((1, nx + 1))]]) - L_dob @ C_d
-    )
-
-    Q = np.asarray(Q, dtype=float)
-    R = np.atleast_2d(np.asarray(R, dtype=float))
-    K_aug, P = ss.lqr(A_I, B_I, Q, R, f"{name} (integrator-augmented)")
-    K_lqr, ki_lqr = ss.split_integral_gain(K_aug, nx)
-    lqr_poles = np.linalg.eigvals(A_I - B_I @ K_aug)
-    _sampled_poles(model, K_lqr, Ts, f"{name} LQR")
-    K_lqr_plain, _ = ss.lqr(A, B, Q[:nx, :nx], R, name)
-    kr_lqr_plain = float(ss.reference_gain(A, B, K_lqr_plain, model.C_r)[0])
-    disc = model.discrete(Ts)
-    A_Id = np.block([[disc.A, np.zeros((nx, 1))], [-Ts * model.C_r, np.eye(1)]])
-    B_Id = np.vstack([disc.B, np.zeros((1, 1))])
-    K_dlqr, _ = ss.dlqr(A_Id, B_Id, Q * Ts, R * Ts, name)
-    dlqr_z = np.linalg.eigvals(A_Id - B_Id @ K_dlqr)
-
-    W, V = kalman_noise(model, Ts, lin.ny, kalman_speedup * np.max(np.abs(poles)), measurement_noise)
-    L_kf, _ = ss.dkalman(disc.A, lin.C, W, V, name)
-    kalman_z = np.linalg.eigvals(disc.A - L_kf @ lin.C)
-
+    K_obs = integral["K_integral"] if observer_uses_integrator else feedback["K"]
     return StateSpaceDesign(
         plant=name,
         model=model,
@@ -260,39 +397,14 @@ def design(
         observer_sample_period=Ts_obs,
         controllability_rank=rank_c,
         observability_rank=rank_o,
-        poles=poles,
-        K=K,
-        kr=kr,
-        poles_sampled_z=sampled,
-        integrator_pole=p_int,
-        K_integral=K_int,
-        ki=float(ki[0]),
         observer_outputs=outputs,
         observer_uses_integrator=bool(observer_uses_integrator),
-        observer_poles=obs_poles,
-        L=L,
-        observer_poles_z=obs_z,
-        L_discrete=L_d,
-        controller_poles=controller_poles,
-        disturbance_observer_poles=dob_poles,
-        L_disturbance=L_dob,
-        disturbance_observer_poles_z=dob_z,
-        L_disturbance_discrete=L_dob_d,
-        disturbance_controller_poles=dob_controller,
-        Q=Q,
-        R=R,
-        K_lqr=K_lqr,
-        ki_lqr=float(ki_lqr[0]),
-        P_lqr=P,
-        lqr_poles=lqr_poles,
-        K_lqr_plain=K_lqr_plain,
-        kr_lqr_plain=kr_lqr_plain,
-        K_dlqr=K_dlqr,
-        dlqr_poles_z=dlqr_z,
-        kalman_W=W,
-        kalman_V=V,
-        L_kalman=L_kf,
-        kalman_poles_z=kalman_z,
+        **feedback,
+        **integral,
+        **observer_design(model, rows, obs_poles, Ts_obs, K_obs, name),
+        **disturbance_observer_design(model, rows, obs_poles, disturbance_pole, Ts, feedback["K"], name),
+        **lqr_design(model, Q, R, Ts, name),
+        **kalman_design(model, Ts, kalman_speedup * np.max(np.abs(poles)), measurement_noise, name),
     )
 
 

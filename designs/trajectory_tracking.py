@@ -87,6 +87,7 @@ class TrajectoryTracker(models.Block):
         )
 
     def expr(self, xc, y, r, gains):
+        """One sample: u = u_ff + K (x_ref − x), saturated; r = (x_ref (nx), u_ff (nu), K row by row (nu·nx))."""
         nx, nu = self.nx, self.nu
         x_ref, u_ff = r[:nx], r[nx : nx + nu]
         gain = ca.reshape(r[nx + nu :], nx, nu).T  # row by row

@@ -44,9 +44,10 @@ def classical(known: models.Plant) -> ClassicalDesign:
     """PD placing the poles at ω_n = 3 rad/s, ζ = 0.8; the same PD with an integrator."""
     G = known.linearize().tf("x", "F")
     pd = pd_design(G, zeta=0.8, wn=3.0)
+    timing = dict(sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant)  # the case's Ts, σ (s)
     blocks = {
-        "PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=LIMIT, name="PD"),
-        "PID": PID(known, "x", kp=pd.kp, kd=pd.kd, ki=12.0, output_limit=LIMIT, name="PID"),
+        "PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=LIMIT, name="PD", **timing),
+        "PID": PID(known, "x", kp=pd.kp, kd=pd.kd, ki=12.0, output_limit=LIMIT, name="PID", **timing),
     }
     return ClassicalDesign({"VII.8": record(kp=pd.kp, kd=pd.kd)}, blocks)
 

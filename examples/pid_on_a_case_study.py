@@ -26,14 +26,15 @@ def main() -> None:
     known = case.known_plant()  # m and ell 5 % off: what the controller believes
     truth = models.get("arm")
     limit = float(known.input_limit[0])
+    timing = dict(sample_period=case.sample_period, sigma=case.derivative_time_constant)  # s: the case's Ts and σ
 
     G = known.linearize().tf("theta", "tau")  # about theta = 0 (level)
     pd = pd_design(G, zeta=ZETA, wn=WN)
     print(f"PD gains: kp = {pd.kp:.10g} N m/rad, kd = {pd.kd:.10g} N m s/rad")
     controllers = {
         # No gravity feedforward: the PD settles where k_p (r − θ) holds the arm up.
-        "PD": PID(known, "theta", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD"),
-        "PID": PID(known, "theta", kp=pd.kp, kd=pd.kd, ki=2.0, output_limit=limit, name="PID"),
+        "PD": PID(known, "theta", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD", **timing),
+        "PID": PID(known, "theta", kp=pd.kp, kd=pd.kd, ki=2.0, output_limit=limit, name="PID", **timing),
     }
     # LQR with an integrator, Bryson's rule: 0.2 rad of error, 5 rad/s, 0.1 rad s of integral, the full torque.
     lqr = statespace_design.design(
@@ -42,7 +43,7 @@ def main() -> None:
         poles=second_order_poles(WN, ZETA),
         Q=np.diag([1 / 0.2**2, 1 / 5.0**2, 1 / 0.1**2]),
         R=[[1 / limit**2]],
-        sample_period=0.01,
+        sample_period=case.sample_period,
     )
     controllers["LQR"] = statespace_design.controllers(lqr)["LQR"]
 

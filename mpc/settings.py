@@ -65,7 +65,8 @@ class MPCSettings:
 
     Attributes
     ----------
-    sample_period : s;  horizon : N samples (linear and nonlinear MPC alike)
+    sample_period : s, no default: the case's sample period, or a multiple of it where the horizon
+        needs seconds;  horizon : N samples (linear and nonlinear MPC alike)
     state_weight : diagonal of Q, (nx,);  input_weight : R (scalar, the plants have one input)
     soft : tuple of SoftSpec
     disturbance_step_std : estimator's random-walk std of d per sample, as a fraction of the input limit

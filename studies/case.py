@@ -167,7 +167,11 @@ class CaseStudy:
     design_step : step on the tracked coordinate used by the saturation rules (.8)
     step : step commanded in the comparisons, from the standard equilibrium
     input_disturbance : constant input disturbance of the .16/.17 problems (units of u)
-    sample_period : controller sample period (.11), s
+    sample_period : controller sample period (.11), s: the one source of every block's and MPC's sample
+        period in the case (an MPC whose horizon needs seconds samples at a multiple of it)
+    derivative_time_constant : σ of the dirty derivative s/(σ s + 1) of the case's PID blocks and their
+        .13 loops (.11: the text's "dirty derivative gain τ = 0.05"), s; also the σ with which the runner
+        turns position noise into the velocity noise of a controller that reads the full state
     observer_sample_period : sample period of the observer problems (.15), where different, s
     duration : length of a step scenario, s
     source : where each number comes from
@@ -217,6 +221,7 @@ class CaseStudy:
     input_unit: str
     scenarios: tuple
     sample_period: float = 0.01
+    derivative_time_constant: float = 0.05
     observer_sample_period: float = 0.01
     duration: float = 10.0
     source: str = ""

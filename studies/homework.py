@@ -22,7 +22,7 @@ Choices the text leaves to the student, made once here for every case:
   integrating only while |ẏ| is small; the rate limit is `RATE_FRACTION` of
   (design step × outer ω_n).
 - The .13 answers use the implemented controllers, with the dirty
-  derivative s/(σ s + 1), σ = `designs.pid.SIGMA`; .8 and .10 use the ideal PD/PID.
+  derivative s/(σ s + 1), σ the case's `derivative_time_constant`; .8 and .10 use the ideal PD/PID.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from designs import statespace_design as ssd
 from designs.analysis import Loop, steady_state_errors
 from designs.loops import SuccessiveLoopClosure
 from designs.loopshaping import flattening_prefilter, improve_loop
-from designs.pid import PID, SIGMA, PDDesign
+from designs.pid import PID, PDDesign
 from designs.rootlocus import integrator_gain
 from models.files import to_jsonable
 
@@ -121,15 +121,28 @@ def rate_limit(step: float, wn: float) -> float:
 
 
 # ----------------------------------------------------------------- designs shared by several chapters
-def single_loop(G, pd, zeta: float) -> tuple[dict, dict]:
-    """Integrator by the root locus, and the four loops the .10/.13 answers read."""
+def single_loop(G, pd, zeta: float, sigma: float) -> tuple[dict, dict]:
+    """Integrator by the root locus, and the four loops the .10/.13 answers read.
+
+    Parameters
+    ----------
+    G : the loop's plant, continuous SISO transfer function
+    pd : the PD design (k_p, k_d) on G
+    zeta : the PD's damping ratio (the integrator keeps `DAMPING_KEPT` of it)
+    sigma : the dirty derivative's time constant σ of the implemented loops, s
+
+    Returns
+    -------
+    (rl, loops) : the root-locus record of `integrator`, and label -> Loop for "PD", "PID" (ideal
+    derivative) and "PD (implemented)", "PID (implemented)" (dirty derivative s/(σ s + 1))
+    """
     rl = integrator(G, pd.kp, pd.kd, zeta)
     ki = rl["ki"]
     loops = {
         "PD": Loop.pid(G, pd.kp, 0.0, pd.kd, name="PD"),
         "PID": Loop.pid(G, pd.kp, ki, pd.kd, name="PID"),
-        "PD (implemented)": Loop.pid(G, pd.kp, 0.0, pd.kd, sigma=SIGMA, name="PD, dirty derivative"),
-        "PID (implemented)": Loop.pid(G, pd.kp, ki, pd.kd, sigma=SIGMA, name="PID, dirty derivative"),
+        "PD (implemented)": Loop.pid(G, pd.kp, 0.0, pd.kd, sigma=sigma, name="PD, dirty derivative"),
+        "PID (implemented)": Loop.pid(G, pd.kp, ki, pd.kd, sigma=sigma, name="PID, dirty derivative"),
     }
     return rl, loops
 
@@ -141,12 +154,26 @@ def single_loop_blocks(
     ki: float,
     *,
     feedforward: bool,
+    sample_period: float,
+    sigma: float,
     anti_windup: str = "back_calculation",
     rate_limit: float | None = None,
 ) -> dict:
-    """The "PD", "PID" and "PID (no anti-windup)" blocks of a single-loop design, saturating at the limit."""
+    """The "PD", "PID" and "PID (no anti-windup)" blocks of a single-loop design, saturating at the limit.
+
+    Parameters
+    ----------
+    known : the plant the blocks know (its outputs, its actuator limit, its equilibrium input)
+    coordinate : the controlled coordinate
+    pd : the PD design (k_p, k_d);  ki : the integrator gain of the PID blocks
+    feedforward : add the known plant's equilibrium input (`designs.pid.PID`)
+    sample_period : s;  sigma : the dirty derivative's time constant σ, s (both the case's)
+    anti_windup, rate_limit : the "PID" block's anti-windup (see `designs.pid.PID`)
+    """
     limit = float(known.input_limit[0])
-    common = dict(kp=pd.kp, kd=pd.kd, output_limit=limit, feedforward=feedforward)
+    common = dict(
+        kp=pd.kp, kd=pd.kd, output_limit=limit, feedforward=feedforward, sample_period=sample_period, sigma=sigma
+    )
     return {
         "PD": PID(known, coordinate, name="PD", **common),
         "PID": PID(known, coordinate, ki=ki, anti_windup=anti_windup, rate_limit=rate_limit, name="PID", **common),
@@ -266,6 +293,7 @@ _CLASSICAL: dict = {}
 
 
 def _known(case: CaseStudy, known: models.Plant | None) -> models.Plant:
+    """`known` (default the case's nominal plant), checked to be the case's plant or one of its design models."""
     known = models.get(case.plant) if known is None else known
     if known.name not in (case.plant, *case.design_models):
         allowed = ", ".join(repr(n) for n in (case.plant, *case.design_models))
@@ -341,6 +369,7 @@ class StateSpaceChoices:
 
 
 def _choices(case: CaseStudy, choices: StateSpaceChoices | None) -> StateSpaceChoices:
+    """`choices`, or the case's own; ValueError when the case has no state-space design."""
     choices = case.statespace if choices is None else choices
     if choices is None:
         raise ValueError(f"the {case.plant} case has no state-space design")

@@ -31,7 +31,6 @@ import numpy as np
 
 import models
 import models.closed_loop
-from designs.pid import SIGMA
 from models import Block, checks, deferred, interrupts, metrics, specs
 
 from . import SCENARIO_NAMES, distributed
@@ -290,14 +289,15 @@ def design_controllers(
 
 
 # ---------------------------------------------------------------------------- noise
-def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, float]) -> np.ndarray:
+def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, float], *, sigma: float) -> np.ndarray:
     """Noise standard deviation of each measurement the controller reads.
 
     Output noise is given per output. A controller that reads the full state
     gets on each coordinate the noise its outputs carry (through q = P y, the
     outputs being linear in q: std_q = sqrt(diag(P Σ Pᵀ))), and on each
-    velocity the noise a dirty derivative (σ = 0.05 s, Tustin at the
-    controller's Ts) would make of it: std_q (1 − β)/Ts · sqrt(2 / (1 + β)).
+    velocity the noise a dirty derivative s/(σ s + 1) (σ = `sigma`,
+    the case's `derivative_time_constant`, in s; Tustin at the controller's Ts) would make of it:
+    std_q (1 − β)/Ts · sqrt(2 / (1 + β)), β = (2σ − Ts)/(2σ + Ts).
 
     Returns
     -------
@@ -316,7 +316,7 @@ def measurement_noise_std(plant: models.Plant, controller, noise: Mapping[str, f
     P = np.asarray(jac(np.zeros(plant.ny)))
     std_q = np.sqrt(np.diag(P @ np.diag(per_output**2) @ P.T))
     ts = controller.sample_period
-    beta = (2 * SIGMA - ts) / (2 * SIGMA + ts)
+    beta = (2 * sigma - ts) / (2 * sigma + ts)
     gain = (1 - beta) / ts * math.sqrt(2 / (1 + beta))
     return np.concatenate([std_q, gain * std_q])
 
@@ -603,7 +603,11 @@ def simulate_scenario(
     plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int, params=None
 ):
     """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed."""
-    noise = measurement_noise_std(plant, controller, scenario.noise) if scenario.noise else 0.0
+    noise = (
+        measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
+        if scenario.noise
+        else 0.0
+    )
     return models.simulate_closed_loop(
         plant,
         controller,
@@ -663,7 +667,11 @@ def _monte_carlo(
             jit=use_jit(options, plant, controller, count, steps, study.substeps),
         )
     elif getattr(controller, "lockstep", False):  # the samples stepped together: the same runs, faster
-        noise = measurement_noise_std(plant, controller, scenario.noise) if scenario.noise else 0.0
+        noise = (
+            measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
+            if scenario.noise
+            else 0.0
+        )
         results = models.simulate_closed_loop_many(
             plant,
             controller,

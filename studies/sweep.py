@@ -116,7 +116,11 @@ def run_sweep(
         started = time.perf_counter()
         try:
             if isinstance(controller, Block):
-                noise = runner.measurement_noise_std(truth, controller, chosen.noise) if chosen.noise else 0.0
+                noise = (
+                    runner.measurement_noise_std(truth, controller, chosen.noise, sigma=study.derivative_time_constant)
+                    if chosen.noise
+                    else 0.0
+                )
                 steps = int(round(duration / controller.sample_period))
                 results = list(
                     distributed.monte_carlo(

@@ -18,7 +18,7 @@ from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
-from designs.pid import PID, SIGMA, linearized_input_bound, pd_saturation
+from designs.pid import PID, linearized_input_bound, pd_saturation
 from designs.tuning import Specs
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem
 from studies import drawing as d
@@ -47,6 +47,8 @@ from studies.trajectories import TrajectoryProblem, TrajectorySetup
 #: I.14(c): 10x better tracking and disturbance rejection below 0.007 rad/s, 10x better noise
 #: attenuation above 200 rad/s, relative to the PD loop.
 LOOPSHAPING = LoopSpec("I.14", "input", low_frequency=0.007, high_frequency=200.0, factor=10.0)
+#: I.11: the controller sample period, s. `CASE.sample_period`: every block and the MPC of the arm.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (I.8-I.14)
@@ -55,7 +57,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
     G = known.linearize().tf("theta", "tau")
     bound = linearized_input_bound(known, {"theta": (-np.pi, np.pi)})
     pd = pd_saturation(G, input_bound=bound["bound"], step=CASE.design_step, zeta=ZETA)
-    rl, loops = single_loop(G, pd, ZETA)
+    rl, loops = single_loop(G, pd, ZETA, CASE.derivative_time_constant)
     ki = rl["ki"]
     a = {}
     a["I.8(a)"] = record(**tf_record(G, "plant_"), **tf_record(pd.closed_loop, "closed_loop_"))
@@ -83,15 +85,18 @@ def classical(known: models.Plant) -> ClassicalDesign:
         noise_percent_ideal_derivative=an.percent_noise_above(loops["PID"], 100.0),
     )
     # I.14: lag + low-pass + lead on the implemented PD loop, then a prefilter.
-    C_pd = pid_tf(pd.kp, 0.0, pd.kd, SIGMA)
+    C_pd = pid_tf(pd.kp, 0.0, pd.kd, CASE.derivative_time_constant)
     shaped, pre, T_new = loopshaped(G * C_pd, LOOPSHAPING)
     a["I.14"] = loopshaping_record(shaped, pre, T_new)
-    blocks = single_loop_blocks(known, "theta", pd, ki, feedforward=True)
+    blocks = single_loop_blocks(
+        known, "theta", pd, ki, feedforward=True, sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant
+    )
     blocks["loopshaped"] = TransferFunctionBlock(
         known,
         "theta",
         shaped.controller * C_pd,
         prefilter=pre["prefilter"],
+        sample_period=CASE.sample_period,
         output_limit=float(known.input_limit[0]),
         feedforward=True,
         name="loopshaped (I.14)",
@@ -129,7 +134,7 @@ STATESPACE = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-MPC = MPCSettings(0.01, 50, (100.0, 0.1), 1.0, notes="50 samples = 0.5 s, several closed-loop time constants")
+MPC = MPCSettings(SAMPLE_PERIOD, 50, (100.0, 0.1), 1.0, notes="50 samples = 0.5 s, several closed-loop time constants")
 
 
 # ----------------------------------------------------------------- co-design: the smallest motor
@@ -277,6 +282,7 @@ CASE = CaseStudy(
     design_step=np.deg2rad(50),
     step=np.deg2rad(50),
     input_disturbance=0.2,
+    sample_period=SAMPLE_PERIOD,
     duration=5.0,
     source="I.8(c) step 50 deg; I.17(e) disturbance 0.2 N m; I.11 Ts = 0.01 s",
     tracked_unit="rad",

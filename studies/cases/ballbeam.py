@@ -10,6 +10,7 @@ declared in `models.catalog`.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -20,13 +21,14 @@ from designs.analysis import Loop, dc_gain
 from designs.filters import TransferFunctionBlock
 from designs.loops import cascade_blocks, successive_loop_closure
 from designs.loopshaping import (
+    LeadDesign,
     crossover_for_bandwidth,
     frequency_design_checks,
     lead_for_crossover,
     low_frequency_sign,
     prototype_phase_margin,
 )
-from designs.pid import PID, SIGMA, linearized_input_bound
+from designs.pid import PID, linearized_input_bound
 from designs.rootlocus import dominant_pair, lead_by_angle
 from designs.tuning import Specs
 from models import deferred
@@ -67,13 +69,14 @@ LOOPS = (
 #: V.11 (the text gives only the title "Root locus design"): a lead for the outer loop placing the
 #: closed-loop pair at V.8(i)'s ω_n and ζ, its zero at this fraction of ω_n.
 ROOT_LOCUS_ZERO = 0.5
+#: V.12: the controller sample period, s. `CASE.sample_period`: every block and the MPC of the ball on beam.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (V.8-V.13)
 def classical(known: models.Plant) -> ClassicalDesign:
     """V.8 successive loop closure, V.10 integrators, V.11 root-locus lead, V.13 frequency-response leads."""
     bound = linearized_input_bound(known, {"z": (0.0, known.params["ell"])})
-    ff = known.equilibrium_input_jacobian().ravel()
     slc = successive_loop_closure(
         known,
         "theta",
@@ -83,24 +86,56 @@ def classical(known: models.Plant) -> ClassicalDesign:
         separation=SEPARATION,
         zeta_inner=ZETA,
         zeta_outer=ZETA,
-        feedforward_gradient=ff,
+        feedforward_gradient=known.equilibrium_input_jacobian().ravel(),
     )
-    a = cascade_records(
-        "V",
-        slc,
-        bound,
-        dict(
-            inner_tf="b",
-            bound="c",
-            kp_inner="d",
-            wn_inner="e",
-            poles_inner="f",
-            outer_tf="g",
-            kp_outer="h",
-            wn_outer="i",
-            poles_outer="j",
-        ),
-    )
+    a = cascade_records("V", slc, bound, dict(zip(CASCADE_RECORDS, "bcdefghij")))
+    rl, rl_in, integrator_answers = integrators(slc)
+    a |= integrator_answers
+    a |= root_locus_design(slc)
+    C_in, loop_in, inner_answers = inner_lead_lag(slc.plants.inner)
+    lead_out, loop_out, outer_answers = outer_lead(slc.plants.outer)
+    a |= inner_answers | outer_answers
+    blocks = classical_blocks(known, slc, rl["ki"], rl_in["ki"], C_in, lead_out.controller)
+    G_out, sigma = slc.outer_model, CASE.derivative_time_constant
+    loops = {
+        "outer PD": Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd, sigma=sigma, name="outer PD"),
+        "outer PID": Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd, sigma=sigma, name="outer PID"),
+        "inner lead-lag": loop_in,
+        "outer lead": loop_out,
+    }
+    notes = [
+        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
+        "feedforward F_e = (m1 z/ℓ + m2/2) g cos θ at the measured (z, θ), from the known plant (V.13(d) hint)",
+        "k_i is negative (V.12(f)); the PID integrates only while |ż| is small",
+        "the PID integrates in both loops (V.12(e)'s nested PID loops): with θ_d bounded at A_θ the inner PD "
+        "holds at most k_p,θ A_θ = F̃_max of unmodelled force, and a 1.5 N disturbance plus the ±5 % "
+        "feedforward error exceed it",
+    ]
+    return ClassicalDesign(a, blocks, loops, notes)
+
+
+#: The records of `studies.homework.cascade_records`, in the order of V.8's letters (b) to (j).
+CASCADE_RECORDS = (
+    "inner_tf",
+    "bound",
+    "kp_inner",
+    "wn_inner",
+    "poles_inner",
+    "outer_tf",
+    "kp_outer",
+    "wn_outer",
+    "poles_outer",
+)
+
+
+def integrators(slc) -> tuple[dict, dict, dict]:
+    """V.10: the outer and inner integrator gains along their root loci, and the answers V.10(a)–(d).
+
+    Returns
+    -------
+    (outer, inner, answers) : the root-locus records of `studies.homework.integrator` (k_i in N per m s
+    outside, N per rad s inside) and homework item -> record
+    """
     G_in, G_out = slc.plants.inner, slc.outer_model
     rl = integrator(G_out, slc.outer.kp, slc.outer.kd, ZETA)
     rl_in = integrator(G_in, slc.inner.kp, slc.inner.kd, ZETA)
@@ -108,6 +143,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
         Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd),
         Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd),
     )
+    a = {}
     a["V.10(a)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"))
     a["V.10(b)"] = record(
         **tf_record(outer_pid.reference_to_error(), "error_"), type_pid=error_record(outer_pid)["type"]
@@ -118,8 +154,19 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     a["V.10(d)"] = root_locus_record(G_out, slc.outer.kp, slc.outer.kd, rl)
     a["V.10(d) inner"] = root_locus_record(G_in, slc.inner.kp, slc.inner.kd, rl_in)
-    a |= root_locus_design(slc)
-    # V.13: lead inner loop (bandwidth 20 rad/s, ζ 0.7), lag for the 13.2 N disturbance, lead outer loop.
+    return rl, rl_in, a
+
+
+def inner_lead_lag(G_in) -> tuple[Any, Loop, dict]:
+    """V.13(a)–(b): a lead for the inner loop's bandwidth (20 rad/s, ζ 0.7), then a lag for the 13.2 N disturbance.
+
+    The lag's ratio leaves the beam-angle error 1.2 times inside 0.0175 rad; its zero is a decade
+    below the crossover.
+
+    Returns
+    -------
+    (C_in, loop, answers) : the lead-lag C_in(s) (N per rad), its unity loop on G_in, homework item -> record
+    """
     wc_in, pm_in = crossover_for_bandwidth(BANDWIDTH_INNER, ZETA_INNER), prototype_phase_margin(ZETA_INNER)
     lead_in = lead_for_crossover(G_in, wc_in, pm_in)
     loop_lead = Loop.unity(G_in, lead_in.controller)
@@ -129,6 +176,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
     C_in = lead_in.controller * an.tf([1.0, lag_zero], [1.0, lag_zero / lag_gain])
     loop_in = Loop.unity(G_in, C_in, "inner lead-lag")
     error_lag = abs(ANGLE_DISTURBANCE * dc_gain(loop_in.input_disturbance_to_output()))
+    a = {}
     a["V.13(a)"] = record(
         bandwidth=BANDWIDTH_INNER,
         zeta=ZETA_INNER,
@@ -155,72 +203,71 @@ def classical(known: models.Plant) -> ClassicalDesign:
             ]
         ),
     )
+    return C_in, loop_in, a
+
+
+def outer_lead(G_z) -> tuple[LeadDesign, Loop, dict]:
+    """V.13(c): a lead for the outer loop's bandwidth (2 rad/s, ζ 0.6) on the position plant G_z(s).
+
+    Returns
+    -------
+    (lead, loop, answers) : the `designs.loopshaping.LeadDesign` (rad per m), its unity loop on G_z,
+    homework item -> record
+    """
     wc_out, pm_out = crossover_for_bandwidth(BANDWIDTH_OUTER, ZETA_OUTER), prototype_phase_margin(ZETA_OUTER)
-    lead_out = lead_for_crossover(slc.plants.outer, wc_out, pm_out)
-    loop_out = Loop.unity(slc.plants.outer, lead_out.controller, "outer lead")
-    a["V.13(c)"] = record(
-        bandwidth=BANDWIDTH_OUTER,
-        zeta=ZETA_OUTER,
-        crossover_target=wc_out,
-        pm_target_deg=pm_out,
-        lead_zero=lead_out.zero,
-        lead_pole=lead_out.pole,
-        gain=lead_out.gain,
-        **tf_record(lead_out.controller, "C_"),
-        **margin_record(slc.plants.outer * lead_out.controller, ""),
-        bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
-        specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, BANDWIDTH_OUTER)),
-    )
+    lead_out = lead_for_crossover(G_z, wc_out, pm_out)
+    loop_out = Loop.unity(G_z, lead_out.controller, "outer lead")
+    answers = {
+        "V.13(c)": record(
+            bandwidth=BANDWIDTH_OUTER,
+            zeta=ZETA_OUTER,
+            crossover_target=wc_out,
+            pm_target_deg=pm_out,
+            lead_zero=lead_out.zero,
+            lead_pole=lead_out.pole,
+            gain=lead_out.gain,
+            **tf_record(lead_out.controller, "C_"),
+            **margin_record(G_z * lead_out.controller, ""),
+            bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
+            specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, BANDWIDTH_OUTER)),
+        )
+    }
+    return lead_out, loop_out, answers
+
+
+def classical_blocks(known: models.Plant, slc, ki: float, inner_ki: float, C_in, C_out) -> dict:
+    """The classical controllers at the case's sample period: the PD and PID cascades and V.13's lead-lag.
+
+    The PIDs integrate in both loops (`ki` N per m s outside, `inner_ki` inside), the "PID" only while
+    |ż| is small; every inner block adds the known plant's equilibrium force. `C_in` (N per rad) and
+    `C_out` (rad per m) are V.13's compensators, the outer bounded to θ_d = ±A_θ.
+
+    Returns
+    -------
+    label -> models.Cascade ("PD", "PID", "PID (no anti-windup)", "loopshaped")
+    """
+    timing: dict[str, Any] = dict(sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant)
+    pid: dict[str, Any] = dict(ki=ki, inner_ki=inner_ki, feedforward=True, **timing)
     rate = rate_limit(CASE.design_step, slc.outer.wn)
     blocks = {
-        "PD": cascade_blocks(known, slc, feedforward=True, name="PD"),
-        "PID": cascade_blocks(
-            known,
-            slc,
-            ki=rl["ki"],
-            inner_ki=rl_in["ki"],
-            feedforward=True,
-            anti_windup="integrate_while_slow",
-            rate_limit=rate,
-            name="PID",
-        ),
-        "PID (no anti-windup)": cascade_blocks(
-            known,
-            slc,
-            ki=rl["ki"],
-            inner_ki=rl_in["ki"],
-            feedforward=True,
-            anti_windup="none",
-            name="PID (no anti-windup)",
-        ),
+        "PD": cascade_blocks(known, slc, feedforward=True, name="PD", **timing),
+        "PID": cascade_blocks(known, slc, anti_windup="integrate_while_slow", rate_limit=rate, name="PID", **pid),
+        "PID (no anti-windup)": cascade_blocks(known, slc, anti_windup="none", name="PID (no anti-windup)", **pid),
     }
     inner_block = TransferFunctionBlock(
         known,
         "theta",
         C_in,
+        sample_period=CASE.sample_period,
         output_limit=float(known.input_limit[0]),
         feedforward=True,
         name="loopshaped inner (theta)",
     )
     outer_block = TransferFunctionBlock(
-        known, "z", lead_out.controller, output_limit=slc.inner_limit, name="loopshaped outer (z)"
+        known, "z", C_out, sample_period=CASE.sample_period, output_limit=slc.inner_limit, name="loopshaped outer (z)"
     )
     blocks["loopshaped"] = models.Cascade(outer_block, inner_block, name="lead-lag (V.13)")
-    loops = {
-        "outer PD": Loop.pid(G_out, slc.outer.kp, 0, slc.outer.kd, sigma=SIGMA, name="outer PD"),
-        "outer PID": Loop.pid(G_out, slc.outer.kp, rl["ki"], slc.outer.kd, sigma=SIGMA, name="outer PID"),
-        "inner lead-lag": loop_in,
-        "outer lead": loop_out,
-    }
-    notes = [
-        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
-        "feedforward F_e = (m1 z/ℓ + m2/2) g cos θ at the measured (z, θ), from the known plant (V.13(d) hint)",
-        "k_i is negative (V.12(f)); the PID integrates only while |ż| is small",
-        "the PID integrates in both loops (V.12(e)'s nested PID loops): with θ_d bounded at A_θ the inner PD "
-        "holds at most k_p,θ A_θ = F̃_max of unmodelled force, and a 1.5 N disturbance plus the ±5 % "
-        "feedforward error exceed it",
-    ]
-    return ClassicalDesign(a, blocks, loops, notes)
+    return blocks
 
 
 def root_locus_design(slc) -> dict:
@@ -298,7 +345,7 @@ STATESPACE = StateSpaceChoices(
 
 # ----------------------------------------------------------------- MPC
 MPC = MPCSettings(
-    0.01,
+    SAMPLE_PERIOD,
     60,
     (100.0, 10.0, 1.0, 1.0),
     1 / 15**2,
@@ -439,6 +486,7 @@ CASE = CaseStudy(
     design_step=0.25,
     step=0.15,
     input_disturbance=1.5,
+    sample_period=SAMPLE_PERIOD,
     observer_sample_period=0.001,
     duration=10.0,
     source="V.8(h) design step 0.25 m; comparison step 0.25 -> 0.40 m keeps the ball on the 0.5 m beam; "

@@ -23,6 +23,7 @@ from designs.analysis import Loop, dc_gain
 from designs.filters import TransferFunctionBlock
 from designs.loops import PlacedPD, SuccessiveLoopClosure, cascade_blocks, cascade_plants, cascade_poles, place_pair
 from designs.loopshaping import (
+    LeadDesign,
     crossover_for_bandwidth,
     damping_for_phase_margin,
     frequency_design_checks,
@@ -63,6 +64,9 @@ LOOPS = (
     LoopSpec("VI.13(a)", "inner", baseline=None, crossover=BANDWIDTH_INNER, phase_margin=PHASE_MARGIN_INNER),
     LoopSpec("VI.13(b)", "outer", baseline=None, crossover=BANDWIDTH_OUTER),
 )
+#: VI.11: the controller sample period, s. `CASE.sample_period`: every block of the crane, and the MPC at a
+#: multiple of it.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (VI.8-VI.13)
@@ -83,21 +87,49 @@ def classical(known: models.Plant) -> ClassicalDesign:
 
     For the two-load crane the controllers read (x, θ1, θ2) and ignore θ2; the answers are crane1's.
     """
-    model = one_load_model(known)
-    plants = cascade_plants(model, "theta", "x")
+    plants = cascade_plants(one_load_model(known), "theta", "x")
+    limit_force = float(known.input_limit[0])
+    slc, a = successive_loops(plants, limit_force)
+    rl, outer_pd, outer_pid, integrator_answers = outer_integrator(slc)
+    a |= integrator_answers
+    lead_in, loop_in, inner_answers = inner_lead(plants.inner)
+    lead_out, loop_out, outer_answers = outer_lead(plants.outer, dc_gain(loop_in.reference_to_output()))
+    a |= inner_answers | outer_answers
+    inner_name = "theta" if known.name == "crane1" else "theta1"
+    blocks = classical_blocks(known, slc, rl["ki"], inner_name, lead_in.controller, lead_out.controller)
+    loops = {"outer PD": outer_pd, "outer PID": outer_pid, "inner lead": loop_in, "outer lead": loop_out}
+    notes = [
+        "designed on crane1 with b = 0 (VI.8: m2 = ℓ2 = b = 0)",
+        f"VI.8(c): ζ = {slc.inner.zeta:.4f} from 50 % overshoot, ω_n from the exact 10–90 % rise time of 1 s",
+        f"bound on θ_d: {slc.inner_limit:.4g} rad, the θ error that saturates the {limit_force:g} N force",
+        "outer derivative in the forward path (on the error), VI.8",
+    ]
+    if known.name == "crane":
+        notes.append("two-load crane: the controllers read (x, θ1, θ2) and ignore θ2; answers are crane1's")
+        a["note"] = "VI.8–VI.13 treat the crane with one load (crane1); these are its answers"
+    return ClassicalDesign(a, blocks, loops, notes)
+
+
+def successive_loops(plants, limit_force: float) -> tuple[SuccessiveLoopClosure, dict[str, Any]]:
+    """VI.8: the inner PD on the load angle from 50 % overshoot and a 1 s rise time, the outer PD by the root locus.
+
+    ζ of the inner loop follows from the overshoot, ω_n from the exact 10–90 % rise time of the
+    normalized second-order step; the outer PD places its pair at `OUTER` on K_DC·G_x with the
+    derivative on the error. The bound A_θ on θ_d is the θ error that saturates `limit_force` (N).
+
+    Returns
+    -------
+    (design, answers) : the `designs.loops.SuccessiveLoopClosure` and homework item -> record, VI.8(b)–(h)
+    """
     overshoot, rise_time = INNER_OVERSHOOT, INNER_RISE_TIME
     zeta_in = float(-np.log(overshoot) / np.sqrt(np.pi**2 + np.log(overshoot) ** 2))
     normalized_rise = an.step_info(an.tf([1.0], [1.0, 2 * zeta_in, 1.0]))["RiseTime"]
     inner = pd_design(plants.inner, zeta=zeta_in, wn=normalized_rise / rise_time)
     K = inner.dc_gain
     outer = place_pair(K * plants.outer, OUTER["wn"], OUTER["zeta"])
-    limit_force = float(known.input_limit[0])
-    inner_limit = limit_force / abs(inner.kp)
     full = cascade_poles(plants.linearization, "theta", "x", (inner.kp, inner.kd), (outer["kp"], outer["kd"]))
     G_out = K * plants.outer
     outer_pd = Loop.pid(G_out, outer["kp"], 0.0, outer["kd"], derivative_on="error")
-    rl = integrator(G_out, outer["kp"], outer["kd"], OUTER["zeta"], derivative_on="error")
-    outer_pid = Loop.pid(G_out, outer["kp"], rl["ki"], outer["kd"], derivative_on="error")
     pair = [p for p in outer["poles"] if p.imag > 0][0]
     a: dict[str, Any] = {}  # homework item -> its record, and a note
     a["VI.8(b)"] = record(
@@ -120,53 +152,6 @@ def classical(known: models.Plant) -> ClassicalDesign:
         zeta_pair=-pair.real / abs(pair),
         full_poles=poles_record(full),
     )
-    a["VI.10(a)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"))
-    a["VI.10(b)"] = record(
-        x_per_rad=dc_gain(outer_pd.input_disturbance_to_output()),
-        x_per_rad_pid=dc_gain(outer_pid.input_disturbance_to_output()),
-    )
-    a["VI.10(c)"] = root_locus_record(G_out, outer["kp"], outer["kd"], rl)
-    # VI.13: lead inner loop (bandwidth 3 rad/s, PM 25 deg), lead outer loop (bandwidth 0.5 rad/s, ζ 0.4).
-    pm_in, bw_in = PHASE_MARGIN_INNER, BANDWIDTH_INNER
-    zeta_lead_in = damping_for_phase_margin(pm_in)
-    wc_in = crossover_for_bandwidth(bw_in, zeta_lead_in)
-    lead_in = lead_for_crossover(plants.inner, wc_in, pm_in)
-    loop_in = Loop.unity(plants.inner, lead_in.controller, "inner lead")
-    K_lead = dc_gain(loop_in.reference_to_output())
-    zeta_out, bw_out = ZETA_OUTER, BANDWIDTH_OUTER
-    wc_out, pm_out = crossover_for_bandwidth(bw_out, zeta_out), prototype_phase_margin(zeta_out)
-    lead_out = lead_for_crossover(K_lead * plants.outer, wc_out, pm_out)
-    loop_out = Loop.unity(K_lead * plants.outer, lead_out.controller, "outer lead")
-    a["VI.13(a)"] = record(
-        bandwidth=bw_in,
-        pm_target_deg=pm_in,
-        crossover_target=wc_in,
-        lead_zero=lead_in.zero,
-        lead_pole=lead_in.pole,
-        gain=lead_in.gain,
-        lead_count=lead_in.count,
-        **tf_record(lead_in.controller, "C_"),
-        **margin_record(plants.inner * lead_in.controller, ""),
-        bandwidth_achieved=float(control.bandwidth(loop_in.reference_to_output())),
-        stable=loop_in.is_stable(),
-        specs=spec_records(frequency_design_checks(loop_in, wc_in, pm_in, bw_in)),
-    )
-    a["VI.13(b)"] = record(
-        inner_dc_gain=K_lead,
-        bandwidth=bw_out,
-        zeta=zeta_out,
-        crossover_target=wc_out,
-        pm_target_deg=pm_out,
-        lead_zero=lead_out.zero,
-        lead_pole=lead_out.pole,
-        gain=lead_out.gain,
-        **tf_record(lead_out.controller, "C_"),
-        **margin_record(K_lead * plants.outer * lead_out.controller, ""),
-        bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
-        stable=loop_out.is_stable(),
-        specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, bw_out)),
-    )
-    inner_name = "theta" if known.name == "crane1" else "theta1"
     slc = SuccessiveLoopClosure(
         plants=plants,
         inner=inner,
@@ -175,35 +160,138 @@ def classical(known: models.Plant) -> ClassicalDesign:
         outer=PlacedPD(outer["kp"], outer["kd"]),
         outer_dc_gain=dc_gain(outer_pd.reference_to_output()),
         separation=inner.wn / OUTER["wn"],
-        inner_limit=inner_limit,
+        inner_limit=limit_force / abs(inner.kp),
         full_poles=full,
     )
-    kw: dict[str, Any] = dict(inner_coordinate=inner_name, outer_derivative_on="error")
+    return slc, a
+
+
+def outer_integrator(slc) -> tuple[dict, Loop, Loop, dict]:
+    """VI.10: the outer integrator gain along its root locus (derivative on the error), and VI.10(a)–(c).
+
+    Returns
+    -------
+    (rl, outer PD loop, outer PID loop, answers) : the root-locus record of `studies.homework.integrator`
+    (k_i in rad per m s), the two loops on K_DC·G_x, homework item -> record
+    """
+    G_out, kp, kd = slc.outer_model, slc.outer.kp, slc.outer.kd
+    outer_pd = Loop.pid(G_out, kp, 0.0, kd, derivative_on="error")
+    rl = integrator(G_out, kp, kd, OUTER["zeta"], derivative_on="error")
+    outer_pid = Loop.pid(G_out, kp, rl["ki"], kd, derivative_on="error")
+    a = {}
+    a["VI.10(a)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"))
+    a["VI.10(b)"] = record(
+        x_per_rad=dc_gain(outer_pd.input_disturbance_to_output()),
+        x_per_rad_pid=dc_gain(outer_pid.input_disturbance_to_output()),
+    )
+    a["VI.10(c)"] = root_locus_record(G_out, kp, kd, rl)
+    return rl, outer_pd, outer_pid, a
+
+
+def inner_lead(G_theta) -> tuple[LeadDesign, Loop, dict]:
+    """VI.13(a): a lead for the load-angle loop, bandwidth 3 rad/s with a 25 deg phase margin, on G_θ(s).
+
+    Returns
+    -------
+    (lead, loop, answers) : the `designs.loopshaping.LeadDesign` (N per rad), its unity loop,
+    homework item -> record
+    """
+    pm_in, bw_in = PHASE_MARGIN_INNER, BANDWIDTH_INNER
+    zeta_lead_in = damping_for_phase_margin(pm_in)
+    wc_in = crossover_for_bandwidth(bw_in, zeta_lead_in)
+    lead_in = lead_for_crossover(G_theta, wc_in, pm_in)
+    loop_in = Loop.unity(G_theta, lead_in.controller, "inner lead")
+    answers = {
+        "VI.13(a)": record(
+            bandwidth=bw_in,
+            pm_target_deg=pm_in,
+            crossover_target=wc_in,
+            lead_zero=lead_in.zero,
+            lead_pole=lead_in.pole,
+            gain=lead_in.gain,
+            lead_count=lead_in.count,
+            **tf_record(lead_in.controller, "C_"),
+            **margin_record(G_theta * lead_in.controller, ""),
+            bandwidth_achieved=float(control.bandwidth(loop_in.reference_to_output())),
+            stable=loop_in.is_stable(),
+            specs=spec_records(frequency_design_checks(loop_in, wc_in, pm_in, bw_in)),
+        )
+    }
+    return lead_in, loop_in, answers
+
+
+def outer_lead(G_outer, inner_dc_gain: float) -> tuple[LeadDesign, Loop, dict]:
+    """VI.13(b): a lead for the car-position loop, bandwidth 0.5 rad/s with ζ 0.4.
+
+    It is designed on G_x = K G_outer: the inner lead loop taken as its DC gain K = `inner_dc_gain`.
+
+    Returns
+    -------
+    (lead, loop, answers) : the `designs.loopshaping.LeadDesign` (rad per m), its unity loop,
+    homework item -> record
+    """
+    G_x = inner_dc_gain * G_outer
+    zeta_out, bw_out = ZETA_OUTER, BANDWIDTH_OUTER
+    wc_out, pm_out = crossover_for_bandwidth(bw_out, zeta_out), prototype_phase_margin(zeta_out)
+    lead_out = lead_for_crossover(G_x, wc_out, pm_out)
+    loop_out = Loop.unity(G_x, lead_out.controller, "outer lead")
+    answers = {
+        "VI.13(b)": record(
+            inner_dc_gain=inner_dc_gain,
+            bandwidth=bw_out,
+            zeta=zeta_out,
+            crossover_target=wc_out,
+            pm_target_deg=pm_out,
+            lead_zero=lead_out.zero,
+            lead_pole=lead_out.pole,
+            gain=lead_out.gain,
+            **tf_record(lead_out.controller, "C_"),
+            **margin_record(G_x * lead_out.controller, ""),
+            bandwidth_achieved=float(control.bandwidth(loop_out.reference_to_output())),
+            stable=loop_out.is_stable(),
+            specs=spec_records(frequency_design_checks(loop_out, wc_out, pm_out, bw_out)),
+        )
+    }
+    return lead_out, loop_out, answers
+
+
+def classical_blocks(known: models.Plant, slc, ki: float, inner_name: str, C_in, C_out) -> dict:
+    """The classical controllers at the case's sample period: the PD and PID cascades and VI.13's leads.
+
+    The outer loops act on the car position x with the derivative on the error, the inner loops on the
+    load angle `inner_name` ("theta" on crane1, "theta1" on the two-load crane); `ki` in rad per m s.
+    `C_in` (N per rad) and `C_out` (rad per m) are VI.13's leads, the outer bounded to θ_d = ±A_θ.
+
+    Returns
+    -------
+    label -> models.Cascade ("PD", "PID", "PID (no anti-windup)", "loopshaped")
+    """
+    kw: dict[str, Any] = dict(
+        inner_coordinate=inner_name,
+        outer_derivative_on="error",
+        sample_period=CASE.sample_period,
+        sigma=CASE.derivative_time_constant,
+    )
     blocks = {
         "PD": cascade_blocks(known, slc, name="PD", **kw),
-        "PID": cascade_blocks(known, slc, ki=rl["ki"], name="PID", **kw),
+        "PID": cascade_blocks(known, slc, ki=ki, name="PID", **kw),
         "PID (no anti-windup)": cascade_blocks(
-            known, slc, ki=rl["ki"], anti_windup="none", name="PID (no anti-windup)", **kw
+            known, slc, ki=ki, anti_windup="none", name="PID (no anti-windup)", **kw
         ),
     }
     inner_block = TransferFunctionBlock(
-        known, inner_name, lead_in.controller, output_limit=limit_force, name=f"loopshaped inner ({inner_name})"
+        known,
+        inner_name,
+        C_in,
+        sample_period=CASE.sample_period,
+        output_limit=float(known.input_limit[0]),
+        name=f"loopshaped inner ({inner_name})",
     )
     outer_block = TransferFunctionBlock(
-        known, "x", lead_out.controller, output_limit=inner_limit, name="loopshaped outer (x)"
+        known, "x", C_out, sample_period=CASE.sample_period, output_limit=slc.inner_limit, name="loopshaped outer (x)"
     )
     blocks["loopshaped"] = models.Cascade(outer_block, inner_block, name="lead (VI.13)")
-    loops = {"outer PD": outer_pd, "outer PID": outer_pid, "inner lead": loop_in, "outer lead": loop_out}
-    notes = [
-        "designed on crane1 with b = 0 (VI.8: m2 = ℓ2 = b = 0)",
-        f"VI.8(c): ζ = {zeta_in:.4f} from 50 % overshoot, ω_n from the exact 10–90 % rise time of 1 s",
-        f"bound on θ_d: {inner_limit:.4g} rad, the θ error that saturates the {limit_force:g} N force",
-        "outer derivative in the forward path (on the error), VI.8",
-    ]
-    if known.name == "crane":
-        notes.append("two-load crane: the controllers read (x, θ1, θ2) and ignore θ2; answers are crane1's")
-        a["note"] = "VI.8–VI.13 treat the crane with one load (crane1); these are its answers"
-    return ClassicalDesign(a, blocks, loops, notes)
+    return blocks
 
 
 # ----------------------------------------------------------------- state space (VI.14-VI.15)
@@ -258,9 +346,10 @@ STATESPACE_ONE_LOAD = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-# The swing modes (0.67 and 1.15 rad/s) and a 10 m move of 10-20 s need horizons of seconds: 0.1 s samples.
+# The swing modes (0.67 and 1.15 rad/s) and a 10 m move of 10-20 s need horizons of seconds: 0.1 s samples
+# (10 of the case's 0.01 s).
 MPC = MPCSettings(
-    0.1,
+    10 * SAMPLE_PERIOD,
     80,
     (1.0, 100.0, 100.0, 1.0, 1000.0, 1000.0),
     1 / 5000**2,
@@ -273,7 +362,7 @@ MPC = MPCSettings(
     "weights damp the 24 m cable mode (time constant 6 s, the best a cart force achieves)",
 )
 MPC_ONE_LOAD = MPCSettings(
-    0.1,
+    10 * SAMPLE_PERIOD,
     80,
     (1.0, 100.0, 1.0, 100.0),
     1 / 5000**2,
@@ -622,6 +711,7 @@ CASE = CaseStudy(
     design_step=10.0,
     step=10.0,
     input_disturbance=500.0,
+    sample_period=SAMPLE_PERIOD,
     observer_sample_period=0.001,
     duration=60.0,
     source="VI.14(e) step 10 m; no disturbance given: 10 % of 5 kN; VI.11 Ts = 0.01 s, VI.15 Ts = 0.001 s",

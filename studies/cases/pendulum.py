@@ -9,6 +9,7 @@ plant itself is declared in `models.catalog`.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -18,8 +19,14 @@ from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
-from designs.loops import cascade_blocks, outer_plant_seen, successive_loop_closure, zero_cancelling_design
-from designs.pid import SIGMA, linearized_input_bound
+from designs.loops import (
+    SuccessiveLoopClosure,
+    cascade_blocks,
+    outer_plant_seen,
+    successive_loop_closure,
+    zero_cancelling_design,
+)
+from designs.pid import linearized_input_bound
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies.case import CONTROLLERS, CaseStudy, LoopSpec, standard_scenarios
@@ -46,6 +53,8 @@ from studies.trajectories import Tracking, TrajectoryProblem, TrajectorySetup
 
 #: II.14(c), outer loop: 10x better below 0.001 rad/s, 10x more noise attenuation above 20 rad/s.
 LOOPSHAPING = LoopSpec("II.14", "outer", low_frequency=0.001, high_frequency=20.0, factor=10.0)
+#: II.11: the controller sample period, s. `CASE.sample_period`: every block and the MPC of the pendulum.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (II.8-II.14)
@@ -103,12 +112,41 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     a["II.10(a)"] = record(**error_record(inner_pd), **error_record(inner_pid, "_pid"), ki=rl_in["ki"])
     a["II.10(b)"] = record(**error_record(outer_pd), **error_record(outer_pid, "_pid"), ki=rl_out["ki"])
-    # .13 on the implemented loops. The outer loop sees the inner closed loop times the exact outer
-    # plant: K_DC (g − ℓ s²)/s² alone has |L| > 1 at high frequency, which the inner loop's roll-off removes.
-    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=SIGMA, name="inner PD")
+    loops, exact_outer, frequency_answers = implemented_loops(slc, rl_in["ki"])
+    a |= frequency_answers
+    C_pd = pid_tf(slc.outer.kp, 0.0, slc.outer.kd, CASE.derivative_time_constant)
+    shaped, pre, T_new = loopshaped(exact_outer * C_pd, LOOPSHAPING)
+    a["II.14"] = loopshaping_record(shaped, pre, T_new)
+    blocks = classical_blocks(known, slc, zc, rl_out["ki"], shaped.controller * C_pd, pre["prefilter"])
+    loops["outer loopshaped"] = Loop.unity(shaped.loop, 1.0, "outer loopshaped")
+    notes = [
+        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
+        "outer PD designed on K_DC·g/s² (the outer plant (g − ℓ s²)/s² below √(g/ℓ)); II.8(g) assumes "
+        f"K_DC = 1, the inner loop gives K_DC = {slc.inner_dc_gain:.4g}",
+        "integrator on the outer (z) loop only, integrating while |ż| is small (II.16 hint)",
+        "'PD (zero-cancelling filter)': the controlbook's outer loop, F(s) = (1/K_DC) √(g/ℓ)/(s + √(g/ℓ)) "
+        "after the outer PD, which then matches a second-order loop exactly (our text does not use it)",
+    ]
+    return ClassicalDesign(a, blocks, loops, notes)
+
+
+def implemented_loops(slc: SuccessiveLoopClosure, ki_inner: float) -> tuple[dict, Any, dict]:
+    """II.13: the implemented loops (dirty derivative with the case's σ) and their frequency answers.
+
+    The outer loop sees the inner closed loop times the exact outer plant: K_DC (g − ℓ s²)/s² alone has
+    |L| > 1 at high frequency, which the inner loop's roll-off removes. ki_inner : N per rad s (II.10).
+
+    Returns
+    -------
+    (loops, exact outer plant, answers) : label -> Loop ("inner PD", "inner PID", "outer PD"), the
+    outer plant the outer PD sees (m per rad), homework item -> record II.13–II.13(e)
+    """
+    G_in, sigma = slc.plants.inner, CASE.derivative_time_constant
+    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=sigma, name="inner PD")
     exact_outer = outer_plant_seen(in_pd, slc.plants.outer)
-    in_pid = Loop.pid(G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd, sigma=SIGMA, name="inner PID")
-    out_pd = Loop.pid(exact_outer, slc.outer.kp, 0, slc.outer.kd, sigma=SIGMA, name="outer PD")
+    in_pid = Loop.pid(G_in, slc.inner.kp, ki_inner, slc.inner.kd, sigma=sigma, name="inner PID")
+    out_pd = Loop.pid(exact_outer, slc.outer.kp, 0, slc.outer.kd, sigma=sigma, name="outer PD")
+    a = {}
     a["II.13"] = record(
         **margin_record(in_pd.loop_gain(), "_inner_pd"),
         **margin_record(in_pid.loop_gain(), "_inner_pid"),
@@ -123,44 +161,45 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     a["II.13(d)"] = record(omega=0.1, output_disturbance_percent=an.percent_output_disturbance_below(out_pd, 0.1))
     a["II.13(e)"] = record(slope=2.0, ess_ramp=2.0 * steady_state_errors(out_pd)["ess_ramp"])
-    C_pd = pid_tf(slc.outer.kp, 0.0, slc.outer.kd, SIGMA)
-    shaped, pre, T_new = loopshaped(exact_outer * C_pd, LOOPSHAPING)
-    a["II.14"] = loopshaping_record(shaped, pre, T_new)
+    return {"inner PD": in_pd, "inner PID": in_pid, "outer PD": out_pd}, exact_outer, a
+
+
+def classical_blocks(
+    known: models.Plant, slc: SuccessiveLoopClosure, zc: SuccessiveLoopClosure, ki: float, C_outer, prefilter
+) -> dict:
+    """The classical controllers at the case's sample period: PD and PID cascades, II.14's loop, the filtered PD.
+
+    The PIDs integrate on the outer (z) loop only (`ki`, rad per m s), the "PID" only while |ż| is small.
+    "loopshaped" runs C_outer(s) with the reference `prefilter` F(s) outside the PD's inner loop; the
+    last block is the zero-cancelling design `zc`.
+
+    Returns
+    -------
+    label -> models.Cascade ("PD", "PID", "PID (no anti-windup)", "loopshaped", "PD (zero-cancelling filter)")
+    """
+    timing: dict[str, Any] = dict(sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant)
     rate = rate_limit(CASE.design_step, slc.outer.wn)
     blocks = {
-        "PD": cascade_blocks(known, slc, name="PD"),
+        "PD": cascade_blocks(known, slc, name="PD", **timing),
         "PID": cascade_blocks(
-            known, slc, ki=rl_out["ki"], anti_windup="integrate_while_slow", rate_limit=rate, name="PID"
+            known, slc, ki=ki, anti_windup="integrate_while_slow", rate_limit=rate, name="PID", **timing
         ),
         "PID (no anti-windup)": cascade_blocks(
-            known, slc, ki=rl_out["ki"], anti_windup="none", name="PID (no anti-windup)"
+            known, slc, ki=ki, anti_windup="none", name="PID (no anti-windup)", **timing
         ),
     }
     outer_block = TransferFunctionBlock(
         known,
         "z",
-        shaped.controller * C_pd,
-        prefilter=pre["prefilter"],
+        C_outer,
+        prefilter=prefilter,
+        sample_period=CASE.sample_period,
         output_limit=slc.inner_limit,
         name="loopshaped outer (z)",
     )
     blocks["loopshaped"] = models.Cascade(outer_block, blocks["PD"].inner, name="loopshaped (II.14)")
-    blocks["PD (zero-cancelling filter)"] = cascade_blocks(known, zc, name="PD (zero-cancelling filter)")
-    loops = {
-        "inner PD": in_pd,
-        "inner PID": in_pid,
-        "outer PD": out_pd,
-        "outer loopshaped": Loop.unity(shaped.loop, 1.0, "outer loopshaped"),
-    }
-    notes = [
-        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g}",
-        "outer PD designed on K_DC·g/s² (the outer plant (g − ℓ s²)/s² below √(g/ℓ)); II.8(g) assumes "
-        f"K_DC = 1, the inner loop gives K_DC = {slc.inner_dc_gain:.4g}",
-        "integrator on the outer (z) loop only, integrating while |ż| is small (II.16 hint)",
-        "'PD (zero-cancelling filter)': the controlbook's outer loop, F(s) = (1/K_DC) √(g/ℓ)/(s + √(g/ℓ)) "
-        "after the outer PD, which then matches a second-order loop exactly (our text does not use it)",
-    ]
-    return ClassicalDesign(a, blocks, loops, notes)
+    blocks["PD (zero-cancelling filter)"] = cascade_blocks(known, zc, name="PD (zero-cancelling filter)", **timing)
+    return blocks
 
 
 # ----------------------------------------------------------------- state space (II.15-II.17)
@@ -189,7 +228,7 @@ STATESPACE = StateSpaceChoices(
 
 # ----------------------------------------------------------------- MPC
 MPC = MPCSettings(
-    0.01,
+    SAMPLE_PERIOD,
     50,
     (1.0, 10.0, 0.1, 0.1),
     1e-2,
@@ -395,6 +434,7 @@ CASE = CaseStudy(
     design_step=2.0,
     step=2.0,
     input_disturbance=0.5,
+    sample_period=SAMPLE_PERIOD,
     duration=20.0,
     source="II.8(h) step 2 m; II.16(c) disturbance 0.5 N; II.11 Ts = 0.01 s",
     tracked_unit="m",

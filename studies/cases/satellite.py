@@ -9,6 +9,7 @@ problem, the drawing and the errata. The plant is declared in `models.catalog`.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
 from designs.loops import SuccessiveLoopClosure, cascade_blocks, coupling_tf, successive_loop_closure
-from designs.pid import SIGMA, linearized_input_bound, pd_design
+from designs.pid import PDDesign, linearized_input_bound, pd_design
 from designs.tuning import Cost, Specs
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
@@ -45,6 +46,9 @@ from studies.homework import (
 
 #: III.14(c), outer loop: 10x better below 0.003 rad/s, 10x more noise attenuation above 10 rad/s.
 LOOPSHAPING = LoopSpec("III.14", "outer", low_frequency=0.003, high_frequency=10.0, factor=10.0)
+#: III.11: the controller sample period, s. `CASE.sample_period`: every block of the satellite, and the MPC
+#: at a multiple of it.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (III.8-III.14)
@@ -62,17 +66,52 @@ def classical(known: models.Plant) -> ClassicalDesign:
         zeta_inner=ZETA,
         outer_derivative=False,
     )
+    a = successive_loop_answers(slc, bound)
+    outer_pd, rl_in, rl_out, integrator_answers = integrators(slc)
+    a |= integrator_answers
+    loops, frequency_answers = implemented_loops(slc, outer_pd, rl_in["ki"], rl_out["ki"])
+    a |= frequency_answers
+    G_out = slc.inner_dc_gain * slc.plants.outer
+    C_pd = pid_tf(outer_pd.kp, 0.0, outer_pd.kd, CASE.derivative_time_constant)
+    baseline_pm = an.margins(G_out * C_pd)["pm_deg"]
+    shaped, pre, T_new = loopshaped(G_out * C_pd, LOOPSHAPING, phase_margin_deg=min(baseline_pm, 60.0))
+    a["III.14"] = loopshaping_record(shaped, pre, T_new)
+    blocks = classical_blocks(known, slc, outer_pd, rl_out["ki"], shaped.controller * C_pd, pre["prefilter"])
+    loops["outer loopshaped"] = Loop.unity(shaped.loop, 1.0, "outer loopshaped")
+    notes = [
+        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g} with III.8's "
+        "P outer loop",
+        f"III.8's P outer loop leaves a DC gain of {slc.outer_dc_gain:.3g}: the 'PD' controller tracks φ only "
+        "partly, as III.8(h) asks the student to notice",
+        "the PID's outer loop is III.10(d)'s PD (ω_n = ω_n,θ/M, ζ = 0.707) plus k_i; θ_d must reach φ_d "
+        "(the outer plant has DC gain 1, not an integrator), so the integrator carries the reference and "
+        "θ_d is bounded about the measured θ (θ ± A_θ), which keeps the inner loop out of saturation and "
+        "lets back-calculation see the bound",
+        "III.14 starts from that PD outer loop: III.8's P loop has no gain crossover to keep",
+        "III.13(d) asks for noise in θ under the outer loop; the outer loop's output is φ, reported for φ",
+    ]
+    return ClassicalDesign(a, blocks, loops, notes)
+
+
+def successive_loop_answers(slc: SuccessiveLoopClosure, bound: dict) -> dict:
+    """III.8(b)–(i): the inner PD on θ and the P outer loop on φ of the successive-loop design `slc`.
+
+    bound : `designs.pid.linearized_input_bound`'s record (the torque bound τ̃_max, N m)
+
+    Returns
+    -------
+    homework item -> record (SI units: rad, rad/s, N m per rad)
+    """
     plants = slc.plants
-    G_in = plants.inner
-    K = slc.inner_dc_gain
-    G_out = K * plants.outer
     a = {}
     a["III.8(b)"] = record(kp=slc.inner.kp, step=slc.inner_limit, bound=bound["bound"])
     a["III.8(c)"] = record(
-        **tf_record(G_in, "plant_"), **tf_record(slc.inner.closed_loop, "closed_loop_"), dropped_coupling=plants.dropped
+        **tf_record(plants.inner, "plant_"),
+        **tf_record(slc.inner.closed_loop, "closed_loop_"),
+        dropped_coupling=plants.dropped,
     )
     a["III.8(d)"] = record(wn=slc.inner.wn, kd=slc.inner.kd, zeta=slc.inner.zeta)
-    a["III.8(e)"] = record(dc_gain=K)
+    a["III.8(e)"] = record(dc_gain=slc.inner_dc_gain)
     a["III.8(f)"] = record(**tf_record(plants.outer, "plant_"), **tf_record(slc.outer.closed_loop, "closed_loop_"))
     a["III.8(g)"] = record(kp=slc.outer.kp, step=CASE.design_step, inner_step=slc.inner_limit)
     a["III.8(h)"] = record(dc_gain=slc.outer_dc_gain, steady_state_error_fraction=1 - slc.outer_dc_gain)
@@ -83,13 +122,29 @@ def classical(known: models.Plant) -> ClassicalDesign:
         zeta_outer=slc.outer.zeta,
         full_poles=poles_record(slc.full_poles),
     )
-    # III.10(d): a PD outer loop (the PID's), placed M below the inner loop.
+    return a
+
+
+def integrators(slc: SuccessiveLoopClosure) -> tuple[PDDesign, dict, dict, dict]:
+    """III.10: the PD outer loop M below the inner loop, both loops' integrators, and III.10(a)–(e).
+
+    The outer PD (III.10(d)) places ω_n = ω_n,θ / M with ζ = 0.707 on K_DC·G_φ; each integrator gain
+    follows its root locus (`studies.homework.integrator`).
+
+    Returns
+    -------
+    (outer PD, inner root locus, outer root locus, answers) : the `designs.pid.PDDesign`, the two records
+    of `studies.homework.integrator` and homework item -> record
+    """
+    plants = slc.plants
+    G_in, G_out = plants.inner, slc.inner_dc_gain * plants.outer
     outer_pd = pd_design(G_out, wn=slc.inner.wn / SEPARATION, zeta=ZETA)
     rl_in = integrator(G_in, slc.inner.kp, slc.inner.kd, ZETA)
     rl_out = integrator(G_out, outer_pd.kp, outer_pd.kd, ZETA)
     inner_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd)
     inner_pid = Loop.pid(G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd)
     coupling = coupling_tf(plants)
+    a = {}
     a["III.10(a)"] = record(**error_record(inner_pd), **error_record(inner_pid, "_pid"))
     a["III.10(b)"] = record(
         **tf_record(coupling, "coupling_"),
@@ -106,10 +161,26 @@ def classical(known: models.Plant) -> ClassicalDesign:
         **error_record(Loop.pid(G_out, outer_pd.kp, rl_out["ki"], outer_pd.kd), "_pid"),
     )
     a["III.10(e)"] = root_locus_record(G_out, outer_pd.kp, outer_pd.kd, rl_out)
-    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=SIGMA, name="inner PD")
-    in_pid = Loop.pid(G_in, slc.inner.kp, rl_in["ki"], slc.inner.kd, sigma=SIGMA, name="inner PID")
+    return outer_pd, rl_in, rl_out, a
+
+
+def implemented_loops(slc: SuccessiveLoopClosure, outer_pd: PDDesign, ki_inner: float, ki_outer: float):
+    """III.13: the implemented loops (dirty derivative with the case's σ) and their frequency answers.
+
+    ki_inner (N m per rad s), ki_outer (rad per rad s) : the integrator gains of III.10
+
+    Returns
+    -------
+    (loops, answers) : label -> Loop ("inner PD", "inner PID", "outer P", "outer PID") and
+    homework item -> record (margins in deg, percentages of |G(jω)|)
+    """
+    G_in, G_out = slc.plants.inner, slc.inner_dc_gain * slc.plants.outer
+    sigma = CASE.derivative_time_constant
+    in_pd = Loop.pid(G_in, slc.inner.kp, 0, slc.inner.kd, sigma=sigma, name="inner PD")
+    in_pid = Loop.pid(G_in, slc.inner.kp, ki_inner, slc.inner.kd, sigma=sigma, name="inner PID")
     out_p = Loop.pid(G_out, slc.outer.kp, name="outer P")
-    out_pid = Loop.pid(G_out, outer_pd.kp, rl_out["ki"], outer_pd.kd, sigma=SIGMA, name="outer PID")
+    out_pid = Loop.pid(G_out, outer_pd.kp, ki_outer, outer_pd.kd, sigma=sigma, name="outer PID")
+    a = {}
     a["III.13"] = record(
         **margin_record(in_pd.loop_gain(), "_inner_pd"),
         **margin_record(in_pid.loop_gain(), "_inner_pid"),
@@ -127,64 +198,55 @@ def classical(known: models.Plant) -> ClassicalDesign:
         tracking_error_percent_p=an.percent_tracking_error_below(out_p, 0.01),
     )
     a["III.13(d)"] = record(omega=1.0, noise_percent=an.percent_noise_above(out_pid, 1.0))
-    C_pd = pid_tf(outer_pd.kp, 0.0, outer_pd.kd, SIGMA)
-    baseline_pm = an.margins(G_out * C_pd)["pm_deg"]
-    shaped, pre, T_new = loopshaped(G_out * C_pd, LOOPSHAPING, phase_margin_deg=min(baseline_pm, 60.0))
-    a["III.14"] = loopshaping_record(shaped, pre, T_new)
+    return {"inner PD": in_pd, "inner PID": in_pid, "outer P": out_p, "outer PID": out_pid}, a
+
+
+def classical_blocks(
+    known: models.Plant, slc: SuccessiveLoopClosure, outer_pd: PDDesign, ki: float, C_outer, prefilter
+) -> dict:
+    """The classical controllers at the case's sample period: the PD and PID cascades and III.14's loop.
+
+    "PD" is III.8's design (a P outer loop, θ_d unbounded); the PIDs run III.10(d)'s PD outer loop with
+    the integrator `ki` (rad per rad s) and bound θ_d to θ ± A_θ. "loopshaped" runs C_outer(s) with the
+    reference `prefilter` F(s) outside the PD's inner loop.
+
+    Returns
+    -------
+    label -> models.Cascade ("PD", "PID", "PID (no anti-windup)", "loopshaped")
+    """
     pid_design = SuccessiveLoopClosure(
-        plants=plants,
+        plants=slc.plants,
         inner=slc.inner,
-        inner_dc_gain=K,
-        outer_model=G_out,
+        inner_dc_gain=slc.inner_dc_gain,
+        outer_model=slc.inner_dc_gain * slc.plants.outer,
         outer=outer_pd,
         outer_dc_gain=outer_pd.dc_gain,
         separation=slc.inner.wn / outer_pd.wn,
         inner_limit=slc.inner_limit,
         full_poles=slc.full_poles,
     )
+    timing: dict[str, Any] = dict(sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant)
+    pid: dict[str, Any] = dict(ki=ki, outer_limit_about="theta", **timing)
     blocks = {
-        "PD": cascade_blocks(known, slc, outer_limit=None, name="PD"),
-        "PID": cascade_blocks(known, pid_design, ki=rl_out["ki"], outer_limit_about="theta", name="PID"),
+        "PD": cascade_blocks(known, slc, outer_limit=None, name="PD", **timing),
+        "PID": cascade_blocks(known, pid_design, name="PID", **pid),
         "PID (no anti-windup)": cascade_blocks(
-            known,
-            pid_design,
-            ki=rl_out["ki"],
-            outer_limit_about="theta",
-            anti_windup="none",
-            name="PID (no anti-windup)",
+            known, pid_design, anti_windup="none", name="PID (no anti-windup)", **pid
         ),
     }
     # θ_d bounded to θ ± A_θ: the inner loop stays out of saturation and the outer anti-windup sees the bound.
     outer_block = TransferFunctionBlock(
         known,
         "phi",
-        shaped.controller * C_pd,
-        prefilter=pre["prefilter"],
+        C_outer,
+        prefilter=prefilter,
+        sample_period=CASE.sample_period,
         output_limit=slc.inner_limit,
         limit_about="theta",
         name="loopshaped outer (phi)",
     )
     blocks["loopshaped"] = models.Cascade(outer_block, blocks["PD"].inner, name="loopshaped (III.14)")
-    loops = {
-        "inner PD": in_pd,
-        "inner PID": in_pid,
-        "outer P": out_p,
-        "outer PID": out_pid,
-        "outer loopshaped": Loop.unity(shaped.loop, 1.0, "outer loopshaped"),
-    }
-    notes = [
-        f"A_θ = {slc.inner_limit:.4g} rad chosen for a bandwidth separation of {SEPARATION:g} with III.8's "
-        "P outer loop",
-        f"III.8's P outer loop leaves a DC gain of {slc.outer_dc_gain:.3g}: the 'PD' controller tracks φ only "
-        "partly, as III.8(h) asks the student to notice",
-        "the PID's outer loop is III.10(d)'s PD (ω_n = ω_n,θ/M, ζ = 0.707) plus k_i; θ_d must reach φ_d "
-        "(the outer plant has DC gain 1, not an integrator), so the integrator carries the reference and "
-        "θ_d is bounded about the measured θ (θ ± A_θ), which keeps the inner loop out of saturation and "
-        "lets back-calculation see the bound",
-        "III.14 starts from that PD outer loop: III.8's P loop has no gain crossover to keep",
-        "III.13(d) asks for noise in θ under the outer loop; the outer loop's output is φ, reported for φ",
-    ]
-    return ClassicalDesign(a, blocks, loops, notes)
+    return blocks
 
 
 # ----------------------------------------------------------------- state space (III.15-III.17)
@@ -212,9 +274,9 @@ STATESPACE = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-# The panel mode (0.42 rad/s, period 15 s) needs a horizon of seconds: 0.1 s samples, not the text's 0.01 s.
+# The panel mode (0.42 rad/s, period 15 s) needs a horizon of seconds: 0.1 s samples (10 of the case's 0.01 s).
 MPC = MPCSettings(
-    0.1,
+    10 * SAMPLE_PERIOD,
     60,
     (1.0, 10.0, 0.1, 0.1),
     1 / 25,
@@ -393,6 +455,7 @@ CASE = CaseStudy(
     design_step=np.deg2rad(30),
     step=np.deg2rad(30),
     input_disturbance=0.5,
+    sample_period=SAMPLE_PERIOD,
     duration=60.0,
     source="III.8(g) step 30 deg; III.16(c) disturbance 0.5 N m; III.11 Ts = 0.01 s",
     tracked_unit="rad",

@@ -10,6 +10,7 @@ declared in `models.catalog`.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import casadi
 import numpy as np
@@ -22,7 +23,7 @@ from designs.analysis import Loop, dc_gain
 from designs.filters import TransferFunctionBlock, notch, proportional_integral
 from designs.loopshaping import lead_for_crossover, phase_at
 from designs.pid import pd_saturation
-from designs.rootlocus import lead_lag_for_static_gain
+from designs.rootlocus import LeadLagDesign, lead_lag_for_static_gain
 from designs.tuning import Specs
 from models import deferred
 from mpc import Collocation, MPCSettings, OptimalControlProblem
@@ -61,6 +62,9 @@ CROSSOVER, PHASE_MARGIN = 2.0, 60.0
 LOOPSHAPING = LoopSpec("IV.13", "input", baseline=None, crossover=CROSSOVER, phase_margin=PHASE_MARGIN)
 #: IV.13(d) notch: the text's zero damping, and our pole damping.
 NOTCH_ZETA_ZERO, NOTCH_ZETA_POLE = 0.05, 0.7
+#: IV.12: the controller sample period, s. `CASE.sample_period`: every block of the UUV, and the MPC at a
+#: multiple of it.
+SAMPLE_PERIOD = 0.01
 
 
 # ----------------------------------------------------------------- classical homework (IV.8-IV.13)
@@ -69,7 +73,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
     G = known.linearize().tf("phi", "tau")
     bound = float(known.input_limit[0])
     pd = pd_saturation(G, input_bound=bound, step=CASE.design_step, zeta=ZETA_UUV)
-    rl, loops = single_loop(G, pd, ZETA_UUV)
+    rl, loops = single_loop(G, pd, ZETA_UUV, CASE.derivative_time_constant)
     ki = rl["ki"]
     a = {}
     a["IV.8(a)"] = record(**tf_record(G, "plant_"), **tf_record(pd.closed_loop, "closed_loop_"))
@@ -83,8 +87,49 @@ def classical(known: models.Plant) -> ClassicalDesign:
     )
     a["IV.10(c)"] = record(**tf_record(loops["PID"].reference_to_output(), "closed_loop_"), ki=ki)
     a["IV.10(d)"] = root_locus_record(G, pd.kp, pd.kd, rl)
-    # IV.11: root-locus lead-lag for the 250 N m thrusters. The lag is fixed first and the lead placed on
-    # G·lag, so the dominant poles stay exactly at ω_n, ζ; the lag ratio gives K_p = 19 (5 % error).
+    leadlag, leadlag_block, lead_lag_answers = root_locus_lead_lag(known, G)
+    C_e, loop_e, loopshaping_answers = loopshaping(known, G)
+    a |= lead_lag_answers | loopshaping_answers
+    blocks = single_loop_blocks(
+        known, "phi", pd, ki, feedforward=False, sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant
+    )
+    # Anti-windup observer at 1 rad/s (z = 0.99): faster tracking starves the integrator while the
+    # lightly damped mode keeps the torque saturated.
+    blocks["loopshaped"] = TransferFunctionBlock(
+        known,
+        "phi",
+        C_e,
+        sample_period=CASE.sample_period,
+        output_limit=bound,
+        tracking_pole=0.99,
+        name="loopshaped (IV.13)",
+    )
+    blocks["lead-lag (IV.11)"] = leadlag_block
+    loops["loopshaped"] = loop_e
+    loops["lead-lag (IV.11)"] = Loop.unity(G, leadlag.transfer_function(), "lead-lag")
+    notes = [
+        "IV.11: dominant poles ω_n = 5 rad/s, ζ = 0.85, lead zero at −1.5, lag zero at −0.5 and K_p = 19 "
+        "(5 % error); the unsaturated linear loop overshoots because of the slow lead zero, the 250 N m "
+        "thrusters' saturation removes it: specs are met on the nonlinear loop",
+        "the IV.11 block saturates at 250 N m: simulate it on models.get('uuv', input_limit=250)",
+        "IV.13 notch poles damped at ζ_p = 0.7 (the text gives only the zero damping 0.05)",
+    ]
+    return ClassicalDesign(a, blocks, loops, notes)
+
+
+def root_locus_lead_lag(known: models.Plant, G) -> tuple[LeadLagDesign, TransferFunctionBlock, dict]:
+    """IV.11: a lead, then a lead-lag, by the root locus for the 250 N m thrusters, judged linear and nonlinear.
+
+    The lag is fixed first and the lead placed on G·lag, so the dominant poles stay exactly at ω_n, ζ
+    (`LEAD_LAG`); the lag ratio gives K_p = 19 (5 % error). The blocks saturate at `THRUSTER_LIMIT`
+    and run on the known plant with that limit; IV.11(e) adds the gravity-buoyancy feedforward.
+
+    Returns
+    -------
+    (lead-lag, its block, answers) : the `designs.rootlocus.LeadLagDesign`, its `TransferFunctionBlock`
+    at the case's sample period, homework item -> record IV.11(a)–(e)
+    """
+    a = {}
     p = LEAD_LAG
     lead_alone, leadlag = lead_lag_for_static_gain(
         G, p["wn"], p["zeta"], p["lead_zero"], p["lag_zero"], p["static_gain"]
@@ -95,12 +140,19 @@ def classical(known: models.Plant) -> ClassicalDesign:
     # No anti-windup: the lead-lag has no integrator, and the saturated lead is what keeps the overshoot
     # low; an anti-windup observer would hold the lead's state at the bound and slow the rise (6.6 s).
     lead_block = TransferFunctionBlock(
-        turbo, "phi", lead_alone.lead_tf(), output_limit=THRUSTER_LIMIT, anti_windup="none", name="lead (IV.11)"
+        turbo,
+        "phi",
+        lead_alone.lead_tf(),
+        sample_period=CASE.sample_period,
+        output_limit=THRUSTER_LIMIT,
+        anti_windup="none",
+        name="lead (IV.11)",
     )
     leadlag_block = TransferFunctionBlock(
         turbo,
         "phi",
         leadlag.transfer_function(),
+        sample_period=CASE.sample_period,
         output_limit=THRUSTER_LIMIT,
         anti_windup="none",
         name="lead-lag (IV.11)",
@@ -134,13 +186,28 @@ def classical(known: models.Plant) -> ClassicalDesign:
         turbo,
         "phi",
         leadlag.transfer_function(),
+        sample_period=CASE.sample_period,
         output_limit=THRUSTER_LIMIT,
         anti_windup="none",
         feedforward="reference",
         name="lead-lag + feedforward (IV.11(e))",
     )
     a["IV.11(e)"] = record(feedforward="m g L sin(phi_d) of the known plant", specs=nonlinear(feedforward_block))
-    # IV.13: PI, lead, notch, double lead at the crossover.
+    return leadlag, leadlag_block, a
+
+
+def loopshaping(known: models.Plant, G) -> tuple[Any, Loop, dict]:
+    """IV.13: PI, lead, notch and a double lead at the 2 rad/s crossover with a 60 deg phase margin.
+
+    The notch sits at the roll mode √(m g L / J) of the known plant, its zero damped `NOTCH_ZETA_ZERO`
+    and its poles `NOTCH_ZETA_POLE`; IV.13(e)'s design C_e = lead · notch · 1/s is checked on its
+    closed loop.
+
+    Returns
+    -------
+    (C_e, loop, answers) : C_e(s) (N m per rad), its unity loop on G, homework item -> record IV.13(a)–(e)
+    """
+    a = {}
     wc = CROSSOVER
     integ = an.tf([1.0], [1.0, 0.0])
     a["IV.13(a)"] = record(crossover_target=wc, pm_deg=180.0 + phase_at(integ * G, wc))
@@ -191,23 +258,7 @@ def classical(known: models.Plant) -> ClassicalDesign:
         overshoot_percent=an.step_info(T_e)["Overshoot"],
         specs=spec_records(checks),
     )
-    blocks = single_loop_blocks(known, "phi", pd, ki, feedforward=False)
-    # Anti-windup observer at 1 rad/s (z = 0.99): faster tracking starves the integrator while the
-    # lightly damped mode keeps the torque saturated.
-    blocks["loopshaped"] = TransferFunctionBlock(
-        known, "phi", C_e, output_limit=bound, tracking_pole=0.99, name="loopshaped (IV.13)"
-    )
-    blocks["lead-lag (IV.11)"] = leadlag_block
-    loops["loopshaped"] = loop_e
-    loops["lead-lag (IV.11)"] = Loop.unity(G, leadlag.transfer_function(), "lead-lag")
-    notes = [
-        "IV.11: dominant poles ω_n = 5 rad/s, ζ = 0.85, lead zero at −1.5, lag zero at −0.5 and K_p = 19 "
-        "(5 % error); the unsaturated linear loop overshoots because of the slow lead zero, the 250 N m "
-        "thrusters' saturation removes it: specs are met on the nonlinear loop",
-        "the IV.11 block saturates at 250 N m: simulate it on models.get('uuv', input_limit=250)",
-        "IV.13 notch poles damped at ζ_p = 0.7 (the text gives only the zero damping 0.05)",
-    ]
-    return ClassicalDesign(a, blocks, loops, notes)
+    return C_e, loop_e, a
 
 
 # ----------------------------------------------------------------- state space (IV.14-IV.15)
@@ -240,8 +291,8 @@ STATESPACE = StateSpaceChoices(
 
 
 # ----------------------------------------------------------------- MPC
-# The roll mode (1.1 rad/s) needs a horizon of seconds: 0.05 s samples, not the text's 0.01 s.
-MPC = MPCSettings(0.05, 40, (100.0, 1.0), 1 / 50**2, notes="2 s horizon, 0.36 of the roll period")
+# The roll mode (1.1 rad/s) needs a horizon of seconds: 0.05 s samples (5 of the case's 0.01 s).
+MPC = MPCSettings(5 * SAMPLE_PERIOD, 40, (100.0, 1.0), 1 / 50**2, notes="2 s horizon, 0.36 of the roll period")
 
 
 # ----------------------------------------------------------------- co-design: the smallest thrusters
@@ -255,6 +306,7 @@ def sizing_hand_design(known: models.Plant) -> models.Block:
         known,
         "phi",
         control.tf(gains["num"], gains["den"]),
+        sample_period=CASE.sample_period,
         output_limit=float(known.input_limit[0]),
         anti_windup="none",
         name="lead-lag (IV.11)",
@@ -437,6 +489,7 @@ CASE = CaseStudy(
     design_step=np.deg2rad(30),
     step=np.deg2rad(30),
     input_disturbance=5.0,
+    sample_period=SAMPLE_PERIOD,
     duration=10.0,
     source="IV.8(b) step 30 deg; no disturbance given: 10 % of 50 N m; IV.12 Ts = 0.01 s",
     tracked_unit="rad",

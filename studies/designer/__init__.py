@@ -501,7 +501,11 @@ class Designer:
         chosen = self.scenario(scenario)
         spread = next((s.rel for s in self.case.scenarios if s.monte_carlo), KNOWN_ERROR)
         params = models.sample_params(self.plant, samples, rel=spread, seed=seed)
-        noise = runner.measurement_noise_std(self.plant, block, chosen.noise) if chosen.noise else 0.0
+        noise = (
+            runner.measurement_noise_std(self.plant, block, chosen.noise, sigma=self.case.derivative_time_constant)
+            if chosen.noise
+            else 0.0
+        )
         with self.lock:
             batch = models.monte_carlo(
                 self.plant,

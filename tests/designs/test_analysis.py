@@ -24,6 +24,8 @@ from designs.analysis import (
     step_response,
     tf,
 )
+from designs.analysis.polynomials import pid_polynomials
+from designs.analysis.stability_margins import sampled_loop_response
 
 # The arm about θ = 0: θ/τ = b0/(s² + a1 s), b0 = 3/(m ℓ²), a1 = 3 b/(m ℓ²).
 B0, A1 = 3 / (0.5 * 0.3**2), 3 * 0.01 / (0.5 * 0.3**2)
@@ -198,6 +200,31 @@ def test_sampled_margins_against_a_dense_scan_and_python_control(seed):
     gm, pm, _, _, wgc, _ = control.stability_margins(L, method="frd")
     if np.isfinite(wgc) and np.isclose(wgc, ours["gain_crossover"], rtol=1e-3):
         assert ours["pm_deg"] == pytest.approx(pm, rel=1e-5, abs=1e-5)
+
+
+def test_sampled_loop_response_of_a_transfer_function_and_of_its_state_space():
+    """L(e^{jωTs}) as python-control evaluates it, for a discrete transfer function and its realization;
+    the poles and zeros are the transfer function's roots."""
+    ts = 0.01
+    L = control.c2d(control.tf([2.0, 1.0], [1.0, 0.5, 4.0, 0.0]), ts)
+    omega = np.array([0.1, 1.0, 2.0, 10.0, 100.0])
+    expected = np.array([complex(L(np.exp(1j * w * ts))) for w in omega])
+    num, den = np.ravel(L.num[0][0]), np.ravel(L.den[0][0])
+    for system in (L, control.tf2ss(L)):
+        response, poles, features = sampled_loop_response(system)
+        np.testing.assert_allclose(response(omega), expected, rtol=1e-8)
+        np.testing.assert_allclose(np.sort_complex(poles), np.sort_complex(np.roots(den)), atol=1e-9)
+        found = np.sort_complex(features[~np.isin(features, poles)])
+        np.testing.assert_allclose(found, np.sort_complex(np.roots(num)), atol=1e-7)
+
+
+def test_pid_polynomials_share_the_denominator_of_their_flags():
+    # k_p + k_i/s + k_d s/(σ s + 1) over s (σ s + 1): (k_p σ + k_d) s² + (k_p + k_i σ) s + k_i.
+    num, den = pid_polynomials(KP, KI, KD, 0.05, True, True)
+    np.testing.assert_allclose(den, [0.05, 1.0, 0.0])
+    np.testing.assert_allclose(num, [KP * 0.05 + KD, KP + KI * 0.05, KI])
+    _, den_reference = pid_polynomials(KP, KI, 0.0, 0.05, True, True)
+    np.testing.assert_array_equal(den_reference, den)
 
 
 def test_step_response_and_overshoot_of_a_second_order_loop():

@@ -57,17 +57,17 @@ def _c2d_step(G, n):
 )
 def test_block_equals_tustin_step_response(arm, C):
     n = 400
-    block = TransferFunctionBlock(arm, "theta", C, anti_windup="none")
+    block = TransferFunctionBlock(arm, "theta", C, anti_windup="none", sample_period=TS)
     np.testing.assert_allclose(_block_step(block, n), _c2d_step(C, n), atol=1e-9)
 
 
 def test_prefilter_path_equals_tustin_of_the_product(arm):
     n, C, F = 400, lead(5, 40), prefilter(2.0)
-    block = TransferFunctionBlock(arm, "theta", C, prefilter=F)
+    block = TransferFunctionBlock(arm, "theta", C, prefilter=F, sample_period=TS)
     np.testing.assert_allclose(_block_step(block, n), _c2d_step(C * F, n), atol=1e-9)
     # Starting at rest at a constant reference, the prefilter passes it unchanged: with C = 2 and the
     # measurement on the reference, the command stays exactly zero.
-    gain = TransferFunctionBlock(arm, "theta", tf([2.0], [1.0]), prefilter=prefilter(2.0, order=2))
+    gain = TransferFunctionBlock(arm, "theta", tf([2.0], [1.0]), prefilter=prefilter(2.0, order=2), sample_period=TS)
     xc = gain.initial_state([0.7], [0.7])
     for _ in range(50):
         xc, u = gain.step(xc, [0.7], [0.7])
@@ -75,7 +75,7 @@ def test_prefilter_path_equals_tustin_of_the_product(arm):
 
 
 def test_rebuilt_from_its_gains(arm):
-    block = TransferFunctionBlock(arm, "theta", lead(5, 50), anti_windup="none")
+    block = TransferFunctionBlock(arm, "theta", lead(5, 50), anti_windup="none", sample_period=TS)
     C2 = lead(3, 30)
     num, den = as_polynomials(C2)
     rebuilt = block.with_gains(num=np.pad(num, (2 - num.size, 0)), den=den)
@@ -86,7 +86,7 @@ def test_observer_anti_windup_keeps_an_integrator_bounded(arm):
     # PI (s + 1)/s under a constant error with |u| <= 0.5: without anti-windup the state ramps,
     # with it the state settles where the output just saturates.
     pi = proportional_integral(1.0)
-    kw = dict(output_limit=0.5)
+    kw = dict(output_limit=0.5, sample_period=TS)
     plain = TransferFunctionBlock(arm, "theta", pi, anti_windup="none", **kw)
     guarded = TransferFunctionBlock(arm, "theta", pi, anti_windup="observer", **kw)
     x_plain, x_guarded = np.zeros(1), np.zeros(1)
@@ -102,8 +102,10 @@ def test_observer_anti_windup_keeps_an_integrator_bounded(arm):
 
 
 def test_bad_compensators_are_refused(arm):
+    with pytest.raises(TypeError, match="sample_period"):
+        TransferFunctionBlock(arm, "theta", lead(5, 50))  # no library default: the case's sample period
     with pytest.raises(ValueError, match="not causal"):
-        TransferFunctionBlock(arm, "theta", tf([1.0, 0.0, 0.0], [1.0, 1.0]))
+        TransferFunctionBlock(arm, "theta", tf([1.0, 0.0, 0.0], [1.0, 1.0]), sample_period=TS)
     with pytest.raises(ValueError, match="sample_period"):
         TransferFunctionBlock(arm, "theta", lead(5, 50), sample_period=-0.01)
     with pytest.raises(ValueError, match="two in series"):
@@ -117,9 +119,11 @@ def test_bad_compensators_are_refused(arm):
 def test_reference_feedforward_is_the_restoring_torque_at_the_reference():
     uuv = models.get("uuv")
     m, g, L = (uuv.params[k] for k in ("m", "g", "L"))
-    block = TransferFunctionBlock(uuv, "phi", lead(2, 40), feedforward="reference", output_limit=250.0)
+    block = TransferFunctionBlock(
+        uuv, "phi", lead(2, 40), feedforward="reference", output_limit=250.0, sample_period=TS
+    )
     phi_d = 0.4
     _, u = block.step(block.initial_state([phi_d], [phi_d]), [phi_d], [phi_d])
     assert u[0] == pytest.approx(m * g * L * np.sin(phi_d), rel=1e-12)
     with pytest.raises(ValueError, match="feedforward must be"):
-        TransferFunctionBlock(uuv, "phi", lead(2, 40), feedforward="state")
+        TransferFunctionBlock(uuv, "phi", lead(2, 40), feedforward="state", sample_period=TS)

@@ -135,14 +135,16 @@ def test_zero_cancelling_design_tracks_on_the_nonlinear_pendulum():
     zc = zero_cancelling_design(slc)
     assert zc.outer_dc_gain == pytest.approx(1.0) and zc.separation == pytest.approx(10.0)
     assert np.all(zc.full_poles.real < 0) and zc.full_poles.size == 5  # the filter adds one state
-    res = models.simulate_closed_loop(p, cascade_blocks(p, zc), models.signals.step(2.0, 0.5), 30.0)
+    res = models.simulate_closed_loop(
+        p, cascade_blocks(p, zc, sample_period=0.01, sigma=0.05), models.signals.step(2.0, 0.5), 30.0
+    )
     assert res.state("z")[-1] == pytest.approx(2.0, abs=1e-4)
     assert np.max(np.abs(res.u)) <= 5.0
 
 
 def test_filtered_block_equals_tustin_of_the_filter_after_the_block():
     arm = models.get("arm")
-    inner = PID(arm, "theta", kp=2.0, kd=0.0, derivative_on="error")
+    inner = PID(arm, "theta", kp=2.0, kd=0.0, derivative_on="error", sample_period=0.01, sigma=0.05)
     F = tf([3.0], [1.0, 3.0])
     block = FilteredBlock(inner, F)
     n, xc, out = 200, np.zeros(block.n_state), []

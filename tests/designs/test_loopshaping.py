@@ -10,7 +10,9 @@ from designs.loopshaping import (
     damping_for_phase_margin,
     flattening_prefilter,
     improve_loop,
+    lag_ratio_for_tracking,
     lead_for_crossover,
+    lowpass_corner_for_noise,
     prototype_bandwidth,
     prototype_crossover,
     prototype_phase_margin,
@@ -87,3 +89,36 @@ def test_a_spec_that_cannot_be_met_is_reported():
     assert any("phase margin" in f or "noise" in f or "stable" in f for f in failed)
     with pytest.raises(ValueError, match="low_frequency < crossover < high_frequency"):
         improve_loop(ARM_PD, low_frequency=10.0, low_factor=10, high_frequency=200, high_factor=10)
+
+
+def _on(G, omega):
+    return np.asarray(control.frequency_response(G, omega).complex).ravel()
+
+
+def test_lowpass_corner_gives_the_noise_ratio_asked_for():
+    """The corner found on a grid, against python-control's closed loops: |T_new/T_old| above 200 rad/s."""
+    omega = np.logspace(np.log10(200), np.log10(200) + 6, 1201)
+    corner = lowpass_corner_for_noise(_on(ARM_PD, omega), np.ones(omega.size), omega, 2, 0.1, 1e-3, 2e5)
+    T_old = control.feedback(ARM_PD, 1)
+    T_new = control.feedback(ARM_PD * (corner / control.tf([1, corner], [1])) ** 2, 1)
+    dense = np.logspace(np.log10(200), 6, 20001)
+    ratio = np.abs(_on(T_new, dense) / _on(T_old, dense))
+    assert np.max(ratio) == pytest.approx(0.1, rel=1e-6)
+    # An interval that cannot reach the ratio, and one whose top end already does.
+    assert lowpass_corner_for_noise(_on(ARM_PD, omega), np.ones(omega.size), omega, 2, 0.1, 1e4, 2e5) == 1e4
+    assert lowpass_corner_for_noise(_on(ARM_PD, omega), np.ones(omega.size), omega, 2, 0.1, 1e-3, 1.0) == 1.0
+
+
+def test_lag_ratio_gives_the_tracking_improvement_asked_for():
+    """The lag ratio M against python-control's sensitivities: |S_old/S_new| below 0.007 rad/s is 10."""
+    omega = np.logspace(np.log10(0.007) - 6, np.log10(0.007), 1201)
+    zero = 0.2
+    ratio, reached = lag_ratio_for_tracking(_on(ARM_PD, omega), np.ones(omega.size), omega, zero, 10.0)
+    assert reached and ratio > 1
+    S_old = control.feedback(1, ARM_PD)
+    S_new = control.feedback(1, ARM_PD * control.tf([1, zero], [1, zero / ratio]))
+    dense = np.logspace(np.log10(0.007) - 6, np.log10(0.007), 20001)
+    assert np.min(np.abs(_on(S_old, dense) / _on(S_new, dense))) == pytest.approx(10.0, rel=1e-6)
+    # No lag is needed for an improvement of 1; none up to 4^20 reaches 10 with a zero far below the band.
+    assert lag_ratio_for_tracking(_on(ARM_PD, omega), np.ones(omega.size), omega, zero, 1.0) == (1.0 + 1e-9, True)
+    assert lag_ratio_for_tracking(_on(ARM_PD, omega), np.ones(omega.size), omega, 1e-12, 10.0) == (4.0**20, False)

@@ -8,7 +8,7 @@ import models
 from designs.analysis import pid_tf
 from designs.pid import PID, linearized_input_bound, pd_design, pd_saturation
 
-TS = 0.01
+TS, SIGMA = 0.01, 0.05
 
 
 @pytest.fixture(scope="module")
@@ -80,7 +80,9 @@ def _tustin_step(G, n):
 
 def test_pid_on_the_error_equals_tustin_of_its_transfer_function(arm):
     n = 300
-    block = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, derivative_on="error", anti_windup="none")
+    block = PID(
+        arm, "theta", kp=0.3, kd=0.08, ki=0.2, derivative_on="error", anti_windup="none", sample_period=TS, sigma=SIGMA
+    )
     np.testing.assert_allclose(
         _run(block, np.zeros(n), np.ones(n)), _tustin_step(pid_tf(0.3, 0.2, 0.08, 0.05), n), atol=1e-9
     )
@@ -88,14 +90,14 @@ def test_pid_on_the_error_equals_tustin_of_its_transfer_function(arm):
 
 def test_pid_on_the_measurement_equals_tustin_of_the_feedback_path(arm):
     n = 300
-    block = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, anti_windup="none")
+    block = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, anti_windup="none", sample_period=TS, sigma=SIGMA)
     np.testing.assert_allclose(
         _run(block, np.ones(n), np.zeros(n)), -_tustin_step(pid_tf(0.3, 0.2, 0.08, 0.05), n), atol=1e-9
     )
 
 
 def test_feedforward_is_the_known_gravity_torque(arm):
-    block = PID(arm, "theta", kp=0.3, kd=0.08, feedforward=True, output_limit=1.0)
+    block = PID(arm, "theta", kp=0.3, kd=0.08, feedforward=True, output_limit=1.0, sample_period=TS, sigma=SIGMA)
     theta = 0.4
     _, u = block.step(block.initial_state([theta], [theta]), [theta], [theta])
     m, ell, g = (arm.params[k] for k in ("m", "ell", "g"))
@@ -106,7 +108,7 @@ def test_back_calculation_holds_the_integral_at_the_saturation(arm):
     # PI, kp = ki = 1, limit 0.5, error 1. Trapezoid first, I' = I + Ts; then back-calculation
     # I'' = I' + Ts/ki (0.5 − (1 + I')). At the fixed point I'' = I: 0 = Ts (1 − 0.5 − I − Ts), I = 0.5 − Ts.
     n = 3000
-    kw = dict(kp=1.0, kd=0.0, ki=1.0, output_limit=0.5, derivative_on="error")
+    kw = dict(kp=1.0, kd=0.0, ki=1.0, output_limit=0.5, derivative_on="error", sample_period=TS, sigma=SIGMA)
     with_aw = PID(arm, "theta", anti_windup="back_calculation", **kw)
     plain = PID(arm, "theta", anti_windup="none", **kw)
     x_aw = x_plain = np.array([1.0, 0.0, 0.0, 0.0])
@@ -119,7 +121,17 @@ def test_back_calculation_holds_the_integral_at_the_saturation(arm):
 
 
 def test_integrate_while_slow_freezes_during_fast_motion(arm):
-    block = PID(arm, "theta", kp=1.0, kd=0.0, ki=-1.0, anti_windup="integrate_while_slow", rate_limit=0.1)
+    block = PID(
+        arm,
+        "theta",
+        kp=1.0,
+        kd=0.0,
+        ki=-1.0,
+        anti_windup="integrate_while_slow",
+        rate_limit=0.1,
+        sample_period=TS,
+        sigma=SIGMA,
+    )
     xc = block.initial_state([0.0], [1.0])
     xc, _ = block.step(xc, [0.5], [1.0])  # |ẏ| ≈ 0.5/(Ts + 2σ)·2 ≫ 0.1: frozen
     assert xc[3] == 0.0
@@ -129,7 +141,7 @@ def test_integrate_while_slow_freezes_during_fast_motion(arm):
 
 def test_limit_about_a_coordinate():
     sat = models.get("satellite")
-    block = PID(sat, "phi", kp=10.0, kd=0.0, output_limit=0.1, limit_about="theta")
+    block = PID(sat, "phi", kp=10.0, kd=0.0, output_limit=0.1, limit_about="theta", sample_period=TS, sigma=SIGMA)
     # y = (θ, φ − θ) = (0.3, 0.2): φ = 0.5, command 10 (1 − 0.5) = 5 is bounded to θ + 0.1.
     _, u = block.step(block.initial_state([0.3, 0.2], [1.0]), [0.3, 0.2], [1.0])
     assert u[0] == pytest.approx(0.4)
@@ -137,18 +149,28 @@ def test_limit_about_a_coordinate():
 
 def test_pid_block_rejects_bad_settings(arm):
     with pytest.raises(ValueError, match="sample_period"):
-        PID(arm, "theta", kp=1.0, sample_period=-0.01)
+        PID(arm, "theta", kp=1.0, sample_period=-0.01, sigma=SIGMA)
     with pytest.raises(ValueError, match="needs an output_limit"):
-        PID(arm, "theta", kp=1.0, ki=1.0)
+        PID(arm, "theta", kp=1.0, ki=1.0, sample_period=TS, sigma=SIGMA)
     with pytest.raises(ValueError, match="needs a rate_limit"):
-        PID(arm, "theta", kp=1.0, ki=1.0, anti_windup="integrate_while_slow")
+        PID(arm, "theta", kp=1.0, ki=1.0, anti_windup="integrate_while_slow", sample_period=TS, sigma=SIGMA)
     with pytest.raises(ValueError, match="no coordinate 'phi'"):
-        PID(arm, "phi", kp=1.0)
+        PID(arm, "phi", kp=1.0, sample_period=TS, sigma=SIGMA)
+
+
+def test_sample_period_and_sigma_have_no_library_default(arm):
+    # Each block runs at its case's sample period with its case's σ: neither may be left out.
+    with pytest.raises(TypeError, match="sample_period"):
+        PID(arm, "theta", kp=1.0, sigma=SIGMA)
+    with pytest.raises(TypeError, match="sigma"):
+        PID(arm, "theta", kp=1.0, sample_period=TS)
 
 
 def test_with_gains_equals_a_block_built_with_them(arm):
-    base = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, output_limit=1.0, feedforward=True)
-    fresh = PID(arm, "theta", kp=0.6, kd=0.05, ki=0.1, output_limit=1.0, feedforward=True)
+    base = PID(arm, "theta", kp=0.3, kd=0.08, ki=0.2, output_limit=1.0, feedforward=True, sample_period=TS, sigma=SIGMA)
+    fresh = PID(
+        arm, "theta", kp=0.6, kd=0.05, ki=0.1, output_limit=1.0, feedforward=True, sample_period=TS, sigma=SIGMA
+    )
     changed = base.with_gains(kp=0.6, kd=0.05, ki=0.1)
     xc = base.initial_state([0.1], [0.5])
     for y in (0.1, 0.12, 0.2):
@@ -162,7 +184,9 @@ def test_closed_loop_cost_gradient_in_the_classical_gains(arm):
     import casadi as ca
 
     # Gains of the size of the arm's I.8/I.10 design (k_p = 0.304 N m/rad).
-    block = PID(arm, "theta", kp=0.304, kd=0.0297, ki=0.45, output_limit=1.0, feedforward=True)
+    block = PID(
+        arm, "theta", kp=0.304, kd=0.0297, ki=0.45, output_limit=1.0, feedforward=True, sample_period=TS, sigma=SIGMA
+    )
     n = 150
     run = models.closed_loop_function(arm, block, n)
     gains = ca.MX.sym("g", block.gain_vector().size)

@@ -38,10 +38,11 @@ def classical(known: models.Plant) -> ClassicalDesign:
     """PD by pole placement (ω_n = 3 rad/s, ζ = 0.8) and the same PD with an integrator."""
     G = known.linearize().tf("x", "F")
     pd = pd_design(G, zeta=0.8, wn=3.0)
+    timing = dict(sample_period=CASE.sample_period, sigma=CASE.derivative_time_constant)  # the case's Ts, σ (s)
     limit = float(known.input_limit[0])
     blocks = {
-        "PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD"),
-        "PID": PID(known, "x", kp=pd.kp, kd=pd.kd, ki=12.0, output_limit=limit, name="PID"),
+        "PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD", **timing),
+        "PID": PID(known, "x", kp=pd.kp, kd=pd.kd, ki=12.0, output_limit=limit, name="PID", **timing),
     }
     answers = {"VII.8": record(kp=pd.kp, kd=pd.kd, dc_gain=dc_gain(Loop.pid(G, pd.kp, 0, pd.kd).reference_to_output()))}
     return ClassicalDesign(answers, blocks)

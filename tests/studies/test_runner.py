@@ -132,8 +132,10 @@ class _Reader:
 def test_noise_on_a_full_state_measurement_follows_the_outputs_and_a_dirty_derivative():
     sat = models.get("satellite")
     noise = {"theta": 1e-3, "phi_minus_theta": 2e-3}
-    np.testing.assert_array_equal(runner.measurement_noise_std(sat, _Reader("outputs"), noise), [1e-3, 2e-3])
-    std = runner.measurement_noise_std(sat, _Reader("state"), noise)
+    np.testing.assert_array_equal(
+        runner.measurement_noise_std(sat, _Reader("outputs"), noise, sigma=0.05), [1e-3, 2e-3]
+    )
+    std = runner.measurement_noise_std(sat, _Reader("state"), noise, sigma=0.05)
     # phi = theta + (phi − theta): independent noises add in variance.
     assert std[:2] == pytest.approx([1e-3, math.hypot(1e-3, 2e-3)])
     # Velocities: the spread a dirty derivative (σ = 0.05 s) makes of white position noise, measured.
@@ -145,7 +147,7 @@ def test_noise_on_a_full_state_measurement_follows_the_outputs_and_a_dirty_deriv
         rates.append(rate)
     assert std[2] == pytest.approx(np.std(rates[1000:]), rel=0.02)
     with pytest.raises(ValueError, match="has no output"):
-        runner.measurement_noise_std(sat, _Reader("outputs"), {"phi": 1e-3})
+        runner.measurement_noise_std(sat, _Reader("outputs"), {"phi": 1e-3}, sigma=0.05)
 
 
 @pytest.mark.parametrize(
