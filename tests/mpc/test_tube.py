@@ -149,6 +149,24 @@ def test_template_error_set_is_between_the_mrpi_bound_and_f_alpha_s(tube, templa
     assert np.all(template_tube.state_margins <= tube.state_margins * 1.01)
 
 
+def test_template_error_set_in_three_dimensions_is_rpi_and_holds_the_mrpi_bound():
+    """A 3-state closed loop (a rotation-contraction and a slow real mode), W a box: the template LP's Z."""
+    c, s_ = 0.9 * np.cos(0.4), 0.9 * np.sin(0.4)
+    A_K = np.array([[c, -s_, 0.1], [s_, c, 0.0], [0.0, 0.05, 0.95]])
+    W = Zonotope.box([-0.1, -0.05, -0.02], [0.1, 0.05, 0.02])
+    approximation = minimal_rpi_approximation(A_K, W)
+    rows = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0], [1.0, -1.0, 2.0]])
+    Z, exact = invariant_polytope(approximation, facet_limit=0, template=rows)
+    assert not exact
+    e = points_of(Z, np.random.default_rng(7), count=300)
+    for w in W.corners():
+        assert np.all(Z.contains(e @ A_K.T + w, tolerance=1e-9))
+    D = np.vstack([rows, -rows, np.random.default_rng(8).normal(size=(20, 3))])
+    assert np.all(Z.support(D) >= (1 - approximation.alpha) * approximation.support(D) * (1 - 1e-9))
+    # along the chained rows the template reaches about the mRPI set: no worse than F(α, s) itself
+    assert np.all(Z.support(rows) <= approximation.support(rows) * (1 + 1e-3))
+
+
 # ----------------------------------------------------------------------------------- terminal set
 @pytest.mark.parametrize("which", ["tube", "template_tube"])
 def test_terminal_set_is_invariant_and_inside_the_tightened_constraints(which, request):
