@@ -54,9 +54,13 @@ class ConvexSet(Protocol):
     """A compact convex set known by its support function h(d) = max_{x ∈ set} dᵀx."""
 
     @property
-    def dimension(self) -> int: ...
+    def dimension(self) -> int:
+        """n, the dimension of the space the set lies in."""
+        ...
 
-    def support(self, directions) -> np.ndarray: ...
+    def support(self, directions) -> np.ndarray:
+        """h(d) for each row d of `directions` (k, n): (k,)."""
+        ...
 
 
 def as_directions(directions, n: int) -> np.ndarray:
@@ -119,6 +123,7 @@ class Polytope:
     h: np.ndarray
 
     def __post_init__(self):
+        """Check H (r, n) and h (r,) finite, refuse zero rows, scale the rows to unit length."""
         H = as_matrix(np.atleast_2d(self.H), np.atleast_2d(self.H).shape[1], "H")
         h = as_vector(self.h, H.shape[0], "h")
         norms = np.linalg.norm(H, axis=1)
@@ -139,6 +144,7 @@ class Polytope:
 
     @property
     def dimension(self) -> int:
+        """n, the number of columns of H."""
         return self.H.shape[1]
 
     def support_points(self, directions) -> tuple[np.ndarray, np.ndarray]:
@@ -226,6 +232,7 @@ class Zonotope:
     generators: np.ndarray
 
     def __post_init__(self):
+        """Check the centre (n,) and generators (n, m) finite and of matching sizes."""
         c = as_vector(self.center, np.size(self.center), "center")
         G = np.asarray(self.generators, dtype=float)
         G = G.reshape(c.size, -1) if G.ndim < 2 else G  # a 1-D zonotope's generators may come flat
@@ -243,6 +250,7 @@ class Zonotope:
 
     @property
     def dimension(self) -> int:
+        """n, the size of the centre."""
         return self.center.size
 
     def support(self, directions) -> np.ndarray:

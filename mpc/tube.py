@@ -215,6 +215,7 @@ class InvariantApproximation:
 
     @property
     def dimension(self) -> int:
+        """nx, the error's dimension."""
         return self.closed_loop.shape[0]
 
     def support(self, directions) -> np.ndarray:
@@ -563,14 +564,17 @@ class TubeSets:
 
     @property
     def alpha(self) -> float:
+        """α of F(α, s): A_K^s W ⊆ α W."""
         return self.approximation.alpha
 
     @property
     def terms(self) -> int:
+        """s of F(α, s), its number of terms."""
         return self.approximation.terms
 
     @property
     def epsilon(self) -> np.ndarray:
+        """(nx,) ε_j: F(α, s) ⊆ F_∞ ⊕ {|e_j| ≤ ε_j}."""
         return self.approximation.epsilon
 
 
