@@ -45,10 +45,12 @@ class Dimensions:
 
     @property
     def nd(self) -> int:
+        """Dynamic inputs per interval."""
         return len(self.dynamic)
 
     @property
     def nst(self) -> int:
+        """Static controls (slacks) per interval."""
         return len(self.static)
 
     @property

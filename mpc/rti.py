@@ -172,8 +172,8 @@ class RealTimeIteration:
         and Hessians (laid out as `mpc.condensing.Structure.layout` says)
     condensing : mpc.condensing.Condensing or None
         The preparation's second part in generated C, ``condensing(lin rows) -> data rows`` (the same
-        numbers as `prepare_function`'s to rounding, about 4x faster on the crane); None when not
-        compiled or no library can be built
+        numbers as `prepare_function`'s to rounding, faster: it skips Γ_k's zero columns); None when
+        not compiled or no library can be built
     vectors_function, recover_function : casadi.Function
         The feedback's two compiled halves around the QP (`qp_solver`): ``vectors(data, x0) ->
         (h, lba, uba)``, the QP's vectors for this x0, and ``recover(data, x0, dv, lam_a, lam_x) ->
@@ -339,7 +339,7 @@ class RealTimeIteration:
         """Compile what runs every sample (`models.compile`): the linearization and the generated
         condensing when both can be built, else the whole preparation; the feedback's halves around
         the Python QP, or the whole feedback with CasADi's DAQP node when the slack-first sequence
-        does not apply (0.05 ms less per step than two calls from Python around the QP)."""
+        does not apply (one call from Python per step instead of three; docs/notes/mpc.md)."""
         vectors, recover, whole = feedback.vectors, feedback.recover, feedback.whole
         self.compiled = bool(compiled)
         self.linearize_function, self.condensing = None, None

@@ -101,6 +101,7 @@ class Collocation(_Meshed):
             raise ValueError(f"points must be one of {', '.join(POINTS)}, got {self.points!r}")
 
     def with_mesh(self, fractions) -> Collocation:
+        """The same collocation on the mesh `fractions` (N + 1 fractions of T from 0 to 1)."""
         return Collocation(degree=self.degree, points=self.points, mesh=tuple(fractions))
 
 
@@ -119,6 +120,7 @@ class MultipleShooting(_Meshed):
         object.__setattr__(self, "substeps", int(self.substeps))
 
     def with_mesh(self, fractions) -> MultipleShooting:
+        """The same shooting on the mesh `fractions` (N + 1 fractions of T from 0 to 1)."""
         return MultipleShooting(substeps=self.substeps, mesh=tuple(fractions))
 
 
@@ -178,6 +180,7 @@ class _Rows:
     labels: list = field(default_factory=list)
 
     def add(self, expressions, lower, upper, labels) -> None:
+        """Append the rows `expressions` with bounds (scalars broadcast) and labels (one, or one per row)."""
         g = ca.vec(ca.SX(expressions))
         n = g.numel()
         fit = lambda b: ca.repmat(ca.SX(b), n, 1) if ca.SX(b).numel() == 1 else ca.vec(ca.SX(b))
