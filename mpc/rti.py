@@ -292,7 +292,6 @@ class RealTimeIteration:
         hessian_pattern, row_pattern = condensed.blocks.H_ss.sparsity(), rows.static.sparsity()
         self.n_rows = m = len(rows.index)
         self.layout = DataLayout([v.numel() for v in stacked], dims, m, condensed.coupled, hessian_pattern, row_pattern)
-        self._offsets = self.layout.offsets
         # Rows that hold a static control (a soft bound's slack): the feedback first tries every static
         # control at its lower bound (see `SlackFirstQP`), where they do not couple with the rest.
         self.soft_rows = sorted(set(row_pattern.row()))
@@ -344,7 +343,7 @@ class RealTimeIteration:
         self.compiled = bool(compiled)
         self.linearize_function, self.condensing = None, None
         if compiled and structure.dynamic:
-            self.condensing = condensing.Condensing.compiled(structure, self._offsets)
+            self.condensing = condensing.Condensing.compiled(structure, self.layout.offsets)
         if self.condensing is not None:
             size = sum(stages.functions[group[0]].n_instructions() for group in stages.groups)
             flags = COMPILE_FLAGS if size <= LARGE_CODE else LARGE_CODE_FLAGS
