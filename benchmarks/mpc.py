@@ -29,7 +29,8 @@ OSQP call barely changes, so that ratio measures cache misses more than solvers.
 ``linear_median_ms`` is the whole linear MPC step (estimator, target, DAQP,
 clipping) in the closed loop, and ``ratio_c_over_linear_step`` OSQP's solve
 alone over it. ``exported_c_step_median_ms`` is the same controller exported
-as C (`mpc.export`), compiled and called through ctypes in the same closed
+as C (`mpc.export`: its QP by DAQP's C library, set up once and
+warm-started), compiled and called through ctypes in the same closed
 loop (``exported_c_max_command_diff``: its largest difference from the Python
 controller's commands).
 

@@ -3,8 +3,10 @@
 Each plant's case NMPC (`studies.get(name).mpc` on the case's known plant) runs the
 case's reference step with its input disturbance for ``--steps`` samples. Two
 controllers are built: one with this tree's `mpc.rti` and one with the
-`mpc/rti.py` of ``--against`` (a git revision, default HEAD), loaded from
-``git show``. The closed loop is driven by this tree's controller; at every
+real-time iteration of ``--against`` (a git revision, default HEAD): its
+`mpc/rti.py` and the modules that build it (`RTI_MODULES`, those the revision
+has), loaded from ``git show`` as the package ``mpc_baseline``, whose other
+modules are this tree's. The closed loop is driven by this tree's controller; at every
 sample the baseline steps on the same controller state, measurement and
 reference (from its own warm start: the same problems, to rounding), each step
 timed with ``time.process_time()`` and the order of the two alternating, so
@@ -19,12 +21,13 @@ Run: ``PYTHONPATH=$PWD python benchmarks/nmpc_steps.py [--steps 300] [--against 
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import importlib
 import json
 import subprocess
 import sys
 import tempfile
 import time
+import types
 from pathlib import Path
 
 import _path  # noqa: F401  (drops this folder from sys.path)
@@ -39,19 +42,30 @@ ROOT = Path(__file__).resolve().parent.parent
 PLANTS = ("crane", "pendulum", "satellite", "ballbeam", "arm", "uuv")
 
 
+#: The modules of the real-time iteration a baseline revision's copy is taken of (when it has them).
+RTI_MODULES = ("rti", "rti_linearization", "condensed_qp", "rti_feedback", "slack_first", "condensing")
+
+
 def baseline_rti(revision: str):
-    """The `RealTimeIteration` class of `revision`'s mpc/rti.py, imported as mpc.rti_baseline."""
-    source = subprocess.run(
-        ["git", "show", f"{revision}:mpc/rti.py"], cwd=ROOT, check=True, capture_output=True, text=True
-    ).stdout
-    path = Path(tempfile.mkdtemp(prefix="rti_baseline_")) / "rti_baseline.py"
-    path.write_text(source)
-    spec = importlib.util.spec_from_file_location("mpc.rti_baseline", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module.RealTimeIteration
+    """The `RealTimeIteration` class of `revision`: its RTI_MODULES imported as the package
+    ``mpc_baseline``, in which every other module of mpc is this tree's (the same objects)."""
+    listed = subprocess.run(
+        ["git", "ls-tree", "--name-only", revision, "mpc/"], cwd=ROOT, check=True, capture_output=True, text=True
+    ).stdout.split()
+    present = [name for name in RTI_MODULES if f"mpc/{name}.py" in listed]
+    folder = Path(tempfile.mkdtemp(prefix="rti_baseline_"))
+    for name in present:
+        source = subprocess.run(
+            ["git", "show", f"{revision}:mpc/{name}.py"], cwd=ROOT, check=True, capture_output=True, text=True
+        ).stdout
+        (folder / f"{name}.py").write_text(source)
+    package = types.ModuleType("mpc_baseline")
+    package.__path__ = [str(folder)]
+    sys.modules["mpc_baseline"] = package
+    for name, module in list(sys.modules.items()):
+        if name.startswith("mpc.") and name.split(".")[1] not in present:
+            sys.modules["mpc_baseline." + name.split(".", 1)[1]] = module
+    return importlib.import_module("mpc_baseline.rti").RealTimeIteration
 
 
 def controllers(name: str, baseline_class, overrides: dict):
@@ -117,7 +131,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("plants", nargs="*", default=list(PLANTS))
     parser.add_argument("--steps", type=int, default=300)
-    parser.add_argument("--against", default="HEAD", help="git revision whose mpc/rti.py is the baseline")
+    parser.add_argument("--against", default="HEAD", help="git revision whose real-time iteration is the baseline")
     parser.add_argument("--no-soft", action="store_true", help="without the cases' soft bounds (input bounds only)")
     parser.add_argument("--json", metavar="PATH", help="write the rows as JSON")
     args = parser.parse_args(argv)

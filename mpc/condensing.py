@@ -4,8 +4,8 @@
 CasADi expressions (the reference). Those run every stage's products on the
 whole dense Γ_k (nx × nz, nz = nx + 1 + N nd), although Γ_k's columns of the
 inputs from interval k on are zero, and move every intermediate through
-CasADi's work vectors: measured on the crane (N = 80, nx = 6), 1.4 ms of its
-1.5 ms preparation. Here the same recursions run in C on Γ_k's nonzero
+CasADi's work vectors, which took most of the crane's preparation
+(docs/notes/mpc.md). Here the same recursions run in C on Γ_k's nonzero
 columns only (half the products), with the sizes, the dynamic and static
 columns and the QP's row order as constants, over many samples in one call.
 The linearization stays a compiled CasADi Function; its outputs, stacked
@@ -362,6 +362,8 @@ class Condensing:
 
     @classmethod
     def compiled(cls, structure: Structure, data_offsets) -> Condensing | None:
+        """The kernel of `structure` compiled (`models.compile`, cached); None when no library can
+        be built. data_offsets : the prepared data's field offsets (`condensed_qp.DataLayout.offsets`)."""
         library = models.compile.build_library({"condense.c": source(structure, data_offsets)}, FLAGS)
         return None if library is None else cls(library, structure, data_offsets[-1])
 

@@ -1,41 +1,49 @@
-"""Linear MPC exported as self-contained C: estimator, target, condensed QP and its solver.
+"""Linear MPC exported as C: estimator, target and the condensed QP solved by DAQP.
 
 `export_linear_mpc(controller, name)` writes the whole `LinearMPC.step` as C
-with fixed sizes and no allocation: the disturbance observer's update, the
-steady-state target, the condensed QP of `mpc.qp_fast.condense` (the problem
-the DAQP path solves, in the same scaled variables) solved by a dense dual
-active-set method, the fallback to the shifted plan, exact clipping and the
-rate limit, and the one-sample prediction of the estimate. The first state
-comes from the first measurement as in Python (`name_init`).
+with fixed sizes: the disturbance observer's update, the steady-state target,
+the condensed QP of `mpc.qp_fast.condense` (the problem the Python path
+solves, in the same scaled variables), the fallback to the shifted plan,
+exact clipping and the rate limit, and the one-sample prediction of the
+estimate. The first state comes from the first measurement as in Python
+(``name_init``).
 
-The QP solver is Goldfarb and Idnani's dual method (Math. Programming 27,
-1983), in the form of Di Gaspero's QuadProg++: from a minimizer over an
-active set with nonnegative multipliers it adds the most violated constraint
-until none is violated, keeping H = L Lᵀ's factor J = L⁻ᵀ orthogonally
-updated (Givens rotations). A strictly convex QP has one solution, so the
-command equals DAQP's to rounding (the tests hold them to 1e-9 over closed
-loops). Each solve starts from the unconstrained minimum of the inputs
-(precomputed as an affine map of the parameters) with every soft-bound slack
-at its bound s = 0: the slacks' Hessian block is diagonal and apart from the
-inputs', so that start's factorization is J with the slack columns moved to
-the front and its multipliers are the slacks' linear weights (>= 0) — a
-valid start that saves one O(n²) update per slack. Each further active
-constraint costs O(n²).
+The QP is solved by DAQP, the dual active-set solver the Python path
+(`mpc.qp_fast.CondensedDaqpSolver`) uses, called the same way: its matrices
+set up once (``setup_daqp``: DAQP's workspace and the factorization of H,
+in ``name_init``), then every sample the linear term and the bounds for the
+new parameters (``update_ldp``) and a solve warm-started from the last
+working set (``daqp_solve``), with the Python path's settings. DAQP comes
+from CasADi's installation, the same build the real-time iteration links
+(its headers in ``include/daqp`` and the static library ``libdaqpstat.a``
+beside CasADi's Python module; `build_flags` names them): nothing of DAQP is
+copied into the generated files, and a program linked with the static
+library needs no CasADi at run time. CasADi's own code generation of its
+``conic("daqp")`` is not used: its generated call sets DAQP up and frees it
+again in every call (allocation and a factorization of H every sample) and
+keeps its memory in a global array (docs/notes/mpc.md has the measurement).
 
-Memory is one struct per controller (``name_state``): the controller state
-and the solver's work arrays, two n×n of them (n = N nu + N ns decision
-variables); the constant data is ``static const``.
+Memory is one struct per controller (``name_state``), owned by the caller and
+zero before its first ``name_init`` (static storage, or cleared): the
+controller state, the QP's vectors and DAQP's workspace record. DAQP
+allocates its arrays once, in ``name_init`` (or in the first ``name_step`` or
+``name_solve_qp`` of a struct never initialized); ``name_free`` releases
+them. The constant data (H, the constraint rows, the parameter maps) is
+``static const``.
 """
 
 from __future__ import annotations
 
+import os
 import string
+from dataclasses import dataclass
 
 import casadi as ca
+import daqp
 import numpy as np
 
-from models import deferred
 from models.export import (
+    LOAD_FLAGS,
     ExportedC,
     UnsupportedExport,
     c_array,
@@ -46,12 +54,11 @@ from models.export import (
 )
 
 from .controller import LinearMPC
-from .linear import INFINITY
-from .qp_fast import CondensedQP, condense
-
-scipy = deferred.module("scipy")
+from .qp_fast import PRIMAL_TOLERANCE, CondensedDaqpSolver, CondensedQP, condense
 
 #: Status codes of ``name_step`` (and ``name_init``, ``name_solve_qp``); a non-finite command adds 16.
+#: 5 is every DAQP failure but infeasibility and the iteration limit (cycling, an overdetermined
+#: working set); 8 a failed DAQP setup (no memory, or H not positive definite).
 STATUS = {
     0: "optimal",
     1: "non-finite measurement",
@@ -61,10 +68,22 @@ STATUS = {
     5: "QP degenerate active set",
     6: "non-finite solution",
     7: "non-finite reference",
+    8: "QP setup failed",
 }
 NONFINITE_COMMAND = 16
-#: A constraint counts as violated below -TOLERANCE (1 + |bound|), in the scaled variables.
-TOLERANCE = 1e-12
+
+#: DAQP's functions the exported C calls (the linker pulls them, and what they call, from the library).
+DAQP_ENTRY_POINTS = (
+    "setup_daqp",
+    "update_ldp",
+    "daqp_solve",
+    "daqp_default_settings",
+    "free_daqp_workspace",
+    "free_daqp_ldp",
+)
+#: DAQP settings the exported C takes from the Python path's solver (the others stay DAQP's defaults;
+#: no proximal iterations: H is positive definite).
+DAQP_SETTINGS = ("primal_tol", "dual_tol", "zero_tol", "pivot_tol", "progress_tol", "cycle_tol", "fval_bound")
 
 
 def status_text(code: int) -> str:
@@ -73,60 +92,45 @@ def status_text(code: int) -> str:
     return f"non-finite command ({text})" if code & NONFINITE_COMMAND else text
 
 
-def constraints(qp: CondensedQP) -> dict[str, np.ndarray]:
-    """The QP's bounds as one-sided constraints sign · (c_k · z̄) >= b0_k + bm_k · p.
-
-    c_k is the unit vector of variable `variable[k]` when `row[k]` < 0, else row `row[k]`.
-    """
-    entries: list[tuple[int, int, float, float, np.ndarray]] = []  # (row, variable, sign, b0, bm) per constraint
-    zero = np.zeros(qp.n_parameters)
-    for i in range(qp.n):
-        for s, bound in ((1.0, qp.lower[i]), (-1.0, qp.upper[i])):
-            if abs(bound) < INFINITY:
-                entries.append((-1, i, s, s * bound, zero))
-    for j in range(qp.rows.shape[0]):
-        for s, constant, matrix in (
-            (1.0, qp.row_lower_constant[j], qp.row_lower_matrix[j]),
-            (-1.0, qp.row_upper_constant[j], qp.row_upper_matrix[j]),
-        ):
-            if abs(constant) < INFINITY:
-                entries.append((j, -1, s, s * constant, s * matrix))
-    row, variable, sign, b0, bm = ([entry[k] for entry in entries] for k in range(5))
-    return {
-        "row": np.array(row, dtype=int),
-        "variable": np.array(variable, dtype=int),
-        "sign": np.array(sign),
-        "b0": np.array(b0),
-        "bm": np.array(bm).reshape(len(b0), qp.n_parameters),
-    }
+def daqp_include_directory() -> str:
+    """The folder holding DAQP's headers (``daqp/api.h``) in CasADi's installation."""
+    return os.path.join(os.path.dirname(ca.__file__), "include")
 
 
-def slack_start(qp: CondensedQP, table: dict, J0: np.ndarray) -> dict[str, np.ndarray]:
-    """The solver's start with every slack at its bound s >= 0 active (see the module docstring).
+def daqp_library() -> str:
+    """DAQP's static library in CasADi's installation."""
+    return os.path.join(os.path.dirname(ca.__file__), "libdaqpstat.a")
 
-    column : J's columns in order (the slacks' first);  active : constraint indices of s_j >= 0;
-    variable : their variables;  r : R's diagonal (J0's slack diagonal);  multiplier : f at the slacks.
-    """
-    slacks = np.arange(qp.n_inputs, qp.n)
-    lower_bound = {
-        int(v): k
-        for k, (row, v, sign) in enumerate(zip(table["row"], table["variable"], table["sign"]))
-        if row < 0 and sign > 0
-    }
-    if (
-        np.any(qp.H[: qp.n_inputs, qp.n_inputs :])
-        or np.any(qp.H[qp.n_inputs :, qp.n_inputs :] - np.diag(np.diag(qp.H[qp.n_inputs :, qp.n_inputs :])))
-        or np.any(qp.lower[slacks] != 0)
-        or np.any(qp.f[slacks] < 0)
-    ):
-        raise UnsupportedExport("the QP's slacks are not separate with bounds s >= 0 and weights >= 0")
-    return {
-        "column": np.concatenate([slacks, np.arange(qp.n_inputs)]).astype(int),
-        "active": np.array([lower_bound[int(v)] for v in slacks], dtype=int),
-        "variable": slacks,
-        "r": np.diag(J0)[slacks],
-        "multiplier": qp.f[slacks],
-    }
+
+def build_flags() -> tuple[str, ...]:
+    """Compiler arguments that build the exported C with DAQP, valid before the source files (as
+    `models.compile.build_library` places flags): the header folder, the DAQP functions named as
+    undefined (``-Wl,-u,``) so that the static library, given before the sources, is searched for
+    them, and the library. After the sources, ``-I`` and the library alone do."""
+    undefined = tuple(f"-Wl,-u,{symbol}" for symbol in DAQP_ENTRY_POINTS)
+    return (f"-I{daqp_include_directory()}", *undefined, daqp_library())
+
+
+@dataclass(frozen=True)
+class ExportedMPC(ExportedC):
+    """An exported linear MPC: `models.export.ExportedC` whose C is built with DAQP (`build_flags`)."""
+
+    def load(self, initial_state=None, flags=LOAD_FLAGS):
+        """Compile with DAQP (`models.compile`, cached) and load as a `models.Controller`; see
+        `ExportedC.load`."""
+        return super().load(initial_state, (*flags, *build_flags()))
+
+
+def daqp_settings(controller: LinearMPC) -> dict[str, float]:
+    """The DAQP settings of `controller`'s Python path: `DAQP_SETTINGS` from the `daqp` package's
+    defaults, its primal tolerance, and its solver's iteration limit (1000 when the controller
+    solves with another solver)."""
+    defaults = daqp.Model().settings
+    settings = {key: defaults[key] for key in DAQP_SETTINGS}
+    settings["primal_tol"] = PRIMAL_TOLERANCE
+    solver = controller.solver
+    settings["iter_limit"] = int(solver.iteration_limit if isinstance(solver, CondensedDaqpSolver) else 1000)
+    return settings
 
 
 def init_kernel(controller: LinearMPC, name: str) -> ca.Function:
@@ -141,16 +145,8 @@ def init_kernel(controller: LinearMPC, name: str) -> ca.Function:
     return ca.Function(f"{name}_init_kernel", [y], [x0 - ca.DM(controller.model.xe), u0], ["y"], ["x0", "u0"])
 
 
-def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
-    """A `LinearMPC` as C with the same commands (see the module docstring).
-
-    Raises
-    ------
-    UnsupportedExport
-        For a controller that is not a LinearMPC (a nonlinear MPC, whose SQP over the
-        plant's equations is not exported: export a LinearMPC or a Block instead).
-    """
-    name = c_name(name)
+def check_exportable(controller) -> None:
+    """Raise `UnsupportedExport` unless `controller` is a LinearMPC tracking one coordinate per input."""
     if not isinstance(controller, LinearMPC):
         kind = type(controller).__name__
         raise UnsupportedExport(
@@ -167,34 +163,33 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
             f"{controller.name}: the export tracks as many coordinates as inputs; "
             f"reference {controller.n_reference}, inputs {controller.plant.nu}"
         )
-    qp = condense(controller.problem)
-    table = constraints(qp)
-    plant, model, observer, target = controller.plant, controller.model, controller.observer, controller.target
-    nx, nu, ny, N = plant.nx, plant.nu, plant.ny, controller.horizon
-    init = init_kernel(controller, name)
-    work = work_sizes(init)
-    # The unconstrained minimizer z̄ = −H⁻¹(F p + f) as an affine map of p, and J = L⁻ᵀ (H = L Lᵀ).
-    L = np.linalg.cholesky(qp.H)
-    J0 = scipy.linalg.solve_triangular(L, np.eye(qp.n), lower=True).T
-    H_inverse = J0 @ J0.T
-    start = slack_start(qp, table, J0)
-    sizes = dict(
-        NX=nx,
-        NU=nu,
-        NY=ny,
-        NE=nx + nu,
-        NH=N,
-        NI=N * nu,
-        NZ=qp.n,
-        NP=qp.n_parameters,
-        NSTART=len(start["active"]),
-        NM=max(1, qp.rows.shape[0]),
-        NC=max(1, len(table["b0"])),
-        NCON=len(table["b0"]),
-        NSTATE=nx + nu + N * nu,
+
+
+def qp_data(qp: CondensedQP) -> str:
+    """The condensed QP's constants as C arrays: H (n, n) and the rows (m, n) row-major as DAQP reads
+    them, the linear term F p + f and the row bounds' constants and matrices on p, the simple bounds."""
+    np.linalg.cholesky(qp.H)  # positive definite, as DAQP's setup needs (LinAlgError if not)
+    return "".join(
+        [
+            c_array("HESSIAN", qp.H),
+            c_array("LINEAR_MATRIX", qp.F),
+            c_array("LINEAR_CONSTANT", qp.f),
+            c_array("VARIABLE_LOWER", qp.lower),
+            c_array("VARIABLE_UPPER", qp.upper),
+            c_array("ROWS", qp.rows if qp.rows.size else [0.0]),
+            c_array("ROW_LOWER_CONSTANT", qp.row_lower_constant),
+            c_array("ROW_LOWER_MATRIX", qp.row_lower_matrix),
+            c_array("ROW_UPPER_CONSTANT", qp.row_upper_constant),
+            c_array("ROW_UPPER_MATRIX", qp.row_upper_matrix),
+        ]
     )
+
+
+def controller_data(controller: LinearMPC, qp: CondensedQP) -> str:
+    """The estimator's, the target's and the limits' constants as C arrays."""
+    model, observer, target, nu = controller.model, controller.observer, controller.target, controller.plant.nu
     rate = controller.problem.rate_limit  # per sample
-    data = "".join(
+    return "".join(
         [
             c_array("A_AUG", observer.A_aug),
             c_array("B_AUG", np.vstack([model.B, np.zeros((nu, nu))])),
@@ -207,21 +202,37 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
             c_array("LIMIT", controller.input_limit),
             c_array("RATE", rate if rate is not None else np.zeros(nu)),
             c_array("SCALE", qp.scale),
-            c_array("J0", J0),
-            c_array("Z_P", -H_inverse @ qp.F),
-            c_array("Z_F", -H_inverse @ qp.f),
-            c_array("ROWS", qp.rows if qp.rows.size else [0.0]),
-            c_array("CON_ROW", table["row"], kind="int"),
-            c_array("CON_VARIABLE", table["variable"], kind="int"),
-            c_array("CON_SIGN", table["sign"]),
-            c_array("CON_B0", table["b0"]),
-            c_array("CON_BM", table["bm"]),
-            c_array("START_COLUMN", start["column"], kind="int"),
-            c_array("START_ACTIVE", start["active"], kind="int"),
-            c_array("START_VARIABLE", start["variable"], kind="int"),
-            c_array("START_R", start["r"]),
-            c_array("START_MULTIPLIER", start["multiplier"]),
         ]
+    )
+
+
+def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedMPC:
+    """A `LinearMPC` as C with the same commands (see the module docstring).
+
+    Parameters
+    ----------
+    controller : the LinearMPC, as designed now
+    name : C prefix of the files (``name.h``, ``name.c``) and functions (``name_step`` ...)
+
+    Raises
+    ------
+    UnsupportedExport
+        For a controller that is not a LinearMPC (a nonlinear MPC, whose SQP over the
+        plant's equations is not exported: export a LinearMPC or a Block instead).
+    """
+    name = c_name(name)
+    check_exportable(controller)
+    qp = condense(controller.problem)
+    plant, N = controller.plant, controller.horizon
+    nx, nu, ny = plant.nx, plant.nu, plant.ny
+    init = init_kernel(controller, name)
+    work = work_sizes(init)
+    n_rows = qp.rows.shape[0]
+    sizes = dict(NX=nx, NU=nu, NY=ny, NE=nx + nu, NH=N, NI=N * nu, NZ=qp.n, NP=qp.n_parameters, NROWS=n_rows)
+    sizes |= dict(NB=qp.n + n_rows, NSTATE=nx + nu + N * nu)
+    settings = "".join(
+        f"    m->settings.{key} = {value if isinstance(value, int) else c_number(value)};\n"
+        for key, value in daqp_settings(controller).items()
     )
     upper = name.upper()
     header = _HEADER.substitute(
@@ -233,25 +244,10 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
         ny=ny,
         N=N,
         nz=qp.n,
-        sizes="\n".join(
-            f"#define {upper}_{key} {value}"
-            for key, value in (
-                ("N_STATE", sizes["NSTATE"]),
-                ("N_MEASURED", ny),
-                ("N_REFERENCE", nu),
-                ("N_INPUT", nu),
-                ("N_DECISIONS", qp.n),
-                ("N_PARAMETERS", qp.n_parameters),
-                ("N_CONSTRAINTS", sizes["NC"]),
-            )
-        ),
+        sizes=_header_sizes(upper, sizes, ny, nu, qp),
         sample_period=c_number(controller.sample_period),
         outputs=", ".join(plant.output_names),
-        statuses="\n".join(
-            f"#define {upper}_{text.upper().replace(' ', '_').replace('-', '')} {code}" for code, text in STATUS.items()
-        )
-        + f"\n#define {upper}_NONFINITE_COMMAND "
-        f"{NONFINITE_COMMAND}",
+        statuses=_header_statuses(upper),
         work_w=work["w"],
         work_iw=work["iw"],
     )
@@ -261,16 +257,16 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
         controller=controller.name,
         sizes="".join(f"#define {key} {value}\n" for key, value in sizes.items()),
         casadi=generated_code([init], f"{name}_casadi"),
-        data=data,
-        reference_offset=c_number(model.xe[controller.tracked_index]),
-        has_rate=int(rate is not None),
-        tolerance=c_number(TOLERANCE),
+        data=controller_data(controller, qp) + qp_data(qp),
+        settings=settings,
+        reference_offset=c_number(controller.model.xe[controller.tracked_index]),
+        has_rate=int(controller.problem.rate_limit is not None),
+        rows_vary=int(qp.rows_vary),
         work_arg=work["arg"],
         work_res=work["res"],
-        max_iterations=10 * (qp.n + sizes["NC"]),
         nonfinite_command=NONFINITE_COMMAND,
     )
-    return ExportedC(
+    return ExportedMPC(
         name=name,
         controller=controller.name,
         header=header,
@@ -286,11 +282,34 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedC:
     )
 
 
+def _header_sizes(upper: str, sizes: dict, ny: int, nu: int, qp: CondensedQP) -> str:
+    named = (
+        ("N_STATE", sizes["NSTATE"]),
+        ("N_MEASURED", ny),
+        ("N_REFERENCE", nu),
+        ("N_INPUT", nu),
+        ("N_DECISIONS", qp.n),
+        ("N_PARAMETERS", qp.n_parameters),
+        ("N_BOUNDS", max(1, sizes["NB"])),
+    )
+    return "\n".join(f"#define {upper}_{key} {value}" for key, value in named)
+
+
+def _header_statuses(upper: str) -> str:
+    lines = [
+        f"#define {upper}_{text.upper().replace(' ', '_').replace('-', '')} {code}" for code, text in STATUS.items()
+    ]
+    return "\n".join([*lines, f"#define {upper}_NONFINITE_COMMAND {NONFINITE_COMMAND}"])
+
+
 _HEADER = string.Template("""/* ${p}.h: linear MPC '${controller}' exported by codesign-control (mpc.export).
  * ${nx} states, ${nu} input(s), ${ny} outputs (${outputs}); horizon ${N}, ${nz} QP decisions.
- * Fixed sizes, no allocation; the QP solver is a dense dual active-set method (Goldfarb-Idnani). */
+ * Fixed sizes; the QP is solved by DAQP, which allocates its workspace once, in ${p}_init.
+ * Build with DAQP's headers and library (mpc.export.build_flags). */
 #ifndef ${P}_H
 #define ${P}_H
+
+#include <daqp/types.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -303,23 +322,28 @@ ${sizes}
  * ${P}_NONFINITE_COMMAND. Any status but ${P}_OPTIMAL means the shifted previous plan was followed. */
 ${statuses}
 
-/* One per controller instance, owned by the caller (sizeof: ${p}_state_size()). */
+/* One per controller instance, owned by the caller (sizeof: ${p}_state_size()); all zero before its
+ * first ${p}_init (static storage, or cleared), and not copied once initialized (DAQP's workspace
+ * points into it). */
 typedef struct {
     double xc[${P}_N_STATE];  /* (x_hat - xe, d_hat, plan): one-sample predictions and the input plan */
-    double J[${P}_N_DECISIONS * ${P}_N_DECISIONS], R[${P}_N_DECISIONS * ${P}_N_DECISIONS];
-    double z[${P}_N_DECISIONS], x_old[${P}_N_DECISIONS], d[${P}_N_DECISIONS], step[${P}_N_DECISIONS];
-    double r[${P}_N_DECISIONS + 1], u[${P}_N_DECISIONS + 1], u_old[${P}_N_DECISIONS + 1];
-    double s[${P}_N_CONSTRAINTS], b[${P}_N_CONSTRAINTS];
-    int active[${P}_N_DECISIONS + 1], active_old[${P}_N_DECISIONS + 1];
-    int inactive[${P}_N_CONSTRAINTS], excluded[${P}_N_CONSTRAINTS];
-    double work[${work_w}];
-    long long int iwork[${work_iw}];
+    double f[${P}_N_DECISIONS];  /* the QP's linear term for this sample */
+    double bupper[${P}_N_BOUNDS], blower[${P}_N_BOUNDS];  /* simple bounds, then the rows' */
+    int sense[${P}_N_BOUNDS];
+    double z[${P}_N_DECISIONS], lam[${P}_N_BOUNDS];  /* DAQP's solution and multipliers (scaled) */
+    DAQPProblem problem;
+    DAQPSettings settings;
+    DAQPWorkspace workspace;
+    int set_up;            /* DAQP holds this QP: its factorization, workspace and working set */
     int iterations;        /* of the last QP solve */
     double input_excess;   /* what clipping removed from the plan's first input */
+    double work[${work_w}];
+    long long int iwork[${work_iw}];
 } ${p}_state;
 
 /* The first state from the first measurement y0 (${P}_N_MEASURED) and reference r0: at rest at the
- * measured configuration, no disturbance, the holding input as plan. Returns 0 or a status code. */
+ * measured configuration, no disturbance, the holding input as plan; sets DAQP up (its one
+ * allocation; again on a struct already initialized, the old workspace freed). Returns 0 or a status code. */
 int ${p}_init(${p}_state *state, const double *y0, const double *r0);
 /* One sample, every ${P}_SAMPLE_PERIOD s: outputs y (${P}_N_MEASURED), reference r (absolute tracked
  * coordinate) -> command u (${P}_N_INPUT), within the actuator limit. Returns a status code. */
@@ -329,6 +353,8 @@ int ${p}_step(${p}_state *state, const double *y, const double *r, double *u);
 int ${p}_solve_qp(${p}_state *state, const double *p, double *z);
 void ${p}_set_state(${p}_state *state, const double *xc);
 void ${p}_get_state(const ${p}_state *state, double *xc);
+/* Release DAQP's workspace (a later ${p}_init sets it up again). */
+void ${p}_free(${p}_state *state);
 unsigned long ${p}_state_size(void);
 
 #ifdef __cplusplus
@@ -340,12 +366,13 @@ unsigned long ${p}_state_size(void);
 
 _SOURCE = string.Template("""/* ${p}.c: linear MPC '${controller}', generated by codesign-control (mpc.export). */
 #include "${p}.h"
-#include <float.h>
 #include <math.h>
+#include <daqp/api.h>
+#include <daqp/utils.h>
+#undef NX  /* DAQP's constants.h: its workspace's size; here the plant's state count */
 
 ${sizes}#define HAS_RATE ${has_rate}
-#define TOLERANCE ${tolerance}
-#define MAX_ITERATIONS ${max_iterations}
+#define ROWS_VARY ${rows_vary}
 #define NONFINITE_COMMAND ${nonfinite_command}
 #define REFERENCE_OFFSET ${reference_offset}
 
@@ -362,206 +389,85 @@ static double clip(double v, double low, double high) {
     return v < low ? low : (v > high ? high : v);
 }
 
-/* sign_k (c_k . z) of one-sided constraint k. */
-static double constraint_value(int k, const double *z) {
+void ${p}_free(${p}_state *m) {
+    if (!m->set_up) return;
+    m->workspace.settings = 0;  /* the settings are the struct's, not DAQP's to free */
+    free_daqp_workspace(&m->workspace);
+    free_daqp_ldp(&m->workspace);
+    m->set_up = 0;
+}
+
+/* DAQP's setup of the QP, as mpc.qp_fast.CondensedDaqpSolver's: H and the rows fixed, the vectors at
+ * p = 0 (each solve updates them); the settings of the Python path. */
+static int setup(${p}_state *m) {
+    static const DAQPWorkspace empty;
+    double setup_time;
     int i;
-    double sum = 0.0;
-    if (CON_ROW[k] < 0) return CON_SIGN[k] * z[CON_VARIABLE[k]];
-    for (i = 0; i < NZ; ++i) sum += ROWS[CON_ROW[k] * NZ + i] * z[i];
-    return CON_SIGN[k] * sum;
-}
-
-/* d = J^T n_k with n_k = sign_k c_k. */
-static void transform(int k, const double *J, double *d) {
-    int i, j;
-    double sum;
-    if (CON_ROW[k] < 0) {
-        for (j = 0; j < NZ; ++j) d[j] = CON_SIGN[k] * J[CON_VARIABLE[k] * NZ + j];
-        return;
-    }
-    for (j = 0; j < NZ; ++j) {
-        sum = 0.0;
-        for (i = 0; i < NZ; ++i) sum += J[i * NZ + j] * ROWS[CON_ROW[k] * NZ + i];
-        d[j] = CON_SIGN[k] * sum;
-    }
-}
-
-/* Append the constraint whose d = J^T n is in m->d: rotate J so that d has no entries below iq,
- * extend R by that column. 0 when the constraint depends on the active ones. */
-static int add_constraint(${p}_state *m, int *iq, double *r_norm) {
-    double *J = m->J, *R = m->R, *d = m->d, cc, ss, h, xny, t1, t2;
-    int i, j, k;
-    for (j = NZ - 1; j >= *iq + 1; --j) {
-        cc = d[j - 1];
-        ss = d[j];
-        h = hypot(cc, ss);
-        if (h == 0.0) continue;
-        d[j] = 0.0;
-        ss /= h;
-        cc /= h;
-        if (cc < 0.0) { cc = -cc; ss = -ss; d[j - 1] = -h; } else { d[j - 1] = h; }
-        xny = ss / (1.0 + cc);
-        for (k = 0; k < NZ; ++k) {
-            t1 = J[k * NZ + j - 1];
-            t2 = J[k * NZ + j];
-            J[k * NZ + j - 1] = t1 * cc + t2 * ss;
-            J[k * NZ + j] = xny * (t1 + J[k * NZ + j - 1]) - t2;
-        }
-    }
-    *iq += 1;
-    for (i = 0; i < *iq; ++i) R[i * NZ + *iq - 1] = d[i];
-    if (fabs(d[*iq - 1]) <= DBL_EPSILON * *r_norm) return 0;
-    if (fabs(d[*iq - 1]) > *r_norm) *r_norm = fabs(d[*iq - 1]);
-    return 1;
-}
-
-/* Drop constraint l from the active set and restore R to triangular form. */
-static void delete_constraint(${p}_state *m, int *iq, int l) {
-    double *J = m->J, *R = m->R, *u = m->u, cc, ss, h, xny, t1, t2;
-    int *A = m->active, i, j, k, qq = -1;
-    for (i = 0; i < *iq; ++i) if (A[i] == l) { qq = i; break; }
-    if (qq < 0) return;
-    for (i = qq; i < *iq - 1; ++i) {
-        A[i] = A[i + 1];
-        u[i] = u[i + 1];
-        for (j = 0; j < NZ; ++j) R[j * NZ + i] = R[j * NZ + i + 1];
-    }
-    A[*iq - 1] = A[*iq];
-    u[*iq - 1] = u[*iq];
-    A[*iq] = 0;
-    u[*iq] = 0.0;
-    for (j = 0; j < *iq; ++j) R[j * NZ + *iq - 1] = 0.0;
-    *iq -= 1;
-    if (*iq == 0) return;
-    for (j = qq; j < *iq; ++j) {
-        cc = R[j * NZ + j];
-        ss = R[(j + 1) * NZ + j];
-        h = hypot(cc, ss);
-        if (h == 0.0) continue;
-        cc /= h;
-        ss /= h;
-        R[(j + 1) * NZ + j] = 0.0;
-        if (cc < 0.0) { R[j * NZ + j] = -h; cc = -cc; ss = -ss; } else { R[j * NZ + j] = h; }
-        xny = ss / (1.0 + cc);
-        for (k = j + 1; k < *iq; ++k) {
-            t1 = R[j * NZ + k];
-            t2 = R[(j + 1) * NZ + k];
-            R[j * NZ + k] = t1 * cc + t2 * ss;
-            R[(j + 1) * NZ + k] = xny * (t1 + R[j * NZ + k]) - t2;
-        }
-        for (k = 0; k < NZ; ++k) {
-            t1 = J[k * NZ + j];
-            t2 = J[k * NZ + j + 1];
-            J[k * NZ + j] = t1 * cc + t2 * ss;
-            J[k * NZ + j + 1] = xny * (J[k * NZ + j] + t1) - t2;
-        }
-    }
-}
-
-/* Goldfarb-Idnani dual active set on the scaled QP: z holds the unconstrained minimizer on entry
- * and the solution on exit; m->b the constraints' right-hand sides. */
-static int solve_scaled(${p}_state *m, double *z) {
-    double *J = m->J, *s = m->s, *d = m->d, *step = m->step, *r = m->r, *u = m->u, *b = m->b;
-    double t, t1, t2, sum, r_norm = 1.0;
-    int *A = m->active, *inactive = m->inactive, *excluded = m->excluded;
-    int i, j, k, l, ip, iq = 0;
-    m->iterations = 0;
-    /* Start: the slacks at their bounds (see mpc.export), the inputs at their unconstrained minimum. */
-    for (i = 0; i < NZ; ++i)
-        for (j = 0; j < NZ; ++j) J[i * NZ + j] = J0[i * NZ + START_COLUMN[j]];
-    for (i = 0; i < NCON; ++i) inactive[i] = i;
-    for (k = 0; k < NSTART; ++k) {
-        for (i = 0; i <= k; ++i) m->R[i * NZ + k] = i == k ? START_R[k] : 0.0;
-        A[k] = START_ACTIVE[k];
-        u[k] = START_MULTIPLIER[k];
-        z[START_VARIABLE[k]] = 0.0;
-    }
-    iq = NSTART;
-    for (;;) {
-        for (i = 0; i < iq; ++i) inactive[A[i]] = -1;
-        for (i = 0; i < NCON; ++i) { excluded[i] = 0; s[i] = constraint_value(i, z) - b[i]; }
-        for (i = 0; i < iq; ++i) { m->u_old[i] = u[i]; m->active_old[i] = A[i]; }
-        for (i = 0; i < NZ; ++i) m->x_old[i] = z[i];
-        /* The most violated constraint not active. */
-        ip = -1;
-        sum = 0.0;
-        for (i = 0; i < NCON; ++i)
-            if (inactive[i] != -1 && !excluded[i] && s[i] < -TOLERANCE * (1.0 + fabs(b[i])) && s[i] < sum) {
-                sum = s[i];
-                ip = i;
-            }
-        if (ip < 0) return 0;
-        u[iq] = 0.0;
-        A[iq] = ip;
-        for (;;) {
-            if (++m->iterations > MAX_ITERATIONS) return 4;
-            transform(ip, J, d);
-            for (i = 0; i < NZ; ++i) {  /* primal step direction J2 d2 */
-                sum = 0.0;
-                for (j = iq; j < NZ; ++j) sum += J[i * NZ + j] * d[j];
-                step[i] = sum;
-            }
-            for (i = iq - 1; i >= 0; --i) {  /* dual step direction R^-1 d1 */
-                sum = 0.0;
-                for (j = i + 1; j < iq; ++j) sum += m->R[i * NZ + j] * r[j];
-                r[i] = (d[i] - sum) / m->R[i * NZ + i];
-            }
-            t1 = INFINITY;  /* largest dual step keeping the multipliers >= 0 */
-            l = -1;
-            for (k = 0; k < iq; ++k)
-                if (r[k] > 0.0 && u[k] / r[k] < t1) { t1 = u[k] / r[k]; l = A[k]; }
-            sum = 0.0;
-            for (i = 0; i < NZ; ++i) sum += step[i] * step[i];
-            if (sum > DBL_EPSILON) {  /* primal step making constraint ip active */
-                t2 = -s[ip] / constraint_value(ip, step);
-                if (t2 < 0.0) t2 = INFINITY;
-            } else {
-                t2 = INFINITY;
-            }
-            t = t1 < t2 ? t1 : t2;
-            if (t >= INFINITY) return 3;
-            if (t2 >= INFINITY) {  /* dual step only: drop constraint l */
-                for (k = 0; k < iq; ++k) u[k] -= t * r[k];
-                u[iq] += t;
-                inactive[l] = l;
-                delete_constraint(m, &iq, l);
-                continue;
-            }
-            for (k = 0; k < NZ; ++k) z[k] += t * step[k];
-            for (k = 0; k < iq; ++k) u[k] -= t * r[k];
-            u[iq] += t;
-            if (t2 <= t1) {  /* full step: ip joins the active set */
-                if (!add_constraint(m, &iq, &r_norm)) return 5;
-                inactive[ip] = -1;
-                break;
-            }
-            inactive[l] = l;  /* partial step: drop l, keep stepping towards ip */
-            delete_constraint(m, &iq, l);
-            s[ip] = constraint_value(ip, z) - b[ip];
-        }
-    }
-}
-
-/* The QP for parameters p: right-hand sides, unconstrained minimizer, solve. z: scaled solution. */
-static int solve(${p}_state *m, const double *p, double *z) {
-    int i, j;
-    double sum;
-    for (i = 0; i < NCON; ++i) {
-        sum = CON_B0[i];
-        for (j = 0; j < NP; ++j) sum += CON_BM[i * NP + j] * p[j];
-        m->b[i] = sum;
-    }
+    ${p}_free(m);
     for (i = 0; i < NZ; ++i) {
-        sum = Z_F[i];
-        for (j = 0; j < NP; ++j) sum += Z_P[i * NP + j] * p[j];
-        z[i] = sum;
+        m->f[i] = LINEAR_CONSTANT[i];
+        m->bupper[i] = VARIABLE_UPPER[i];
+        m->blower[i] = VARIABLE_LOWER[i];
     }
-    return solve_scaled(m, z);
+    for (i = 0; i < NROWS; ++i) {
+        m->bupper[NZ + i] = ROW_UPPER_CONSTANT[i];
+        m->blower[NZ + i] = ROW_LOWER_CONSTANT[i];
+    }
+    for (i = 0; i < NB; ++i) m->sense[i] = 0;
+    m->problem.n = NZ;
+    m->problem.m = NB;
+    m->problem.ms = NZ;
+    m->problem.H = (c_float *) HESSIAN;  /* DAQP reads H and the rows, never writes them */
+    m->problem.f = m->f;
+    m->problem.A = (c_float *) ROWS;
+    m->problem.bupper = m->bupper;
+    m->problem.blower = m->blower;
+    m->problem.sense = m->sense;
+    daqp_default_settings(&m->settings);
+${settings}    m->workspace = empty;
+    m->workspace.settings = &m->settings;
+    if (setup_daqp(&m->problem, &m->workspace, &setup_time) < 0) {
+        m->workspace.settings = 0;
+        free_daqp_workspace(&m->workspace);  /* both guard against what is freed already */
+        free_daqp_ldp(&m->workspace);
+        return 8;
+    }
+    m->set_up = 1;
+    return 0;
+}
+
+/* The QP for parameters p: the linear term and the row bounds, then DAQP from the last working set.
+ * m->z: the scaled solution. */
+static int solve(${p}_state *m, const double *p) {
+    DAQPResult result;
+    int i, j, status;
+    double sum;
+    if (!m->set_up && (status = setup(m))) return status;
+    for (i = 0; i < NZ; ++i) {
+        sum = LINEAR_CONSTANT[i];
+        for (j = 0; j < NP; ++j) sum += LINEAR_MATRIX[i * NP + j] * p[j];
+        m->f[i] = sum;
+    }
+    for (i = 0; i < NROWS && ROWS_VARY; ++i) {
+        sum = 0.0;
+        for (j = 0; j < NP; ++j) sum += ROW_UPPER_MATRIX[i * NP + j] * p[j];
+        m->bupper[NZ + i] = sum + ROW_UPPER_CONSTANT[i];
+        sum = 0.0;
+        for (j = 0; j < NP; ++j) sum += ROW_LOWER_MATRIX[i * NP + j] * p[j];
+        m->blower[NZ + i] = sum + ROW_LOWER_CONSTANT[i];
+    }
+    if (update_ldp(ROWS_VARY ? UPDATE_v | UPDATE_d : UPDATE_v, &m->workspace) < 0) return 3;
+    result.x = m->z;
+    result.lam = m->lam;
+    daqp_solve(&result, &m->workspace);
+    m->iterations = result.iter;
+    if (result.exitflag > 0) return 0;
+    return result.exitflag == EXIT_INFEASIBLE ? 3 : (result.exitflag == EXIT_ITERLIMIT ? 4 : 5);
 }
 
 int ${p}_solve_qp(${p}_state *m, const double *p, double *z) {
-    int i, status = solve(m, p, z);
-    for (i = 0; i < NZ; ++i) z[i] *= SCALE[i];
+    int i, status = solve(m, p);
+    for (i = 0; i < NZ; ++i) z[i] = m->z[i] * SCALE[i];
     return status;
 }
 
@@ -582,7 +488,7 @@ int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
         for (i = 0; i < NU; ++i) m->xc[NE + k * NU + i] = u0[i];
     m->iterations = 0;
     m->input_excess = 0.0;
-    return 0;
+    return setup(m);
 }
 
 int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
@@ -623,7 +529,7 @@ int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
             p[NE + NX + i] = sum - estimate[NX + i];
             p[NE + NE + i] = plan[i] - UE[i];
         }
-        status = solve(m, p, m->z);
+        status = solve(m, p);
         if (status == 0) {
             for (k = 0; k < NI; ++k) candidate[k] = m->z[k] * SCALE[k] + UE[k % NU];
             if (!all_finite(candidate, NI)) status = 6;

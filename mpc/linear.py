@@ -325,6 +325,7 @@ class MPCProblem:
 
     @property
     def n_soft(self) -> int:
+        """ns, the number of soft bounds (rows of `soft_rows`)."""
         return self.soft_rows.shape[0]
 
     # ----------------------------------------------------------- prediction

@@ -32,6 +32,9 @@ import numpy as np
 
 from models import Plant
 
+from .mesh_refinement import solve_refined
+from .ocp_solver import OCPSolver
+
 
 class UnknownNameError(ValueError, AttributeError):
     """A state, input, output, parameter or control name the problem does not have."""
@@ -549,8 +552,6 @@ class OptimalControlProblem:
         transcription : `Collocation` (default: Radau, degree 3, 50 intervals) or `MultipleShooting`
         options : see `OCPSolver` (hessian, tolerance, max_iterations, ipopt_options, ...)
         """
-        from .ocp_solver import OCPSolver
-
         return OCPSolver(self, transcription, **options)
 
     def solve(
@@ -571,8 +572,6 @@ class OptimalControlProblem:
             (x0, params, plant_params, guess, guess_input).
         """
         if refine_tolerance is not None:
-            from .mesh_refinement import solve_refined
-
             return solve_refined(
                 self, transcription, refine_tolerance, max_refinements, solver_options or {}, solve_options
             )

@@ -116,14 +116,17 @@ class OCPSolution:
 
     @property
     def plant(self) -> Plant:
+        """The plant of the transcription that was solved."""
         return self.transcription.plant
 
     @property
     def state_names(self) -> tuple:
+        """The plant's state names, in the order of `states`' columns."""
         return self.plant.state_names
 
     @property
     def input_names(self) -> tuple:
+        """The plant's input names, in the order of `inputs`' columns."""
         return self.plant.input_names
 
     def state(self, name: str) -> np.ndarray:

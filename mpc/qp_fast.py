@@ -88,10 +88,12 @@ class CondensedQP:
 
     @property
     def n(self) -> int:
+        """The QP's variables, N nu + N ns."""
         return self.n_inputs + self.n_slacks
 
     @property
     def n_parameters(self) -> int:
+        """n_p = 2 nx + 3 nu, the size of p."""
         return self.F.shape[1]
 
     @property

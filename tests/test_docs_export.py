@@ -13,6 +13,7 @@ import numpy as np
 
 import models
 from models import compile as mc
+from mpc.export import daqp_include_directory, daqp_library
 from studies import providers
 
 REPO = Path(models.__file__).resolve().parent.parent
@@ -37,8 +38,9 @@ def test_the_documented_example_exports_compiles_and_agrees_with_python(tmp_path
     generated = tmp_path / "generated"
     assert sorted(p.name for p in generated.iterdir()) == ["arm_mpc.c", "arm_mpc.h", "arm_pid.c", "arm_pid.h"]
     (generated / "main.c").write_text(c_program[0])
+    command = [*mc.compiler(), "-std=c99", "-O2", f"-I{daqp_include_directory()}", "-o", "main"]  # as the doc says
     subprocess.run(
-        [*mc.compiler(), "-std=c99", "-O2", "-o", "main", "main.c", "arm_pid.c", "arm_mpc.c", "-lm"],
+        [*command, "main.c", "arm_pid.c", "arm_mpc.c", daqp_library(), "-lm"],
         cwd=generated,
         check=True,
         capture_output=True,

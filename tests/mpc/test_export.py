@@ -1,10 +1,12 @@
-"""Linear MPC exported as C (mpc.export): its dense dual active-set QP solver against DAQP and the
-cvxpy reference on the instances of test_solver_paths, its fault statuses against the Python
-controller's, and the errors for what cannot be exported."""
+"""Linear MPC exported as C (mpc.export): its QP (DAQP from C, set up once and warm-started) against
+the Python path's DAQP and the cvxpy reference on the instances of test_solver_paths, its fault
+statuses against the Python controller's, and the errors for what cannot be exported."""
 
 from __future__ import annotations
 
 import ctypes
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ import models
 import mpc
 from models import compile as mc
 from models.export import UnsupportedExport
-from mpc.export import STATUS, export_linear_mpc, status_text
+from mpc.export import STATUS, build_flags, daqp_include_directory, daqp_library, export_linear_mpc, status_text
 from mpc.linear import QPSolution
 from mpc.qp_fast import condense, parameter_vector
 from mpc.reference_cvxpy import CvxpySolver
@@ -39,7 +41,8 @@ class ExportedQP:
         controller = build("linear", "arm")  # any controller: its QP is replaced below
         controller.problem = problem
         exported = export_linear_mpc(controller, "qp")
-        self._library = ctypes.CDLL(str(mc.build_library(exported.files(), fallback=False)))
+        library = mc.build_library(exported.files(), (*mc.FLAGS, *build_flags()), fallback=False)
+        self._library = ctypes.CDLL(str(library))
         self._library.qp_state_size.restype = ctypes.c_ulong
         self._memory = ctypes.create_string_buffer(self._library.qp_state_size())
         self._solve = self._library.qp_solve_qp
@@ -143,3 +146,54 @@ def test_what_cannot_be_exported_is_named():
         models.export.export_block(build("linear", "arm"), "mpc")
     with pytest.raises(ValueError, match="name must be a C identifier prefix"):
         export_linear_mpc(build("linear", "arm"), "linear MPC")
+
+
+#: A C program counting the allocator's calls (GNU ld's --wrap puts these in front of malloc and free):
+#: init, 50 steps, a second init, then free; it prints the calls after each phase.
+COUNTING_PROGRAM = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "counted.h"
+static long allocations = 0, releases = 0;
+void *__real_malloc(size_t); void *__real_calloc(size_t, size_t); void *__real_realloc(void *, size_t);
+void __real_free(void *);
+void *__wrap_malloc(size_t n) { ++allocations; return __real_malloc(n); }
+void *__wrap_calloc(size_t n, size_t size) { ++allocations; return __real_calloc(n, size); }
+void *__wrap_realloc(void *p, size_t n) { ++allocations; return __real_realloc(p, n); }
+void __wrap_free(void *p) { if (p) ++releases; __real_free(p); }
+static counted_state state;
+int main(void) {
+    double y[COUNTED_N_MEASURED] = {0}, r[1] = {0.3}, u[1];
+    int k, failed = 0;
+    failed |= counted_init(&state, y, r);
+    printf("%ld %ld\n", allocations, releases);
+    for (k = 0; k < 50; ++k) { y[1] = 0.01 * (k % 7); failed |= counted_step(&state, y, r, u) & ~16; }
+    printf("%ld %ld\n", allocations, releases);
+    failed |= counted_init(&state, y, r);
+    printf("%ld %ld\n", allocations, releases);
+    counted_free(&state);
+    printf("%ld %ld %d\n", allocations, releases, failed);
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="counts allocations with GNU ld's --wrap")
+def test_daqp_allocates_at_init_only_and_frees_it_all(tmp_path):
+    """On the pendulum (soft bound: rows that change every sample): DAQP's setup in name_init is the
+    only allocation; 50 steps allocate nothing; a second init frees the first workspace before
+    allocating again; name_free releases everything."""
+    exported = export_linear_mpc(build("linear", "pendulum"), "counted")
+    exported.write(tmp_path)
+    (tmp_path / "main.c").write_text(COUNTING_PROGRAM)
+    wrap = "-Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc,--wrap=free"
+    arguments = ["-std=c99", "-O2", f"-I{daqp_include_directory()}", "-o", "counted", "main.c", "counted.c"]
+    subprocess.run([*mc.compiler(), *arguments, daqp_library(), "-lm", wrap], cwd=tmp_path, check=True)
+    printed = subprocess.run([str(tmp_path / "counted")], check=True, capture_output=True, text=True).stdout
+    counts = [[int(v) for v in line.split()] for line in printed.splitlines()]
+    (init, none), (after_steps, still_none), (again, freed), (total, released, failed) = counts
+    assert failed == 0
+    assert init > 0 and none == 0
+    assert (after_steps, still_none) == (init, 0)
+    assert (again, freed) == (2 * init, init)
+    assert total == released == 2 * init

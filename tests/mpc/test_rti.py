@@ -16,6 +16,7 @@ import scipy.sparse
 
 import models
 import mpc
+import mpc.slack_first
 import studies
 from mpc.nonlinear import mpc_problem
 from mpc.rti import RealTimeIteration
@@ -263,7 +264,7 @@ def soft_qp(rng, stages, scale, width, crossed=False):
     return (H, h, C, np.array(lba), np.array(uba), lbv, ubv), pieces
 
 
-@pytest.mark.parametrize("near", [None, mpc.rti.NEAR, 0.5, np.inf])
+@pytest.mark.parametrize("near", [None, mpc.slack_first.NEAR, 0.5, np.inf])
 def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(near, monkeypatch):
     """Random soft-bounded QPs: the slack-first sequence returns a point and multipliers that satisfy
     the whole QP's KKT conditions (stationarity, feasibility, multiplier signs, complementarity; a
@@ -273,13 +274,15 @@ def test_the_slack_first_qp_meets_the_whole_qps_kkt_conditions_and_daqps_answer(
     together with their slacks fixed, on some: the sequence then starts over without them)."""
     rng = np.random.default_rng(7)
     seen, starts = set(), []
-    sequence = mpc.rti.SlackFirstQP._sequence
-    monkeypatch.setattr(mpc.rti.SlackFirstQP, "_sequence", lambda self, *a: starts.append(a[-1]) or sequence(self, *a))
+    sequence = mpc.slack_first.SlackFirstQP._sequence
+    monkeypatch.setattr(
+        mpc.slack_first.SlackFirstQP, "_sequence", lambda self, *a: starts.append(a[-1]) or sequence(self, *a)
+    )
     for trial in range(40):
         scale, width = [(0.1, 20.0), (3.0, 1.0), (10.0, 10.0)][trial % 3]
         crossed = trial % 4 == 3
         (H, h, C, lba, uba, lbv, ubv), (H_dd, H_ss, C_d, C_s) = soft_qp(rng, 12, scale, width, crossed)
-        solver = mpc.rti.SlackFirstQP(
+        solver = mpc.slack_first.SlackFirstQP(
             len(H_dd),
             H_ss.shape[0],
             len(C),
