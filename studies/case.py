@@ -4,9 +4,9 @@ A case file (``studies/cases/<name>.py``) defines ``CASE = CaseStudy(...)``;
 `studies.cases` discovers it. Everything the engine needs from a case is a
 field here: the plant's registry name, the tracked coordinate and the text's
 step, disturbance and sample periods; the scenarios and controllers of its
-table; and its designs (classical homework, state-space choices, MPC
-settings, co-design problems), its animation drawing and its errata.
-Nothing in the library packages (`designs`, `mpc`) names a case.
+table and the providers they come from; and its designs (classical homework,
+state-space choices, MPC settings, co-design problems), its animation drawing
+and its errata. Nothing in the library packages (`designs`, `mpc`) names a case.
 """
 
 from __future__ import annotations
@@ -40,17 +40,6 @@ CONTROLLERS = (
     "nonlinear MPC",
     "tuned",
 )
-
-#: Where controllers come from: ``module:function``, called as ``function(case_name, known=Plant)``.
-PROVIDERS = (
-    "studies.providers:classical",
-    "studies.providers:statespace",
-    "studies.providers:mpc",
-    "studies.providers:tuned",
-)
-
-#: Where homework answers come from: ``module:function``, called as ``function(case_name)``.
-ANSWER_PROVIDERS = ("studies.providers:classical_answers", "studies.providers:statespace_answers")
 
 
 # ---------------------------------------------------------------------------- scenarios
@@ -177,8 +166,10 @@ class CaseStudy:
     tracked_unit, input_unit : units of the tracked coordinate and of the input, for labels
     scenarios : the scenarios, in table order
     controllers : labels in table order (providers' other labels are appended)
-    providers : ``module:function`` returning {label: controller}, called with (plant, known=Plant)
-    answer_providers : ``module:function`` returning {item: {name: value}}, called with (plant)
+    providers : callables ``provider(case, known) -> {label: controller}``, asked in order for the table's
+        controllers (keyword only; `studies.providers.STANDARD` are the case's own designs by kind)
+    answer_providers : callables ``provider(case) -> {item: {name: value}}`` of the homework answers
+        (keyword only; `studies.providers.STANDARD_ANSWERS` are the case's own)
     bounds : params dict -> {state name: (low, high)}, counted as constraint violation and judged as a spec
     specs : scenario name -> `models.specs.Specs` the rows of that scenario are judged by; "*" for the
         scenarios not named (default: no step specs, only the actuator limit, the bounds and no limit cycle)
@@ -221,8 +212,9 @@ class CaseStudy:
     duration: float = 10.0
     source: str = ""
     controllers: tuple = CONTROLLERS
-    providers: tuple = PROVIDERS
-    answer_providers: tuple = ANSWER_PROVIDERS
+    # Keyword-only and required: a case says where its controllers and answers come from.
+    providers: tuple = field(kw_only=True)
+    answer_providers: tuple = field(kw_only=True)
     bounds: Callable[[dict], dict] | None = None
     specs: Mapping[str, Specs] = field(default_factory=dict)
     loops: tuple = ()

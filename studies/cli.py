@@ -143,7 +143,7 @@ def parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="MODULE:FUNCTION",
-        help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}",
+        help="add a controller provider: FUNCTION(case, known) -> {label: controller}",
     )
     p.add_argument(
         "--strict",
@@ -386,23 +386,27 @@ def _stop_workers_on_error():
         raise
 
 
-def check_providers(specs) -> list:
-    """One message per ``module:function`` provider that does not exist or fails to import."""
+def command_line_providers(specs) -> tuple[list, list]:
+    """The ``--provider MODULE:FUNCTION`` providers, found before any work, and one message per provider
+    that does not exist or fails to import; such a provider is run as a `studies.providers.Unavailable`
+    stand-in, which each study notes."""
     from models import interrupts
 
-    from .runner import ProviderNotFound, find_provider
+    from .providers import ProviderNotFound, find, unavailable
 
-    problems = []
+    found, problems = [], []
     for spec in specs:
         try:
-            find_provider(spec)
+            found.append(find(spec))
         except ProviderNotFound as err:
             problems.append(f"--provider {spec}: {str(err).split(': ', 1)[1]}")
+            found.append(unavailable(spec, err))
         except Exception as err:
             if interrupts.is_interrupt(err):
                 raise KeyboardInterrupt from err
             problems.append(f"--provider {spec}: importing it failed: {type(err).__name__}: {err}")
-    return problems
+            found.append(unavailable(spec, err))
+    return found, problems
 
 
 def check_resources(plants, settings: dict) -> None:
@@ -519,7 +523,7 @@ def _gather(future):
         ) from None
 
 
-def _run_sweep(args, p, plants, settings, progress_stream) -> int:
+def _run_sweep(args, p, plants, settings, chosen, progress_stream) -> int:
     from . import get, runner
     from .distributed import connect
     from .sweep import Grid, run_sweep, sweep_summary, write_sweep
@@ -550,7 +554,7 @@ def _run_sweep(args, p, plants, settings, progress_stream) -> int:
                 grid,
                 scenario=scenario[0],
                 options=options,
-                providers=list(study.providers) + args.provider,
+                providers=list(study.providers) + chosen,
                 executor=executor,
                 progress=lambda done, total, text: progress.update(name, done, total, text),
             )
@@ -615,7 +619,7 @@ def main(argv=None) -> int:
         check_resources(plants, settings)
     except checks.ResourceLimitError as err:
         p.error(f"--mc {settings['mc']}: {err}")
-    missing = check_providers(args.provider)
+    chosen, missing = command_line_providers(args.provider)
     for message in missing:
         print(f"python -m studies: {message}" + ("" if args.strict else "; running without it"), file=sys.stderr)
     if missing and args.strict:
@@ -626,7 +630,7 @@ def main(argv=None) -> int:
     except OSError as err:
         p.error(str(err))
     if args.sweep:
-        return _run_sweep(args, p, plants, settings, sys.stderr)
+        return _run_sweep(args, p, plants, settings, chosen, sys.stderr)
 
     from . import writers
     from .distributed import connect
@@ -641,9 +645,7 @@ def main(argv=None) -> int:
     published = False
     try:
         with connect(args.scheduler, args.workers) as executor:
-            finished = _run_all(
-                plants, settings, args.provider, str(staging), answers, jobs, progress, executor, run_id
-            )
+            finished = _run_all(plants, settings, chosen, str(staging), answers, jobs, progress, executor, run_id)
         progress.close()
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
             writers.publish(staging, args.out, registered, run_id)

@@ -1,70 +1,247 @@
-"""The default controller and answer providers of a case study: its own designs, by kind.
+"""Where a study's controllers and design answers come from: providers, and a case's own ones.
 
-Each provider is called by the runner as ``function(case_name, known=Plant)``
-(answers: ``function(case_name)``) and reads the registered case. A case
-without a design of that kind has nothing to provide: `NotProvided`, which
-the runner notes instead of failing.
+A controller provider is a callable ``provider(case, known) -> {label: controller}``: it gets the
+`studies.CaseStudy` being run and the plant known to its controllers (`CaseStudy.known_plant`), and
+returns controllers designed from it. An answer provider is ``provider(case) -> {item: answers}``.
+A case lists its providers (`CaseStudy.providers`, `CaseStudy.answer_providers`); `STANDARD` and
+`STANDARD_ANSWERS` are the case's own designs by kind, read from its record, so they work on a case
+that was never registered. A provider with nothing for a case (no design of its kind) raises
+`NotProvided`, which the run notes instead of failing.
+
+The command line names providers as ``MODULE:FUNCTION`` strings (``--provider``); `find` turns one
+into its function and `resolve` a list of functions and strings into functions, before any work.
 """
 
 from __future__ import annotations
 
+import importlib
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
 import models
+from models import interrupts
+from mpc import linear_mpc, nonlinear_mpc
 
-from . import cases, homework
-from .runner import NotProvided
+from . import cases, homework, tuner
+from .case import CaseStudy
+
+#: provider(case, known) -> {label: controller}
+Provider = Callable[..., Mapping[str, Any]]
+#: provider(case) -> {homework item: answers}
+AnswerProvider = Callable[[CaseStudy], Mapping[str, Any]]
 
 
-def classical(name: str, known: models.Plant | None = None) -> dict:
-    """The case's classical controllers (the .8-.14 designs), designed from `known`."""
-    case = cases.get(name)
+class NotProvided(LookupError):
+    """Raised by a provider that has nothing for this case (no design of its kind): noted, not a failure."""
+
+
+class ProviderNotFound(LookupError):
+    """A ``module:function`` provider whose module cannot be imported or has no such function."""
+
+
+# ---------------------------------------------------------------------------- naming and finding
+def find(spec: str) -> Callable:
+    """The function a ``module:function`` string names (its module imported), named as given
+    (`Named` when the function's own module and name differ, as for a re-exported one).
+
+    Raises
+    ------
+    ProviderNotFound
+        Naming the provider when its module does not exist or has no such function (an error
+        raised while importing an existing module propagates as it is).
+    """
+    module_name, _, function_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as err:
+        if err.name and (module_name == err.name or module_name.startswith(err.name + ".")):
+            raise ProviderNotFound(f"provider {spec!r}: no module named {err.name!r}") from None
+        raise
+    function = getattr(module, function_name, None)
+    if not callable(function):
+        raise ProviderNotFound(f"provider {spec!r}: module {module_name} has no function {function_name}()")
+    return function if name_of(function) == spec else Named(spec, function)
+
+
+@dataclass(frozen=True)
+class Unavailable:
+    """A ``module:function`` provider that could not be found or imported, run without it.
+
+    Called, it provides nothing (`NotProvided` with `reason`), so the study notes it where the
+    provider stands in its list: "``name``: skipped, ``reason``".
+    """
+
+    name: str
+    reason: str
+
+    def __call__(self, *args, **kwargs):
+        """Provide nothing: `NotProvided` with the reason."""
+        raise NotProvided(self.reason)
+
+
+@dataclass(frozen=True)
+class Named:
+    """A provider found from a ``module:function`` string that names it otherwise (a re-exported
+    function): called, it is `function`; notes and run.json name it `name`, as it was given."""
+
+    name: str
+    function: Callable
+
+    def __call__(self, *args, **kwargs):
+        """What `function` returns for these arguments."""
+        return self.function(*args, **kwargs)
+
+
+def unavailable(spec: str, err: Exception) -> Unavailable:
+    """The stand-in of the provider `spec` that `find` refused with `err` (not found, or failed to import)."""
+    if isinstance(err, ProviderNotFound):
+        return Unavailable(spec, str(err).split(": ", 1)[1])
+    return Unavailable(spec, f"importing {spec.partition(':')[0]} failed: {type(err).__name__}: {err}")
+
+
+def name_of(provider) -> str:
+    """How notes and run.json name a provider: ``module:function`` (a stand-in's own name)."""
+    if isinstance(provider, (Unavailable, Named)):
+        return provider.name
+    if isinstance(provider, str):
+        return provider
+    module = getattr(provider, "__module__", None) or type(provider).__module__
+    function = getattr(provider, "__qualname__", None) or type(provider).__qualname__
+    return f"{module}:{function}"
+
+
+def _is_spec(value) -> bool:
+    """Whether `value` is a ``module:function`` string (one colon, neither side blank)."""
+    return isinstance(value, str) and value.count(":") == 1 and all(part.strip() for part in value.split(":"))
+
+
+def resolve(values, what: str = "providers", strict: bool = False) -> tuple:
+    """`values` (a list or tuple of providers, or of ``module:function`` strings naming them) as a tuple
+    of callables, each string found now (`find`).
+
+    A string whose provider is not found or fails to import becomes an `Unavailable` stand-in (the
+    study notes it), or with `strict` raises.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming `what`, when `values` is a single string or not a list of callables and strings.
+    ProviderNotFound, or the error importing the provider's module raised
+        With `strict`, for the first string that names no provider.
+    """
+    if isinstance(values, str) or not isinstance(values, (list, tuple)):
+        raise TypeError(
+            f"{what} must be a list of providers (functions, or 'module:function' strings), "
+            f"got {type(values).__name__} {values!r}"
+        )
+    for value in values:
+        if not (callable(value) or _is_spec(value)):
+            raise ValueError(f"{what}: each provider is a function or 'module:function', got {value!r}")
+    found = []
+    for value in values:
+        if callable(value):
+            found.append(value)
+            continue
+        try:
+            found.append(find(value))
+        except Exception as err:  # not found, or failing to import: noted unless strict
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
+            if strict:
+                raise
+            found.append(unavailable(value, err))
+    return tuple(found)
+
+
+def call_all(providers: Sequence[Callable], *args, strict: bool = False) -> tuple[list, list]:
+    """Call each provider with `args`.
+
+    A provider that raises is noted and skipped, or with `strict` raised; one that raises
+    `NotProvided` (an `Unavailable` one included) is noted in either case.
+
+    Returns
+    -------
+    results : list of (provider's name, returned value) for the providers that answered
+    notes : one line per provider skipped or failed
+    """
+    results, notes = [], []
+    for provider in providers:
+        name = name_of(provider)
+        try:
+            results.append((name, provider(*args)))
+        except NotProvided as err:
+            notes.append(f"{name}: skipped, {err}")
+        except Exception as err:
+            if interrupts.is_interrupt(err):
+                raise KeyboardInterrupt from err
+            if strict:
+                raise
+            where = traceback.extract_tb(err.__traceback__)[-1]
+            notes.append(f"{name}: failed ({type(err).__name__}: {err}; at {where.filename}:{where.lineno})")
+    return results, notes
+
+
+# ---------------------------------------------------------------------------- the case's own designs
+def _case(case: CaseStudy | str) -> CaseStudy:
+    """`case`, or the registered case of that name (for callers that hold only the name)."""
+    return cases.get(case) if isinstance(case, str) else case
+
+
+def classical(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
+    """The case's classical controllers (the .8-.14 designs), designed from `known` (default: nominal)."""
+    case = _case(case)
     if case.classical is None:
-        raise NotProvided(f"the {name} case has no classical design")
+        raise NotProvided(f"the {case.plant} case has no classical design")
     return dict(homework.classical_design(case, known).controllers)
 
 
-def statespace(name: str, known: models.Plant | None = None) -> dict:
-    """The case's state-space controllers (.15-.17 and LQR), designed from `known`."""
-    case = cases.get(name)
+def statespace(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
+    """The case's state-space controllers (.15-.17 and LQR), designed from `known` (default: nominal)."""
+    case = _case(case)
     if case.statespace is None:
-        raise NotProvided(f"the {name} case has no state-space design")
+        raise NotProvided(f"the {case.plant} case has no state-space design")
     return homework.statespace_controllers(case, known)
 
 
-def mpc(name: str, known: models.Plant | None = None) -> dict:
-    """The case's linear and nonlinear MPC with its `mpc.MPCSettings`, designed from `known`."""
-    import mpc as mpc_package
-
-    case = cases.get(name)
+def mpc(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
+    """The case's linear and nonlinear MPC with its `mpc.MPCSettings`, designed from `known` (default: nominal)."""
+    case = _case(case)
     if case.mpc is None:
-        raise NotProvided(f"the {name} case has no MPC settings")
-    known = models.get(name) if known is None else known
+        raise NotProvided(f"the {case.plant} case has no MPC settings")
+    known = models.get(case.plant) if known is None else known
     return {
-        "linear MPC": mpc_package.linear_mpc(known, case.mpc, tracked=case.tracked),
-        "nonlinear MPC": mpc_package.nonlinear_mpc(known, case.mpc, tracked=case.tracked),
+        "linear MPC": linear_mpc(known, case.mpc, tracked=case.tracked),
+        "nonlinear MPC": nonlinear_mpc(known, case.mpc, tracked=case.tracked),
     }
 
 
-def tuned(name: str, known: models.Plant | None = None) -> dict:
+def tuned(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
     """The case's "tuned" design: its hand PID with the stored tuned gains (see `studies.tuner`)."""
-    from . import tuner
-
-    case = cases.get(name)
+    case = _case(case)
     if tuner.stored(case) is None:
-        raise NotProvided(f"no tuned gains stored for {name}; `python -m studies.tuner {name}` tunes them")
+        raise NotProvided(f"no tuned gains stored for {case.plant}; `python -m studies.tuner {case.plant}` tunes them")
     return tuner.controllers(case, known)
 
 
-def classical_answers(name: str) -> dict:
+def classical_answers(case: CaseStudy | str) -> dict:
     """The classical homework answers of the case, designed on the nominal plant."""
-    case = cases.get(name)
+    case = _case(case)
     if case.classical is None:
-        raise NotProvided(f"the {name} case has no classical design")
+        raise NotProvided(f"the {case.plant} case has no classical design")
     return homework.classical_answers(case)
 
 
-def statespace_answers(name: str) -> dict:
+def statespace_answers(case: CaseStudy | str) -> dict:
     """The state-space homework answers of the case, designed on the nominal plant."""
-    case = cases.get(name)
+    case = _case(case)
     if case.statespace is None:
-        raise NotProvided(f"the {name} case has no state-space design")
+        raise NotProvided(f"the {case.plant} case has no state-space design")
     return homework.statespace_answers(case)
+
+
+#: A case's own controllers, by kind: each provides nothing (`NotProvided`) for a case without that design.
+STANDARD: tuple[Provider, ...] = (classical, statespace, mpc, tuned)
+#: A case's own homework answers, by kind.
+STANDARD_ANSWERS: tuple[AnswerProvider, ...] = (classical_answers, statespace_answers)

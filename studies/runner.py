@@ -1,9 +1,9 @@
 """The one runner: every controller of a case study through every scenario, on the nonlinear plant.
 
-A case (`studies.case.CaseStudy`, declared in ``studies/cases/<name>.py``) names
-its plant, the controllers it compares, where they come from (provider
-functions ``module:function`` returning ``{label: controller}``) and its scenarios. The
-runner designs the controllers from the model known to them (the text's
+A case (`studies.case.CaseStudy`, declared in ``studies/cases/<name>.py`` or
+anywhere) names its plant, the controllers it compares, where they come from
+(providers, ``provider(case, known) -> {label: controller}``, see
+`studies.providers`) and its scenarios. The runner designs the controllers from the model known to them (the text's
 +5 % parameter error), simulates each scenario with `models.simulate_closed_loop`
 (every row comes from the nonlinear plant, never from a linear model), runs
 the parameter Monte Carlo of a `models.Block` as one batched CasADi map
@@ -12,17 +12,15 @@ same samples, and computes every column with `models.metrics`. Every
 controller runs every scenario on the same samples: there is no time budget,
 so the same command gives the same table on any machine.
 
-A provider that is not importable yet, or has no such function yet, is
-skipped with a note; the notes travel with the results into the tables.
+A provider that has nothing for the case, or fails, is skipped with a note;
+the notes travel with the results into the tables.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 import shutil
 import time
-import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -35,7 +33,10 @@ from designs.pid import SIGMA
 from models import Block, checks, deferred, interrupts, metrics, specs
 
 from . import SCENARIO_NAMES, distributed
+from .answers import collect
 from .case import CaseStudy, Scenario
+from .providers import NotProvided as NotProvided  # raised by providers; callers catch it from here too
+from .providers import call_all, name_of, resolve
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -73,6 +74,7 @@ class Options:
     quick: bool = False
 
     def __post_init__(self):
+        """Check every field (TypeError or ValueError naming it); `scenarios` becomes a tuple."""
         checks.integer(self.mc, "mc (Monte Carlo samples)", minimum=0)
         object.__setattr__(self, "scenarios", scenario_names(self.scenarios, "scenarios"))
         checks.integer(self.seed, "seed", minimum=0)
@@ -147,7 +149,7 @@ class StudyResult:
     notes : skipped providers, failures and other remarks, in order
     timing : seconds spent per phase
     answers : homework item -> answers (see `studies.answers`), with "errata"
-    providers : the ``module:function`` providers asked for controllers
+    providers : the names (``module:function``) of the providers asked for controllers
     trajectories : the case's solved optimal trajectories (`studies.trajectories.CaseTrajectories`), when
         `studies.solve_trajectories` ran
     """
@@ -175,108 +177,37 @@ class StudyResult:
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
 
 
-# ---------------------------------------------------------------------------- providers
-class NotProvided(LookupError):
-    """Raised by a provider that has nothing for this case (no design of its kind): noted, not a failure."""
+# ---------------------------------------------------------------------------- controllers
+def design_controllers(
+    study: CaseStudy, known: models.Plant, providers: Sequence | None = None, strict: bool = False
+) -> tuple[dict, list]:
+    """The study's controllers designed from `known`, in table order, and notes on what is missing.
 
-
-def provider_specs(value, what: str = "providers") -> tuple:
-    """`value` (a list or tuple of ``module:function`` strings) as a tuple, or an error naming `what`."""
-    if isinstance(value, str) or not isinstance(value, (list, tuple)):
-        raise TypeError(f"{what} must be a list of 'module:function' strings, got {type(value).__name__} {value!r}")
-    for spec in value:
-        if not isinstance(spec, str) or spec.count(":") != 1 or not all(part.strip() for part in spec.split(":")):
-            raise ValueError(f"{what}: each provider is 'module:function', got {spec!r}")
-    return tuple(value)
-
-
-class ProviderNotFound(LookupError):
-    """A ``module:function`` provider whose module cannot be imported or has no such function."""
-
-
-def find_provider(spec: str) -> Callable:
-    """The function a ``module:function`` provider names.
-
-    Raises
-    ------
-    ProviderNotFound
-        Naming the provider when its module does not exist or has no such function (an error
-        raised while importing an existing module propagates as it is).
-    """
-    module_name, _, function_name = spec.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as err:
-        if err.name and (module_name == err.name or module_name.startswith(err.name + ".")):
-            raise ProviderNotFound(f"provider {spec!r}: no module named {err.name!r}") from None
-        raise
-    function = getattr(module, function_name, None)
-    if not callable(function):
-        raise ProviderNotFound(f"provider {spec!r}: module {module_name} has no function {function_name}()")
-    return function
-
-
-def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) -> tuple[list, list]:
-    """Call each ``module:function`` provider.
-
-    A provider that does not exist (`ProviderNotFound`), fails to import or raises is noted and
-    skipped, or with `strict` raised; one that raises `NotProvided` is noted in either case.
+    Parameters
+    ----------
+    providers : replace the study's own (`CaseStudy.providers`): callables ``provider(case, known)``,
+        or ``module:function`` strings naming them (`studies.providers.resolve`)
 
     Returns
     -------
-    results : list of (spec, returned value) for the providers that answered
-    notes : one line per provider skipped or failed
+    {label: controller}: the study's declared labels first, in its order, then the others as provided;
+    notes: list of str
     """
-    results, notes = [], []
-    for spec in specs:
-        try:
-            function = find_provider(spec)
-        except ProviderNotFound as err:
-            if strict:
-                raise
-            notes.append(f"{spec}: skipped, {str(err).split(': ', 1)[1]}")
-            continue
-        except Exception as err:  # a provider that fails to import must not stop the other studies
-            if interrupts.is_interrupt(err):
-                raise KeyboardInterrupt from err
-            if strict:
-                raise
-            notes.append(f"{spec}: skipped, importing {spec.partition(':')[0]} failed: {type(err).__name__}: {err}")
-            continue
-        try:
-            results.append((spec, function(*args, **kwargs)))
-        except NotProvided as err:
-            notes.append(f"{spec}: skipped, {err}")
-        except Exception as err:
-            if interrupts.is_interrupt(err):
-                raise KeyboardInterrupt from err
-            if strict:
-                raise
-            where = traceback.extract_tb(err.__traceback__)[-1]
-            notes.append(f"{spec}: failed ({type(err).__name__}: {err}; at {where.filename}:{where.lineno})")
-    return results, notes
-
-
-def design_controllers(
-    study: CaseStudy, known: models.Plant, providers: Sequence[str] | None = None, strict: bool = False
-) -> tuple[dict, list]:
-    """The study's controllers designed from `known`, in table order, and notes on what is missing."""
-    found, notes = call_providers(
-        study.providers if providers is None else providers, study.plant, strict=strict, known=known
-    )
+    chosen = resolve(study.providers if providers is None else providers, strict=strict)
+    found, notes = call_all(chosen, study, known, strict=strict)
     collected: dict = {}
-    for spec, returned in found:
+    for name, returned in found:
         if not isinstance(returned, Mapping):
-            notes.append(f"{spec}: returned {type(returned).__name__}, not a dict of controllers; skipped")
+            notes.append(f"{name}: returned {type(returned).__name__}, not a dict of controllers; skipped")
             continue
         for label, controller in returned.items():
             if label in collected:
-                notes.append(f"{spec}: controller {label!r} already provided; the first one is kept")
+                notes.append(f"{name}: controller {label!r} already provided; the first one is kept")
             elif not isinstance(controller, models.Controller):
-                notes.append(f"{spec}: {label!r} is a {type(controller).__name__}, not a controller; skipped")
+                notes.append(f"{name}: {label!r} is a {type(controller).__name__}, not a controller; skipped")
             elif controller.n_reference != 1:
                 notes.append(
-                    f"{spec}: {label!r} takes {controller.n_reference} references; the studies "
+                    f"{name}: {label!r} takes {controller.n_reference} references; the studies "
                     "command the tracked coordinate only; skipped"
                 )
             else:
@@ -446,7 +377,7 @@ def run_study(
     study: CaseStudy,
     options: Options | None = None,
     *,
-    providers: Sequence[str] | None = None,
+    providers: Sequence | None = None,
     controllers: Mapping | None = None,
     progress: Callable[[int, int, str], None] | None = None,
     executor=None,
@@ -457,7 +388,8 @@ def run_study(
     ----------
     study : CaseStudy
     options : Options (defaults: all scenarios, 200 Monte Carlo samples, seed 0)
-    providers : replace the study's provider list (``module:function`` strings)
+    providers : replace the study's providers: callables ``provider(case, known)``, or ``module:function``
+        strings naming them (found before any work; one not found is noted, or with `Options.strict` raised)
     controllers : extra {label: controller} added after the providers' (for example your own design)
     progress : called as progress(done, total, text) after each simulation
     executor : where the Monte Carlo of Block controllers runs: None (this process), a
@@ -477,7 +409,7 @@ def run_study(
     options = Options() if options is None else options
     if not isinstance(options, Options):
         raise TypeError(f"options must be a studies.Options, got {type(options).__name__} {options!r}")
-    providers = None if providers is None else provider_specs(providers)
+    providers = None if providers is None else resolve(providers, strict=options.strict)
     if controllers is not None and not isinstance(controllers, Mapping):
         raise TypeError(f"controllers must be a dict {{label: controller}}, got {type(controllers).__name__}")
     if progress is not None and not callable(progress):
@@ -574,11 +506,9 @@ def run_study(
             done += 1
             if progress:
                 progress(done, total, f"{study.plant}: {label} / {scenario.name}")
-    table = _frame(rows, study, case)
+    table = _frame(rows, study)
     timing |= {"simulate_s": sim_time, "monte_carlo_s": mc_time, "total_s": time.perf_counter() - started}
     samples = pd.concat(sample_rows, ignore_index=True) if sample_rows else pd.DataFrame()
-    from .answers import collect
-
     answers, answer_notes = collect(study, options.strict)
     notes += answer_notes
     return StudyResult(
@@ -595,7 +525,7 @@ def run_study(
         timing,
         answers,
         truths,
-        tuple(study.providers if providers is None else providers),
+        tuple(name_of(p) for p in (study.providers if providers is None else providers)),
     )
 
 
@@ -757,12 +687,13 @@ TABLE_COLUMNS = (
 )
 
 
-def _frame(rows: list, study: CaseStudy, case) -> pd.DataFrame:
+def _frame(rows: list, study: CaseStudy) -> pd.DataFrame:
+    """The study table of `rows` (dicts): the columns of `TABLE_COLUMNS` in that order, absent ones NaN."""
     frame = pd.DataFrame(rows)
     for column in TABLE_COLUMNS:
         if column not in frame:
             frame[column] = np.nan
-    frame["tracked"] = case.tracked
+    frame["tracked"] = study.tracked
     frame["tracked_unit"] = study.tracked_unit
     frame["input_unit"] = study.input_unit
     if len(frame):

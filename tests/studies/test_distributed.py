@@ -37,7 +37,7 @@ def client():
 @pytest.fixture(scope="module")
 def pendulum_loop():
     case, plant = studies.get("pendulum"), models.get("pendulum")
-    block = providers.statespace("pendulum", known=case.known_plant())["pole placement"]
+    block = providers.statespace(case, case.known_plant())["pole placement"]
     return plant, block, case.scenarios[0].reference(case, 0.0)
 
 

@@ -4,6 +4,7 @@ divergence reported as such, noise levels of full-state controllers."""
 import dataclasses
 import math
 
+import example_providers
 import numpy as np
 import pytest
 
@@ -11,17 +12,20 @@ import models
 import studies
 from designs.discrete import dirty_derivative
 from models import metrics
-from studies import runner
+from studies import providers, runner
 
 EXAMPLE = "example_providers:controllers"
 STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
 
 
 def arm_study(**changes):
+    """The arm case with `changes` (e.g. its providers)."""
     return dataclasses.replace(studies.get("arm"), **changes)
 
 
 def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
+    """Providers named by 'module:function' strings (as the command line names them) are found before
+    the run; one that does not exist is noted where it stands, and a failing one does not stop the others."""
     study = arm_study(
         providers=(
             "no_such_package_for_studies.designs:controllers",
@@ -44,7 +48,7 @@ def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
     assert status["linear MPC"] == "degraded: solver failed on 10 of 500 steps"
     assert set(status.drop("linear MPC")) == {"ok"}
     # Strict: the first provider that is missing stops the study, and one that fails.
-    with pytest.raises(runner.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
+    with pytest.raises(providers.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
         runner.run_study(study, runner.Options(scenarios=("step",), mc=0, strict=True))
     with pytest.raises(RuntimeError, match="no design for arm"):
         runner.run_study(
@@ -56,7 +60,7 @@ def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
 def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
     """Each recorded sample, integrated through CVODES (a different integrator) from the recorded state
     under the recorded, clipped command, lands on the next recorded state; a linear model does not."""
-    study = arm_study(providers=(EXAMPLE,))
+    study = arm_study(providers=(example_providers.controllers,))
     result = runner.run_study(study, STEP_ONLY)
     run = result.runs[("LQR", "step")]
     plant = result.plant
@@ -78,7 +82,7 @@ def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
 
 
 def test_monte_carlo_is_reproducible_from_its_seed():
-    study = arm_study(providers=(EXAMPLE,))
+    study = arm_study(providers=(example_providers.controllers,))
     options = runner.Options(scenarios=("mc",), mc=6, seed=3)
     first = runner.run_study(study, options)
     again = runner.run_study(study, options)
@@ -100,7 +104,7 @@ def test_monte_carlo_is_reproducible_from_its_seed():
 
 
 def test_python_controllers_run_every_scenario_on_as_many_samples_and_report_solver_status():
-    study = arm_study(providers=(EXAMPLE,))
+    study = arm_study(providers=(example_providers.controllers,))
     options = runner.Options(scenarios=("step", "noise", "mc"), mc=4)
     result = runner.run_study(study, options)
     table = result.table.set_index(["controller", "scenario"])
@@ -114,7 +118,7 @@ def test_python_controllers_run_every_scenario_on_as_many_samples_and_report_sol
 
 
 def test_a_diverged_run_is_reported_as_diverged_with_its_time():
-    result = runner.run_study(arm_study(providers=("example_providers:diverging",)), STEP_ONLY)
+    result = runner.run_study(arm_study(providers=(example_providers.diverging,)), STEP_ONLY)
     row = result.table.iloc[0]
     # The example controller commands NaN from its 100th step (t = 1 s): the run diverges at that command,
     # before the plant integrates it.
@@ -191,7 +195,7 @@ def test_run_returns_the_table_as_a_dataframe_with_the_documented_columns():
 def test_two_rk4_substeps_give_the_tables_of_ten(plant):
     """The studies integrate with 2 RK4 sub-steps per sample; 10 (the simulator's default) change
     no metric of the step by more than 1e-5 relative."""
-    base = dataclasses.replace(studies.get(plant), providers=("example_providers:lqr_only",))
+    base = dataclasses.replace(studies.get(plant), providers=(example_providers.lqr_only,))
     rows = [runner.run_study(dataclasses.replace(base, substeps=n), STEP_ONLY).table.iloc[0] for n in (2, 10)]
     for key in ("rise_time_s", "settling_time_s", "overshoot_pct", "iae", "itae", "peak_u", "energy"):
         assert rows[0][key] == pytest.approx(rows[1][key], rel=1e-5, abs=1e-9), key
@@ -199,7 +203,7 @@ def test_two_rk4_substeps_give_the_tables_of_ten(plant):
 
 def test_a_design_with_its_own_actuator_runs_on_it():
     """IV.11 assumes 250 N m thrusters: that row's plant has them, the others keep 50 N m."""
-    study = dataclasses.replace(studies.get("uuv"), providers=("example_providers:with_own_actuator",))
+    study = dataclasses.replace(studies.get("uuv"), providers=(example_providers.with_own_actuator,))
     result = runner.run_study(study, STEP_ONLY)
     table = result.table.set_index("controller")
     assert table.loc["LQR", "u_limit"] == 50.0 and table.loc["lead-lag (IV.11)", "u_limit"] == 250.0
