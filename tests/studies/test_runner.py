@@ -11,7 +11,7 @@ import pytest
 import models
 import studies
 from designs.discrete import dirty_derivative
-from models import metrics
+from models import metrics, specs
 from studies import providers, runner
 
 EXAMPLE = "example_providers:controllers"
@@ -210,3 +210,50 @@ def test_a_design_with_its_own_actuator_runs_on_it():
     fast, slow = (result.runs[(label, "step")] for label in ("lead-lag (IV.11)", "LQR"))
     assert np.max(np.abs(fast.u)) > 50.0  # the same law asks for more than 50 N m ...
     assert table.loc["lead-lag (IV.11)", "rise_time_s"] < table.loc["LQR", "rise_time_s"]  # ... and gets it
+
+
+# ---------------------------------------------------------------------------- the steps of run_study
+def test_the_scenarios_asked_for_keep_the_studys_order_and_without_samples_no_monte_carlo():
+    study = studies.get("arm")
+    notes: list = []
+    chosen = runner.chosen_scenarios(study, runner.Options(scenarios=("mc", "step"), mc=0), notes)
+    assert [s.name for s in chosen] == ["step"] and notes == ["Monte Carlo skipped (0 samples requested)"]
+    notes = []
+    chosen = runner.chosen_scenarios(study, runner.Options(scenarios=("mc", "step"), mc=3), notes)
+    assert [s.name for s in chosen] == ["step", "mc"] and notes == []
+    assert [s.name for s in runner.chosen_scenarios(study, runner.Options(), [])] == list(studies.SCENARIO_NAMES)
+
+
+def test_a_callers_controller_replaces_a_providers_of_the_same_label_with_a_note():
+    designed = {"PD": "provided PD", "LQR": "provided LQR"}
+    notes = runner.add_controllers(designed, {"LQR": "mine", "extra": "also mine"})
+    assert designed == {"PD": "provided PD", "LQR": "mine", "extra": "also mine"}
+    assert notes == ["controller 'LQR' given twice; the provider's is replaced"]
+
+
+def test_a_failed_row_has_no_metrics_and_the_failed_verdict():
+    row = runner.failed_row(ValueError("first line\nsecond line " + "x" * 300))
+    assert row["status"] == "failed: ValueError: first line"
+    assert all(math.isnan(row[k]) for k in metrics.METRIC_COLUMNS)
+    assert row["verdict"] == specs.FAILED and row["verdict_detail"] == row["status"]
+    assert len(runner.failed_row(ValueError("y" * 300))["status"]) == 200
+
+
+def test_a_row_of_the_simulation_is_the_plant_simulated_directly():
+    """`Simulation.row` of the LQR's step: the metrics of the same closed loop run by
+    `models.simulate_closed_loop` (a second path), and the row's run kept for the plots."""
+    study = arm_study(providers=(example_providers.lqr_only,))
+    plant = models.get("arm")
+    lqr = example_providers.lqr_only(study, study.known_plant(plant))["LQR"]
+    simulation = runner.Simulation(study, STEP_ONLY, plant, None)
+    step = study.scenarios[0]
+    row = simulation.row("LQR", lqr, plant, step)
+    _, base = runner.tracked_equilibrium(plant, study)
+    run = models.simulate_closed_loop(
+        plant, lqr, step.reference(study, base), step.duration(study), substeps=study.substeps
+    )
+    expected = metrics.run_metrics(run, study.tracked)
+    assert (row["controller"], row["scenario"], row["kind"], row["status"]) == ("LQR", "step", "block", "ok")
+    for key in ("iae", "itae", "peak_u", "settling_time_s"):
+        assert row[key] == expected[key], key
+    assert simulation.runs[("LQR", "step")].x.shape == run.x.shape and simulation.notes == []
