@@ -17,12 +17,9 @@ or a row is not ok), 130 when interrupted (Ctrl-C), 0 otherwise.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import math
 import os
 import shutil
 import sys
-import textwrap
 import time
 from typing import Any
 
@@ -242,108 +239,6 @@ def _list(plants, providers) -> str:
     return "\n".join(lines)
 
 
-def _run_plant(
-    name: str, settings: dict, out: str, answers: bool, queue=None, executor=None, run_id: str | None = None
-) -> dict:
-    """Run and write one study; returns what the command prints (picklable, for --jobs and Dask)."""
-    from . import get, run_study
-    from .answers import format_answers
-    from .writers import not_ok_rows, verdict_counts
-
-    study = get(name)
-    progress = None if queue is None else (lambda done, total, text: queue.put((name, done, total, text)))
-    result = run_study(study, out=out, progress=progress, executor=executor, run_id=run_id, **settings)
-    table = result.table
-    return {
-        "name": name,
-        "answers": format_answers(study, result.answers, result.plant.title) if answers else None,
-        "controllers": len(result.controllers),
-        "rows": len(table),
-        "timing": result.timing,
-        "notes": list(result.notes),
-        "best": result.best("step"),
-        "counts": verdict_counts(table),
-        "not_ok": not_ok_lines(table),
-        "not_ok_rows": len(not_ok_rows(table)),
-    }
-
-
-def plant_task(task: tuple) -> tuple:
-    """One plant on a Dask worker: run it into a private folder, return its report and its files as bytes.
-
-    Nothing is written where the client can see it until every plant has come back (`install`).
-    """
-    import tempfile
-    from pathlib import Path
-
-    name, settings, answers, run_id = task
-    with tempfile.TemporaryDirectory(prefix="studies-") as folder:
-        report = _run_plant(name, settings, folder, answers, run_id=run_id)
-        files = {
-            str(path.relative_to(folder)): path.read_bytes()
-            for path in sorted(Path(folder).rglob("*"))
-            if path.is_file()
-        }
-    return report, files
-
-
-def install(out: str, files: dict) -> None:
-    """Write the plants' folders {relative path: bytes} into `out`, each plant folder replaced as a whole."""
-    import shutil
-    import uuid
-    from pathlib import Path
-
-    from models.files import write_bytes
-
-    folder = Path(out)
-    staging = folder / f".staging-{uuid.uuid4().hex[:8]}"
-    try:
-        for relative, data in files.items():
-            write_bytes(staging / relative, data)
-        for plant in sorted(p for p in staging.iterdir() if p.is_dir()):
-            target, old = folder / plant.name, folder / f".old-{plant.name}-{staging.name[9:]}"
-            if target.exists():
-                target.rename(old)
-            plant.rename(target)
-            shutil.rmtree(old, ignore_errors=True)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
-def not_ok_lines(table, width: int = 118) -> list:
-    """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".
-
-    Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
-    scenarios, so the list stays short while naming every (controller, scenario). A row that did not
-    run as designed says so beside its verdict: "violates (degraded)".
-    """
-    from .runner import status_kind
-
-    scenarios = list(dict.fromkeys(table.scenario))
-    groups: dict = {}
-    for row in table.to_dict("records"):
-        verdict, status = str(row.get("verdict")), str(row.get("status"))
-        if verdict == "meets specs" and status == "ok":
-            continue
-        kind = status_kind(status)
-        if verdict == "meets specs":
-            key = kind
-        elif kind == "ok" or verdict.startswith(kind):
-            key = verdict
-        else:
-            key = f"{verdict} ({kind})"
-        groups.setdefault(key, {}).setdefault(row["controller"], []).append(row["scenario"])
-    lines = []
-    for key, by_controller in groups.items():
-        by_set: dict = {}
-        for controller, where in by_controller.items():
-            tag = "all" if where == scenarios else ", ".join(where)
-            by_set.setdefault(tag, []).append(controller)
-        text = "; ".join(f"{', '.join(controllers)} [{tag}]" for tag, controllers in by_set.items())
-        lines += textwrap.wrap(f"{key}: {text}", width, initial_indent="  ", subsequent_indent="      ")
-    return lines
-
-
 def _plant_line(done: dict) -> str:
     plural = {"meets specs": "meet specs", "violates": "violate"}
     counts = ", ".join(
@@ -367,23 +262,6 @@ def closing_lines(finished: list, out: str, verbose: bool = False) -> list:
         "row misses, and by how much"
     )
     return lines
-
-
-@contextlib.contextmanager
-def _stop_workers_on_error():
-    """On any exception (Ctrl-C included) end the worker processes now, so leaving the process pool
-    does not wait for their plants to finish; their partial files are in the run's staging folder."""
-    try:
-        yield
-    except BaseException:
-        import multiprocessing
-
-        children = multiprocessing.active_children()
-        for child in children:
-            child.terminate()
-        for child in children:
-            child.join(10)
-        raise
 
 
 def command_line_providers(specs) -> tuple[list, list]:
@@ -422,105 +300,6 @@ def check_resources(plants, settings: dict) -> None:
     for name in plants:
         study = get(name)
         runner.check_resources(study, options, models.get(study.plant).n_params)
-
-
-class _Inline:
-    """A queue stand-in for running plants in this process: puts go straight to the progress bar."""
-
-    def __init__(self, progress: Progress):
-        self.progress = progress
-
-    def put(self, item) -> None:
-        self.progress.update(*item)
-
-
-def _run_all(
-    plants,
-    settings: dict,
-    providers: list,
-    out: str,
-    answers: bool,
-    jobs: int,
-    progress: Progress,
-    executor=None,
-    run_id: str | None = None,
-) -> list:
-    from . import get
-
-    # Parallel jobs take the plants longest first, so they finish together (a plant not in RUN_SECONDS first
-    # of all); every order writes the same tables.
-    order = sorted(plants, key=lambda name: -RUN_SECONDS.get(name, math.inf))
-    per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in plants}
-    finished = []
-    if executor is not None and executor.distributed and len(plants) > 1:
-        import uuid
-
-        from distributed import as_completed
-
-        run = uuid.uuid4().hex[:8]
-        futures = [
-            executor.client.submit(
-                plant_task, (name, per_plant[name], answers, run_id), pure=False, key=f"plant-{name}-{run}"
-            )
-            for name in order
-        ]
-        reports: list = []
-        files: dict = {}
-        try:
-            for future in as_completed(futures):  # as they finish, so the bar moves
-                report, written = _gather(future)
-                reports.append(report)
-                files |= written
-                progress.update(report["name"], 1, 1, f"{report['name']} done")
-        finally:
-            executor.client.cancel(futures)
-        install(out, files)
-        return reports
-    if jobs == 1 or (executor is not None and executor.distributed):
-        for name in plants:
-            finished.append(_run_plant(name, per_plant[name], out, answers, _Inline(progress), executor, run_id))
-        return finished
-    import concurrent.futures
-    import multiprocessing
-    import queue as queue_module
-
-    context = multiprocessing.get_context("spawn")
-    with (
-        context.Manager() as manager,
-        concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool,
-        _stop_workers_on_error(),
-    ):
-        messages = manager.Queue()
-        pending = {
-            pool.submit(_run_plant, name, per_plant[name], out, answers, messages, None, run_id) for name in order
-        }
-        while pending:
-            try:
-                progress.update(*messages.get(timeout=0.2))
-            except queue_module.Empty:
-                pass
-            done = {f for f in pending if f.done()}
-            for future in done:
-                finished.append(future.result())
-            pending -= done
-        while not messages.empty():
-            progress.update(*messages.get())
-    return finished
-
-
-def _gather(future):
-    """A plant task's result, with a dead worker reported as `studies.distributed.RunFailed`."""
-    from distributed import KilledWorker
-
-    from .distributed import RunFailed
-
-    try:
-        return future.result()
-    except KilledWorker as err:
-        raise RunFailed(
-            f"{future.key}: a Dask worker died while running it and the scheduler gave up after "
-            f"retrying ({err}); nothing was written"
-        ) from None
 
 
 def _run_sweep(args, p, plants, settings, chosen, progress_stream) -> int:
@@ -632,10 +411,13 @@ def main(argv=None) -> int:
     if args.sweep:
         return _run_sweep(args, p, plants, settings, chosen, sys.stderr)
 
-    from . import writers
+    # The batch and the page writers import Jinja2 and, through the plots, Matplotlib (0.1 s and 0.6 s,
+    # measured here): imported when plants run, so --list, --help and a refused command line do without them.
+    from . import batch, get, writers
     from .distributed import connect
 
     answers = args.answers or args.verbose
+    per_plant = {name: settings | {"providers": list(get(name).providers) + chosen} for name in plants}
     started = time.perf_counter()
     run_id = writers.new_run_id()
     staging = writers.new_staging(args.out, run_id)
@@ -644,8 +426,10 @@ def main(argv=None) -> int:
     interrupts.terminate_as_interrupt()  # kill / a scheduler's SIGTERM: stop as on Ctrl-C, workers included
     published = False
     try:
-        with connect(args.scheduler, args.workers) as executor:
-            finished = _run_all(plants, settings, chosen, str(staging), answers, jobs, progress, executor, run_id)
+        with connect(args.scheduler, args.workers, jobs) as executor:
+            finished = batch.run_plants(
+                plants, per_plant, str(staging), answers, executor, progress.update, run_id, longest_first=RUN_SECONDS
+            )
         progress.close()
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
             writers.publish(staging, args.out, registered, run_id)

@@ -241,7 +241,9 @@ def test_the_command_reads_an_interrupt_reported_as_an_error_as_an_interrupt(wor
             "<built-in function Function_call> returned a result with an exception set: KeyboardInterrupt"
         )
 
-    monkeypatch.setattr(command, "_run_all", interrupted)
+    from studies import batch
+
+    monkeypatch.setattr(batch, "run_plants", interrupted)
     monkeypatch.chdir(workdir)
     before = previous_run(workdir / "out")
     assert command.main(["arm", "--quick", "--out", "out"]) == 130
