@@ -3,8 +3,8 @@
 The model items (.1 kinetic energy and .3 equations of motion as printed
 expressions, .5 equilibria, .6 transfer functions, .7 state space) come from
 the plant declared in `models`; the design items (.8, .10, .13, .14 and
-.15-.17) from the case's answer providers (``provider(case)``, see
-`studies.providers`); the errata from the case files' data (`studies.errata`).
+.15-.17) from the case's answer providers (``provider(case)``, called
+through `studies.provider_calls`); the errata from the case files' data (`studies.errata`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from models.linear import clean_tf, tf_string
 from . import cases
 from .case import CaseStudy
 from .errata import errata_of
-from .providers import call_all, resolve
+from .provider_calls import call_all, resolve
 
 if TYPE_CHECKING:
     import control

@@ -266,11 +266,11 @@ def closing_lines(finished: list, out: str, verbose: bool = False) -> list:
 
 def command_line_providers(specs) -> tuple[list, list]:
     """The ``--provider MODULE:FUNCTION`` providers, found before any work, and one message per provider
-    that does not exist or fails to import; such a provider is run as a `studies.providers.Unavailable`
+    that does not exist or fails to import; such a provider is run as a `studies.provider_calls.Unavailable`
     stand-in, which each study notes."""
     from models import interrupts
 
-    from .providers import ProviderNotFound, find, unavailable
+    from .provider_calls import ProviderNotFound, find, unavailable
 
     found, problems = [], []
     for spec in specs:

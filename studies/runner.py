@@ -2,10 +2,11 @@
 
 A case (`studies.case.CaseStudy`, declared in ``studies/cases/<name>.py`` or
 anywhere) names its plant, the controllers it compares, where they come from
-(providers, ``provider(case, known) -> {label: controller}``, see
-`studies.providers`) and its scenarios. The runner designs the controllers from the model known to them (the text's
-+5 % parameter error), simulates each scenario with `models.simulate_closed_loop`
-(every row comes from the nonlinear plant, never from a linear model), runs
+(providers, ``provider(case, known) -> {label: controller}``, called through
+`studies.provider_calls`) and its scenarios. The runner designs the controllers
+from the model known to them (the text's +5 % parameter error), simulates
+each scenario with `models.simulate_closed_loop` (every row comes from the
+nonlinear plant, never from a linear model), runs
 the parameter Monte Carlo of a `models.Block` as one batched CasADi map
 (`models.monte_carlo`) and of any other controller (MPC) as a loop over the
 same samples, and computes every column with `models.metrics`. Every
@@ -35,8 +36,8 @@ from models import Block, checks, deferred, interrupts, metrics, specs
 from . import SCENARIO_NAMES, distributed
 from .answers import collect
 from .case import CaseStudy, Scenario
-from .providers import NotProvided as NotProvided  # raised by providers; callers catch it from here too
-from .providers import call_all, name_of, resolve
+from .provider_calls import NotProvided as NotProvided  # raised by providers; callers catch it from here too
+from .provider_calls import call_all, name_of, resolve
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -186,7 +187,7 @@ def design_controllers(
     Parameters
     ----------
     providers : replace the study's own (`CaseStudy.providers`): callables ``provider(case, known)``,
-        or ``module:function`` strings naming them (`studies.providers.resolve`)
+        or ``module:function`` strings naming them (`studies.provider_calls.resolve`)
 
     Returns
     -------
@@ -416,7 +417,7 @@ def run_study(
     ------
     TypeError, ValueError
         Naming the argument, before any work, when one is not what is allowed.
-    studies.providers.ProviderNotFound
+    studies.provider_calls.ProviderNotFound
         With `Options.strict`, before any work, for a provider string that names no provider.
     studies.distributed.RunFailed
         When work sent to a Dask cluster could not complete (never noted as a failed row).

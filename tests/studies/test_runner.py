@@ -12,7 +12,7 @@ import models
 import studies
 from designs.discrete import dirty_derivative
 from models import metrics, specs
-from studies import providers, runner
+from studies import provider_calls, runner
 
 EXAMPLE = "example_providers:controllers"
 STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
@@ -48,7 +48,7 @@ def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
     assert status["linear MPC"] == "degraded: solver failed on 10 of 500 steps"
     assert set(status.drop("linear MPC")) == {"ok"}
     # Strict: the first provider that is missing stops the study, and one that fails.
-    with pytest.raises(providers.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
+    with pytest.raises(provider_calls.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
         runner.run_study(study, runner.Options(scenarios=("step",), mc=0, strict=True))
     with pytest.raises(RuntimeError, match="no design for arm"):
         runner.run_study(
