@@ -13,13 +13,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import models
 from models import signals
 from models.specs import Specs
 
-if TYPE_CHECKING:
-    import models
+#: The scenarios a study can run, as named on the command line (`Scenario.name`).
+SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
 #: The text's parameter error: the controller knows each uncertain parameter to ±5 % (I.11(a), II.11(a), ...).
 KNOWN_ERROR = 0.05
@@ -243,6 +244,7 @@ class CaseStudy:
         return plant.with_input_limit(self.input_limits[label]) if label in self.input_limits else plant
 
     def state_bounds(self, params: Mapping[str, float]) -> dict:
+        """{state name: (low, high)} of the plant with `params` (`bounds`; none without it), SI units."""
         return dict(self.bounds(dict(params))) if self.bounds else {}
 
     def specs_for(self, scenario: str, params: Mapping[str, float]) -> Specs:
@@ -252,8 +254,6 @@ class CaseStudy:
 
     def known_plant(self, plant: models.Plant | None = None) -> models.Plant:
         """The model the controllers are designed from: the uncertain parameters scaled by 1 + known_rel."""
-        import models
-
         plant = models.get(self.plant) if plant is None else plant
         return models.perturbed(plant, self.known_rel, 1.0) if self.known_rel else plant
 

@@ -21,9 +21,20 @@ import os
 import shutil
 import sys
 import time
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
-from . import SCENARIO_NAMES, listing
+import models
+from models import checks, deferred, files, interrupts
+
+from . import cases, distributed, runner, sweep
+from .case import SCENARIO_NAMES
+from .provider_calls import ProviderNotFound, find, unavailable
+
+if TYPE_CHECKING:
+    import tqdm
+else:  # 0.06 s to import: the bar is made once the command line is checked
+    tqdm = deferred.module("tqdm")
 
 #: Defaults of a full run and of --quick: Monte Carlo samples of every controller (MPC included).
 FULL = {"mc": 200}
@@ -34,6 +45,7 @@ RUN_SECONDS = {"crane": 80.0, "pendulum": 58.0, "ballbeam": 43.0, "satellite": 3
 
 
 def _count(text: str) -> int:
+    """--mc: a whole number of samples >= 0."""
     try:
         value = int(text)
     except ValueError:
@@ -44,6 +56,7 @@ def _count(text: str) -> int:
 
 
 def _seed(text: str) -> int:
+    """--seed: a whole number >= 0."""
     try:
         value = int(text)
     except ValueError:
@@ -54,6 +67,7 @@ def _seed(text: str) -> int:
 
 
 def _folder(text: str) -> str:
+    """--out: a folder name, not blank and without a NUL character."""
     if not text.strip():
         raise argparse.ArgumentTypeError(f"expected a folder name, got {text!r} (use . for this folder)")
     if "\0" in text:
@@ -61,16 +75,8 @@ def _folder(text: str) -> str:
     return text
 
 
-def _known_names() -> list:
-    """The plants the command knows: the case files' (read without importing them), or the imported registry."""
-    if "studies.cases" in sys.modules:
-        from . import names
-
-        return list(names())
-    return list(listing.names())
-
-
 def parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m studies`` (its help lists the registered plants)."""
     p = argparse.ArgumentParser(
         prog="python -m studies",
         description=__doc__,
@@ -79,7 +85,7 @@ def parser() -> argparse.ArgumentParser:
         "  python -m studies pendulum --sweep m2=0.5:2:8 --workers 2\n  python -m studies --list",
     )
     p.add_argument(
-        "plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(_known_names())})"
+        "plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(cases.names())})"
     )
     p.add_argument(
         "--scenario",
@@ -161,20 +167,18 @@ def parser() -> argparse.ArgumentParser:
 class Progress:
     """One tqdm bar over every plant's runs, its total fixed before the run starts.
 
-    Each plant has a share of the total: its declared controllers times its scenarios (from the
-    case files, `studies.listing`). `update(plant, done, total, text)` after each simulation moves
-    the bar to the plant's share times done/total, so controllers a provider adds or lacks change
-    the pace, never the total.
+    Each plant has a share of the total: its declared controllers times its scenarios
+    (`progress_slots`). `update(plant, done, total, text)` after each simulation, or once when a plant
+    run elsewhere is done, moves the bar to the plant's share times done/total, so controllers a
+    provider adds or lacks change the pace, never the total.
     """
 
     def __init__(self, slots: dict, stream=None, disable: bool = False):
-        from tqdm import tqdm
-
         stream = stream or sys.stderr
         tty = stream.isatty()
         self.slots = dict(slots)
         self.done = dict.fromkeys(self.slots, 0.0)
-        self.bar = tqdm(
+        self.bar = tqdm.tqdm(
             total=sum(self.slots.values()),
             unit="run",
             file=stream,
@@ -187,6 +191,7 @@ class Progress:
         )
 
     def update(self, plant: str, done: int, total: int, text: str) -> None:
+        """`plant` has made `done` of its `total` runs; `text` (its first 50 characters) follows the bar."""
         self.done[plant] = self.slots.get(plant, 0) * min(done, total) / max(total, 1)
         reached = int(round(sum(self.done.values())))
         self.bar.set_postfix_str(text[:50], refresh=False)
@@ -194,6 +199,7 @@ class Progress:
             self.bar.update(reached - self.bar.n)
 
     def close(self) -> None:
+        """End the bar (its last state stays on the stream)."""
         self.bar.close()
 
 
@@ -201,16 +207,18 @@ def progress_slots(plants, scenarios, settings: dict) -> dict:
     """plant -> runs it is expected to make: declared controllers x the scenarios it will run."""
     slots = {}
     for name in plants:
-        listed = listing.get(name) if name in listing.names() else None
-        declared = listed.scenarios if listed else SCENARIO_NAMES
+        case = cases.get(name)
         chosen = [
-            s for s in declared if (scenarios is None or s in scenarios) and not (s == "mc" and settings.get("mc") == 0)
+            s.name
+            for s in case.scenarios
+            if (scenarios is None or s.name in scenarios) and not (s.name == "mc" and settings.get("mc") == 0)
         ]
-        slots[name] = max(1, len(chosen) * len(listed.controllers if listed else (1,)))
+        slots[name] = max(1, len(chosen) * len(case.controllers))
     return slots
 
 
 def _scenarios(values, p: argparse.ArgumentParser):
+    """The --scenario names (repeated or comma-separated; None for all), each checked."""
     if not values:
         return None
     names = [n.strip() for v in values for n in v.split(",") if n.strip()]
@@ -223,13 +231,13 @@ def _scenarios(values, p: argparse.ArgumentParser):
 
 
 def _list(plants, providers) -> str:
-    """Plants, scenarios and declared controllers, read from the case files (nothing designed or imported)."""
-    lines = ["plants: " + ", ".join(_known_names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
+    """Plants, scenarios and declared controllers, as the registered cases declare them (nothing designed)."""
+    lines = ["plants: " + ", ".join(cases.names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
     for name in plants:
-        listed = listing.get(name)
-        lines.append(f"{name}: {listed.source}")
-        lines.append("  scenarios: " + ", ".join(listed.scenarios))
-        lines.append("  controllers: " + ", ".join(listed.controllers))
+        case = cases.get(name)
+        lines.append(f"{name}: {case.source}")
+        lines.append("  scenarios: " + ", ".join(s.name for s in case.scenarios))
+        lines.append("  controllers: " + ", ".join(case.controllers))
         lines += [f"  + the controllers of {spec}, named when they are designed" for spec in providers]
     lines += [
         "",
@@ -240,6 +248,7 @@ def _list(plants, providers) -> str:
 
 
 def _plant_line(done: dict) -> str:
+    """A plant's closing line: "arm: 12 controllers, 60 rows: 50 meet specs, 10 violate; best step ITAE: LQR"."""
     plural = {"meets specs": "meet specs", "violates": "violate"}
     counts = ", ".join(
         f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items() if n
@@ -264,14 +273,10 @@ def closing_lines(finished: list, out: str, verbose: bool = False) -> list:
     return lines
 
 
-def command_line_providers(specs) -> tuple[list, list]:
+def command_line_providers(specs: Sequence[str]) -> tuple[list, list]:
     """The ``--provider MODULE:FUNCTION`` providers, found before any work, and one message per provider
     that does not exist or fails to import; such a provider is run as a `studies.provider_calls.Unavailable`
     stand-in, which each study notes."""
-    from models import interrupts
-
-    from .provider_calls import ProviderNotFound, find, unavailable
-
     found, problems = [], []
     for spec in specs:
         try:
@@ -290,45 +295,37 @@ def command_line_providers(specs) -> tuple[list, list]:
 def check_resources(plants, settings: dict) -> None:
     """Refuse, before any work, settings whose Monte Carlo would hold more memory than allowed
     (`models.checks.ResourceLimitError` naming the samples and the limit)."""
-    import models
-
-    from . import get, runner
-
     keys = ("scenarios", "mc", "seed")
     chosen: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in settings.items() if k in keys}
     options = runner.Options(**chosen)
     for name in plants:
-        study = get(name)
+        study = cases.get(name)
         runner.check_resources(study, options, models.get(study.plant).n_params)
 
 
-def _run_sweep(args, p, plants, settings, chosen, progress_stream) -> int:
-    from . import get, runner
-    from .distributed import connect
-    from .sweep import Grid, run_sweep, sweep_summary, write_sweep
-
+def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen: list, stream) -> int:
+    """``--sweep PARAM=LOW:HIGH:N``: every controller of the one plant over the grid, into OUT/PLANT/sweep.*;
+    returns the exit status (exit 2 through `p` for a bad sweep)."""
     if len(plants) != 1:
         p.error(f"--sweep runs one plant; name exactly one, got {len(plants)}")
     try:
-        grid = Grid.parse(args.sweep)
+        grid = sweep.Grid.parse(args.sweep)
     except ValueError as err:
         p.error(str(err))
     scenario = settings["scenarios"] or ["step"]
     if len(scenario) != 1 or scenario[0] == "mc":
         p.error(f"--sweep runs one scenario other than mc; got {', '.join(scenario)}")
-    import models
-
     name = plants[0]
     plant = models.get(name)
     if grid.param not in plant.params:
         p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
-    study = get(name)
-    progress = Progress({name: len(listing.get(name).controllers)}, progress_stream, disable=args.quiet)
+    study = cases.get(name)
+    progress = Progress({name: len(study.controllers)}, stream, disable=args.quiet)
     started = time.perf_counter()
     try:
-        with connect(args.scheduler, args.workers) as executor:
-            table, notes = run_sweep(
+        with distributed.connect(args.scheduler, args.workers) as executor:
+            table, notes = sweep.run_sweep(
                 study,
                 grid,
                 scenario=scenario[0],
@@ -342,11 +339,11 @@ def _run_sweep(args, p, plants, settings, chosen, progress_stream) -> int:
         print(f"python -m studies: the sweep failed: {type(err).__name__}: {err}", file=sys.stderr)
         return 1
     progress.close()
-    write_sweep(study, grid, table, args.out, notes, scenario[0])
+    sweep.write_sweep(study, grid, table, args.out, notes, scenario[0])
     lines = [
         f"{name}: {table.controller.nunique()} controllers x {len(grid.values)} values of {grid.param} "
         f"({grid.values[0]:g} to {grid.values[-1]:g}), scenario {scenario[0]}",
-        *sweep_summary(table, grid),
+        *sweep.sweep_summary(table, grid),
     ]
     lines += [f"  note: {n}" for n in notes if args.verbose or "failed" in n]
     folder = os.path.join(args.out, name)
@@ -358,10 +355,9 @@ def _run_sweep(args, p, plants, settings, chosen, progress_stream) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    p = parser()
-    args = p.parse_args(argv)
-    registered = _known_names()
+def _checked_plants(p: argparse.ArgumentParser, args) -> tuple[list, list | None]:
+    """(plants, scenarios) the command line asks for (exit 2 through `p` for what is not allowed)."""
+    registered = list(cases.names())
     plants = args.plants or list(registered)
     unknown = [name for name in plants if name not in registered]
     if unknown:
@@ -377,6 +373,14 @@ def main(argv=None) -> int:
         p.error(f"--workers must be >= 1, got {args.workers}")
     if args.workers is not None and args.scheduler:
         p.error("give --workers (a local Dask cluster) or --scheduler (an existing one), not both")
+    return plants, scenarios
+
+
+def main(argv=None) -> int:
+    """``python -m studies [PLANT ...] [options]``; returns the exit status (see the module's docstring)."""
+    p = parser()
+    args = p.parse_args(argv)
+    plants, scenarios = _checked_plants(p, args)
     if args.list:
         print(_list(plants, args.provider))
         return 0
@@ -391,9 +395,6 @@ def main(argv=None) -> int:
         "strict": args.strict,
         "threads": max(1, 2 // jobs),
     }
-
-    from models import checks, files, interrupts
-
     try:
         check_resources(plants, settings)
     except checks.ResourceLimitError as err:
@@ -410,25 +411,41 @@ def main(argv=None) -> int:
         p.error(str(err))
     if args.sweep:
         return _run_sweep(args, p, plants, settings, chosen, sys.stderr)
+    where = (
+        f"on Dask ({args.scheduler or f'{args.workers} local workers'})"
+        if dask
+        else f"with {jobs} job{'s' if jobs > 1 else ''}"
+    )
+    return _run(args, plants, settings, chosen, missing, jobs, where)
 
+
+def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: int, where: str) -> int:
+    """Run the plants into a staging folder, publish it into OUT when every plant is done, and print the
+    closing lines; returns the exit status (1 failed, 130/143 interrupted, 1 with --strict and a row not ok)."""
     # The batch and the page writers import Jinja2 and, through the plots, Matplotlib (0.1 s and 0.6 s,
     # measured here): imported when plants run, so --list, --help and a refused command line do without them.
-    from . import batch, get, writers
-    from .distributed import connect
+    from . import batch, writers
 
-    answers = args.answers or args.verbose
-    per_plant = {name: settings | {"providers": list(get(name).providers) + chosen} for name in plants}
+    registered = list(cases.names())
+    per_plant = {name: settings | {"providers": list(cases.get(name).providers) + chosen} for name in plants}
     started = time.perf_counter()
     run_id = writers.new_run_id()
     staging = writers.new_staging(args.out, run_id)
-    progress = Progress(progress_slots(plants, scenarios, settings), disable=args.quiet)
+    progress = Progress(progress_slots(plants, settings["scenarios"], settings), disable=args.quiet)
     interrupts.watch()
     interrupts.terminate_as_interrupt()  # kill / a scheduler's SIGTERM: stop as on Ctrl-C, workers included
     published = False
     try:
-        with connect(args.scheduler, args.workers, jobs) as executor:
+        with distributed.connect(args.scheduler, args.workers, jobs) as executor:
             finished = batch.run_plants(
-                plants, per_plant, str(staging), answers, executor, progress.update, run_id, longest_first=RUN_SECONDS
+                plants,
+                per_plant,
+                str(staging),
+                args.answers or args.verbose,
+                executor,
+                progress.update,
+                run_id,
+                longest_first=RUN_SECONDS,
             )
         progress.close()
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
@@ -463,16 +480,16 @@ def main(argv=None) -> int:
         )
         return 143 if interrupts.terminated() else 130
     finished = sorted(finished, key=lambda d: registered.index(d["name"]))
+    return _closing(args, finished, missing, f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
+
+
+def _closing(args, finished: list, missing: list, total: str) -> int:
+    """Print the answers asked for and the closing lines of a finished run; the exit status."""
     for done in finished:
         if done["answers"]:
             print(done["answers"], flush=True)
-    where = (
-        f"on Dask ({args.scheduler or f'{args.workers} local workers'})"
-        if dask
-        else f"with {jobs} job{'s' if jobs > 1 else ''}"
-    )
     lines = closing_lines(finished, args.out, args.verbose)
-    lines.append(f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
+    lines.append(total)
     if missing:
         lines.append(f"python -m studies: ran without {len(missing)} missing provider(s): " + "; ".join(missing))
     not_ok = sum(done["not_ok_rows"] for done in finished)

@@ -33,9 +33,9 @@ import models.closed_loop
 from designs.pid import SIGMA
 from models import Block, checks, deferred, interrupts, metrics, specs
 
-from . import SCENARIO_NAMES, distributed
+from . import distributed
 from .answers import collect
-from .case import CaseStudy, Scenario
+from .case import SCENARIO_NAMES, CaseStudy, Scenario
 from .provider_calls import NotProvided as NotProvided  # raised by providers; callers catch it from here too
 from .provider_calls import call_all, name_of, resolve
 
