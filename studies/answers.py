@@ -54,9 +54,8 @@ def printed_model(plant: models.Plant, numeral: str) -> dict:
 @functools.lru_cache(maxsize=16)
 def _printed(declaration, numeral: str) -> dict:
     """The .1 and .3 answers of `declaration` (cached: `printed_model` hands out copies)."""
-    # models.symbolic builds its operator table from SymPy when imported (0.5 s here, measured with
-    # -X importtime); imported at the first printed model, `python -m studies --list` and a refused
-    # command line do without it.
+    # models.symbolic builds its operator table from SymPy when imported (0.28 s here, -X importtime,
+    # median of 5); imported at the first printed model, `python -m studies --list` does without it.
     from models import symbolic
 
     T = symbolic.kinetic_energy(declaration)
