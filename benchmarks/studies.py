@@ -66,7 +66,7 @@ PLANT, SAMPLE_PERIOD, DURATION, SUBSTEPS, THREADS, REL = "pendulum", 0.01, 20.0,
 
 def pole_placement(known: models.Plant) -> StateFeedback:
     """The pendulum case's II.15(c) pole-placement block, designed from `known`."""
-    return providers.statespace(PLANT, known)["pole placement"]
+    return providers.statespace(studies.get(PLANT), known)["pole placement"]
 
 
 def python_control_loop(plant: models.Plant, block: StateFeedback) -> control.InterconnectedSystem:

@@ -18,6 +18,7 @@ from designs.pid import PID, pd_design
 from designs.statespace import second_order_poles
 from models.specs import Specs
 from mpc import MPCSettings
+from studies import providers
 from studies.case import CaseStudy, input_disturbance, step
 from studies.homework import ClassicalDesign, StateSpaceChoices, record
 
@@ -63,6 +64,8 @@ CASE = CaseStudy(
     tracked_unit="m",
     input_unit="N",
     scenarios=(step(), input_disturbance()),
+    providers=providers.STANDARD,  # its own designs below, by kind: classical, state space, MPC, tuned
+    answer_providers=providers.STANDARD_ANSWERS,
     known_rel=0.05,  # the designs see m, k and b 5 % off, as in the six case studies
     specs={
         "*": Specs(

@@ -5,8 +5,8 @@
 >>> result = studies.run_study("arm", mc=50, out="results")   # everything, files written
 
 Each case study is one file, ``studies/cases/<name>.py``, defining ``CASE =
-CaseStudy(...)``: its numbers, scenarios, designs, drawing and errata.
-`studies.cases` is the registry (`names()`, `get`, `register`);
+CaseStudy(...)``: its numbers, scenarios, providers, designs, drawing and
+errata. `studies.cases` is the registry (`names()`, `get`, `register`);
 `studies.runner` runs every controller on the nonlinear plant,
 `models.metrics` computes every column and `studies.writers` writes the
 tables. ``python -m studies`` runs every registered case.
@@ -15,17 +15,17 @@ tables. ``python -m studies`` runs every registered case.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
+from . import runner, trajectories
+from .case import SCENARIO_NAMES, CaseStudy
+from .cases import get, names, register, unregister
+from .runner import Options, StudyResult
+
 if TYPE_CHECKING:
     import pandas as pd
-
-    from .case import CaseStudy
-    from .runner import Options, StudyResult
-
-#: The scenarios a study can run, as named on the command line.
-SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
 __all__ = [
     "CaseStudy",
@@ -41,47 +41,6 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    # The runner imports pandas; `python -m studies` with bad arguments should not wait for it.
-    if name in ("Options", "StudyResult"):
-        from . import runner
-
-        return getattr(runner, name)
-    if name == "CaseStudy":
-        from .case import CaseStudy
-
-        return CaseStudy
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def names() -> tuple[str, ...]:
-    """Names of the registered case studies, in the text's order (see `studies.cases`)."""
-    from . import cases
-
-    return cases.names()
-
-
-def get(name: str) -> CaseStudy:
-    """The case study `name` (ValueError listing the registered ones otherwise)."""
-    from . import cases
-
-    return cases.get(name)
-
-
-def register(case: CaseStudy, replace: bool = False) -> CaseStudy:
-    """Add a user's case study to the registry (see `studies.cases.register`)."""
-    from . import cases
-
-    return cases.register(case, replace)
-
-
-def unregister(name: str) -> None:
-    """Remove a case study from the registry."""
-    from . import cases
-
-    cases.unregister(name)
-
-
 def run_study(
     name: str | CaseStudy,
     *,
@@ -90,7 +49,7 @@ def run_study(
     seed: int = 0,
     quick: bool = False,
     out: str | os.PathLike | None = None,
-    providers: Sequence[str] | None = None,
+    providers: Sequence | None = None,
     controllers: Mapping | None = None,
     strict: bool = False,
     threads: int = 2,
@@ -103,14 +62,15 @@ def run_study(
 
     Parameters
     ----------
-    name : name of a registered case study, or a `CaseStudy`
+    name : name of a registered case study, or a `CaseStudy` (registered or not)
     scenarios : names among "step", "steps", "disturbance", "noise", "mc" (default all)
     mc : Monte Carlo samples of every controller, MPC included (0 skips it)
     seed : seed (integer >= 0) of the parameter samples and of the noise
     quick : fewer animation frames and lighter plots
     out : output folder; nothing is written without it. out/<plant> is written aside and replaces
         the previous folder whole when complete (see `studies.writers.write_study`)
-    providers : replace the case's ``module:function`` controller providers
+    providers : replace the case's controller providers: callables ``provider(case, known)``, or
+        ``module:function`` strings naming them (see `studies.providers`)
     controllers : extra {label: controller} to compare
     strict : raise on provider or controller errors instead of noting them
     progress : progress(done, total, text) after each simulation
@@ -129,23 +89,22 @@ def run_study(
     models.checks.ResourceLimitError
         Before any work, when the Monte Carlo would need more memory than allowed.
     """
-    from . import runner, writers
-    from .case import CaseStudy
-
     if not isinstance(name, (str, CaseStudy)):
         raise TypeError(f"name must be a plant name or a CaseStudy, got {type(name).__name__} {name!r}")
     if out is not None and (not isinstance(out, (str, os.PathLike)) or not str(os.fspath(out)).strip()):
         raise ValueError(f"out must name a folder (or be None to write nothing), got {out!r}")
     study = name if isinstance(name, CaseStudy) else get(name)
-    options = runner.Options(
-        scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict, quick=quick
-    )
+    options = Options(scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict, quick=quick)
     result = runner.run_study(
         study, options, providers=providers, controllers=controllers, progress=progress, executor=executor
     )
     if out is not None:
         if study.trajectories:
             solve_trajectories(result)
+        # The page writers and what their pages import (Matplotlib through the plots, 0.39 s here, -X importtime,
+        # median of 5) are loaded when a study is written: `python -m studies --list` does without them.
+        from . import writers
+
         writers.write_study(result, out, run_id)
     return result
 
@@ -154,10 +113,6 @@ def solve_trajectories(result: StudyResult) -> None:
     """Solve, track and compare the study's optimal trajectories (`studies.trajectories`) into
     ``result.trajectories`` (written with the study's files); the wall time goes to
     ``result.timing["trajectories_s"]``, failures to its notes."""
-    import time
-
-    from . import trajectories
-
     started = time.perf_counter()
     options = result.options
     solved = trajectories.solve_case(

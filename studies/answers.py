@@ -3,8 +3,8 @@
 The model items (.1 kinetic energy and .3 equations of motion as printed
 expressions, .5 equilibria, .6 transfer functions, .7 state space) come from
 the plant declared in `models`; the design items (.8, .10, .13, .14 and
-.15-.17) from the providers' ``answers(plant)`` functions; the errata from the
-case files' data (`studies.errata`).
+.15-.17) from the case's answer providers (``provider(case)``, called
+through `studies.provider_calls`); the errata from the case files' data (`studies.errata`).
 """
 
 from __future__ import annotations
@@ -19,11 +19,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import models
-from models import deferred, symbolic
+from models import deferred
 from models.linear import clean_tf, tf_string
 
+from . import cases
 from .case import CaseStudy
-from .runner import call_providers
+from .errata import errata_of
+from .provider_calls import call_all, resolve
 
 if TYPE_CHECKING:
     import control
@@ -51,6 +53,11 @@ def printed_model(plant: models.Plant, numeral: str) -> dict:
 
 @functools.lru_cache(maxsize=16)
 def _printed(declaration, numeral: str) -> dict:
+    """The .1 and .3 answers of `declaration` (cached: `printed_model` hands out copies)."""
+    # models.symbolic builds its operator table from SymPy when imported (0.28 s here, -X importtime,
+    # median of 5); imported at the first printed model, `python -m studies --list` does without it.
+    from models import symbolic
+
     T = symbolic.kinetic_energy(declaration)
     equations = symbolic.equations_of_motion(declaration)
     return {
@@ -114,8 +121,9 @@ def model_answers(study: CaseStudy) -> dict:
 
 
 def provider_answers(study: CaseStudy, strict: bool = False) -> tuple[dict, list]:
-    """The design answers from the study's answer providers, merged by item, and notes."""
-    found, notes = call_providers(study.answer_providers, study.plant, strict=strict)
+    """The design answers from the study's answer providers (each called as ``provider(study)``),
+    merged by item (the first provider's value of a name is kept), and notes on what was skipped."""
+    found, notes = call_all(resolve(study.answer_providers, "answer_providers", strict), study, strict=strict)
     merged: dict = {}
     for spec, answers in found:
         if not isinstance(answers, Mapping):
@@ -141,9 +149,6 @@ def errata(study: CaseStudy) -> list[dict]:
     -------
     list of dicts {section, item, <table headers>: cell text}
     """
-    from . import cases
-    from .errata import errata_of
-
     registered = [cases.get(n) for n in cases.names()]
     if all(c is not study for c in registered):
         registered.append(study)
@@ -165,11 +170,13 @@ def collect(study: CaseStudy, strict: bool = False) -> tuple[dict, list]:
 
 
 def _item_key(item: str):
+    """Sort key of a homework item: its number, then its letter ("I.8(c)" -> (8, "(c)")); others last."""
     match = re.match(r"([IVX]+)\.(\d+)(.*)", item)
     return (int(match.group(2)), match.group(3)) if match else (10**6, item)
 
 
 def _number(v) -> str:
+    """A number to 4 significant digits (complex as a±bj; -0 as 0)."""
     if isinstance(v, (complex, np.complexfloating)):
         return f"{v.real + 0.0:.4g}{v.imag + 0.0:+.4g}j"
     return f"{float(v) + 0.0:.4g}"

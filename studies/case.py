@@ -4,22 +4,23 @@ A case file (``studies/cases/<name>.py``) defines ``CASE = CaseStudy(...)``;
 `studies.cases` discovers it. Everything the engine needs from a case is a
 field here: the plant's registry name, the tracked coordinate and the text's
 step, disturbance and sample periods; the scenarios and controllers of its
-table; and its designs (classical homework, state-space choices, MPC
-settings, co-design problems), its animation drawing and its errata.
-Nothing in the library packages (`designs`, `mpc`) names a case.
+table and the providers they come from; and its designs (classical homework,
+state-space choices, MPC settings, co-design problems), its animation drawing
+and its errata. Nothing in the library packages (`designs`, `mpc`) names a case.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import models
 from models import signals
 from models.specs import Specs
 
-if TYPE_CHECKING:
-    import models
+#: The scenarios a study can run, as named on the command line (`Scenario.name`).
+SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
 #: The text's parameter error: the controller knows each uncertain parameter to ±5 % (I.11(a), II.11(a), ...).
 KNOWN_ERROR = 0.05
@@ -40,17 +41,6 @@ CONTROLLERS = (
     "nonlinear MPC",
     "tuned",
 )
-
-#: Where controllers come from: ``module:function``, called as ``function(case_name, known=Plant)``.
-PROVIDERS = (
-    "studies.providers:classical",
-    "studies.providers:statespace",
-    "studies.providers:mpc",
-    "studies.providers:tuned",
-)
-
-#: Where homework answers come from: ``module:function``, called as ``function(case_name)``.
-ANSWER_PROVIDERS = ("studies.providers:classical_answers", "studies.providers:statespace_answers")
 
 
 # ---------------------------------------------------------------------------- scenarios
@@ -181,8 +171,10 @@ class CaseStudy:
     tracked_unit, input_unit : units of the tracked coordinate and of the input, for labels
     scenarios : the scenarios, in table order
     controllers : labels in table order (providers' other labels are appended)
-    providers : ``module:function`` returning {label: controller}, called with (plant, known=Plant)
-    answer_providers : ``module:function`` returning {item: {name: value}}, called with (plant)
+    providers : callables ``provider(case, known) -> {label: controller}``, asked in order for the table's
+        controllers (keyword only; `studies.providers.STANDARD` are the case's own designs by kind)
+    answer_providers : callables ``provider(case) -> {item: {name: value}}`` of the homework answers
+        (keyword only; `studies.providers.STANDARD_ANSWERS` are the case's own)
     bounds : params dict -> {state name: (low, high)}, counted as constraint violation and judged as a spec
     specs : scenario name -> `models.specs.Specs` the rows of that scenario are judged by; "*" for the
         scenarios not named (default: no step specs, only the actuator limit, the bounds and no limit cycle)
@@ -226,8 +218,9 @@ class CaseStudy:
     duration: float = 10.0
     source: str = ""
     controllers: tuple = CONTROLLERS
-    providers: tuple = PROVIDERS
-    answer_providers: tuple = ANSWER_PROVIDERS
+    # Keyword-only and required: a case says where its controllers and answers come from.
+    providers: tuple = field(kw_only=True)
+    answer_providers: tuple = field(kw_only=True)
     bounds: Callable[[dict], dict] | None = None
     specs: Mapping[str, Specs] = field(default_factory=dict)
     loops: tuple = ()
@@ -256,6 +249,7 @@ class CaseStudy:
         return plant.with_input_limit(self.input_limits[label]) if label in self.input_limits else plant
 
     def state_bounds(self, params: Mapping[str, float]) -> dict:
+        """{state name: (low, high)} of the plant with `params` (`bounds`; none without it), SI units."""
         return dict(self.bounds(dict(params))) if self.bounds else {}
 
     def specs_for(self, scenario: str, params: Mapping[str, float]) -> Specs:
@@ -265,8 +259,6 @@ class CaseStudy:
 
     def known_plant(self, plant: models.Plant | None = None) -> models.Plant:
         """The model the controllers are designed from: the uncertain parameters scaled by 1 + known_rel."""
-        import models
-
         plant = models.get(self.plant) if plant is None else plant
         return models.perturbed(plant, self.known_rel, 1.0) if self.known_rel else plant
 

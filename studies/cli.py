@@ -17,16 +17,24 @@ or a row is not ok), 130 when interrupted (Ctrl-C), 0 otherwise.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import math
 import os
 import shutil
 import sys
-import textwrap
 import time
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
-from . import SCENARIO_NAMES, listing
+import models
+from models import checks, deferred, files, interrupts
+
+from . import cases, distributed, runner, sweep
+from .case import SCENARIO_NAMES
+from .provider_calls import ProviderNotFound, find, unavailable
+
+if TYPE_CHECKING:
+    import tqdm
+else:  # 0.03 s to import (-X importtime): the bar is made once the command line is checked
+    tqdm = deferred.module("tqdm")
 
 #: Defaults of a full run and of --quick: Monte Carlo samples of every controller (MPC included).
 FULL = {"mc": 200}
@@ -37,6 +45,7 @@ RUN_SECONDS = {"crane": 80.0, "pendulum": 58.0, "ballbeam": 43.0, "satellite": 3
 
 
 def _count(text: str) -> int:
+    """--mc: a whole number of samples >= 0."""
     try:
         value = int(text)
     except ValueError:
@@ -47,6 +56,7 @@ def _count(text: str) -> int:
 
 
 def _seed(text: str) -> int:
+    """--seed: a whole number >= 0."""
     try:
         value = int(text)
     except ValueError:
@@ -57,6 +67,7 @@ def _seed(text: str) -> int:
 
 
 def _folder(text: str) -> str:
+    """--out: a folder name, not blank and without a NUL character."""
     if not text.strip():
         raise argparse.ArgumentTypeError(f"expected a folder name, got {text!r} (use . for this folder)")
     if "\0" in text:
@@ -64,16 +75,8 @@ def _folder(text: str) -> str:
     return text
 
 
-def _known_names() -> list:
-    """The plants the command knows: the case files' (read without importing them), or the imported registry."""
-    if "studies.cases" in sys.modules:
-        from . import names
-
-        return list(names())
-    return list(listing.names())
-
-
 def parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m studies`` (its help lists the registered plants)."""
     p = argparse.ArgumentParser(
         prog="python -m studies",
         description=__doc__,
@@ -82,7 +85,7 @@ def parser() -> argparse.ArgumentParser:
         "  python -m studies pendulum --sweep m2=0.5:2:8 --workers 2\n  python -m studies --list",
     )
     p.add_argument(
-        "plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(_known_names())})"
+        "plants", nargs="*", metavar="PLANT", help=f"plants to study (default all: {', '.join(cases.names())})"
     )
     p.add_argument(
         "--scenario",
@@ -143,7 +146,7 @@ def parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="MODULE:FUNCTION",
-        help="add a controller provider: FUNCTION(plant, known=Plant) -> {label: controller}",
+        help="add a controller provider: FUNCTION(case, known) -> {label: controller}",
     )
     p.add_argument(
         "--strict",
@@ -164,20 +167,18 @@ def parser() -> argparse.ArgumentParser:
 class Progress:
     """One tqdm bar over every plant's runs, its total fixed before the run starts.
 
-    Each plant has a share of the total: its declared controllers times its scenarios (from the
-    case files, `studies.listing`). `update(plant, done, total, text)` after each simulation moves
-    the bar to the plant's share times done/total, so controllers a provider adds or lacks change
-    the pace, never the total.
+    Each plant has a share of the total: its declared controllers times its scenarios
+    (`progress_slots`). `update(plant, done, total, text)` after each simulation, or once when a plant
+    run elsewhere is done, moves the bar to the plant's share times done/total, so controllers a
+    provider adds or lacks change the pace, never the total.
     """
 
     def __init__(self, slots: dict, stream=None, disable: bool = False):
-        from tqdm import tqdm
-
         stream = stream or sys.stderr
         tty = stream.isatty()
         self.slots = dict(slots)
         self.done = dict.fromkeys(self.slots, 0.0)
-        self.bar = tqdm(
+        self.bar = tqdm.tqdm(
             total=sum(self.slots.values()),
             unit="run",
             file=stream,
@@ -190,6 +191,7 @@ class Progress:
         )
 
     def update(self, plant: str, done: int, total: int, text: str) -> None:
+        """`plant` has made `done` of its `total` runs; `text` (its first 50 characters) follows the bar."""
         self.done[plant] = self.slots.get(plant, 0) * min(done, total) / max(total, 1)
         reached = int(round(sum(self.done.values())))
         self.bar.set_postfix_str(text[:50], refresh=False)
@@ -197,6 +199,7 @@ class Progress:
             self.bar.update(reached - self.bar.n)
 
     def close(self) -> None:
+        """End the bar (its last state stays on the stream)."""
         self.bar.close()
 
 
@@ -204,16 +207,18 @@ def progress_slots(plants, scenarios, settings: dict) -> dict:
     """plant -> runs it is expected to make: declared controllers x the scenarios it will run."""
     slots = {}
     for name in plants:
-        listed = listing.get(name) if name in listing.names() else None
-        declared = listed.scenarios if listed else SCENARIO_NAMES
+        case = cases.get(name)
         chosen = [
-            s for s in declared if (scenarios is None or s in scenarios) and not (s == "mc" and settings.get("mc") == 0)
+            s.name
+            for s in case.scenarios
+            if (scenarios is None or s.name in scenarios) and not (s.name == "mc" and settings.get("mc") == 0)
         ]
-        slots[name] = max(1, len(chosen) * len(listed.controllers if listed else (1,)))
+        slots[name] = max(1, len(chosen) * len(case.controllers))
     return slots
 
 
 def _scenarios(values, p: argparse.ArgumentParser):
+    """The --scenario names (repeated or comma-separated; None for all), each checked."""
     if not values:
         return None
     names = [n.strip() for v in values for n in v.split(",") if n.strip()]
@@ -226,13 +231,13 @@ def _scenarios(values, p: argparse.ArgumentParser):
 
 
 def _list(plants, providers) -> str:
-    """Plants, scenarios and declared controllers, read from the case files (nothing designed or imported)."""
-    lines = ["plants: " + ", ".join(_known_names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
+    """Plants, scenarios and declared controllers, as the registered cases declare them (nothing designed)."""
+    lines = ["plants: " + ", ".join(cases.names()), "scenarios: " + ", ".join(SCENARIO_NAMES), ""]
     for name in plants:
-        listed = listing.get(name)
-        lines.append(f"{name}: {listed.source}")
-        lines.append("  scenarios: " + ", ".join(listed.scenarios))
-        lines.append("  controllers: " + ", ".join(listed.controllers))
+        case = cases.get(name)
+        lines.append(f"{name}: {case.source}")
+        lines.append("  scenarios: " + ", ".join(s.name for s in case.scenarios))
+        lines.append("  controllers: " + ", ".join(case.controllers))
         lines += [f"  + the controllers of {spec}, named when they are designed" for spec in providers]
     lines += [
         "",
@@ -242,109 +247,8 @@ def _list(plants, providers) -> str:
     return "\n".join(lines)
 
 
-def _run_plant(
-    name: str, settings: dict, out: str, answers: bool, queue=None, executor=None, run_id: str | None = None
-) -> dict:
-    """Run and write one study; returns what the command prints (picklable, for --jobs and Dask)."""
-    from . import get, run_study
-    from .answers import format_answers
-    from .writers import not_ok_rows, verdict_counts
-
-    study = get(name)
-    progress = None if queue is None else (lambda done, total, text: queue.put((name, done, total, text)))
-    result = run_study(study, out=out, progress=progress, executor=executor, run_id=run_id, **settings)
-    table = result.table
-    return {
-        "name": name,
-        "answers": format_answers(study, result.answers, result.plant.title) if answers else None,
-        "controllers": len(result.controllers),
-        "rows": len(table),
-        "timing": result.timing,
-        "notes": list(result.notes),
-        "best": result.best("step"),
-        "counts": verdict_counts(table),
-        "not_ok": not_ok_lines(table),
-        "not_ok_rows": len(not_ok_rows(table)),
-    }
-
-
-def plant_task(task: tuple) -> tuple:
-    """One plant on a Dask worker: run it into a private folder, return its report and its files as bytes.
-
-    Nothing is written where the client can see it until every plant has come back (`install`).
-    """
-    import tempfile
-    from pathlib import Path
-
-    name, settings, answers, run_id = task
-    with tempfile.TemporaryDirectory(prefix="studies-") as folder:
-        report = _run_plant(name, settings, folder, answers, run_id=run_id)
-        files = {
-            str(path.relative_to(folder)): path.read_bytes()
-            for path in sorted(Path(folder).rglob("*"))
-            if path.is_file()
-        }
-    return report, files
-
-
-def install(out: str, files: dict) -> None:
-    """Write the plants' folders {relative path: bytes} into `out`, each plant folder replaced as a whole."""
-    import shutil
-    import uuid
-    from pathlib import Path
-
-    from models.files import write_bytes
-
-    folder = Path(out)
-    staging = folder / f".staging-{uuid.uuid4().hex[:8]}"
-    try:
-        for relative, data in files.items():
-            write_bytes(staging / relative, data)
-        for plant in sorted(p for p in staging.iterdir() if p.is_dir()):
-            target, old = folder / plant.name, folder / f".old-{plant.name}-{staging.name[9:]}"
-            if target.exists():
-                target.rename(old)
-            plant.rename(target)
-            shutil.rmtree(old, ignore_errors=True)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
-def not_ok_lines(table, width: int = 118) -> list:
-    """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".
-
-    Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
-    scenarios, so the list stays short while naming every (controller, scenario). A row that did not
-    run as designed says so beside its verdict: "violates (degraded)".
-    """
-    from .runner import status_kind
-
-    scenarios = list(dict.fromkeys(table.scenario))
-    groups: dict = {}
-    for row in table.to_dict("records"):
-        verdict, status = str(row.get("verdict")), str(row.get("status"))
-        if verdict == "meets specs" and status == "ok":
-            continue
-        kind = status_kind(status)
-        if verdict == "meets specs":
-            key = kind
-        elif kind == "ok" or verdict.startswith(kind):
-            key = verdict
-        else:
-            key = f"{verdict} ({kind})"
-        groups.setdefault(key, {}).setdefault(row["controller"], []).append(row["scenario"])
-    lines = []
-    for key, by_controller in groups.items():
-        by_set: dict = {}
-        for controller, where in by_controller.items():
-            tag = "all" if where == scenarios else ", ".join(where)
-            by_set.setdefault(tag, []).append(controller)
-        text = "; ".join(f"{', '.join(controllers)} [{tag}]" for tag, controllers in by_set.items())
-        lines += textwrap.wrap(f"{key}: {text}", width, initial_indent="  ", subsequent_indent="      ")
-    return lines
-
-
 def _plant_line(done: dict) -> str:
+    """A plant's closing line: "arm: 12 controllers, 60 rows: 50 meet specs, 10 violate; best step ITAE: LQR"."""
     plural = {"meets specs": "meet specs", "violates": "violate"}
     counts = ", ".join(
         f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items() if n
@@ -369,188 +273,64 @@ def closing_lines(finished: list, out: str, verbose: bool = False) -> list:
     return lines
 
 
-@contextlib.contextmanager
-def _stop_workers_on_error():
-    """On any exception (Ctrl-C included) end the worker processes now, so leaving the process pool
-    does not wait for their plants to finish; their partial files are in the run's staging folder."""
-    try:
-        yield
-    except BaseException:
-        import multiprocessing
-
-        children = multiprocessing.active_children()
-        for child in children:
-            child.terminate()
-        for child in children:
-            child.join(10)
-        raise
-
-
-def check_providers(specs) -> list:
-    """One message per ``module:function`` provider that does not exist or fails to import."""
-    from models import interrupts
-
-    from .runner import ProviderNotFound, find_provider
-
-    problems = []
+def command_line_providers(specs: Sequence[str]) -> tuple[list, list]:
+    """The ``--provider MODULE:FUNCTION`` providers, found before any work, and one message per provider
+    that does not exist or fails to import; such a provider is run as a `studies.provider_calls.Unavailable`
+    stand-in, which each study notes."""
+    found, problems = [], []
     for spec in specs:
         try:
-            find_provider(spec)
+            found.append(find(spec))
         except ProviderNotFound as err:
             problems.append(f"--provider {spec}: {str(err).split(': ', 1)[1]}")
+            found.append(unavailable(spec, err))
         except Exception as err:
             if interrupts.is_interrupt(err):
                 raise KeyboardInterrupt from err
             problems.append(f"--provider {spec}: importing it failed: {type(err).__name__}: {err}")
-    return problems
+            found.append(unavailable(spec, err))
+    return found, problems
 
 
 def check_resources(plants, settings: dict) -> None:
     """Refuse, before any work, settings whose Monte Carlo would hold more memory than allowed
     (`models.checks.ResourceLimitError` naming the samples and the limit)."""
-    import models
-
-    from . import get, runner
-
     keys = ("scenarios", "mc", "seed")
     chosen: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in settings.items() if k in keys}
     options = runner.Options(**chosen)
     for name in plants:
-        study = get(name)
+        study = cases.get(name)
         runner.check_resources(study, options, models.get(study.plant).n_params)
 
 
-class _Inline:
-    """A queue stand-in for running plants in this process: puts go straight to the progress bar."""
-
-    def __init__(self, progress: Progress):
-        self.progress = progress
-
-    def put(self, item) -> None:
-        self.progress.update(*item)
-
-
-def _run_all(
-    plants,
-    settings: dict,
-    providers: list,
-    out: str,
-    answers: bool,
-    jobs: int,
-    progress: Progress,
-    executor=None,
-    run_id: str | None = None,
-) -> list:
-    from . import get
-
-    # Parallel jobs take the plants longest first, so they finish together (a plant not in RUN_SECONDS first
-    # of all); every order writes the same tables.
-    order = sorted(plants, key=lambda name: -RUN_SECONDS.get(name, math.inf))
-    per_plant = {name: settings | {"providers": list(get(name).providers) + providers} for name in plants}
-    finished = []
-    if executor is not None and executor.distributed and len(plants) > 1:
-        import uuid
-
-        from distributed import as_completed
-
-        run = uuid.uuid4().hex[:8]
-        futures = [
-            executor.client.submit(
-                plant_task, (name, per_plant[name], answers, run_id), pure=False, key=f"plant-{name}-{run}"
-            )
-            for name in order
-        ]
-        reports: list = []
-        files: dict = {}
-        try:
-            for future in as_completed(futures):  # as they finish, so the bar moves
-                report, written = _gather(future)
-                reports.append(report)
-                files |= written
-                progress.update(report["name"], 1, 1, f"{report['name']} done")
-        finally:
-            executor.client.cancel(futures)
-        install(out, files)
-        return reports
-    if jobs == 1 or (executor is not None and executor.distributed):
-        for name in plants:
-            finished.append(_run_plant(name, per_plant[name], out, answers, _Inline(progress), executor, run_id))
-        return finished
-    import concurrent.futures
-    import multiprocessing
-    import queue as queue_module
-
-    context = multiprocessing.get_context("spawn")
-    with (
-        context.Manager() as manager,
-        concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool,
-        _stop_workers_on_error(),
-    ):
-        messages = manager.Queue()
-        pending = {
-            pool.submit(_run_plant, name, per_plant[name], out, answers, messages, None, run_id) for name in order
-        }
-        while pending:
-            try:
-                progress.update(*messages.get(timeout=0.2))
-            except queue_module.Empty:
-                pass
-            done = {f for f in pending if f.done()}
-            for future in done:
-                finished.append(future.result())
-            pending -= done
-        while not messages.empty():
-            progress.update(*messages.get())
-    return finished
-
-
-def _gather(future):
-    """A plant task's result, with a dead worker reported as `studies.distributed.RunFailed`."""
-    from distributed import KilledWorker
-
-    from .distributed import RunFailed
-
-    try:
-        return future.result()
-    except KilledWorker as err:
-        raise RunFailed(
-            f"{future.key}: a Dask worker died while running it and the scheduler gave up after "
-            f"retrying ({err}); nothing was written"
-        ) from None
-
-
-def _run_sweep(args, p, plants, settings, progress_stream) -> int:
-    from . import get, runner
-    from .distributed import connect
-    from .sweep import Grid, run_sweep, sweep_summary, write_sweep
-
+def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen: list, stream) -> int:
+    """``--sweep PARAM=LOW:HIGH:N``: every controller of the one plant over the grid, into OUT/PLANT/sweep.*;
+    returns the exit status (exit 2 through `p` for a bad sweep)."""
     if len(plants) != 1:
         p.error(f"--sweep runs one plant; name exactly one, got {len(plants)}")
     try:
-        grid = Grid.parse(args.sweep)
+        grid = sweep.Grid.parse(args.sweep)
     except ValueError as err:
         p.error(str(err))
     scenario = settings["scenarios"] or ["step"]
     if len(scenario) != 1 or scenario[0] == "mc":
         p.error(f"--sweep runs one scenario other than mc; got {', '.join(scenario)}")
-    import models
-
     name = plants[0]
     plant = models.get(name)
     if grid.param not in plant.params:
         p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
-    study = get(name)
-    progress = Progress({name: len(listing.get(name).controllers)}, progress_stream, disable=args.quiet)
+    study = cases.get(name)
+    progress = Progress({name: len(study.controllers)}, stream, disable=args.quiet)
     started = time.perf_counter()
     try:
-        with connect(args.scheduler, args.workers) as executor:
-            table, notes = run_sweep(
+        with distributed.connect(args.scheduler, args.workers) as executor:
+            table, notes = sweep.run_sweep(
                 study,
                 grid,
                 scenario=scenario[0],
                 options=options,
-                providers=list(study.providers) + args.provider,
+                providers=list(study.providers) + chosen,
                 executor=executor,
                 progress=lambda done, total, text: progress.update(name, done, total, text),
             )
@@ -559,11 +339,11 @@ def _run_sweep(args, p, plants, settings, progress_stream) -> int:
         print(f"python -m studies: the sweep failed: {type(err).__name__}: {err}", file=sys.stderr)
         return 1
     progress.close()
-    write_sweep(study, grid, table, args.out, notes, scenario[0])
+    sweep.write_sweep(study, grid, table, args.out, notes, scenario[0])
     lines = [
         f"{name}: {table.controller.nunique()} controllers x {len(grid.values)} values of {grid.param} "
         f"({grid.values[0]:g} to {grid.values[-1]:g}), scenario {scenario[0]}",
-        *sweep_summary(table, grid),
+        *sweep.sweep_summary(table, grid),
     ]
     lines += [f"  note: {n}" for n in notes if args.verbose or "failed" in n]
     folder = os.path.join(args.out, name)
@@ -575,10 +355,9 @@ def _run_sweep(args, p, plants, settings, progress_stream) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    p = parser()
-    args = p.parse_args(argv)
-    registered = _known_names()
+def _checked_plants(p: argparse.ArgumentParser, args) -> tuple[list, list | None]:
+    """(plants, scenarios) the command line asks for (exit 2 through `p` for what is not allowed)."""
+    registered = list(cases.names())
     plants = args.plants or list(registered)
     unknown = [name for name in plants if name not in registered]
     if unknown:
@@ -594,6 +373,14 @@ def main(argv=None) -> int:
         p.error(f"--workers must be >= 1, got {args.workers}")
     if args.workers is not None and args.scheduler:
         p.error("give --workers (a local Dask cluster) or --scheduler (an existing one), not both")
+    return plants, scenarios
+
+
+def main(argv=None) -> int:
+    """``python -m studies [PLANT ...] [options]``; returns the exit status (see the module's docstring)."""
+    p = parser()
+    args = p.parse_args(argv)
+    plants, scenarios = _checked_plants(p, args)
     if args.list:
         print(_list(plants, args.provider))
         return 0
@@ -608,14 +395,11 @@ def main(argv=None) -> int:
         "strict": args.strict,
         "threads": max(1, 2 // jobs),
     }
-
-    from models import checks, files, interrupts
-
     try:
         check_resources(plants, settings)
     except checks.ResourceLimitError as err:
         p.error(f"--mc {settings['mc']}: {err}")
-    missing = check_providers(args.provider)
+    chosen, missing = command_line_providers(args.provider)
     for message in missing:
         print(f"python -m studies: {message}" + ("" if args.strict else "; running without it"), file=sys.stderr)
     if missing and args.strict:
@@ -626,23 +410,42 @@ def main(argv=None) -> int:
     except OSError as err:
         p.error(str(err))
     if args.sweep:
-        return _run_sweep(args, p, plants, settings, sys.stderr)
+        return _run_sweep(args, p, plants, settings, chosen, sys.stderr)
+    where = (
+        f"on Dask ({args.scheduler or f'{args.workers} local workers'})"
+        if dask
+        else f"with {jobs} job{'s' if jobs > 1 else ''}"
+    )
+    return _run(args, plants, settings, chosen, missing, jobs, where)
 
-    from . import writers
-    from .distributed import connect
 
-    answers = args.answers or args.verbose
+def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: int, where: str) -> int:
+    """Run the plants into a staging folder, publish it into OUT when every plant is done, and print the
+    closing lines; returns the exit status (1 failed, 130/143 interrupted, 1 with --strict and a row not ok)."""
+    # The batch and the page writers import Matplotlib through the plots for their pages (0.39 s here,
+    # -X importtime, median of 5): imported when plants run, so --list and --help do without them.
+    from . import batch, writers
+
+    registered = list(cases.names())
+    per_plant = {name: settings | {"providers": list(cases.get(name).providers) + chosen} for name in plants}
     started = time.perf_counter()
     run_id = writers.new_run_id()
     staging = writers.new_staging(args.out, run_id)
-    progress = Progress(progress_slots(plants, scenarios, settings), disable=args.quiet)
+    progress = Progress(progress_slots(plants, settings["scenarios"], settings), disable=args.quiet)
     interrupts.watch()
     interrupts.terminate_as_interrupt()  # kill / a scheduler's SIGTERM: stop as on Ctrl-C, workers included
     published = False
     try:
-        with connect(args.scheduler, args.workers) as executor:
-            finished = _run_all(
-                plants, settings, args.provider, str(staging), answers, jobs, progress, executor, run_id
+        with distributed.connect(args.scheduler, args.workers, jobs) as executor:
+            finished = batch.run_plants(
+                plants,
+                per_plant,
+                str(staging),
+                args.answers or args.verbose,
+                executor,
+                progress.update,
+                run_id,
+                longest_first=RUN_SECONDS,
             )
         progress.close()
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
@@ -677,16 +480,16 @@ def main(argv=None) -> int:
         )
         return 143 if interrupts.terminated() else 130
     finished = sorted(finished, key=lambda d: registered.index(d["name"]))
+    return _closing(args, finished, missing, f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
+
+
+def _closing(args, finished: list, missing: list, total: str) -> int:
+    """Print the answers asked for and the closing lines of a finished run; the exit status."""
     for done in finished:
         if done["answers"]:
             print(done["answers"], flush=True)
-    where = (
-        f"on Dask ({args.scheduler or f'{args.workers} local workers'})"
-        if dask
-        else f"with {jobs} job{'s' if jobs > 1 else ''}"
-    )
     lines = closing_lines(finished, args.out, args.verbose)
-    lines.append(f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
+    lines.append(total)
     if missing:
         lines.append(f"python -m studies: ran without {len(missing)} missing provider(s): " + "; ".join(missing))
     not_ok = sum(done["not_ok_rows"] for done in finished)

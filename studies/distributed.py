@@ -1,30 +1,46 @@
-"""Study work on Dask: Monte Carlo samples, parameter sweeps and whole plants on a cluster.
+"""Where study work runs: in this process, in a pool of processes here, or on a Dask cluster.
 
-Without a scheduler everything runs in this process, as it always did
-(`Local`). With one (`connect(scheduler=ADDRESS)`, or a `LocalCluster` of
-`workers` processes with `connect(workers=N)`), `Dask.map` sends work to the
-workers and gathers the results in order. Results do not depend on where
-they ran: every sample's noise comes from the run's seed and the sample's
-index (`models.monte_carlo`'s ``first_sample``), never from a worker.
+An executor runs tasks (a function and its items) and hands back their results: `Local` in this
+process, or with ``jobs > 1`` in a pool of that many processes here (``--jobs``); `Dask` on a
+`dask.distributed.Client`'s workers (``--workers``, ``--scheduler``). `connect` gives the one a run
+asks for and closes it afterwards. `map` returns the results in the items' order, `as_completed` as
+each task finishes (the whole plants of a run, so that its progress moves as they finish).
+Results do not depend on where they ran: every sample's noise comes from the run's seed and the
+sample's index (`models.monte_carlo`'s ``first_sample``), never from a worker.
 
-A worker that dies is replaced and its work re-run by Dask, up to its
-``distributed.scheduler.allowed-failures``; past that the run stops with
-`RunFailed`, naming what was running, and the callers write nothing.
+An error ending the run (Ctrl-C, SIGTERM, a failed task) ends the pool's processes at once; a Dask
+cluster started by `connect` is closed with its workers. A Dask worker that dies is replaced and its
+work re-run by Dask, up to its ``distributed.scheduler.allowed-failures``; past that the run stops
+with `RunFailed`, naming what was running, and the callers write nothing.
 
-Plants and Block controllers travel to the workers by pickling: a plant by
-its registry name and parameters, so a worker must import the module that
-declares it (the catalog's plants always are). Controllers that are not
-Blocks (MPC, holding solver objects) run in this process.
+Tasks, plants and Block controllers travel to other processes by pickling: a plant by its registry
+name and parameters, so a worker must import the module that declares it (the catalog's plants
+always are), and a function by its module and name. Controllers that are not Blocks (MPC, holding
+solver objects) run in the process that designed them.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import logging
 import math
+import multiprocessing
+import uuid
 from collections.abc import Callable, Iterator, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+import models
+from models import checks, deferred
+
+if TYPE_CHECKING:
+    import distributed as dask_distributed
+    import distributed.comm.core as dask_comm
+else:  # optional (the "dask" extra), imported at the first use of a Dask executor
+    dask_distributed = deferred.module("distributed")
+    dask_comm = deferred.module("distributed.comm.core")
 
 
 class RunFailed(RuntimeError):
@@ -32,17 +48,81 @@ class RunFailed(RuntimeError):
 
 
 class Local:
-    """Run everything in this process, in order."""
+    """Run tasks in this process, or with ``jobs > 1`` in a pool of `jobs` processes started here.
 
-    workers = 1
+    The pool's processes are started (by "spawn": a fresh interpreter each, which imports this
+    package) at the first task given to them, and ended by `close`; `terminate` ends them at once.
+    """
+
     distributed = False
 
-    def map(self, function: Callable, items: Sequence, what: str = "") -> list:
-        return [function(item) for item in items]
+    def __init__(self, jobs: int = 1):
+        checks.integer(jobs, "jobs", minimum=1)
+        self.jobs = jobs
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+
+    @property
+    def workers(self) -> int:
+        """Tasks run at once: `jobs`."""
+        return self.jobs
 
     def share(self, value):
-        """`value` itself: in this process there is nothing to send."""
+        """`value` itself: tasks that take it are pickled with it."""
         return value
+
+    def map(self, function: Callable, items: Sequence, what: str = "") -> list:
+        """function(item) for every item, results in the items' order (in the pool when ``jobs > 1``)."""
+        if self.jobs == 1:
+            return [function(item) for item in items]
+        with self._ending_on_error():
+            futures = [self._started().submit(function, item) for item in items]
+            return [future.result() for future in futures]
+
+    def as_completed(self, function: Callable, items: Sequence, labels: Sequence[str] = ()) -> Iterator:
+        """function(item) for every item, each result as its task finishes (`labels` name the tasks on
+        a Dask executor; here they are not needed). With ``jobs == 1`` the items run here, in order."""
+        if self.jobs == 1:
+            for item in items:
+                yield function(item)
+            return
+        with self._ending_on_error():
+            futures = [self._started().submit(function, item) for item in items]
+            for future in concurrent.futures.as_completed(futures):
+                yield future.result()
+
+    def _started(self) -> concurrent.futures.ProcessPoolExecutor:
+        """The pool, made at the first task given to it."""
+        if self._pool is None:
+            context = multiprocessing.get_context("spawn")
+            self._pool = concurrent.futures.ProcessPoolExecutor(self.jobs, mp_context=context)
+        return self._pool
+
+    @contextlib.contextmanager
+    def _ending_on_error(self) -> Iterator[None]:
+        """On any exception (Ctrl-C, SIGTERM, a task's error, a consumer that stops) end the pool's
+        processes now: leaving the pool must not wait for the tasks still running."""
+        try:
+            yield
+        except BaseException:
+            self.terminate()
+            raise
+
+    def terminate(self) -> None:
+        """End the pool's processes now (SIGTERM, then wait up to 10 s for each), and the pool with them."""
+        if self._pool is None:
+            return
+        children = multiprocessing.active_children()
+        for child in children:
+            child.terminate()
+        for child in children:
+            child.join(10)
+        self.close()
+
+    def close(self) -> None:
+        """Shut the pool down once its tasks are done (nothing to do without one)."""
+        if self._pool is not None:
+            pool, self._pool = self._pool, None
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 class Dask:
@@ -55,6 +135,7 @@ class Dask:
 
     @property
     def workers(self) -> int:
+        """The cluster's workers now (at least 1)."""
         return max(1, len(self.client.scheduler_info().get("workers", {})))
 
     def share(self, value):
@@ -63,7 +144,7 @@ class Dask:
         return self.client.scatter([value], broadcast=True, hash=False)[0]
 
     def map(self, function: Callable, items: Sequence, what: str = "work") -> list:
-        """function(item) for every item, on the workers.
+        """function(item) for every item, on the workers, results in the items' order.
 
         Raises
         ------
@@ -71,53 +152,92 @@ class Dask:
             When a worker died while running it more often than the scheduler allows, or the
             connection to the cluster was lost; the task's own exceptions propagate unchanged.
         """
-        from distributed import KilledWorker
-        from distributed.comm.core import CommClosedError
-
         futures = self.client.map(function, list(items), pure=False)
         try:
-            return self.client.gather(futures)
-        except KilledWorker as err:
-            raise RunFailed(
-                f"{what}: a Dask worker died while running it and the scheduler gave up after "
-                f"retrying ({err}); nothing was written"
-            ) from None
-        except (CommClosedError, OSError, TimeoutError) as err:
-            raise RunFailed(
-                f"{what}: lost the Dask cluster ({type(err).__name__}: {err}); nothing was written"
-            ) from None
+            with _failing_as_run_failed(what):
+                return self.client.gather(futures)
+        finally:
+            self.client.cancel(futures)
+
+    def as_completed(self, function: Callable, items: Sequence, labels: Sequence[str] = ()) -> Iterator:
+        """function(item) for every item, on the workers, each result as its task finishes.
+
+        `labels` name the tasks (their keys are "<label>-<run>", run a random id), so a failure names
+        the task. Tasks not finished are cancelled when the iteration ends early.
+
+        Raises
+        ------
+        RunFailed
+            When a worker died while running a task more often than the scheduler allows; the task's
+            own exceptions propagate unchanged.
+        """
+        run = uuid.uuid4().hex[:8]
+        names = list(labels) or [f"task{i}" for i in range(len(items))]
+        futures = [
+            self.client.submit(function, item, pure=False, key=f"{name}-{run}") for name, item in zip(names, items)
+        ]
+        try:
+            for future in dask_distributed.as_completed(futures):
+                with _failing_as_run_failed(future.key, connection=False):  # a task's OSError is its own
+                    result = future.result()
+                yield result
         finally:
             self.client.cancel(futures)
 
 
 @contextlib.contextmanager
-def connect(scheduler=None, workers: int | None = None) -> Iterator[Local | Dask]:
-    """The executor for a run: `Local` by default, else Dask on `scheduler` or on a new LocalCluster.
+def _failing_as_run_failed(what: str, connection: bool = True) -> Iterator[None]:
+    """Turn a dead worker, and with `connection` a lost cluster (a closed connection, an OSError or a
+    timeout), into `RunFailed` naming `what`."""
+    try:
+        yield
+    except dask_distributed.KilledWorker as err:
+        raise RunFailed(
+            f"{what}: a Dask worker died while running it and the scheduler gave up after "
+            f"retrying ({err}); nothing was written"
+        ) from None
+    except (dask_comm.CommClosedError, OSError, TimeoutError) as err:
+        if not connection:
+            raise
+        raise RunFailed(f"{what}: lost the Dask cluster ({type(err).__name__}: {err}); nothing was written") from None
+
+
+@contextlib.contextmanager
+def connect(scheduler=None, workers: int | None = None, jobs: int = 1) -> Iterator[Local | Dask]:
+    """The executor for a run: `Local` (with `jobs` processes) by default, else Dask on `scheduler`
+    or on a new LocalCluster of `workers` processes. Closed (its pool, or the cluster it started) when
+    the block ends; an error ending the block ends the pool's processes at once.
 
     Parameters
     ----------
     scheduler : None, a scheduler address ("tcp://host:8786"), or a `dask.distributed.Client`
     workers : processes of a LocalCluster started here (one thread each) when no scheduler is given
+    jobs : processes of the `Local` executor's pool when neither is given (1: this process only)
     """
     if scheduler is None and workers is None:
-        yield Local()
+        local = Local(jobs)
+        try:
+            yield local
+        except BaseException:
+            local.terminate()
+            raise
+        finally:
+            local.close()
         return
     if workers is not None and (int(workers) != workers or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
-    from distributed import Client, LocalCluster
-
-    if isinstance(scheduler, Client):
+    if isinstance(scheduler, dask_distributed.Client):
         yield Dask(scheduler)
         return
     with contextlib.ExitStack() as stack:
         if scheduler is not None:
             try:
-                client = stack.enter_context(Client(scheduler, timeout="20s"))
+                client = stack.enter_context(dask_distributed.Client(scheduler, timeout="20s"))
             except (OSError, TimeoutError) as err:
                 raise RunFailed(f"cannot reach the Dask scheduler at {scheduler!r}: {err}") from None
         else:
             cluster = stack.enter_context(
-                LocalCluster(
+                dask_distributed.LocalCluster(
                     n_workers=int(workers or 1),
                     threads_per_worker=1,
                     processes=True,
@@ -125,7 +245,7 @@ def connect(scheduler=None, workers: int | None = None) -> Iterator[Local | Dask
                     silence_logs=logging.ERROR,
                 )
             )
-            client = stack.enter_context(Client(cluster))
+            client = stack.enter_context(dask_distributed.Client(cluster))
         yield Dask(client)
 
 
@@ -135,9 +255,7 @@ def executor_of(value) -> Local | Dask:
         return Local()
     if isinstance(value, (Local, Dask)):
         return value
-    from distributed import Client
-
-    if isinstance(value, Client):
+    if isinstance(value, dask_distributed.Client):
         return Dask(value)
     raise TypeError(
         f"executor must be None, studies.distributed.Local/Dask or a dask.distributed.Client, "
@@ -151,8 +269,8 @@ MIN_SAMPLES_PER_TASK = 16
 
 
 def _monte_carlo_part(task: tuple) -> dict:
-    import models
-
+    """One part of a split Monte Carlo, run on a worker: `models.monte_carlo` of the part's samples from
+    their index in the whole run, returned as plain arrays {x, xc, u, measured, diverged_at, t, r, d}."""
     (plant, controller, reference), duration, samples, first, kwargs = task
     batch = models.monte_carlo(plant, controller, reference, duration, samples, first_sample=first, **kwargs)
     return {
@@ -178,8 +296,6 @@ def monte_carlo(executor, plant, controller, reference, duration: float, param_s
     -------
     models.MonteCarloResult of all the samples
     """
-    import models
-
     executor = executor_of(executor)
     samples = np.asarray(param_samples, dtype=float)
     if not executor.distributed or len(samples) <= MIN_SAMPLES_PER_TASK:

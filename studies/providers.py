@@ -1,70 +1,82 @@
-"""The default controller and answer providers of a case study: its own designs, by kind.
+"""A case study's own controllers and homework answers, by kind: the providers every case file lists.
 
-Each provider is called by the runner as ``function(case_name, known=Plant)``
-(answers: ``function(case_name)``) and reads the registered case. A case
-without a design of that kind has nothing to provide: `NotProvided`, which
-the runner notes instead of failing.
+Each receives the `studies.CaseStudy` it designs for (registered or not) and reads its record:
+`classical` and `classical_answers` its ``classical`` design, `statespace` and `statespace_answers`
+its ``statespace`` choices, `mpc` its ``mpc`` settings, `tuned` its stored tuned gains
+(`studies.tuner`). A case without that design has nothing to provide: `NotProvided`, which the run
+notes. `STANDARD` and `STANDARD_ANSWERS` are the lists a case file gives as ``providers=`` and
+``answer_providers=``. How providers are found and called is `studies.provider_calls`.
 """
 
 from __future__ import annotations
 
 import models
+from mpc import linear_mpc, nonlinear_mpc
 
-from . import cases, homework
-from .runner import NotProvided
+from . import cases, homework, tuner
+from .case import CaseStudy
+from .provider_calls import AnswerProvider, Provider
+from .provider_calls import NotProvided as NotProvided  # what these raise; callers catch it from here too
 
 
-def classical(name: str, known: models.Plant | None = None) -> dict:
-    """The case's classical controllers (the .8-.14 designs), designed from `known`."""
-    case = cases.get(name)
+def _case(case: CaseStudy | str) -> CaseStudy:
+    """`case`, or the registered case of that name (for callers that hold only the name)."""
+    return cases.get(case) if isinstance(case, str) else case
+
+
+def classical(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
+    """The case's classical controllers (the .8-.14 designs), designed from `known` (default: nominal)."""
+    case = _case(case)
     if case.classical is None:
-        raise NotProvided(f"the {name} case has no classical design")
+        raise NotProvided(f"the {case.plant} case has no classical design")
     return dict(homework.classical_design(case, known).controllers)
 
 
-def statespace(name: str, known: models.Plant | None = None) -> dict:
-    """The case's state-space controllers (.15-.17 and LQR), designed from `known`."""
-    case = cases.get(name)
+def statespace(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
+    """The case's state-space controllers (.15-.17 and LQR), designed from `known` (default: nominal)."""
+    case = _case(case)
     if case.statespace is None:
-        raise NotProvided(f"the {name} case has no state-space design")
+        raise NotProvided(f"the {case.plant} case has no state-space design")
     return homework.statespace_controllers(case, known)
 
 
-def mpc(name: str, known: models.Plant | None = None) -> dict:
-    """The case's linear and nonlinear MPC with its `mpc.MPCSettings`, designed from `known`."""
-    import mpc as mpc_package
-
-    case = cases.get(name)
+def mpc(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
+    """The case's linear and nonlinear MPC with its `mpc.MPCSettings`, designed from `known` (default: nominal)."""
+    case = _case(case)
     if case.mpc is None:
-        raise NotProvided(f"the {name} case has no MPC settings")
-    known = models.get(name) if known is None else known
+        raise NotProvided(f"the {case.plant} case has no MPC settings")
+    known = models.get(case.plant) if known is None else known
     return {
-        "linear MPC": mpc_package.linear_mpc(known, case.mpc, tracked=case.tracked),
-        "nonlinear MPC": mpc_package.nonlinear_mpc(known, case.mpc, tracked=case.tracked),
+        "linear MPC": linear_mpc(known, case.mpc, tracked=case.tracked),
+        "nonlinear MPC": nonlinear_mpc(known, case.mpc, tracked=case.tracked),
     }
 
 
-def tuned(name: str, known: models.Plant | None = None) -> dict:
+def tuned(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
     """The case's "tuned" design: its hand PID with the stored tuned gains (see `studies.tuner`)."""
-    from . import tuner
-
-    case = cases.get(name)
+    case = _case(case)
     if tuner.stored(case) is None:
-        raise NotProvided(f"no tuned gains stored for {name}; `python -m studies.tuner {name}` tunes them")
+        raise NotProvided(f"no tuned gains stored for {case.plant}; `python -m studies.tuner {case.plant}` tunes them")
     return tuner.controllers(case, known)
 
 
-def classical_answers(name: str) -> dict:
+def classical_answers(case: CaseStudy | str) -> dict:
     """The classical homework answers of the case, designed on the nominal plant."""
-    case = cases.get(name)
+    case = _case(case)
     if case.classical is None:
-        raise NotProvided(f"the {name} case has no classical design")
+        raise NotProvided(f"the {case.plant} case has no classical design")
     return homework.classical_answers(case)
 
 
-def statespace_answers(name: str) -> dict:
+def statespace_answers(case: CaseStudy | str) -> dict:
     """The state-space homework answers of the case, designed on the nominal plant."""
-    case = cases.get(name)
+    case = _case(case)
     if case.statespace is None:
-        raise NotProvided(f"the {name} case has no state-space design")
+        raise NotProvided(f"the {case.plant} case has no state-space design")
     return homework.statespace_answers(case)
+
+
+#: A case's own controllers, by kind: each provides nothing (`NotProvided`) for a case without that design.
+STANDARD: tuple[Provider, ...] = (classical, statespace, mpc, tuned)
+#: A case's own homework answers, by kind.
+STANDARD_ANSWERS: tuple[AnswerProvider, ...] = (classical_answers, statespace_answers)

@@ -1,28 +1,27 @@
 """The one runner: every controller of a case study through every scenario, on the nonlinear plant.
 
-A case (`studies.case.CaseStudy`, declared in ``studies/cases/<name>.py``) names
-its plant, the controllers it compares, where they come from (provider
-functions ``module:function`` returning ``{label: controller}``) and its scenarios. The
-runner designs the controllers from the model known to them (the text's
-+5 % parameter error), simulates each scenario with `models.simulate_closed_loop`
-(every row comes from the nonlinear plant, never from a linear model), runs
+A case (`studies.case.CaseStudy`, declared in ``studies/cases/<name>.py`` or
+anywhere) names its plant, the controllers it compares, where they come from
+(providers, ``provider(case, known) -> {label: controller}``, called through
+`studies.provider_calls`) and its scenarios. The runner designs the controllers
+from the model known to them (the text's +5 % parameter error), simulates
+each scenario with `models.simulate_closed_loop` (every row comes from the
+nonlinear plant, never from a linear model), runs
 the parameter Monte Carlo of a `models.Block` as one batched CasADi map
 (`models.monte_carlo`) and of any other controller (MPC) as a loop over the
 same samples, and computes every column with `models.metrics`. Every
 controller runs every scenario on the same samples: there is no time budget,
 so the same command gives the same table on any machine.
 
-A provider that is not importable yet, or has no such function yet, is
-skipped with a note; the notes travel with the results into the tables.
+A provider that has nothing for the case, or fails, is skipped with a note;
+the notes travel with the results into the tables.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 import shutil
 import time
-import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -33,8 +32,11 @@ import models
 import models.closed_loop
 from models import Block, checks, deferred, interrupts, metrics, specs
 
-from . import SCENARIO_NAMES, distributed
-from .case import CaseStudy, Scenario
+from . import distributed
+from .answers import collect
+from .case import SCENARIO_NAMES, CaseStudy, Scenario
+from .provider_calls import NotProvided as NotProvided  # raised by providers; callers catch it from here too
+from .provider_calls import call_all, name_of, resolve
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -72,6 +74,7 @@ class Options:
     quick: bool = False
 
     def __post_init__(self):
+        """Check every field (TypeError or ValueError naming it); `scenarios` becomes a tuple."""
         checks.integer(self.mc, "mc (Monte Carlo samples)", minimum=0)
         object.__setattr__(self, "scenarios", scenario_names(self.scenarios, "scenarios"))
         checks.integer(self.seed, "seed", minimum=0)
@@ -146,7 +149,7 @@ class StudyResult:
     notes : skipped providers, failures and other remarks, in order
     timing : seconds spent per phase
     answers : homework item -> answers (see `studies.answers`), with "errata"
-    providers : the ``module:function`` providers asked for controllers
+    providers : the names (``module:function``) of the providers asked for controllers
     trajectories : the case's solved optimal trajectories (`studies.trajectories.CaseTrajectories`), when
         `studies.solve_trajectories` ran
     """
@@ -174,108 +177,37 @@ class StudyResult:
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
 
 
-# ---------------------------------------------------------------------------- providers
-class NotProvided(LookupError):
-    """Raised by a provider that has nothing for this case (no design of its kind): noted, not a failure."""
+# ---------------------------------------------------------------------------- controllers
+def design_controllers(
+    study: CaseStudy, known: models.Plant, providers: Sequence | None = None, strict: bool = False
+) -> tuple[dict, list]:
+    """The study's controllers designed from `known`, in table order, and notes on what is missing.
 
-
-def provider_specs(value, what: str = "providers") -> tuple:
-    """`value` (a list or tuple of ``module:function`` strings) as a tuple, or an error naming `what`."""
-    if isinstance(value, str) or not isinstance(value, (list, tuple)):
-        raise TypeError(f"{what} must be a list of 'module:function' strings, got {type(value).__name__} {value!r}")
-    for spec in value:
-        if not isinstance(spec, str) or spec.count(":") != 1 or not all(part.strip() for part in spec.split(":")):
-            raise ValueError(f"{what}: each provider is 'module:function', got {spec!r}")
-    return tuple(value)
-
-
-class ProviderNotFound(LookupError):
-    """A ``module:function`` provider whose module cannot be imported or has no such function."""
-
-
-def find_provider(spec: str) -> Callable:
-    """The function a ``module:function`` provider names.
-
-    Raises
-    ------
-    ProviderNotFound
-        Naming the provider when its module does not exist or has no such function (an error
-        raised while importing an existing module propagates as it is).
-    """
-    module_name, _, function_name = spec.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as err:
-        if err.name and (module_name == err.name or module_name.startswith(err.name + ".")):
-            raise ProviderNotFound(f"provider {spec!r}: no module named {err.name!r}") from None
-        raise
-    function = getattr(module, function_name, None)
-    if not callable(function):
-        raise ProviderNotFound(f"provider {spec!r}: module {module_name} has no function {function_name}()")
-    return function
-
-
-def call_providers(specs: Sequence[str], *args, strict: bool = False, **kwargs) -> tuple[list, list]:
-    """Call each ``module:function`` provider.
-
-    A provider that does not exist (`ProviderNotFound`), fails to import or raises is noted and
-    skipped, or with `strict` raised; one that raises `NotProvided` is noted in either case.
+    Parameters
+    ----------
+    providers : replace the study's own (`CaseStudy.providers`): callables ``provider(case, known)``,
+        or ``module:function`` strings naming them (`studies.provider_calls.resolve`)
 
     Returns
     -------
-    results : list of (spec, returned value) for the providers that answered
-    notes : one line per provider skipped or failed
+    {label: controller}: the study's declared labels first, in its order, then the others as provided;
+    notes: list of str
     """
-    results, notes = [], []
-    for spec in specs:
-        try:
-            function = find_provider(spec)
-        except ProviderNotFound as err:
-            if strict:
-                raise
-            notes.append(f"{spec}: skipped, {str(err).split(': ', 1)[1]}")
-            continue
-        except Exception as err:  # a provider that fails to import must not stop the other studies
-            if interrupts.is_interrupt(err):
-                raise KeyboardInterrupt from err
-            if strict:
-                raise
-            notes.append(f"{spec}: skipped, importing {spec.partition(':')[0]} failed: {type(err).__name__}: {err}")
-            continue
-        try:
-            results.append((spec, function(*args, **kwargs)))
-        except NotProvided as err:
-            notes.append(f"{spec}: skipped, {err}")
-        except Exception as err:
-            if interrupts.is_interrupt(err):
-                raise KeyboardInterrupt from err
-            if strict:
-                raise
-            where = traceback.extract_tb(err.__traceback__)[-1]
-            notes.append(f"{spec}: failed ({type(err).__name__}: {err}; at {where.filename}:{where.lineno})")
-    return results, notes
-
-
-def design_controllers(
-    study: CaseStudy, known: models.Plant, providers: Sequence[str] | None = None, strict: bool = False
-) -> tuple[dict, list]:
-    """The study's controllers designed from `known`, in table order, and notes on what is missing."""
-    found, notes = call_providers(
-        study.providers if providers is None else providers, study.plant, strict=strict, known=known
-    )
+    chosen = resolve(study.providers if providers is None else providers, strict=strict)
+    found, notes = call_all(chosen, study, known, strict=strict)
     collected: dict = {}
-    for spec, returned in found:
+    for name, returned in found:
         if not isinstance(returned, Mapping):
-            notes.append(f"{spec}: returned {type(returned).__name__}, not a dict of controllers; skipped")
+            notes.append(f"{name}: returned {type(returned).__name__}, not a dict of controllers; skipped")
             continue
         for label, controller in returned.items():
             if label in collected:
-                notes.append(f"{spec}: controller {label!r} already provided; the first one is kept")
+                notes.append(f"{name}: controller {label!r} already provided; the first one is kept")
             elif not isinstance(controller, models.Controller):
-                notes.append(f"{spec}: {label!r} is a {type(controller).__name__}, not a controller; skipped")
+                notes.append(f"{name}: {label!r} is a {type(controller).__name__}, not a controller; skipped")
             elif controller.n_reference != 1:
                 notes.append(
-                    f"{spec}: {label!r} takes {controller.n_reference} references; the studies "
+                    f"{name}: {label!r} takes {controller.n_reference} references; the studies "
                     "command the tracked coordinate only; skipped"
                 )
             else:
@@ -286,6 +218,17 @@ def design_controllers(
     if missing and found:
         notes.append("not provided yet: " + ", ".join(missing))
     return ordered, notes
+
+
+def add_controllers(designed: dict, extra: Mapping) -> list:
+    """Add the caller's `extra` {label: controller} to `designed` (in place), replacing a provider's
+    controller of the same label; returns a note per label replaced."""
+    notes = []
+    for label, controller in extra.items():
+        if label in designed:
+            notes.append(f"controller {label!r} given twice; the provider's is replaced")
+        designed[label] = controller
+    return notes
 
 
 # ---------------------------------------------------------------------------- noise
@@ -417,7 +360,7 @@ def monte_carlo_bytes(study: CaseStudy, options: Options, n_params: int, sample_
 
     Per sample: the tracked coordinate and the first input over the run, kept for the envelope (and
     copied once by its quantiles), and the sample's row of parameters and metrics. The simulator's
-    own working memory is bounded separately (`models.monte_carlo_batch.MONTE_CARLO_CHUNK_BYTES`).
+    own working memory is bounded separately (`models.closed_loop.MONTE_CARLO_CHUNK_BYTES`).
 
     Parameters
     ----------
@@ -446,18 +389,21 @@ def run_study(
     study: CaseStudy,
     options: Options | None = None,
     *,
-    providers: Sequence[str] | None = None,
+    providers: Sequence | None = None,
     controllers: Mapping | None = None,
     progress: Callable[[int, int, str], None] | None = None,
     executor=None,
 ) -> StudyResult:
     """Run every controller of `study` through its scenarios on the nonlinear plant.
 
+    `study` need not be registered: its providers receive it.
+
     Parameters
     ----------
     study : CaseStudy
     options : Options (defaults: all scenarios, 200 Monte Carlo samples, seed 0)
-    providers : replace the study's provider list (``module:function`` strings)
+    providers : replace the study's providers: callables ``provider(case, known)``, or ``module:function``
+        strings naming them (found before any work; one not found is noted, or with `Options.strict` raised)
     controllers : extra {label: controller} added after the providers' (for example your own design)
     progress : called as progress(done, total, text) after each simulation
     executor : where the Monte Carlo of Block controllers runs: None (this process), a
@@ -469,116 +415,31 @@ def run_study(
 
     Raises
     ------
+    TypeError, ValueError
+        Naming the argument, before any work, when one is not what is allowed.
+    studies.provider_calls.ProviderNotFound
+        With `Options.strict`, before any work, for a provider string that names no provider.
     studies.distributed.RunFailed
         When work sent to a Dask cluster could not complete (never noted as a failed row).
     """
-    if not isinstance(study, CaseStudy):
-        raise TypeError(f"study must be a CaseStudy, got {type(study).__name__} {study!r}")
-    options = Options() if options is None else options
-    if not isinstance(options, Options):
-        raise TypeError(f"options must be a studies.Options, got {type(options).__name__} {options!r}")
-    providers = None if providers is None else provider_specs(providers)
-    if controllers is not None and not isinstance(controllers, Mapping):
-        raise TypeError(f"controllers must be a dict {{label: controller}}, got {type(controllers).__name__}")
-    if progress is not None and not callable(progress):
-        raise TypeError(f"progress must be a function progress(done, total, text), got {progress!r}")
-    executor = distributed.executor_of(executor)
+    options, chosen, executor = _checked_arguments(study, options, providers, controllers, progress, executor)
     plant = models.get(study.plant)
     check_resources(study, options, plant.n_params)
     interrupts.watch()  # Ctrl-C stops the study even where CasADi swallows it
     interrupts.clear()
     started = time.perf_counter()
-    case = study
     known = study.known_plant(plant)
-    designed, notes = design_controllers(study, known, providers, options.strict)
-    for label, controller in (controllers or {}).items():
-        if label in designed:
-            notes.append(f"controller {label!r} given twice; the provider's is replaced")
-        designed[label] = controller
+    designed, notes = design_controllers(study, known, chosen, options.strict)
+    notes += add_controllers(designed, controllers or {})
     timing = {"design_s": time.perf_counter() - started}
     if not designed:
         notes.append("no controllers: nothing to simulate")
-
-    scenarios = [s for s in study.scenarios if options.scenarios is None or s.name in options.scenarios]
-    if options.mc == 0 and any(s.monte_carlo for s in scenarios):
-        notes.append("Monte Carlo skipped (0 samples requested)")
-        scenarios = [s for s in scenarios if not s.monte_carlo]
-    xe, base = tracked_equilibrium(plant, case)
-    tracked_index = plant.state_names.index(case.tracked)
-
-    rows: list[dict] = []
-    sample_rows: list[pd.DataFrame] = []
-    runs: dict = {}
-    envelopes: dict[str, Envelope] = {}
-    total, done = len(designed) * len(scenarios), 0
-    sim_time = mc_time = 0.0
-    truths = {}
-    for label, controller in designed.items():
-        truth = truths[label] = study.truth(plant, label)
-        python = not isinstance(controller, Block)
-        for scenario in scenarios:
-            tick = time.perf_counter()
-            row = {"controller": label, "scenario": scenario.name, "kind": "python" if python else "block"}
-            try:
-                if scenario.monte_carlo:
-                    row |= _monte_carlo(
-                        study,
-                        truth,
-                        controller,
-                        scenario,
-                        options,
-                        base,
-                        tracked_index,
-                        sample_rows,
-                        envelopes,
-                        label,
-                        executor,
-                    )
-                else:
-                    result = simulate_scenario(truth, controller, scenario, case, options, base, study.substeps)
-                    runs[(label, scenario.name)] = result
-                    judged = study.specs_for(scenario.name, truth.params)
-                    row |= metrics.run_metrics(result, case.tracked, judged.state_bounds)
-                    row |= {
-                        "status": run_status(result),
-                        "diverged_at_s": result.diverged_at,
-                        "samples": 1,
-                        "solver_issues": _solver_issues(result),
-                    }
-                    row |= verdict_columns(
-                        specs.judge(judged, result, case.tracked, case.step, row["status"], measured=row)
-                    )
-            except distributed.RunFailed:
-                raise
-            except Exception as err:
-                if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
-                    raise KeyboardInterrupt from err
-                if options.strict:
-                    raise
-                row |= dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
-                row |= {"status": f"failed: {type(err).__name__}: {err}".splitlines()[0][:200]}
-                row |= verdict_columns(specs.Verdict(specs.FAILED, (), row["status"]))
-                notes.append(f"{label} / {scenario.name}: {row['status']}")
-            elapsed = time.perf_counter() - tick
-            row["wall_s"] = elapsed
-            if scenario.monte_carlo:
-                mc_time += elapsed
-            else:
-                sim_time += elapsed
-            rows.append(row)
-            if not python:
-                # A closed loop of 60000 steps holds hundreds of MB of work memory; rows of the same length
-                # are rare (step and noise), so free it now rather than hold every row's at once.
-                models.closed_loop.release(truth, controller)
-            interrupts.check()
-            done += 1
-            if progress:
-                progress(done, total, f"{study.plant}: {label} / {scenario.name}")
-    table = _frame(rows, study, case)
-    timing |= {"simulate_s": sim_time, "monte_carlo_s": mc_time, "total_s": time.perf_counter() - started}
-    samples = pd.concat(sample_rows, ignore_index=True) if sample_rows else pd.DataFrame()
-    from .answers import collect
-
+    scenarios = chosen_scenarios(study, options, notes)
+    simulation = Simulation(study, options, plant, executor, notes)
+    simulation.run_all(designed, scenarios, progress)
+    table = _frame(simulation.rows, study)
+    timing |= simulation.seconds | {"total_s": time.perf_counter() - started}
+    samples = pd.concat(simulation.samples, ignore_index=True) if simulation.samples else pd.DataFrame()
     answers, answer_notes = collect(study, options.strict)
     notes += answer_notes
     return StudyResult(
@@ -587,16 +448,263 @@ def run_study(
         plant,
         known,
         table,
-        runs,
-        envelopes,
+        simulation.runs,
+        simulation.envelopes,
         samples,
         designed,
         notes,
         timing,
         answers,
-        truths,
-        tuple(study.providers if providers is None else providers),
+        simulation.truths,
+        tuple(name_of(p) for p in (study.providers if chosen is None else chosen)),
     )
+
+
+def _checked_arguments(study, options, providers, controllers, progress, executor) -> tuple:
+    """(options, providers found or None, executor) of `run_study`'s arguments, or the error naming one."""
+    if not isinstance(study, CaseStudy):
+        raise TypeError(f"study must be a CaseStudy, got {type(study).__name__} {study!r}")
+    options = Options() if options is None else options
+    if not isinstance(options, Options):
+        raise TypeError(f"options must be a studies.Options, got {type(options).__name__} {options!r}")
+    chosen = None if providers is None else resolve(providers, strict=options.strict)
+    if controllers is not None and not isinstance(controllers, Mapping):
+        raise TypeError(f"controllers must be a dict {{label: controller}}, got {type(controllers).__name__}")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a function progress(done, total, text), got {progress!r}")
+    return options, chosen, distributed.executor_of(executor)
+
+
+def chosen_scenarios(study: CaseStudy, options: Options, notes: list) -> list[Scenario]:
+    """The study's scenarios that `options` asks for, in the study's order; without samples (mc = 0)
+    the Monte Carlo is left out and a note says so (appended to `notes`)."""
+    scenarios = [s for s in study.scenarios if options.scenarios is None or s.name in options.scenarios]
+    if options.mc == 0 and any(s.monte_carlo for s in scenarios):
+        notes.append("Monte Carlo skipped (0 samples requested)")
+        scenarios = [s for s in scenarios if not s.monte_carlo]
+    return scenarios
+
+
+def failed_row(err: Exception) -> dict:
+    """The columns of a row an error stopped: NaN metrics, status "failed: <error>" (one line, at most
+    200 characters) and the failed verdict."""
+    status = f"failed: {type(err).__name__}: {err}".splitlines()[0][:200]
+    row: dict = dict.fromkeys(metrics.METRIC_COLUMNS, math.nan)
+    return row | {"status": status} | verdict_columns(specs.Verdict(specs.FAILED, (), status))
+
+
+class Simulation:
+    """The rows of one study, made controller by controller and scenario by scenario.
+
+    Holds what the runs leave for the `StudyResult`: `rows` (one dict per table row), `runs`
+    ((label, scenario) -> ClosedLoopResult of the scenarios that are not the Monte Carlo), `envelopes`
+    (label -> Envelope), `samples` (one DataFrame of per-sample rows per Monte Carlo), `truths`
+    (label -> simulated plant), `seconds` (simulate_s, monte_carlo_s) and `notes` (failed rows appended).
+    """
+
+    def __init__(self, study: CaseStudy, options: Options, plant: models.Plant, executor, notes: list | None = None):
+        self.study, self.options, self.plant, self.executor = study, options, plant, executor
+        self.notes = [] if notes is None else notes
+        _, self.base = tracked_equilibrium(plant, study)
+        self.tracked_index = plant.state_names.index(study.tracked)
+        self.rows: list[dict] = []
+        self.runs: dict = {}
+        self.envelopes: dict[str, Envelope] = {}
+        self.samples: list[pd.DataFrame] = []
+        self.truths: dict = {}
+        self.seconds = {"simulate_s": 0.0, "monte_carlo_s": 0.0}
+
+    def run_all(self, designed: Mapping, scenarios: Sequence[Scenario], progress=None) -> None:
+        """Every controller of `designed` through every scenario, in that order; `progress(done, total,
+        text)` after each row."""
+        total, done = len(designed) * len(scenarios), 0
+        for label, controller in designed.items():
+            truth = self.truths[label] = self.study.truth(self.plant, label)
+            for scenario in scenarios:
+                self.rows.append(self.row(label, controller, truth, scenario))
+                done += 1
+                if progress:
+                    progress(done, total, f"{self.study.plant}: {label} / {scenario.name}")
+
+    def row(self, label: str, controller, truth: models.Plant, scenario: Scenario) -> dict:
+        """The table row of `controller` in `scenario` on `truth`: a failed row (noted) when an error
+        stops it, unless the options are strict; Ctrl-C and a lost cluster stop the study."""
+        tick = time.perf_counter()
+        python = not isinstance(controller, Block)
+        row: dict = {"controller": label, "scenario": scenario.name, "kind": "python" if python else "block"}
+        try:
+            if scenario.monte_carlo:
+                row |= self.monte_carlo_row(label, controller, truth, scenario)
+            else:
+                row |= self.scenario_row(label, controller, truth, scenario)
+        except distributed.RunFailed:
+            raise
+        except Exception as err:
+            if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
+                raise KeyboardInterrupt from err
+            if self.options.strict:
+                raise
+            row |= failed_row(err)
+            self.notes.append(f"{label} / {scenario.name}: {row['status']}")
+        elapsed = time.perf_counter() - tick
+        row["wall_s"] = elapsed
+        self.seconds["monte_carlo_s" if scenario.monte_carlo else "simulate_s"] += elapsed
+        if not python:
+            # A closed loop of 60000 steps holds hundreds of MB of work memory; rows of the same length
+            # are rare (step and noise), so free it now rather than hold every row's at once.
+            models.closed_loop.release(truth, controller)
+        interrupts.check()
+        return row
+
+    def scenario_row(self, label: str, controller, truth: models.Plant, scenario: Scenario) -> dict:
+        """The columns of one run of `scenario` (not the Monte Carlo): metrics, status and verdict."""
+        study = self.study
+        result = simulate_scenario(truth, controller, scenario, study, self.options, self.base, study.substeps)
+        self.runs[(label, scenario.name)] = result
+        judged = study.specs_for(scenario.name, truth.params)
+        row = metrics.run_metrics(result, study.tracked, judged.state_bounds)
+        row |= {
+            "status": run_status(result),
+            "diverged_at_s": result.diverged_at,
+            "samples": 1,
+            "solver_issues": _solver_issues(result),
+        }
+        return row | verdict_columns(
+            specs.judge(judged, result, study.tracked, study.step, row["status"], measured=row)
+        )
+
+    def monte_carlo_runs(self, truth: models.Plant, controller, scenario: Scenario, samples: np.ndarray) -> Iterable:
+        """The runs of `controller` on `truth` with each row of `samples` (parameters), yielded as they are
+        simulated: a Block's as one batched map (a chunk at a time here, in parts on a Dask executor), a
+        lockstep controller's stepped together, any other's one by one."""
+        study, options, base = self.study, self.options, self.base
+        duration = scenario.duration(study)
+        steps = int(round(duration / controller.sample_period))
+        if isinstance(controller, Block):
+            jit = use_jit(options, truth, controller, len(samples), steps, study.substeps)
+            if isinstance(self.executor, distributed.Local):
+                chunks = models.monte_carlo_chunks(
+                    truth,
+                    controller,
+                    scenario.reference(study, base),
+                    duration,
+                    samples,
+                    seed=options.seed,
+                    threads=options.threads,
+                    substeps=study.substeps,
+                    jit=jit,
+                )
+                return (run for chunk in chunks for run in chunk)
+            return distributed.monte_carlo(
+                self.executor,
+                truth,
+                controller,
+                scenario.reference(study, base),
+                duration,
+                samples,
+                seed=options.seed,
+                threads=options.threads,
+                substeps=study.substeps,
+                jit=jit,
+            )
+        if getattr(controller, "lockstep", False):  # the samples stepped together: the same runs, faster
+            noise = (
+                measurement_noise_std(truth, controller, scenario.noise, sigma=study.derivative_time_constant)
+                if scenario.noise
+                else 0.0
+            )
+            return models.simulate_closed_loop_many(
+                truth,
+                controller,
+                scenario.reference(study, base),
+                duration,
+                samples,
+                substeps=study.substeps,
+                input_disturbance=study.input_disturbance if scenario.input_disturbance else 0.0,
+                noise_std=noise,
+                seed=options.seed,
+            )
+        return (
+            simulate_scenario(truth, controller, scenario, study, options, base, study.substeps, params=row)
+            for row in samples
+        )
+
+    def monte_carlo_row(self, label: str, controller, truth: models.Plant, scenario: Scenario) -> dict:
+        """The Monte Carlo row of one controller: the worst sample's metrics (`models.metrics.aggregate`),
+        the status over the samples and the combined verdict. Its per-sample rows go to `samples` (one
+        DataFrame) and its envelope to `envelopes`. Samples are consumed as they are simulated: only the
+        tracked coordinate and the first input of each stay."""
+        study, count = self.study, self.options.mc
+        batched = isinstance(controller, Block)
+        steps = int(round(scenario.duration(study) / controller.sample_period))
+        checks.check_memory(
+            monte_carlo_bytes(study, self.options, truth.n_params, controller.sample_period),
+            f"the Monte Carlo of {label} ({count} samples of {steps} steps)",
+            "give fewer samples (mc)",
+        )
+        # The same seeded samples for every controller.
+        samples = models.sample_params(truth, count, rel=scenario.rel, seed=self.options.seed)
+        names = list(truth.params)
+        per_sample, verdicts, diverged_at, tracked, inputs, step_times = [], [], [], [], [], []
+        counts = np.zeros(3, dtype=int)
+        t: np.ndarray | None = None
+        reference: np.ndarray | None = None
+        for result, row in zip(self.monte_carlo_runs(truth, controller, scenario, samples), samples):
+            judged = study.specs_for(scenario.name, dict(zip(names, row)))
+            values = metrics.run_metrics(result, study.tracked, judged.state_bounds)
+            per_sample.append(values)
+            verdicts.append(specs.judge(judged, result, study.tracked, study.step, measured=values))
+            if t is None:
+                t, reference = np.array(result.t), np.array(result.r[:, 0])
+            diverged_at.append(math.nan if result.diverged_at is None else float(result.diverged_at))
+            if result.diverged_at is None:
+                tracked.append(np.array(result.x[:, self.tracked_index]))
+                inputs.append(np.array(result.u[:, 0]))
+            if not batched:
+                step_times.append(result.step_time)
+                counts += solver_counts(result.status)
+        self.samples.append(_sample_frame(label, names, samples, per_sample, diverged_at, verdicts))
+        if t is None or reference is None:
+            raise ValueError(f"the Monte Carlo of {label} ran no sample")
+        self.envelopes[label] = _envelope(t, reference, tracked, inputs, count)
+        out = metrics.aggregate(per_sample) | _monte_carlo_status(diverged_at, counts, count)
+        out |= verdict_columns(specs.combine(verdicts))
+        if not batched:
+            out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate(step_times)))
+            out["step_ms_max"] = 1e3 * float(np.nanmax(np.concatenate(step_times)))
+            out["solver_issues"] = float(counts[1]) if counts[0] else math.nan
+        return out
+
+
+def _sample_frame(label: str, names: list, samples: np.ndarray, per_sample: list, diverged_at: list, verdicts: list):
+    """The per-sample rows of one controller's Monte Carlo: controller, sample index, the sample's
+    parameters (columns `names`), its metrics, divergence time (NaN if none) and verdict."""
+    frame = pd.DataFrame(per_sample)
+    frame.insert(0, "controller", label)
+    frame.insert(1, "sample", np.arange(len(samples)))
+    for j, name in enumerate(names):
+        frame.insert(2 + j, name, samples[:, j])
+    frame["diverged_at_s"] = diverged_at
+    for key in ("verdict", "verdict_detail"):
+        frame[key] = [verdict_columns(v)[key] for v in verdicts]
+    return frame
+
+
+def _monte_carlo_status(diverged_at: list, counts: np.ndarray, count: int) -> dict:
+    """The status columns of a Monte Carlo row from each sample's divergence time (s, NaN if none) and
+    the (steps, failed solves, fallbacks) summed over the samples."""
+    diverged = [t for t in diverged_at if not math.isnan(t)]
+    if diverged:
+        status = f"diverged: {len(diverged)} of {count} samples, first at t = {min(diverged):.3g} s"
+    else:
+        steps_run, failed, fallback = (int(c) for c in counts)
+        status = degraded_status(steps_run, failed, fallback, what=f"steps of {count} samples") or "ok"
+    return {
+        "status": status,
+        "samples": count,
+        "diverged_samples": len(diverged),
+        "diverged_at_s": min(diverged) if diverged else None,
+    }
 
 
 def simulate_scenario(
@@ -620,124 +728,6 @@ def simulate_scenario(
         seed=options.seed,
         allow_divergence=True,
     )
-
-
-def _monte_carlo(
-    study, plant, controller, scenario, options, base, tracked_index, sample_rows, envelopes, label, executor=None
-) -> dict:
-    """The Monte Carlo row of one controller; its per-sample rows are appended to `sample_rows` (one
-    DataFrame) and its envelope stored in `envelopes`. Samples are consumed as they are simulated
-    (a chunk at a time for a Block in this process): only the tracked coordinate and the first input stay."""
-    case = study
-    batched = isinstance(controller, Block)
-    duration = scenario.duration(case)
-    steps = int(round(duration / controller.sample_period))
-    count = options.mc
-    checks.check_memory(
-        monte_carlo_bytes(study, options, plant.n_params, controller.sample_period),
-        f"the Monte Carlo of {label} ({count} samples of {steps} steps)",
-        "give fewer samples (mc)",
-    )
-    # The same seeded samples for every controller.
-    samples = models.sample_params(plant, count, rel=scenario.rel, seed=options.seed)
-    if batched and isinstance(executor, distributed.Local):
-        chunks = models.monte_carlo_chunks(
-            plant,
-            controller,
-            scenario.reference(case, base),
-            duration,
-            samples,
-            seed=options.seed,
-            threads=options.threads,
-            substeps=study.substeps,
-            jit=use_jit(options, plant, controller, count, steps, study.substeps),
-        )
-        results: Iterable[models.ClosedLoopResult] = (run for chunk in chunks for run in chunk)
-    elif batched:
-        results = distributed.monte_carlo(
-            executor,
-            plant,
-            controller,
-            scenario.reference(case, base),
-            duration,
-            samples,
-            seed=options.seed,
-            threads=options.threads,
-            substeps=study.substeps,
-            jit=use_jit(options, plant, controller, count, steps, study.substeps),
-        )
-    elif getattr(controller, "lockstep", False):  # the samples stepped together: the same runs, faster
-        noise = (
-            measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
-            if scenario.noise
-            else 0.0
-        )
-        results = models.simulate_closed_loop_many(
-            plant,
-            controller,
-            scenario.reference(case, base),
-            duration,
-            samples,
-            substeps=study.substeps,
-            input_disturbance=case.input_disturbance if scenario.input_disturbance else 0.0,
-            noise_std=noise,
-            seed=options.seed,
-        )
-    else:
-        results = (
-            simulate_scenario(plant, controller, scenario, case, options, base, study.substeps, params=row)
-            for row in samples
-        )
-    per_sample, verdicts, diverged_at, tracked, inputs, step_times = [], [], [], [], [], []
-    names = list(plant.params)
-    counts = np.zeros(3, dtype=int)
-    t: np.ndarray | None = None
-    reference: np.ndarray | None = None
-    for result, row in zip(results, samples):
-        judged = study.specs_for(scenario.name, dict(zip(names, row)))
-        values = metrics.run_metrics(result, case.tracked, judged.state_bounds)
-        per_sample.append(values)
-        verdicts.append(specs.judge(judged, result, case.tracked, case.step, measured=values))
-        if t is None:
-            t, reference = np.array(result.t), np.array(result.r[:, 0])
-        diverged_at.append(math.nan if result.diverged_at is None else float(result.diverged_at))
-        if result.diverged_at is None:
-            tracked.append(np.array(result.x[:, tracked_index]))
-            inputs.append(np.array(result.u[:, 0]))
-        if not batched:
-            step_times.append(result.step_time)
-            counts += solver_counts(result.status)
-    frame = pd.DataFrame(per_sample)
-    frame.insert(0, "controller", label)
-    frame.insert(1, "sample", np.arange(count))
-    for j, name in enumerate(names):
-        frame.insert(2 + j, name, samples[:, j])
-    frame["diverged_at_s"] = diverged_at
-    for key in ("verdict", "verdict_detail"):
-        frame[key] = [verdict_columns(v)[key] for v in verdicts]
-    sample_rows.append(frame)
-    diverged = [t for t in diverged_at if not math.isnan(t)]
-    if t is None or reference is None:
-        raise ValueError(f"the Monte Carlo of {label} ran no sample")
-    envelopes[label] = _envelope(t, reference, tracked, inputs, count)
-    out = metrics.aggregate(per_sample)
-    if diverged:
-        status = f"diverged: {len(diverged)} of {count} samples, first at t = {min(diverged):.3g} s"
-    else:
-        steps_run, failed, fallback = (int(c) for c in counts)
-        status = degraded_status(steps_run, failed, fallback, what=f"steps of {count} samples") or "ok"
-    out |= {
-        "status": status,
-        "samples": count,
-        "diverged_samples": len(diverged),
-        "diverged_at_s": min(diverged) if diverged else None,
-    }
-    out |= verdict_columns(specs.combine(verdicts))
-    if not batched:
-        out["step_ms"] = 1e3 * float(np.nanmean(np.concatenate(step_times)))
-        out["step_ms_max"] = 1e3 * float(np.nanmax(np.concatenate(step_times)))
-        out["solver_issues"] = float(counts[1]) if counts[0] else math.nan
-    return out
 
 
 def verdict_columns(verdict: specs.Verdict) -> dict:
@@ -765,12 +755,13 @@ TABLE_COLUMNS = (
 )
 
 
-def _frame(rows: list, study: CaseStudy, case) -> pd.DataFrame:
+def _frame(rows: list, study: CaseStudy) -> pd.DataFrame:
+    """The study table of `rows` (dicts): the columns of `TABLE_COLUMNS` in that order, absent ones NaN."""
     frame = pd.DataFrame(rows)
     for column in TABLE_COLUMNS:
         if column not in frame:
             frame[column] = np.nan
-    frame["tracked"] = case.tracked
+    frame["tracked"] = study.tracked
     frame["tracked_unit"] = study.tracked_unit
     frame["input_unit"] = study.input_unit
     if len(frame):

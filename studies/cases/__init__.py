@@ -4,6 +4,11 @@ Every module of this package that defines ``CASE = CaseStudy(...)`` is a
 case study; `names()` lists them by their Roman numeral (the text's order).
 `register` adds a user's case at run time. Adding a plant to the studies is
 one new module here (and its plant declaration, if the plant is new).
+
+The case files are imported at the first lookup. Everything that needs the
+cases reads them here, ``python -m studies --list`` and the command line's
+checks included: the heavy third-party modules their designs use are imported
+at their first use (`models.deferred`), so importing every case stays quick.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ _DISCOVERED: list[bool] = []
 
 
 def _discover() -> None:
+    """Import every module of this package once and register the `CaseStudy` each one names ``CASE``."""
     if _DISCOVERED:
         return
     _DISCOVERED.append(True)

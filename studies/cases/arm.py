@@ -22,6 +22,7 @@ from designs.pid import PID, linearized_input_bound, pd_saturation
 from designs.tuning import Specs
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem
 from studies import drawing as d
+from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.codesign_report import ActuatorSizing
 from studies.codesign_report import actuator_sizing as size_actuator
@@ -290,6 +291,8 @@ CASE = CaseStudy(
     # I.8(c): 50 deg, sized so that the PD just saturates; I.17(e): 0.2 N m; noise in rad, the text gives no
     # sensor: an encoder-scale 0.06 deg; I.11(a): m and ell known to 5 %.
     scenarios=standard_scenarios({"theta": 1e-3}),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     loops=(LOOPSHAPING,),
     classical=classical,
     statespace=STATESPACE,

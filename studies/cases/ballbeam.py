@@ -34,6 +34,7 @@ from designs.tuning import Specs
 from models import deferred
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
+from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.codesign_report import ActuatorSizing
 from studies.codesign_report import actuator_sizing as size_actuator
@@ -496,6 +497,8 @@ CASE = CaseStudy(
     # 0.25 -> 0.40 m stays on the beam; V.15(e): a series of step changes; the text gives no disturbance:
     # 10 % of 15 N; noise in m, rad: the text gives no sensors; V.12(c): m1, m2, ell known to 5 %.
     scenarios=standard_scenarios({"z": 1e-3, "theta": 1e-3}),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     # The ball must stay on the beam: 0 <= z <= ell.
     bounds=lambda params: {"z": (0.0, params["ell"])},
     loops=LOOPS,

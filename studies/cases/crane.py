@@ -35,6 +35,7 @@ from designs.tuning import Cost, Specs
 from models import deferred
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
+from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum, Remark
 from studies.homework import (
@@ -720,6 +721,8 @@ CASE = CaseStudy(
     # VI.14(e): 10 m; the text gives no disturbance: 10 % of 5 kN; noise in m, rad: the text gives none;
     # VI.11(a): all but g known to 5 %.
     scenarios=standard_scenarios({"x": 1e-2, "theta1": 1e-3, "theta2": 1e-3}),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     loops=LOOPS,
     # VI.6: the single-load crane without friction (m2 = ell2 = b = 0): F -> theta -> x.
     cascade=("theta", "x"),

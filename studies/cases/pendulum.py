@@ -29,6 +29,7 @@ from designs.loops import (
 from designs.pid import linearized_input_bound
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
+from studies import providers
 from studies.case import CONTROLLERS, CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum
 from studies.homework import (
@@ -441,6 +442,8 @@ CASE = CaseStudy(
     input_unit="N",
     # II.8(h): 2 m; II.16(c): 0.5 N; noise in m, rad: the text gives no sensors; II.11(a): m1, m2, ell, b to 5 %.
     scenarios=standard_scenarios({"z": 1e-3, "theta": 1e-3}),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     # II.8's controlbook variant of the outer loop, after the text's controllers.
     controllers=CONTROLLERS + ("PD (zero-cancelling filter)",),
     loops=(LOOPSHAPING,),

@@ -24,6 +24,7 @@ from designs.pid import PDDesign, linearized_input_bound, pd_design
 from designs.tuning import Cost, Specs
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
+from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.errata import Erratum
 from studies.homework import (
@@ -463,6 +464,8 @@ CASE = CaseStudy(
     # III.8(g): 30 deg; III.16(c): 0.5 N m; noise in rad: star tracker on theta, strain gauge on phi - theta,
     # the text gives no figures; Js, Jp, k, b known to 5 %.
     scenarios=standard_scenarios({"theta": 1e-3, "phi_minus_theta": 1e-3}),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     loops=(LOOPSHAPING,),
     cascade=("theta", "phi"),  # III.6(b): tau -> theta -> phi
     classical=classical,

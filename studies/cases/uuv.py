@@ -28,6 +28,7 @@ from designs.tuning import Specs
 from models import deferred
 from mpc import Collocation, MPCSettings, OptimalControlProblem
 from studies import drawing as d
+from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
 from studies.codesign_report import ActuatorSizing
 from studies.codesign_report import actuator_sizing as size_actuator
@@ -497,6 +498,8 @@ CASE = CaseStudy(
     # IV.8(b): 30 deg; the text gives no disturbance: 10 % of the 50 N m limit; noise in rad, the text gives no
     # sensor; m, b, L known to 5 %.
     scenarios=standard_scenarios({"phi": 1e-3}),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     # IV.11's root-locus lead-lag is the UUV's own homework, listed after the loopshaped design.
     controllers=(
         "PD",

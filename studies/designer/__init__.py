@@ -60,7 +60,7 @@ import models  # noqa: E402
 from designs import tuning  # noqa: E402
 from models import Block, Cascade, export, metrics, specs  # noqa: E402
 
-from .. import cases, homework, loops, runner, tuner  # noqa: E402
+from .. import cases, homework, loops, providers, runner, tuner  # noqa: E402
 from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, Scenario  # noqa: E402
 
 #: Each gain element ranges over [value / RANGE, value * RANGE] (sign kept).
@@ -74,7 +74,7 @@ SPEC_POINTS = 120
 #: Loop gain multipliers k of the root locus (k = 1 is the design).
 LOCUS_GAINS = np.logspace(-2, 2, 121)
 #: Providers the designer does not ask: their controllers are not Blocks (an MPC has no gains to move).
-SKIPPED_PROVIDERS = ("studies.providers:mpc",)
+SKIPPED_PROVIDERS = (providers.mpc,)
 #: Plants of the optional Monte Carlo envelope, and the quantiles it draws.
 ENVELOPE_SAMPLES = 20
 ENVELOPE_QUANTILES = (0.0, 0.05, 0.5, 0.95, 1.0)

@@ -1,10 +1,14 @@
-"""The case studies' designs by plant name, for the tests: crane1 is the crane case's one-load design model."""
+"""The case studies' designs by plant name, for the tests: crane1 is the crane case's one-load design model.
+
+These design through `studies.homework` directly; the studies ask the same designs through the
+case's providers (`studies.providers.STANDARD`), which receive the case itself."""
 
 from __future__ import annotations
 
 import models
 import studies
 from studies import homework
+from studies.cases import crane
 
 #: Every plant a case study designs: the registered cases' and crane1, the crane case's one-load model.
 DESIGNED = (*studies.names(), "crane1")
@@ -20,11 +24,8 @@ def _known(name: str, known):
 
 
 def _choices(name: str):
-    if name == "crane1":
-        from studies.cases import crane
-
-        return crane.STATESPACE_ONE_LOAD
-    return None
+    """The state-space choices of `name` where they are not its case's own (crane1's one-load ones)."""
+    return crane.STATESPACE_ONE_LOAD if name == "crane1" else None
 
 
 def classical_answers(name: str, known=None) -> dict:

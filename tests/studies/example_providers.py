@@ -1,15 +1,17 @@
-"""Controller providers for testing the studies before the real designs land.
+"""Controller providers for testing the studies apart from the case studies' own designs.
 
-`controllers(name, known)` returns, for any of the six plants, linear-quadratic
+`controllers(case, known)` returns, for any case (registered or not), linear-quadratic
 state feedback with reference feedforward in three speeds (blocks), a
 dirty-derivative PD on the tracked output for the one-coordinate plants, and
 the same state feedback as a Python controller with per-step solver records
-(standing in for MPC). These are fixtures with the providers' interface, not
-designs of the case studies.
+(standing in for MPC). These are fixtures with the providers' interface
+(``provider(case, known) -> {label: controller}``, `studies.providers`), not
+designs of the case studies. Each takes the case, or a registered case's name.
 """
 
 from __future__ import annotations
 
+import os
 import time
 
 import casadi as ca
@@ -21,9 +23,17 @@ import studies
 from designs.discrete import dirty_derivative
 
 
-def _tracking_gains(plant: models.Plant, name: str, weight: float):
+def _case(case) -> studies.CaseStudy:
+    """`case`, or the registered case of that name."""
+    return studies.get(case) if isinstance(case, str) else case
+
+
+def _plant(case: studies.CaseStudy, known: models.Plant | None) -> models.Plant:
+    return known or models.get(case.plant)
+
+
+def _tracking_gains(plant: models.Plant, case: studies.CaseStudy, weight: float):
     """LQR gain K and feedforward (Nx, Nu) so that x → xe + Nx Δr, u → ue + Nu Δr."""
-    case = studies.get(name)
     xe, ue = plant.equilibrium()
     lin = plant.linearize(xe, ue)
     i = plant.state_names.index(case.tracked)
@@ -112,53 +122,53 @@ class PythonStateFeedback:
         return dict(self._info)
 
 
-def controllers(name: str, known: models.Plant | None = None) -> dict:
-    """Example controllers for plant `name`, designed from `known` (default: nominal)."""
-    plant = known or models.get(name)
+def controllers(case, known: models.Plant | None = None) -> dict:
+    """Example controllers for `case`, designed from `known` (default: nominal)."""
+    case = _case(case)
+    plant = _plant(case, known)
     out = {}
     for label, weight in (("LQR", 1.0), ("LQR fast", 0.25), ("LQR slow", 4.0)):
-        K, Nx, Nu, xe, ue, re = _tracking_gains(plant, name, weight)
+        K, Nx, Nu, xe, ue, re = _tracking_gains(plant, case, weight)
         out[label] = StateFeedback(K, Nx, Nu, xe, ue, re, name=label)
     if plant.nq == 1:
-        K, _, _, xe, ue, _ = _tracking_gains(plant, name, 1.0)
+        K, _, _, xe, ue, _ = _tracking_gains(plant, case, 1.0)
         out["PD"] = DirtyPD(K[0], K[1], ue[0])
     out["linear MPC"] = PythonStateFeedback(out["LQR"], float(plant.input_limit[0]))
     return out
 
 
-def failing(name: str, known: models.Plant | None = None) -> dict:
+def failing(case, known: models.Plant | None = None) -> dict:
     """A provider that raises, as a provider with a bug would."""
-    raise RuntimeError(f"no design for {name}")
+    raise RuntimeError(f"no design for {_case(case).plant}")
 
 
-def diverging(name: str, known: models.Plant | None = None) -> dict:
+def diverging(case, known: models.Plant | None = None) -> dict:
     """A controller whose command becomes NaN after 1 s: the run must be reported as diverged."""
-    plant = known or models.get(name)
-    K, Nx, Nu, xe, ue, re = _tracking_gains(plant, name, 1.0)
+    case = _case(case)
+    plant = _plant(case, known)
+    K, Nx, Nu, xe, ue, re = _tracking_gains(plant, case, 1.0)
     return {
         "broken": PythonStateFeedback(StateFeedback(K, Nx, Nu, xe, ue, re), float(plant.input_limit[0]), fail_after=100)
     }
 
 
-def lqr_only(name: str, known: models.Plant | None = None) -> dict:
+def lqr_only(case, known: models.Plant | None = None) -> dict:
     """Just the LQR state feedback of `controllers`."""
-    return {"LQR": controllers(name, known)["LQR"]}
+    return {"LQR": controllers(case, known)["LQR"]}
 
 
-def with_own_actuator(name: str, known: models.Plant | None = None) -> dict:
+def with_own_actuator(case, known: models.Plant | None = None) -> dict:
     """The LQR twice, once under the label the UUV study gives its own 250 N m actuator."""
-    lqr = controllers(name, known)["LQR"]
+    lqr = controllers(case, known)["LQR"]
     return {"LQR": lqr, "lead-lag (IV.11)": lqr}
 
 
-def killing_the_worker(name: str, known: models.Plant | None = None) -> dict:
+def killing_the_worker(case, known: models.Plant | None = None) -> dict:
     """Kills the process it runs in when that is a Dask worker (a worker lost mid-run); else `controllers`."""
-    import os
-
     try:
         from distributed import get_worker
 
         get_worker()
     except (ImportError, ValueError):
-        return controllers(name, known)
+        return controllers(case, known)
     os._exit(1)

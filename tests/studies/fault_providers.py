@@ -1,7 +1,7 @@
 """Controller providers that inject faults into a study, for tests/studies/test_faults.py.
 
-Each is a ``module:function`` provider (called as ``function(name, known=Plant)``) returning
-``{label: controller}``, as the command line's ``--provider`` takes them.
+Each is a provider ``provider(case, known) -> {label: controller}`` (`studies.providers`), named
+``fault_providers:function`` on the command line's ``--provider``.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import sys
 from example_providers import PythonStateFeedback, controllers
 
 import models
+from mpc.controller import NonlinearMPC
 
 
 class SolverAlwaysFails(PythonStateFeedback):
@@ -21,10 +22,10 @@ class SolverAlwaysFails(PythonStateFeedback):
         return {"status": "Maximum_Iterations_Exceeded", "success": False, "fallback": True, "solve_time": 0.0}
 
 
-def solver_always_fails(name: str, known: models.Plant | None = None) -> dict:
+def solver_always_fails(case, known: models.Plant | None = None) -> dict:
     """One 'MPC' whose solver fails on all of its steps."""
-    lqr = controllers(name, known)["LQR"]
-    plant = known or models.get(name)
+    lqr = controllers(case, known)["LQR"]
+    plant = known or models.get(case.plant)
     return {"failing MPC": SolverAlwaysFails(lqr, float(plant.input_limit[0]))}
 
 
@@ -41,9 +42,10 @@ class InterruptInDisguise(PythonStateFeedback):
         return super().step(xc, y, r)
 
 
-def interrupt_in_disguise(name: str, known: models.Plant | None = None) -> dict:
-    lqr = controllers(name, known)["LQR"]
-    plant = known or models.get(name)
+def interrupt_in_disguise(case, known: models.Plant | None = None) -> dict:
+    """The example LQR, and an 'MPC' whose CasADi call reports Ctrl-C as an error at its 20th step."""
+    lqr = controllers(case, known)["LQR"]
+    plant = known or models.get(case.plant)
     return {"interrupted MPC": InterruptInDisguise(lqr, float(plant.input_limit[0]))}
 
 
@@ -56,9 +58,10 @@ class RaisesMidRun(PythonStateFeedback):
         return super().step(xc, y, r)
 
 
-def raises_mid_run(name: str, known: models.Plant | None = None) -> dict:
-    lqr = controllers(name, known)["LQR"]
-    plant = known or models.get(name)
+def raises_mid_run(case, known: models.Plant | None = None) -> dict:
+    """The example LQR, and an 'MPC' that raises an ordinary error at its 30th step."""
+    lqr = controllers(case, known)["LQR"]
+    plant = known or models.get(case.plant)
     return {"LQR": lqr, "broken MPC": RaisesMidRun(lqr, float(plant.input_limit[0]))}
 
 
@@ -66,17 +69,15 @@ def raises_mid_run(name: str, known: models.Plant | None = None) -> dict:
 HOSTILE_LABELS = ("<script>alert(1)</script> *bold* | pipe", "__DATA__ and __TITLE__", "- [link](http://x) `code`")
 
 
-def hostile_labels(name: str, known: models.Plant | None = None) -> dict:
+def hostile_labels(case, known: models.Plant | None = None) -> dict:
     """The example LQR (the fastest, so it is the animated 'best' one) under labels with markup."""
-    found = controllers(name, known)
+    found = controllers(case, known)
     return {HOSTILE_LABELS[0]: found["LQR fast"], HOSTILE_LABELS[1]: found["LQR"], HOSTILE_LABELS[2]: found["LQR slow"]}
 
 
-def announce_nonlinear_mpc(name: str, known: models.Plant | None = None) -> dict:
+def announce_nonlinear_mpc(case, known: models.Plant | None = None) -> dict:
     """No controller: makes every nonlinear MPC print 'NMPC RUN STARTED' on stderr as each of its runs
     starts, so a test can interrupt the command while the case's own nonlinear MPC is solving."""
-    from mpc.controller import NonlinearMPC
-
     start = NonlinearMPC.initial_state
     if not getattr(start, "announces", False):
 
@@ -90,6 +91,6 @@ def announce_nonlinear_mpc(name: str, known: models.Plant | None = None) -> dict
     return {}
 
 
-def not_a_dict(name: str, known: models.Plant | None = None):
+def not_a_dict(case, known: models.Plant | None = None):
     """A provider with a bug: it returns a list."""
     return [1, 2, 3]

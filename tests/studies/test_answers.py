@@ -55,15 +55,17 @@ def test_errata_declared_in_the_case_files_are_picked_for_the_case(plant, presen
         assert item not in items
 
 
-def test_provider_answers_are_merged_by_item(monkeypatch):
+def test_provider_answers_are_merged_by_item():
     study = studies.get("arm")
-    module = type("Module", (), {})()
-    module.answers = lambda name: {"I.8(c)": {"kp": 0.3}, "I.5": {"note": "from the design"}}
-    import sys
+    asked = []
 
-    monkeypatch.setitem(sys.modules, "fake_answers_for_studies", module)
-    patched = dataclasses.replace(study, answer_providers=("fake_answers_for_studies:answers",))
+    def provider(case):
+        asked.append(case)
+        return {"I.8(c)": {"kp": 0.3}, "I.5": {"note": "from the design"}}
+
+    patched = dataclasses.replace(study, answer_providers=(provider,))
     found, notes = answers.collect(patched)
+    assert asked == [patched] and asked[0] is patched  # the provider receives the case itself
     assert found["I.8(c)"] == {"kp": 0.3}
     assert found["I.5"]["note"] == "from the design" and "u_e" in found["I.5"]
     assert list(found).index("I.7") < list(found).index("I.8(c)") < list(found).index("errata")

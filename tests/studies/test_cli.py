@@ -120,3 +120,16 @@ def test_answers_are_printed_when_asked(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert "IV.5" in done.stdout and "IV.6" in done.stdout and "Errata found" in done.stdout
+
+
+@pytest.mark.parametrize(
+    "module", ["studies.tuner", "studies.errata", "studies.codesign_report", "studies.codesign_open_loop"]
+)
+def test_every_command_of_the_package_runs_its_module_once(module):
+    """`import studies` imports none of the modules that also run as commands: runpy would warn that the
+    module is imported already and run a second copy of it."""
+    done = subprocess.run(
+        [sys.executable, "-m", module, "--help"], cwd=REPO, env=subprocess_env(), capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"usage: python -m {module}") and "RuntimeWarning" not in done.stderr

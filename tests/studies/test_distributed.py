@@ -1,7 +1,10 @@
-"""Dask: a LocalCluster of two workers gives the numbers of one process (per-sample seeds from the run's
-seed, never from a worker), survives a worker killed mid-run, and when workers keep dying the command
-fails with a clear message and writes nothing."""
+"""The executors. Local: in this process, or in a pool of processes whose results are those of this
+process and which an error ends at once. Dask: a LocalCluster of two workers gives the numbers of one
+process (per-sample seeds from the run's seed, never from a worker), survives a worker killed mid-run,
+and when workers keep dying the command fails with a clear message and writes nothing."""
 
+import math
+import multiprocessing
 import os
 import signal
 import threading
@@ -15,6 +18,33 @@ from conftest import EXAMPLE, HERE, REPO
 import models
 import studies
 from studies import distributed, providers
+
+
+# ---------------------------------------------------------------------------- Local
+def test_a_local_pool_gives_each_result_once_and_map_keeps_the_order():
+    values = [4.0, 9.0, 16.0, 25.0]
+    before = set(multiprocessing.active_children())
+    with distributed.connect(jobs=2) as executor:
+        assert isinstance(executor, distributed.Local) and executor.workers == 2 and not executor.distributed
+        assert executor.map(math.sqrt, values) == [2.0, 3.0, 4.0, 5.0]
+        assert sorted(executor.as_completed(math.sqrt, values)) == [2.0, 3.0, 4.0, 5.0]
+        pool = set(multiprocessing.active_children()) - before
+        assert 1 <= len(pool) <= 2  # the pool's processes, started as tasks came
+    assert not any(process.is_alive() for process in pool)  # closed with the block
+    alone = distributed.Local()
+    assert alone.map(math.sqrt, values) == list(alone.as_completed(math.sqrt, values)) == [2.0, 3.0, 4.0, 5.0]
+
+
+def test_a_failing_task_ends_the_pools_processes_and_its_error_propagates():
+    before = set(multiprocessing.active_children())
+    with distributed.connect(jobs=2) as executor:
+        assert executor.map(math.sqrt, [1.0, 4.0]) == [1.0, 2.0]  # the pool is up
+        pool = set(multiprocessing.active_children()) - before
+        with pytest.raises(ValueError, match="math domain error"):
+            list(executor.as_completed(math.sqrt, [4.0, -1.0, 9.0]))
+        assert pool and not any(process.is_alive() for process in pool)
+        assert executor.map(math.sqrt, [9.0]) == [3.0]  # a new pool for the next tasks
+
 
 distributed_package = pytest.importorskip("distributed")
 
@@ -37,7 +67,7 @@ def client():
 @pytest.fixture(scope="module")
 def pendulum_loop():
     case, plant = studies.get("pendulum"), models.get("pendulum")
-    block = providers.statespace("pendulum", known=case.known_plant())["pole placement"]
+    block = providers.statespace(case, case.known_plant())["pole placement"]
     return plant, block, case.scenarios[0].reference(case, 0.0)
 
 

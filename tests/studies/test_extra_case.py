@@ -1,6 +1,8 @@
 """Adding a plant to the studies is one case file: a mass-spring-damper declared and registered here,
-run end to end by `studies.run`, its rows checked against closed forms of the linear plant."""
+run end to end by `studies.run`, its rows checked against closed forms of the linear plant; and the same
+plant as a case that is never registered, run with a provider of its own."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +14,7 @@ from designs.analysis import Loop, dc_gain
 from designs.pid import PID, pd_design
 from designs.statespace import second_order_poles
 from mpc import MPCSettings
+from studies import providers, runner
 from studies.case import CaseStudy, input_disturbance, step
 from studies.homework import ClassicalDesign, StateSpaceChoices, record
 
@@ -59,6 +62,8 @@ CASE = CaseStudy(
     tracked_unit="m",
     input_unit="N",
     scenarios=(step(), input_disturbance()),
+    providers=providers.STANDARD,
+    answer_providers=providers.STANDARD_ANSWERS,
     known_rel=0.0,
     classical=classical,
     statespace=StateSpaceChoices(
@@ -153,3 +158,31 @@ def test_the_registry_lists_the_new_case_after_the_six_and_refuses_a_second():
     finally:
         studies.unregister(NAME)
     assert NAME not in studies.names()
+
+
+def test_an_unregistered_case_runs_with_a_callable_provider_that_receives_it():
+    """A `CaseStudy` that is never registered, with one provider of its own (a function, not a name):
+    `run_study` hands it the case and the known plant, and the PD's steady-state error is the hand
+    derivation k / (k + k_p) of the step (as in the registered case above)."""
+    asked = []
+
+    def pd_only(case, known):
+        asked.append((case, known))
+        G = known.linearize().tf("x", "F")
+        pd = pd_design(G, zeta=0.8, wn=3.0)
+        return {"PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=LIMIT, name="PD")}
+
+    case = dataclasses.replace(CASE, providers=(pd_only,), answer_providers=())
+    assert NAME not in studies.names()
+    result = runner.run_study(case, runner.Options(scenarios=("step",), mc=0))
+    assert [(c, k.name) for c, k in asked] == [(case, NAME)] and asked[0][0] is case
+    assert NAME not in studies.names()  # running it registered nothing
+    row = result.table.set_index("controller").loc["PD"]
+    kp = 3.0**2 * M - K  # ω_n² = (k + k_p) / m
+    assert row.status == "ok" and row.ss_error == pytest.approx(0.5 * K / (K + kp), rel=1e-4)
+    assert len(result.providers) == 1 and result.providers[0].endswith(":" + pd_only.__qualname__)
+    # The answers of an unregistered case: the model's items, and no errata of its own.
+    assert "VII.7" in result.answers and result.answers["errata"] == []
+    # The same through `studies.run_study`, which also takes the case itself.
+    table = studies.run_study(case, scenarios=["step"], mc=0).table
+    assert table.set_index("controller").loc["PD"].ss_error == row.ss_error

@@ -1,6 +1,6 @@
 """Faults injected into the studies and their command line; each test asserts the exact behaviour.
 
-Five classes (issue 12): Ctrl-C always stops the run and leaves no partial or mixed files; an output
+Five classes: Ctrl-C always stops the run and leaves no partial or mixed files; an output
 folder always holds one run; a row's status tells the truth (ok, degraded, diverged, failed,
 skipped) and --strict makes any other than ok an exit 1; resources are checked before the work; bad
 input gets a one-line error naming the argument; the same seed gives the same bytes, and labels
@@ -25,6 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import example_providers
+import fault_providers
 import numpy as np
 import pandas as pd
 import pytest
@@ -43,6 +45,7 @@ STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
 
 
 def arm_study(*providers):
+    """The arm case with only `providers` (callables ``provider(case, known)``)."""
     return dataclasses.replace(studies.get("arm"), providers=tuple(providers))
 
 
@@ -225,7 +228,7 @@ def test_an_interrupt_casadi_reports_as_an_error_stops_the_study():
     """CasADi turns Ctrl-C inside a solver into RuntimeError('... KeyboardInterrupt'): the study stops
     with KeyboardInterrupt instead of noting a failed row and going on."""
     with pytest.raises(KeyboardInterrupt):
-        runner.run_study(arm_study("fault_providers:interrupt_in_disguise"), STEP_ONLY)
+        runner.run_study(arm_study(fault_providers.interrupt_in_disguise), STEP_ONLY)
 
 
 def test_the_command_reads_an_interrupt_reported_as_an_error_as_an_interrupt(workdir, monkeypatch, capsys):
@@ -238,7 +241,9 @@ def test_the_command_reads_an_interrupt_reported_as_an_error_as_an_interrupt(wor
             "<built-in function Function_call> returned a result with an exception set: KeyboardInterrupt"
         )
 
-    monkeypatch.setattr(command, "_run_all", interrupted)
+    from studies import batch
+
+    monkeypatch.setattr(batch, "run_plants", interrupted)
     monkeypatch.chdir(workdir)
     before = previous_run(workdir / "out")
     assert command.main(["arm", "--quick", "--out", "out"]) == 130
@@ -249,7 +254,7 @@ def test_the_command_reads_an_interrupt_reported_as_an_error_as_an_interrupt(wor
 def test_an_interrupted_write_leaves_the_previous_folder(tmp_path, monkeypatch):
     """Ctrl-C while a study's files are written (in the middle of its plots): out/arm is the earlier
     folder, file for file, and no staging folder is left."""
-    result = runner.run_study(arm_study("example_providers:lqr_only"), STEP_ONLY)
+    result = runner.run_study(arm_study(example_providers.lqr_only), STEP_ONLY)
     out = tmp_path / "out"
     before = previous_run(out)
     from studies import plots
@@ -267,9 +272,7 @@ def test_an_interrupted_write_leaves_the_previous_folder(tmp_path, monkeypatch):
 def test_a_study_folder_is_replaced_whole_and_records_its_run(tmp_path):
     """A stale file of an earlier run does not survive a rewrite; run.json names the run, its settings
     and the SHA-256 of every file, which check_study_folder verifies."""
-    result = runner.run_study(
-        arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step",), mc=0, seed=7)
-    )
+    result = runner.run_study(arm_study(example_providers.lqr_only), runner.Options(scenarios=("step",), mc=0, seed=7))
     out = tmp_path / "out"
     (out / "arm").mkdir(parents=True)
     (out / "arm" / "stale.png").write_bytes(b"from an earlier run")
@@ -290,10 +293,8 @@ def test_a_mixed_folder_is_detected_and_reported_in_the_summary_and_index(tmp_pa
     """A table.csv of another run copied into a plant folder, and a file it never wrote, are named by
     check_study_folder, and summary.md and index.html say the folder is not as its run wrote it; a
     plant written by an earlier run is marked as such."""
-    result = runner.run_study(arm_study("example_providers:lqr_only"), STEP_ONLY)
-    uuv = runner.run_study(
-        dataclasses.replace(studies.get("uuv"), providers=("example_providers:lqr_only",)), STEP_ONLY
-    )
+    result = runner.run_study(arm_study(example_providers.lqr_only), STEP_ONLY)
+    uuv = runner.run_study(dataclasses.replace(studies.get("uuv"), providers=(example_providers.lqr_only,)), STEP_ONLY)
     out = tmp_path / "out"
     writers.write_study(uuv, out, run_id="earlier")
     writers.write_study(result, out, run_id="now")
@@ -358,7 +359,7 @@ def test_an_mpc_whose_solver_fails_on_every_step_is_degraded_not_ok():
     """500 failed solves (each falling back on the previous plan) in the step, and in every step of
     the Monte Carlo samples: 'degraded' with the counts, never 'ok', and not the best row."""
     result = runner.run_study(
-        arm_study("fault_providers:solver_always_fails", "example_providers:lqr_only"),
+        arm_study(fault_providers.solver_always_fails, example_providers.lqr_only),
         runner.Options(scenarios=("step", "mc"), mc=2),
     )
     table = result.table.set_index(["controller", "scenario"]).status
@@ -386,19 +387,19 @@ def test_counts_of_solver_records():
 
 
 def test_a_diverging_and_a_failing_controller_have_their_own_status_and_the_others_run():
-    result = runner.run_study(arm_study("example_providers:diverging", "fault_providers:raises_mid_run"), STEP_ONLY)
+    result = runner.run_study(arm_study(example_providers.diverging, fault_providers.raises_mid_run), STEP_ONLY)
     status = result.table.set_index("controller").status
     assert status["broken"] == "diverged at t = 1 s"
     assert status["broken MPC"] == "failed: FloatingPointError: the solver's factorization broke down"
     assert status["LQR"] == "ok"
     with pytest.raises(FloatingPointError, match="factorization broke down"):
         runner.run_study(
-            arm_study("fault_providers:raises_mid_run"), runner.Options(scenarios=("step",), mc=0, strict=True)
+            arm_study(fault_providers.raises_mid_run), runner.Options(scenarios=("step",), mc=0, strict=True)
         )
 
 
 def test_a_provider_that_returns_no_dict_is_noted():
-    result = runner.run_study(arm_study("fault_providers:not_a_dict", "example_providers:lqr_only"), STEP_ONLY)
+    result = runner.run_study(arm_study(fault_providers.not_a_dict, example_providers.lqr_only), STEP_ONLY)
     assert "fault_providers:not_a_dict: returned list, not a dict of controllers; skipped" in result.notes
 
 
@@ -540,7 +541,7 @@ def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(mon
     import models.monte_carlo_batch
 
     monkeypatch.setattr(models.monte_carlo_batch, "MONTE_CARLO_CHUNK_BYTES", 1)  # one sample per chunk
-    study = arm_study("example_providers:lqr_only")
+    study = arm_study(example_providers.lqr_only)
     options = runner.Options(scenarios=("mc",), mc=7, seed=2, jit=False)
     result = runner.run_study(study, options)
     plant = result.plant
@@ -564,7 +565,7 @@ def test_the_streamed_monte_carlo_equals_the_one_batch_of_models_monte_carlo(mon
 def test_a_controllers_compiled_closed_loops_are_freed_after_each_row():
     """The work memory of a closed loop (hundreds of MB at 1 ms over a minute) is not kept once its row
     is done: after the study no cached closed-loop Function of the controller is left on the plant."""
-    result = runner.run_study(arm_study("example_providers:lqr_only"), runner.Options(scenarios=("step", "mc"), mc=3))
+    result = runner.run_study(arm_study(example_providers.lqr_only), runner.Options(scenarios=("step", "mc"), mc=3))
     lqr = result.controllers["LQR"]
 
     def cached():
@@ -634,8 +635,16 @@ def test_bad_command_line_arguments_exit_2_naming_the_argument(workdir, monkeypa
         ({"jit": 1}, ValueError, "jit must be True, False or 'auto', got 1"),
         ({"out": ""}, ValueError, "out must name a folder (or be None to write nothing), got ''"),
         ({"out": 5}, ValueError, "out must name a folder (or be None to write nothing), got 5"),
-        ({"providers": EXAMPLE}, TypeError, "providers must be a list of 'module:function' strings, got str"),
-        ({"providers": ["nocolon"]}, ValueError, "providers: each provider is 'module:function', got 'nocolon'"),
+        (
+            {"providers": EXAMPLE},
+            TypeError,
+            "providers must be a list of providers (functions, or 'module:function' strings), got str",
+        ),
+        (
+            {"providers": ["nocolon"]},
+            ValueError,
+            "providers: each provider is a function or 'module:function', got 'nocolon'",
+        ),
         ({"controllers": ["PD"]}, TypeError, "controllers must be a dict {label: controller}, got list"),
         ({"progress": 5}, TypeError, "progress must be a function progress(done, total, text), got 5"),
         ({"mc": 2_000_000}, models.checks.ResourceLimitError, "a Monte Carlo of 2000000 samples on arm needs about"),
@@ -673,7 +682,7 @@ def test_the_same_seed_gives_the_same_bytes_and_the_timings_are_apart(tmp_path):
     """Two runs of the arm with a Block and a controller timed step by step (example linear MPC),
     Monte Carlo included: table.csv and monte_carlo.csv are byte-identical; compute times are only in
     timings.csv (and they differ); another seed changes the Monte Carlo."""
-    study = arm_study(EXAMPLE)
+    study = arm_study(example_providers.controllers)
     options = runner.Options(scenarios=("step", "mc"), mc=3, seed=11)
     outs = []
     for k, seed in enumerate((11, 11, 12)):
@@ -739,7 +748,7 @@ def test_markdown_escaping_shows_the_text_and_starts_no_syntax(label):
 def test_labels_are_shown_literally_in_every_file(tmp_path):
     """Labels with HTML, Markdown and the animation page's placeholders: escaped in table.md, summary.md
     and index.html, and the animation page's title is the label (its data appears once, in the script)."""
-    result = runner.run_study(arm_study("fault_providers:hostile_labels"), STEP_ONLY)
+    result = runner.run_study(arm_study(fault_providers.hostile_labels), STEP_ONLY)
     out = tmp_path / "out"
     writers.write_study(result, out, run_id="labels")
     writers.write_summary(out, ["arm"], "labels")

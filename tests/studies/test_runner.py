@@ -4,24 +4,28 @@ divergence reported as such, noise levels of full-state controllers."""
 import dataclasses
 import math
 
+import example_providers
 import numpy as np
 import pytest
 
 import models
 import studies
 from designs.discrete import dirty_derivative
-from models import metrics
-from studies import runner
+from models import metrics, specs
+from studies import provider_calls, runner
 
 EXAMPLE = "example_providers:controllers"
 STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
 
 
 def arm_study(**changes):
+    """The arm case with `changes` (e.g. its providers)."""
     return dataclasses.replace(studies.get("arm"), **changes)
 
 
 def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
+    """Providers named by 'module:function' strings (as the command line names them) are found before
+    the run; one that does not exist is noted where it stands, and a failing one does not stop the others."""
     study = arm_study(
         providers=(
             "no_such_package_for_studies.designs:controllers",
@@ -44,7 +48,7 @@ def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
     assert status["linear MPC"] == "degraded: solver failed on 10 of 500 steps"
     assert set(status.drop("linear MPC")) == {"ok"}
     # Strict: the first provider that is missing stops the study, and one that fails.
-    with pytest.raises(runner.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
+    with pytest.raises(provider_calls.ProviderNotFound, match="no module named 'no_such_package_for_studies'"):
         runner.run_study(study, runner.Options(scenarios=("step",), mc=0, strict=True))
     with pytest.raises(RuntimeError, match="no design for arm"):
         runner.run_study(
@@ -56,7 +60,7 @@ def test_missing_providers_are_skipped_with_a_note_and_the_others_run():
 def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
     """Each recorded sample, integrated through CVODES (a different integrator) from the recorded state
     under the recorded, clipped command, lands on the next recorded state; a linear model does not."""
-    study = arm_study(providers=(EXAMPLE,))
+    study = arm_study(providers=(example_providers.controllers,))
     result = runner.run_study(study, STEP_ONLY)
     run = result.runs[("LQR", "step")]
     plant = result.plant
@@ -78,7 +82,7 @@ def test_a_table_row_is_the_nonlinear_plant_under_the_recorded_input():
 
 
 def test_monte_carlo_is_reproducible_from_its_seed():
-    study = arm_study(providers=(EXAMPLE,))
+    study = arm_study(providers=(example_providers.controllers,))
     options = runner.Options(scenarios=("mc",), mc=6, seed=3)
     first = runner.run_study(study, options)
     again = runner.run_study(study, options)
@@ -100,7 +104,7 @@ def test_monte_carlo_is_reproducible_from_its_seed():
 
 
 def test_python_controllers_run_every_scenario_on_as_many_samples_and_report_solver_status():
-    study = arm_study(providers=(EXAMPLE,))
+    study = arm_study(providers=(example_providers.controllers,))
     options = runner.Options(scenarios=("step", "noise", "mc"), mc=4)
     result = runner.run_study(study, options)
     table = result.table.set_index(["controller", "scenario"])
@@ -114,7 +118,7 @@ def test_python_controllers_run_every_scenario_on_as_many_samples_and_report_sol
 
 
 def test_a_diverged_run_is_reported_as_diverged_with_its_time():
-    result = runner.run_study(arm_study(providers=("example_providers:diverging",)), STEP_ONLY)
+    result = runner.run_study(arm_study(providers=(example_providers.diverging,)), STEP_ONLY)
     row = result.table.iloc[0]
     # The example controller commands NaN from its 100th step (t = 1 s): the run diverges at that command,
     # before the plant integrates it.
@@ -193,7 +197,7 @@ def test_run_returns_the_table_as_a_dataframe_with_the_documented_columns():
 def test_two_rk4_substeps_give_the_tables_of_ten(plant):
     """The studies integrate with 2 RK4 sub-steps per sample; 10 (the simulator's default) change
     no metric of the step by more than 1e-5 relative."""
-    base = dataclasses.replace(studies.get(plant), providers=("example_providers:lqr_only",))
+    base = dataclasses.replace(studies.get(plant), providers=(example_providers.lqr_only,))
     rows = [runner.run_study(dataclasses.replace(base, substeps=n), STEP_ONLY).table.iloc[0] for n in (2, 10)]
     for key in ("rise_time_s", "settling_time_s", "overshoot_pct", "iae", "itae", "peak_u", "energy"):
         assert rows[0][key] == pytest.approx(rows[1][key], rel=1e-5, abs=1e-9), key
@@ -201,10 +205,57 @@ def test_two_rk4_substeps_give_the_tables_of_ten(plant):
 
 def test_a_design_with_its_own_actuator_runs_on_it():
     """IV.11 assumes 250 N m thrusters: that row's plant has them, the others keep 50 N m."""
-    study = dataclasses.replace(studies.get("uuv"), providers=("example_providers:with_own_actuator",))
+    study = dataclasses.replace(studies.get("uuv"), providers=(example_providers.with_own_actuator,))
     result = runner.run_study(study, STEP_ONLY)
     table = result.table.set_index("controller")
     assert table.loc["LQR", "u_limit"] == 50.0 and table.loc["lead-lag (IV.11)", "u_limit"] == 250.0
     fast, slow = (result.runs[(label, "step")] for label in ("lead-lag (IV.11)", "LQR"))
     assert np.max(np.abs(fast.u)) > 50.0  # the same law asks for more than 50 N m ...
     assert table.loc["lead-lag (IV.11)", "rise_time_s"] < table.loc["LQR", "rise_time_s"]  # ... and gets it
+
+
+# ---------------------------------------------------------------------------- the steps of run_study
+def test_the_scenarios_asked_for_keep_the_studys_order_and_without_samples_no_monte_carlo():
+    study = studies.get("arm")
+    notes: list = []
+    chosen = runner.chosen_scenarios(study, runner.Options(scenarios=("mc", "step"), mc=0), notes)
+    assert [s.name for s in chosen] == ["step"] and notes == ["Monte Carlo skipped (0 samples requested)"]
+    notes = []
+    chosen = runner.chosen_scenarios(study, runner.Options(scenarios=("mc", "step"), mc=3), notes)
+    assert [s.name for s in chosen] == ["step", "mc"] and notes == []
+    assert [s.name for s in runner.chosen_scenarios(study, runner.Options(), [])] == list(studies.SCENARIO_NAMES)
+
+
+def test_a_callers_controller_replaces_a_providers_of_the_same_label_with_a_note():
+    designed = {"PD": "provided PD", "LQR": "provided LQR"}
+    notes = runner.add_controllers(designed, {"LQR": "mine", "extra": "also mine"})
+    assert designed == {"PD": "provided PD", "LQR": "mine", "extra": "also mine"}
+    assert notes == ["controller 'LQR' given twice; the provider's is replaced"]
+
+
+def test_a_failed_row_has_no_metrics_and_the_failed_verdict():
+    row = runner.failed_row(ValueError("first line\nsecond line " + "x" * 300))
+    assert row["status"] == "failed: ValueError: first line"
+    assert all(math.isnan(row[k]) for k in metrics.METRIC_COLUMNS)
+    assert row["verdict"] == specs.FAILED and row["verdict_detail"] == row["status"]
+    assert len(runner.failed_row(ValueError("y" * 300))["status"]) == 200
+
+
+def test_a_row_of_the_simulation_is_the_plant_simulated_directly():
+    """`Simulation.row` of the LQR's step: the metrics of the same closed loop run by
+    `models.simulate_closed_loop` (a second path), and the row's run kept for the plots."""
+    study = arm_study(providers=(example_providers.lqr_only,))
+    plant = models.get("arm")
+    lqr = example_providers.lqr_only(study, study.known_plant(plant))["LQR"]
+    simulation = runner.Simulation(study, STEP_ONLY, plant, None)
+    step = study.scenarios[0]
+    row = simulation.row("LQR", lqr, plant, step)
+    _, base = runner.tracked_equilibrium(plant, study)
+    run = models.simulate_closed_loop(
+        plant, lqr, step.reference(study, base), step.duration(study), substeps=study.substeps
+    )
+    expected = metrics.run_metrics(run, study.tracked)
+    assert (row["controller"], row["scenario"], row["kind"], row["status"]) == ("LQR", "step", "block", "ok")
+    for key in ("iae", "itae", "peak_u", "settling_time_s"):
+        assert row[key] == expected[key], key
+    assert simulation.runs[("LQR", "step")].x.shape == run.x.shape and simulation.notes == []

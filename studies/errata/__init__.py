@@ -6,17 +6,19 @@ paragraphs printed under a section's table. A row that concerns several cases
 is declared once, in one of them, naming the others in ``also``.
 
 ``python -m studies.errata`` rewrites docs/errata.md from the registered
-cases; a test checks that the committed file equals `document()`.
+cases (`main`, run by this package's ``__main__``); a test checks that the
+committed file equals `document()`.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from models.files import format_number, markdown_table, write_text
+
+from .. import cases
 
 #: The errata tables: key -> (title, column headers after "item", text under the title).
 SECTIONS = {
@@ -31,7 +33,7 @@ SECTIONS = {
     ),
 }
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "errata.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "errata.md"
 
 HEADER = """# Errata in the case studies
 
@@ -64,6 +66,7 @@ class Erratum:
     also: tuple = ()
 
     def __post_init__(self):
+        """Refuse an unknown section, and cells that do not fill the section's columns (ValueError)."""
         if self.section not in SECTIONS:
             raise ValueError(f"unknown errata section {self.section!r}; sections are {', '.join(SECTIONS)}")
         headers = SECTIONS[self.section][1]
@@ -87,25 +90,27 @@ class Remark:
     text: str
 
 
-def _declared(cases) -> list[tuple[str, object]]:
-    """(declaring case, entry) over the cases in registry order."""
-    return [(case.plant, entry) for case in cases for entry in case.errata]
+def _declared(studied) -> list[tuple[str, object]]:
+    """(declaring case, entry) over the cases `studied`, in their order."""
+    return [(case.plant, entry) for case in studied for entry in case.errata]
 
 
-def errata_of(case, cases) -> list[dict]:
-    """The rows that concern `case`, in the document's order, as the answers list them."""
+def errata_of(case, studied) -> list[dict]:
+    """The rows declared by the cases `studied` that concern `case`, in the document's order, as the
+    answers list them."""
     rows = []
     for key in SECTIONS:
-        for owner, entry in _declared(cases):
+        for owner, entry in _declared(studied):
             if isinstance(entry, Erratum) and entry.section == key and case.plant in (owner, *entry.also):
                 rows.append(entry.row())
     return rows
 
 
-def document(cases) -> str:
-    """docs/errata.md: every section's table (rows in case order) and remarks."""
+def document(studied) -> str:
+    """docs/errata.md from the errata of the cases `studied`: every section's table (rows in case order)
+    and remarks."""
     parts = [HEADER]
-    declared = _declared(cases)
+    declared = _declared(studied)
     for key, (title, headers, intro) in SECTIONS.items():
         parts.append(f"\n## {title}\n\n")
         if intro:
@@ -120,16 +125,10 @@ def document(cases) -> str:
 
 
 def main(argv=None) -> int:
+    """``python -m studies.errata [--out FILE]``: write `document()` of the registered cases (default to `DOC`)."""
     parser = argparse.ArgumentParser(prog="python -m studies.errata", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DOC, help=f"file to write (default {DOC})")
     args = parser.parse_args(argv)
-    # As ``python -m studies.errata`` this file runs as __main__: use the module the case files import.
-    from studies import cases, errata
-
-    write_text(args.out, errata.document([cases.get(n) for n in cases.names()]))
+    write_text(args.out, document([cases.get(n) for n in cases.names()]))
     print(f"wrote {args.out}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

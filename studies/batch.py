@@ -1,0 +1,167 @@
+"""Several case studies run into one folder on one executor: the work of ``python -m studies``.
+
+`run_plants` runs the named plants and writes each one's folder into a staging folder that the
+command publishes when every plant is done (`studies.writers.publish`). On an executor with more
+than one worker (``--jobs N`` with several plants, or Dask) each plant is one task (`plant_task`):
+it is studied in a private folder wherever it runs and its files come back as bytes, installed
+into the staging folder once every plant has come back; otherwise the plants run here one after
+the other, their Monte Carlo on the executor. Either way every plant's files are the same bytes.
+
+What the command prints of a plant comes back as a small report (`plant_report`), so that a
+plant run elsewhere sends back no tables or plots.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import tempfile
+import textwrap
+import uuid
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+from models.files import write_bytes
+
+from . import cases, run_study
+from .answers import format_answers
+from .runner import StudyResult, status_kind
+from .writers import not_ok_rows, verdict_counts
+
+#: progress(plant, done, total, text) after each simulation of a plant, or when a plant is done.
+PlantProgress = Callable[[str, int, int, str], None]
+
+
+def not_ok_lines(table, width: int = 118) -> list:
+    """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".
+
+    Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
+    scenarios, so the list stays short while naming every (controller, scenario). A row that did not
+    run as designed says so beside its verdict: "violates (degraded)".
+    """
+    scenarios = list(dict.fromkeys(table.scenario))
+    groups: dict = {}
+    for row in table.to_dict("records"):
+        verdict, status = str(row.get("verdict")), str(row.get("status"))
+        if verdict == "meets specs" and status == "ok":
+            continue
+        kind = status_kind(status)
+        if verdict == "meets specs":
+            key = kind
+        elif kind == "ok" or verdict.startswith(kind):
+            key = verdict
+        else:
+            key = f"{verdict} ({kind})"
+        groups.setdefault(key, {}).setdefault(row["controller"], []).append(row["scenario"])
+    lines = []
+    for key, by_controller in groups.items():
+        by_set: dict = {}
+        for controller, where in by_controller.items():
+            tag = "all" if where == scenarios else ", ".join(where)
+            by_set.setdefault(tag, []).append(controller)
+        text = "; ".join(f"{', '.join(controllers)} [{tag}]" for tag, controllers in by_set.items())
+        lines += textwrap.wrap(f"{key}: {text}", width, initial_indent="  ", subsequent_indent="      ")
+    return lines
+
+
+def plant_report(result: StudyResult, answers: bool) -> dict:
+    """What the command prints of one study (picklable): its name, the answers' text (with `answers`,
+    else None), counts of controllers and rows, timing, notes, the best step, the verdict counts and
+    the lines of the rows that are not ok."""
+    table = result.table
+    return {
+        "name": result.study.plant,
+        "answers": format_answers(result.study, result.answers, result.plant.title) if answers else None,
+        "controllers": len(result.controllers),
+        "rows": len(table),
+        "timing": result.timing,
+        "notes": list(result.notes),
+        "best": result.best("step"),
+        "counts": verdict_counts(table),
+        "not_ok": not_ok_lines(table),
+        "not_ok_rows": len(not_ok_rows(table)),
+    }
+
+
+def run_plant(
+    name: str,
+    settings: Mapping,
+    out: str,
+    answers: bool,
+    progress: PlantProgress | None = None,
+    executor=None,
+    run_id: str | None = None,
+) -> dict:
+    """Study the registered plant `name` with `settings` (keyword arguments of `studies.run_study`) and
+    write its folder into `out`; returns its `plant_report`."""
+    step = None if progress is None else (lambda done, total, text: progress(name, done, total, text))
+    result = run_study(cases.get(name), out=out, progress=step, executor=executor, run_id=run_id, **settings)
+    return plant_report(result, answers)
+
+
+def plant_task(task: tuple) -> tuple:
+    """One plant as a task: ``(name, settings, answers, run_id)`` -> (its report, its files as
+    {path relative to the output folder: bytes}). It runs in a private folder, so nothing is written
+    where the command can see it until every plant has come back (`install`)."""
+    name, settings, answers, run_id = task
+    with tempfile.TemporaryDirectory(prefix="studies-") as folder:
+        report = run_plant(name, settings, folder, answers, run_id=run_id)
+        files = {
+            str(path.relative_to(folder)): path.read_bytes()
+            for path in sorted(Path(folder).rglob("*"))
+            if path.is_file()
+        }
+    return report, files
+
+
+def install(out: str, files: Mapping[str, bytes]) -> None:
+    """Write the plants' folders {relative path: bytes} into `out`, each plant folder replaced as a whole."""
+    folder = Path(out)
+    staging = folder / f".staging-{uuid.uuid4().hex[:8]}"
+    try:
+        for relative, data in files.items():
+            write_bytes(staging / relative, data)
+        for plant in sorted(p for p in staging.iterdir() if p.is_dir()):
+            target, old = folder / plant.name, folder / f".old-{plant.name}-{staging.name[9:]}"
+            if target.exists():
+                target.rename(old)
+            plant.rename(target)
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def run_plants(
+    plants: Sequence[str],
+    settings: Mapping[str, Mapping],
+    out: str,
+    answers: bool,
+    executor,
+    progress: PlantProgress,
+    run_id: str | None = None,
+    longest_first: Mapping[str, float] | None = None,
+) -> list:
+    """Study every plant of `plants` into `out` on `executor`; returns their reports, as they finished.
+
+    Parameters
+    ----------
+    settings : plant -> keyword arguments of `studies.run_study` (providers, scenarios, mc, ...)
+    executor : a `studies.distributed` executor; with more than one worker (a `Local` pool, or Dask)
+        and more than one plant, each plant is a task of its own, else they run here one by one
+    progress : progress(plant, done, total, text): after each simulation here, as each plant ends elsewhere
+    longest_first : plant -> seconds it is expected to take: parallel tasks start with the longest (an
+        unknown plant first of all), so that they finish together; every order writes the same files
+    """
+    if len(plants) < 2 or not (executor.distributed or executor.workers > 1):
+        return [run_plant(name, settings[name], out, answers, progress, executor, run_id) for name in plants]
+    seconds = longest_first or {}
+    order = sorted(plants, key=lambda name: -seconds.get(name, math.inf))
+    tasks = [(name, settings[name], answers, run_id) for name in order]
+    reports: list = []
+    files: dict = {}
+    for report, written in executor.as_completed(plant_task, tasks, labels=[f"plant-{name}" for name in order]):
+        reports.append(report)
+        files |= written
+        progress(report["name"], 1, 1, f"{report['name']} done")
+    install(out, files)
+    return reports
