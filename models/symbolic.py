@@ -28,25 +28,26 @@ if TYPE_CHECKING:
 else:
     sympy = deferred.module("sympy")
 
+# SymPy's functions are looked up at the call, so importing this module does not import SymPy.
 _UNARY = {
     ca.OP_NEG: lambda a: -a,
-    ca.OP_SIN: sympy.sin,
-    ca.OP_COS: sympy.cos,
-    ca.OP_TAN: sympy.tan,
-    ca.OP_EXP: sympy.exp,
-    ca.OP_LOG: sympy.log,
-    ca.OP_SQRT: sympy.sqrt,
+    ca.OP_SIN: lambda a: sympy.sin(a),
+    ca.OP_COS: lambda a: sympy.cos(a),
+    ca.OP_TAN: lambda a: sympy.tan(a),
+    ca.OP_EXP: lambda a: sympy.exp(a),
+    ca.OP_LOG: lambda a: sympy.log(a),
+    ca.OP_SQRT: lambda a: sympy.sqrt(a),
     ca.OP_SQ: lambda a: a**2,
     ca.OP_TWICE: lambda a: 2 * a,
     ca.OP_INV: lambda a: 1 / a,
-    ca.OP_FABS: sympy.Abs,
-    ca.OP_ASIN: sympy.asin,
-    ca.OP_ACOS: sympy.acos,
-    ca.OP_ATAN: sympy.atan,
-    ca.OP_SINH: sympy.sinh,
-    ca.OP_COSH: sympy.cosh,
-    ca.OP_TANH: sympy.tanh,
-    ca.OP_SIGN: sympy.sign,
+    ca.OP_FABS: lambda a: sympy.Abs(a),
+    ca.OP_ASIN: lambda a: sympy.asin(a),
+    ca.OP_ACOS: lambda a: sympy.acos(a),
+    ca.OP_ATAN: lambda a: sympy.atan(a),
+    ca.OP_SINH: lambda a: sympy.sinh(a),
+    ca.OP_COSH: lambda a: sympy.cosh(a),
+    ca.OP_TANH: lambda a: sympy.tanh(a),
+    ca.OP_SIGN: lambda a: sympy.sign(a),
 }
 _BINARY = {
     ca.OP_ADD: lambda a, b: a + b,
@@ -55,9 +56,9 @@ _BINARY = {
     ca.OP_DIV: lambda a, b: a / b,
     ca.OP_POW: lambda a, b: a**b,
     ca.OP_CONSTPOW: lambda a, b: a**b,
-    ca.OP_ATAN2: sympy.atan2,
-    ca.OP_FMIN: sympy.Min,
-    ca.OP_FMAX: sympy.Max,
+    ca.OP_ATAN2: lambda a, b: sympy.atan2(a, b),
+    ca.OP_FMIN: lambda a, b: sympy.Min(a, b),
+    ca.OP_FMAX: lambda a, b: sympy.Max(a, b),
 }
 
 

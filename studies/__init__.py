@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
-from . import runner, trajectories
+from . import runner, trajectories, writers
 from .case import SCENARIO_NAMES, CaseStudy
 from .cases import get, names, register, unregister
 from .runner import Options, StudyResult
@@ -101,10 +101,6 @@ def run_study(
     if out is not None:
         if study.trajectories:
             solve_trajectories(result)
-        # The page writers and what their pages import (Matplotlib through the plots, 0.39 s here, -X importtime,
-        # median of 5) are loaded when a study is written: `python -m studies --list` does without them.
-        from . import writers
-
         writers.write_study(result, out, run_id)
     return result
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import models
-from models import deferred
+from models import deferred, symbolic
 from models.linear import clean_tf, tf_string
 
 from . import cases
@@ -54,10 +54,6 @@ def printed_model(plant: models.Plant, numeral: str) -> dict:
 @functools.lru_cache(maxsize=16)
 def _printed(declaration, numeral: str) -> dict:
     """The .1 and .3 answers of `declaration` (cached: `printed_model` hands out copies)."""
-    # models.symbolic builds its operator table from SymPy when imported (0.28 s here, -X importtime,
-    # median of 5); imported at the first printed model, `python -m studies --list` does without it.
-    from models import symbolic
-
     T = symbolic.kinetic_energy(declaration)
     equations = symbolic.equations_of_motion(declaration)
     return {

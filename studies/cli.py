@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import models
 from models import checks, deferred, files, interrupts
 
-from . import cases, distributed, runner, sweep
+from . import batch, cases, distributed, runner, sweep, writers
 from .case import SCENARIO_NAMES
 from .provider_calls import ProviderNotFound, find, unavailable
 
@@ -422,10 +422,6 @@ def main(argv=None) -> int:
 def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: int, where: str) -> int:
     """Run the plants into a staging folder, publish it into OUT when every plant is done, and print the
     closing lines; returns the exit status (1 failed, 130/143 interrupted, 1 with --strict and a row not ok)."""
-    # The batch and the page writers import Matplotlib through the plots for their pages (0.39 s here,
-    # -X importtime, median of 5): imported when plants run, so --list and --help do without them.
-    from . import batch, writers
-
     registered = list(cases.names())
     per_plant = {name: settings | {"providers": list(cases.get(name).providers) + chosen} for name in plants}
     started = time.perf_counter()

@@ -27,7 +27,7 @@ import models
 from models import Block, deferred, interrupts, metrics, specs
 from models.files import write_csv, write_text
 
-from . import distributed, runner, style
+from . import distributed, plots, runner, style
 from .case import CaseStudy
 
 if TYPE_CHECKING:
@@ -200,10 +200,6 @@ def run_sweep(
 def write_sweep(study: CaseStudy, grid: Grid, table, out, notes: Sequence[str] = (), scenario: str = "step") -> dict:
     """``OUT/<plant>/sweep.csv``, ``sweep.png`` and ``sweep.md``: cost and verdict of every controller
     against the parameter; returns {kind: file name}."""
-    # The plots import Matplotlib (0.39 s here, -X importtime, median of 5): imported when a sweep is
-    # drawn, so the command line, which imports this module, answers --list and --help without it.
-    from . import plots
-
     folder = Path(out) / study.plant
     write_csv(folder / "sweep.csv", table)
     plant = models.get(study.plant)

@@ -35,6 +35,7 @@ from models.files import (
 )
 
 from . import animation, loops, overview, plots, style, templates, trajectories
+from .answers import format_answers
 from .case import LoopSpec
 from .runner import STATUS_KINDS, status_kind, tracked_equilibrium
 
@@ -291,11 +292,6 @@ def write_tables(result, folder: Path) -> dict:
     """table.csv and monte_carlo.csv (without their compute times), timings.csv, answers.json and
     answers.md of `result` in `folder`; {kind: file name} of those written (no monte_carlo.csv
     without Monte Carlo samples)."""
-    # Imported here, not with the writers: studies.answers imports models.symbolic, which imports SymPy
-    # (its operator table), 0.5 to 1.3 s measured after the case registry; importing the writers (as the
-    # command line does to check its arguments) must not wait for it.
-    from .answers import format_answers
-
     files: dict = {}
     table, samples = result.table, result.samples
     write_csv(folder / "table.csv", table.drop(columns=[c for c in TIMING_COLUMNS if c in table]))
