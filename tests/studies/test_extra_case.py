@@ -170,7 +170,8 @@ def test_an_unregistered_case_runs_with_a_callable_provider_that_receives_it():
         asked.append((case, known))
         G = known.linearize().tf("x", "F")
         pd = pd_design(G, zeta=0.8, wn=3.0)
-        return {"PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=LIMIT, name="PD")}
+        timing = dict(sample_period=case.sample_period, sigma=case.derivative_time_constant)
+        return {"PD": PID(known, "x", kp=pd.kp, kd=pd.kd, output_limit=LIMIT, name="PD", **timing)}
 
     case = dataclasses.replace(CASE, providers=(pd_only,), answer_providers=())
     assert NAME not in studies.names()
