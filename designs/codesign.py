@@ -44,9 +44,11 @@ from .tuning import (
     TOL,
     WIDTHS,
     Cost,
+    SolveOptions,
     Specs,
     TuningProblem,
     TuningResult,
+    TuningSetup,
     gain_bounds,
     solve,
     tune,
@@ -258,10 +260,9 @@ def codesign(
         raise ValueError("the sequential method needs a plant-only objective: give plant_objective or plant_cost")
     names = tuple(ranges)
     options = {"specs": specs, "cost": cost, "samples": samples, "robust": robust, "substeps": substeps, "paths": paths}
-    solve_options = {
-        "max_iter": max_iter, "jit": jit, "tol": tol, "widths": widths, "hessian": hessian, "phase": True,
-        "relaxed": relaxed,
-    }  # fmt: skip
+    solve_options = SolveOptions(
+        max_iter=max_iter, jit=jit, tol=tol, widths=widths, hessian=hessian, phase=True, relaxed=relaxed
+    )
     # Validate everything once, before any solve: the joint problem and its bounds.
     joint = TuningProblem(plant, block, scenarios, free=free, extra_params=names, **options)
     lbx, ubx = _joint_bounds(joint, bounds, names, ranges)
@@ -296,9 +297,7 @@ def codesign(
 
     def simultaneous(method, problem, lb, ub, start, where):
         started = time.perf_counter()
-        result = solve(
-            problem, lb, ub, plant_cost=lambda x: cost_fn(x[problem.n_gains :]), start=start, **solve_options
-        )
+        result = solve(problem, lb, ub, solve_options, plant_cost=lambda x: cost_fn(x[problem.n_gains :]), start=start)
         status = f"IPOPT: {result.status}"
         found(
             _answer(
@@ -337,7 +336,7 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
         "ipopt",
         {"x": p, "f": objective},
         {
-            "ipopt": {"print_level": 0, "sb": "yes", "tol": solve_options["tol"], "max_iter": MAX_ITER},
+            "ipopt": {"print_level": 0, "sb": "yes", "tol": solve_options.tol, "max_iter": MAX_ITER},
             "print_time": False,
             "error_on_fail": False,
         },
@@ -348,7 +347,7 @@ def _sequential(plant, block, scenarios, names, ranges, plant_only, cost_fn, fre
     designed = plant.with_params(**values)
     problem = TuningProblem(designed, block, scenarios, free=free, **options)
     lbx, ubx = gain_bounds(problem, bounds)
-    tuned = solve(problem, lbx, ubx, **solve_options)
+    tuned = solve(problem, lbx, ubx, solve_options)
     plant_cost_value = float(cost_fn(list(values.values())))
     converged = plant_status in STOPPED_BY_TEST[:2] and tuned.stopped_on_test
     return CodesignResult(
@@ -395,7 +394,7 @@ def _nested(plant, joint, lbx, ubx, names, cost_fn, solve_options, nested_tol, f
         start[n:] = values
         fixed_low, fixed_high = lbx.copy(), ubx.copy()
         fixed_low[n:] = fixed_high[n:] = values
-        result = solve(joint, fixed_low, fixed_high, start=start, **solve_options)
+        result = solve(joint, fixed_low, fixed_high, solve_options, start=start)
         value = result.cost + float(cost_fn(values))
         if not result.feasible or not np.isfinite(value):
             # Infeasible inner answers lose to every feasible one, and the least infeasible wins.
@@ -510,6 +509,17 @@ def _check_sizing(low, high, rel_tol):
     return low, high, rel_tol
 
 
+#: The `tune_options` that describe the problem (a `TuningSetup`); the others are `SolveOptions`.
+_SETUP_OPTIONS = ("cost", "samples", "robust", "free", "bounds", "substeps", "paths")
+
+
+def _tune(plant, block, scenario, specs, options: Mapping) -> TuningResult:
+    setup = TuningSetup(
+        plant, block, scenario, specs=specs, **{k: v for k, v in options.items() if k in _SETUP_OPTIONS}
+    )
+    return tune(setup, SolveOptions(**{k: v for k, v in options.items() if k not in _SETUP_OPTIONS}))
+
+
 def size_actuator(
     plant: Plant,
     design: Callable[[Plant], Block],
@@ -574,14 +584,14 @@ def size_actuator(
         if retune:
             # Only the verdict matters to the bisection: feasibility first, the cost tuned once at the answer.
             verdict = options | {"until_feasible": True}
-            result = tune(sized, block, scenario, specs=specs, **verdict)
+            result = _tune(sized, block, scenario, specs, verdict)
             if not result.stopped_on_test and best_block is not None:
                 # A numerical stop decides nothing about this limit: once more from the gains that met the
                 # specs at the smallest feasible limit so far (seen in a case's sizing: Restoration_Failed
                 # from the design's own gains, Solve_Succeeded from those).
                 retries += 1
                 known = {k: v for k, v in best_block.gains.items() if k in block.gains}
-                again = tune(sized, block.with_gains(**known), scenario, specs=specs, **verdict)
+                again = _tune(sized, block.with_gains(**known), scenario, specs, verdict)
                 # A feasible design decides the limit whatever the other start claims; then a stop on the test.
                 if (again.feasible, again.stopped_on_test) > (result.feasible, result.stopped_on_test):
                     result = again
@@ -612,7 +622,7 @@ def size_actuator(
     if retune:
         # The gains at the limit found, tuned for the cost from the feasible ones the verdict found there.
         sized = plant.with_input_limit(best)
-        final = tune(sized, best_block, scenario, specs=specs, **options)
+        final = _tune(sized, best_block, scenario, specs, options)
         if final.feasible:
             best_block = final.block
     return {
@@ -697,13 +707,13 @@ def size_actuator_simultaneous(
     offset = sum(np.asarray(wrapped.gains[g]).size for g in problem.free[:index])
     j0 = problem.values(problem.start())[0]
     scaled = start_limit / j0 if np.isfinite(j0) and j0 > 0 else 0.0
-    options = {"plant_cost": lambda x: x[offset], "tol": tol, "widths": widths, "hessian": hessian, "phase": True}
+    options = SolveOptions(max_iter=max_iter, tol=tol, jit=jit, widths=widths, hessian=hessian, phase=True)
     # First with the regularizing weight, then at `cost_weight` from that answer; the last converged,
     # feasible answer is kept (the first one when the second creeps or fails).
     weights = (SIZING_COST_WEIGHT, cost_weight) if cost_weight < SIZING_COST_WEIGHT else (cost_weight,)
     result, point, used = None, None, cost_weight
     for w in weights:
-        trial = solve(problem, lbx, ubx, max_iter, jit, cost_weight=w * scaled, start=point, **options)
+        trial = solve(problem, lbx, ubx, options, cost_weight=w * scaled, start=point, plant_cost=lambda x: x[offset])
         if result is None or (trial.converged and trial.feasible):
             result, used = trial, w
         point = trial.decision

@@ -58,7 +58,7 @@ from designs.codesign import (
     size_actuator_simultaneous,
 )
 from designs.pid import PID, max_equilibrium_input
-from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
+from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup, tune
 from models import files
 
 from . import cases
@@ -436,7 +436,9 @@ def actuator_sizing(
     if "sequential" in methods:
         started = time.perf_counter()
         sized = plant.with_input_limit(floor)
-        tuned = tune(sized, sizing.retune_start(sized), scenario, specs=specs, **options)
+        setup = TuningSetup(sized, sizing.retune_start(sized), scenario, specs=specs, free=sizing.free)
+        solved: dict[str, Any] = {"phase": True} | dict(tune_options or {})
+        tuned = tune(setup, SolveOptions(**solved))
         result.designs["sequential"] = _sizing_design(
             "sequential",
             sized,

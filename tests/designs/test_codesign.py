@@ -372,9 +372,9 @@ def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(mo
 
     edge, calls = 1.2, []
 
-    def fake_tune(plant, block, scenario, *, specs, **options):
-        limit = float(plant.input_limit[0])
-        if not options.get("until_feasible"):  # the cost tuning at the limit found
+    def fake_tune(setup, options):
+        limit, block = float(setup.plant.input_limit[0]), setup.block
+        if not options.until_feasible:  # the cost tuning at the limit found
             return types.SimpleNamespace(feasible=True, block=block)
         first = all(c[0] != limit for c in calls)
         calls.append((limit, float(block.gains["kp"])))
@@ -411,9 +411,9 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
 
     edge, seen = 1.2, set()
 
-    def fake_tune(plant, block, scenario, *, specs, **options):
-        limit = float(plant.input_limit[0])
-        if not options.get("until_feasible"):  # the cost tuning at the limit found
+    def fake_tune(setup, options):
+        limit, block = float(setup.plant.input_limit[0]), setup.block
+        if not options.until_feasible:  # the cost tuning at the limit found
             return types.SimpleNamespace(feasible=True, block=block)
         first, feasible = limit not in seen, limit >= edge
         seen.add(limit)
@@ -440,12 +440,12 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
     monkeypatch.setattr(
         dc,
         "tune",
-        lambda plant, block, scenario, *, specs, **options: types.SimpleNamespace(
-            feasible=plant.input_limit[0] >= 2.0,
-            block=block,
+        lambda setup, options: types.SimpleNamespace(
+            feasible=setup.plant.input_limit[0] >= 2.0,
+            block=setup.block,
             violations=[],
-            status="Solve_Succeeded" if plant.input_limit[0] >= 2.0 else "Restoration_Failed",
-            stopped_on_test=plant.input_limit[0] >= 2.0,
+            status="Solve_Succeeded" if setup.plant.input_limit[0] >= 2.0 else "Restoration_Failed",
+            stopped_on_test=setup.plant.input_limit[0] >= 2.0,
         ),
     )
     sized = size_actuator(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0, retune=True)

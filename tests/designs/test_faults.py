@@ -5,15 +5,20 @@ solve; each case asserts the error type and that the message names the
 culprit. The first block reproduces the cases seen in the issue.
 """
 
+import dataclasses
 import math
 import time
 
+import casadi as ca
 import numpy as np
 import pytest
 
 import models
 from designs.codesign import codesign, size_actuator, size_actuator_simultaneous
-from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
+from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup, tune
+
+#: What `TuningSetup` takes; the other keywords of a case below are `SolveOptions`.
+SETUP_FIELDS = {f.name for f in dataclasses.fields(TuningSetup)}
 
 
 class PD(models.Block):
@@ -44,19 +49,18 @@ STEP = Scenario(reference=0.5, duration=2.0, tracked="theta")
 
 def _never_solves(monkeypatch):
     """Make any IPOPT solve fail the test: the checks must come first."""
-    import designs.tuning
 
     def refuse(*args, **kwargs):
         raise AssertionError("a solve started before the arguments were checked")
 
-    monkeypatch.setattr(designs.tuning.ca, "nlpsol", refuse)
+    monkeypatch.setattr(ca, "nlpsol", refuse)
 
 
 # ----------------------------------------------------------------- the examples seen in the issue
 def test_settling_time_after_the_end_of_the_scenario_is_refused(arm, monkeypatch):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=r"settling_time = 7 s is after the end of the scenario \(2 s\)"):
-        tune(arm, PD(), STEP, specs=Specs(settling_time=7.0))
+        tune(TuningSetup(arm, PD(), STEP, specs=Specs(settling_time=7.0)))
 
 
 @pytest.mark.parametrize("name", ["settling_time", "rise_time"])
@@ -73,7 +77,7 @@ def test_negative_overshoot_is_refused():
 def test_zero_samples_are_refused(arm, monkeypatch):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match="samples has no rows"):
-        tune(arm, PD(), STEP, samples=np.zeros((0, arm.n_params)))
+        tune(TuningSetup(arm, PD(), STEP, samples=np.zeros((0, arm.n_params))))
 
 
 @pytest.mark.parametrize(
@@ -83,7 +87,7 @@ def test_zero_samples_are_refused(arm, monkeypatch):
 def test_inverted_or_nan_bounds_are_refused(arm, monkeypatch, pair, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
-        tune(arm, PD(), STEP, bounds={"kp": pair})
+        tune(TuningSetup(arm, PD(), STEP, bounds={"kp": pair}))
 
 
 @pytest.mark.parametrize(
@@ -97,7 +101,7 @@ def test_inverted_or_nan_bounds_are_refused(arm, monkeypatch, pair, message):
 def test_bad_max_iter_is_refused(arm, monkeypatch, value, error, message):
     _never_solves(monkeypatch)
     with pytest.raises(error, match=message):
-        tune(arm, PD(), STEP, max_iter=value)
+        tune(TuningSetup(arm, PD(), STEP), SolveOptions(max_iter=value))
 
 
 @pytest.mark.parametrize(
@@ -164,8 +168,9 @@ def test_size_actuator_tries_a_bounded_number_of_limits(arm):
 )
 def test_tune_refuses_before_solving(arm, monkeypatch, kwargs, error, message):
     _never_solves(monkeypatch)
+    setup = {k: v for k, v in kwargs.items() if k in SETUP_FIELDS}
     with pytest.raises(error, match=message):
-        tune(arm, PD(), STEP, **kwargs)
+        tune(TuningSetup(arm, PD(), STEP, **setup), SolveOptions(**{k: v for k, v in kwargs.items() if k not in setup}))
 
 
 def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
@@ -173,7 +178,7 @@ def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
     rows = np.tile(arm.param_vector(), (3, 1))
     rows[2, 0] = -1.0
     with pytest.raises(ValueError, match="samples row 2: .*m"):
-        tune(arm, PD(), STEP, samples=rows)
+        tune(TuningSetup(arm, PD(), STEP, samples=rows))
 
 
 @pytest.mark.parametrize(
@@ -210,7 +215,7 @@ def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
 def test_specs_the_scenario_cannot_judge_are_refused(arm, monkeypatch, scenario, specs, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
-        tune(arm, PD(), scenario, specs=specs)
+        tune(TuningSetup(arm, PD(), scenario, specs=specs))
 
 
 @pytest.mark.parametrize(
@@ -269,7 +274,7 @@ def test_records_refuse_bad_values_when_made(build, error, message):
 def test_costs_the_plant_cannot_evaluate_are_refused(arm, monkeypatch, cost, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
-        tune(arm, PD(), STEP, cost=cost)
+        tune(TuningSetup(arm, PD(), STEP, cost=cost))
 
 
 def test_the_error_signal_needs_a_reference(arm):
