@@ -79,11 +79,10 @@ N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
 MARGIN = 0.75
 #: Overshoot (fraction of the step) below which a response counts as not overshooting, on fresh samples: a
-#: hand design that never passes the reference gives a bound of exactly 0, which no margin can tighten; the
-#: pendulum tuned to overshoot nowhere on its tuning samples (disturbance run) passed the reference by up to
-#: 9e-5 of the step on fresh ones. Tuning itself enforces no overshoot there (`with_margin`): enforcing the
-#: floor instead left IPOPT hovering at the width 1e-4 (over 220 iterations, cost 14.97-15.00, where the
-#: zero bound converged in 76), the answer riding along the bound.
+#: hand design that never passes the reference gives a bound of exactly 0, which no margin can tighten, and a
+#: design tuned to overshoot nowhere on its tuning samples may pass it by a hair on fresh ones. Tuning itself
+#: enforces no overshoot there (`with_margin`), which converges where the floor as a bound does not
+#: (docs/notes/tuning.md).
 OVERSHOOT_FLOOR = 1e-3
 GAIN_RANGE = 100.0
 SUBSTEPS = 2

@@ -86,7 +86,7 @@ from .settings import (
     WIDTHS,
     check_widths,
 )
-from .solving import solve, tune
+from .solving import checked_options, solve, tune
 from .spectral import closed_loop_spectral_abscissa, missed_specs, spectral_violations
 
 __all__ = [
@@ -125,6 +125,7 @@ __all__ = [
     "TuningResult",
     "TuningSetup",
     "check_widths",
+    "checked_options",
     "closed_loop_spectral_abscissa",
     "decision_scale",
     "final_value",

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 
 import models
-from designs.codesign import codesign, size_actuator, size_actuator_simultaneous
+from designs.codesign import SizingProblem, codesign, size_actuator, size_actuator_simultaneous
 from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup, tune
 
-#: What `TuningSetup` takes; the other keywords of a case below are `SolveOptions`.
+#: What `TuningSetup` and `SolveOptions` take: a case's keywords below go to the record that takes them.
 SETUP_FIELDS = {f.name for f in dataclasses.fields(TuningSetup)}
+SOLVE_FIELDS = {f.name for f in dataclasses.fields(SolveOptions)}
 
 
 class PD(models.Block):
@@ -116,7 +117,11 @@ def test_bad_max_iter_is_refused(arm, monkeypatch, value, error, message):
 def test_size_actuator_refuses_a_tolerance_that_never_ends_or_ends_at_once(arm, rel_tol, message):
     started = time.perf_counter()
     with pytest.raises(ValueError, match=message):
-        size_actuator(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=0.5, high=2.0, retune=False, rel_tol=rel_tol)
+        size_actuator(
+            SizingProblem(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=0.5, high=2.0),
+            retune=False,
+            rel_tol=rel_tol,
+        )
     assert time.perf_counter() - started < 1.0
 
 
@@ -125,12 +130,7 @@ def test_size_actuator_tries_a_bounded_number_of_limits(arm):
     from tests.designs.test_tuning import ArmPD
 
     sized = size_actuator(
-        arm,
-        lambda p: ArmPD(p, kp=2.0, kd=0.2),
-        STEP,
-        Specs(rise_time=1.0),
-        low=0.8,
-        high=3.0,
+        SizingProblem(arm, lambda p: ArmPD(p, kp=2.0, kd=0.2), STEP, Specs(rise_time=1.0), low=0.8, high=3.0),
         retune=False,
         rel_tol=1e-6,
     )
@@ -324,8 +324,11 @@ def test_scenarios_must_be_scenarios(arm):
 def test_codesign_refuses_before_solving(arm, monkeypatch, design_params, kwargs, error, message):
     _never_solves(monkeypatch)
     kwargs = {"plant_cost": lambda p: p["m"]} | kwargs
+    setup = {k: v for k, v in kwargs.items() if k in SETUP_FIELDS}
+    solve = {k: v for k, v in kwargs.items() if k in SOLVE_FIELDS}
+    rest = {k: v for k, v in kwargs.items() if k not in setup and k not in solve}
     with pytest.raises(error, match=message):
-        codesign(arm, PD(), STEP, design_params, **kwargs)
+        codesign(TuningSetup(arm, PD(), STEP, **setup), design_params, options=SolveOptions(**solve), **rest)
 
 
 # ----------------------------------------------------------------- size_actuator
@@ -340,7 +343,7 @@ def test_codesign_refuses_before_solving(arm, monkeypatch, design_params, kwargs
         ({"retune": "yes"}, TypeError, "retune must be True or False, got str"),
         ({"design": "PD"}, TypeError, "design must be callable Plant -> Block"),
         ({"specs": None}, TypeError, "specs must be a designs.tuning.Specs"),
-        ({"tune_options": ["bounds"]}, TypeError, "tune_options must be a dict of keyword arguments"),
+        ({"options": ["bounds"]}, TypeError, "options must be a designs.tuning.SolveOptions, got list"),
     ],
 )
 def test_size_actuator_refuses_before_any_limit_is_tried(arm, kwargs, error, message):
@@ -352,7 +355,8 @@ def test_size_actuator_refuses_before_any_limit_is_tried(arm, kwargs, error, mes
 
     args = {"design": design, "specs": Specs(rise_time=1.0), "low": 0.5, "high": 2.0, "retune": False} | kwargs
     with pytest.raises(error, match=message):
-        size_actuator(arm, args.pop("design"), STEP, args.pop("specs"), **args)
+        range_ = {"low": args.pop("low"), "high": args.pop("high")}
+        size_actuator(SizingProblem(arm, args.pop("design"), STEP, args.pop("specs"), **range_), **args)
     assert tried == []
 
 
@@ -368,4 +372,7 @@ def test_simultaneous_sizing_refuses_before_solving(arm, monkeypatch, kwargs, me
     _never_solves(monkeypatch)
     args = {"low": 0.5, "high": 2.0, "start_limit": 1.0} | kwargs
     with pytest.raises(ValueError, match=message):
-        size_actuator_simultaneous(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), **args)
+        problem = SizingProblem(
+            arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=args.pop("low"), high=args.pop("high")
+        )
+        size_actuator_simultaneous(problem, **args)

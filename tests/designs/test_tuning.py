@@ -1,5 +1,7 @@
 """Gain tuning against a closed-form optimum, finite differences and a fresh simulation."""
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -10,6 +12,7 @@ from designs.tuning import (
     AGREEMENT,
     STAGE_TOL_FACTOR,
     TOL,
+    Continuation,
     Cost,
     Scenario,
     SolveOptions,
@@ -22,6 +25,7 @@ from designs.tuning import (
     phase_one,
     tune,
 )
+from designs.tuning.result import pick_answer
 from models import metrics
 
 
@@ -875,3 +879,112 @@ def test_bad_phase_one_input_is_named(arm):
         phase_one(problem, lbx, ubx, problem.start(), SolveOptions(method="fast"))
     with pytest.raises(TypeError, match="phase"):
         tune(TuningSetup(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1)), SolveOptions(phase="yes"))
+
+
+# ----------------------------------------------------------------- the continuation's steps, alone
+def _continuation(problem, bounds, options=None, start=None):
+    lbx, ubx = gain_bounds(problem, bounds)
+    begin = problem.start() if start is None else np.asarray(start, dtype=float)
+    return Continuation(problem, lbx, ubx, begin, options or SolveOptions())
+
+
+def test_a_stage_judgement_is_a_fresh_simulations_cost_and_names_the_spec_missed_by_hand(arm):
+    """At the start (an arm PD saturating for 20 samples or more): the exact objective is the ITAE of a
+    fresh numpy simulation; at a tiny width the smoothed one agrees with it and both loops miss the
+    overshoot bound, which the simulation exceeds by a hand-computed margin; at a wide width the
+    smoothing changes the cost of the saturated samples, and the gap says by how much."""
+    target = np.deg2rad(50)
+    block = ArmPD(arm, kp=2.0, kd=0.15)
+    exact_cost, run = _itae_by_simulation(arm, block, target, 3.0, substeps=10)
+    overshoot = (np.max(run.x[:, 0]) - target) / target
+    assert np.sum(np.abs(run.u[:, 0]) >= arm.input_limit[0] - 1e-12) >= 20 and overshoot > 0.02
+    scenario = Scenario(reference=target, duration=3.0, tracked="theta")
+    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot=overshoot - 0.01))
+    continuation = _continuation(problem, {"kp": (0, 5.0), "kd": (0, 1.0)})
+    level = continuation.build(problem)
+    tiny = continuation.judge_stage(level, 1e-9)
+    assert tiny.exact == pytest.approx(exact_cost, rel=1e-9)
+    assert tiny.gap < 1e-6 and tiny.same
+    (missed,) = problem.values(continuation.decision())[2]
+    excess = float(missed.split("violated by ")[1].split(" ")[0])
+    assert excess == pytest.approx(0.01 * target, rel=1e-3)  # g = peak − r against bound × step, scale 1
+    wide = continuation.judge_stage(level, 0.3)
+    assert wide.exact == tiny.exact and wide.gap == pytest.approx(abs(wide.exact - wide.smoothed) / wide.exact)
+    assert wide.gap > 1e3 * tiny.gap
+
+
+def test_a_stage_run_alone_reaches_the_closed_form_optimum_of_a_loop_without_switches():
+    """One IPOPT solve, cold and to the tolerance, on ẋ = −b x + u regulated by u = −k x (no saturation, so
+    every width gives the exact loop): it ends at the sampled LQR gain of the closed form (see
+    `test_a_first_order_plant_tunes_without_registering_to_its_sampled_lqr_gain`), and the judgement
+    finds the exact and smoothed objectives equal there."""
+    plant = models.Plant(_lag)
+    b, ts, q, r = 2.0, 0.01, 3.0, 0.5
+    phi = np.exp(-b * ts)
+    gamma = (1 - phi) / b
+    rho = r / q
+    lin = rho * (1 - phi**2) + gamma**2
+    k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
+    cost = Cost(kind=None, state_weights={"x": q}, input_weights={"u": r})
+    problem = TuningProblem(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]), cost=cost)
+    continuation = _continuation(problem, None, SolveOptions(tol=1e-12))
+    level = continuation.build(problem)
+    status, iterations = continuation.run_stage(level, 1e-3, tight=True, warm=False)
+    assert status == "Solve_Succeeded" and iterations > 0 and set(continuation.multipliers) == {"lam_x0", "lam_g0"}
+    assert float(continuation.decision()[0]) == pytest.approx(k_star, rel=1e-6)
+    assert len(continuation.log.iterates) == iterations + 1  # IPOPT reports its iterations 0 .. n
+    judged = continuation.judge_stage(level, 1e-3)
+    assert judged.gap == 0.0 and judged.same
+    expected = q * ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2)
+    assert judged.exact == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_fidelity_levels_are_a_coarse_loop_then_the_problem_only_without_specs(arm):
+    """A coarse level first where its objective agrees with the problem's at the start (both computed on
+    fresh problems), never on a problem with specs."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    free = TuningProblem(arm, ArmPD(arm), scenario)
+    coarse = TuningProblem(arm, ArmPD(arm), scenario, substeps=1)
+    start = free.start()
+    assert abs(coarse.values(start)[0] / free.values(start)[0] - 1) < tuning.COARSE_AGREEMENT
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    assert [p.substeps for p in _continuation(free, bounds).levels] == [1, 10]
+    assert [p.substeps for p in _continuation(free, bounds, SolveOptions(coarse_substeps=None)).levels] == [10]
+    with_specs = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(max_overshoot=0.5))
+    assert [p.substeps for p in _continuation(with_specs, bounds).levels] == [10]
+
+
+def test_the_answer_is_the_final_point_unless_a_feasible_point_is_clearly_cheaper():
+    """`pick_answer` on a judge by hand: objective x₀², infeasible where x₁ > 1."""
+
+    def judge(x):
+        return float(x[0] ** 2), (["x1 <= 1"] if x[1] > 1 else [])
+
+    lbx, ubx = np.full(2, -10.0), np.full(2, 10.0)
+    start = (judge([3.0, 0.0])[0], np.array([3.0, 0.0]), "start")
+    # A feasible final point stands against iterates no cheaper by 1e-6 relative.
+    kept = pick_answer(judge, np.array([1.0, 0.0]), [(1.0 - 1e-9, np.array([1.0 - 5e-10, 0.0]))], [start], lbx, ubx)
+    assert kept.label == "final" and kept.value == 1.0
+    # An infeasible final point loses to the cheapest feasible iterate, judged on the exact objective.
+    iterates = [(0.1, np.array([0.5, 2.0])), (0.3, np.array([0.6, 0.0])), (0.2, np.array([0.7, 0.0]))]
+    chosen = pick_answer(judge, np.array([0.1, 5.0]), iterates, [start], lbx, ubx)
+    assert chosen.label == "iterate" and chosen.value == pytest.approx(0.49) and not chosen.violations
+    # Nothing feasible but a finite final point: it is returned with its violations; nothing finite: None.
+    alone = pick_answer(judge, np.array([0.1, 5.0]), [], [], lbx, ubx)
+    assert alone.label == "final" and alone.violations == ["x1 <= 1"]
+    assert pick_answer(lambda x: (np.inf, []), np.zeros(2), [], [], lbx, ubx) is None
+    # Candidates are clipped to the bounds before they are judged.
+    clipped = pick_answer(judge, np.array([0.0, 5.0]), [(0.0, np.array([-20.0, 0.0]))], [], lbx, ubx)
+    assert clipped.value == 100.0 and np.array_equal(clipped.decision, [-10.0, 0.0])
+
+
+def test_solve_options_are_normalized_and_checked_again_when_replaced():
+    options = SolveOptions(widths=[1e-2, 1e-3], max_iter=10.0, tol=1)
+    assert options.widths == (1e-2, 1e-3) and options.max_iter == 10 and isinstance(options.max_iter, int)
+    assert options.tol == 1.0 and options.smooth
+    with pytest.raises(ValueError, match="until_feasible needs phase=True"):
+        dataclasses.replace(options, until_feasible=True)
+    with pytest.raises(TypeError, match="options must be a designs.tuning.SolveOptions, got dict"):
+        tuning.solve(None, [], [], {"max_iter": 3})
+    with pytest.raises(TypeError, match="setup must be a designs.tuning.TuningSetup, got tuple"):
+        tune((None, None, None))
