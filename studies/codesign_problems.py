@@ -487,6 +487,7 @@ class CaseSizing:
 
 # ----------------------------------------------------------------- plant + controller (codesign)
 def _codesign_design(res, name, result: CaseResult) -> Design:
+    """The `Design` of one `designs.codesign.CodesignResult` for parameter `name`, measured afresh."""
     assert result.scenario is not None and result.specs is not None, "a solved problem, not a record"
     return Design(
         method=res.method,

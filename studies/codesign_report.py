@@ -264,6 +264,8 @@ def _listed_methods(methods) -> str:
 
 
 def main(argv=None) -> int:
+    """``python -m studies.codesign_report``: solve (or read) each problem, save its record, write the document;
+    1 unless every problem converged."""
     found = problems()
     parser = argparse.ArgumentParser(prog="python -m studies.codesign_report", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DOC, help=f"Markdown file to write (default {DOC})")

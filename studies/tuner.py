@@ -145,6 +145,7 @@ def tuning_samples(case: CaseStudy) -> tuple[np.ndarray, str]:
 
 
 def _problem(case, block, specs: dict | None, cost: Cost, params) -> TuningProblem:
+    """The tuner's problem: `block` on the case's plant over the `SCENARIOS` and the parameter rows `params`."""
     return TuningProblem(
         models.get(case.plant), block, scenarios(case, specs), cost=cost, samples=params, substeps=SUBSTEPS
     )
@@ -404,6 +405,7 @@ def _widths(text: str) -> tuple[float, ...]:
 
 
 def main(argv=None) -> int:
+    """``python -m studies.tuner``: tune (or re-validate) and store each case's gains; 1 if one did not converge."""
     names = [n for n in cases.names() if cases.get(n).classical is not None]
     parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
     parser.add_argument("plants", nargs="*", default=names, help=f"cases to tune (default all: {', '.join(names)})")

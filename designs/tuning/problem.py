@@ -52,6 +52,7 @@ class ScenarioRun:
 
 
 def _scenarios(value) -> tuple[Scenario, ...]:
+    """One Scenario or a non-empty sequence of them, as a tuple (TypeError, ValueError otherwise)."""
     if isinstance(value, Scenario):
         return (value,)
     if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
@@ -256,6 +257,7 @@ class TuningProblem:
 
     # ------------------------------------------------------------ one scenario's numbers
     def _free_index(self) -> np.ndarray:
+        """Indices of the free gains' entries in the block's gain vector (n_gains,)."""
         idx: list[int] = []
         i = 0
         for name, g in self.block.gains.items():
@@ -388,6 +390,7 @@ class TuningProblem:
 
     # ------------------------------------------------------------ building
     def _params(self, j: int, param_index) -> ca.MX:
+        """Parameter sample j (n_params,), the designed parameters at `param_index` replaced by the decision's."""
         p = ca.MX(ca.DM(self.samples[j]))
         for i, pi in enumerate(param_index):
             p[pi] = self.decision[self.n_gains + i]
@@ -519,6 +522,7 @@ class TuningProblem:
         return total
 
     def _per_sample(self, costs: ca.MX) -> ca.MX:
+        """Per-sample weighted totals (M, 1) from the scenario costs (S, M) and the scenarios' weights."""
         weights = ca.DM([run.scenario.weight for run in self.runs])
         return ca.mtimes(costs.T, weights)
 
