@@ -23,7 +23,7 @@ import _path  # noqa: F401  (before our packages: drops this folder from sys.pat
 
 import models
 import studies
-from designs.tuning import Cost, TuningProblem, gain_bounds, solve
+from designs.tuning import Cost, SolveOptions, TuningProblem, gain_bounds, solve
 from studies import tuner
 
 ORDERINGS = {"auto": 7, "qamd": 6}
@@ -55,10 +55,12 @@ def first_iterate_s(problem: TuningProblem, bounds: tuple, order: int) -> float:
     solve(
         problem,
         *bounds,
-        max_iter=1,
-        widths=(0.1,),
-        ipopt_options={"mumps_pivot_order": order},
-        progress=lambda i, f, s: seen.append(time.perf_counter() - called) if i == 0 else None,
+        SolveOptions(
+            max_iter=1,
+            widths=(0.1,),
+            ipopt_options={"mumps_pivot_order": order},
+            progress=lambda i, f, s: seen.append(time.perf_counter() - called) if i == 0 else None,
+        ),
     )
     return seen[0]
 

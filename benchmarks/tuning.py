@@ -15,7 +15,7 @@ start within the same box, in one process:
   on this one); each iterate's exact objective (on this loop, whatever level it came
   from) is evaluated after the run, and the time it was reached counted;
 - with --compare, the alternatives `tune`'s method was chosen against: "exact loop"
-  (IPOPT on the exact loop, single shooting: `tune(method="exact")`) and "multiple
+  (IPOPT on the exact loop, single shooting: `tune` with `SolveOptions(method="exact")`) and "multiple
   shooting" (IPOPT on the exact loop cut into `SEGMENTS` intervals whose start states
   are decisions, with continuity constraints), each capped at `ALTERNATIVE_MAX_ITER`
   iterations.
@@ -43,7 +43,7 @@ import scipy.optimize
 
 import models
 import studies
-from designs.tuning import Cost, Scenario, TuningProblem, tune
+from designs.tuning import Cost, Scenario, SolveOptions, TuningProblem, TuningSetup, tune
 from studies.homework import statespace_controllers
 
 PLANT, LABEL, DURATION = "pendulum", "pole placement + integrator", 10.0
@@ -87,7 +87,9 @@ ALTERNATIVE_MAX_ITER = 300
 
 def run_gradient(plant, block, scenario, bounds, method="smooth", max_iter=3000):
     start = time.perf_counter()
-    result = tune(plant, block, scenario, cost=COST, bounds=bounds, method=method, max_iter=max_iter)
+    result = tune(
+        TuningSetup(plant, block, scenario, cost=COST, bounds=bounds), SolveOptions(method=method, max_iter=max_iter)
+    )
     return time.perf_counter() - start, result
 
 

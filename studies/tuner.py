@@ -54,12 +54,13 @@ from designs.tuning import (
     HESSIANS,
     MAX_ITER,
     PATHS,
-    TOL,
     WIDTHS,
     Cost,
     Scenario,
+    SolveOptions,
     Specs,
     TuningProblem,
+    TuningSetup,
     check_widths,
     tune,
 )
@@ -78,14 +79,15 @@ N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
 MARGIN = 0.75
 #: Overshoot (fraction of the step) below which a response counts as not overshooting, on fresh samples: a
-#: hand design that never passes the reference gives a bound of exactly 0, which no margin can tighten; the
-#: pendulum tuned to overshoot nowhere on its tuning samples (disturbance run) passed the reference by up to
-#: 9e-5 of the step on fresh ones. Tuning itself enforces no overshoot there (`with_margin`): enforcing the
-#: floor instead left IPOPT hovering at the width 1e-4 (over 220 iterations, cost 14.97-15.00, where the
-#: zero bound converged in 76), the answer riding along the bound.
+#: hand design that never passes the reference gives a bound of exactly 0, which no margin can tighten, and a
+#: design tuned to overshoot nowhere on its tuning samples may pass it by a hair on fresh ones. Tuning itself
+#: enforces no overshoot there (`with_margin`), which converges where the floor as a bound does not
+#: (docs/notes/tuning.md).
 OVERSHOOT_FLOOR = 1e-3
 GAIN_RANGE = 100.0
 SUBSTEPS = 2
+#: How the stored gains are tuned: compiled (each case's problem is solved for seconds to an hour).
+TUNE_OPTIONS = SolveOptions(jit=True)
 #: Folder of the stored gains when writing them (beside the case files).
 STORE_DIR = Path(cases.__file__).resolve().parent
 
@@ -143,6 +145,7 @@ def tuning_samples(case: CaseStudy) -> tuple[np.ndarray, str]:
 
 
 def _problem(case, block, specs: dict | None, cost: Cost, params) -> TuningProblem:
+    """The tuner's problem: `block` on the case's plant over the `SCENARIOS` and the parameter rows `params`."""
     return TuningProblem(
         models.get(case.plant), block, scenarios(case, specs), cost=cost, samples=params, substeps=SUBSTEPS
     )
@@ -240,19 +243,12 @@ def specs_from_record(record: dict) -> dict:
     }
 
 
-def tune_case(
-    case: CaseStudy,
-    max_iter: int = MAX_ITER,
-    jit: bool = True,
-    progress=None,
-    widths=WIDTHS,
-    paths="pointwise",
-    hessian="limited-memory",
-) -> dict:
+def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str = "pointwise") -> dict:
     """Tune the case's hand design, validate on fresh samples; the record its stored-gains file keeps.
 
-    widths, paths, hessian : the smoothing continuation's widths, the specs' form and IPOPT's Hessian
-        (`designs.tuning.tune`), stored in the record
+    options : how the tuning is solved (default `TUNE_OPTIONS`); its tol, widths, Hessian and jit are stored
+        in the record
+    paths : the specs' form on the smoothed stages (`designs.tuning.TuningSetup`), stored in the record
     """
     started = time.perf_counter()
     block = hand_design(case)
@@ -262,7 +258,7 @@ def tune_case(
     weight = ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
     cost = Cost("itae", energy_weight=weight)
     tuned_specs = {name: with_margin(s) for name, s in specs.items()}
-    result = tune(
+    setup = TuningSetup(
         models.get(case.plant),
         block,
         scenarios(case, tuned_specs),
@@ -270,13 +266,9 @@ def tune_case(
         samples=train,
         bounds=gain_bounds(block),
         substeps=SUBSTEPS,
-        max_iter=max_iter,
-        jit=jit,
-        progress=progress,
-        widths=widths,
         paths=paths,
-        hessian=hessian,
     )
+    result = tune(setup, options)
     record = {
         "plant": case.plant,
         "start": START,
@@ -304,17 +296,17 @@ def tune_case(
             "improvement": result.improvement,
             "feasible": result.feasible,
             "status": result.status,
-            "tol": TOL,
-            "widths": [float(w) for w in widths],
+            "tol": options.tol,
+            "widths": [float(w) for w in options.widths],
             "paths": paths,
-            "hessian": hessian,
+            "hessian": options.hessian,
             "converged": result.converged,
             "method": result.method,
             "stages": result.stages,
             "smoothing_gap": result.smoothing_gap,
             "message": result.message,
             "iterations": result.iterations,
-            "jit": jit,
+            "jit": options.jit,
             "wall_time_s": time.perf_counter() - started,
         },
     }
@@ -413,6 +405,7 @@ def _widths(text: str) -> tuple[float, ...]:
 
 
 def main(argv=None) -> int:
+    """``python -m studies.tuner``: tune (or re-validate) and store each case's gains; 1 if one did not converge."""
     names = [n for n in cases.names() if cases.get(n).classical is not None]
     parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
     parser.add_argument("plants", nargs="*", default=names, help=f"cases to tune (default all: {', '.join(names)})")
@@ -463,15 +456,14 @@ def main(argv=None) -> int:
             record = record | {"validation": validate(case, record)}
         else:
             print(f"tuning {name} ...", flush=True)
-            record = tune_case(
-                case,
-                args.max_iter,
-                not args.no_jit,
+            options = SolveOptions(
+                max_iter=args.max_iter,
+                jit=not args.no_jit,
                 progress=_report_every(10),
                 widths=args.widths,
-                paths=args.paths,
                 hessian=args.hessian,
             )
+            record = tune_case(case, options, paths=args.paths)
         write(case, record)
         t, v = record["tuning"], record["validation"]
         if t["status"] not in CONVERGED or not t["converged"]:

@@ -24,13 +24,14 @@ from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
-from studies.codesign_report import ActuatorSizing
-from studies.codesign_report import actuator_sizing as size_actuator
+from studies.codesign_problems import ActuatorSizing, pid_at
+from studies.codesign_problems import actuator_sizing as size_actuator
 from studies.errata import Erratum
 from studies.homework import (
     ZETA,
     ClassicalDesign,
     StateSpaceChoices,
+    classical_design,
     error_record,
     loopshaped,
     loopshaping_record,
@@ -141,8 +142,6 @@ MPC = MPCSettings(SAMPLE_PERIOD, 50, (100.0, 0.1), 1.0, notes="50 samples = 0.5 
 # ----------------------------------------------------------------- co-design: the smallest motor
 def sizing_hand_design(known: models.Plant) -> PID:
     """I.8's saturation-rule PD re-derived for `known`'s torque limit (needs it above the 0.735 N m gravity torque)."""
-    from studies.homework import classical_design
-
     block = classical_design(CASE, known).controllers["PD"]
     assert isinstance(block, PID)  # `classical` builds the arm's PD as one PID block
     return block
@@ -150,8 +149,6 @@ def sizing_hand_design(known: models.Plant) -> PID:
 
 def sizing_start(known: models.Plant) -> models.Block:
     """The hand PD at the text's 1 N m, saturating at `known`'s limit (the re-tuning start)."""
-    from studies.codesign_report import pid_at
-
     text = known.with_input_limit(1.0)
     return pid_at(sizing_hand_design(text), known, float(known.input_limit[0]))
 
@@ -174,7 +171,8 @@ SIZING = ActuatorSizing(
 
 
 def actuator_sizing(**options):
-    """The smallest torque limit meeting `SIZING_SPECS`, three ways (`studies.codesign_report`)."""
+    """The smallest torque limit meeting `SIZING_SPECS`, three ways; `options` are the keywords of
+    `studies.codesign_problems.actuator_sizing` (rel_tol, methods, the tunings' SolveOptions)."""
     return size_actuator(CASE, SIZING, **options)
 
 

@@ -36,8 +36,8 @@ from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
-from studies.codesign_report import ActuatorSizing
-from studies.codesign_report import actuator_sizing as size_actuator
+from studies.codesign_problems import ActuatorSizing, pid_at
+from studies.codesign_problems import actuator_sizing as size_actuator
 from studies.errata import Erratum
 from studies.homework import (
     SEPARATION,
@@ -45,6 +45,7 @@ from studies.homework import (
     ClassicalDesign,
     StateSpaceChoices,
     cascade_records,
+    classical_design,
     error_record,
     integrator,
     margin_record,
@@ -359,8 +360,6 @@ MPC = MPCSettings(
 def sizing_hand_design(known: models.Plant) -> models.Cascade:
     """V.8's saturation-rule PD cascade re-derived for `known`'s force limit (above the 13.23 N equilibrium
     force with the ball at the beam's end)."""
-    from studies.homework import classical_design
-
     block = classical_design(CASE, known).controllers["PD"]
     assert isinstance(block, models.Cascade)  # `classical` builds the PD as a cascade of two PID blocks
     return block
@@ -373,8 +372,6 @@ def sizing_start(known: models.Plant) -> models.Block:
     bound A_θ on θ_d (a structure choice, not a gain) at the text's value: the V.8
     rule shrinks it with the limit, which would slow every re-tuned design below 15 N.
     """
-    from studies.codesign_report import pid_at
-
     block = sizing_hand_design(known.with_input_limit(15.0))
     assert isinstance(block.inner, PID)
     return models.Cascade(block.outer, pid_at(block.inner, known, float(known.input_limit[0])), name=block.name)
@@ -398,7 +395,8 @@ SIZING = ActuatorSizing(
 
 
 def actuator_sizing(**options):
-    """The smallest force limit meeting `SIZING_SPECS`, three ways (`studies.codesign_report`)."""
+    """The smallest force limit meeting `SIZING_SPECS`, three ways; `options` are the keywords of
+    `studies.codesign_problems.actuator_sizing` (rel_tol, methods, the tunings' SolveOptions)."""
     return size_actuator(CASE, SIZING, **options)
 
 

@@ -20,6 +20,7 @@ import models.specs
 from designs import analysis as an
 from designs import input_shaping
 from designs.analysis import Loop, dc_gain
+from designs.codesign import METHODS
 from designs.filters import TransferFunctionBlock
 from designs.loops import PlacedPD, SuccessiveLoopClosure, cascade_blocks, cascade_plants, cascade_poles, place_pair
 from designs.loopshaping import (
@@ -31,12 +32,13 @@ from designs.loopshaping import (
     prototype_phase_margin,
 )
 from designs.pid import pd_design
-from designs.tuning import Cost, Specs
+from designs.tuning import Cost, SolveOptions, Specs, TuningSetup
 from models import deferred
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_problems import CODESIGN_SOLVE_OPTIONS, CaseResult, codesign_case, step_scenario
 from studies.errata import Erratum, Remark
 from studies.homework import (
     ClassicalDesign,
@@ -48,6 +50,7 @@ from studies.homework import (
     record,
     root_locus_record,
     spec_records,
+    statespace_controllers,
     tf_record,
 )
 from studies.trajectories import OpenLoopCodesign, OpenLoopCommand, TrajectoryProblem, TrajectorySetup
@@ -382,14 +385,12 @@ SWING_BOUND = 0.2
 #: (m g = 4.9 kN) each metre the load hangs higher costs about 1 m s² of ITAE, the same
 #: order as the ITAE a metre of cable costs a re-tuned controller (1–3 m s²/m).
 HOIST_PRICE = 2e-4
-#: The swing bound is active at the answers, as one inequality per sample: aggregated into a soft
-#: maximum it sharpens with each width until IPOPT zig-zags along it (at ℓ = 5 m the gains' tuning
-#: passed 380 iterations of its fourth solve, 0.37 s each, without converging); pointwise (2000 rows
-#: for 5 gains) it converged in 3 stages, 112 iterations, 43 s of IPOPT. The nested method's inner
-#: tunings start from the text's gains: from the gains tuned at 5.84 m, where the bound is active at
-#: other samples, the tuning at 5.52 m ended its first stage in Restoration_Failed after 2110
-#: iterations (over half an hour).
-CABLE_TUNE_OPTIONS = {"paths": "pointwise", "nested_start": "neutral"}
+#: The swing bound is active at the answers: one inequality per sample, since its soft maximum sharpens
+#: with each width until IPOPT zig-zags along it (docs/notes/tuning.md).
+CABLE_PATHS = "pointwise"
+#: The nested method's inner tunings start from the text's gains: from gains tuned where the bound is
+#: active at other samples, a tuning can end in Restoration_Failed after thousands of iterations.
+CABLE_NESTED_START = "neutral"
 
 
 def hoist_cost(params: dict):
@@ -401,7 +402,9 @@ def hoist_cost(params: dict):
     return HOIST_PRICE * crane["m"] * crane["g"] * (CABLE_RANGE[1] - params["ell"])
 
 
-def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFER_DURATION):
+def cable_transfer(
+    *, methods=None, options: SolveOptions = CODESIGN_SOLVE_OPTIONS, duration: float = TRANSFER_DURATION
+) -> CaseResult:
     """crane1's cable length ℓ (m) with the text's VI.14 state feedback, 10 m transfer, three ways.
 
     Objective: ITAE of the trolley position x (m s²) over `duration` s plus
@@ -410,16 +413,14 @@ def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFE
     Spec: |θ| ≤ `SWING_BOUND` rad all along the transfer; the hand design
     swings 0.15 rad at ℓ = 10 m and 0.18 rad at 5 m, so it is feasible over the
     whole range. Uses crane1: the two-load crane doubles the state and cost of
-    every solve. `methods` (default all of `studies.codesign_report.METHODS`)
-    and `tune_options` (max_iter, jit, ...; by default
-    `studies.codesign_report.CODESIGN_TUNE_OPTIONS` with `CABLE_TUNE_OPTIONS`) go to `codesign_case`.
+    every solve. `methods` (default all of `designs.codesign.METHODS`) and `options` (the
+    SolveOptions of every solve) go to `studies.codesign_problems.codesign_case`.
     """
-    from studies import codesign_report as cr
-    from studies.homework import statespace_controllers
-
     plant = models.get("crane1")
     block = statespace_controllers(CASE, plant, STATESPACE_ONE_LOAD)["pole placement"]
-    result = cr.CaseResult(
+    scenario = step_scenario(plant, CASE.tracked, CASE.step, duration)
+    specs, cost = Specs(state_bounds={"theta": SWING_BOUND}), Cost("itae")
+    result = CaseResult(
         key="crane",
         problem="crane transfer (crane1)",
         plant="crane1",
@@ -427,23 +428,24 @@ def cable_transfer(*, methods=None, tune_options=None, duration: float = TRANSFE
         unit="m",
         text_value=plant.params["ell"],
         objective="ITAE(x) + hoisting price",
-        scenario=cr.step_scenario(plant, CASE.tracked, CASE.step, duration),
-        specs=Specs(state_bounds={"theta": SWING_BOUND}),
-        cost=Cost("itae"),
+        scenario=scenario,
+        specs=specs,
+        cost=cost,
         notes=[
             f"start: the text's VI.14 pole placement at ℓ = 10 m; |θ| ≤ {SWING_BOUND:g} rad; {duration:g} s run",
             f"plant cost {HOIST_PRICE:g} m s²/J × m g (ℓ_max − ℓ), ℓ in [{CABLE_RANGE[0]:g}, {CABLE_RANGE[1]:g}] m",
         ],
     )
-    return cr.codesign_case(
+    setup = TuningSetup(plant, block, scenario, specs=specs, cost=cost, paths=CABLE_PATHS)
+    return codesign_case(
         result,
-        plant,
-        block,
+        setup,
         "ell",
         *CABLE_RANGE,
         hoist_cost,
-        methods=methods or cr.METHODS,
-        tune_options=cr.CODESIGN_TUNE_OPTIONS | CABLE_TUNE_OPTIONS | dict(tune_options or {}),
+        methods=methods or METHODS,
+        options=options,
+        nested_start=CABLE_NESTED_START,
     )
 
 

@@ -9,6 +9,7 @@ problem, the drawing and the errata. The plant is declared in `models.catalog`.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -18,14 +19,16 @@ import models.specs
 from designs import analysis as an
 from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
+from designs.codesign import METHODS
 from designs.filters import TransferFunctionBlock
 from designs.loops import SuccessiveLoopClosure, cascade_blocks, coupling_tf, successive_loop_closure
 from designs.pid import PDDesign, linearized_input_bound, pd_design
-from designs.tuning import Cost, Specs
+from designs.tuning import Cost, SolveOptions, Specs, TuningSetup
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
+from studies.codesign_problems import CODESIGN_PATHS, CODESIGN_SOLVE_OPTIONS, CaseResult, codesign_case, step_scenario
 from studies.errata import Erratum
 from studies.homework import (
     SEPARATION,
@@ -41,6 +44,7 @@ from studies.homework import (
     poles_record,
     record,
     root_locus_record,
+    statespace_controllers,
     statespace_items_15_to_17,
     tf_record,
 )
@@ -295,10 +299,9 @@ STIFFNESS_SPECS = Specs(max_overshoot=0.05, settling_time=23.0)
 #: k = 0.15 costs 0.075 rad s², small against the hand design's ITAE (about 14 rad s²) but
 #: comparable with what a re-tuned controller gains from a stiffer panel (about 1 rad s² per N m/rad).
 STIFFNESS_PRICE = 0.5
-#: Each tuning solved without the specs first (`designs.tuning.solve`'s `relaxed`): both specs are inactive
-#: at the answers (1 % and more inside their bounds), and with them IPOPT wandered for thousands of
-#: iterations (the simultaneous solve from the middle stopped at its cap after 43 minutes).
-STIFFNESS_TUNE_OPTIONS = {"relaxed": True}
+#: Each tuning solved without the specs first (`designs.tuning.SolveOptions.relaxed`): both specs are inactive
+#: at the answers (1 % and more inside their bounds), and with them IPOPT wanders (docs/notes/tuning.md).
+STIFFNESS_SOLVE_OPTIONS = replace(CODESIGN_SOLVE_OPTIONS, relaxed=True)
 
 
 def stiffness_cost(params: dict):
@@ -306,24 +309,23 @@ def stiffness_cost(params: dict):
     return STIFFNESS_PRICE * params["k"]
 
 
-def panel_stiffness(*, methods=None, tune_options=None, duration: float = STIFFNESS_DURATION):
+def panel_stiffness(
+    *, methods=None, options: SolveOptions = STIFFNESS_SOLVE_OPTIONS, duration: float = STIFFNESS_DURATION
+) -> CaseResult:
     """The panel stiffness k (N m/rad) with the pole-placement state feedback (III.15), three ways.
 
     Objective: ITAE of the panel angle φ (rad s²) on the text's 30 deg step plus
     `stiffness_cost` (a stiffer panel is heavier and dearer); the control-blind
     sequential method takes the stiffness cost alone. Specs: overshoot ≤ 5 % and
     2 % settling by 23 s, which the hand design meets at the text's k = 0.15
-    N m/rad (4.4 %, 22 s). `methods` (default all of
-    `studies.codesign_report.METHODS`) and `tune_options` (max_iter, jit, ...;
-    by default `studies.codesign_report.CODESIGN_TUNE_OPTIONS` with `STIFFNESS_TUNE_OPTIONS`) go to
-    `codesign_case`.
+    N m/rad (4.4 %, 22 s). `methods` (default all of `designs.codesign.METHODS`) and
+    `options` (the SolveOptions of every solve) go to `studies.codesign_problems.codesign_case`; each
+    spec is aggregated over the run on the smoothed stages (`CODESIGN_PATHS`).
     """
-    from studies import codesign_report as cr
-    from studies.homework import statespace_controllers
-
     plant = models.get("satellite")
     block = statespace_controllers(CASE, plant)["pole placement"]
-    result = cr.CaseResult(
+    scenario = step_scenario(plant, CASE.tracked, CASE.step, duration)
+    result = CaseResult(
         key="satellite",
         problem="satellite panel",
         plant="satellite",
@@ -331,7 +333,7 @@ def panel_stiffness(*, methods=None, tune_options=None, duration: float = STIFFN
         unit="N m/rad",
         text_value=plant.params["k"],
         objective="ITAE(φ) + stiffness price",
-        scenario=cr.step_scenario(plant, CASE.tracked, CASE.step, duration),
+        scenario=scenario,
         specs=STIFFNESS_SPECS,
         cost=Cost("itae"),
         notes=[
@@ -340,15 +342,9 @@ def panel_stiffness(*, methods=None, tune_options=None, duration: float = STIFFN
             f"[{STIFFNESS_RANGE[0]:g}, {STIFFNESS_RANGE[1]:g}] N m/rad",
         ],
     )
-    return cr.codesign_case(
-        result,
-        plant,
-        block,
-        "k",
-        *STIFFNESS_RANGE,
-        stiffness_cost,
-        methods=methods or cr.METHODS,
-        tune_options=cr.CODESIGN_TUNE_OPTIONS | STIFFNESS_TUNE_OPTIONS | dict(tune_options or {}),
+    setup = TuningSetup(plant, block, scenario, specs=STIFFNESS_SPECS, cost=Cost("itae"), paths=CODESIGN_PATHS)
+    return codesign_case(
+        result, setup, "k", *STIFFNESS_RANGE, stiffness_cost, methods=methods or METHODS, options=options
     )
 
 

@@ -30,12 +30,13 @@ from mpc import Collocation, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies import providers
 from studies.case import CaseStudy, LoopSpec, standard_scenarios
-from studies.codesign_report import ActuatorSizing
-from studies.codesign_report import actuator_sizing as size_actuator
+from studies.codesign_problems import ActuatorSizing
+from studies.codesign_problems import actuator_sizing as size_actuator
 from studies.errata import Erratum
 from studies.homework import (
     ClassicalDesign,
     StateSpaceChoices,
+    classical_design,
     error_record,
     margin_record,
     poles_record,
@@ -299,8 +300,6 @@ MPC = MPCSettings(5 * SAMPLE_PERIOD, 40, (100.0, 1.0), 1 / 50**2, notes="2 s hor
 # ----------------------------------------------------------------- co-design: the smallest thrusters
 def sizing_hand_design(known: models.Plant) -> models.Block:
     """IV.11's root-locus lead-lag (designed once, at the text's 250 N m), saturating at `known`'s limit."""
-    from studies.homework import classical_design
-
     turbo = known.with_input_limit(THRUSTER_LIMIT)
     gains = classical_design(CASE, turbo).controllers["lead-lag (IV.11)"].gains
     return TransferFunctionBlock(

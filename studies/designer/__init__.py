@@ -565,14 +565,10 @@ class Designer:
         # while this one tunes, and a cached Function must not be called from two threads at once.
         plant = self.plant.with_input_limit(self.plant.input_limit)
         result = tuning.tune(
-            plant,
-            start,
-            [chosen],
-            cost=tuning.Cost("itae"),
-            bounds=bounds,
-            substeps=self.case.substeps,
-            max_iter=max_iter,
-            progress=progress,
+            tuning.TuningSetup(
+                plant, start, [chosen], cost=tuning.Cost("itae"), bounds=bounds, substeps=self.case.substeps
+            ),
+            tuning.SolveOptions(max_iter=max_iter, progress=progress),
         )
         tuned = {
             c.key: float(np.clip(np.asarray(result.gains[c.gain], dtype=float)[c.index], c.low, c.high))

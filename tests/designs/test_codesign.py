@@ -7,8 +7,16 @@ import pytest
 import scipy.optimize
 
 import models
-from designs.codesign import METHODS, ActuatorLimit, codesign, size_actuator, size_actuator_simultaneous
-from designs.tuning import Cost, Scenario, Specs, TuningProblem
+from designs.codesign import (
+    METHODS,
+    ActuatorLimit,
+    Codesign,
+    SizingProblem,
+    codesign,
+    size_actuator,
+    size_actuator_simultaneous,
+)
+from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup
 
 Q, R, W = 1.0, 1.0, 0.5
 B_RANGE, K_BOUNDS = (0.1, 2.0), (0.0, 10.0)
@@ -86,15 +94,11 @@ def test_first_order_codesign_converges_to_the_closed_form_optimum_as_the_sample
     for ts in periods:
         plant, block, scenario, cost = _problem(ts)
         answer = codesign(
-            plant,
-            block,
-            scenario,
+            TuningSetup(plant, block, scenario, cost=cost, bounds={"k": K_BOUNDS}),
             {"b": B_RANGE},
             plant_cost=lambda p: W * p["b"],
-            cost=cost,
-            bounds={"k": K_BOUNDS},
             methods=("simultaneous",),
-            tol=1e-10,
+            options=SolveOptions(tol=1e-10),
         )["simultaneous"]
         assert answer.converged and answer.feasible, answer.message
         b, k = answer.params["b"], float(answer.block.gains["k"])
@@ -117,15 +121,11 @@ def test_every_method_reaches_the_sampled_optimum_and_control_blind_sequential_d
     ts = 0.1
     plant, block, scenario, cost = _problem(ts)
     answers = codesign(
-        plant,
-        block,
-        scenario,
+        TuningSetup(plant, block, scenario, cost=cost, bounds={"k": K_BOUNDS}),
         {"b": B_RANGE},
         plant_cost=lambda p: W * p["b"],
-        cost=cost,
-        bounds={"k": K_BOUNDS},
-        tol=1e-10,
         nested_tol=1e-5,
+        options=SolveOptions(tol=1e-10),
     )
     sampled = scipy.optimize.minimize(
         sampled_psi, [0.5, 0.5], args=(ts,), method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-14}
@@ -159,13 +159,14 @@ def test_the_nested_methods_tunings_share_one_compiled_problem(tmp_path, monkeyp
     monkeypatch.setenv("CODESIGN_CONTROL_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(models.compile, "STATS", models.compile.Counters())
     plant, block, scenario, cost = _problem(0.1)
-    kwargs = dict(plant_cost=lambda p: W * p["b"], cost=cost, bounds={"k": K_BOUNDS}, tol=1e-10, methods=("nested",))
-    compiled = codesign(plant, block, scenario, {"b": B_RANGE}, jit=True, **kwargs)["nested"]
+    setup = TuningSetup(plant, block, scenario, cost=cost, bounds={"k": K_BOUNDS})
+    kwargs = dict(plant_cost=lambda p: W * p["b"], methods=("nested",))
+    compiled = codesign(setup, {"b": B_RANGE}, options=SolveOptions(tol=1e-10, jit=True), **kwargs)["nested"]
     assert compiled.evaluations > 3 and compiled.converged
     # Two problems per tuning, each built and compiled once: the coarse level's and the problem's own (no
     # specs here); no later evaluation generates their code again, not even to find it in the cache.
     assert models.compile.STATS.compiled == 2 and models.compile.STATS.cache_hits == 0
-    plain = codesign(plant, block, scenario, {"b": B_RANGE}, **kwargs)["nested"]
+    plain = codesign(setup, {"b": B_RANGE}, options=SolveOptions(tol=1e-10), **kwargs)["nested"]
     assert compiled.params["b"] == pytest.approx(plain.params["b"], rel=1e-9)
     assert compiled.objective == pytest.approx(plain.objective, rel=1e-9)
 
@@ -176,34 +177,30 @@ def test_the_nested_method_from_neutral_starts_reaches_the_answer_from_nearest_o
     import designs.codesign as dc
 
     plant, block, scenario, cost = _problem(0.1)
-    kwargs = dict(plant_cost=lambda p: W * p["b"], cost=cost, bounds={"k": K_BOUNDS}, tol=1e-10, methods=("nested",))
-    nearest = codesign(plant, block, scenario, {"b": B_RANGE}, **kwargs)["nested"]
+    setup = TuningSetup(plant, block, scenario, cost=cost, bounds={"k": K_BOUNDS})
+    kwargs = dict(plant_cost=lambda p: W * p["b"], options=SolveOptions(tol=1e-10), methods=("nested",))
+    nearest = codesign(setup, {"b": B_RANGE}, **kwargs)["nested"]
     starts, real = [], dc.solve
     monkeypatch.setattr(
         dc, "solve", lambda *a, start, **k: starts.append(np.array(start)) or real(*a, start=start, **k)
     )
-    neutral = codesign(plant, block, scenario, {"b": B_RANGE}, nested_start="neutral", **kwargs)["nested"]
+    neutral = codesign(setup, {"b": B_RANGE}, nested_start="neutral", **kwargs)["nested"]
     assert neutral.converged and len(starts) == neutral.evaluations > 3
     assert all(s[0] == pytest.approx(float(block.gains["k"])) for s in starts)
     assert neutral.params["b"] == pytest.approx(nearest.params["b"], rel=1e-6)
     assert neutral.objective == pytest.approx(nearest.objective, rel=1e-9)
     with pytest.raises(ValueError, match="nested_start must be one of"):
-        codesign(plant, block, scenario, {"b": B_RANGE}, nested_start="closest", **kwargs)
+        codesign(setup, {"b": B_RANGE}, nested_start="closest", **kwargs)
 
 
 def test_gain_bounds_hold_in_every_method_when_free_is_left_at_its_default():
-    """Issue 12: with free=None the simultaneous solve dropped the bounds (seen: k <= 1, answer 1.30)."""
+    """With free=None (every gain free) the gain bounds hold in every method, the simultaneous one included."""
     plant, block, scenario, cost = _problem(0.1)
     told: list = []
     answers = codesign(
-        plant,
-        block,
-        scenario,
+        TuningSetup(plant, block, scenario, cost=cost, bounds={"k": (0.0, 0.3)}, free=None),
         {"b": B_RANGE},
         plant_cost=lambda p: W * p["b"],
-        cost=cost,
-        bounds={"k": (0.0, 0.3)},
-        free=None,
         nested_tol=1e-3,
         progress=told.append,
     )
@@ -240,14 +237,16 @@ def test_uuv_buoyancy_offset_simultaneous_from_sequential_is_never_worse():
     uuv = models.get("uuv")
     scenario = Scenario(reference=np.deg2rad(30), duration=5.0, tracked="phi")
     results = codesign(
-        uuv,
-        RollPD(uuv.input_limit[0]),
-        scenario,
+        TuningSetup(
+            uuv,
+            RollPD(uuv.input_limit[0]),
+            scenario,
+            cost=Cost("itae"),
+            specs=Specs(max_overshoot=0.05),
+            bounds={"kp": (0, 500), "kd": (0, 500)},
+        ),
         {"L": (0.01, 0.2)},
         plant_cost=lambda p: 200 * p["L"] * 1e-3,
-        cost=Cost("itae"),
-        specs=Specs(max_overshoot=0.05),
-        bounds={"kp": (0, 500), "kd": (0, 500)},
         methods=("sequential", "simultaneous from sequential"),
     )
     seq, sim = results["sequential"], results["simultaneous from sequential"]
@@ -289,7 +288,9 @@ def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     specs = Specs(rise_time=0.8, max_overshoot=0.05)
-    sized = size_actuator(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0, retune=False, rel_tol=0.01)
+    sized = size_actuator(
+        SizingProblem(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0), retune=False, rel_tol=0.01
+    )
     limit = sized["limit"]
     smaller = arm.with_input_limit(limit / 1.02)
     assert _meets(arm, limit, sized["block"]) and not _meets(arm, limit / 1.02, _arm_saturation_pd(smaller))
@@ -320,20 +321,14 @@ def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
     specs = Specs(rise_time=0.8, max_overshoot=0.05)
     bounds = {"kp": (0, 5), "kd": (0, 1)}
     nested = size_actuator(
-        arm,
-        _arm_saturation_pd,
-        scenario,
-        specs,
-        low=0.75,
-        high=3.0,
+        SizingProblem(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, bounds=bounds),
         retune=True,
         rel_tol=0.01,
-        tune_options={"bounds": bounds},
     )
     assert nested["converged"] and "Maximum_Iterations_Exceeded" not in nested["statuses"]
     assert nested["final"].feasible and nested["final"].block is nested["block"]
     sim = size_actuator_simultaneous(
-        arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, start_limit=1.5, bounds=bounds
+        SizingProblem(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, bounds=bounds), start_limit=1.5
     )
     assert sim["converged"] and sim["feasible"], sim["message"]
     assert sim["limit"] <= nested["limit"] * 1.01
@@ -352,14 +347,10 @@ def test_simultaneous_sizing_proves_a_rise_time_beyond_the_largest_limit_out_of_
     assert specs.rise_time < fastest
     scenario = Scenario(reference=step, duration=1.0, tracked="theta")
     sim = size_actuator_simultaneous(
-        arm,
-        _arm_saturation_pd,
-        scenario,
-        specs,
-        low=0.75,
-        high=high,
+        SizingProblem(
+            arm, _arm_saturation_pd, scenario, specs, low=0.75, high=high, bounds={"kp": (0, 5), "kd": (0, 1)}
+        ),
         start_limit=1.5,
-        bounds={"kp": (0, 5), "kd": (0, 1)},
     )
     assert sim["converged"] and not sim["feasible"], sim["message"]
     assert any("rise" in v or "90 %" in v for v in sim["violations"]), sim["violations"]
@@ -372,9 +363,9 @@ def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(mo
 
     edge, calls = 1.2, []
 
-    def fake_tune(plant, block, scenario, *, specs, **options):
-        limit = float(plant.input_limit[0])
-        if not options.get("until_feasible"):  # the cost tuning at the limit found
+    def fake_tune(setup, options):
+        limit, block = float(setup.plant.input_limit[0]), setup.block
+        if not options.until_feasible:  # the cost tuning at the limit found
             return types.SimpleNamespace(feasible=True, block=block)
         first = all(c[0] != limit for c in calls)
         calls.append((limit, float(block.gains["kp"])))
@@ -392,7 +383,9 @@ def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(mo
     monkeypatch.setattr(dc, "tune", fake_tune)
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
-    sized = size_actuator(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0, retune=True)
+    sized = size_actuator(
+        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0), retune=True
+    )
     assert sized["converged"] and "Restoration_Failed" not in sized["statuses"]
     assert edge <= sized["limit"] <= edge * 1.01 and sized["block"].gains["kp"] == sized["limit"]
     repeats = [(limit, kp) for k, (limit, kp) in enumerate(calls) if any(c[0] == limit for c in calls[:k])]
@@ -411,9 +404,9 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
 
     edge, seen = 1.2, set()
 
-    def fake_tune(plant, block, scenario, *, specs, **options):
-        limit = float(plant.input_limit[0])
-        if not options.get("until_feasible"):  # the cost tuning at the limit found
+    def fake_tune(setup, options):
+        limit, block = float(setup.plant.input_limit[0]), setup.block
+        if not options.until_feasible:  # the cost tuning at the limit found
             return types.SimpleNamespace(feasible=True, block=block)
         first, feasible = limit not in seen, limit >= edge
         seen.add(limit)
@@ -432,7 +425,9 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
     monkeypatch.setattr(dc, "tune", fake_tune)
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
-    sized = size_actuator(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0, retune=True)
+    sized = size_actuator(
+        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0), retune=True
+    )
     assert edge <= sized["limit"] <= edge * 1.01
     assert sized["retries"] > 0 and sized["converged"]
     assert "Maximum_Iterations_Exceeded" in sized["statuses"]
@@ -440,15 +435,17 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
     monkeypatch.setattr(
         dc,
         "tune",
-        lambda plant, block, scenario, *, specs, **options: types.SimpleNamespace(
-            feasible=plant.input_limit[0] >= 2.0,
-            block=block,
+        lambda setup, options: types.SimpleNamespace(
+            feasible=setup.plant.input_limit[0] >= 2.0,
+            block=setup.block,
             violations=[],
-            status="Solve_Succeeded" if plant.input_limit[0] >= 2.0 else "Restoration_Failed",
-            stopped_on_test=plant.input_limit[0] >= 2.0,
+            status="Solve_Succeeded" if setup.plant.input_limit[0] >= 2.0 else "Restoration_Failed",
+            stopped_on_test=setup.plant.input_limit[0] >= 2.0,
         ),
     )
-    sized = size_actuator(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0, retune=True)
+    sized = size_actuator(
+        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0), retune=True
+    )
     assert sized["limit"] >= 2.0 and not sized["converged"]
 
 
@@ -466,3 +463,25 @@ def test_a_claim_of_infeasibility_with_a_feasible_answer_is_not_a_stop_on_the_te
     assert stopped(ns(converged=False, status="Restoration_Failed", feasible=False, phase_one=certificate))
     assert not stopped(ns(converged=False, status="Restoration_Failed", feasible=True, phase_one=certificate))
     assert not stopped(ns(converged=False, status="Restoration_Failed", feasible=False, phase_one=ns(infeasible=False)))
+
+
+def test_a_nested_evaluation_is_the_best_gain_of_the_closed_form_at_its_parameter():
+    """`Codesign.inner` at b = 0.5 alone: the gain it tunes is the sampled loop's best k at that b (its
+    closed form minimized by scipy) and the value the outer search sees is Ψ there; a second evaluation
+    starts from the first one's gain, the nearest."""
+    ts = 0.1
+    plant, block, scenario, cost = _problem(ts)
+    setup = TuningSetup(plant, block, scenario, cost=cost, bounds={"k": K_BOUNDS})
+    ranges = {"b": B_RANGE}
+    problem = Codesign(setup, ranges, lambda p: W * p["b"], lambda p: W * p["b"], SolveOptions(tol=1e-10))
+    tried: list = []
+    result, value = problem.inner(np.array([0.5]), tried, from_nearest=True)
+    best = scipy.optimize.minimize_scalar(
+        lambda k: sampled_psi((0.5, k), ts), bounds=K_BOUNDS, method="bounded", options={"xatol": 1e-10}
+    )
+    assert result.converged and float(result.gains["k"]) == pytest.approx(best.x, rel=1e-4)
+    assert value == pytest.approx(best.fun, rel=1e-7) and len(tried) == 1 and tried[0][2] == value
+    again, _ = problem.inner(np.array([0.6]), tried, from_nearest=True)
+    # IPOPT's first iterate is the start: the first evaluation's gain, at the parameter fixed to 0.6.
+    np.testing.assert_allclose(again.iterates[0], [result.decision[0], 0.6], rtol=1e-12)
+    assert len(tried) == 2

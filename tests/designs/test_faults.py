@@ -5,15 +5,21 @@ solve; each case asserts the error type and that the message names the
 culprit. The first block reproduces the cases seen in the issue.
 """
 
+import dataclasses
 import math
 import time
 
+import casadi as ca
 import numpy as np
 import pytest
 
 import models
-from designs.codesign import codesign, size_actuator, size_actuator_simultaneous
-from designs.tuning import Cost, Scenario, Specs, TuningProblem, tune
+from designs.codesign import SizingProblem, codesign, size_actuator, size_actuator_simultaneous
+from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup, tune
+
+#: What `TuningSetup` and `SolveOptions` take: a case's keywords below go to the record that takes them.
+SETUP_FIELDS = {f.name for f in dataclasses.fields(TuningSetup)}
+SOLVE_FIELDS = {f.name for f in dataclasses.fields(SolveOptions)}
 
 
 class PD(models.Block):
@@ -44,19 +50,18 @@ STEP = Scenario(reference=0.5, duration=2.0, tracked="theta")
 
 def _never_solves(monkeypatch):
     """Make any IPOPT solve fail the test: the checks must come first."""
-    import designs.tuning
 
     def refuse(*args, **kwargs):
         raise AssertionError("a solve started before the arguments were checked")
 
-    monkeypatch.setattr(designs.tuning.ca, "nlpsol", refuse)
+    monkeypatch.setattr(ca, "nlpsol", refuse)
 
 
 # ----------------------------------------------------------------- the examples seen in the issue
 def test_settling_time_after_the_end_of_the_scenario_is_refused(arm, monkeypatch):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=r"settling_time = 7 s is after the end of the scenario \(2 s\)"):
-        tune(arm, PD(), STEP, specs=Specs(settling_time=7.0))
+        tune(TuningSetup(arm, PD(), STEP, specs=Specs(settling_time=7.0)))
 
 
 @pytest.mark.parametrize("name", ["settling_time", "rise_time"])
@@ -73,7 +78,7 @@ def test_negative_overshoot_is_refused():
 def test_zero_samples_are_refused(arm, monkeypatch):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match="samples has no rows"):
-        tune(arm, PD(), STEP, samples=np.zeros((0, arm.n_params)))
+        tune(TuningSetup(arm, PD(), STEP, samples=np.zeros((0, arm.n_params))))
 
 
 @pytest.mark.parametrize(
@@ -83,7 +88,7 @@ def test_zero_samples_are_refused(arm, monkeypatch):
 def test_inverted_or_nan_bounds_are_refused(arm, monkeypatch, pair, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
-        tune(arm, PD(), STEP, bounds={"kp": pair})
+        tune(TuningSetup(arm, PD(), STEP, bounds={"kp": pair}))
 
 
 @pytest.mark.parametrize(
@@ -97,7 +102,7 @@ def test_inverted_or_nan_bounds_are_refused(arm, monkeypatch, pair, message):
 def test_bad_max_iter_is_refused(arm, monkeypatch, value, error, message):
     _never_solves(monkeypatch)
     with pytest.raises(error, match=message):
-        tune(arm, PD(), STEP, max_iter=value)
+        tune(TuningSetup(arm, PD(), STEP), SolveOptions(max_iter=value))
 
 
 @pytest.mark.parametrize(
@@ -112,7 +117,11 @@ def test_bad_max_iter_is_refused(arm, monkeypatch, value, error, message):
 def test_size_actuator_refuses_a_tolerance_that_never_ends_or_ends_at_once(arm, rel_tol, message):
     started = time.perf_counter()
     with pytest.raises(ValueError, match=message):
-        size_actuator(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=0.5, high=2.0, retune=False, rel_tol=rel_tol)
+        size_actuator(
+            SizingProblem(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=0.5, high=2.0),
+            retune=False,
+            rel_tol=rel_tol,
+        )
     assert time.perf_counter() - started < 1.0
 
 
@@ -121,12 +130,7 @@ def test_size_actuator_tries_a_bounded_number_of_limits(arm):
     from tests.designs.test_tuning import ArmPD
 
     sized = size_actuator(
-        arm,
-        lambda p: ArmPD(p, kp=2.0, kd=0.2),
-        STEP,
-        Specs(rise_time=1.0),
-        low=0.8,
-        high=3.0,
+        SizingProblem(arm, lambda p: ArmPD(p, kp=2.0, kd=0.2), STEP, Specs(rise_time=1.0), low=0.8, high=3.0),
         retune=False,
         rel_tol=1e-6,
     )
@@ -164,8 +168,9 @@ def test_size_actuator_tries_a_bounded_number_of_limits(arm):
 )
 def test_tune_refuses_before_solving(arm, monkeypatch, kwargs, error, message):
     _never_solves(monkeypatch)
+    setup = {k: v for k, v in kwargs.items() if k in SETUP_FIELDS}
     with pytest.raises(error, match=message):
-        tune(arm, PD(), STEP, **kwargs)
+        tune(TuningSetup(arm, PD(), STEP, **setup), SolveOptions(**{k: v for k, v in kwargs.items() if k not in setup}))
 
 
 def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
@@ -173,7 +178,7 @@ def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
     rows = np.tile(arm.param_vector(), (3, 1))
     rows[2, 0] = -1.0
     with pytest.raises(ValueError, match="samples row 2: .*m"):
-        tune(arm, PD(), STEP, samples=rows)
+        tune(TuningSetup(arm, PD(), STEP, samples=rows))
 
 
 @pytest.mark.parametrize(
@@ -210,7 +215,7 @@ def test_a_sample_the_plant_refuses_is_named_by_row(arm, monkeypatch):
 def test_specs_the_scenario_cannot_judge_are_refused(arm, monkeypatch, scenario, specs, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
-        tune(arm, PD(), scenario, specs=specs)
+        tune(TuningSetup(arm, PD(), scenario, specs=specs))
 
 
 @pytest.mark.parametrize(
@@ -269,7 +274,7 @@ def test_records_refuse_bad_values_when_made(build, error, message):
 def test_costs_the_plant_cannot_evaluate_are_refused(arm, monkeypatch, cost, message):
     _never_solves(monkeypatch)
     with pytest.raises(ValueError, match=message):
-        tune(arm, PD(), STEP, cost=cost)
+        tune(TuningSetup(arm, PD(), STEP, cost=cost))
 
 
 def test_the_error_signal_needs_a_reference(arm):
@@ -319,8 +324,11 @@ def test_scenarios_must_be_scenarios(arm):
 def test_codesign_refuses_before_solving(arm, monkeypatch, design_params, kwargs, error, message):
     _never_solves(monkeypatch)
     kwargs = {"plant_cost": lambda p: p["m"]} | kwargs
+    setup = {k: v for k, v in kwargs.items() if k in SETUP_FIELDS}
+    solve = {k: v for k, v in kwargs.items() if k in SOLVE_FIELDS}
+    rest = {k: v for k, v in kwargs.items() if k not in setup and k not in solve}
     with pytest.raises(error, match=message):
-        codesign(arm, PD(), STEP, design_params, **kwargs)
+        codesign(TuningSetup(arm, PD(), STEP, **setup), design_params, options=SolveOptions(**solve), **rest)
 
 
 # ----------------------------------------------------------------- size_actuator
@@ -335,7 +343,7 @@ def test_codesign_refuses_before_solving(arm, monkeypatch, design_params, kwargs
         ({"retune": "yes"}, TypeError, "retune must be True or False, got str"),
         ({"design": "PD"}, TypeError, "design must be callable Plant -> Block"),
         ({"specs": None}, TypeError, "specs must be a designs.tuning.Specs"),
-        ({"tune_options": ["bounds"]}, TypeError, "tune_options must be a dict of keyword arguments"),
+        ({"options": ["bounds"]}, TypeError, "options must be a designs.tuning.SolveOptions, got list"),
     ],
 )
 def test_size_actuator_refuses_before_any_limit_is_tried(arm, kwargs, error, message):
@@ -347,7 +355,8 @@ def test_size_actuator_refuses_before_any_limit_is_tried(arm, kwargs, error, mes
 
     args = {"design": design, "specs": Specs(rise_time=1.0), "low": 0.5, "high": 2.0, "retune": False} | kwargs
     with pytest.raises(error, match=message):
-        size_actuator(arm, args.pop("design"), STEP, args.pop("specs"), **args)
+        range_ = {"low": args.pop("low"), "high": args.pop("high")}
+        size_actuator(SizingProblem(arm, args.pop("design"), STEP, args.pop("specs"), **range_), **args)
     assert tried == []
 
 
@@ -363,4 +372,7 @@ def test_simultaneous_sizing_refuses_before_solving(arm, monkeypatch, kwargs, me
     _never_solves(monkeypatch)
     args = {"low": 0.5, "high": 2.0, "start_limit": 1.0} | kwargs
     with pytest.raises(ValueError, match=message):
-        size_actuator_simultaneous(arm, lambda p: PD(), STEP, Specs(rise_time=1.0), **args)
+        problem = SizingProblem(
+            arm, lambda p: PD(), STEP, Specs(rise_time=1.0), low=args.pop("low"), high=args.pop("high")
+        )
+        size_actuator_simultaneous(problem, **args)

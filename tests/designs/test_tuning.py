@@ -1,5 +1,7 @@
 """Gain tuning against a closed-form optimum, finite differences and a fresh simulation."""
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -10,15 +12,20 @@ from designs.tuning import (
     AGREEMENT,
     STAGE_TOL_FACTOR,
     TOL,
+    Continuation,
     Cost,
     Scenario,
+    SolveOptions,
     Specs,
     TuningProblem,
+    TuningSetup,
     closed_loop_spectral_abscissa,
+    continuation,
     gain_bounds,
     phase_one,
     tune,
 )
+from designs.tuning.result import pick_answer
 from models import metrics
 
 
@@ -87,11 +94,13 @@ def test_tuner_finds_the_closed_form_optimum_of_a_first_order_loop():
     k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
     # 40 s: λ^(2N) ≈ e^-270, so the finite horizon is the infinite one to machine precision.
     result = tune(
-        plant,
-        VelocityGain(1.0),
-        Scenario(reference=0.0, duration=40.0, x0=[0.0, 1.0], tracked="ds"),
-        cost=Cost("ise", energy_weight=rho),
-        tol=1e-12,
+        TuningSetup(
+            plant,
+            VelocityGain(1.0),
+            Scenario(reference=0.0, duration=40.0, x0=[0.0, 1.0], tracked="ds"),
+            cost=Cost("ise", energy_weight=rho),
+        ),
+        SolveOptions(tol=1e-12),
     )
     assert result.success, result.message
     assert float(result.gains["k"]) == pytest.approx(k_star, abs=1e-6)
@@ -128,11 +137,13 @@ def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
     specs = Specs(max_overshoot=0.02, settling_time=1.5)
     # Without bounds ITAE keeps falling towards bang-bang as the gains grow.
     result = tune(
-        arm,
-        block,
-        Scenario(reference=target, duration=3.0, tracked="theta"),
-        specs=specs,
-        bounds={"kp": (0, 1.0), "kd": (0, 0.2)},
+        TuningSetup(
+            arm,
+            block,
+            Scenario(reference=target, duration=3.0, tracked="theta"),
+            specs=specs,
+            bounds={"kp": (0, 1.0), "kd": (0, 0.2)},
+        )
     )
     assert result.success and result.feasible, result.message
     assert result.cost < 0.9 * result.initial_cost
@@ -144,11 +155,13 @@ def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
 
 def test_infeasible_specs_are_named(arm):
     result = tune(
-        arm,
-        ArmPD(arm),
-        Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"),
-        specs=Specs(rise_time=0.05, max_overshoot=0.0),
-        max_iter=30,
+        TuningSetup(
+            arm,
+            ArmPD(arm),
+            Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"),
+            specs=Specs(rise_time=0.05, max_overshoot=0.0),
+        ),
+        SolveOptions(max_iter=30),
     )
     assert not result.feasible and not result.success
     assert any("90 % of the step by 0.05 s" in v for v in result.violations)
@@ -182,28 +195,29 @@ def test_an_infeasibility_verdict_contradicted_by_its_own_iterates_is_retried_fr
     specs = Specs(max_overshoot=0.05)
     problem = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
     result = tune(
-        arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)},
-        progress=lambda i, f, t: progress.append(i),
-    )  # fmt: skip
+        TuningSetup(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}),
+        SolveOptions(progress=lambda i, f, t: progress.append(i)),
+    )
     assert len(starts) >= 2 and result.converged and result.feasible
     met = [d for d in result.iterates[: seen[1]] if not problem.values(d)[2]]
     assert met
     scale = np.abs(problem.start())
     np.testing.assert_allclose(starts[1] * scale, met[-1], rtol=1e-12)
     monkeypatch.undo()
-    honest = tune(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    honest = tune(TuningSetup(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}))
     assert honest.converged and result.cost == pytest.approx(honest.cost, rel=1e-6)
 
 
 def test_iteration_limit_returns_the_best_feasible_point_and_says_it_did_not_converge(arm):
     calls = []
     result = tune(
-        arm,
-        ArmPD(arm),
-        Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
-        specs=Specs(max_overshoot=0.05),
-        max_iter=2,
-        progress=lambda *a: calls.append(a),
+        TuningSetup(
+            arm,
+            ArmPD(arm),
+            Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
+            specs=Specs(max_overshoot=0.05),
+        ),
+        SolveOptions(max_iter=2, progress=lambda *a: calls.append(a)),
     )
     assert result.status == "Maximum_Iterations_Exceeded"
     assert {s["substeps"] for s in result.stages} == {10}  # with specs, no coarse level first
@@ -293,12 +307,14 @@ def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agre
     target = np.deg2rad(50)
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
     result = tune(
-        arm,
-        block,
-        scenario,
-        cost=Cost("itae", energy_weight=0.01),
-        specs=Specs(max_overshoot=0.02),
-        bounds={"kp": (0, 5.0), "kd": (0, 1.0)},
+        TuningSetup(
+            arm,
+            block,
+            scenario,
+            cost=Cost("itae", energy_weight=0.01),
+            specs=Specs(max_overshoot=0.02),
+            bounds={"kp": (0, 5.0), "kd": (0, 1.0)},
+        )
     )
     assert result.method == "smooth" and result.converged and result.status == "Solve_Succeeded", result.message
     assert result.feasible and result.cost < result.initial_cost
@@ -323,9 +339,9 @@ def test_loose_intermediate_stages_end_where_tight_ones_do(arm, monkeypatch):
     on the saturating arm loop it ends at the answer of the continuation solved to tol at every width."""
     block, scenario = ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     kwargs = dict(cost=Cost("itae", energy_weight=0.01), bounds={"kp": (0, 5.0), "kd": (0, 1.0)})
-    loose = tune(arm, block, scenario, **kwargs)
-    monkeypatch.setattr(tuning, "STAGE_TOL_FACTOR", 1.0)
-    tight = tune(arm, block, scenario, **kwargs)
+    loose = tune(TuningSetup(arm, block, scenario, **kwargs))
+    monkeypatch.setattr(continuation, "STAGE_TOL_FACTOR", 1.0)
+    tight = tune(TuningSetup(arm, block, scenario, **kwargs))
     assert loose.converged and tight.converged, (loose.message, tight.message)
     assert len(loose.stages) >= 2 and loose.stages[-1]["tol"] == TOL
     assert all(stage["tol"] == STAGE_TOL_FACTOR * TOL for stage in loose.stages[:-1])
@@ -413,7 +429,9 @@ def test_multi_scenario_tuning_is_never_worse_than_the_hand_design_on_any_scenar
         for s in plain
     ]
     result = tune(
-        arm, block, scenarios, cost=Cost("itae", energy_weight=0.01), bounds={"kp": (0.06, 6.0), "kd": (0.012, 1.2)}
+        TuningSetup(
+            arm, block, scenarios, cost=Cost("itae", energy_weight=0.01), bounds={"kp": (0.06, 6.0), "kd": (0.012, 1.2)}
+        )
     )
     assert result.converged and result.feasible, result.message
     assert result.cost < 0.9 * result.initial_cost
@@ -529,11 +547,13 @@ def test_a_first_order_plant_tunes_without_registering_to_its_sampled_lqr_gain()
     lin = rho * (1 - phi**2) + gamma**2
     k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
     result = tune(
-        plant,
-        Proportional(1.0, ts),
-        Scenario(reference=None, duration=12.0, x0=[1.0]),
-        cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}),
-        tol=1e-12,
+        TuningSetup(
+            plant,
+            Proportional(1.0, ts),
+            Scenario(reference=None, duration=12.0, x0=[1.0]),
+            cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}),
+        ),
+        SolveOptions(tol=1e-12),
     )
     assert result.converged and result.success, result.message
     assert float(result.gains["k"]) == pytest.approx(k_star, rel=1e-6)
@@ -558,13 +578,15 @@ def test_worst_case_tuning_minimizes_the_largest_sample_cost_of_the_closed_form(
         lambda k: max(closed_form(k, b) for b in rows[:, 0]), bounds=(0, 10), method="bounded", options={"xatol": 1e-12}
     )
     result = tune(
-        plant,
-        Proportional(1.0, ts),
-        Scenario(reference=None, duration=12.0, x0=[1.0]),
-        samples=rows,
-        robust="worst",
-        cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}),
-        tol=1e-12,
+        TuningSetup(
+            plant,
+            Proportional(1.0, ts),
+            Scenario(reference=None, duration=12.0, x0=[1.0]),
+            samples=rows,
+            robust="worst",
+            cost=Cost(kind=None, state_weights={"x": q}, input_weights={"u": r}),
+        ),
+        SolveOptions(tol=1e-12),
     )
     assert result.converged, result.message
     assert float(result.gains["k"]) == pytest.approx(best.x, rel=1e-5)
@@ -578,7 +600,7 @@ def test_soft_max_excess_lies_within_the_width_below_the_largest_excess_and_has_
     values = rng.normal(size=40)
     lo, hi = -0.5, np.full(40, 0.3)
     x, w = ca.MX.sym("x", 40), ca.MX.sym("w")
-    soft = tuning._soft_max_excess(x, lo, hi, w)
+    soft = tuning.soft_max_excess(x, lo, hi, w)
     f = ca.Function("f", [x, w], [soft, ca.gradient(soft, x)])
     scale = 1 + max(abs(lo), 0.3)
     largest = max(np.max(values - hi), np.max(lo - values)) / scale
@@ -598,8 +620,8 @@ def test_aggregated_path_specs_reach_the_pointwise_answer(arm):
     block = ArmPD(arm)
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     kwargs = dict(specs=Specs(max_overshoot=0.02, settling_time=1.5), bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
-    pointwise = tune(arm, block, scenario, **kwargs)
-    aggregated = tune(arm, block, scenario, paths="aggregated", **kwargs)
+    pointwise = tune(TuningSetup(arm, block, scenario, **kwargs))
+    aggregated = tune(TuningSetup(arm, block, scenario, paths="aggregated", **kwargs))
     problem = TuningProblem(arm, block, scenario, specs=kwargs["specs"], paths="aggregated")
     _, g = problem.smoothed()
     assert g.numel() == len(problem.constraint_names) == 2 and problem.g.numel() > 100
@@ -696,7 +718,10 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
     start = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
     assert start.values(start.start())[2]  # the start misses both specs
-    result = tune(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}, phase=True)
+    result = tune(
+        TuningSetup(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}),
+        SolveOptions(phase=True),
+    )
     assert result.phase_one is not None and result.phase_one.converged and not result.phase_one.infeasible
     assert result.converged and result.feasible and result.stopped_on_test, result.message
     assert "phase one" in result.message
@@ -712,13 +737,15 @@ def test_a_capped_intermediate_stage_hands_its_point_on_and_two_in_a_row_end_the
     fidelity (no coarse level first): the rule is the continuation's."""
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
-    free = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None)
-    capped = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None, max_iter=16)
+    free = tune(TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds), SolveOptions(coarse_substeps=None))
+    capped = tune(
+        TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds), SolveOptions(coarse_substeps=None, max_iter=16)
+    )
     assert free.converged and "Maximum_Iterations_Exceeded" not in [s["status"] for s in free.stages]
     assert [s["status"] for s in capped.stages][:2] == ["Solve_Succeeded", "Maximum_Iterations_Exceeded"]
     assert capped.converged and capped.stopped_on_test
     assert capped.cost == pytest.approx(free.cost, rel=1e-6)
-    stuck = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None, max_iter=4)
+    stuck = tune(TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds), SolveOptions(coarse_substeps=None, max_iter=4))
     assert [s["status"] for s in stuck.stages] == ["Maximum_Iterations_Exceeded"] * 2 and not stuck.converged
 
 
@@ -728,8 +755,8 @@ def test_a_coarse_level_first_ends_at_the_one_level_answer_on_the_fine_loop(arm)
     tuning's, whose iterates never saw the coarse loop."""
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
-    one = tune(arm, ArmPD(arm), scenario, bounds=bounds, coarse_substeps=None)
-    two = tune(arm, ArmPD(arm), scenario, bounds=bounds)
+    one = tune(TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds), SolveOptions(coarse_substeps=None))
+    two = tune(TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds))
     levels = [s["substeps"] for s in two.stages]
     assert levels[0] == tuning.COARSE_SUBSTEPS == 1 and levels[-1] == 10 and levels == sorted(levels)
     assert {s["substeps"] for s in one.stages} == {10}
@@ -748,8 +775,11 @@ def test_one_width_with_a_coarse_level_ends_at_the_one_level_answer(arm):
     from its answer, warm (this raised KeyError: no warm solver was built without a continuation)."""
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
-    two = tune(arm, ArmPD(arm), scenario, bounds=bounds, widths=(1e-3,), tol=1e-10)
-    one = tune(arm, ArmPD(arm), scenario, bounds=bounds, widths=(1e-3,), tol=1e-10, coarse_substeps=None)
+    two = tune(TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds), SolveOptions(widths=(1e-3,), tol=1e-10))
+    one = tune(
+        TuningSetup(arm, ArmPD(arm), scenario, bounds=bounds),
+        SolveOptions(widths=(1e-3,), tol=1e-10, coarse_substeps=None),
+    )
     assert [s["substeps"] for s in two.stages] == [1, 10] and two.converged and one.converged
     assert two.cost == pytest.approx(one.cost, rel=1e-8)
     np.testing.assert_allclose(two.decision, one.decision, rtol=1e-5)
@@ -762,8 +792,10 @@ def test_relaxed_keeps_the_unconstrained_answer_only_where_it_meets_the_specs(ar
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
     loose = Specs(max_overshoot=0.5)
-    kept = tune(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds, relaxed=True, tol=1e-10)
-    with_specs = tune(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds, tol=1e-10)
+    kept = tune(
+        TuningSetup(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds), SolveOptions(relaxed=True, tol=1e-10)
+    )
+    with_specs = tune(TuningSetup(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds), SolveOptions(tol=1e-10))
     assert kept.converged and with_specs.converged and kept.message.startswith("solved without the specs")
     assert kept.cost == pytest.approx(with_specs.cost, rel=1e-7)
     np.testing.assert_allclose(kept.decision, with_specs.decision, rtol=1e-4)
@@ -771,8 +803,8 @@ def test_relaxed_keeps_the_unconstrained_answer_only_where_it_meets_the_specs(ar
     over, _ = _overshoot_and_settling(models.simulate_closed_loop(arm, kept.block, target, 3.0), 0.0, target)
     assert 0 < over < 0.5  # overshoots (so the 0 % bound below is active), within the 50 % one
     tight = Specs(max_overshoot=0.0)
-    fallback = tune(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds, relaxed=True)
-    usual = tune(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds)
+    fallback = tune(TuningSetup(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds), SolveOptions(relaxed=True))
+    usual = tune(TuningSetup(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds))
     assert fallback.message.startswith("without the specs: ") and "missing overshoot" in fallback.message
     assert fallback.cost == usual.cost and fallback.feasible and fallback.converged
 
@@ -783,8 +815,10 @@ def test_no_coarse_level_where_it_disagrees_at_the_start(arm, monkeypatch):
     coarse = problem.with_substeps(1)
     gap = abs(coarse.values(problem.start())[0] / problem.values(problem.start())[0] - 1)
     assert 0 < gap < tuning.COARSE_AGREEMENT  # it runs by default (the test above)
-    monkeypatch.setattr(tuning, "COARSE_AGREEMENT", gap / 2)
-    result = tune(arm, ArmPD(arm), scenario, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}, max_iter=2)
+    monkeypatch.setattr(continuation, "COARSE_AGREEMENT", gap / 2)
+    result = tune(
+        TuningSetup(arm, ArmPD(arm), scenario, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}), SolveOptions(max_iter=2)
+    )
     assert {s["substeps"] for s in result.stages} == {10}
 
 
@@ -794,20 +828,26 @@ def test_until_feasible_stops_at_the_first_decision_meeting_the_specs(arm):
     specs = Specs(max_overshoot=0.0, settling_time=0.8)
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
-    found = tune(arm, ArmPD(arm), scenario, specs=specs, bounds=bounds, phase=True, until_feasible=True)
+    found = tune(
+        TuningSetup(arm, ArmPD(arm), scenario, specs=specs, bounds=bounds),
+        SolveOptions(phase=True, until_feasible=True),
+    )
     assert found.feasible and found.converged and found.stopped_on_test and found.phase_one is not None
     assert found.iterations == found.phase_one.iterations and "cost not tuned" in found.message
     res = models.simulate_closed_loop(arm, found.block, target, 3.0)
     over, settle = _overshoot_and_settling(res, 0.0, target)
     assert over * target <= 1e-6 and settle <= 0.8 + 0.01
     # A start that already meets the specs is the verdict itself: no solve, its gains returned.
-    again = tune(arm, found.block, scenario, specs=specs, bounds=bounds, phase=True, until_feasible=True)
+    again = tune(
+        TuningSetup(arm, found.block, scenario, specs=specs, bounds=bounds),
+        SolveOptions(phase=True, until_feasible=True),
+    )
     assert again.iterations == 0 and again.phase_one is None and again.feasible
     np.testing.assert_array_equal(again.block.gain_vector(), found.block.gain_vector())
     fresh = TuningProblem(arm, found.block, scenario, specs=specs)
     assert again.cost == pytest.approx(fresh.values(fresh.start())[0], rel=1e-12)
     with pytest.raises(ValueError, match="until_feasible needs phase=True"):
-        tune(arm, ArmPD(arm), scenario, specs=specs, until_feasible=True)
+        tune(TuningSetup(arm, ArmPD(arm), scenario, specs=specs), SolveOptions(until_feasible=True))
 
 
 @pytest.mark.parametrize(
@@ -823,7 +863,7 @@ def test_relative_excess_rows_are_the_judges_excess(arm, lbg, ubg):
     lbg, ubg = np.array(lbg), np.array(ubg)
     problem = TuningProblem(arm, ArmPD(arm), Scenario(reference=0.5, duration=0.1, tracked="theta"))
     g = ca.MX.sym("g", 4)
-    rows = ca.Function("rows", [g], [tuning._relative_excess(g, lbg, ubg)])
+    rows = ca.Function("rows", [g], [tuning.relative_excess(g, lbg, ubg)])
     for value in ([3.0, 5.0, 0.0, -1.0], [0.0, 0.0, 0.9, 2.5]):
         got = np.asarray(rows(value)).ravel()
         judged = problem.excess(np.array(value), (lbg, ubg))
@@ -836,6 +876,115 @@ def test_bad_phase_one_input_is_named(arm):
     problem = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1))
     lbx, ubx = gain_bounds(problem, None)
     with pytest.raises(ValueError, match="method must be 'smooth' or 'exact'"):
-        phase_one(problem, lbx, ubx, problem.start(), method="fast")
+        phase_one(problem, lbx, ubx, problem.start(), SolveOptions(method="fast"))
     with pytest.raises(TypeError, match="phase"):
-        tune(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1), phase="yes")
+        tune(TuningSetup(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1)), SolveOptions(phase="yes"))
+
+
+# ----------------------------------------------------------------- the continuation's steps, alone
+def _continuation(problem, bounds, options=None, start=None):
+    lbx, ubx = gain_bounds(problem, bounds)
+    begin = problem.start() if start is None else np.asarray(start, dtype=float)
+    return Continuation(problem, lbx, ubx, begin, options or SolveOptions())
+
+
+def test_a_stage_judgement_is_a_fresh_simulations_cost_and_names_the_spec_missed_by_hand(arm):
+    """At the start (an arm PD saturating for 20 samples or more): the exact objective is the ITAE of a
+    fresh numpy simulation; at a tiny width the smoothed one agrees with it and both loops miss the
+    overshoot bound, which the simulation exceeds by a hand-computed margin; at a wide width the
+    smoothing changes the cost of the saturated samples, and the gap says by how much."""
+    target = np.deg2rad(50)
+    block = ArmPD(arm, kp=2.0, kd=0.15)
+    exact_cost, run = _itae_by_simulation(arm, block, target, 3.0, substeps=10)
+    overshoot = (np.max(run.x[:, 0]) - target) / target
+    assert np.sum(np.abs(run.u[:, 0]) >= arm.input_limit[0] - 1e-12) >= 20 and overshoot > 0.02
+    scenario = Scenario(reference=target, duration=3.0, tracked="theta")
+    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot=overshoot - 0.01))
+    continuation = _continuation(problem, {"kp": (0, 5.0), "kd": (0, 1.0)})
+    level = continuation.build(problem)
+    tiny = continuation.judge_stage(level, 1e-9)
+    assert tiny.exact == pytest.approx(exact_cost, rel=1e-9)
+    assert tiny.gap < 1e-6 and tiny.same
+    (missed,) = problem.values(continuation.decision())[2]
+    excess = float(missed.split("violated by ")[1].split(" ")[0])
+    assert excess == pytest.approx(0.01 * target, rel=1e-3)  # g = peak − r against bound × step, scale 1
+    wide = continuation.judge_stage(level, 0.3)
+    assert wide.exact == tiny.exact and wide.gap == pytest.approx(abs(wide.exact - wide.smoothed) / wide.exact)
+    assert wide.gap > 1e3 * tiny.gap
+
+
+def test_a_stage_run_alone_reaches_the_closed_form_optimum_of_a_loop_without_switches():
+    """One IPOPT solve, cold and to the tolerance, on ẋ = −b x + u regulated by u = −k x (no saturation, so
+    every width gives the exact loop): it ends at the sampled LQR gain of the closed form (see
+    `test_a_first_order_plant_tunes_without_registering_to_its_sampled_lqr_gain`), and the judgement
+    finds the exact and smoothed objectives equal there."""
+    plant = models.Plant(_lag)
+    b, ts, q, r = 2.0, 0.01, 3.0, 0.5
+    phi = np.exp(-b * ts)
+    gamma = (1 - phi) / b
+    rho = r / q
+    lin = rho * (1 - phi**2) + gamma**2
+    k_star = (-lin + np.sqrt(lin**2 + 4 * rho * phi**2 * gamma**2)) / (2 * rho * phi * gamma)
+    cost = Cost(kind=None, state_weights={"x": q}, input_weights={"u": r})
+    problem = TuningProblem(plant, Proportional(1.0, ts), Scenario(reference=None, duration=12.0, x0=[1.0]), cost=cost)
+    continuation = _continuation(problem, None, SolveOptions(tol=1e-12))
+    level = continuation.build(problem)
+    status, iterations = continuation.run_stage(level, 1e-3, tight=True, warm=False)
+    assert status == "Solve_Succeeded" and iterations > 0 and set(continuation.multipliers) == {"lam_x0", "lam_g0"}
+    assert float(continuation.decision()[0]) == pytest.approx(k_star, rel=1e-6)
+    assert len(continuation.log.iterates) == iterations + 1  # IPOPT reports its iterations 0 .. n
+    judged = continuation.judge_stage(level, 1e-3)
+    assert judged.gap == 0.0 and judged.same
+    expected = q * ts * (1 + rho * k_star**2) / (1 - (phi - gamma * k_star) ** 2)
+    assert judged.exact == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_fidelity_levels_are_a_coarse_loop_then_the_problem_only_without_specs(arm):
+    """A coarse level first where its objective agrees with the problem's at the start (both computed on
+    fresh problems), never on a problem with specs."""
+    scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
+    free = TuningProblem(arm, ArmPD(arm), scenario)
+    coarse = TuningProblem(arm, ArmPD(arm), scenario, substeps=1)
+    start = free.start()
+    assert abs(coarse.values(start)[0] / free.values(start)[0] - 1) < tuning.COARSE_AGREEMENT
+    bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
+    assert [p.substeps for p in _continuation(free, bounds).levels] == [1, 10]
+    assert [p.substeps for p in _continuation(free, bounds, SolveOptions(coarse_substeps=None)).levels] == [10]
+    with_specs = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(max_overshoot=0.5))
+    assert [p.substeps for p in _continuation(with_specs, bounds).levels] == [10]
+
+
+def test_the_answer_is_the_final_point_unless_a_feasible_point_is_clearly_cheaper():
+    """`pick_answer` on a judge by hand: objective x₀², infeasible where x₁ > 1."""
+
+    def judge(x):
+        return float(x[0] ** 2), (["x1 <= 1"] if x[1] > 1 else [])
+
+    lbx, ubx = np.full(2, -10.0), np.full(2, 10.0)
+    start = (judge([3.0, 0.0])[0], np.array([3.0, 0.0]), "start")
+    # A feasible final point stands against iterates no cheaper by 1e-6 relative.
+    kept = pick_answer(judge, np.array([1.0, 0.0]), [(1.0 - 1e-9, np.array([1.0 - 5e-10, 0.0]))], [start], lbx, ubx)
+    assert kept.label == "final" and kept.value == 1.0
+    # An infeasible final point loses to the cheapest feasible iterate, judged on the exact objective.
+    iterates = [(0.1, np.array([0.5, 2.0])), (0.3, np.array([0.6, 0.0])), (0.2, np.array([0.7, 0.0]))]
+    chosen = pick_answer(judge, np.array([0.1, 5.0]), iterates, [start], lbx, ubx)
+    assert chosen.label == "iterate" and chosen.value == pytest.approx(0.49) and not chosen.violations
+    # Nothing feasible but a finite final point: it is returned with its violations; nothing finite: None.
+    alone = pick_answer(judge, np.array([0.1, 5.0]), [], [], lbx, ubx)
+    assert alone.label == "final" and alone.violations == ["x1 <= 1"]
+    assert pick_answer(lambda x: (np.inf, []), np.zeros(2), [], [], lbx, ubx) is None
+    # Candidates are clipped to the bounds before they are judged.
+    clipped = pick_answer(judge, np.array([0.0, 5.0]), [(0.0, np.array([-20.0, 0.0]))], [], lbx, ubx)
+    assert clipped.value == 100.0 and np.array_equal(clipped.decision, [-10.0, 0.0])
+
+
+def test_solve_options_are_normalized_and_checked_again_when_replaced():
+    options = SolveOptions(widths=[1e-2, 1e-3], max_iter=10.0, tol=1)
+    assert options.widths == (1e-2, 1e-3) and options.max_iter == 10 and isinstance(options.max_iter, int)
+    assert options.tol == 1.0 and options.smooth
+    with pytest.raises(ValueError, match="until_feasible needs phase=True"):
+        dataclasses.replace(options, until_feasible=True)
+    with pytest.raises(TypeError, match="options must be a designs.tuning.SolveOptions, got dict"):
+        tuning.solve(None, [], [], {"max_iter": 3})
+    with pytest.raises(TypeError, match="setup must be a designs.tuning.TuningSetup, got tuple"):
+        tune((None, None, None))

@@ -1,13 +1,15 @@
 """Co-design of the case studies: every reported number re-checked on a fresh simulation or evaluation."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from case_designs import classical_controllers
 
 import models
-from designs.tuning import Cost, Specs, TuningProblem
+from designs.tuning import Cost, SolveOptions, Specs, TuningProblem
+from studies import codesign_problems as cp
 from studies import codesign_report as cr
 from studies.cases import arm, ballbeam, crane, satellite, uuv
 from studies.homework import statespace_controllers
@@ -40,7 +42,7 @@ def _meets(plant, block, scenario, specs, slack=1e-5):
     return bool(ok)
 
 
-def _check_reported(result: cr.CaseResult, plant_cost=None):
+def _check_reported(result: cp.CaseResult, plant_cost=None):
     """Each design's numbers are a fresh problem's, and `feasible` is what a fresh simulation says."""
     name = {"crane1": "ell", "satellite": "k"}.get(result.plant)
     for method, design in result.designs.items():
@@ -62,10 +64,10 @@ def _check_reported(result: cr.CaseResult, plant_cost=None):
 
 def test_arm_sizing_short_run_reports_what_it_designed():
     """Few iterations: the wiring (limits, fresh re-evaluation, statuses), not the optimum."""
-    result = arm.actuator_sizing(methods=("sequential", "simultaneous"), tune_options={"max_iter": 5})
+    result = arm.actuator_sizing(methods=("sequential", "simultaneous"), options=SolveOptions(max_iter=5))
     _check_reported(result)
     seq, sim = result.designs["sequential"], result.designs["simultaneous"]
-    floor = cr.holding_limit(arm.CASE, arm.SIZING)
+    floor = cp.holding_limit(arm.CASE, arm.SIZING)
     # Control-blind: the plant-only objective's answer is the holding limit.
     assert seq.value == pytest.approx(floor)
     assert floor <= sim.value <= arm.SIZING.high
@@ -93,7 +95,7 @@ def test_full_sizing_every_method_converges_and_simultaneous_is_no_worse_than_ne
     nested = result.designs["nested"]
     sim = result.best(("simultaneous", "simultaneous from sequential"))
     assert nested.feasible and sim is not None
-    assert sim.value <= nested.value * (1 + cr.SIZING_REL_TOL)
+    assert sim.value <= nested.value * (1 + cp.SIZING_REL_TOL)
     assert result.gain is not None and result.gain == pytest.approx(
         1
         - sim.objective
@@ -113,7 +115,7 @@ def test_hand_designs_at_the_text_limit():
         known = models.get(name).with_input_limit(sizing.text_limit)
         hand, start = sizing.hand_design(known), sizing.retune_start(known)
         np.testing.assert_allclose(start.gain_vector(), hand.gain_vector())
-        scenario = cr.sizing_scenario(SIZING[name].CASE, sizing)
+        scenario = cp.sizing_scenario(SIZING[name].CASE, sizing)
         runs = [models.simulate_closed_loop(known, b, scenario.reference, 1.0, x0=scenario.x0) for b in (hand, start)]
         np.testing.assert_allclose(runs[0].u, runs[1].u, atol=1e-12)
     # Below the text's limit the start keeps the text's gains and saturates at the new limit.
@@ -133,7 +135,9 @@ def test_sizing_specs_come_from_the_text_or_a_stated_requirement():
 def test_satellite_stiffness_short_run_reports_what_it_designed():
     """A short, cheap run: the wiring (ranges, costs, fresh re-evaluation, statuses), not the optimum."""
     result = satellite.panel_stiffness(
-        methods=("sequential", "simultaneous"), duration=24.0, tune_options={"max_iter": 3, "jit": False}
+        methods=("sequential", "simultaneous"),
+        duration=24.0,
+        options=replace(satellite.STIFFNESS_SOLVE_OPTIONS, max_iter=3, jit=False),
     )
     _check_reported(result, satellite.stiffness_cost)
     low, high = satellite.STIFFNESS_RANGE
@@ -145,7 +149,9 @@ def test_satellite_stiffness_short_run_reports_what_it_designed():
 
 def test_crane_short_run_reports_what_it_designed():
     result = crane.cable_transfer(
-        methods=("sequential", "simultaneous"), duration=6.0, tune_options={"max_iter": 2, "jit": False}
+        methods=("sequential", "simultaneous"),
+        duration=6.0,
+        options=replace(cp.CODESIGN_SOLVE_OPTIONS, max_iter=2, jit=False),
     )
     _check_reported(result, crane.hoist_cost)
     assert result.plant == "crane1" and list(result.specs.state_bounds) == ["theta"]
@@ -204,16 +210,16 @@ def _fake_result(key="fake"):
         status="IPOPT: Solve_Succeeded",
     )
     designs = {
-        "sequential": cr.Design(**base),
-        "nested": cr.Design(**base | {"method": "nested", "value": 0.9, "objective": 0.9, "wall_time": 10.0}),
-        "simultaneous": cr.Design(
+        "sequential": cp.Design(**base),
+        "nested": cp.Design(**base | {"method": "nested", "value": 0.9, "objective": 0.9, "wall_time": 10.0}),
+        "simultaneous": cp.Design(
             **base | {"method": "simultaneous", "value": 0.8, "objective": 0.8, "feasible": False}
         ),
-        "simultaneous from sequential": cr.Design(
+        "simultaneous from sequential": cp.Design(
             **base | {"method": "simultaneous from sequential", "value": 0.85, "objective": 0.85}
         ),
     }
-    return cr.CaseResult(
+    return cp.CaseResult(
         key=key,
         problem=f"problem {key}",
         plant="arm",
@@ -221,7 +227,7 @@ def _fake_result(key="fake"):
         unit="N m",
         text_value=1.0,
         objective="smallest limit",
-        scenario=cr.sizing_scenario(arm.CASE, arm.SIZING),
+        scenario=cp.sizing_scenario(arm.CASE, arm.SIZING),
         specs=Specs(rise_time=0.5),
         cost=Cost(),
         designs=designs,
@@ -325,9 +331,9 @@ def test_methods_solved_again_replace_only_theirs_in_the_record(tmp_path, monkey
 
 def test_sizing_methods_checked_before_solving():
     with pytest.raises(ValueError, match="needs 'sequential'"):
-        cr.actuator_sizing(arm.CASE, arm.SIZING, methods=("simultaneous from sequential",))
+        cp.actuator_sizing(arm.CASE, arm.SIZING, methods=("simultaneous from sequential",))
     with pytest.raises(ValueError, match="unknown co-design method"):
-        cr.actuator_sizing(arm.CASE, arm.SIZING, methods=("bisection",))
+        cp.actuator_sizing(arm.CASE, arm.SIZING, methods=("bisection",))
 
 
 @pytest.mark.parametrize(
@@ -342,13 +348,13 @@ def test_a_simultaneous_sizing_is_settled_within_the_bisections_resolution_of_th
     bisection's test. The ball on beam's recorded gains: its simultaneous answer (feasible, 0.07 % above
     the holding limit), the same at 2 rel_tol above it, and its sequential answer (infeasible)."""
     saved = json.loads((cr.DOC.with_suffix("") / "ballbeam.json").read_text())["designs"][method]
-    floor = cr.holding_limit(ballbeam.CASE, ballbeam.SIZING)
-    limit = saved["value"] if above_floor is None else floor * (1 + above_floor * cr.SIZING_REL_TOL)
+    floor = cp.holding_limit(ballbeam.CASE, ballbeam.SIZING)
+    limit = saved["value"] if above_floor is None else floor * (1 + above_floor * cp.SIZING_REL_TOL)
     sized = models.get("ballbeam").with_input_limit(limit)
     block = ballbeam.SIZING.retune_start(sized).with_gains(**{k: np.asarray(v) for k, v in saved["gains"].items()})
     answer = {"limit": limit, "block": block, "converged": False, "status": "IPOPT: Infeasible_Problem_Detected"}
-    monkeypatch.setattr(cr, "size_actuator_simultaneous", lambda *a, **k: answer | {"message": "stub"})
-    design = cr.actuator_sizing(ballbeam.CASE, ballbeam.SIZING, methods=("simultaneous",)).designs["simultaneous"]
+    monkeypatch.setattr(cp, "size_actuator_simultaneous", lambda *a, **k: answer | {"message": "stub"})
+    design = cp.actuator_sizing(ballbeam.CASE, ballbeam.SIZING, methods=("simultaneous",)).designs["simultaneous"]
     assert design.feasible == (method == "simultaneous")
     assert design.converged == settled
     assert ("settled: feasible within rel_tol" in design.status) == settled
@@ -360,7 +366,7 @@ def test_committed_sizing_records_hold_on_a_fresh_simulation(name):
     input, the specs hold, and the recorded peak input and overshoot are what a fresh run gives."""
     record = json.loads((cr.DOC.with_suffix("") / f"{name}.json").read_text())
     case = SIZING[name]
-    plant, scenario = models.get(name), cr.sizing_scenario(case.CASE, case.SIZING)
+    plant, scenario = models.get(name), cp.sizing_scenario(case.CASE, case.SIZING)
     for method, saved in record["designs"].items():
         sized = plant.with_input_limit(saved["value"])
         block = case.SIZING.retune_start(sized).with_gains(**{k: np.asarray(v) for k, v in saved["gains"].items()})
@@ -390,7 +396,7 @@ def test_committed_plant_parameter_records_hold_on_a_fresh_simulation(key):
     args = (crane.STATESPACE_ONE_LOAD,) if choices else ()
     block = statespace_controllers(case.CASE, base, *args)["pole placement"]
     duration = {"satellite": satellite.STIFFNESS_DURATION, "crane": crane.TRANSFER_DURATION}[key]
-    scenario = cr.step_scenario(base, case.CASE.tracked, case.CASE.step, duration)
+    scenario = cp.step_scenario(base, case.CASE.tracked, case.CASE.step, duration)
     k = base.state_names.index(scenario.tracked)
     step = scenario.reference - scenario.x0[k]
     for method, saved in record["designs"].items():

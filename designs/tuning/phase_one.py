@@ -1,0 +1,121 @@
+"""The phase one: gains meeting the specs, or a converged local certificate that none near the start do."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+import models
+from models.checks import as_vector
+
+from .excess import relative_excess
+from .options import SolveOptions
+from .problem import TuningProblem
+from .settings import AGREEMENT, IPOPT_OPTIONS, PHASE_ONE_MARGIN, RETRIED, converged
+
+
+@dataclass
+class PhaseOne:
+    """What `phase_one` found.
+
+    decision : the decision vector it ended at (n_decision,)
+    excess : the largest relative excess of the exact specs there (<= 0: every spec holds)
+    status : IPOPT's return status of its last solve;  converged : that status is in `CONVERGED`
+    iterations : IPOPT iterations over its stages
+    """
+
+    decision: np.ndarray
+    excess: float
+    status: str
+    converged: bool
+    iterations: int
+
+    @property
+    def infeasible(self) -> bool:
+        """Converged with the specs still missed: a local certificate that no decision near it meets them."""
+        return self.converged and self.excess > AGREEMENT
+
+
+def decision_scale(start: np.ndarray) -> np.ndarray:
+    """The scale of each decision (shape of `start`): IPOPT works on z = x / scale, each decision scaled by
+    its own start, so gains of different magnitudes (a crane cascade's 0.2 outer and 8000 inner) all move on
+    the order of one; a zero start takes 1e-3 of the largest."""
+    magnitude = np.abs(start)
+    floor = 1e-3 * np.max(magnitude) if np.any(magnitude > 0) else 1.0
+    return np.where(magnitude > 0, magnitude, floor)
+
+
+def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | None = None) -> PhaseOne:
+    """Gains meeting the specs, or a converged local certificate that none near `start` do.
+
+    minimize s over (decision, s >= -`PHASE_ONE_MARGIN`) subject to every spec's relative
+    excess (as `TuningProblem.excess` measures it) <= s, on the smoothed loop through the
+    continuation's widths, each stage from the last one's answer; it stops at the first
+    stage whose answer meets the exact specs. The problem is feasible for every decision
+    (s large), so IPOPT has no restoration phase to fail in and stops on its convergence
+    test (a local minimum of the largest excess), where the tuning problem itself, started
+    outside its specs, can end in Restoration_Failed.
+
+    Parameters
+    ----------
+    problem : TuningProblem;  lbx, ubx : decision bounds (n_decision,);  start : (n_decision,)
+    options : its method, widths, tol, max_iter and jit are used (L-BFGS, IPOPT's own options)
+    """
+    options = options or SolveOptions()
+    lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
+    start = np.clip(as_vector(start, problem.decision.numel(), "start"), lbx, ubx)
+    smooth = options.smooth
+    if smooth:
+        g = problem.smoothed()[1]
+        assert problem.smooth_bounds is not None, "set by smoothed()"
+        lbg, ubg, _ = problem.smooth_bounds
+    else:
+        g, lbg, ubg = problem.g, problem.lbg, problem.ubg
+    width = problem.width if smooth else ca.MX.sym("unused", 0)
+    excess = relative_excess(g, lbg, ubg)
+    scale = decision_scale(start)
+    n = start.size
+    z, s, scaling = ca.MX.sym("z", n), ca.MX.sym("s"), ca.MX.sym("scale", n)  # a parameter, as in `solve`
+    excess_of = ca.Function("excess", [problem.decision, width], [excess])
+    rows = excess_of(scaling * z, width) - s
+    tol = options.tol
+    ipopt = IPOPT_OPTIONS | {"max_iter": int(options.max_iter), "tol": tol, "acceptable_tol": 100 * tol}
+    settings: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
+    nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
+    solver = problem.cached(
+        ("phase one", smooth, options.jit, settings),
+        lambda: (
+            models.compile.jit_nlpsols("ipopt", nlp, {"phase_one": settings})["phase_one"]
+            if options.jit
+            else ca.nlpsol("phase_one", "ipopt", nlp, settings)
+        ),
+    )
+
+    decision, worst = start, np.inf  # widths is never empty: the loop sets both
+    status, iterations = "not solved", 0
+    z_now = start / scale
+    for w in options.widths if smooth else (None,):
+        for _ in range(2):
+            # A numerical failure is retried once from where it stopped, as the tuning's stages are.
+            s0 = float(ca.mmax(excess_of(scale * z_now, [] if w is None else w)))
+            sol = solver(
+                x0=np.concatenate([z_now, [max(s0, 0.0)]]),
+                lbx=np.concatenate([lbx / scale, [-PHASE_ONE_MARGIN]]),
+                ubx=np.concatenate([ubx / scale, [np.inf]]),
+                lbg=-np.inf,
+                ubg=0.0,
+                p=np.concatenate([[] if w is None else [w], scale]),
+            )
+            stats = solver.stats()
+            status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
+            z_now = np.asarray(sol["x"]).ravel()[:n]
+            if status not in RETRIED:
+                break
+        decision = np.clip(scale * z_now, lbx, ubx)
+        worst = problem.largest_excess(decision)
+        if worst <= 0 or not converged(status):
+            break
+    return PhaseOne(decision, worst, status, converged(status), iterations)

@@ -1,0 +1,203 @@
+"""What one closed-loop run of a tuning problem is and how it is judged: `Scenario`, `Specs` and `Cost`.
+
+Kept apart from the solver so that the records can move on their own (a later
+change merges `Specs` into `models.specs` and `Scenario` into `studies.case`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from models.checks import integer, positive, real, real_array
+
+#: The criteria a `Cost` may take.
+COSTS = ("itae", "iae", "ise")
+
+
+def _optional_time(value, what: str) -> float | None:
+    return None if value is None else positive(value, what)
+
+
+@dataclass(frozen=True)
+class Specs:
+    """Time-domain specs of one scenario, enforced at every sample of every parameter sample.
+
+    max_overshoot : fraction (>= 0) of the step the tracked output may pass the final reference
+    settling_time : s after which |e| <= settling_band * |step|
+    settling_band : fraction of the step, in (0, 1)
+    rise_time : s by which the output has covered 90 % of the step, and stays beyond
+        (sufficient for a 10-90 % rise time below it)
+    max_spectral_abscissa : 1/s, bound on the closed-loop linearization's slowest mode
+        at the final state, log(spectral radius) / Ts; checked at the solution, not
+        enforced during the search (eigenvalues are not smooth)
+    state_bounds : dict state name -> bound b > 0 (|x_i| <= b) or (low, high) with low < high
+        (either may be infinite), at every sample after the start (a crane's swing angle)
+    final_values : dict state name -> (value, tolerance > 0): |x_i(t_N) − value| <= tolerance
+        at the scenario's last sample
+
+    The first three need a step (a constant reference different from the initial
+    tracked value); the others hold for any scenario.
+    """
+
+    max_overshoot: float | None = None
+    settling_time: float | None = None
+    settling_band: float = 0.02
+    rise_time: float | None = None
+    max_spectral_abscissa: float | None = None
+    state_bounds: Mapping = field(default_factory=dict)
+    final_values: Mapping = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.max_overshoot is not None:
+            value = real(self.max_overshoot, "max_overshoot")
+            if value < 0:
+                raise ValueError(f"max_overshoot must be a fraction >= 0, got {value}")
+        _optional_time(self.settling_time, "settling_time (s)")
+        _optional_time(self.rise_time, "rise_time (s)")
+        band = real(self.settling_band, "settling_band")
+        if not 0 < band < 1:
+            raise ValueError(f"settling_band must be a fraction in (0, 1), got {band}")
+        if self.max_spectral_abscissa is not None:
+            real(self.max_spectral_abscissa, "max_spectral_abscissa (1/s)")
+        if not isinstance(self.state_bounds, Mapping):
+            raise TypeError(f"state_bounds must be a dict state name -> bound, got {self.state_bounds!r}")
+        for name, bound in self.state_bounds.items():
+            state_bound(bound, f"state_bounds[{name!r}]")
+        if not isinstance(self.final_values, Mapping):
+            raise TypeError(f"final_values must be a dict state name -> (value, tolerance), got {self.final_values!r}")
+        for name, pair in self.final_values.items():
+            final_value(pair, f"final_values[{name!r}]")
+
+    @property
+    def step_specs(self) -> tuple[str, ...]:
+        """Names of the specs set here that need a step."""
+        return tuple(
+            name for name in ("max_overshoot", "settling_time", "rise_time") if getattr(self, name) is not None
+        )
+
+
+def state_bound(bound, what: str) -> tuple[float, float]:
+    """(low, high) from a bound b > 0 (meaning |x| <= b) or a pair low < high (NaN refused)."""
+    arr = real_array(bound, what)
+    if arr.ndim == 0:
+        b = float(arr)
+        if not (np.isfinite(b) and b > 0):
+            raise ValueError(f"{what} must be a finite bound > 0 or a pair (low, high), got {bound!r}")
+        return -b, b
+    if arr.shape != (2,) or np.any(np.isnan(arr)) or not arr[0] < arr[1]:
+        raise ValueError(f"{what} must be a finite bound > 0 or a pair (low, high) with low < high, got {bound!r}")
+    return float(arr[0]), float(arr[1])
+
+
+def final_value(pair, what: str) -> tuple[float, float]:
+    """(value, tolerance) with a finite value and a finite tolerance > 0."""
+    arr = real_array(pair, what)
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or arr[1] <= 0:
+        raise ValueError(f"{what} must be a pair (value, tolerance > 0) of finite numbers, got {pair!r}")
+    return float(arr[0]), float(arr[1])
+
+
+@dataclass(frozen=True)
+class Cost:
+    """A closed-loop cost: a criterion of one signal plus quadratic terms, summed over k = 0..N-1.
+
+        J = Ts Σ_k w(t_k) ρ(s_k) + energy_weight Ts Σ_k |u_k|²
+            + Ts Σ_k [(x_k − x*)ᵀ Q (x_k − x*) + (u_k − u*)ᵀ R (u_k − u*) + (y_k − y*)ᵀ Q_y (y_k − y*)]
+            + (x_N − x*)ᵀ P (x_N − x*)
+
+    kind : "itae" (w = t, ρ = |s|), "iae" (ρ = |s|), "ise" (ρ = s²), or None for no criterion term
+    signal : what the criterion measures: "error" (reference − tracked coordinate), or the
+        name of a state, output or input (measured from its target)
+    energy_weight : weight (>= 0) on Σ u² Ts
+    smoothing, resolution : |s| is evaluated as sqrt(s² + δ²), δ = max(smoothing, resolution × S),
+        so the criterion is differentiable with a curvature a quasi-Newton method can follow;
+        `smoothing` in units of the signal (> 0), `resolution` relative (>= 0) to the signal's
+        scale S (its size at the start, or the reference's largest change for "error"; 0 where
+        both are zero). The criterion exceeds the exact Σ w|s| Ts by at most δ Σ w Ts (ITAE:
+        δ T² / 2). The default resolution 1e-4 is coarse enough for IPOPT to converge across
+        the sign changes of a settled error (each a kink of curvature 1/δ; see
+        docs/notes/tuning.md).
+    state_weights, output_weights, input_weights, terminal_weights : Q, Q_y, R and P: a
+        symmetric positive semidefinite matrix, a vector of its diagonal, or a dict
+        name -> weight (diagonal, the others zero); None for no term
+    target : x*, a dict state name -> value or a full state vector; default the plant's
+        standard equilibrium with the tracked coordinate at the final reference (when the
+        scenario has one); y* = h(x*)
+    input_target : u*, a dict input name -> value or a vector; default zero
+    """
+
+    kind: str | None = "itae"
+    energy_weight: float = 0.0
+    smoothing: float = 1e-6
+    resolution: float = 1e-4
+    signal: str = "error"
+    state_weights: object = None
+    input_weights: object = None
+    output_weights: object = None
+    terminal_weights: object = None
+    target: object = None
+    input_target: object = None
+
+    def __post_init__(self):
+        if self.kind is not None and self.kind not in COSTS:
+            raise ValueError(f"unknown cost {self.kind!r}; choose one of {', '.join(COSTS)} or None")
+        weight = real(self.energy_weight, "energy_weight", finite=False)
+        if not np.isfinite(weight) or weight < 0:
+            raise ValueError(f"energy_weight must be finite and >= 0, got {self.energy_weight}")
+        positive(self.smoothing, "smoothing")
+        resolution = real(self.resolution, "resolution", finite=False)
+        if not np.isfinite(resolution) or resolution < 0:
+            raise ValueError(f"resolution must be finite and >= 0, got {self.resolution}")
+        if not isinstance(self.signal, str):
+            raise TypeError(f"signal must be 'error' or a state, output or input name, got {self.signal!r}")
+        terms = (self.kind, self.state_weights, self.input_weights, self.output_weights, self.terminal_weights)
+        if all(term is None for term in terms) and weight == 0:
+            raise ValueError("the cost has no term: give kind, energy_weight or a weight matrix")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One closed-loop run of a tuning problem.
+
+    reference : constant, callable t -> r, or array (N+1, n_reference): the block's reference
+        (absolute tracked value); None for a regulation (the block's reference held at zero)
+    duration : s
+    x0 : initial plant state (nx,), default the plant's standard equilibrium
+    input_disturbance : constant, callable or array (N, nu), added at the plant input
+    tracked : state name of the coordinate that follows the reference (needed by the
+        "error" signal and the step specs; keyword only)
+    noise_std : standard deviation of Gaussian measurement noise, one number or one per
+        measurement; parameter sample j draws it from the generator seeded (seed, j)
+    seed : integer >= 0, the noise seed
+    weight : > 0, the scenario's weight in the objective
+    specs, cost : this scenario's own specs and cost (default: the problem's)
+    name : label in violation messages
+    """
+
+    reference: object
+    duration: float
+    x0: np.ndarray | None = None
+    input_disturbance: object = 0.0
+    tracked: str | None = field(default=None, kw_only=True)
+    noise_std: object = field(default=0.0, kw_only=True)
+    seed: int = field(default=0, kw_only=True)
+    weight: float = field(default=1.0, kw_only=True)
+    specs: Specs | None = field(default=None, kw_only=True)
+    cost: Cost | None = field(default=None, kw_only=True)
+    name: str = field(default="", kw_only=True)
+
+    def __post_init__(self):
+        positive(self.duration, "duration (s)")
+        positive(self.weight, "scenario weight")
+        integer(self.seed, "seed", minimum=0)
+        if self.tracked is not None and not isinstance(self.tracked, str):
+            raise TypeError(f"tracked must be a state name, got {self.tracked!r}")
+        if self.specs is not None and not isinstance(self.specs, Specs):
+            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(self.specs).__name__}")
+        if self.cost is not None and not isinstance(self.cost, Cost):
+            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(self.cost).__name__}")
+        if not isinstance(self.name, str):
+            raise TypeError(f"name must be a string, got {self.name!r}")
