@@ -13,8 +13,8 @@ state in a struct the caller owns::
 Everything has a fixed size known at export: the state and CasADi's work
 arrays are members of the struct, nothing is allocated, the source needs
 only ``<math.h>`` (link with ``-lm``) and compiles as C99. `ExportedC.load`
-compiles it with `models.compile` and returns the C step as a
-`models.Controller` (through ctypes), which is how the tests hold it
+compiles and opens it with `models.compile.load_library` and returns the C
+step as a `models.Controller` (through ctypes), which is how the tests hold it
 against the Python block. `mpc.export` builds linear MPC on the same pieces.
 """
 
@@ -199,7 +199,7 @@ class ExportedC:
         return [write_text(Path(directory) / file, text) for file, text in self.files().items()]
 
     def load(self, initial_state: Callable | None = None, flags=LOAD_FLAGS) -> CompiledController:
-        """Compile (through `models.compile`, cached) and load the C as a `models.Controller`.
+        """Compile and open the C (`models.compile.load_library`: cached, checked) as a `models.Controller`.
 
         Parameters
         ----------
@@ -213,7 +213,7 @@ class ExportedC:
         models.compile.CompilationError
             When no library can be built (no compiler, no cache, compiler errors).
         """
-        library = compiling.build_library(self.files(), flags, fallback=False)
+        library = compiling.load_library(self.files(), flags, fallback=False)
         assert library is not None  # fallback=False raises instead of returning None
         return CompiledController(self, library, initial_state)
 
@@ -377,20 +377,18 @@ class CompiledController:
     `step_info()` reports the C step's status code.
     """
 
-    def __init__(self, exported: ExportedC, library: Path, initial_state: Callable | None = None):
+    def __init__(self, exported: ExportedC, library: compiling.CompiledLibrary, initial_state: Callable | None = None):
         self.exported = exported
         self.name = f"{exported.controller} (C)"
         self.sample_period = exported.sample_period
         self.measures = exported.measures
         self.n_reference, self.n_state = exported.n_reference, exported.n_state
-        self._library = ctypes.CDLL(str(library))
+        self._library = library
         prefix, pointer = exported.name, ctypes.c_void_p
 
         def function(suffix, argtypes, restype=None):
             # The library's function prefix_suffix with its ctypes signature.
-            fun = getattr(self._library, f"{prefix}_{suffix}")
-            fun.argtypes, fun.restype = argtypes, restype
-            return fun
+            return library.function(f"{prefix}_{suffix}", argtypes, restype)
 
         size = function("state_size", [], ctypes.c_ulong)()
         self._memory = ctypes.create_string_buffer(size)
