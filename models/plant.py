@@ -13,6 +13,7 @@ purely first-order plant has no coordinates.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -91,7 +92,10 @@ def declare(
     Parameters
     ----------
     name : str
-        Registry name used by `models.get`.
+        Registry name used by `models.get`, and the name of the plant's folders and files: a safe
+        identifier (a letter, then ASCII letters, digits or underscores, at most 64 characters).
+    title : str
+        Free text describing the plant (shown in tables and pages, escaped there).
     coordinates, inputs : sequence of str
         Generalized coordinates q and input names; q may be empty for a purely
         first-order plant.
@@ -115,7 +119,7 @@ def declare(
         Allow `register` to replace a plant already registered under `name`
         (refused otherwise, so a user plant cannot silently shadow a case study).
     """
-    _check_name(name, "name")
+    plant_name(name)
     _check_name(title, f"{name}: title")
     register, replace = boolean(register, "register"), boolean(replace, "replace")
     coordinates = _names(coordinates, f"{name}: coordinates")
@@ -156,6 +160,22 @@ def declare(
         return decl
 
     return wrap
+
+
+#: A plant's name: it becomes a folder name, a part of C identifiers and of page anchors.
+PLANT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
+
+
+def plant_name(value) -> str:
+    """`value` if it is a safe plant name: a letter, then letters, digits or underscores (ASCII), at most
+    64 characters. TypeError for a non-string, ValueError naming the rule otherwise."""
+    _check_name(value, "name")
+    if not PLANT_NAME.fullmatch(value):
+        raise ValueError(
+            "name must be a safe identifier (a letter, then letters, digits or underscores, ASCII, at most 64 "
+            f"characters; free text goes in title), got {value!r}"
+        )
+    return value
 
 
 def _check_name(value, what: str) -> str:

@@ -565,6 +565,38 @@ def test_kinetic_energy_may_not_depend_on_a_first_order_state():
 
 
 @pytest.mark.parametrize(
+    "name", ["../evil<b>x</b>;rm -rf ~", "my plant", "my-plant", "2fast", "_hidden", "é", "a" * 65]
+)
+def test_a_plant_name_must_be_a_safe_identifier(name):
+    """The name reaches file names, pages and C: before, '../evil<b>x</b>;rm -rf ~' was accepted."""
+    with pytest.raises(
+        ValueError, match=r"name must be a safe identifier \(a letter, then letters, digits or underscores"
+    ):
+        models.declare(
+            name=name,
+            title="user plant",
+            coordinates=("q1",),
+            inputs=("u",),
+            params=(models.Param("m", 1.0, "kg"),),
+            input_limit=1.0,
+            register=False,
+        )
+
+
+def test_the_title_is_free_text():
+    decl = models.declare(
+        name="user_2",
+        title="<b>My</b> arm & co; rm -rf ~",
+        coordinates=("q1",),
+        inputs=("u",),
+        params=(models.Param("m", 1.0, "kg"),),
+        input_limit=1.0,
+        register=False,
+    )(lambda q, dq, u, p: models.Physics(kinetic=p.m * dq.q1**2 / 2, forces=[u.u], outputs={"q1": q.q1}))
+    assert models.Plant(decl).title == "<b>My</b> arm & co; rm -rf ~"
+
+
+@pytest.mark.parametrize(
     "kwargs,error,message",
     [
         ({"coordinates": "theta"}, TypeError, r"user: coordinates must be a list or tuple of names, got 'theta'"),
