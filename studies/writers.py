@@ -202,7 +202,7 @@ def caption(result) -> str:
     uncertain = ", ".join(plant.uncertain_params)
     mc = next((s for s in study.scenarios if s.monte_carlo), None)
     text = (
-        f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
+        f"Every row is a closed-loop simulation of the nonlinear {escape_markdown(plant.title)} "
         "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
         f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
         "period, the actuator clipped at its limit), never a linear model alone. "
@@ -333,7 +333,8 @@ def write_tables(result, folder: Path) -> dict:
     write_csv(folder / "timings.csv", timings_frame(table, samples))
     files["timings.csv"] = "timings.csv"
     write_json(folder / "answers.json", {"_conventions": JSON_CONVENTIONS, **result.answers})
-    write_text(folder / "answers.md", format_answers(result.study, result.answers, result.plant.title))
+    # The title goes into answers.md's heading: shown as written, never Markdown or HTML.
+    write_text(folder / "answers.md", format_answers(result.study, result.answers, escape_markdown(result.plant.title)))
     return files | {"answers.json": "answers.json", "answers.md": "answers.md"}
 
 
@@ -518,7 +519,7 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
     grid_rows, grid_columns = verdict_grid(result.table)
     failing = not_ok(result.table)
     parts = [
-        f"# {plant.title}: controllers compared",
+        f"# {escape_markdown(plant.title)}: controllers compared",
         "",
         f"Run {run_id}; settings in run.json.",
         "",

@@ -258,3 +258,16 @@ def test_bad_declarations_are_named():
         trajectories.TrajectoryProblem("point to point", "x", build)
     with pytest.raises(ValueError, match="headroom must be in"):
         trajectories.TrajectoryProblem("p", "x", build, tracking=trajectories.Tracking({}, (1.0,), headroom=1.0))
+
+
+def test_the_plant_title_is_shown_literally_in_the_trajectories_heading():
+    """trajectories.md's heading escapes the plant's title (free text) as table.md's does."""
+    from types import SimpleNamespace
+
+    from studies.trajectories import report
+
+    result = SimpleNamespace(
+        case=SimpleNamespace(input_unit="N m"), plant=SimpleNamespace(title="<b>Arm</b> & co"), solved={}, quick=False
+    )
+    text = report.markdown(result, {}, [])
+    assert text.splitlines()[0] == r"# \<b\>Arm\</b\> \& co: optimized trajectories"
