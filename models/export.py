@@ -23,6 +23,7 @@ from __future__ import annotations
 import ctypes
 import math
 import re
+import unicodedata
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,8 @@ C_KEYWORDS = frozenset(
 inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
 volatile while""".split()
 )
+#: Longest C prefix `c_name` accepts.
+C_NAME_LENGTH = 48
 #: Flags the tests and `ExportedC.load` compile exported controllers with.
 LOAD_FLAGS = ("-O2", "-std=c99")
 
@@ -53,14 +56,45 @@ def c_name(name: str) -> str:
     if (
         not isinstance(name, str)
         or not re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*", name)
-        or len(name) > 48
+        or len(name) > C_NAME_LENGTH
         or name in C_KEYWORDS
     ):
         raise ValueError(
             f"name must be a C identifier prefix (a letter, then letters, digits and single "
-            f"underscores, at most 48 characters, not a C keyword), got {name!r}"
+            f"underscores, at most {C_NAME_LENGTH} characters, not a C keyword), got {name!r}"
         )
     return name
+
+
+def c_identifiers(texts) -> list[str]:
+    """A C prefix (`c_name`'s rule) for each of `texts` (free text: a controller's label), distinct.
+
+    Each is the text folded to ASCII (accents dropped), in lower case, with every run of other
+    characters one underscore and none at either end: "PID (no anti-windup)" -> "pid_no_anti_windup".
+    One starting with a digit gets "c_" in front, an empty one is "controller", a C keyword gets "_c"
+    after it; at most `C_NAME_LENGTH` characters. A name an earlier text already has gets "_2", "_3" ...
+
+    Parameters
+    ----------
+    texts : iterable of str
+
+    Returns
+    -------
+    list of str, in the order of `texts`
+    """
+    out: list[str] = []
+    for text in texts:
+        ascii_text = unicodedata.normalize("NFKD", str(text)).encode("ascii", "ignore").decode("ascii")
+        base = re.sub(r"[^a-z0-9]+", "_", ascii_text.lower()).strip("_") or "controller"
+        base = f"c_{base}" if base[0].isdigit() else base
+        base = f"{base}_c" if base in C_KEYWORDS else base
+        name, count = base[:C_NAME_LENGTH].rstrip("_"), 1
+        while name in out:
+            count += 1
+            suffix = f"_{count}"
+            name = base[: C_NAME_LENGTH - len(suffix)].rstrip("_") + suffix
+        out.append(c_name(name))
+    return out
 
 
 def c_number(value: float) -> str:

@@ -505,6 +505,7 @@ class Page:
             self.tune_status.text = f"export failed: {type(err).__name__}: {err}".splitlines()[0]
             return
         self.export_data.text = json.dumps(data, indent=1)
+        self.tune_status.text = export_note(data)
 
     def _on_tune(self) -> None:
         """Tune from the gains in force in a thread (`Designer.tune`), reporting progress every 5 iterations;
@@ -706,6 +707,14 @@ class Page:
             self.anim_time.value = min(self.anim_time.end, self.anim_time.value + FRAME_SECONDS)
 
         self.playing, self.play_button.label = doc.add_periodic_callback(advance, int(1e3 * FRAME_SECONDS)), "Pause"
+
+
+def export_note(data: dict) -> str:
+    """What the Export button says it downloaded (plain text): the C name and files of the step, or why
+    there is no C."""
+    if "c" in data:
+        return f"exported the gains and the C step as {data['c_name']}_step ({', '.join(sorted(data['c']))})"
+    return f"exported the gains; no C: {data.get('c_note', 'not exported')}".splitlines()[0]
 
 
 def _margins_text(u: Update, spec: dict) -> str:
