@@ -16,6 +16,7 @@ Starlette page would need its own widgets and plotting glue.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import threading
@@ -754,6 +755,22 @@ def application(catalog: Catalog, plants: list[str], plant: str, label: str | No
     return Application(FunctionHandler(make))
 
 
+def listen(port: int = 0) -> tuple[list, int]:
+    """Sockets listening on 127.0.0.1:`port` (0: a free port the system chooses) and the port, before any
+    design work (`serve` takes them).
+
+    Raises
+    ------
+    OSError
+        Saying "127.0.0.1:PORT is in use" (or why else it cannot listen there).
+    """
+    try:
+        return bind_sockets("127.0.0.1", port)
+    except OSError as err:
+        reason = "is in use" if err.errno == errno.EADDRINUSE else f"cannot be listened on ({err.strerror or err})"
+        raise OSError(err.errno, f"127.0.0.1:{port} {reason}") from None
+
+
 def serve(
     catalog: Catalog,
     plants: list[str],
@@ -761,6 +778,7 @@ def serve(
     label: str | None = None,
     port: int = 0,
     ready: Callable[[str], None] | None = None,
+    listening: tuple[list, int] | None = None,
 ) -> None:
     """Serve the page on 127.0.0.1:`port` (0: a free port) until interrupted; print its URL.
 
@@ -770,9 +788,11 @@ def serve(
         a user's own gives its own plant and blocks
     plants : the plant picker's names;  plant, label : what the page opens with
     ready : called with the URL once the server listens (default: print it)
+    listening : (sockets, port) from `listen`, when the caller checked the port before designing;
+        default: `listen(port)` here
     """
     # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
-    sockets, port = bind_sockets("127.0.0.1", port)
+    sockets, port = listening if listening is not None else listen(port)
     tornado_app = BokehTornado(
         {"/": application(catalog, plants, plant, label)},
         extra_websocket_origins=[f"127.0.0.1:{port}", f"localhost:{port}"],

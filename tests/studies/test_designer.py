@@ -480,6 +480,28 @@ def test_the_page_says_under_which_c_name_it_exported():
     )
 
 
+def test_a_port_in_use_is_refused_before_designing():
+    """Before: the designer designed every controller, then died with a tornado traceback (exit 1)."""
+    pytest.importorskip("bokeh")
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        done = subprocess.run(
+            [sys.executable, "-m", "studies.designer", "arm", "--port", str(port)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "designing" not in done.stdout and "Traceback" not in done.stderr
+    assert f"--port {port}: 127.0.0.1:{port} is in use" in done.stderr, done.stderr[-2000:]
+
+
 def test_the_command_without_bokeh_says_what_to_install():
     code = (
         "import sys; sys.modules['bokeh'] = None\n"  # as if the optional "designer" extra were not installed
