@@ -466,6 +466,23 @@ def test_the_page_shows_labels_and_messages_as_text_in_its_html():
     assert type(app.fragment("busy", "designing")) is str  # a plain str for Bokeh's Div
 
 
+def test_typed_html_reaches_only_plain_text_divs():
+    """Self-XSS (issue 31): a typed value quoted in an error message is shown by a Div that renders its
+    text as text; every other Div gets escaped fragments only."""
+    pytest.importorskip("bokeh")
+    from studies.designer import app
+
+    page = app.Page(designer.catalog, list(studies.cases.names()), "arm", "PD")
+    typed = "<img src=x onerror=alert(1)>"
+    for c in page.designer.controls:
+        page._on_text("gain", c, typed)
+        error = page.rows[("gain", c.key)][3]
+        assert typed in error.text and error.render_as_text
+    divs = [m for m in page.layout.references() if type(m).__name__ == "Div"]
+    assert all(d.render_as_text or "<img" not in d.text for d in divs)
+    assert {d.name for d in divs if not d.render_as_text} == {"title", "margins", "verdict"}  # fragments only
+
+
 def test_the_page_says_under_which_c_name_it_exported():
     pytest.importorskip("bokeh")
     from studies.designer import app
