@@ -607,6 +607,14 @@ class Designer:
         return out
 
 
+def export_note(data: dict) -> str:
+    """What the Export button says it downloaded (plain text): the C name and files of the step, or why
+    there is no C."""
+    if "c" in data:
+        return f"exported the gains and the C step as {data['c_name']}_step ({', '.join(sorted(data['c']))})"
+    return f"exported the gains; no C: {data.get('c_note', 'not exported')}".splitlines()[0]
+
+
 def pole_controls(poles) -> tuple[GainControl, ...]:
     """Controls of desired poles (rad/s): one per real pole ("p1"), two per conjugate pair ("p2.re" and
     "p2.im", the upper pole's), each over `RANGE` times its value either way, sign kept (so a pole stays

@@ -44,7 +44,7 @@ from models import specs
 from studies import animation, style, templates
 from studies.plots import tracked_scale
 
-from . import Designer, GainControl, Update
+from . import Designer, GainControl, Update, export_note
 
 #: plant name -> (controller labels, label -> a new `Designer`): see `studies.designer.catalog`.
 Catalog = Callable[[str], tuple[list[str], Callable[[str], Designer]]]
@@ -710,14 +710,6 @@ class Page:
         self.playing, self.play_button.label = doc.add_periodic_callback(advance, int(1e3 * FRAME_SECONDS)), "Pause"
 
 
-def export_note(data: dict) -> str:
-    """What the Export button says it downloaded (plain text): the C name and files of the step, or why
-    there is no C."""
-    if "c" in data:
-        return f"exported the gains and the C step as {data['c_name']}_step ({', '.join(sorted(data['c']))})"
-    return f"exported the gains; no C: {data.get('c_note', 'not exported')}".splitlines()[0]
-
-
 def _margins_text(u: Update, spec: dict) -> str:
     """The margins line under the plots: the loop's gain and phase margins, the closed-loop poles in the
     right half plane and the loopshaping specs met; the notes of the update when it has no margins."""
@@ -756,14 +748,8 @@ def application(catalog: Catalog, plants: list[str], plant: str, label: str | No
 
 
 def listen(port: int = 0) -> tuple[list, int]:
-    """Sockets listening on 127.0.0.1:`port` (0: a free port the system chooses) and the port, before any
-    design work (`serve` takes them).
-
-    Raises
-    ------
-    OSError
-        Saying "127.0.0.1:PORT is in use" (or why else it cannot listen there).
-    """
+    """(sockets listening on 127.0.0.1:`port`, the port; 0: one the system chooses) for `serve`, bound before
+    any design; OSError saying "127.0.0.1:PORT is in use" (or why else it cannot listen there)."""
     try:
         return bind_sockets("127.0.0.1", port)
     except OSError as err:

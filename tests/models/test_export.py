@@ -13,7 +13,7 @@ import pytest
 
 import models
 from models import compile as mc
-from models.export import UnsupportedExport, c_number, export_block
+from models.export import UnsupportedExport, c_identifiers, c_name, c_number, export_block
 
 
 @pytest.fixture(autouse=True)
@@ -210,15 +210,11 @@ def test_names_must_be_c_identifiers(name):
     ],
 )
 def test_a_c_identifier_is_derived_from_free_text(text, expected):
-    from models.export import c_identifiers, c_name
-
     (derived,) = c_identifiers([text])
     assert derived == expected and c_name(derived) == derived
 
 
 def test_derived_c_identifiers_are_distinct_and_short_enough():
-    from models.export import c_identifiers, c_name
-
     texts = ["a b", "a-b", "a_b", "A B", "x" * 80, "x" * 81]
     derived = c_identifiers(texts)
     assert derived[:4] == ["a_b", "a_b_2", "a_b_3", "a_b_4"]

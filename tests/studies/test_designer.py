@@ -223,14 +223,12 @@ def test_every_arm_controller_exports_under_a_distinct_c_name_it_shows():
     """Before, Export failed for 6 of the arm's 11 controllers: their labels ('PID (no anti-windup)',
     'LQR + Kalman' ...) are not C names. Each now exports under a C identifier derived from its label,
     distinct from the others', given in the export; the C of one of them steps as its Python block."""
-    from models.export import c_name
-
     labels, make = designer.catalog("arm")
     exported = {label: make(label).export() for label in labels}
     names = {label: data["c_name"] for label, data in exported.items()}
     assert len(set(names.values())) == len(labels) == 11
     for label, data in exported.items():
-        assert c_name(data["c_name"]) == data["c_name"] and data["c_name"].startswith("arm_")
+        assert models.export.c_name(data["c_name"]) == data["c_name"] and data["c_name"].startswith("arm_")
         assert sorted(data["c"]) == [f"{data['c_name']}.c", f"{data['c_name']}.h"], label
     assert names["PID (no anti-windup)"] == "arm_pid_no_anti_windup"
     assert names["LQR + Kalman"] == "arm_lqr_kalman"
@@ -484,15 +482,12 @@ def test_typed_html_reaches_only_plain_text_divs():
 
 
 def test_the_page_says_under_which_c_name_it_exported():
-    pytest.importorskip("bokeh")
-    from studies.designer import app
-
     data = {"c_name": "arm_lqr_kalman", "c": {"arm_lqr_kalman.h": "", "arm_lqr_kalman.c": ""}}
-    assert app.export_note(data) == (
+    assert designer.export_note(data) == (
         "exported the gains and the C step as arm_lqr_kalman_step (arm_lqr_kalman.c, arm_lqr_kalman.h)"
     )
     assert (
-        app.export_note({"c_name": "x", "c_note": "MPC: not a Block\nmore"})
+        designer.export_note({"c_name": "x", "c_note": "MPC: not a Block\nmore"})
         == "exported the gains; no C: MPC: not a Block"
     )
 

@@ -13,6 +13,7 @@ The default suite solves each case once on its --quick meshes (a few seconds eac
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -262,12 +263,8 @@ def test_bad_declarations_are_named():
 
 def test_the_plant_title_is_shown_literally_in_the_trajectories_heading():
     """trajectories.md's heading escapes the plant's title (free text) as table.md's does."""
-    from types import SimpleNamespace
-
-    from studies.trajectories import report
-
     result = SimpleNamespace(
         case=SimpleNamespace(input_unit="N m"), plant=SimpleNamespace(title="<b>Arm</b> & co"), solved={}, quick=False
     )
-    text = report.markdown(result, {}, [])
+    text = trajectories.report.markdown(result, {}, [])
     assert text.splitlines()[0] == r"# \<b\>Arm\</b\> \& co: optimized trajectories"

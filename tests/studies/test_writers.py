@@ -1,5 +1,7 @@
 """The writer: JSON conventions, atomic files, and the files a study leaves."""
 
+import copy
+import dataclasses
 import json
 import math
 
@@ -7,8 +9,11 @@ import control
 import numpy as np
 import pandas as pd
 import pytest
+from example_providers import controllers as example_controllers
 
+import studies
 from models import files
+from studies import runner, writers
 
 REQUIRED_COLUMNS = [
     "controller",
@@ -217,14 +222,6 @@ def test_a_title_or_label_with_html_in_it_is_escaped_in_every_page(tmp_path):
 def test_a_title_with_html_is_shown_literally_in_the_markdown_headings(tmp_path):
     """table.md and answers.md: the title is escaped in their headings (and table.md's caption), as the
     labels are in their tables; before, '# <b>Arm</b> & co: controllers compared' was written raw."""
-    import copy
-    import dataclasses
-
-    from example_providers import controllers as example_controllers
-
-    import studies
-    from studies import runner, writers
-
     case = dataclasses.replace(studies.get("arm"), providers=())
     result = runner.run_study(
         case, runner.Options(scenarios=("step",), mc=0), controllers={"LQR": example_controllers("arm")["LQR"]}
