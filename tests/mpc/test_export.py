@@ -39,9 +39,12 @@ class ExportedQP:
         controller = build("linear", "arm")  # any controller: its QP is replaced below
         controller.problem = problem
         exported = export_linear_mpc(controller, "qp")
-        library = mc.load_library(exported.files(), fallback=False)
-        self._memory = ctypes.create_string_buffer(library.function("qp_state_size", [], ctypes.c_ulong)())
-        self._solve = library.function("qp_solve_qp", [ctypes.c_void_p] * 3, ctypes.c_int)
+        self._library = ctypes.CDLL(str(mc.build_library(exported.files(), fallback=False)))
+        self._library.qp_state_size.restype = ctypes.c_ulong
+        self._memory = ctypes.create_string_buffer(self._library.qp_state_size())
+        self._solve = self._library.qp_solve_qp
+        self._solve.argtypes = [ctypes.c_void_p] * 3
+        self._solve.restype = ctypes.c_int
         self.n = condense(problem).n
 
     def solve(self, params):
