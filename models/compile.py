@@ -17,9 +17,9 @@ One mechanism for every piece of C the project builds (a closed loop's
   (`models.elf`), since ``dlopen`` of a damaged library can kill the process
   before any error is raised. An entry that fails is rebuilt, with one
   `CacheEntryRebuilt` warning naming it and what was wrong;
-- every compiled library is opened by one function, `load_library`, which
-  returns a `CompiledLibrary` (its path for CasADi's loaders, its ctypes
-  handle for direct calls);
+- every compiled library comes from one function, `load_library`, which
+  returns a `CompiledLibrary` (its checked path for CasADi's loaders, its
+  ctypes handle for direct calls);
 - when compiling is impossible (no compiler, no writable private cache, a
   compiler error), `jit` and `jit_nlpsol` return CasADi's virtual-machine
   Function instead and say so once per process with a
@@ -419,35 +419,43 @@ def _compile_entry(command: list[str], flags: tuple, files: dict[str, str], sour
 
 @dataclass(frozen=True)
 class CompiledLibrary:
-    """A compiled library, checked (`check_entry`) and opened (`load_library`).
+    """A compiled library, checked (`check_entry`) and, for ctypes, opened (`load_library`).
 
     Attributes
     ----------
-    path : the library in the cache, for CasADi's loaders (``casadi.external``, ``casadi.nlpsol``); the
-        process already has it open, so they get this very file
-    handle : the ``ctypes.CDLL`` of it, for direct calls (see `function`)
+    path : the library in the cache; CasADi's loaders (``casadi.external``, ``casadi.nlpsol``) open it
+        from here
+    handle : its ``ctypes.CDLL`` for direct calls (see `function`), or None when it was loaded for
+        CasADi (``load_library(..., ctypes_handle=False)``: CasADi opens and closes it with its Functions)
     """
 
     path: Path
-    handle: ctypes.CDLL
+    handle: ctypes.CDLL | None
 
     def function(self, name: str, argtypes, restype=None):
         """The library's C function `name` with its ctypes signature: `argtypes` (a list of ctypes types)
         and `restype` (a ctypes type, None for void)."""
+        if self.handle is None:
+            raise ValueError(f"{self.path} was loaded for CasADi (ctypes_handle=False): it has no ctypes handle")
         fun = getattr(self.handle, name)
         fun.argtypes, fun.restype = list(argtypes), restype
         return fun
 
 
-def load_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) -> CompiledLibrary | None:
+def load_library(
+    files: dict[str, str], flags=FLAGS, *, fallback: bool = True, ctypes_handle: bool = True
+) -> CompiledLibrary | None:
     """The one loader of compiled code: the library of C sources `files` built or taken from the cache
-    (`build_library`, which checks and rebuilds a damaged entry), then opened.
+    (`build_library`, which checks it and rebuilds a damaged entry before anything opens it), then
+    opened with ctypes.
 
     Parameters
     ----------
     files, flags : as `build_library`
     fallback : True: None (after one `CompilationUnavailable` warning per reason and process) when no
         library can be built or opened; False: raise instead
+    ctypes_handle : False for a library CasADi's loaders open from `CompiledLibrary.path` (`jit`,
+        `jit_nlpsols`): not opened here, so that it is unmapped with the last Function using it
 
     Returns
     -------
@@ -460,8 +468,8 @@ def load_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) -
         errors, a library the system refuses to open, as on a noexec mount).
     """
     path = build_library(files, flags, fallback=fallback)
-    if path is None:
-        return None
+    if path is None or not ctypes_handle:
+        return None if path is None else CompiledLibrary(path, None)
     try:
         handle = ctypes.CDLL(str(path))
     except OSError as err:
@@ -488,7 +496,7 @@ def jit(fun: ca.Function, flags=FLAGS) -> ca.Function:
     one `CompilationUnavailable` warning per reason and process. The copy has
     no derivatives: differentiate `fun`.
     """
-    library = load_library({"function.c": _generated([fun], "codesign_jit")}, flags)
+    library = load_library({"function.c": _generated([fun], "codesign_jit")}, flags, ctypes_handle=False)
     if library is None:
         return fun
     try:
@@ -519,7 +527,7 @@ def jit_nlpsols(plugin: str, problem: dict, options: dict[str, dict], flags=FLAG
     names = list(options)
     solver = ca.nlpsol(names[0], plugin, problem, options[names[0]])
     functions = [solver.oracle()] + [solver.get_function(f) for f in solver.get_function()]
-    library = load_library({"nlp.c": _generated(functions, "codesign_nlp")}, flags)
+    library = load_library({"nlp.c": _generated(functions, "codesign_nlp")}, flags, ctypes_handle=False)
     if library is None:
         return {name: solver if name == names[0] else ca.nlpsol(name, plugin, problem, options[name]) for name in names}
     solvers = {}
