@@ -8,9 +8,18 @@ One mechanism for every piece of C the project builds (a closed loop's
 - the compiler runs as ``subprocess.run([cc, ...], check=True)``, arguments
   as a list (no shell), in a private build directory under the cache;
 - the library is cached under a hash of the sources, the flags, the
-  compiler's identity and the machine, and moved into the cache with one
-  atomic rename, so a second run (or a second process) does not recompile
-  and two processes compiling at once are safe;
+  compiler's identity and the machine, in an entry folder with a record of
+  its size and SHA-256, moved into the cache with one atomic rename, so a
+  second run (or a second process) does not recompile and two processes
+  compiling at once are safe;
+- before a cached library is opened it is checked (`check_entry`): its size
+  and SHA-256 against the record, and its ELF header and tables
+  (`models.elf`), since ``dlopen`` of a damaged library can kill the process
+  before any error is raised. An entry that fails is rebuilt, with one
+  `CacheEntryRebuilt` warning naming it and what was wrong;
+- every compiled library comes from one function, `load_library`, which
+  returns a `CompiledLibrary` (its checked path for CasADi's loaders, its
+  ctypes handle for direct calls);
 - when compiling is impossible (no compiler, no writable private cache, a
   compiler error), `jit` and `jit_nlpsol` return CasADi's virtual-machine
   Function instead and say so once per process with a
@@ -30,8 +39,11 @@ copy has no derivatives (differentiate the original).
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import functools
 import hashlib
+import json
 import os
 import platform
 import shlex
@@ -47,15 +59,19 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import interrupts
+from . import elf, interrupts
 
 #: Libraries run on the machine that compiles them (the machine is part of the cache key),
 #: so -march=native is safe.
 FLAGS = ("-O3", "-march=native")
 #: Flags every shared library gets, whatever the optimization flags.
 LIBRARY_FLAGS = ("-shared", "-fPIC")
-#: Bump when the way libraries are built changes, so old cache entries are not reused.
-LAYOUT_VERSION = "1"
+#: Bump when the way libraries are built or cached changes, so old cache entries are not reused.
+#: 2: an entry is a folder holding the library and the record of its size and SHA-256.
+LAYOUT_VERSION = "2"
+#: The names of a cache entry's library and its record, inside the entry's folder.
+LIBRARY_NAME = "library.so"
+RECORD_NAME = "entry.json"
 #: Build directories older than this (s) are left over from a killed process and removed.
 STALE_BUILD_AGE = 24 * 3600.0
 
@@ -68,13 +84,20 @@ class CompilationError(RuntimeError):
     """A compiler was found but building the library failed; the message has its first error lines."""
 
 
+class CacheEntryRebuilt(RuntimeWarning):
+    """A cached library failed its check before loading (size, SHA-256, ELF headers) and was rebuilt;
+    the message names the entry and what was wrong."""
+
+
 @dataclass
 class Counters:
-    """What this process did: compiler runs, cache hits and fallbacks to the virtual machine."""
+    """What this process did: compiler runs, cache hits, damaged entries rebuilt and fallbacks to the
+    virtual machine."""
 
     compiled: int = 0
     cache_hits: int = 0
     fallbacks: int = 0
+    rebuilt: int = 0
 
 
 #: Counters of this process (tests read them; nothing depends on them).
@@ -185,9 +208,95 @@ def _warn_once(kind: str, message: str) -> None:
         )
 
 
+# ---------------------------------------------------------------------------- cache entries
+def entry_record(library: str | os.PathLike) -> Path:
+    """The record beside the cached library `library`: JSON with its size (bytes) and SHA-256 when built."""
+    return Path(library).with_name(RECORD_NAME)
+
+
+def check_entry(library: str | os.PathLike) -> str | None:
+    """What is wrong with the cached library `library` (a path `build_library` returned), in words; None
+    when it is the file that was built and its ELF headers hold (`models.elf.check_image`).
+
+    The size and SHA-256 are compared with the entry's record (`entry_record`): they catch what the
+    headers cannot (machine code or constants overwritten in place). The file is read once, so the
+    three checks see the same bytes.
+    """
+    try:
+        record = json.loads(entry_record(library).read_text(encoding="utf-8"))
+        size, digest = int(record["size"]), str(record["sha256"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "it has no readable record of its size and SHA-256"
+    try:
+        data = Path(library).read_bytes()
+    except OSError as err:
+        return f"cannot read the library: {err.strerror or err}"
+    if len(data) != size:
+        return f"the library has {len(data)} bytes, {size} when it was built"
+    if hashlib.sha256(data).hexdigest() != digest:
+        return "the library's SHA-256 is not the one recorded when it was built (its contents changed)"
+    problem = elf.check_image(data)
+    return None if problem is None else f"the library's ELF headers are damaged: {problem}"
+
+
+def _write_record(library: Path, command: list[str], flags: tuple, sources: list[str]) -> None:
+    """Write the record of the freshly built `library` beside it (`entry_record`)."""
+    data = library.read_bytes()
+    record = {
+        "library": library.name,
+        "size": len(data),
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "compiler": command[0],
+        "flags": list(flags),
+        "sources": sources,
+    }
+    entry_record(library).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+
+
+def _discard(entry: Path, cache: Path) -> None:
+    """Take the cache entry `entry` out of the cache: renamed into a fresh build folder (one atomic step, so
+    no process sees half of it), then removed. Nothing happens when it is already gone."""
+    aside = Path(tempfile.mkdtemp(prefix=".build-discard-", dir=cache))
+    try:
+        os.rename(entry, aside / "entry")
+    except FileNotFoundError:
+        pass
+    finally:
+        shutil.rmtree(aside, ignore_errors=True)
+
+
+def _install(built: Path, entry: Path, cache: Path) -> None:
+    """Rename the complete entry folder `built` to `entry`. When another process installed it meanwhile,
+    theirs is kept if it passes `check_entry`, else replaced."""
+    try:
+        os.rename(built, entry)
+        return
+    except OSError as err:
+        if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR):
+            raise
+    if entry.is_dir() and check_entry(entry / LIBRARY_NAME) is None:
+        return
+    _discard(entry, cache)
+    os.rename(built, entry)
+
+
+def _cache_key(command: list[str], identity: str, flags: tuple, files: dict[str, str]) -> str:
+    """The cache entry's name: a hash of the layout, the compiler, the machine, the flags and the sources."""
+    digest = hashlib.sha256()
+    for part in (LAYOUT_VERSION, identity, _machine_identity(), " ".join(command), "\0".join(flags)):
+        digest.update(part.encode() + b"\0\0")
+    for name in sorted(files):
+        digest.update(name.encode() + b"\0" + files[name].encode() + b"\0\0")
+    return f"lib{digest.hexdigest()[:32]}"
+
+
 # ---------------------------------------------------------------------------- building libraries
 def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) -> Path | None:
-    """A shared library of C sources, from the cache or compiled into it.
+    """A shared library of C sources, from the cache (checked) or compiled into it.
+
+    Open it with `load_library`, which calls this; the path alone is for a loader of its own (CasADi's,
+    through `load_library`'s `CompiledLibrary.path`). A cached entry that fails `check_entry` is rebuilt,
+    with one `CacheEntryRebuilt` warning saying which and why.
 
     Parameters
     ----------
@@ -199,7 +308,7 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
 
     Returns
     -------
-    Path of the library in the cache, or None.
+    Path of the library in the cache (``<cache>/lib<hash>/library.so``), or None.
 
     Raises
     ------
@@ -237,33 +346,19 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
     if problem:
         unavailable("cache", problem)
         return None
-    digest = hashlib.sha256()
-    for part in (LAYOUT_VERSION, identity, _machine_identity(), " ".join(command), "\0".join(flags)):
-        digest.update(part.encode() + b"\0\0")
-    for name in sorted(files):
-        digest.update(name.encode() + b"\0" + files[name].encode() + b"\0\0")
-    library = cache / f"lib{digest.hexdigest()[:32]}.so"
-    if library.exists():
-        STATS.cache_hits += 1
-        return library
-    _remove_stale_builds(cache)
+    entry = cache / _cache_key(command, identity, flags, files)
+    library = entry / LIBRARY_NAME
+    damaged = None
+    if entry.exists() or entry.is_symlink():
+        damaged = check_entry(library)
+        if damaged is None:
+            STATS.cache_hits += 1
+            return library
     try:
-        # Removed on every exit path, an interrupt included; subprocess.run kills the compiler
-        # when interrupted.
-        with tempfile.TemporaryDirectory(prefix=".build-", dir=cache) as build:
-            for name, text in files.items():
-                Path(build, name).write_text(text, encoding="utf-8")
-            output = Path(build, "library.so")
-            STATS.compiled += 1
-            subprocess.run(
-                [*command, *flags, *LIBRARY_FLAGS, "-o", str(output), *sources, "-lm"],
-                check=True,
-                cwd=build,
-                capture_output=True,
-                text=True,
-                stdin=subprocess.DEVNULL,
-            )
-            os.replace(output, library)
+        if damaged is not None:
+            _discard(entry, cache)
+        _remove_stale_builds(cache)
+        _compile_entry(command, flags, files, sources, entry, cache)
     except subprocess.CalledProcessError as err:
         lines = [line for line in (err.stderr or "").splitlines() if "error" in line.lower()] or (
             err.stderr or ""
@@ -273,10 +368,117 @@ def build_library(files: dict[str, str], flags=FLAGS, *, fallback: bool = True) 
             f"compiling with {command[0]!r} failed (exit {err.returncode}): {' | '.join(lines[:3]) or 'no message'}",
         )
         return None
+    except CompilationError as err:
+        unavailable("failed", str(err))
+        return None
     except OSError as err:
         unavailable("cache", f"cannot build in the cache directory {str(cache)!r}: {err.strerror or err}")
         return None
+    if damaged is not None:
+        STATS.rebuilt += 1
+        warnings.warn(
+            f"the cached library {str(entry)!r} failed its check before loading ({damaged}); it was rebuilt",
+            CacheEntryRebuilt,
+            stacklevel=3,
+        )
     return library
+
+
+def _compile_entry(command: list[str], flags: tuple, files: dict[str, str], sources: list, entry: Path, cache: Path):
+    """Compile `sources` (of `files`) into a complete entry folder in a private build folder, record it and
+    install it as `entry` (`_install`). The build folder is removed on every exit path, an interrupt
+    included; subprocess.run kills the compiler when interrupted.
+
+    Raises
+    ------
+    subprocess.CalledProcessError
+        When the compiler fails.
+    CompilationError
+        When its output is not a library this interpreter can open (`models.elf.check_image`).
+    """
+    with tempfile.TemporaryDirectory(prefix=".build-", dir=cache) as build:
+        for name, text in files.items():
+            Path(build, name).write_text(text, encoding="utf-8")
+        built = Path(build, "entry")
+        built.mkdir()
+        STATS.compiled += 1
+        subprocess.run(
+            [*command, *flags, *LIBRARY_FLAGS, "-o", str(built / LIBRARY_NAME), *sources, "-lm"],
+            check=True,
+            cwd=build,
+            capture_output=True,
+            text=True,
+            stdin=subprocess.DEVNULL,
+        )
+        _write_record(built / LIBRARY_NAME, command, flags, sources)
+        problem = check_entry(built / LIBRARY_NAME)
+        if problem is not None:
+            raise CompilationError(f"the compiler {command[0]!r} wrote no library this interpreter can open: {problem}")
+        _install(built, entry, cache)
+
+
+@dataclass(frozen=True)
+class CompiledLibrary:
+    """A compiled library, checked (`check_entry`) and, for ctypes, opened (`load_library`).
+
+    Attributes
+    ----------
+    path : the library in the cache; CasADi's loaders (``casadi.external``, ``casadi.nlpsol``) open it
+        from here
+    handle : its ``ctypes.CDLL`` for direct calls (see `function`), or None when it was loaded for
+        CasADi (``load_library(..., ctypes_handle=False)``: CasADi opens and closes it with its Functions)
+    """
+
+    path: Path
+    handle: ctypes.CDLL | None
+
+    def function(self, name: str, argtypes, restype=None):
+        """The library's C function `name` with its ctypes signature: `argtypes` (a list of ctypes types)
+        and `restype` (a ctypes type, None for void)."""
+        if self.handle is None:
+            raise ValueError(f"{self.path} was loaded for CasADi (ctypes_handle=False): it has no ctypes handle")
+        fun = getattr(self.handle, name)
+        fun.argtypes, fun.restype = list(argtypes), restype
+        return fun
+
+
+def load_library(
+    files: dict[str, str], flags=FLAGS, *, fallback: bool = True, ctypes_handle: bool = True
+) -> CompiledLibrary | None:
+    """The one loader of compiled code: the library of C sources `files` built or taken from the cache
+    (`build_library`, which checks it and rebuilds a damaged entry before anything opens it), then
+    opened with ctypes.
+
+    Parameters
+    ----------
+    files, flags : as `build_library`
+    fallback : True: None (after one `CompilationUnavailable` warning per reason and process) when no
+        library can be built or opened; False: raise instead
+    ctypes_handle : False for a library CasADi's loaders open from `CompiledLibrary.path` (`jit`,
+        `jit_nlpsols`): not opened here, so that it is unmapped with the last Function using it
+
+    Returns
+    -------
+    CompiledLibrary or None
+
+    Raises
+    ------
+    CompilationError
+        With ``fallback=False``, naming why there is no library (no compiler, the cache, compiler
+        errors, a library the system refuses to open, as on a noexec mount).
+    """
+    path = build_library(files, flags, fallback=fallback)
+    if path is None or not ctypes_handle:
+        return None if path is None else CompiledLibrary(path, None)
+    try:
+        handle = ctypes.CDLL(str(path))
+    except OSError as err:
+        message = f"cannot load the compiled library {str(path)!r}: {str(err).splitlines()[0]}"
+        if not fallback:
+            raise CompilationError(message) from None
+        _warn_once("load", message)
+        return None
+    return CompiledLibrary(path, handle)
 
 
 def _generated(functions: list[ca.Function], prefix: str) -> str:
@@ -294,15 +496,15 @@ def jit(fun: ca.Function, flags=FLAGS) -> ca.Function:
     one `CompilationUnavailable` warning per reason and process. The copy has
     no derivatives: differentiate `fun`.
     """
-    library = build_library({"function.c": _generated([fun], "codesign_jit")}, flags)
+    library = load_library({"function.c": _generated([fun], "codesign_jit")}, flags, ctypes_handle=False)
     if library is None:
         return fun
     try:
-        return ca.external(fun.name(), str(library))
-    except RuntimeError as err:  # a cache on a noexec mount, for example
+        return ca.external(fun.name(), str(library.path))
+    except RuntimeError as err:
         if interrupts.is_interrupt(err):
             raise KeyboardInterrupt from err
-        _warn_once("load", f"cannot load the compiled library {str(library)!r}: {str(err).splitlines()[0]}")
+        _warn_once("load", f"cannot load the compiled library {str(library.path)!r}: {str(err).splitlines()[0]}")
         return fun
 
 
@@ -325,7 +527,7 @@ def jit_nlpsols(plugin: str, problem: dict, options: dict[str, dict], flags=FLAG
     names = list(options)
     solver = ca.nlpsol(names[0], plugin, problem, options[names[0]])
     functions = [solver.oracle()] + [solver.get_function(f) for f in solver.get_function()]
-    library = build_library({"nlp.c": _generated(functions, "codesign_nlp")}, flags)
+    library = load_library({"nlp.c": _generated(functions, "codesign_nlp")}, flags, ctypes_handle=False)
     if library is None:
         return {name: solver if name == names[0] else ca.nlpsol(name, plugin, problem, options[name]) for name in names}
     solvers = {}
@@ -334,11 +536,11 @@ def jit_nlpsols(plugin: str, problem: dict, options: dict[str, dict], flags=FLAG
         # the compiled oracle, which has no symbolic graph.
         loaded_options = {key: value for key, value in options[name].items() if key != "expand"}
         try:
-            solvers[name] = ca.nlpsol(name, plugin, str(library), loaded_options)
+            solvers[name] = ca.nlpsol(name, plugin, str(library.path), loaded_options)
         except RuntimeError as err:
             if interrupts.is_interrupt(err):
                 raise KeyboardInterrupt from err
-            _warn_once("load", f"cannot load the compiled library {str(library)!r}: {str(err).splitlines()[0]}")
+            _warn_once("load", f"cannot load the compiled library {str(library.path)!r}: {str(err).splitlines()[0]}")
             solvers[name] = ca.nlpsol(name, plugin, problem, options[name])
     return solvers
 

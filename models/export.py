@@ -13,8 +13,8 @@ state in a struct the caller owns::
 Everything has a fixed size known at export: the state and CasADi's work
 arrays are members of the struct, nothing is allocated, the source needs
 only ``<math.h>`` (link with ``-lm``) and compiles as C99. `ExportedC.load`
-compiles it with `models.compile` and returns the C step as a
-`models.Controller` (through ctypes), which is how the tests hold it
+compiles and opens it with `models.compile.load_library` and returns the C
+step as a `models.Controller` (through ctypes), which is how the tests hold it
 against the Python block. `mpc.export` builds linear MPC on the same pieces.
 """
 
@@ -23,6 +23,7 @@ from __future__ import annotations
 import ctypes
 import math
 import re
+import unicodedata
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,8 @@ C_KEYWORDS = frozenset(
 inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
 volatile while""".split()
 )
+#: Longest C prefix `c_name` accepts.
+C_NAME_LENGTH = 48
 #: Flags the tests and `ExportedC.load` compile exported controllers with.
 LOAD_FLAGS = ("-O2", "-std=c99")
 
@@ -53,14 +56,45 @@ def c_name(name: str) -> str:
     if (
         not isinstance(name, str)
         or not re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*", name)
-        or len(name) > 48
+        or len(name) > C_NAME_LENGTH
         or name in C_KEYWORDS
     ):
         raise ValueError(
             f"name must be a C identifier prefix (a letter, then letters, digits and single "
-            f"underscores, at most 48 characters, not a C keyword), got {name!r}"
+            f"underscores, at most {C_NAME_LENGTH} characters, not a C keyword), got {name!r}"
         )
     return name
+
+
+def c_identifiers(texts) -> list[str]:
+    """A C prefix (`c_name`'s rule) for each of `texts` (free text: a controller's label), distinct.
+
+    Each is the text folded to ASCII (accents dropped), in lower case, with every run of other
+    characters one underscore and none at either end: "PID (no anti-windup)" -> "pid_no_anti_windup".
+    One starting with a digit gets "c_" in front, an empty one is "controller", a C keyword gets "_c"
+    after it; at most `C_NAME_LENGTH` characters. A name an earlier text already has gets "_2", "_3" ...
+
+    Parameters
+    ----------
+    texts : iterable of str
+
+    Returns
+    -------
+    list of str, in the order of `texts`
+    """
+    out: list[str] = []
+    for text in texts:
+        ascii_text = unicodedata.normalize("NFKD", str(text)).encode("ascii", "ignore").decode("ascii")
+        base = re.sub(r"[^a-z0-9]+", "_", ascii_text.lower()).strip("_") or "controller"
+        base = f"c_{base}" if base[0].isdigit() else base
+        base = f"{base}_c" if base in C_KEYWORDS else base
+        name, count = base[:C_NAME_LENGTH].rstrip("_"), 1
+        while name in out:
+            count += 1
+            suffix = f"_{count}"
+            name = base[: C_NAME_LENGTH - len(suffix)].rstrip("_") + suffix
+        out.append(c_name(name))
+    return out
 
 
 def c_number(value: float) -> str:
@@ -199,7 +233,7 @@ class ExportedC:
         return [write_text(Path(directory) / file, text) for file, text in self.files().items()]
 
     def load(self, initial_state: Callable | None = None, flags=LOAD_FLAGS) -> CompiledController:
-        """Compile (through `models.compile`, cached) and load the C as a `models.Controller`.
+        """Compile and open the C (`models.compile.load_library`: cached, checked) as a `models.Controller`.
 
         Parameters
         ----------
@@ -213,7 +247,7 @@ class ExportedC:
         models.compile.CompilationError
             When no library can be built (no compiler, no cache, compiler errors).
         """
-        library = compiling.build_library(self.files(), flags, fallback=False)
+        library = compiling.load_library(self.files(), flags, fallback=False)
         assert library is not None  # fallback=False raises instead of returning None
         return CompiledController(self, library, initial_state)
 
@@ -377,20 +411,18 @@ class CompiledController:
     `step_info()` reports the C step's status code.
     """
 
-    def __init__(self, exported: ExportedC, library: Path, initial_state: Callable | None = None):
+    def __init__(self, exported: ExportedC, library: compiling.CompiledLibrary, initial_state: Callable | None = None):
         self.exported = exported
         self.name = f"{exported.controller} (C)"
         self.sample_period = exported.sample_period
         self.measures = exported.measures
         self.n_reference, self.n_state = exported.n_reference, exported.n_state
-        self._library = ctypes.CDLL(str(library))
+        self._library = library
         prefix, pointer = exported.name, ctypes.c_void_p
 
         def function(suffix, argtypes, restype=None):
             # The library's function prefix_suffix with its ctypes signature.
-            fun = getattr(self._library, f"{prefix}_{suffix}")
-            fun.argtypes, fun.restype = argtypes, restype
-            return fun
+            return library.function(f"{prefix}_{suffix}", argtypes, restype)
 
         size = function("state_size", [], ctypes.c_ulong)()
         self._memory = ctypes.create_string_buffer(size)

@@ -94,29 +94,52 @@ def replace_folder(source: str | os.PathLike, target: str | os.PathLike) -> Path
 
     `target` is renamed aside to a hidden sibling, `source` renamed onto `target`, and the old folder
     removed: `target` holds either every old file or every new one, never a mix (between the two
-    renames it is briefly absent). Both must be on one filesystem (siblings are).
+    renames it is briefly absent).
+
+    A symbolic link `target` is followed: the folder it points to is the one replaced, and the link
+    stays as it is (renaming the link aside would leave it hidden there, and the folder it points to
+    untouched). When `source` is on another filesystem than the folder replaced, it is first copied
+    into a hidden sibling of that folder (then renamed as above) and removed.
+
+    Returns
+    -------
+    Path
+        `target` as given (the link, for a link).
 
     Raises
     ------
     NotADirectoryError
         When `target` exists and is not a folder (it is left alone).
     """
-    source, target = Path(source), Path(target)
+    source, given = Path(source), Path(target)
+    target = Path(os.path.realpath(given)) if given.is_symlink() else given
     if target.exists() and not target.is_dir():
-        raise NotADirectoryError(f"cannot replace {str(target)!r} by a folder: it is a file")
+        raise NotADirectoryError(f"cannot replace {str(given)!r} by a folder: it is a file")
+    copied = None
+    if os.stat(source).st_dev != os.stat(target.parent).st_dev:
+        copied = fresh_folder(target.parent, f".{target.name}.", ".partial")
+        try:
+            shutil.copytree(source, copied, dirs_exist_ok=True)
+        except BaseException:
+            shutil.rmtree(copied, ignore_errors=True)
+            raise
     old = None
     if target.exists():
         old = target.with_name(f".{target.name}.old-{secrets.token_hex(4)}")
         os.rename(target, old)
     try:
-        os.rename(source, target)
+        os.rename(copied or source, target)
     except BaseException:
         if old is not None:
             os.rename(old, target)
+        if copied is not None:
+            shutil.rmtree(copied, ignore_errors=True)
         raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
-    return target
+    if copied is not None:
+        shutil.rmtree(source, ignore_errors=True)
+    return given
 
 
 def check_writable(folder: str | os.PathLike) -> Path:

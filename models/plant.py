@@ -13,10 +13,9 @@ purely first-order plant has no coordinates.
 
 from __future__ import annotations
 
-import numbers
-from collections.abc import Callable, Mapping, Sequence
+import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -25,6 +24,8 @@ from .checks import as_vector, boolean, integer, positive, real, real_array
 from .integrators import rk4
 from .lagrangian import EquationsOfMotion, euler_lagrange
 from .linear import LinearModel
+from .physics import Physics as Physics
+from .physics import check_finite, check_mass_matrix, checked_physics, namespaces, parameter_values
 
 
 @dataclass(frozen=True)
@@ -40,26 +41,6 @@ class Param:
     unit: str
     description: str = ""
     positive: bool = True
-
-
-@dataclass(frozen=True)
-class Physics:
-    """What a declaration returns, all CasADi SX (or numbers).
-
-    kinetic : T(q, q̇, p) in J;  potential : V(q, s, p) in J
-    forces : generalized forces Q(q, q̇, s, u, p), one per coordinate
-    outputs : mapping output name -> expression of (q, q̇, s, p); not of the inputs
-    rates : mapping first-order state name -> its derivative ṡ = g(q, q̇, s, u, p),
-        one per declared first-order state (or a sequence in declaration order)
-
-    A purely first-order plant gives only `rates` and `outputs`.
-    """
-
-    kinetic: ca.SX | float = 0
-    potential: ca.SX | float = 0
-    forces: Sequence = ()
-    outputs: Mapping[str, ca.SX] = field(default_factory=dict)
-    rates: Mapping[str, ca.SX] | Sequence = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -111,7 +92,10 @@ def declare(
     Parameters
     ----------
     name : str
-        Registry name used by `models.get`.
+        Registry name used by `models.get`, and the name of the plant's folders and files: a safe
+        identifier (a letter, then ASCII letters, digits or underscores, at most 64 characters).
+    title : str
+        Free text describing the plant (shown in tables and pages, escaped there).
     coordinates, inputs : sequence of str
         Generalized coordinates q and input names; q may be empty for a purely
         first-order plant.
@@ -135,7 +119,7 @@ def declare(
         Allow `register` to replace a plant already registered under `name`
         (refused otherwise, so a user plant cannot silently shadow a case study).
     """
-    _check_name(name, "name")
+    plant_name(name)
     _check_name(title, f"{name}: title")
     register, replace = boolean(register, "register"), boolean(replace, "replace")
     coordinates = _names(coordinates, f"{name}: coordinates")
@@ -176,6 +160,22 @@ def declare(
         return decl
 
     return wrap
+
+
+#: A plant's name: it becomes a folder name, a part of C identifiers and of page anchors.
+PLANT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
+
+
+def plant_name(value) -> str:
+    """`value` if it is a safe plant name: a letter, then letters, digits or underscores (ASCII), at most
+    64 characters. TypeError for a non-string, ValueError naming the rule otherwise."""
+    _check_name(value, "name")
+    if not PLANT_NAME.fullmatch(value):
+        raise ValueError(
+            "name must be a safe identifier (a letter, then letters, digits or underscores, ASCII, at most 64 "
+            f"characters; free text goes in title), got {value!r}"
+        )
+    return value
 
 
 def _check_name(value, what: str) -> str:
@@ -261,17 +261,15 @@ class _Symbolic:
         u = ca.SX.sym("u", nu)
         p = ca.SX.sym("p", len(decl.params))
         s = ca.SX.sym("s", ns)
-        ns_ = lambda vec, keys: SimpleNamespace(**{k: vec[i] for i, k in enumerate(keys)})
-        spaces = [
-            ns_(q, decl.coordinates),
-            ns_(dq, decl.coordinates),
-            ns_(u, decl.inputs),
-            ns_(p, [pp.name for pp in decl.params]),
-        ]
-        if ns:
-            spaces.append(ns_(s, decl.first_order))
-        phys = decl.physics(*spaces)
-        kinetic, potential, forces, outputs, rates = _checked_physics(decl, phys)
+        phys = decl.physics(*namespaces(decl, q, dq, u, p, s))
+        kinetic, potential, forces, outputs, rates = checked_physics(decl, phys)
+        check_finite(
+            decl,
+            {"the kinetic energy": kinetic, "the potential energy": potential}
+            | {f"the generalized force of {c!r}": f for c, f in zip(decl.coordinates, forces)}
+            | {f"the output {k!r}": e for k, e in outputs.items()}
+            | {f"the first-order equation of {k!r}": rates[i] for i, k in enumerate(decl.first_order)},
+        )
         self.output_names = tuple(outputs)
         y = ca.vertcat(*outputs.values()) if outputs else ca.SX(0, 1)
         if ca.depends_on(y, u):
@@ -289,7 +287,7 @@ class _Symbolic:
         except ValueError as err:
             raise ValueError(f"{decl.name}: {err}") from None
         if nq:
-            _check_mass_matrix(decl, self.eom.mass_matrix, q, p)
+            check_mass_matrix(decl, self.eom.mass_matrix, q, p)
         x = ca.vertcat(q, dq, s)
         xdot = ca.vertcat(dq, self.eom.accel, rates)
         self.f = ca.Function("f", [x, u, p], [xdot], ["x", "u", "p"], ["xdot"])
@@ -335,109 +333,6 @@ class _Symbolic:
             residual = ca.substitute(static_force, balance_unknowns, ca.DM.zeros(ns + nu))
             balance = -ca.solve(force_per_input.T @ force_per_input, force_per_input.T @ residual)
             self.static_input = ca.Function("static_input", [q, p], [balance[ns:]], ["q", "p"], ["u"])
-
-
-def _scalar_expression(value, what: str) -> ca.SX:
-    """One CasADi SX scalar from an SX expression or a real number (TypeError/ValueError naming `what`)."""
-    if isinstance(value, (ca.SX, ca.DM)):
-        expr = ca.SX(value)
-    elif isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
-        expr = ca.SX(float(value))
-    else:
-        raise TypeError(f"{what} must be a CasADi SX expression or a number, got {type(value).__name__} {value!r}")
-    if expr.shape != (1, 1):
-        raise ValueError(f"{what} must be one scalar expression, got shape {expr.shape}")
-    return expr
-
-
-def _checked_physics(decl: Declaration, phys) -> tuple:
-    """(kinetic, potential, forces (nq,), outputs {name: SX}, rates (ns,)) checked against `decl`."""
-    where = f"{decl.name}: the physics function {getattr(decl.physics, '__name__', decl.physics)!r}"
-    if not isinstance(phys, Physics):
-        raise TypeError(f"{where} must return models.Physics, got {type(phys).__name__} {phys!r}")
-    kinetic = _scalar_expression(phys.kinetic, f"{decl.name}: Physics.kinetic")
-    potential = _scalar_expression(phys.potential, f"{decl.name}: Physics.potential")
-    nq, ns = len(decl.coordinates), len(decl.first_order)
-    raw_forces = phys.forces
-    if isinstance(raw_forces, ca.SX):
-        raw_forces = [raw_forces[i] for i in range(raw_forces.numel())]
-    if isinstance(raw_forces, (str, Mapping)) or not isinstance(raw_forces, (list, tuple)):
-        raise TypeError(
-            f"{decl.name}: Physics.forces must be a list with one generalized force per "
-            f"coordinate {decl.coordinates}, got {phys.forces!r}"
-        )
-    if len(raw_forces) != nq:
-        raise ValueError(
-            f"{decl.name}: Physics.forces needs one generalized force per coordinate "
-            f"{decl.coordinates} ({nq}), got {len(raw_forces)}"
-        )
-    forces = [
-        _scalar_expression(f, f"{decl.name}: generalized force of {c!r}") for f, c in zip(raw_forces, decl.coordinates)
-    ]
-    if not isinstance(phys.outputs, Mapping):
-        raise TypeError(f"{decl.name}: Physics.outputs must be a mapping name -> expression, got {phys.outputs!r}")
-    outputs = {}
-    for key, value in phys.outputs.items():
-        _check_name(key, f"{decl.name}: output name")
-        outputs[key] = _scalar_expression(value, f"{decl.name}: output {key!r}")
-    raw_rates = phys.rates
-    if isinstance(raw_rates, Mapping):
-        if set(raw_rates) != set(decl.first_order):
-            raise ValueError(
-                f"{decl.name}: Physics.rates must give one equation per first-order state "
-                f"{decl.first_order}, got {tuple(raw_rates)}"
-            )
-        raw_rates = [raw_rates[k] for k in decl.first_order]
-    elif isinstance(raw_rates, ca.SX):
-        raw_rates = [raw_rates[i] for i in range(raw_rates.numel())]
-    elif isinstance(raw_rates, str) or not isinstance(raw_rates, (list, tuple)):
-        raise TypeError(
-            f"{decl.name}: Physics.rates must map each first-order state to its derivative, got {phys.rates!r}"
-        )
-    if len(raw_rates) != ns:
-        raise ValueError(
-            f"{decl.name}: Physics.rates needs one equation per first-order state "
-            f"{decl.first_order} ({ns}), got {len(raw_rates)}"
-        )
-    rates = [
-        _scalar_expression(r, f"{decl.name}: first-order equation of {k!r}")
-        for r, k in zip(raw_rates, decl.first_order)
-    ]
-    return kinetic, potential, forces, outputs, ca.vertcat(*rates) if rates else ca.SX(0, 1)
-
-
-def _check_mass_matrix(decl: Declaration, mass_matrix: ca.SX, q: ca.SX, p: ca.SX) -> None:
-    """Refuse a mass matrix that is singular or indefinite at every sampled configuration.
-
-    Evaluated at the nominal parameters, at q = 0 and at two seeded random
-    configurations in [-1, 1]: a matrix singular at all three is singular
-    structurally (a combination of velocities has no kinetic energy), not at
-    an isolated configuration.
-    """
-    fun = ca.Function("mass_matrix", [q, p], [mass_matrix])
-    nominal = np.array([pp.value for pp in decl.params], dtype=float)
-    rng = np.random.default_rng(0)
-    points = [np.zeros(q.numel())] + [rng.uniform(-1.0, 1.0, q.numel()) for _ in range(2)]
-    singular: list[np.ndarray] = []  # per configuration, the velocity direction without kinetic energy
-    for point in points:
-        matrix = np.asarray(fun(point, nominal), dtype=float)
-        if not np.all(np.isfinite(matrix)):
-            return
-        eig, vectors = np.linalg.eigh((matrix + matrix.T) / 2)
-        scale = max(np.max(np.abs(eig)), np.finfo(float).tiny)
-        if eig[0] < -1e-12 * scale:
-            raise ValueError(
-                f"{decl.name}: the mass matrix is not positive definite at q = {point.round(3)} "
-                f"(eigenvalue {eig[0]:.3g}): the kinetic energy is negative for some velocities"
-            )
-        if eig[0] <= 1e-12 * scale:
-            singular.append(vectors[:, 0])
-    if len(singular) == len(points):
-        combo = " + ".join(f"{c:.3g} d{n}" for c, n in zip(singular[0], decl.coordinates) if abs(c) > 1e-9)
-        raise ValueError(
-            f"{decl.name}: the mass matrix is singular: the velocity combination {combo} has "
-            "no kinetic energy, so the accelerations are undetermined"
-        )
 
 
 class Plant:
@@ -671,8 +566,7 @@ class Plant:
         tol = positive(tol, f"{self.name}: equilibrium tol")
         p = self.param_vector(params)
         if not fixed:
-            pns = SimpleNamespace(**dict(zip(self.params, p)))
-            point = self.declaration.operating_point(pns)
+            point = self.declaration.operating_point(parameter_values(self.declaration, p, "the operating point"))
             if not isinstance(point, Mapping):
                 raise TypeError(f"{self.name}: operating_point must return a dict of fixed values, got {point!r}")
             fixed = dict(point)

@@ -14,13 +14,13 @@ Nothing here knows about a particular plant.
 from __future__ import annotations
 
 import re
-from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
 import casadi as ca
 
 from . import deferred
 from .lagrangian import euler_lagrange
+from .physics import namespaces
 from .plant import Declaration, Plant
 
 if TYPE_CHECKING:
@@ -143,10 +143,7 @@ class DeclarationSymbols:
         self.ddq = ca.vertcat(*[ca.SX.sym("dd" + c) for c in decl.coordinates])
         self.u = ca.vertcat(*[ca.SX.sym(n) for n in decl.inputs])
         self.p = ca.vertcat(*[ca.SX.sym(n) for n in names])
-        ns = lambda vec, keys: SimpleNamespace(**{k: vec[i] for i, k in enumerate(keys)})
-        self.physics = decl.physics(
-            ns(self.q, decl.coordinates), ns(self.dq, decl.coordinates), ns(self.u, decl.inputs), ns(self.p, names)
-        )
+        self.physics = decl.physics(*namespaces(decl, self.q, self.dq, self.u, self.p, ca.SX(0, 1))[:4])
         self.symbols: dict[str, sympy.Symbol] = {}
         self.latex_names: dict[sympy.Symbol, str] = {}
         for prefix, dots in (("", 0), ("d", 1), ("dd", 2)):

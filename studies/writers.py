@@ -35,8 +35,13 @@ from models.files import (
 )
 
 from . import animation, loops, overview, plots, style, templates, trajectories
+from . import output_folder as owned
 from .answers import format_answers
 from .case import LoopSpec
+from .output_folder import STAGING_OWNER as STAGING_OWNER
+from .output_folder import ForeignFolderError as ForeignFolderError
+from .output_folder import StagingLeftOver as StagingLeftOver
+from .output_folder import check_output_folder
 from .runner import STATUS_KINDS, status_kind, tracked_equilibrium
 
 if TYPE_CHECKING:
@@ -56,17 +61,33 @@ def new_run_id() -> str:
     return f"{now:%Y%m%dT%H%M%SZ}-{secrets.token_hex(3)}"
 
 
+# What the output folder may replace, and its staging folders: `studies.output_folder`; its exception,
+# warning, owner record's name and up-front check (`check_output_folder`) are offered here too, beside
+# the writers that raise them.
+
+
 def new_staging(out: str | os.PathLike, run_id: str) -> Path:
-    """A fresh hidden folder in `out` where a run writes its plant folders before `publish`."""
-    return fresh_folder(out, f".run-{run_id}.", ".partial")
+    """A fresh hidden folder in `out` where a run writes its plant folders before `publish`, with its
+    owner record; the staging folders of dead runs are removed first, and one whose owner cannot be told
+    is named (`studies.output_folder.new_staging`)."""
+    return owned.new_staging(out, run_id)
 
 
 def publish(staging: str | os.PathLike, out: str | os.PathLike, names, run_id: str) -> None:
     """Move every plant folder a run wrote into `staging` to `out`, each replacing the one there
     (`models.files.replace_folder`), then write out/summary.md and out/index.html over the plants
-    `names` found in `out`. Called when the whole run succeeded: an interrupted run publishes nothing."""
+    `names` found in `out`. Called when the whole run succeeded: an interrupted run publishes nothing.
+
+    Raises
+    ------
+    ForeignFolderError
+        Before anything is moved, when a plant folder in `out` holds entries no run of ours wrote
+        (`studies.output_folder.foreign_entries`); `out` is then left as it was.
+    """
     staging, out = Path(staging), Path(out)
-    for folder in sorted(p for p in staging.iterdir() if p.is_dir() and not p.name.startswith(".")):
+    plants = sorted(p for p in staging.iterdir() if p.is_dir() and not p.name.startswith("."))
+    check_output_folder(out, [folder.name for folder in plants])
+    for folder in plants:
         replace_folder(folder, out / folder.name)
     write_summary(out, names, run_id)
     write_index(out, names, run_id)
@@ -182,7 +203,7 @@ def caption(result) -> str:
     uncertain = ", ".join(plant.uncertain_params)
     mc = next((s for s in study.scenarios if s.monte_carlo), None)
     text = (
-        f"Every row is a closed-loop simulation of the nonlinear {plant.title} "
+        f"Every row is a closed-loop simulation of the nonlinear {escape_markdown(plant.title)} "
         "(`models.simulate_closed_loop`: the equations of motion derived from the plant's energies, "
         f"RK4 with {study.substeps} sub-steps per controller sample, the controller sampled at its own "
         "period, the actuator clipped at its limit), never a linear model alone. "
@@ -248,9 +269,15 @@ def write_study(result, out: str | os.PathLike, run_id: str | None = None) -> di
     SHA-256 of every other file (see `check_study_folder`). table.csv and monte_carlo.csv
     hold no timings (those are in timings.csv and run.json): the same seed and settings give
     the same bytes.
+
+    Raises
+    ------
+    ForeignFolderError
+        Before any file is written, when ``out/<plant>`` holds entries no run of ours wrote.
     """
     run_id = new_run_id() if run_id is None else str(run_id)
     out = Path(out)
+    check_output_folder(out, [result.study.plant])
     # Every file goes into a fresh hidden sibling first, swapped in by one rename when complete: out/<plant>
     # holds one run's files, whatever interrupts this one.
     folder = fresh_folder(out, f".{result.study.plant}.", ".partial")
@@ -302,7 +329,8 @@ def write_tables(result, folder: Path) -> dict:
     write_csv(folder / "timings.csv", timings_frame(table, samples))
     files["timings.csv"] = "timings.csv"
     write_json(folder / "answers.json", {"_conventions": JSON_CONVENTIONS, **result.answers})
-    write_text(folder / "answers.md", format_answers(result.study, result.answers, result.plant.title))
+    # The title goes into answers.md's heading: shown as written, never Markdown or HTML.
+    write_text(folder / "answers.md", format_answers(result.study, result.answers, escape_markdown(result.plant.title)))
     return files | {"answers.json": "answers.json", "answers.md": "answers.md"}
 
 
@@ -487,7 +515,7 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
     grid_rows, grid_columns = verdict_grid(result.table)
     failing = not_ok(result.table)
     parts = [
-        f"# {plant.title}: controllers compared",
+        f"# {escape_markdown(plant.title)}: controllers compared",
         "",
         f"Run {run_id}; settings in run.json.",
         "",

@@ -280,6 +280,9 @@ class Designer:
     poles, placement : for a pole-placement design, its desired poles (rad/s; conjugate pairs) and the
         function poles -> block that designs it (`pole_placement`); the poles then get controls
         (`pole_controls`) and `place` redesigns the gains from them
+    c_prefix : the C name `export` gives the C step (a `models.export.c_name`); default derived from the
+        plant's name and `label` (`models.export.c_identifiers`). `catalog` and `for_case` give each of a
+        plant's controllers a distinct one.
     """
 
     def __init__(
@@ -292,6 +295,7 @@ class Designer:
         baseline: Block | None = None,
         poles=None,
         placement: Callable[[np.ndarray], Block] | None = None,
+        c_prefix: str | None = None,
     ):
         if not isinstance(case, CaseStudy):
             raise TypeError(f"case must be a studies CaseStudy, got {type(case).__name__} {case!r}")
@@ -300,6 +304,9 @@ class Designer:
         self.case = case
         self.block = self.text_block = block
         self.label = label or block.name
+        self.c_prefix = (
+            export.c_identifiers([f"{case.plant}_{self.label}"])[0] if c_prefix is None else export.c_name(c_prefix)
+        )
         if (poles is None) != (placement is None):
             raise ValueError("give both poles and placement (the function that designs from them), or neither")
         self.text_poles = None if poles is None else np.asarray(poles, dtype=complex)
@@ -347,7 +354,8 @@ class Designer:
         if label not in designed:
             raise ValueError(f"{case.plant} has no controller {label!r} with gains; choose from {', '.join(designed)}")
         baseline = next((designed.get(s.baseline) for s in case.loops if s.baseline), None)
-        return cls(case, designed[label], label, baseline=baseline, **pole_placement(case, label))
+        prefix = c_prefixes(case.plant, list(designed))[label]
+        return cls(case, designed[label], label, baseline=baseline, c_prefix=prefix, **pole_placement(case, label))
 
     # ------------------------------------------------------------- pole placement
     def poles_for(self, values: Mapping[str, float] | None = None) -> np.ndarray:
@@ -577,19 +585,30 @@ class Designer:
         return result, tuned
 
     def export(self, values: Mapping[str, float] | None = None) -> dict:
-        """The gains as JSON-ready data, with the C step function (`models.export.export_block`) when it exports."""
+        """The gains as JSON-ready data, with the C step function (`models.export.export_block`, files
+        ``<c_name>.h`` and ``<c_name>.c``, under the C name `c_prefix`) when it exports, or a note saying why not.
+        """
         block = self.block_for(values)
         out = {
             "plant": self.case.plant,
             "controller": self.label,
             "sample_period_s": block.sample_period,
             "gains": {k: np.asarray(v, dtype=float).tolist() for k, v in block.gains.items()},
+            "c_name": self.c_prefix,
         }
         try:
-            out["c"] = export.export_block(block, f"{self.case.plant}_{self.label}").files()
+            out["c"] = export.export_block(block, self.c_prefix).files()
         except export.UnsupportedExport as err:
             out["c_note"] = str(err)
         return out
+
+
+def export_note(data: dict) -> str:
+    """What the Export button says it downloaded (plain text): the C name and files of the step, or why
+    there is no C."""
+    if "c" in data:
+        return f"exported the gains and the C step as {data['c_name']}_step ({', '.join(sorted(data['c']))})"
+    return f"exported the gains; no C: {data.get('c_note', 'not exported')}".splitlines()[0]
 
 
 def pole_controls(poles) -> tuple[GainControl, ...]:
@@ -679,13 +698,22 @@ def catalog(name: str) -> tuple[list[str], Callable[[str], Designer]]:
     if not blocks:
         raise ValueError(f"{name} has no controller with gains")
     baseline = next((blocks.get(s.baseline) for s in case.loops if s.baseline), None)
+    prefixes = c_prefixes(name, list(blocks))
 
     def make(label: str) -> Designer:
         if label not in blocks:
             raise ValueError(f"{name} has no controller {label!r} with gains; choose from {', '.join(blocks)}")
-        return Designer(case, blocks[label], label, baseline=baseline, **pole_placement(case, label))
+        return Designer(
+            case, blocks[label], label, baseline=baseline, c_prefix=prefixes[label], **pole_placement(case, label)
+        )
 
     return list(blocks), make
+
+
+def c_prefixes(plant: str, labels: list[str]) -> dict[str, str]:
+    """label -> the C name of its exported step: ``<plant>_<label>`` as a C identifier, distinct for each of
+    the plant's `labels` (`models.export.c_identifiers`, in the order of `labels`)."""
+    return dict(zip(labels, export.c_identifiers(f"{plant}_{label}" for label in labels)))
 
 
 def designed_blocks(name: str | CaseStudy) -> dict:

@@ -11,7 +11,7 @@ from . import catalog
 #: The module of the optional "designer" extra (Bokeh, Tornado) that is not installed, or "".
 MISSING = ""
 try:
-    from .app import serve
+    from .app import listen, serve
 except ModuleNotFoundError as err:
     if err.name is None or err.name.split(".")[0] not in ("bokeh", "tornado"):
         raise
@@ -41,15 +41,23 @@ def main(argv=None) -> int:
     if MISSING:
         parser.error(f"the designer's page needs {MISSING} (pip install 'codesign-control[designer]')")
 
-    print(f"designing the {args.plant} controllers ...", flush=True)
+    try:  # before designing: a port in use is a usage error, not a traceback after minutes of work
+        listening = listen(args.port)
+    except OSError as err:
+        parser.error(f"--port {args.port}: {err.strerror}; choose a free port, or 0 for any")
     try:
-        labels, _ = catalog(args.plant)
-    except ValueError as err:
-        parser.error(str(err))
-    label = args.controller or labels[0]
-    if label not in labels:
-        parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(labels)}")
-    serve(catalog, list(cases.names()), args.plant, label, port=args.port)
+        print(f"designing the {args.plant} controllers ...", flush=True)
+        try:
+            labels, _ = catalog(args.plant)
+        except ValueError as err:
+            parser.error(str(err))
+        label = args.controller or labels[0]
+        if label not in labels:
+            parser.error(f"{args.plant} has no controller {label!r} with gains; choose from {', '.join(labels)}")
+        serve(catalog, list(cases.names()), args.plant, label, listening=listening)
+    finally:
+        for sock in listening[0]:
+            sock.close()
     return 0
 
 

@@ -16,6 +16,7 @@ Starlette page would need its own widgets and plotting glue.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import threading
@@ -43,7 +44,7 @@ from models import specs
 from studies import animation, style, templates
 from studies.plots import tracked_scale
 
-from . import Designer, GainControl, Update
+from . import Designer, GainControl, Update, export_note
 
 #: plant name -> (controller labels, label -> a new `Designer`): see `studies.designer.catalog`.
 Catalog = Callable[[str], tuple[list[str], Callable[[str], Designer]]]
@@ -505,6 +506,7 @@ class Page:
             self.tune_status.text = f"export failed: {type(err).__name__}: {err}".splitlines()[0]
             return
         self.export_data.text = json.dumps(data, indent=1)
+        self.tune_status.text = export_note(data)
 
     def _on_tune(self) -> None:
         """Tune from the gains in force in a thread (`Designer.tune`), reporting progress every 5 iterations;
@@ -745,6 +747,16 @@ def application(catalog: Catalog, plants: list[str], plant: str, label: str | No
     return Application(FunctionHandler(make))
 
 
+def listen(port: int = 0) -> tuple[list, int]:
+    """(sockets listening on 127.0.0.1:`port`, the port; 0: one the system chooses) for `serve`, bound before
+    any design; OSError saying "127.0.0.1:PORT is in use" (or why else it cannot listen there)."""
+    try:
+        return bind_sockets("127.0.0.1", port)
+    except OSError as err:
+        reason = "is in use" if err.errno == errno.EADDRINUSE else f"cannot be listened on ({err.strerror or err})"
+        raise OSError(err.errno, f"127.0.0.1:{port} {reason}") from None
+
+
 def serve(
     catalog: Catalog,
     plants: list[str],
@@ -752,6 +764,7 @@ def serve(
     label: str | None = None,
     port: int = 0,
     ready: Callable[[str], None] | None = None,
+    listening: tuple[list, int] | None = None,
 ) -> None:
     """Serve the page on 127.0.0.1:`port` (0: a free port) until interrupted; print its URL.
 
@@ -761,9 +774,11 @@ def serve(
         a user's own gives its own plant and blocks
     plants : the plant picker's names;  plant, label : what the page opens with
     ready : called with the URL once the server listens (default: print it)
+    listening : (sockets, port) from `listen`, when the caller checked the port before designing;
+        default: `listen(port)` here
     """
     # Bound first, so that the page's own origin (with the port the system chose) is the one allowed.
-    sockets, port = bind_sockets("127.0.0.1", port)
+    sockets, port = listening if listening is not None else listen(port)
     tornado_app = BokehTornado(
         {"/": application(catalog, plants, plant, label)},
         extra_websocket_origins=[f"127.0.0.1:{port}", f"localhost:{port}"],

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from models import deferred
-from models.files import format_number, markdown_table, write_csv, write_text
+from models.files import escape_markdown, format_number, markdown_table, write_csv, write_text
 
 from .. import animation, plots
 from ..style import display_unit
@@ -324,7 +324,7 @@ def markdown(result: CaseTrajectories, files: Mapping, notes: list) -> str:
     case, plant = result.case, result.plant
     unit = case.input_unit
     parts = [
-        f"# {plant.title}: optimized trajectories",
+        f"# {escape_markdown(plant.title)}: optimized trajectories",
         "",
         "Each problem is an `mpc.OptimalControlProblem` on the nonlinear plant (nominal parameters), "
         "transcribed as stated and solved by IPOPT; the wall time runs from posing the problem to the "

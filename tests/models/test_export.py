@@ -13,7 +13,7 @@ import pytest
 
 import models
 from models import compile as mc
-from models.export import UnsupportedExport, c_number, export_block
+from models.export import UnsupportedExport, c_identifiers, c_name, c_number, export_block
 
 
 @pytest.fixture(autouse=True)
@@ -193,3 +193,30 @@ def test_what_cannot_be_exported_is_named():
 def test_names_must_be_c_identifiers(name):
     with pytest.raises(ValueError, match="name must be a C identifier prefix"):
         export_block(PendulumPD(), name)
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("PID (no anti-windup)", "pid_no_anti_windup"),
+        ("LQR + Kalman", "lqr_kalman"),
+        ("arm_pole placement + integrator", "arm_pole_placement_integrator"),
+        ("lead-lag (IV.11)", "lead_lag_iv_11"),
+        ("2nd order", "c_2nd_order"),
+        ("int", "int_c"),
+        ("", "controller"),
+        ("Régulateur à avance", "regulateur_a_avance"),
+        ("__x__", "x"),
+    ],
+)
+def test_a_c_identifier_is_derived_from_free_text(text, expected):
+    (derived,) = c_identifiers([text])
+    assert derived == expected and c_name(derived) == derived
+
+
+def test_derived_c_identifiers_are_distinct_and_short_enough():
+    texts = ["a b", "a-b", "a_b", "A B", "x" * 80, "x" * 81]
+    derived = c_identifiers(texts)
+    assert derived[:4] == ["a_b", "a_b_2", "a_b_3", "a_b_4"]
+    assert len(set(derived)) == len(derived) and all(c_name(d) == d for d in derived)
+    assert derived[4] == "x" * 48 and derived[5] == "x" * 46 + "_2"

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import models
+import models.export
 import studies
 from models import Block, metrics
 from studies import designer
@@ -216,6 +217,30 @@ def test_export_gives_the_gains_in_force_and_the_c_step(arm):
     assert data["gains"] == {"kp": float(arm.block.gains["kp"]), "kd": 0.2}
     assert any(name.endswith(".c") for name in data["c"])
     json.dumps(data)
+
+
+def test_every_arm_controller_exports_under_a_distinct_c_name_it_shows():
+    """Before, Export failed for 6 of the arm's 11 controllers: their labels ('PID (no anti-windup)',
+    'LQR + Kalman' ...) are not C names. Each now exports under a C identifier derived from its label,
+    distinct from the others', given in the export; the C of one of them steps as its Python block."""
+    labels, make = designer.catalog("arm")
+    exported = {label: make(label).export() for label in labels}
+    names = {label: data["c_name"] for label, data in exported.items()}
+    assert len(set(names.values())) == len(labels) == 11
+    for label, data in exported.items():
+        assert models.export.c_name(data["c_name"]) == data["c_name"] and data["c_name"].startswith("arm_")
+        assert sorted(data["c"]) == [f"{data['c_name']}.c", f"{data['c_name']}.h"], label
+    assert names["PID (no anti-windup)"] == "arm_pid_no_anti_windup"
+    assert names["LQR + Kalman"] == "arm_lqr_kalman"
+    session = make("pole placement + integrator")
+    block = session.block_for()
+    compiled = models.export.export_block(block, names["pole placement + integrator"]).load()
+    y, r = np.full(block.n_measured, 0.1), np.full(block.n_reference, 0.3)
+    xc = np.asarray(block.initial_state(y, r), dtype=float) + 0.05
+    xc_c, u_c = compiled.step(xc, y, r)
+    xc_py, u_py = (np.asarray(v, dtype=float).ravel() for v in block.casadi_step(xc, y, r, block.gain_vector()))
+    np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(xc_c, xc_py, rtol=1e-12, atol=1e-12)
 
 
 def test_tune_is_at_least_as_good_as_its_start_on_an_independent_run(arm):
@@ -437,6 +462,56 @@ def test_the_page_shows_labels_and_messages_as_text_in_its_html():
         "half plane<br>loopshaping specs (&lt;IV.11&gt;): crossover met, phase_margin not checked"
     )
     assert type(app.fragment("busy", "designing")) is str  # a plain str for Bokeh's Div
+
+
+def test_typed_html_reaches_only_plain_text_divs():
+    """Self-XSS (issue 31): a typed value quoted in an error message is shown by a Div that renders its
+    text as text; every other Div gets escaped fragments only."""
+    pytest.importorskip("bokeh")
+    from studies.designer import app
+
+    page = app.Page(designer.catalog, list(studies.cases.names()), "arm", "PD")
+    typed = "<img src=x onerror=alert(1)>"
+    for c in page.designer.controls:
+        page._on_text("gain", c, typed)
+        error = page.rows[("gain", c.key)][3]
+        assert typed in error.text and error.render_as_text
+    divs = [m for m in page.layout.references() if type(m).__name__ == "Div"]
+    assert all(d.render_as_text or "<img" not in d.text for d in divs)
+    assert {d.name for d in divs if not d.render_as_text} == {"title", "margins", "verdict"}  # fragments only
+
+
+def test_the_page_says_under_which_c_name_it_exported():
+    data = {"c_name": "arm_lqr_kalman", "c": {"arm_lqr_kalman.h": "", "arm_lqr_kalman.c": ""}}
+    assert designer.export_note(data) == (
+        "exported the gains and the C step as arm_lqr_kalman_step (arm_lqr_kalman.c, arm_lqr_kalman.h)"
+    )
+    assert (
+        designer.export_note({"c_name": "x", "c_note": "MPC: not a Block\nmore"})
+        == "exported the gains; no C: MPC: not a Block"
+    )
+
+
+def test_a_port_in_use_is_refused_before_designing():
+    """Before: the designer designed every controller, then died with a tornado traceback (exit 1)."""
+    pytest.importorskip("bokeh")
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        done = subprocess.run(
+            [sys.executable, "-m", "studies.designer", "arm", "--port", str(port)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "designing" not in done.stdout and "Traceback" not in done.stderr
+    assert f"--port {port}: 127.0.0.1:{port} is in use" in done.stderr, done.stderr[-2000:]
 
 
 def test_the_command_without_bokeh_says_what_to_install():

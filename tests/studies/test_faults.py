@@ -78,10 +78,11 @@ def snapshot(folder: Path) -> dict:
 
 
 def previous_run(out: Path) -> dict:
-    """An output folder as an earlier run left it; returns its snapshot."""
+    """An output folder as an earlier run left it (its run.json lists its file); returns its snapshot."""
     (out / "arm").mkdir(parents=True)
     (out / "arm" / "table.csv").write_text("controller,scenario,status\nPD,step,ok\n")
-    (out / "arm" / "run.json").write_text('{"run_id": "earlier"}\n')
+    digest = hashlib.sha256((out / "arm" / "table.csv").read_bytes()).hexdigest()
+    (out / "arm" / "run.json").write_text(json.dumps({"run_id": "earlier", "sha256": {"table.csv": digest}}) + "\n")
     (out / "summary.md").write_text("# Summary of the earlier run\n")
     (out / "index.html").write_text("<!DOCTYPE html><title>earlier</title>\n")
     return snapshot(out)
@@ -276,6 +277,8 @@ def test_a_study_folder_is_replaced_whole_and_records_its_run(tmp_path):
     out = tmp_path / "out"
     (out / "arm").mkdir(parents=True)
     (out / "arm" / "stale.png").write_bytes(b"from an earlier run")
+    earlier = {"run_id": "run-one", "sha256": {"stale.png": hashlib.sha256(b"from an earlier run").hexdigest()}}
+    (out / "arm" / "run.json").write_text(json.dumps(earlier))
     written = writers.write_study(result, out, run_id="run-two")
     folder = out / "arm"
     assert not (folder / "stale.png").exists()

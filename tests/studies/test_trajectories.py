@@ -13,6 +13,7 @@ The default suite solves each case once on its --quick meshes (a few seconds eac
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -258,3 +259,12 @@ def test_bad_declarations_are_named():
         trajectories.TrajectoryProblem("point to point", "x", build)
     with pytest.raises(ValueError, match="headroom must be in"):
         trajectories.TrajectoryProblem("p", "x", build, tracking=trajectories.Tracking({}, (1.0,), headroom=1.0))
+
+
+def test_the_plant_title_is_shown_literally_in_the_trajectories_heading():
+    """trajectories.md's heading escapes the plant's title (free text) as table.md's does."""
+    result = SimpleNamespace(
+        case=SimpleNamespace(input_unit="N m"), plant=SimpleNamespace(title="<b>Arm</b> & co"), solved={}, quick=False
+    )
+    text = trajectories.report.markdown(result, {}, [])
+    assert text.splitlines()[0] == r"# \<b\>Arm\</b\> \& co: optimized trajectories"

@@ -1,5 +1,7 @@
 """The writer: JSON conventions, atomic files, and the files a study leaves."""
 
+import copy
+import dataclasses
 import json
 import math
 
@@ -7,8 +9,11 @@ import control
 import numpy as np
 import pandas as pd
 import pytest
+from example_providers import controllers as example_controllers
 
+import studies
 from models import files
+from studies import runner, writers
 
 REQUIRED_COLUMNS = [
     "controller",
@@ -212,6 +217,26 @@ def test_a_title_or_label_with_html_in_it_is_escaped_in_every_page(tmp_path):
     )
     data = json.loads(re.search(r"const DATA = (\{.*?\});\n", animation).group(1))
     assert data["selected"] == label and data["order"] == [label, "LQR"]  # the script's data hold the label itself
+
+
+def test_a_title_with_html_is_shown_literally_in_the_markdown_headings(tmp_path):
+    """table.md and answers.md: the title is escaped in their headings (and table.md's caption), as the
+    labels are in their tables; before, '# <b>Arm</b> & co: controllers compared' was written raw."""
+    case = dataclasses.replace(studies.get("arm"), providers=())
+    result = runner.run_study(
+        case, runner.Options(scenarios=("step",), mc=0), controllers={"LQR": example_controllers("arm")["LQR"]}
+    )
+    plant = copy.copy(result.plant)
+    plant.title = "<b>Arm</b> & co"
+    result = dataclasses.replace(result, plant=plant)
+    writers.write_study(result, tmp_path, run_id="escaped")
+    table = (tmp_path / "arm" / "table.md").read_text(encoding="utf-8")
+    answers = (tmp_path / "arm" / "answers.md").read_text(encoding="utf-8")
+    escaped = r"\<b\>Arm\</b\> \& co"
+    assert table.splitlines()[0] == f"# {escaped}: controllers compared"
+    assert answers.splitlines()[0] == f"# Homework answers: {escaped}"
+    assert f"the nonlinear {escaped} (" in table
+    assert "<b>" not in table and "<b>" not in answers
 
 
 def test_importing_the_writers_imports_no_matplotlib_pillow_or_jinja2():
