@@ -15,7 +15,8 @@ optimizer) stops on the first. `search` wraps any of them:
 4. **merge**: two local answers closer than `tolerance` in the scaled parameters are
    one optimum (the better objective kept); the global answer is the converged
    optimum of least objective (any optimum when none converged, and then the answer
-   is not converged).
+   is not converged). "Converged" means converged at the best of them: the best
+   converged and no unconverged refinement ended below it.
 
 Steps 1 and 3 go through `map(function, items) -> list` when one is given (a
 `studies.distributed` executor's ``map``, a Dask client's, or one built on
@@ -194,41 +195,56 @@ def search(
         if distinct([np.array([o.params[n] for n in names]) for o in optima], at, span, tolerance):
             optima.append(answer)
     best = optima[0]
+    below = [o for o in optima if not o.success and o.objective < best.objective]
+    converged = best.success and not below
     how = (
         f"least objective among the {sum(o.success for o in optima)} converged of {len(optima)} distinct local "
         f"optima, refined from the best {len(kept)} local minima of the sweep (distinct: parameters farther "
         f"apart than {tolerance:g} of their range)"
+        + (
+            f"; not converged: {len(below)} refinement(s) that did not converge ended below it"
+            if below
+            else ("" if best.success else "; not converged: no refinement converged")
+        )
     )
     sweep = [(dict(zip(names, item)), float(v[0]), bool(v[1])) for item, v in zip(items, values)]
-    return GlobalResult(best, optima, best.success, how, design, sweep, time.perf_counter() - started)
+    return GlobalResult(best, optima, converged, how, design, sweep, time.perf_counter() - started)
 
 
 # ----------------------------------------------------------------- the open-loop methods
 class OpenLoopWork:
     """The sweep's and the refinement's work on one `OptimalControlProblem` with chosen parameters.
 
-    Picklable when its problem is (the solvers it builds are kept per thread and never pickled). Each sweep
+    problem : an `OptimalControlProblem`, or a picklable callable () -> one (a function of an importable
+    module), which each process calls once: then the work travels to other processes. The solvers it builds
+    are kept per thread and never pickled. Each sweep
     point and each refinement starts from the same start: the problem's own initial guess with
     `solve_options` (``guess``, ``guess_input``, ...). A refinement first solves its point with p fixed and
     starts the local method from that trajectory at that p.
     """
 
-    def __init__(self, ocp, transcription, method: str, solver_options: dict | None, solve_options: dict):
+    def __init__(self, problem, transcription, method: str, solver_options: dict | None, solve_options: dict):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-        self.ocp, self.transcription, self.method = ocp, transcription, method
+        self.build = problem if callable(problem) else None
+        self.ocp = problem() if callable(problem) else problem
+        self.transcription, self.method = transcription, method
         self.solver_options = {"tolerance": 1e-10} | dict(solver_options or {})
         self.solve_options = dict(solve_options)
-        self.names = list(ocp.chosen)
+        self.names = list(self.ocp.chosen)
         self._local = threading.local()
 
     def __getstate__(self):
         state = dict(self.__dict__)
         state.pop("_local")
+        if self.build is not None:
+            state.pop("ocp")
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
+        if self.build is not None:
+            self.ocp = self.build()
         self._local = threading.local()
 
     def solver(self, fixed: bool):
@@ -270,7 +286,7 @@ class OpenLoopWork:
 
 
 def codesign(
-    ocp,
+    problem,
     transcription=None,
     *,
     method: str = "simultaneous",
@@ -287,6 +303,8 @@ def codesign(
 ) -> GlobalResult:
     """Global open-loop co-design of the parameters in `ocp.choose(...)`: `search` around `method`.
 
+    problem : the `OptimalControlProblem`, or a picklable callable () -> one (so that `map` may send the
+        work to other processes; see `OpenLoopWork`)
     method : "simultaneous" (the parameters decisions of the transcription) or "nested" (`solve_nested`)
     samples : the sweep's density (`sweep_points`; default `DEFAULT_SAMPLES`); refused (ValueError) when
         one timed solve makes the whole search exceed `max_seconds` (s, on `workers` workers) or the sweep
@@ -297,11 +315,12 @@ def codesign(
     Returns the `GlobalResult`, its `answer` the best's full answer (`OCPSolution` or
     `NestedCodesignResult`), solved again here from its start when `map` ran the refinements elsewhere.
     """
-    if not ocp.chosen:
-        raise ValueError("global co-design needs parameters to choose: call ocp.choose(name, lower, upper)")
     checks.integer(samples, "samples", minimum=2)
     checks.integer(workers, "workers", minimum=1)
-    work = OpenLoopWork(ocp, transcription, method, solver_options, solve_options)
+    work = OpenLoopWork(problem, transcription, method, solver_options, solve_options)
+    ocp = work.ocp
+    if not ocp.chosen:
+        raise ValueError("global co-design needs parameters to choose: call ocp.choose(name, lower, upper)")
     ranges = {n: (ocp.chosen[n].lower, ocp.chosen[n].upper) for n in work.names}
     timed = time.perf_counter()
     trial = work.at(tuple(ocp.chosen[n].guess for n in work.names))
