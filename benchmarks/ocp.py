@@ -26,7 +26,17 @@ each answer's input (held for (a)-(c), piecewise linear for (d)); the defect is
 `verify()`'s: the input re-simulated with CVODES, over the whole horizon from x(0) (the
 upright end is unstable, so this grows with any error) and restarted at every mesh point.
 
+A second problem has several local optima: the spring's minimum-energy transfer priced by its
+stiffness (`studies.codesign_problems.spring_transfer_ocp`, three local minima of J*(k) in the range).
+The plain local solves (simultaneous and nested, from the problem's start) are timed against the global
+layer (`mpc.global_search.codesign`, nested, its default sweep) in this process and on Dask's threads
+scheduler with 2 workers (a LocalCluster's spawned processes would re-run this script, which only
+runs from its folder); "gap closed" is the
+plain nested answer's objective above the global one, relative to the plain one. The two global runs
+must agree bit for bit.
+
 Usage: python benchmarks/ocp.py [--intervals 100] [--control-intervals 20] [--repeat 3] [--json PATH]
+       [--skip-global]
 """
 
 from __future__ import annotations
@@ -36,13 +46,16 @@ import time
 
 import _path  # noqa: F401  (before our packages: drops this folder from sys.path)
 import casadi as ca
+import dask
 import numpy as np
 
 import models
 import mpc
 from models.compile import NumpyCall
 from models.files import write_json
+from mpc import global_search
 from mpc.transcription import collocation_coefficients
+from studies import codesign_problems
 
 FINAL_TIME, FORCE_LIMIT, TRAVEL = 4.0, 5.0, 0.5
 START = np.array([0.0, np.pi, 0.0, 0.0])
@@ -223,6 +236,50 @@ def defects(plant, row, substeps: int = 20) -> tuple[float, float]:
     return float(np.max(np.abs(whole - states))), float(np.max(np.abs(np.array(local) - states[1:])))
 
 
+def dask_threads(function, items) -> list:
+    """`map` on Dask's threads scheduler (its workers set by ``dask.config``), results in the items' order."""
+    return list(dask.compute(*[dask.delayed(function)(item) for item in items], scheduler="threads"))
+
+
+def global_layer(intervals: int = 80) -> dict:
+    """The multi-optimum problem: plain local solves against the global layer on 1 and 2 workers."""
+    transcription = mpc.Collocation(intervals=intervals)
+    build = codesign_problems.spring_transfer_ocp
+    started = time.perf_counter()
+    simultaneous = build().solve(transcription, solver_options={"tolerance": 1e-10})
+    simultaneous_s = time.perf_counter() - started
+    started = time.perf_counter()
+    nested = mpc.solve_nested(build(), transcription)
+    nested_s = time.perf_counter() - started
+    started = time.perf_counter()
+    here = global_search.codesign(build, transcription, method="nested")
+    seconds_1 = time.perf_counter() - started
+    with dask.config.set(num_workers=2):
+        started = time.perf_counter()
+        there = global_search.codesign(build, transcription, method="nested", map=dask_threads, workers=2)
+        seconds_2 = time.perf_counter() - started
+    local, best = nested.objective, here.best.objective
+    return {
+        "problem": "spring minimum-energy transfer, stiffness priced, k in "
+        f"{list(codesign_problems.TRANSFER_RANGE)} N/m from {codesign_problems.TRANSFER_GUESS} N/m",
+        "intervals": intervals,
+        "design": here.design,
+        "optima": [{"k": o.params["k"], "objective": o.objective, "converged": o.success} for o in here.optima],
+        "local_simultaneous": {
+            "k": simultaneous.chosen["k"],
+            "objective": simultaneous.objective,
+            "seconds": simultaneous_s,
+        },
+        "local_nested": {"k": nested.params["k"], "objective": local, "seconds": nested_s},
+        "best": {"k": here.best.params["k"], "objective": best, "converged": here.converged},
+        "gap_closed": (local - best) / abs(local),
+        "gap_closed_absolute": local - best,
+        "seconds_1": seconds_1,
+        "seconds_2": seconds_2,
+        "identical": here.sweep == there.sweep and here.optima == there.optima,
+    }
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--intervals", type=int, default=100, help="N for (a), (b), (c)")
@@ -230,6 +287,7 @@ def main(argv=None):
     parser.add_argument("--repeat", type=int, default=3, help="runs of (a), (b), (c); the median is reported")
     parser.add_argument("--skip-python-control", action="store_true")
     parser.add_argument("--json", metavar="PATH", help="write the figures as one JSON object")
+    parser.add_argument("--skip-global", action="store_true", help="skip the multi-optimum problem")
     args = parser.parse_args(argv)
 
     plant = models.get("pendulum")
@@ -316,6 +374,16 @@ def main(argv=None):
         )
     else:
         print()
+    if not args.skip_global:
+        figures["global"] = g = global_layer()
+        print(
+            f"Global layer ({g['problem']}; {g['design']}): {len(g['optima'])} local optima; plain nested "
+            f"k = {g['local_nested']['k']:.4g} N/m, J = {g['local_nested']['objective']:.5g} "
+            f"({g['local_nested']['seconds']:.2f} s); global k = {g['best']['k']:.4g} N/m, J = "
+            f"{g['best']['objective']:.5g}; gap closed {100 * g['gap_closed']:.1f} %; 1 worker {g['seconds_1']:.2f} s, "
+            f"2 workers {g['seconds_2']:.2f} s (ratio {g['seconds_1'] / g['seconds_2']:.2f}); bit for bit: "
+            f"{g['identical']}"
+        )
     if args.json:
         write_json(args.json, figures)
 

@@ -361,19 +361,25 @@ class Codesign:
         tried.append((values, result, value))
         return result, value
 
-    def nested(self, nested_tol: float, from_nearest: bool = True) -> CodesignResult:
+    def nested(self, nested_tol: float, from_nearest: bool = True, bracket=None) -> CodesignResult:
         """Outer optimizer on the parameters (bounded Brent for one, Powell for several, to `nested_tol` of
-        each range), each evaluation an `inner` tuning; the best evaluation is the answer."""
+        each range), each evaluation an `inner` tuning; the best evaluation is the answer.
+
+        bracket : None (the whole ranges, Powell from their middle) or (low, high) arrays inside them: the
+            search is kept to that box, Powell started at its middle (the global layer's refinement)
+        """
         started = time.perf_counter()
         n, names = self.joint.n_gains, self.names
         low, high = self.lbx[n:], self.ubx[n:]
+        if bracket is not None:
+            low, high = (np.clip(np.asarray(b, dtype=float), self.lbx[n:], self.ubx[n:]) for b in bracket)
         tried: list[tuple[np.ndarray, TuningResult, float]] = []
         if len(names) == 1:
             outer = scipy.optimize.minimize_scalar(
                 lambda v: self.inner(np.atleast_1d(v), tried, from_nearest)[1],
                 bounds=(low[0], high[0]),
                 method="bounded",
-                options={"xatol": nested_tol * (high - low)[0], "maxiter": 500},
+                options={"xatol": nested_tol * (self.ubx[n:] - self.lbx[n:])[0], "maxiter": 500},
             )
             outer_ok, outer_text = bool(outer.success), f"bounded Brent: {outer.message}"
         else:
@@ -407,7 +413,7 @@ class Codesign:
             history=[(float(v[0]) if len(v) == 1 else v.tolist(), float(f)) for v, _, f in tried],
         )
 
-    def _simultaneous(self, method: str, problem: TuningProblem, start, where: str) -> CodesignResult:
+    def solve_joint(self, method: str, problem: TuningProblem, start, where: str) -> CodesignResult:
         """One IPOPT problem on gains and parameters together, from `start` (None: the problem's own)."""
         started = time.perf_counter()
         lbx, ubx = (self.lbx, self.ubx) if problem is self.joint else self.joint_bounds(problem)
@@ -420,12 +426,12 @@ class Codesign:
         """Simultaneous from a neutral start: the middle of each range, the block's gains."""
         neutral = self.joint.start()
         neutral[self.joint.n_gains :] = [(low + high) / 2 for low, high in self.ranges.values()]
-        return self._simultaneous("simultaneous", self.joint, neutral, "from the middle of the ranges: ")
+        return self.solve_joint("simultaneous", self.joint, neutral, "from the middle of the ranges: ")
 
     def simultaneous_from(self, sequential: CodesignResult) -> CodesignResult:
         """Simultaneous from the sequential answer (its plant and controller)."""
         problem = replace(self.setup, plant=sequential.plant, block=sequential.block).problem(self.names)
-        return self._simultaneous("simultaneous from sequential", problem, None, "from the sequential answer: ")
+        return self.solve_joint("simultaneous from sequential", problem, None, "from the sequential answer: ")
 
 
 # ----------------------------------------------------------------- actuator sizing

@@ -61,11 +61,13 @@ def solve_nested(
     tolerance: float = 1e-10,
     ftol: float = 1e-12,
     max_outer_iterations: int = 200,
+    start: dict | None = None,
     solver_options: dict | None = None,
     **solve_options,
 ) -> NestedCodesignResult:
     """Nested co-design of the parameters in `ocp.choose(...)`; see the module docstring.
 
+    start : the outer optimizer's starting values by name (SI; default each chosen parameter's guess)
     tolerance : L-BFGS-B's ftol and gtol (on J* and its gradient in the [0, 1]-scaled parameters)
     solver_options : passed to `OCPSolver` (default tolerance 1e-10: J* must be accurate below the
         outer optimizer's steps); solve_options to every inner `OCPSolver.solve`
@@ -101,10 +103,14 @@ def solve_nested(
 
     outer_status, success, iterations = "", False, 0
     try:
-        start = (np.array([ocp.chosen[n].guess for n in names]) - lower) / span
+        begin = {n: ocp.chosen[n].guess for n in names} | dict(start or {})
+        unknown = sorted(set(begin) - set(names))
+        if unknown:
+            raise ValueError(f"start names {unknown}, which the problem does not choose ({names})")
+        first = (np.clip(np.array([float(begin[n]) for n in names]), lower, upper) - lower) / span
         result = scipy.optimize.minimize(
             inner,
-            start,
+            first,
             jac=True,
             method="L-BFGS-B",
             bounds=[(0.0, 1.0)] * len(names),

@@ -2,7 +2,7 @@
 
 Each problem is an `mpc.OptimalControlProblem` with chosen plant parameters
 (`ocp.choose`), declared as data (`OpenLoopCodesign`, `studies.trajectories`): the
-spring-mass declared here (a user's plant, no case study) and each case's own
+spring-mass problems of `studies.codesign_problems` (a user's plant, no case study) and each case's own
 (``CaseStudy.open_loop_codesign``: the crane's cable length, the UUV's
 centre-of-gravity offset). `solve` decides every problem twice, to convergence:
 
@@ -15,7 +15,11 @@ then tabulates the optimal value J*(p) at a few parameter values with the
 parameter fixed (`sweep`), verifies the answers (`OCPSolution.verify`), and
 `report` returns the Markdown of docs/codesign_open_loop.md:
 
-    python -m studies.codesign_open_loop [--quick] [--out FILE]
+    python -m studies.codesign_open_loop [--quick] [--samples N] [--out FILE | --write-docs]
+
+Every problem is also decided under the global layer (`mpc.global_search.codesign`: a coarse sweep of the
+parameter, then local refinement from the sweep's best local minima), and the report lists every distinct
+local optimum it found and how far each method's plain local answer is from the best.
 """
 
 from __future__ import annotations
@@ -28,86 +32,23 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import models
-from models import catalog, deferred, files
+from models import files
 from models.files import format_number, markdown_table
-from mpc import Collocation, OptimalControlProblem, solve_nested
+from mpc import global_search, solve_nested
 
 from . import cases
+from .codesign_problems import (
+    SPRING_MASS_PROBLEM,
+    SPRING_TRANSFER_PROBLEM,
+)
 from .trajectories import OpenLoopCodesign, TrajectorySetup, describe
-
-optimize = deferred.module("scipy.optimize")
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign_open_loop.md"
 
 
-# ---------------------------------------------------------------------------- the spring-mass
-#: The mass (kg, the plant's, `models.catalog.spring_mass`), the fixed final time (s) and the stiffness range (N/m).
-SPRING_MASS = next(param.value for param in catalog.spring_mass.params if param.name == "m")
-SPRING_TIME, SPRING_RANGE = 2.0, (0.1, 2.0)
-
-
-def spring_mass_plant() -> models.Plant:
-    """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen (declared in `models.catalog`)."""
-    return models.Plant(catalog.spring_mass)
-
-
-def spring_mass(quick: bool) -> TrajectorySetup:
-    """Maximize s(T) at T = 2 s from rest, with s'(T) = 0 and |u| <= 1, choosing k in [0.1, 2] N/m."""
-    ocp = OptimalControlProblem(spring_mass_plant(), SPRING_TIME)
-    ocp.choose("k", *SPRING_RANGE)
-    ocp.maximize(ocp.at_end(ocp.x.s))
-    ocp.subject_to(ocp.at_start(ocp.state) == 0)
-    ocp.subject_to(ocp.at_end(ocp.x.ds) == 0)
-    return TrajectorySetup(
-        ocp,
-        Collocation(intervals=40 if quick else 100),
-        {},
-        "s(T) (m), maximized",
-        f"m s'' = −k s + u, m = {SPRING_MASS:g} kg, from rest; maximize the displacement s(T) at T = "
-        f"{SPRING_TIME:g} s with s'(T) = 0 and |u| ≤ 1 N, choosing the stiffness k in [{SPRING_RANGE[0]:g}, "
-        f"{SPRING_RANGE[1]:g}] N/m and the force history together.",
-    )
-
-
-def spring_mass_semi_analytic() -> dict:
-    """One-switch bang-bang (Pontryagin; derived in tests/mpc/test_ocp_codesign.py):
-
-    s*(k) = [2 √(1 − sin²θ / 4) − 1 − cos θ] / k with θ = √(k/m) T, maximized over k by a bounded scalar search.
-    Returns {"parameter": k (N/m), "objective": s*(k) (m), "how": text}.
-    """
-
-    def best(k):
-        """s*(k) (m), the largest displacement with the stiffness k (N/m) fixed."""
-        theta = math.sqrt(k / SPRING_MASS) * SPRING_TIME
-        return (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / k
-
-    found = optimize.minimize_scalar(
-        lambda k: -best(k), bounds=SPRING_RANGE, method="bounded", options={"xatol": 1e-12}
-    )
-    return {
-        "parameter": float(found.x),
-        "objective": float(-found.fun),
-        "how": "one-switch bang-bang, s*(k) in closed form, maximized over k",
-    }
-
-
-SPRING_MASS_PROBLEM = OpenLoopCodesign(
-    "spring_mass",
-    "spring-mass: stiffness and force history (issue 13)",
-    "spring and mass (user-declared)",
-    spring_mass,
-    "k",
-    "N/m",
-    maximized=True,
-    sweep=(0.25, 0.5, 1.0, 1.5, 2.0),
-    reference=spring_mass_semi_analytic,
-)
-
-
 def problems() -> list[OpenLoopCodesign]:
-    """The spring-mass problem, then every registered case's, in the text's order."""
-    found = [SPRING_MASS_PROBLEM]
+    """The spring-mass problems, then every registered case's, in the text's order."""
+    found = [SPRING_MASS_PROBLEM, SPRING_TRANSFER_PROBLEM]
     for name in cases.names():
         found += list(cases.get(name).open_loop_codesign)
     return found
@@ -141,12 +82,20 @@ class CodesignResult:
     sweep: list = field(default_factory=list)
     reference: dict | None = None
     at_text: dict | None = None
+    global_answers: dict = field(default_factory=dict)
 
     @property
     def agree(self) -> tuple[float, float]:
         """(|Δp|, |ΔJ| / max(1, |J|)) between the two methods."""
         s, n = self.simultaneous, self.nested
         return abs(s.parameter - n.parameter), abs(s.objective - n.objective) / max(1.0, abs(s.objective))
+
+    def global_gap(self, method: str) -> tuple[float, float]:
+        """(|ΔJ|, relative |ΔJ|) of `method`'s plain local answer from its global layer's best (as reported)."""
+        local = self.simultaneous if method == "simultaneous" else self.nested
+        best = (-1.0 if self.problem.maximized else 1.0) * self.global_answers[method].best.objective
+        difference = abs(local.objective - best)
+        return difference, difference / max(abs(best), 1e-300)
 
 
 def envelope_gradient(solution, name: str) -> float:
@@ -231,8 +180,22 @@ def sweep_optimum(
     return rows, at_text
 
 
-def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
-    """Decide `problem` simultaneously and nested (each on a fresh build), then sweep J*(p) with p fixed.
+def decide_globally(problem: OpenLoopCodesign, quick: bool, samples: int) -> dict:
+    """method -> `mpc.global_search.GlobalResult` of both methods on fresh builds of `problem`, `samples` points."""
+    found = {}
+    for method in global_search.METHODS:
+        setup = problem.build(quick)
+        found[method] = global_search.codesign(
+            setup.problem, setup.transcription, method=method, samples=samples, **dict(setup.solve_options)
+        )
+    return found
+
+
+def solve(
+    problem: OpenLoopCodesign, quick: bool = False, samples: int = global_search.DEFAULT_SAMPLES
+) -> CodesignResult:
+    """Decide `problem` simultaneously and nested (each on a fresh build), then sweep J*(p) with p fixed, then
+    both methods under the global layer (`mpc.global_search.codesign` with `samples` sweep points; 0: not).
 
     quick : coarser meshes. The problem must choose exactly its `parameter` (ValueError otherwise).
     """
@@ -248,7 +211,8 @@ def solve(problem: OpenLoopCodesign, quick: bool = False) -> CodesignResult:
     nested, inner = decide_nested(problem, fresh, sign)
     rows, at_text = sweep_optimum(problem, fresh, inner, sign)
     reference = problem.reference() if problem.reference else None
-    return CodesignResult(problem, setup, simultaneous, nested, rows, reference, at_text)
+    found = decide_globally(problem, quick, samples) if samples else {}
+    return CodesignResult(problem, setup, simultaneous, nested, rows, reference, at_text, found)
 
 
 # ---------------------------------------------------------------------------- report
@@ -272,6 +236,12 @@ re-simulated with CVODES from the optimized state on every interval, largest sta
 (SI units). *dJ*/dp* is the envelope derivative −λ_p of the problem with p fixed: at a bound it is
 what the bound costs, per unit of the parameter. The sweep tables give J*(p) with p fixed, and the
 text's value of the parameter is compared with the co-designed one.
+
+**Global layer** (`mpc.global_search.codesign`): each method is also run over a coarse sweep of the
+parameter (a grid over its range, each point solved with the parameter fixed from the same start),
+refined from the sweep's best local minima; the answers closer than 2 % of the range are one optimum.
+Each section lists every distinct local optimum found and how far the method's plain local answer is
+from the best; "converged" there means converged at the best of them.
 """
 
 
@@ -344,6 +314,7 @@ def section(result: CodesignResult) -> str:
             f"objective {_number(ref['objective'])}.",
             "",
         ]
+    lines += global_lines(result)
     if result.sweep:
         sweep_rows = [
             {
@@ -370,6 +341,48 @@ def section(result: CodesignResult) -> str:
             ),
         ]
     return "\n".join(lines)
+
+
+def global_lines(result: CodesignResult) -> list[str]:
+    """The global layer's paragraph and table: its sweep, every distinct local optimum, the gap it closes."""
+    if not result.global_answers:
+        return []
+    p, sign = result.problem, -1.0 if result.problem.maximized else 1.0
+    lines = []
+    for method, found in result.global_answers.items():
+        best = sign * found.best.objective
+        difference, relative = result.global_gap(method)
+        optima = f"{len(found.optima)} distinct local optim{'um' if len(found.optima) == 1 else 'a'}"
+        rows = [
+            {
+                "p": f"{_number(o.params[p.parameter])} {p.unit}",
+                "J": _number(sign * o.objective),
+                "start": f"{_number(o.start[p.parameter])} {p.unit}",
+                "ok": "yes" if o.success else "no",
+                "status": o.status,
+            }
+            for o in found.optima
+        ]
+        lines += [
+            f"Global layer over the {method} method ({found.design}, each from the same start; "
+            f"{found.wall_time:.2f} s): {optima}, "
+            f"the best {p.parameter} = {_number(found.best.params[p.parameter])} {p.unit}, objective {_number(best)} "
+            f"({'converged' if found.converged else 'not converged'}; chosen as the {found.how}). The plain "
+            f"{method} answer is {_number(difference, 4)} ({100 * relative:.3g} %) "
+            + ("from it: already the global one." if relative < 1e-4 else "worse."),
+            "",
+            markdown_table(
+                rows,
+                [
+                    ("p", p.parameter, str),
+                    ("J", "objective", str),
+                    ("start", "refined from", str),
+                    ("ok", "converged", str),
+                    ("status", "status", str),
+                ],
+            ),
+        ]
+    return lines
 
 
 def _where(result: CodesignResult) -> str:
@@ -406,6 +419,8 @@ def report(results: list[CodesignResult], command: str, machine: str = "") -> st
             "J": f"{_number(r.simultaneous.objective)} / {_number(r.nested.objective)}",
             "converged": f"{'yes' if r.simultaneous.success else 'no'} / {'yes' if r.nested.success else 'no'}",
             "wall": f"{r.simultaneous.wall_time:.2f} / {r.nested.wall_time:.2f}",
+            "optima": " / ".join(str(len(g.optima)) for g in r.global_answers.values()) or "—",
+            "gap": " / ".join(f"{100 * r.global_gap(m)[1]:.3g} %" for m in r.global_answers) or "—",
         }
         for r in results
     ]
@@ -418,6 +433,8 @@ def report(results: list[CodesignResult], command: str, machine: str = "") -> st
         ("J", "objective sim / nested", str),
         ("converged", "converged sim / nested", str),
         ("wall", "wall time sim / nested (s)", str),
+        ("optima", "local optima found sim / nested", str),
+        ("gap", "local answer's gap to the global sim / nested", str),
     ]
     parts = [HEADER.format(command=command, machine=machine or "timings of one run"), markdown_table(summary, columns)]
     parts += [section(r) for r in results]
@@ -425,40 +442,63 @@ def report(results: list[CodesignResult], command: str, machine: str = "") -> st
 
 
 def main(argv=None) -> int:
-    """The command line: decide the problems (all, or --only KEY ...), print each answer, write the report.
+    """The command line: decide the problems (all, or --only KEY ...), print each answer, give the report.
 
-    Returns 0 when every problem converged both ways, 1 otherwise; an unknown key is a usage error.
+    The report goes to stdout, to --out PATH, or with --write-docs into docs/codesign_open_loop.md (the
+    committed one is never overwritten by default); progress goes to stderr. Returns 0 when every problem
+    converged both ways (and under the global layer), 1 otherwise; an unknown key is a usage error.
     """
     parser = argparse.ArgumentParser(prog="python -m studies.codesign_open_loop", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=DOC, help=f"Markdown file to write (default {DOC})")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--out", type=Path, help="Markdown file to write (default: the report on stdout)")
+    where.add_argument("--write-docs", action="store_true", help=f"write the report into {DOC}")
     parser.add_argument("--quick", action="store_true", help="coarser meshes (seconds instead of a minute)")
     parser.add_argument("--only", nargs="+", metavar="KEY", help="run only these problems")
+    parser.add_argument(
+        "--samples",
+        type=int,
+        default=global_search.DEFAULT_SAMPLES,
+        help=f"the global layer's sweep points per parameter (default {global_search.DEFAULT_SAMPLES}; 0: none)",
+    )
     args = parser.parse_args(argv)
     found = {p.key: p for p in problems()}
     unknown = [key for key in args.only or () if key not in found]
     if unknown:
         parser.error(f"unknown problem {unknown[0]!r}; problems: {', '.join(found)}")
-    files.check_writable(args.out.parent)
+    if args.samples and args.samples < 2:
+        parser.error(f"--samples must be 0 or at least 2, got {args.samples}")
+    out = DOC if args.write_docs else args.out
+    if out is not None:
+        files.check_writable(out.parent)
     results = []
     for i, key in enumerate(args.only or list(found), 1):
-        print(f"[{i}/{len(args.only or found)}] {key} ...", end=" ", flush=True)
-        result = solve(found[key], args.quick)
+        print(f"[{i}/{len(args.only or found)}] {key} ...", end=" ", flush=True, file=sys.stderr)
+        result = solve(found[key], args.quick, args.samples)
         results.append(result)
         print(
             f"simultaneous {_number(result.simultaneous.parameter)}, nested {_number(result.nested.parameter)} "
             f"{found[key].unit} ({result.simultaneous.wall_time:.1f} s / {result.nested.wall_time:.1f} s)",
             flush=True,
+            file=sys.stderr,
         )
     command = (
         "python -m studies.codesign_open_loop"
         + (" --quick" if args.quick else "")
         + ("" if args.only is None else " --only " + " ".join(args.only))
+        + ("" if args.samples == global_search.DEFAULT_SAMPLES else f" --samples {args.samples}")
     )
     total = sum(r.simultaneous.wall_time + r.nested.wall_time for r in results)
-    text = report(results, command, f"{len(results)} problems, {total:.0f} s of solves in all")
-    files.write_text(args.out, text)
-    print(f"wrote {args.out}")
-    return 0 if all(r.simultaneous.success and r.nested.success for r in results) else 1
+    layer = sum(g.wall_time for r in results for g in r.global_answers.values())
+    text = report(
+        results, command, f"{len(results)} problems, {total:.0f} s of local solves and {layer:.0f} s of global layer"
+    )
+    if out is None:
+        sys.stdout.write(text + "\n")
+    else:
+        files.write_text(out, text)
+        print(f"wrote {out}", file=sys.stderr)
+    converged = all(r.simultaneous.success and r.nested.success for r in results)
+    return 0 if converged and all(g.converged for r in results for g in r.global_answers.values()) else 1
 
 
 if __name__ == "__main__":

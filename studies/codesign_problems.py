@@ -10,12 +10,17 @@ collects them is `studies.codesign_report`):
   the gains, the nested one bisects on the limit with each limit decided by a converged feasibility
   search, the simultaneous one decides the limit as a gain;
 - a plant parameter with the controller (`codesign_case`): the crane's cable length and the satellite's
-  panel stiffness, by `designs.codesign.codesign`.
+  panel stiffness, by `designs.codesign.codesign`;
+- the open-loop problems of a user's plant, the catalog's spring and mass (no case study), which
+  `studies.codesign_open_loop` decides with the cases' own: the largest displacement in a fixed time
+  (`SPRING_MASS_PROBLEM`) and a minimum-energy transfer priced by the stiffness, whose J*(k) has a local
+  minimum below each resonance (`SPRING_TRANSFER_PROBLEM`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -33,8 +38,13 @@ from designs.codesign import (
 )
 from designs.pid import PID, max_equilibrium_input
 from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup, checked_options, tune
+from models import catalog, deferred
+from mpc import Collocation, OptimalControlProblem
 
 from .case import CaseStudy
+from .trajectories import OpenLoopCodesign, TrajectorySetup
+
+optimize = deferred.module("scipy.optimize")
 
 log = logging.getLogger(__name__)
 #: How the plant-parameter problems are solved (crane, satellite; `codesign_case`): compiled, IPOPT on the
@@ -543,3 +553,147 @@ def codesign_case(
         f"plant-only objective of the sequential method: the plant's price alone, minimized over [{low:g}, {high:g}]"
     )
     return result
+
+
+# ---------------------------------------------------------------------------- the spring-mass
+#: The mass (kg, the plant's, `models.catalog.spring_mass`), the fixed final time (s) and the stiffness range (N/m).
+SPRING_MASS = next(param.value for param in catalog.spring_mass.params if param.name == "m")
+SPRING_TIME, SPRING_RANGE = 2.0, (0.1, 2.0)
+
+
+def spring_mass_plant() -> models.Plant:
+    """m s'' = −k s + u, |u| <= 1 N, m = 1 kg; k (N/m) to be chosen (declared in `models.catalog`)."""
+    return models.Plant(catalog.spring_mass)
+
+
+def spring_mass(quick: bool) -> TrajectorySetup:
+    """Maximize s(T) at T = 2 s from rest, with s'(T) = 0 and |u| <= 1, choosing k in [0.1, 2] N/m."""
+    ocp = OptimalControlProblem(spring_mass_plant(), SPRING_TIME)
+    ocp.choose("k", *SPRING_RANGE)
+    ocp.maximize(ocp.at_end(ocp.x.s))
+    ocp.subject_to(ocp.at_start(ocp.state) == 0)
+    ocp.subject_to(ocp.at_end(ocp.x.ds) == 0)
+    return TrajectorySetup(
+        ocp,
+        Collocation(intervals=40 if quick else 100),
+        {},
+        "s(T) (m), maximized",
+        f"m s'' = −k s + u, m = {SPRING_MASS:g} kg, from rest; maximize the displacement s(T) at T = "
+        f"{SPRING_TIME:g} s with s'(T) = 0 and |u| ≤ 1 N, choosing the stiffness k in [{SPRING_RANGE[0]:g}, "
+        f"{SPRING_RANGE[1]:g}] N/m and the force history together.",
+    )
+
+
+def spring_mass_semi_analytic() -> dict:
+    """One-switch bang-bang (Pontryagin; derived in tests/mpc/test_ocp_codesign.py):
+
+    s*(k) = [2 √(1 − sin²θ / 4) − 1 − cos θ] / k with θ = √(k/m) T, maximized over k by a bounded scalar search.
+    Returns {"parameter": k (N/m), "objective": s*(k) (m), "how": text}.
+    """
+
+    def best(k):
+        """s*(k) (m), the largest displacement with the stiffness k (N/m) fixed."""
+        theta = math.sqrt(k / SPRING_MASS) * SPRING_TIME
+        return (2 * math.sqrt(1 - math.sin(theta) ** 2 / 4) - 1 - math.cos(theta)) / k
+
+    found = optimize.minimize_scalar(
+        lambda k: -best(k), bounds=SPRING_RANGE, method="bounded", options={"xatol": 1e-12}
+    )
+    return {
+        "parameter": float(found.x),
+        "objective": float(-found.fun),
+        "how": "one-switch bang-bang, s*(k) in closed form, maximized over k",
+    }
+
+
+SPRING_MASS_PROBLEM = OpenLoopCodesign(
+    "spring_mass",
+    "spring-mass: stiffness and force history (issue 13)",
+    "spring and mass (user-declared)",
+    spring_mass,
+    "k",
+    "N/m",
+    maximized=True,
+    sweep=(0.25, 0.5, 1.0, 1.5, 2.0),
+    reference=spring_mass_semi_analytic,
+)
+
+
+# ---------------------------------------------------------------------------- the spring's transfer
+#: The minimum-energy transfer: final time (s), half the distance (m, from −d to +d at rest), the stiffness's
+#: price (J per N/m) and its range (N/m), wide enough for three resonances (ωT = π, 3π, 5π).
+TRANSFER_TIME, TRANSFER_DISTANCE, STIFFNESS_PRICE, TRANSFER_RANGE = 2.0, 0.05, 1e-3, (0.5, 70.0)
+#: The transfer's starting stiffness (N/m), from which both local methods stop on the second local optimum.
+TRANSFER_GUESS = 20.0
+
+
+def spring_transfer_ocp(guess: float | None = TRANSFER_GUESS) -> OptimalControlProblem:
+    """Move the spring's mass from rest at −d to rest at +d in T with the least ½∫u² dt + c·k, choosing k.
+
+    A function of this module (picklable by name), so that `mpc.global_search.codesign` may send it to other
+    processes. guess : the starting stiffness (N/m; None: the plant's).
+    """
+    ocp = OptimalControlProblem(spring_mass_plant(), TRANSFER_TIME)
+    k = ocp.choose("k", *TRANSFER_RANGE, guess=guess)
+    ocp.minimize(ocp.integral(ocp.u.u**2 / 2) + STIFFNESS_PRICE * k)
+    ocp.subject_to(ocp.at_start(ocp.state) == [-TRANSFER_DISTANCE, 0])
+    ocp.subject_to(ocp.at_end(ocp.state) == [TRANSFER_DISTANCE, 0])
+    return ocp
+
+
+def spring_transfer(quick: bool) -> TrajectorySetup:
+    """`spring_transfer_ocp` on 40 (quick) or 80 collocation intervals."""
+    d, (low, high) = TRANSFER_DISTANCE, TRANSFER_RANGE
+    return TrajectorySetup(
+        spring_transfer_ocp(),
+        Collocation(intervals=40 if quick else 80),
+        {},
+        "½∫u² dt + c k (J), minimized",
+        f"m s'' = −k s + u, m = {SPRING_MASS:g} kg; move from rest at s = −{d:g} m to rest at +{d:g} m in "
+        f"T = {TRANSFER_TIME:g} s with the least energy ½∫u² dt plus the stiffness's price {STIFFNESS_PRICE:g} k, "
+        f"choosing k in [{low:g}, {high:g}] N/m (started at {TRANSFER_GUESS:g} N/m). The free motion makes the "
+        "transfer at no energy where ωT is an odd multiple of π, so J*(k) has a local minimum below each such "
+        "stiffness in the range.",
+    )
+
+
+def spring_transfer_reference() -> dict:
+    """The global optimum of J*(k) = ½ rᵀ W(T)⁻¹ r + c k (W the controllability Gramian, by Van Loan's
+    exponential; r = x_T − e^{AT} x_0): a scan of 2001 stiffnesses, its best local minimum polished by a
+    bounded Brent search. Returns {"parameter": k (N/m), "objective": J (J), "how": text, "minima": [(k, J)]}."""
+    linalg = deferred.module("scipy.linalg")
+
+    def optimum(k):
+        A = np.array([[0.0, 1.0], [-k / SPRING_MASS, 0.0]])
+        B = np.array([[0.0], [1.0 / SPRING_MASS]])
+        van_loan = np.zeros((4, 4))
+        van_loan[:2, :2], van_loan[:2, 2:], van_loan[2:, 2:] = -A, B @ B.T, A.T
+        E = linalg.expm(van_loan * TRANSFER_TIME)
+        r = np.array([TRANSFER_DISTANCE, 0.0]) - linalg.expm(A * TRANSFER_TIME) @ np.array([-TRANSFER_DISTANCE, 0.0])
+        return 0.5 * float(r @ np.linalg.solve(E[2:, 2:].T @ E[:2, 2:], r)) + STIFFNESS_PRICE * k
+
+    ks = np.linspace(*TRANSFER_RANGE, 2001)
+    js = np.array([optimum(k) for k in ks])
+    minima = []
+    for i in np.flatnonzero((js[1:-1] < js[:-2]) & (js[1:-1] < js[2:])) + 1:
+        found = optimize.minimize_scalar(optimum, bounds=(ks[i - 1], ks[i + 1]), method="bounded")
+        minima.append((float(found.x), float(found.fun)))
+    minima.sort(key=lambda m: m[1])
+    return {
+        "parameter": minima[0][0],
+        "objective": minima[0][1],
+        "how": f"the controllability Gramian's minimum energy, scanned: {len(minima)} local minima, the best",
+        "minima": minima,
+    }
+
+
+SPRING_TRANSFER_PROBLEM = OpenLoopCodesign(
+    "spring_transfer",
+    "spring-mass: stiffness for a minimum-energy transfer (several local optima)",
+    "spring and mass (user-declared)",
+    spring_transfer,
+    "k",
+    "N/m",
+    sweep=(2.0, 10.0, 22.0, 40.0, 61.0),
+    reference=spring_transfer_reference,
+)

@@ -25,9 +25,10 @@ sizing for the arm, UUV and ball on beam (`ActuatorSizing` + `actuator_sizing`),
 the crane's cable length and the satellite's panel stiffness (`codesign_case`).
 This module collects them from the case registry (`problems`).
 
-``python -m studies.codesign_report [--out FILE] [--only KEY ...]`` runs them
+``python -m studies.codesign_report [--out FILE | --write-docs] [--only KEY ...]`` runs them
 (an hour or more on a shared core, most of it the nested method on the crane
-and the satellite) and writes the Markdown report docs/codesign.md. The
+and the satellite) and prints the Markdown report, or writes it to FILE, or with
+--write-docs into docs/codesign.md and its records (never by default). The
 document is built from sections (`SECTIONS`: header, table, notes), so other
 co-design reports can be appended to it.
 """
@@ -246,10 +247,44 @@ def notes(results: list[CaseResult]) -> str:
     return "".join(parts)
 
 
+#: What the global layer says about each case (a measured statement; see `global_layer`).
+GLOBAL_LAYER = """
+## Local optima: the global layer
+
+Every method above is local: the nested method's bounded Brent search and the simultaneous IPOPT solve
+stop on the first local optimum of the plant parameter. `designs.codesign_global.codesign_globally` (over
+`mpc.global_search.search`) sweeps the parameter first (a grid of `samples` points, default 12, each a
+converged tuning from the block's own gains) and refines the sweep's best local minima with the nested or
+the simultaneous method; its answer lists every distinct local optimum (parameter, objective, status),
+and says converged only when the best of them converged. It is tested on a first-order loop with four
+known local optima (tests/designs/test_codesign_global.py).
+
+The closed-loop cases above have not been re-run under it: their records keep the local answers of
+each method, which are not claimed global. Its cost there is estimable from the records: a sweep of 12
+tunings plus about 15 per refinement against the nested method's 13 (satellite) and 16 (crane) inner
+tunings, so about three to four times the nested method's time per refined basin. The plant-parameter
+answers agree across nested, simultaneous and the start from the sequential answer (satellite
+k = 0.9086 N m/rad by all three; crane ℓ = 5 m, the range's end, by all three), which is evidence but not
+proof of a single basin; the actuator sizings are bisections on a monotone feasibility, to which the
+sweep adds nothing.
+
+The open-loop problems (docs/codesign_open_loop.md, `python -m studies.codesign_open_loop`) run under
+the layer by default; for each, local optima found by the sweep (simultaneous / nested) and the plain
+local answer's gap to the best:
+
+| problem | local optima | plain answer's gap to the best | plain answer |
+|---|---|---|---|
+| spring-mass, largest displacement | 1 / 1 | < 1e-5 relative | already global |
+| spring-mass, minimum-energy transfer (from k = 20 N/m) | 3 / 3 | 871 % / 871 % (k = 21.81, not 2.067 N/m) | local |
+| UUV roll, centre-of-gravity offset | 1 / 1 | < 1e-6 relative | already global |
+| crane, cable length | 1 / 1 | < 1e-7 relative | already global (the range's end) |
+"""
+
 #: The document's sections in order: each a callable (results, command) -> Markdown.
 SECTIONS = (
     lambda results, command: HEADER.format(command=command, weight=SIZING_COST_WEIGHT, tie_break=SIZING_TIE_BREAK),
     lambda results, command: "\n" + table(results) + "\n",
+    lambda results, command: GLOBAL_LAYER + "\n",
     lambda results, command: notes(results),
 )
 
@@ -268,13 +303,15 @@ def main(argv=None) -> int:
     1 unless every problem converged."""
     found = problems()
     parser = argparse.ArgumentParser(prog="python -m studies.codesign_report", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=DOC, help=f"Markdown file to write (default {DOC})")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--out", type=Path, help="Markdown file to write (default: the report on stdout)")
+    where.add_argument("--write-docs", action="store_true", help=f"write the report and records into {DOC}")
     parser.add_argument("--only", nargs="+", choices=list(found), help="run only these problems")
     parser.add_argument(
         "--records",
         type=Path,
         help="folder of each problem's record, KEY.json, written as soon as the problem is solved "
-        "(default: beside the document, its name without .md: docs/codesign/)",
+        "(default: beside the document, its name without .md; with neither --out nor --write-docs none is written)",
     )
     parser.add_argument(
         "--reuse", action="store_true", help="read the problems that have a record instead of solving them again"
@@ -288,12 +325,13 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
     keys = args.only or list(found)
-    records = args.records or args.out.with_suffix("")
+    out = DOC if args.write_docs else args.out
+    records = args.records or (out.with_suffix("") if out is not None else None)
     command = "python -m studies.codesign_report" + ("" if args.only is None else " --only " + " ".join(keys))
     results = []
     for i, key in enumerate(keys, 1):
-        saved = records / f"{key}.json"
-        earlier = json.loads(saved.read_text()) if saved.exists() else None
+        saved = records / f"{key}.json" if records is not None else None
+        earlier = json.loads(saved.read_text()) if saved is not None and saved.exists() else None
         if args.reuse and earlier is not None:
             results.append(from_record(earlier))
             print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
@@ -306,12 +344,16 @@ def main(argv=None) -> int:
         values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
         print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
         record = to_record(r, run, earlier if args.methods else None)
-        files.write_json(saved, record)
+        if saved is not None:
+            files.write_json(saved, record)
         results.append(from_record(record) if args.methods else r)
     text = report(results, command + (" --reuse" if args.reuse else ""))
-    print(table(results))
-    files.write_text(args.out, text)
-    print(f"wrote {args.out}")
+    if out is None:
+        print(text)
+    else:
+        print(table(results))
+        files.write_text(out, text)
+        print(f"wrote {out}")
     return 0 if all(r.converged for r in results) else 1
 
 

@@ -276,6 +276,17 @@ def test_table_and_cli_write_the_document_atomically(tmp_path, monkeypatch, caps
     assert extra.endswith("## Open-loop co-design\n") and extra.startswith(cr.report([result], "cmd"))
 
 
+def test_by_default_the_report_goes_to_stdout_and_nothing_is_written(tmp_path, monkeypatch, capsys):
+    result = _fake_result()
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda: result})
+    before = {p: p.stat().st_mtime_ns for p in [cr.DOC, *cr.DOC.with_suffix("").iterdir()]}
+    assert cr.main([]) == 0
+    printed = capsys.readouterr().out
+    assert "# Co-design" in printed and "## Local optima: the global layer" in printed
+    assert {p: p.stat().st_mtime_ns for p in [cr.DOC, *cr.DOC.with_suffix("").iterdir()]} == before
+    assert not (cr.DOC.with_suffix("") / "fake.json").exists()
+
+
 def test_records_rebuild_the_document_without_solving(tmp_path, monkeypatch):
     result = _fake_result()
     result.designs["simultaneous"].measured["rise_time_s"] = float("inf")  # never rose: kept through JSON
