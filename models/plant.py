@@ -101,7 +101,7 @@ def declare(
         first-order plant.
     params : sequence of Param
     input_limit : float or sequence of float
-        Symmetric actuator limit |u_i| <= input_limit[i] on the total input.
+        Symmetric actuator limit ``|u_i|`` <= input_limit[i] on the total input.
     operating_point : callable p -> dict, optional
         The standard equilibrium's fixed coordinates (or first-order states,
         or inputs) as a function of the parameter namespace (for example the
