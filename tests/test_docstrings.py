@@ -83,9 +83,6 @@ UNDOCUMENTED: dict[str, str] = {
     "mpc.resimulate": "to document: plant, params, method, rtol, atol",
     "mpc.solve_nested": "to document: transcription, max_outer_iterations",
     "mpc.verify_trajectory": "to document: plant, params, rtol, atol",
-    "studies.CaseStudy.known_plant": "to document: plant",
-    "studies.run": "to document: name",
-    "studies.run_study": "to document: threads, jit",
 }
 
 
