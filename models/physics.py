@@ -28,7 +28,10 @@ if TYPE_CHECKING:
 class Physics:
     """What a declaration returns, all CasADi SX (or numbers).
 
-    kinetic : T(q, q̇, p) in J;  potential : V(q, s, p) in J
+    Attributes
+    ----------
+    kinetic : T(q, q̇, p) in J
+    potential : V(q, s, p) in J
     forces : generalized forces Q(q, q̇, s, u, p), one per coordinate
     outputs : mapping output name -> expression of (q, q̇, s, p); not of the inputs
     rates : mapping first-order state name -> its derivative ṡ = g(q, q̇, s, u, p),

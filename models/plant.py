@@ -101,7 +101,7 @@ def declare(
         first-order plant.
     params : sequence of Param
     input_limit : float or sequence of float
-        Symmetric actuator limit |u_i| <= input_limit[i] on the total input.
+        Symmetric actuator limit ``|u_i|`` <= input_limit[i] on the total input.
     operating_point : callable p -> dict, optional
         The standard equilibrium's fixed coordinates (or first-order states,
         or inputs) as a function of the parameter namespace (for example the
@@ -436,7 +436,8 @@ class Plant:
         return Plant(self.declaration, self.params | overrides, self.input_limit)
 
     def with_input_limit(self, input_limit) -> Plant:
-        """A copy with another actuator limit (for example the UUV's 250 N m variant)."""
+        """A copy with another actuator limit `input_limit` (a number, or one per input, in the inputs' SI units;
+        for example the UUV's 250 N m variant)."""
         return Plant(self.declaration, self.params, input_limit)
 
     def param_vector(self, params=None) -> np.ndarray:
@@ -671,7 +672,8 @@ class Plant:
 
 
 def get(name: str, input_limit=None, **overrides) -> Plant:
-    """The registered plant `name` with parameter overrides, e.g. ``get("arm", m=0.6)``."""
+    """The registered plant `name` with parameter overrides, e.g. ``get("arm", m=0.6)``, and the actuator limit
+    `input_limit` (default the declaration's)."""
     return Plant(declaration(name), overrides, input_limit)
 
 

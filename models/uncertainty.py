@@ -37,6 +37,8 @@ def sample_params(plant: Plant, n: int, rel: float = 0.05, seed: int = 0, names=
 
     Parameters
     ----------
+    plant : the plant whose parameters are sampled (its nominal values are the centres)
+    n : number of samples;  rel : relative half-width of the uniform spread
     names : parameters to perturb; default the case study's uncertain ones
     seed : integer >= 0, seed of numpy's default generator; same seed, same samples
 

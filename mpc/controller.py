@@ -404,7 +404,7 @@ class NonlinearMPC(_PlanFollower):
     substeps : RK4 steps per sample in the prediction model
     iteration : "rti" (one SQP iteration per sample, the default) or "sqp" (iterated to convergence)
     max_iterations : SQP iterations where iterating to convergence
-    tolerance : the SQP's convergence test, max |Δw| (inputs scaled by their limit)
+    tolerance : the SQP's convergence test, max ``|Δw|`` (inputs scaled by their limit)
     compiled : compile the iteration to machine code (`models.compile`); False runs CasADi's virtual machine
     input_noise_std, disturbance_step_std, measurement_std : estimator tuning, as `LinearMPC`
     """

@@ -88,7 +88,7 @@ class SoftBound:
         combination : mapping state name -> coefficient
         lower, upper : bounds (±inf allowed, not both)
         scale : size of a meaningful violation in the bound's unit (default:
-            the half-width of the bound, or |finite bound| when one-sided, or 1).
+            the half-width of the bound, or ``|finite bound|`` when one-sided, or 1).
             The weights are given per violation of one `scale`:
             w = linear_weight / scale, ρ = quadratic_weight / scale².
         """
@@ -210,7 +210,7 @@ class MPCProblem:
     input_weight : R, scalar, (nu,) or (nu, nu), positive definite
     horizon : N >= 1 samples
     input_lower, input_upper : (nu,) hard bounds on ũ (the actuator limit minus ue)
-    rate_limit : (nu,) bound on |ũ_k − ũ_{k-1}| per sample, or None
+    rate_limit : (nu,) bound on ``|ũ_k − ũ_{k-1}|`` per sample, or None
     soft_rows : (ns, nx) G;  soft_lower, soft_upper : (ns,) bounds on G x̃ (±inf allowed)
     soft_linear_weight, soft_quadratic_weight : (ns,) w >= 0 and ρ > 0
     terminal_weight : (nx, nx) P, default the Riccati solution for (A, B, Q, R)
@@ -385,8 +385,8 @@ def problem_from_model(
     Parameters
     ----------
     model : discrete LinearModel; its operating point (xe, ue) defines the deviations
-    input_limit : (nu,) symmetric limit |u| <= limit on the TOTAL input u = ue + ũ
-    rate_limit : (nu,) bound on |u_k − u_{k-1}| per sample, or None
+    input_limit : (nu,) symmetric limit ``|u|`` <= limit on the TOTAL input u = ue + ũ
+    rate_limit : (nu,) bound on ``|u_k − u_{k-1}|`` per sample, or None
     soft_bounds : sequence of SoftBound on the absolute state
 
     Raises

@@ -109,11 +109,11 @@ class NonlinearMPCProblem:
     horizon : N >= 1
     state_weight, input_weight : Q (nx, nx) and R (nu, nu) as in `mpc.linear`
     soft_bounds : sequence of SoftBound on the absolute state
-    rate_limit : (nu,) bound on |u_k − u_{k−1}| per sample, or None
+    rate_limit : (nu,) bound on ``|u_k − u_{k−1}|`` per sample, or None
     substeps : RK4 steps per shooting interval
     iteration : "rti" (one SQP iteration per sample) or "sqp" (iterate to convergence)
     max_iterations : SQP iteration limit where iterating to convergence (hitting it is a failure)
-    tolerance : convergence test of the SQP, max |Δw| in scaled units (inputs / limit)
+    tolerance : convergence test of the SQP, max ``|Δw|`` in scaled units (inputs / limit)
     compiled : compile the iteration to machine code (`models.compile`, cached); False runs
         CasADi's virtual machine
 

@@ -165,7 +165,7 @@ class OptimalControlProblem:
     final_time : float (s) or FreeTime
         The horizon T: fixed, or a decision in a range.
     actuator_limit : bool
-        Apply the plant's |u_i| <= input_limit[i] as bounds on the input (default).
+        Apply the plant's ``|u_i|`` <= input_limit[i] as bounds on the input (default).
 
     Attributes
     ----------

@@ -49,7 +49,9 @@ def resimulate(
 class Verification:
     """How well the optimal input reproduces the optimized states on the nonlinear plant.
 
-    max_defect : largest |x_sim(t_k) - x_k| over mesh points and states (SI units of that state),
+    Attributes
+    ----------
+    max_defect : largest ``|x_sim(t_k) - x_k|`` over mesh points and states (SI units of that state),
         simulating the whole horizon from x(0); `state` and `time` say where.
     max_interval_defect : the same with the simulation restarted from x_k on every interval;
         `interval_state` and `interval_time` say where.

@@ -82,6 +82,8 @@ class _Meshed:
 class Collocation(_Meshed):
     """Direct collocation on N intervals with `degree` points per interval (1-5).
 
+    Attributes
+    ----------
     points : "radau" (stiffly accurate, includes the interval's end) or "legendre" (Gauss)
     mesh : optional N + 1 increasing fractions of T from 0 to 1 (default uniform);
         when given, `intervals` is taken from it.
@@ -714,8 +716,10 @@ class Transcription:
     def parameter_values(self, x0=None, params=None, plant_params=None) -> np.ndarray:
         """The NLP parameter vector P from defaults and overrides.
 
+        Parameters
+        ----------
         x0 : the initial state, for a problem with `start_from`
-        params : name -> value of `OptimalControlProblem.parameter`s
+        params : name -> value of the parameters declared by `OptimalControlProblem.parameter`
         plant_params : name -> value of fixed plant parameters (default: the plant's)
         """
         ocp = self.ocp

@@ -73,6 +73,8 @@ def run_study(
         ``module:function`` strings naming them (see `studies.providers`)
     controllers : extra {label: controller} to compare
     strict : raise on provider or controller errors instead of noting them
+    threads : threads of the batched Monte Carlo map (integer >= 1)
+    jit : True, False or "auto" (compile the Monte Carlo map when it is long enough to pay off)
     progress : progress(done, total, text) after each simulation
     run_id : the id recorded in out/<plant>/run.json (default a new one)
     executor : a `dask.distributed.Client` (or a `studies.distributed` executor) to run the Monte Carlo
@@ -122,8 +124,8 @@ def solve_trajectories(result: StudyResult) -> None:
 def run(name: str | CaseStudy, **kwargs) -> pd.DataFrame:
     """Run one study and return its table: one row per (controller, scenario).
 
-    Takes the keyword arguments of `run_study`. Every row is a simulation of
-    the nonlinear plant; ``table.attrs["notes"]`` lists skipped providers and
+    `name` is a registered case study's name or a `CaseStudy`; takes the keyword arguments of `run_study`.
+    Every row is a simulation of the nonlinear plant; ``table.attrs["notes"]`` lists skipped providers and
     failures, ``table.attrs["timing"]`` the seconds spent.
     """
     result = run_study(name, **kwargs)

@@ -258,7 +258,8 @@ class CaseStudy:
         return chosen.with_state_bounds(self.state_bounds(params))
 
     def known_plant(self, plant: models.Plant | None = None) -> models.Plant:
-        """The model the controllers are designed from: the uncertain parameters scaled by 1 + known_rel."""
+        """The model the controllers are designed from: the uncertain parameters of `plant` (default the
+        case's plant with the text's parameters) scaled by 1 + known_rel."""
         plant = models.get(self.plant) if plant is None else plant
         return models.perturbed(plant, self.known_rel, 1.0) if self.known_rel else plant
 

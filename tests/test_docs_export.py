@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import models
 from models import compile as mc
@@ -61,3 +62,19 @@ def test_the_documented_example_exports_compiles_and_agrees_with_python(tmp_path
         np.testing.assert_allclose([float(row[0]), float(row[1])], commands, atol=1e-9, rtol=0)
         assert row[2] == "0"
     assert len(rows) == 3
+
+
+def test_the_documentation_site_builds_with_warnings_as_errors(tmp_path):
+    # The same command as .ci/run: the pages, the notebooks (executed once) and the API reference.
+    pytest.importorskip("sphinx")
+    pytest.importorskip("myst_nb")
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])))
+    command = [sys.executable, "-m", "sphinx", "-W", "-q", "-b", "html", "-d", str(tmp_path / "doctrees")]
+    done = subprocess.run(
+        [*command, str(root / "docs"), str(tmp_path / "html")], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    api = (tmp_path / "html" / "api.html").read_text(encoding="utf-8")
+    assert "simulate_closed_loop" in api and "NonlinearMPC" in api
+    assert (tmp_path / "html" / "notebooks" / "arm.html").is_file()

@@ -90,15 +90,14 @@ def test_each_package_ships_its_py_typed_marker(package):
 
 
 def test_the_packages_import_only_declared_distributions():
-    # Dask is optional (--workers, --scheduler) and imported lazily: the "dask" extra; the designer's
-    # web server (studies.designer) is the "designer" extra.
-    allowed = declared(["dask", "designer"])
+    # Bokeh (studies.designer) and Dask (--workers, --scheduler) are core dependencies: no extra needed.
+    allowed = declared()
     missing = {m: distributions(m) for m in third_party(imported_modules(PACKAGES)) if not distributions(m) & allowed}
     assert not missing, f"imported but not declared in [project] dependencies: {missing}"
 
 
 def test_the_tests_and_examples_import_only_declared_distributions():
-    allowed = declared(["dev", "dask", "designer"])
+    allowed = declared(["dev"])
     modules = third_party(imported_modules(["tests", "examples"])) - {
         "case_designs",
         "example_providers",
@@ -120,3 +119,11 @@ def test_the_page_templates_are_package_data():
     assert found and all(name.endswith(".html.j2") for name in found), found
     assert all(any(fnmatch(f"templates/{name}", pattern) for pattern in patterns) for name in found)
     assert all(templates.environment().get_template(name) for name in found)  # each one parses
+
+
+def test_the_old_extras_are_kept_as_empty_aliases():
+    # `pip install -e '.[designer]'` and `'.[dask]'` still resolve; what they installed is now core.
+    extras = PROJECT["project"]["optional-dependencies"]
+    assert extras["designer"] == [] and extras["dask"] == []
+    core = declared()
+    assert {"bokeh", "tornado", "dask", "distributed"} <= core, core

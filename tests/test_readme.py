@@ -1,4 +1,5 @@
-"""Every Python block of README.md runs on its own: each in a fresh interpreter, in an empty folder."""
+"""README.md stays short and starts with its two commands; every Python block of README.md and of
+docs/guide.md (where the README's long examples live) runs on its own, in a fresh interpreter and an empty folder."""
 
 import os
 import re
@@ -9,9 +10,29 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-BLOCKS = re.findall(r"```python\n(.*?)```", (REPO / "README.md").read_text(encoding="utf-8"), re.S)
+README = (REPO / "README.md").read_text(encoding="utf-8")
+#: The most characters README.md may hold: the rest goes to docs/.
+README_LIMIT = 6000
+BLOCKS = [
+    block
+    for page in ("README.md", "docs/guide.md")
+    for block in re.findall(r"```python\n(.*?)```", (REPO / page).read_text(encoding="utf-8"), re.S)
+]
 #: Blocks that run studies, Dask or tuning take a minute or more: they run with the slow tests.
 LONG = ("studies.run(", "tune(", "LocalCluster(")
+
+
+def test_the_readme_is_short_and_starts_with_its_two_commands():
+    assert len(README) <= README_LIMIT, len(README)
+    first, second = [line for line in README.splitlines() if line.strip()][:2]
+    assert first.startswith("Run the studies: `") and "pip install -e ." in first and "-m studies`" in first
+    assert second.startswith("Run the tests: `") and "-m pytest`" in second
+
+
+def test_the_readme_links_resolve():
+    for target in re.findall(r"\]\(([^)#]+)\)", README):
+        if not target.startswith(("http://", "https://")):
+            assert (REPO / target).exists(), target
 
 
 def test_the_readme_has_python_blocks():
