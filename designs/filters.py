@@ -29,7 +29,7 @@ from models.checks import positive
 
 from .analysis.polynomials import as_polynomials, tf
 from .discrete import saturate
-from .pid import coordinate_reader, equilibrium_feedforward, reference_feedforward
+from .pid import coordinate_reader, equilibrium_feedforward, numbers_repr, reference_feedforward
 
 if TYPE_CHECKING:
     import control
@@ -272,6 +272,10 @@ class TransferFunctionBlock(models.Block):
     def transfer_function(self) -> control.TransferFunction:
         """C(s) with the current gains."""
         return tf(self.gains["num"], self.gains["den"])
+
+    def __repr__(self) -> str:
+        fields = dict(self.gains) | {"Ts": self.sample_period, "limit": self.output_limit}
+        return numbers_repr("TransferFunctionBlock", {"coordinate": self.coordinate} | fields)
 
     def expr(self, xc, y, r, gains):
         """One sample: the prefiltered reference, C(z) on the error, the feedforward, saturation, anti-windup."""

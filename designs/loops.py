@@ -30,7 +30,7 @@ from models.linear import LinearModel, chop
 
 from .analysis.polynomials import as_polynomials, poly_add, poly_mul, polynomial, tf, zeros_at_origin
 from .filters import TustinSection, padded_coefficients
-from .pid import PID, PDDesign, pd_design, pd_saturation, second_order_coefficients
+from .pid import PID, PDDesign, numbers_repr, pd_design, pd_saturation, second_order_coefficients
 
 if TYPE_CHECKING:
     import control
@@ -530,6 +530,10 @@ class FilteredBlock(models.Block):
             measures=block.measures,
             name=name or f"F(s)·{block.name}",
         )
+
+    def __repr__(self) -> str:
+        filter_gains = {k: v for k, v in self.gains.items() if k.startswith("filter_")}
+        return f"FilteredBlock({self.block!r}, " + numbers_repr("F", filter_gains) + ")"
 
     def expr(self, xc, y, r, gains):
         """One sample: the block's step, then the filter section on its output."""

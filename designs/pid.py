@@ -317,6 +317,22 @@ def reference_feedforward(known: models.Plant, coordinate: str):
 ANTI_WINDUP = ("back_calculation", "integrate_while_slow", "none")
 
 
+def format_number(value) -> str:
+    """A gain as printed in a repr: 4 significant digits, one-element arrays as numbers, arrays as lists."""
+    if value is None:
+        return "None"
+    array = np.asarray(value, dtype=float)
+    if array.size == 1:
+        return f"{float(array.ravel()[0]):.4g}"
+    return "[" + ", ".join(f"{v:.4g}" for v in array.ravel()) + "]"
+
+
+def numbers_repr(kind: str, fields: dict) -> str:
+    """``kind(name=value, ...)`` with every value formatted by `format_number` (strings quoted)."""
+    parts = [f"{k}={v!r}" if isinstance(v, str) else f"{k}={format_number(v)}" for k, v in fields.items()]
+    return f"{kind}(" + ", ".join(parts) + ")"
+
+
 class PID(models.Block):
     """Discrete PID on one coordinate, at sample period Ts (the text's .11 controller).
 
@@ -396,6 +412,11 @@ class PID(models.Block):
             measures="outputs",
             name=name,
         )
+
+    def __repr__(self) -> str:
+        kind = "PID" if self.has_integrator else "PD"
+        fields = dict(self.gains) | {"sigma": self.sigma, "Ts": self.sample_period, "limit": self.output_limit}
+        return numbers_repr(kind, {"coordinate": self.coordinate} | fields)
 
     def expr(self, xc, y, r, gains):
         """One sample: the error, the dirty derivative, the integral and feedforward, saturation, anti-windup."""

@@ -53,6 +53,7 @@ import numpy as np
 
 import models
 from designs.discrete import back_calculation, integrate_while_slow, saturate, trapezoid
+from designs.pid import numbers_repr
 from designs.statespace import augment_disturbance, pole_mismatch, reference_steady_state
 
 __all__ = ["TrackingModel", "StateFeedback", "ObserverFeedback"]
@@ -173,6 +174,12 @@ class _TrackingBlock(models.Block):
         if self.has_integrator:
             gains["ki"] = _scalar(ki, f"{model.name}: ki")
         return gains
+
+    def __repr__(self) -> str:
+        fields = dict(self.gains) | {"Ts": self.sample_period, "limit": self.limit}
+        if isinstance(self, ObserverFeedback):
+            fields |= {"observer_gain": self.M, "measured": ", ".join(self.measured_outputs)}
+        return numbers_repr(type(self).__name__, {"name": self.name} | fields)
 
     @property
     def n_integrator_states(self) -> int:

@@ -253,6 +253,8 @@ def write_html(
     caption: str = "",
     max_frames: int = 300,
     verdicts: dict | None = None,
+    *,
+    scenario: str,
 ) -> Path:
     """A self-contained HTML page (inline SVG and script) animating the runs of several controllers.
 
@@ -262,6 +264,7 @@ def write_html(
     selected : the label shown first (default: the first)
     max_frames : frames kept per run (subsampled evenly, the last always kept)
     verdicts : label -> verdict text, shown in the picker and beside the title
+    scenario : what the runs show, the page's title after the plant's (the scenario's or the problem's words)
     """
     runs = dict(runs)
     if not runs:
@@ -280,9 +283,7 @@ def write_html(
     }
     for label, run in runs.items():
         data["runs"][label] = run_data(case, plant, run, max_frames)
-    page = templates.render(
-        "animation.html.j2", title=f"{plant.title}: the controllers on the text's step", caption=caption, data=data
-    )
+    page = templates.render("animation.html.j2", title=f"{plant.title}: {scenario}", caption=caption, data=data)
     return files.write_text(path, page)
 
 

@@ -421,6 +421,7 @@ def write_animation(result, folder: Path) -> tuple[dict, list]:
         text,
         max_frames=150 if quick else 300,
         verdicts=step_verdicts,
+        scenario="the controllers on the text's step",
     )
     return {"animation.gif": "animation.gif", "animation.html": "animation.html"}, []
 

@@ -260,7 +260,14 @@ def write_files(result: CaseTrajectories, folder: Path) -> dict:
                 dpi=64 if quick else 80,
             )
             animation.write_html(
-                folder / page, result.case, result.plant, {label: run}, label, caption, max_frames=300 if quick else 600
+                folder / page,
+                result.case,
+                result.plant,
+                {label: run},
+                label,
+                caption,
+                max_frames=300 if quick else 600,
+                scenario=label,
             )
             files |= {gif: gif, page: page}
     for key, tracked in result.tracking.items():

@@ -138,7 +138,9 @@ def test_cart_and_loads_are_drawn_where_the_simulation_put_them(name, browser, t
         )
         for label in ("LQR", "LQR fast")
     }
-    path = animation.write_html(tmp_path / "animation.html", case, plant, runs, "LQR", max_frames=60)
+    path = animation.write_html(
+        tmp_path / "animation.html", case, plant, runs, "LQR", max_frames=60, scenario="the step"
+    )
     data = page_data(path)
     browser.open(path.as_uri())
     p = plant.params

@@ -12,7 +12,9 @@
 The default suite solves each case once on its --quick meshes (a few seconds each).
 """
 
+import html
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -243,6 +245,10 @@ def test_write_leaves_the_tables_figures_and_animations(solved, tmp_path):
     text = (folder / "trajectories.md").read_text()
     assert f"{solution.final_time:.4g}" in text and "ZV-ZV" in text
     assert "not run with these trajectories" in text  # no study result was given
+    page = (folder / "trajectory_transfer_time.html").read_text()
+    title = re.search(r"<title>(.*)</title>", page).group(1)
+    problem_title = result.solved["transfer_time"].problem.title
+    assert title == html.escape(f"{result.plant.title}: {problem_title}") and "text's step" not in title
 
 
 def test_the_study_writes_its_trajectories_beside_its_table(arm_study):
