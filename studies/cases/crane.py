@@ -743,8 +743,9 @@ CASE = CaseStudy(
 )
 
 #: Physical state limits, checked on every run by models.state_limits.check_state_limits.
-STATE_LIMITS = (
+STATE_LIMITS = tuple(
     StateLimit(
-        "swing angle", "theta", -SWING_BOUND, SWING_BOUND, source="±0.2 rad, the co-design's swing bound (SWING_BOUND)"
-    ),
+        f"swing angle {k}", f"theta{k}", -SWING_BOUND, SWING_BOUND, source="±0.2 rad, the swing bound (SWING_BOUND)"
+    )
+    for k in (1, 2)
 )

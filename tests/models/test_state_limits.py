@@ -1,8 +1,11 @@
 """check_state_limits: a run that leaves a limit is reported with its excess and time."""
 
+import importlib
+
 import numpy as np
 import pytest
 
+import models
 from models.state_limits import StateLimit, check_state_limits
 
 TRAVEL = StateLimit("cart travel", "z", -1.0, 1.0, source="test")
@@ -41,3 +44,12 @@ def test_bad_input_refused():
         StateLimit("x", "z", 1.0, -1.0, source="s")
     with pytest.raises(ValueError, match="no state 'q'"):
         check_state_limits(np.zeros(2), np.zeros((2, 2)), ["z", "theta"], [StateLimit("q", "q", -1, 1, "s")])
+
+
+@pytest.mark.parametrize("case", ["pendulum", "crane", "ballbeam"])
+def test_case_limits_name_their_plants_states(case):
+    mod = importlib.import_module(f"studies.cases.{case}")
+    names = models.get(mod.CASE.plant).state_names
+    assert mod.STATE_LIMITS
+    for lim in mod.STATE_LIMITS:
+        assert lim.state in names and lim.source
