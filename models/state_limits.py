@@ -95,3 +95,24 @@ def check_state_limits(
         violated = outside.size > 0
         out.append(LimitViolation(lim, violated, excess, float(t[outside[0]]) if violated else None))
     return out
+
+
+def summarize_limit_violations(runs: Sequence[Sequence[LimitViolation]]) -> dict[str, dict[str, float]]:
+    """Per limit over many runs (a Monte Carlo): how many left it and the largest excess.
+
+    Parameters
+    ----------
+    runs : sequence of the lists :func:`check_state_limits` returned, one per run,
+        all for the same limits in the same order.
+
+    Returns
+    -------
+    dict limit name -> {"count": runs that left it, "largest": largest excess (state units)}.
+    """
+    out: dict[str, dict[str, float]] = {}
+    for run in runs:
+        for v in run:
+            entry = out.setdefault(v.limit.name, {"count": 0, "largest": 0.0})
+            entry["count"] += int(v.violated)
+            entry["largest"] = max(entry["largest"], v.excess)
+    return out

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import models
-from models.state_limits import StateLimit, check_state_limits
+from models.state_limits import StateLimit, check_state_limits, summarize_limit_violations
 
 TRAVEL = StateLimit("cart travel", "z", -1.0, 1.0, source="test")
 SWING = StateLimit("swing", "theta", -0.2, 0.2, source="test")
@@ -28,6 +28,9 @@ def test_violation_in_a_monte_carlo_sample_is_reported():
     travel = results[7][0]
     assert travel.violated and travel.excess == pytest.approx(0.3) and travel.first_time == pytest.approx(2.0)
     assert not results[7][1].violated and results[7][1].excess == 0.0
+    summary = summarize_limit_violations(results)
+    assert summary["cart travel"] == {"count": 1, "largest": pytest.approx(0.3)}
+    assert summary["swing"] == {"count": 0, "largest": 0.0}
 
 
 def test_lower_side_and_tolerance():
