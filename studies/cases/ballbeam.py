@@ -32,6 +32,7 @@ from designs.pid import PID, linearized_input_bound
 from designs.rootlocus import dominant_pair, lead_by_angle
 from designs.tuning import Specs
 from models import deferred
+from models.state_limits import StateLimit
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies import providers
@@ -508,4 +509,11 @@ CASE = CaseStudy(
     specs=SPECS,
     drawing=draw,
     errata=ERRATA,
+)
+
+#: Physical state limits, checked on every run by models.state_limits.check_state_limits.
+STATE_LIMITS = (
+    StateLimit(
+        "beam length", "z", 0.0, 0.5, source="0 <= z <= ell, the beam length ell = 0.5 m of the catalog's plant"
+    ),
 )

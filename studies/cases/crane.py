@@ -34,6 +34,7 @@ from designs.loopshaping import (
 from designs.pid import pd_design
 from designs.tuning import Cost, SolveOptions, Specs, TuningSetup
 from models import deferred
+from models.state_limits import StateLimit
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies import providers
@@ -739,4 +740,12 @@ CASE = CaseStudy(
     errata=ERRATA + (REMARK,),
     trajectories=TRAJECTORIES,
     open_loop_codesign=OPEN_LOOP_CODESIGN,
+)
+
+#: Physical state limits, checked on every run by models.state_limits.check_state_limits.
+STATE_LIMITS = tuple(
+    StateLimit(
+        f"swing angle {k}", f"theta{k}", -SWING_BOUND, SWING_BOUND, source="±0.2 rad, the swing bound (SWING_BOUND)"
+    )
+    for k in (1, 2)
 )

@@ -27,6 +27,7 @@ from designs.loops import (
     zero_cancelling_design,
 )
 from designs.pid import linearized_input_bound
+from models.state_limits import StateLimit
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
 from studies import providers
@@ -455,4 +456,15 @@ CASE = CaseStudy(
     drawing=draw,
     errata=ERRATA,
     trajectories=TRAJECTORIES,
+)
+
+#: Physical state limits, checked on every run by models.state_limits.check_state_limits.
+STATE_LIMITS = (
+    StateLimit(
+        "cart travel",
+        "z",
+        -SWING_UP_TRAVEL,
+        SWING_UP_TRAVEL,
+        source="the text gives no track length; ±0.5 m, the swing-up's track (SWING_UP_TRAVEL)",
+    ),
 )
