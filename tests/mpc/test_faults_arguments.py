@@ -1,0 +1,18 @@
+"""The newer MPC APIs' arguments: a one-line error naming the argument, its value and what it must be."""
+
+from __future__ import annotations
+
+import pytest
+
+import mpc
+
+
+@pytest.mark.parametrize("args", [("a", 2), (1, "b"), (True, 2), (1, 2, "c")])
+def test_free_time_names_the_argument_that_is_not_a_number(args):
+    # before: "could not convert string to float", naming no argument; True was taken as 1 s
+    with pytest.raises(TypeError, match=r"FreeTime (lower|upper|guess) must be a real number of seconds, got"):
+        mpc.FreeTime(*args)
+
+
+def test_free_time_takes_numbers():
+    assert mpc.FreeTime(1, 3).guess == 2.0
