@@ -200,6 +200,10 @@ class OptimalControlProblem:
             self.free_time: FreeTime | None = final_time
             self.fixed_final_time = None
         else:
+            if isinstance(final_time, (bool, np.bool_)) or not isinstance(
+                final_time, (int, float, np.integer, np.floating)
+            ):
+                raise TypeError(f"final_time must be a real number of seconds or a FreeTime, got {final_time!r}")
             value = float(final_time)
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"final_time must be finite and > 0 s (or a FreeTime), got {final_time}")

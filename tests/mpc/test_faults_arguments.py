@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+import models
 import mpc
 
 
@@ -16,3 +17,10 @@ def test_free_time_names_the_argument_that_is_not_a_number(args):
 
 def test_free_time_takes_numbers():
     assert mpc.FreeTime(1, 3).guess == 2.0
+
+
+@pytest.mark.parametrize("final_time", ["abc", True, None])
+def test_a_final_time_that_is_not_a_number_is_named(final_time):
+    # before: "could not convert string to float" for "abc", and True taken as 1 s
+    with pytest.raises(TypeError, match=r"final_time must be a real number of seconds or a FreeTime, got"):
+        mpc.OptimalControlProblem(models.get("arm"), final_time)
