@@ -24,3 +24,10 @@ def test_a_final_time_that_is_not_a_number_is_named(final_time):
     # before: "could not convert string to float" for "abc", and True taken as 1 s
     with pytest.raises(TypeError, match=r"final_time must be a real number of seconds or a FreeTime, got"):
         mpc.OptimalControlProblem(models.get("arm"), final_time)
+
+
+def test_a_soft_bound_with_equal_sides_does_not_speak_of_a_scale_not_given():
+    # before: "scale must be finite and > 0, got 0.0", a scale the caller never gave
+    with pytest.raises(ValueError, match=r"lower = upper = 0.5; need lower < upper") as refused:
+        mpc.SoftBound.on(models.get("arm"), {"theta": 1.0}, 0.5, 0.5, linear_weight=1.0, quadratic_weight=1.0)
+    assert "scale must" not in str(refused.value)
