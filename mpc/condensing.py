@@ -351,11 +351,9 @@ class Condensing:
     compiler, no private cache: `models.compile.build_library`'s fallback). Not re-entrant: one
     call at a time per instance (the work vector is the instance's)."""
 
-    def __init__(self, library, structure: Structure, data_size: int):
-        self._library = ctypes.CDLL(str(library))
-        self._call = self._library.condense
-        self._call.argtypes = [ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-        self._call.restype = None
+    def __init__(self, library: models.compile.CompiledLibrary, structure: Structure, data_size: int):
+        self._library = library
+        self._call = library.function("condense", [ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p])
         self.structure, self.data_size = structure, int(data_size)
         self.lin_size = structure.layout()["size"]
         self._work = np.empty(work_size(structure))
@@ -364,7 +362,7 @@ class Condensing:
     def compiled(cls, structure: Structure, data_offsets) -> Condensing | None:
         """The kernel of `structure` compiled (`models.compile`, cached); None when no library can
         be built. data_offsets : the prepared data's field offsets (`condensed_qp.DataLayout.offsets`)."""
-        library = models.compile.build_library({"condense.c": source(structure, data_offsets)}, FLAGS)
+        library = models.compile.load_library({"condense.c": source(structure, data_offsets)}, FLAGS)
         return None if library is None else cls(library, structure, data_offsets[-1])
 
     def __call__(self, lin: np.ndarray) -> np.ndarray:

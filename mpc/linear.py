@@ -129,6 +129,10 @@ class SoftBound:
         if scale is None:
             finite = [b for b in (lower, upper) if np.isfinite(b)]
             scale = (upper - lower) / 2 if len(finite) == 2 else (abs(finite[0]) if finite and finite[0] else 1.0)
+            if scale == 0:
+                raise ValueError(
+                    f"soft bound {label!r}: lower = upper = {lower}; need lower < upper, or give scale= (> 0)"
+                )
         scale = float(real_array(scale, f"soft bound {label!r}: scale"))
         if not np.isfinite(scale) or scale <= 0:
             raise ValueError(f"soft bound {label!r}: scale must be finite and > 0, got {scale}")

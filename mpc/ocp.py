@@ -40,6 +40,14 @@ class UnknownNameError(ValueError, AttributeError):
     """A state, input, output, parameter or control name the problem does not have."""
 
 
+def _seconds(name: str, value) -> float:
+    """`value` as a float number of seconds; TypeError naming FreeTime's argument `name` for a bool or a
+    value that is not a real number."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"final_time: FreeTime {name} must be a real number of seconds, got {value!r}")
+    return float(value)
+
+
 @dataclass(frozen=True)
 class FreeTime:
     """A free final time T in [lower, upper] s, a decision of the problem.
@@ -52,14 +60,14 @@ class FreeTime:
     guess: float | None = None
 
     def __post_init__(self):
-        lower, upper = float(self.lower), float(self.upper)
+        lower, upper = _seconds("lower", self.lower), _seconds("upper", self.upper)
         if not np.isfinite(lower) or lower <= 0:
             raise ValueError(f"final_time: FreeTime lower bound must be finite and > 0 s, got {self.lower}")
         if not np.isfinite(upper) or upper <= lower:
             raise ValueError(
                 f"final_time: FreeTime upper bound must be finite and > lower = {lower} s, got {self.upper}"
             )
-        guess = (lower + upper) / 2 if self.guess is None else float(self.guess)
+        guess = (lower + upper) / 2 if self.guess is None else _seconds("guess", self.guess)
         if not lower <= guess <= upper:
             raise ValueError(f"final_time: FreeTime guess must lie in [{lower}, {upper}] s, got {self.guess}")
         object.__setattr__(self, "lower", lower)
@@ -192,6 +200,10 @@ class OptimalControlProblem:
             self.free_time: FreeTime | None = final_time
             self.fixed_final_time = None
         else:
+            if isinstance(final_time, (bool, np.bool_)) or not isinstance(
+                final_time, (int, float, np.integer, np.floating)
+            ):
+                raise TypeError(f"final_time must be a real number of seconds or a FreeTime, got {final_time!r}")
             value = float(final_time)
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"final_time must be finite and > 0 s (or a FreeTime), got {final_time}")

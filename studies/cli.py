@@ -407,8 +407,9 @@ def main(argv=None) -> int:
         return 1
     try:
         files.check_writable(args.out)
+        writers.check_output_folder(args.out, plants)  # a plant folder that is not ours: before any work
     except OSError as err:
-        p.error(str(err))
+        p.error(f"{type(err).__name__}: {err}" if isinstance(err, writers.ForeignFolderError) else str(err))
     if args.sweep:
         return _run_sweep(args, p, plants, settings, chosen, sys.stderr)
     where = (
@@ -455,7 +456,7 @@ def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: 
                 f"{args.out}",
                 file=sys.stderr,
             )
-            return 1
+            return 2 if isinstance(err, writers.ForeignFolderError) else 1  # a folder that is not ours: exit 2
         interrupted = True
     except KeyboardInterrupt:
         progress.close()

@@ -145,7 +145,7 @@ def test_the_command_refuses_a_users_plant_folder_and_leaves_it(tmp_path):
         text=True,
         timeout=600,
     )
-    assert done.returncode != 0, done.stdout[-2000:]
+    assert done.returncode == 2, done.stdout[-2000:]
     assert "ForeignFolderError" in done.stderr and "my_thesis.tex" in done.stderr, done.stderr[-2000:]
     assert (out / "uuv" / "my_thesis.tex").read_text() == THESIS
     assert sorted(p.name for p in (out / "uuv").iterdir()) == ["my_thesis.tex"]
