@@ -170,9 +170,13 @@ class StudyResult:
     providers: tuple = ()
     trajectories: object = None
 
-    def best(self, scenario: str = "step") -> str | None:
-        """The controller with the lowest ITAE in `scenario` among runs that did not diverge or fail."""
+    def best(self, scenario: str = "step", meeting: bool = True) -> str | None:
+        """The controller with the lowest ITAE in `scenario` among rows of status "ok" that meet their
+        specs (verdict `models.specs.MEETS`); None when no row does. A violating or degraded row is never
+        the best. ``meeting=False`` drops the verdict condition (the lowest ITAE among "ok" rows)."""
         rows = self.table[(self.table.scenario == scenario) & (self.table.status == "ok")]
+        if meeting:
+            rows = rows[rows.verdict == specs.MEETS]
         rows = rows[np.isfinite(rows.itae.astype(float))]
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
 
