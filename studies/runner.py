@@ -35,6 +35,10 @@ from models import Block, checks, deferred, interrupts, metrics, specs
 from . import distributed
 from .answers import collect
 from .case import SCENARIO_NAMES, CaseStudy, Scenario
+from .judging import degraded_status as degraded_status
+from .judging import judge_run, verdict_columns
+from .judging import run_status as run_status
+from .judging import solver_counts as solver_counts
 from .provider_calls import NotProvided as NotProvided  # raised by providers; callers catch it from here too
 from .provider_calls import call_all, name_of, resolve
 
@@ -170,9 +174,13 @@ class StudyResult:
     providers: tuple = ()
     trajectories: object = None
 
-    def best(self, scenario: str = "step") -> str | None:
-        """The controller with the lowest ITAE in `scenario` among runs that did not diverge or fail."""
+    def best(self, scenario: str = "step", meeting: bool = True) -> str | None:
+        """The controller with the lowest ITAE in `scenario` among rows of status "ok" that meet their
+        specs (verdict `models.specs.MEETS`); None when no row does. A violating or degraded row is never
+        the best. ``meeting=False`` drops the verdict condition (the lowest ITAE among "ok" rows)."""
         rows = self.table[(self.table.scenario == scenario) & (self.table.status == "ok")]
+        if meeting:
+            rows = rows[rows.verdict == specs.MEETS]
         rows = rows[np.isfinite(rows.itae.astype(float))]
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
 
@@ -283,49 +291,6 @@ def status_kind(status) -> str:
     such as a missing status)."""
     words = str(status).replace(":", " ").split()
     return words[0] if words and words[0] in STATUS_KINDS else "failed"
-
-
-def solver_counts(records) -> tuple[int, int, int]:
-    """(steps, steps whose solver did not succeed, steps that fell back) of per-step solver records.
-
-    A record says success with "success" (bool) or, without it, with a "status" text naming success
-    (solved, optimal, succeeded); a fallback with "fallback" (bool).
-    """
-    steps = failed = fallback = 0
-    for record in records or ():
-        if not isinstance(record, Mapping):
-            continue
-        steps += 1
-        if "success" in record:
-            failed += not bool(record["success"])
-        elif "status" in record:
-            text = str(record["status"]).lower().replace(" ", "_")
-            failed += not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
-        fallback += bool(record.get("fallback", False))
-    return steps, failed, fallback
-
-
-def degraded_status(steps: int, failed: int, fallback: int, what: str = "steps") -> str | None:
-    """'degraded: solver failed on 3 of 500 steps, fallback on 2' (None when nothing failed)."""
-    if not failed and not fallback:
-        return None
-    parts = [f"solver failed on {failed} of {steps} {what}"] if failed else []
-    parts += [f"fallback on {fallback}" + ("" if failed else f" of {steps} {what}")] if fallback else []
-    return "degraded: " + ", ".join(parts)
-
-
-def run_status(result) -> str:
-    """A run's status as the study tables write it: "diverged at t = ... s", "degraded: ..." or "ok"."""
-    if result.diverged_at is not None:
-        return f"diverged at t = {result.diverged_at:.3g} s"
-    return degraded_status(*solver_counts(result.status)) or "ok"
-
-
-def _solver_issues(result) -> float:
-    """Steps whose solver record does not report success (NaN when there are no records)."""
-    if not result.status:
-        return math.nan
-    return float(solver_counts(result.status)[1])
 
 
 def use_jit(
@@ -561,17 +526,7 @@ class Simulation:
         study = self.study
         result = simulate_scenario(truth, controller, scenario, study, self.options, self.base, study.substeps)
         self.runs[(label, scenario.name)] = result
-        judged = study.specs_for(scenario.name, truth.params)
-        row = metrics.run_metrics(result, study.tracked, judged.state_bounds)
-        row |= {
-            "status": run_status(result),
-            "diverged_at_s": result.diverged_at,
-            "samples": 1,
-            "solver_issues": _solver_issues(result),
-        }
-        return row | verdict_columns(
-            specs.judge(judged, result, study.tracked, study.step, row["status"], measured=row)
-        )
+        return judge_run(study, scenario.name, result, truth.params).row()
 
     def monte_carlo_runs(self, truth: models.Plant, controller, scenario: Scenario, samples: np.ndarray) -> Iterable:
         """The runs of `controller` on `truth` with each row of `samples` (parameters), yielded as they are
@@ -650,10 +605,9 @@ class Simulation:
         t: np.ndarray | None = None
         reference: np.ndarray | None = None
         for result, row in zip(self.monte_carlo_runs(truth, controller, scenario, samples), samples):
-            judged = study.specs_for(scenario.name, dict(zip(names, row)))
-            values = metrics.run_metrics(result, study.tracked, judged.state_bounds)
-            per_sample.append(values)
-            verdicts.append(specs.judge(judged, result, study.tracked, study.step, measured=values))
+            judgement = judge_run(study, scenario.name, result, dict(zip(names, row)))
+            per_sample.append(judgement.metrics)
+            verdicts.append(judgement.verdict)
             if t is None:
                 t, reference = np.array(result.t), np.array(result.r[:, 0])
             diverged_at.append(math.nan if result.diverged_at is None else float(result.diverged_at))
@@ -728,11 +682,6 @@ def simulate_scenario(
         seed=options.seed,
         allow_divergence=True,
     )
-
-
-def verdict_columns(verdict: specs.Verdict) -> dict:
-    """The table's verdict columns of a `models.specs.Verdict`: its label and what it found."""
-    return {"verdict": verdict.label, "verdict_detail": verdict.detail}
 
 
 TABLE_COLUMNS = (

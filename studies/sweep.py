@@ -27,7 +27,7 @@ import models
 from models import Block, deferred, interrupts, metrics, specs
 from models.files import write_csv, write_text
 
-from . import distributed, plots, runner, style
+from . import distributed, judging, plots, runner, style
 from .case import CaseStudy
 
 if TYPE_CHECKING:
@@ -154,19 +154,8 @@ def run_sweep(
                     for row in samples
                 ]
             for value, row, result in zip(grid.values, samples, results):
-                judged = study.specs_for(chosen.name, dict(zip(names, row)))
-                values = metrics.run_metrics(result, study.tracked, judged.state_bounds)
-                status = "ok" if result.diverged_at is None else f"diverged at t = {result.diverged_at:.3g} s"
-                verdict = specs.judge(judged, result, study.tracked, study.step, status, measured=values)
-                rows.append(
-                    {
-                        "controller": label,
-                        grid.param: value,
-                        "status": status,
-                        **runner.verdict_columns(verdict),
-                        **values,
-                    }
-                )
+                judged = judging.judge_run(study, chosen.name, result, dict(zip(names, row)))
+                rows.append({"controller": label, grid.param: value, **judged.row()})
         except distributed.RunFailed:
             raise
         except Exception as err:  # one controller's failure leaves the others' points
@@ -180,7 +169,7 @@ def run_sweep(
                     "controller": label,
                     grid.param: value,
                     "status": status[:200],
-                    **runner.verdict_columns(specs.Verdict(specs.FAILED, (), status[:200])),
+                    **judging.verdict_columns(specs.Verdict(specs.FAILED, (), status[:200])),
                     **dict.fromkeys(metrics.METRIC_COLUMNS, math.nan),
                 }
                 for value in grid.values

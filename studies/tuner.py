@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 import models
+import models.compile
 from designs.tuning import (
     CONVERGED,
     HESSIANS,
@@ -405,7 +406,9 @@ def _widths(text: str) -> tuple[float, ...]:
 
 
 def main(argv=None) -> int:
-    """``python -m studies.tuner``: tune (or re-validate) and store each case's gains; 1 if one did not converge."""
+    """``python -m studies.tuner``: tune (or re-validate) each case's gains and write its record when the tuning
+    converged (or with ``--force``) into ``--out`` (default the user cache's tuned/; ``--install`` writes into
+    studies/cases, the records the study reads); 1 if one did not converge."""
     names = [n for n in cases.names() if cases.get(n).classical is not None]
     parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
     parser.add_argument("plants", nargs="*", default=names, help=f"cases to tune (default all: {', '.join(names)})")
@@ -439,7 +442,16 @@ def main(argv=None) -> int:
         default="limited-memory",
         help="IPOPT's Hessian: L-BFGS (default) or CasADi's exact second derivatives (few gains, hard problems)",
     )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="folder for the records (default: tuned/ in the user cache, models.compile.cache_directory())",
+    )
+    parser.add_argument("--install", action="store_true", help=f"write the records into {STORE_DIR} instead")
+    parser.add_argument("--force", action="store_true", help="write a record also when its tuning did not converge")
     args = parser.parse_args(argv)
+    folder = STORE_DIR if args.install else (args.out or models.compile.cache_directory() / "tuned")
     unknown = [p for p in args.plants if p not in names]
     if unknown:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
@@ -464,10 +476,14 @@ def main(argv=None) -> int:
                 hessian=args.hessian,
             )
             record = tune_case(case, options, paths=args.paths)
-        write(case, record)
         t, v = record["tuning"], record["validation"]
-        if t["status"] not in CONVERGED or not t["converged"]:
+        converged = t["status"] in CONVERGED and t["converged"]
+        if not converged:
             failed.append(name)
+        if converged or args.force:
+            print(f"  record written: {write(case, record, folder)}", flush=True)
+        else:
+            print("  not converged: no record written (--force writes it)", flush=True)
         steps = "; ".join(
             f"{s}: worst overshoot {100 * v['hand_step'][s]['overshoot']:.2f} -> "
             f"{100 * v['tuned_step'][s]['overshoot']:.2f} %, worst settling "

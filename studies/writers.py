@@ -394,7 +394,7 @@ def write_animation(result, folder: Path) -> tuple[dict, list]:
     ({kind: file name} of the files written, a note saying why there is no animation (or none))
     """
     study, plant, quick = result.study, result.plant, result.options.quick
-    best = result.best("step")
+    best = result.best("step", meeting=False)
     if study.drawing is None:
         return {}, [f"no animation: the {study.plant} case has no drawing"]
     if best is None or (best, "step") not in result.runs:
@@ -687,7 +687,7 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
         {
             "plant": n,
             "run": _run_of(info, run_id),
-            "best": info.get("best") or "—",
+            "best": info.get("best") or "no row meets the specs",
             "controllers": int(t.controller.nunique()),
             **verdict_counts(t),
             "time": f"{info['timing'].get('total_s', math.nan) + info['timing'].get('files_s', 0.0):.1f} s",
@@ -700,7 +700,7 @@ def write_summary(out: str | os.PathLike, names, run_id: str | None = None) -> P
         markdown_table(
             per,
             [
-                (k, k if k != "best" else "best (lowest step ITAE)", format_number)
+                (k, k if k != "best" else "best (lowest step ITAE among rows meeting the specs)", format_number)
                 for k in ("plant", "run", "best", "controllers", *COUNTED, "time", "settings")
             ],
         )
@@ -756,7 +756,7 @@ def _index_entry(name: str, info: dict, table, run_id: str | None) -> dict:
         "run": _run_of(info, run_id),
         "counts": ", ".join(f"{n} {kind}" for kind, n in status_counts(table).items() if n),
         "not_ok": not_ok_rows(table),
-        "best": info.get("best"),
+        "best": info.get("best") or "no row meets the specs",
         "animation": "animation.gif" in files,
         "verdicts": verdicts,
         "step": {"rows": step_rows, "columns": [c for c in columns if c[0] != "scenario"]} if step_rows else None,

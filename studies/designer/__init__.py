@@ -17,8 +17,8 @@ What an update computes, with the project's one mechanism for each:
   parameters): `studies.runner.simulate_scenario`, that is
   `models.simulate_closed_loop`, compiled and cached per controller structure,
   so a new gain value costs one call of the cached closed loop;
-* the verdict against the case's specs: `models.specs.judge` on the metrics of
-  `models.metrics.run_metrics`, as `studies.runner` judges a row;
+* the verdict against the case's specs: `studies.judging.judge_run`, the one rule
+  the study tables use (metrics, status, verdict);
 * the loop gain about the end of the run (`studies.loops.loop`, exact
   Jacobians of the block and the plant): its Bode plot, its gain and phase
   margins (`studies.loops.LoopGain.margins`), the case's loopshaping specs
@@ -58,9 +58,9 @@ import numpy as np  # noqa: E402
 
 import models  # noqa: E402
 from designs import tuning  # noqa: E402
-from models import Block, Cascade, export, metrics, specs  # noqa: E402
+from models import Block, Cascade, export, specs  # noqa: E402
 
-from .. import cases, homework, loops, providers, runner, tuner  # noqa: E402
+from .. import cases, homework, judging, loops, providers, runner, tuner  # noqa: E402
 from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, Scenario  # noqa: E402
 
 #: Each gain element ranges over [value / RANGE, value * RANGE] (sign kept).
@@ -448,10 +448,8 @@ class Designer:
         gains = {c.key: float(np.asarray(block.gains[c.gain])[c.index]) for c in self.controls}
         with self.lock:  # CasADi Functions cached on the plant are not safe to call from two threads
             run = self.simulate(block, scenario)
-            status = runner.run_status(run)
-            judged = self.case.specs_for(scenario, self.plant.params)
-            measured = metrics.run_metrics(run, self.case.tracked, judged.state_bounds)
-            verdict = specs.judge(judged, run, self.case.tracked, self.case.step, status, measured=measured)
+            judgement = judging.judge_run(self.case, scenario, run, self.plant.params)
+            status, measured, verdict = judgement.status, judgement.metrics, judgement.verdict
             out = Update(
                 gains,
                 scenario,

@@ -40,7 +40,7 @@ def test_quick_run_of_all_six_studies_writes_every_file(tmp_path):
         table = pd.read_csv(out / plant / "table.csv")
         assert set(table.scenario) == {"step", "steps", "disturbance", "noise", "mc"}
         info = json.loads((out / plant / "run.json").read_text())
-        assert info["settings"]["quick"] is True and info["best"] in set(table.controller)
+        assert info["settings"]["quick"] is True and (info["best"] is None or info["best"] in set(table.controller))
         numeral = info["numeral"]
         answers = (out / plant / "answers.md").read_text()
         assert f"{numeral}.5" in answers and f"{numeral}.7" in answers

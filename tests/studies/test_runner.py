@@ -6,6 +6,7 @@ import math
 
 import example_providers
 import numpy as np
+import pandas as pd
 import pytest
 
 import models
@@ -259,3 +260,24 @@ def test_a_row_of_the_simulation_is_the_plant_simulated_directly():
     for key in ("iae", "itae", "peak_u", "settling_time_s"):
         assert row[key] == expected[key], key
     assert simulation.runs[("LQR", "step")].x.shape == run.x.shape and simulation.notes == []
+
+
+def test_best_is_never_a_violating_or_degraded_row():
+    """The lowest ITAE belongs to a violating row and the next to a degraded one: the best is the
+    meeting row behind them, and None (not a violating row) once no row meets."""
+    table = pd.DataFrame(
+        {
+            "controller": ["fast", "degraded", "slow", "fast"],
+            "scenario": ["step", "step", "step", "noise"],
+            "status": ["ok", "degraded: solver failed on 1 of 10 steps", "ok", "ok"],
+            "verdict": [specs.VIOLATES, specs.MEETS, specs.MEETS, specs.MEETS],
+            "itae": [0.1, 0.2, 0.5, 0.1],
+        }
+    )
+    fields = {f.name: None for f in dataclasses.fields(runner.StudyResult) if f.name != "table"}
+    result = runner.StudyResult(table=table, **fields)
+    assert result.best("step") == "slow"
+    assert result.best("step", meeting=False) == "fast"
+    result.table = table.assign(verdict=specs.VIOLATES)
+    assert result.best("step") is None
+    assert studies.overview.relative_itae(table) == pytest.approx({"fast": 0.2, "degraded": 0.4, "slow": 1.0})

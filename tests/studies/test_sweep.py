@@ -1,6 +1,7 @@
 """The sweep: its grid, and its points against runs made another way (the study's own step row at the nominal
 value; a directly simulated plant with the parameter changed elsewhere)."""
 
+import fault_providers
 import numpy as np
 import pandas as pd
 import pytest
@@ -74,3 +75,27 @@ def test_write_sweep_leaves_its_files(swept, tmp_path):
     assert len(back) == table.controller.nunique() * len(grid.values)
     text = (tmp_path / "arm" / "sweep.md").read_text()
     assert all(f"- {label}: meets its specs" in text for label in set(table.controller))
+
+
+def test_a_point_judged_by_the_sweep_is_the_row_the_runner_judges(swept):
+    """The nominal point's status, verdict, its detail and every metric are the study's step row's: both
+    come from `studies.judging.judge_run` (the time per step is a measured duration, not judged)."""
+    case, grid, table, _ = swept
+    study = studies.run("arm", scenarios=["step"], mc=0, providers=[EXAMPLE]).set_index("controller")
+    nominal = table[table[grid.param] == 0.5].set_index("controller").loc[study.index]
+    for column in ("status", "verdict", "verdict_detail"):
+        assert list(nominal[column].fillna("")) == list(study[column].fillna("")), column
+    for column in (c for c in metrics.METRIC_COLUMNS if not c.startswith("step_ms")):  # not wall-clock times
+        np.testing.assert_allclose(
+            nominal[column].astype(float), study[column].astype(float), rtol=1e-12, equal_nan=True, err_msg=column
+        )
+
+
+def test_a_degraded_run_in_the_sweep_says_degraded():
+    """An MPC whose solver fails on every step (falling back each time) is "degraded" at every sweep point,
+    with the counts, as in the study's own row."""
+    grid = sweep.Grid("m", (0.5, 0.55))
+    table, _ = sweep.run_sweep(studies.get("arm"), grid, providers=(fault_providers.solver_always_fails,))
+    failing = table[table.controller == "failing MPC"]
+    assert len(failing) == 2
+    assert set(failing.status) == {"degraded: solver failed on 500 of 500 steps, fallback on 500"}

@@ -172,3 +172,25 @@ def test_tuning_enforces_the_specs_with_a_margin_and_no_overshoot_where_only_the
     assert (some.max_overshoot, some.settling_time) == (tuner.MARGIN * 0.2, tuner.MARGIN * 4.0)
     assert tuner.with_margin(Specs(max_overshoot=floor)).max_overshoot == 0.0
     assert tuner.with_margin(Specs(max_overshoot=2 * floor)).max_overshoot == tuner.MARGIN * 2 * floor
+
+
+def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_source_by_default(tmp_path, monkeypatch):
+    """An unconverged tuning writes nothing; --force writes it into --out; the default folder is the user
+    cache (here redirected), never studies/cases."""
+    step = {s: {"overshoot": 0.0, "settling_time_s": 1.0} for s in tuner.SCENARIOS}
+    validation = {"hand_step": step, "tuned_step": step, "hand_mean": 1.0, "tuned_mean": 1.0}
+    validation |= {"improvement_mean": 0.0, "tuned_better_on": 0, "samples": 0, "tuned_violations": []}
+    tuning = {"status": "Maximum_Iterations_Exceeded", "converged": False, "message": "cap", "iterations": 1}
+    tuning |= {"wall_time_s": 0.0, "initial_cost": 1.0, "cost": 1.0, "improvement": 0.0}
+    record = {"tuning": tuning, "validation": validation}
+    monkeypatch.setattr(tuner, "tune_case", lambda case, options, paths: record)
+    monkeypatch.setenv("CODESIGN_CONTROL_CACHE", str(tmp_path / "cache"))
+    before = (tuner.STORE_DIR / tuner.store_name(studies.get("arm"))).stat().st_mtime_ns
+    assert tuner.main(["arm", "--out", str(tmp_path / "out")]) == 1
+    assert not (tmp_path / "out").exists()
+    assert tuner.main(["arm", "--out", str(tmp_path / "out"), "--force"]) == 1
+    assert (tmp_path / "out" / tuner.store_name(studies.get("arm"))).exists()
+    tuning |= {"status": next(iter(tuner.CONVERGED)), "converged": True}
+    assert tuner.main(["arm"]) == 0
+    assert list((tmp_path / "cache" / "tuned").iterdir())
+    assert (tuner.STORE_DIR / tuner.store_name(studies.get("arm"))).stat().st_mtime_ns == before

@@ -1,0 +1,102 @@
+"""The one way a simulated run becomes a table row: its metrics, its status and its verdict.
+
+`judge_run` is what the study's nominal scenarios, its Monte Carlo samples,
+the sweep and the designer call on each closed-loop run: the metrics of
+`models.metrics.run_metrics` on the tracked coordinate, the status of
+`run_status` ("ok", "degraded: ...", "diverged at t = ... s") and the verdict
+of `models.specs.judge` against the case's specs for that scenario on the
+plant with the run's parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from models import metrics, specs
+
+from .case import CaseStudy
+
+
+def solver_counts(records) -> tuple[int, int, int]:
+    """(steps, steps whose solver did not succeed, steps that fell back) of per-step solver records.
+
+    A record says success with "success" (bool) or, without it, with a "status" text naming success
+    (solved, optimal, succeeded); a fallback with "fallback" (bool).
+    """
+    steps = failed = fallback = 0
+    for record in records or ():
+        if not isinstance(record, Mapping):
+            continue
+        steps += 1
+        if "success" in record:
+            failed += not bool(record["success"])
+        elif "status" in record:
+            text = str(record["status"]).lower().replace(" ", "_")
+            failed += not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
+        fallback += bool(record.get("fallback", False))
+    return steps, failed, fallback
+
+
+def degraded_status(steps: int, failed: int, fallback: int, what: str = "steps") -> str | None:
+    """'degraded: solver failed on 3 of 500 steps, fallback on 2' (None when nothing failed)."""
+    if not failed and not fallback:
+        return None
+    parts = [f"solver failed on {failed} of {steps} {what}"] if failed else []
+    parts += [f"fallback on {fallback}" + ("" if failed else f" of {steps} {what}")] if fallback else []
+    return "degraded: " + ", ".join(parts)
+
+
+def run_status(result) -> str:
+    """A run's status as the study tables write it: "diverged at t = ... s", "degraded: ..." or "ok"."""
+    if result.diverged_at is not None:
+        return f"diverged at t = {result.diverged_at:.3g} s"
+    return degraded_status(*solver_counts(result.status)) or "ok"
+
+
+def solver_issues(result) -> float:
+    """Steps whose solver record does not report success (NaN when there are no records)."""
+    if not result.status:
+        return math.nan
+    return float(solver_counts(result.status)[1])
+
+
+def verdict_columns(verdict: specs.Verdict) -> dict:
+    """The table's verdict columns of a `models.specs.Verdict`: its label and what it found."""
+    return {"verdict": verdict.label, "verdict_detail": verdict.detail}
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One run judged: `metrics` (the columns of `models.metrics.run_metrics`), `status` (`run_status`),
+    `verdict` (a `models.specs.Verdict`), and the run's divergence time (s, None) and solver issues."""
+
+    metrics: dict
+    status: str
+    verdict: specs.Verdict
+    diverged_at: float | None
+    solver_issues: float
+
+    def row(self) -> dict:
+        """The table row's columns: metrics, status, diverged_at_s, samples (1), solver_issues, verdict."""
+        return (
+            self.metrics
+            | {
+                "status": self.status,
+                "diverged_at_s": self.diverged_at,
+                "samples": 1,
+                "solver_issues": self.solver_issues,
+            }
+            | verdict_columns(self.verdict)
+        )
+
+
+def judge_run(case: CaseStudy, scenario: str, result, params: Mapping[str, float]) -> Judgement:
+    """Judge one closed-loop run (a `models.ClosedLoopResult`) of `scenario` on the plant with `params`
+    (name -> value, SI units) against the case's specs for that scenario (`CaseStudy.specs_for`)."""
+    judged = case.specs_for(scenario, params)
+    measured = metrics.run_metrics(result, case.tracked, judged.state_bounds)
+    status = run_status(result)
+    verdict = specs.judge(judged, result, case.tracked, case.step, status, measured=measured)
+    return Judgement(measured, status, verdict, result.diverged_at, solver_issues(result))
