@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import zlib
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -44,7 +45,7 @@ class Style:
     shape: str | tuple
 
     @property
-    def marker(self) -> str | tuple | np.ndarray:
+    def marker(self) -> Any:  # str, (sides, style, angle) or an (n, 2) array: what matplotlib takes
         """The matplotlib marker: the name or (sides, style, angle) as given, a polygon as an (n, 2) array."""
         if isinstance(self.shape, tuple) and self.shape and isinstance(self.shape[0], tuple):
             return np.asarray(self.shape, dtype=float)
