@@ -37,6 +37,7 @@ import numpy as np
 from models import Plant, interrupts
 from models.checks import integer, positive, real_array, weight_matrix
 from models.compile import NumpyCall
+from models.linear_plant import LinearPlant
 
 from .estimator import DisturbanceObserver, SteadyStateTarget
 from .linear import (
@@ -113,7 +114,7 @@ class _PlanFollower:
     _rate_per_sample: np.ndarray | None  # (nu,) largest input change per sample, None when unlimited
 
     def _setup_common(self, known: Plant, sample_period: float, horizon: int, tracked: str, name: str):
-        if not isinstance(known, Plant):
+        if not isinstance(known, (Plant, LinearPlant)):  # LinearPlant: a python-control model with limits
             raise TypeError(f"known must be a models.Plant, got {type(known).__name__} {known!r}")
         sample_period = positive(sample_period, "sample_period (s)")
         horizon = integer(horizon, "horizon", minimum=1)

@@ -31,6 +31,68 @@ from .writers import not_ok_rows, verdict_counts
 #: progress(plant, done, total, text) after each simulation of a plant, or when a plant is done.
 PlantProgress = Callable[[str, int, int, str], None]
 
+#: Expected cost of one row (`run_weights`), in ms of the rows of a recorded ``python -m studies arm
+#: --quick`` (tests/studies/data/arm_quick_row_seconds.csv): a fixed part (the closed loop built, the
+#: metrics) and one part per simulated sample; an MPC's sample costs in proportion to its horizon.
+ROW_MS = 5.0
+BLOCK_SAMPLE_MS = 6e-4
+LINEAR_MPC_SAMPLE_MS_PER_STAGE = 1e-3
+NONLINEAR_MPC_SAMPLE_MS_PER_STAGE = 8e-3
+#: The plant's first Monte Carlo row also compiles the batched simulation of its samples.
+FIRST_MONTE_CARLO_MS = 200.0
+#: The nonlinear MPC steps its Monte Carlo samples together: each sample costs this fraction of a run alone.
+NONLINEAR_MPC_BATCH = 0.4
+
+
+def controller_kind(label: str) -> str:
+    """ "nonlinear MPC", "linear MPC" or "block", from a controller's label (what its cost follows)."""
+    if "MPC" not in label:
+        return "block"
+    return "nonlinear MPC" if "nonlinear" in label else "linear MPC"
+
+
+def run_weights(case, scenarios=None, samples: int = 0, controllers=None) -> list:
+    """Expected cost of each run of `case` in the order the runner makes them (every controller through
+    every scenario), in ms of the recorded timings (`ROW_MS`); their sum is the plant's whole.
+
+    A run costs ROW_MS plus, per simulated sample (the scenario's duration over the controller's
+    sample period, times the Monte Carlo `samples`), a block's BLOCK_SAMPLE_MS or an MPC's cost per
+    stage times its horizon (the case's `mpc` settings; the nonlinear MPC's stages are dearer, its
+    Monte Carlo samples batched: `NONLINEAR_MPC_BATCH`). The first Monte Carlo run adds
+    FIRST_MONTE_CARLO_MS.
+
+    Parameters
+    ----------
+    case : studies.case.CaseStudy
+    scenarios : names of the scenarios that run (None: all; "mc" is left out when `samples` is 0)
+    samples : Monte Carlo samples per controller
+    controllers : labels (default the case's declared ones)
+    """
+    mpc = case.mpc
+    horizon = mpc.horizon if mpc is not None else 1
+    mpc_period = mpc.sample_period if mpc is not None else case.sample_period
+    per_sample = {
+        "block": (case.sample_period, BLOCK_SAMPLE_MS),
+        "linear MPC": (mpc_period, LINEAR_MPC_SAMPLE_MS_PER_STAGE * horizon),
+        "nonlinear MPC": (mpc_period, NONLINEAR_MPC_SAMPLE_MS_PER_STAGE * horizon),
+    }
+    chosen = [
+        s for s in case.scenarios if (scenarios is None or s.name in scenarios) and not (s.monte_carlo and samples == 0)
+    ]
+    weights: list[float] = []
+    compiled = False
+    for label in case.controllers if controllers is None else controllers:
+        kind = controller_kind(label)
+        period, cost = per_sample[kind]
+        for scenario in chosen:
+            steps = scenario.duration(case) / period
+            extra = 0.0
+            if scenario.monte_carlo:
+                steps *= samples * (NONLINEAR_MPC_BATCH if kind == "nonlinear MPC" else 1.0)
+                extra, compiled = (0.0 if compiled else FIRST_MONTE_CARLO_MS), True
+            weights.append(ROW_MS + extra + steps * cost)
+    return weights
+
 
 def not_ok_lines(table, width: int = 118) -> list:
     """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".

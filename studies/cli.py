@@ -167,34 +167,49 @@ def parser() -> argparse.ArgumentParser:
 class Progress:
     """One tqdm bar over every plant's runs, its total fixed before the run starts.
 
-    Each plant has a share of the total: its declared controllers times its scenarios
-    (`progress_slots`). `update(plant, done, total, text)` after each simulation, or once when a plant
-    run elsewhere is done, moves the bar to the plant's share times done/total, so controllers a
-    provider adds or lacks change the pace, never the total.
+    Each plant has a share of the total: the expected costs of its declared controllers' runs
+    (`progress_slots`, `studies.batch.run_weights`), or a number of equal runs. `update(plant, done,
+    total, text)` after each simulation, or once when a plant run elsewhere is done, moves the bar to
+    the cost of the plant's first `done` runs (or its share times done/total when a provider added or
+    lacked controllers), so the remaining time follows the work left, not the count of runs. The
+    estimate is the run's average rate (no smoothing): elapsed x whole / done.
     """
 
     def __init__(self, slots: dict, stream=None, disable: bool = False):
         stream = stream or sys.stderr
         tty = stream.isatty()
-        self.slots = dict(slots)
+        self.weights = {
+            plant: [1.0] * int(w) if isinstance(w, (int, float)) else [float(x) for x in w]
+            for plant, w in slots.items()
+        }
+        self.slots = {plant: sum(w) for plant, w in self.weights.items()}
         self.done = dict.fromkeys(self.slots, 0.0)
+        self.runs = dict.fromkeys(self.slots, 0)
         self.bar = tqdm.tqdm(
             total=sum(self.slots.values()),
-            unit="run",
             file=stream,
             disable=disable,
             dynamic_ncols=True,
             mininterval=0.2 if tty else 20.0,
+            smoothing=0.0,
             ascii=not tty,
-            bar_format="{desc} {percentage:3.0f}%|{bar}| {n}/{total} runs [{elapsed}<{remaining}]{postfix}",
+            bar_format="{desc} {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]{postfix}",
             desc=f"{len(self.slots)} plant{'s' * (len(self.slots) > 1)}",
         )
 
     def update(self, plant: str, done: int, total: int, text: str) -> None:
-        """`plant` has made `done` of its `total` runs; `text` (its first 50 characters) follows the bar."""
-        self.done[plant] = self.slots.get(plant, 0) * min(done, total) / max(total, 1)
-        reached = int(round(sum(self.done.values())))
-        self.bar.set_postfix_str(text[:50], refresh=False)
+        """`plant` has made `done` of its `total` runs; the runs made and `text` (its first 50 characters)
+        follow the bar."""
+        weights = self.weights.get(plant, [])
+        done = min(done, total)
+        if total == len(weights):
+            self.done[plant] = sum(weights[:done])
+        else:
+            self.done[plant] = self.slots.get(plant, 0) * done / max(total, 1)
+        self.runs[plant] = done if total == len(weights) else round(len(weights) * done / max(total, 1))
+        runs = sum(len(w) for w in self.weights.values())
+        self.bar.set_postfix_str(f"{sum(self.runs.values())}/{runs} runs, {text[:50]}", refresh=False)
+        reached = sum(self.done.values())
         if reached > self.bar.n:
             self.bar.update(reached - self.bar.n)
 
@@ -204,16 +219,12 @@ class Progress:
 
 
 def progress_slots(plants, scenarios, settings: dict) -> dict:
-    """plant -> runs it is expected to make: declared controllers x the scenarios it will run."""
+    """plant -> expected cost of each run it will make (`studies.batch.run_weights`): its declared
+    controllers through the scenarios it will run."""
     slots = {}
     for name in plants:
-        case = cases.get(name)
-        chosen = [
-            s.name
-            for s in case.scenarios
-            if (scenarios is None or s.name in scenarios) and not (s.name == "mc" and settings.get("mc") == 0)
-        ]
-        slots[name] = max(1, len(chosen) * len(case.controllers))
+        weights = batch.run_weights(cases.get(name), scenarios, int(settings.get("mc") or 0))
+        slots[name] = weights or [1.0]
     return slots
 
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from models import deferred, specs
 
-from . import style, templates
+from . import cases, style, templates
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -189,21 +189,39 @@ def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
     fig.subplots_adjust(bottom=(0.35 + 0.22 * rows) / fig.get_figheight())
 
 
+def step_specs(name: str) -> specs.Specs | None:
+    """The registered case `name`'s specs of the step (None for a plant the registry does not know)."""
+    if name not in cases.names():
+        return None
+    chosen = cases.get(name).specs
+    return chosen.get("step", chosen.get("*"))
+
+
 def scatter(studies) -> str | None:
-    """Inline SVG: per plant, settling time (s) against overshoot (%) of the step for every controller.
+    """Inline SVG of `scatter_figure` (None without studies)."""
+    fig = scatter_figure(studies)
+    return None if fig is None else _svg(fig, "scatter")
+
+
+def scatter_figure(studies) -> Figure | None:
+    """Per plant, settling time (s) against overshoot (%) of the step for every controller.
 
     Filled markers meet their specs, hollow ones do not; a run that never settles sits on the
-    right edge past a dashed line marked ∞; rows without numbers (skipped, failed, diverged) are left out.
+    right edge past a dashed grey line, its tick marked ∞ (under the axes, clear of the titles); the case's
+    step specs (largest settling time and overshoot) are dashed red lines; rows without numbers
+    (skipped, failed, diverged) are left out.
     """
     if not studies:
         return None
     labels = controller_order([t for _, _, t in studies])
     fig, axes = _grid(len(studies), 3, 13.0, 3.6)
-    for ax, (_, info, table) in zip(axes, studies):
+    for ax, (name, info, table) in zip(axes, studies):
         rows = step_rows(table)
         settling = rows.settling_time_s.astype(float)
         finite = settling[np.isfinite(settling)]
-        edge = 1.15 * float(finite.max()) if len(finite) else 1.0
+        spec = step_specs(name)
+        limit_s = spec.max_settling_time_s if spec is not None else None
+        edge = 1.15 * max(float(finite.max()) if len(finite) else 0.0, limit_s or 0.0) or 1.0
         for label, row in rows.iterrows():
             overshoot, time_ = float(row.overshoot_pct), float(row.settling_time_s)
             if math.isnan(overshoot) or math.isnan(time_):
@@ -220,20 +238,32 @@ def scatter(studies) -> str | None:
                 markerfacecolor=look.color if meets else "none",
                 markeredgewidth=1.5,
             )
+        limits = {"color": style.LIMIT_COLOR, "linestyle": "--", "linewidth": 0.9, "gid": "spec-limit"}
+        if limit_s is not None:
+            ax.axvline(limit_s, **limits)
+        if spec is not None and spec.max_overshoot_pct is not None:
+            ax.axhline(spec.max_overshoot_pct, **limits)
         if len(finite) < len(settling.dropna()):
-            ax.axvline(edge / 1.15 * 1.075, color="#999", linestyle="--", linewidth=0.8)
-            ax.text(edge, ax.get_ylim()[1], "∞", ha="center", va="bottom", fontsize=9, color="#555")
+            cut = edge / 1.15 * 1.075
+            ax.axvline(cut, color="#999", linestyle="--", linewidth=0.8)
+            low, high = ax.get_xlim()
+            ticks = [t for t in ax.get_xticks() if low <= t < cut - 0.04 * (high - low)]
+            ax.set_xticks([*ticks, edge], [f"{t:g}" for t in ticks] + ["∞"])  # ∞ among the ticks, under the axes
+            ax.set_xlim(low, high)
+            ax.get_xticklabels()[-1].set_gid("not-settled")
         ax.set_title(info["title"], fontsize=10)
         ax.set_xlabel("settling time, 2 % (s)", fontsize=8)
         ax.set_ylabel("overshoot (%)", fontsize=8)
         ax.grid(True, alpha=0.3)
         ax.tick_params(labelsize=8)
     fig.suptitle(
-        "The text's step: settling time against overshoot (filled: meets its specs; hollow: misses them)", fontsize=11
+        "The text's step: settling time against overshoot (filled: meets its specs; hollow: misses them; "
+        "dashed red: the specs' largest settling time and overshoot)",
+        fontsize=11,
     )
     fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.85 / fig.get_figheight(), hspace=0.45, wspace=0.25)
     _legend(fig, labels)
-    return _svg(fig, "scatter")
+    return fig
 
 
 def boxplots(out: Path, studies) -> str | None:

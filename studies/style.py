@@ -12,6 +12,9 @@ from __future__ import annotations
 import math
 import zlib
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
 
 from models import specs
 
@@ -31,11 +34,22 @@ def display_unit(name: str) -> tuple[float, str]:
 
 @dataclass(frozen=True)
 class Style:
-    """How one controller is drawn: colour (hex), matplotlib line style, marker."""
+    """How one controller is drawn: colour (hex), matplotlib line style, marker shape.
+
+    `shape` is a matplotlib marker name ("o"), a regular star or polygon (sides, style, angle), or a
+    filled polygon's vertices ((x, y), ...) within [-1, 1]; `marker` gives it to matplotlib.
+    """
 
     color: str
     linestyle: str
-    marker: str
+    shape: str | tuple
+
+    @property
+    def marker(self) -> Any:  # str, (sides, style, angle) or an (n, 2) array: what matplotlib takes
+        """The matplotlib marker: the name or (sides, style, angle) as given, a polygon as an (n, 2) array."""
+        if isinstance(self.shape, tuple) and self.shape and isinstance(self.shape[0], tuple):
+            return np.asarray(self.shape, dtype=float)
+        return self.shape
 
     def line(self, linewidth: float = 1.3) -> dict:
         """Keyword arguments of `Axes.plot` for this controller's lines."""
@@ -47,23 +61,51 @@ class Style:
         return {"-": "", "--": "6 3", "-.": "6 3 1.5 3", ":": "1.5 2.5"}[self.linestyle]
 
 
-#: The controllers of the case studies, in the registry's table order, and their styles.
+def _closed(points) -> tuple:
+    """A filled marker's vertices: the polygon through `points` (x, y within [-1, 1]), closed."""
+    return (*map(tuple, points), tuple(points[0]))
+
+
+def _crescent(n: int = 16) -> tuple:
+    """A crescent opening right: the unit circle's arc from 50° to 310° and back along a circle about
+    (0.45, 0) through the same two ends."""
+    top = (math.cos(math.radians(50)), math.sin(math.radians(50)))
+    radius = math.hypot(top[0] - 0.45, top[1])
+    end = math.atan2(top[1], top[0] - 0.45)
+    outer = [(math.cos(a), math.sin(a)) for a in np.linspace(math.radians(50), math.radians(310), 2 * n)]
+    inner = [(0.45 + radius * math.cos(a), radius * math.sin(a)) for a in np.linspace(2 * math.pi - end, end, n)]
+    return _closed(outer + inner[1:-1])
+
+
+_half = [(math.cos(math.pi * k / 24), math.sin(math.pi * k / 24) - 0.4) for k in range(25)]
+#: Marker shapes of their own, beside matplotlib's: a half disc, a bar, a bow tie, an arrow, a crescent.
+HALF_DISC = _closed(_half)
+CRESCENT = _crescent()
+BAR = _closed([(-1, -0.35), (1, -0.35), (1, 0.35), (-1, 0.35)])
+BOW_TIE = _closed([(-1, -0.8), (0, -0.15), (1, -0.8), (1, 0.8), (0, 0.15), (-1, 0.8)])
+ARROW = _closed([(-1, -0.3), (0.2, -0.3), (0.2, -0.8), (1, 0), (0.2, 0.8), (0.2, 0.3), (-1, 0.3)])
+
+#: The controllers of the case studies, in the registry's table order, and their styles. No two
+#: markers are one shape turned or mirrored (tests/studies/test_style.py measures their overlap):
+#: matplotlib's "X" is "P" turned, "8", "h" and "p" are nearly "o", "D" is "s" turned, the triangles
+#: one shape (and a star of 3 points is one too), so each family is used once; stars of 6 and 8
+#: points, card suits and the shapes above make up the rest.
 TABLE = {
     "PD": Style("#1f77b4", "-", "o"),
     "PID": Style("#ff7f0e", "-", "s"),
-    "PID (no anti-windup)": Style("#843c39", ":", "D"),
+    "PID (no anti-windup)": Style("#843c39", ":", "d"),
     "loopshaped": Style("#9467bd", "-.", "^"),
-    "lead-lag (IV.11)": Style("#e377c2", "-.", "v"),
-    "PD (zero-cancelling filter)": Style("#17becf", "--", "<"),
-    "pole placement": Style("#2ca02c", "-", ">"),
-    "pole placement + integrator": Style("#bcbd22", "--", "p"),
-    "observer-based": Style("#7f7f7f", "-.", "h"),
+    "lead-lag (IV.11)": Style("#e377c2", "-.", BOW_TIE),
+    "PD (zero-cancelling filter)": Style("#17becf", "--", HALF_DISC),
+    "pole placement": Style("#2ca02c", "-", (6, 1, 0)),
+    "pole placement + integrator": Style("#bcbd22", "--", (8, 1, 0)),
+    "observer-based": Style("#7f7f7f", "-.", CRESCENT),
     "disturbance observer": Style("#d62728", ":", "*"),
-    "LQR": Style("#393b79", "-", "X"),
-    "LQR + Kalman": Style("#e7ba52", "--", "P"),
-    "linear MPC": Style("#000000", "-", "d"),
-    "nonlinear MPC": Style("#7b4173", "--", "8"),
-    "tuned": Style("#8c564b", "-", "H"),
+    "LQR": Style("#393b79", "-", "P"),
+    "LQR + Kalman": Style("#e7ba52", "--", "$\u2663$"),
+    "linear MPC": Style("#000000", "-", BAR),
+    "nonlinear MPC": Style("#7b4173", "--", ARROW),
+    "tuned": Style("#8c564b", "-", "$\u2665$"),
 }
 
 #: Colours, line styles and markers for labels not in `TABLE`, picked by a hash of the label.

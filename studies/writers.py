@@ -36,6 +36,7 @@ from models.files import (
 
 from . import animation, loops, overview, plots, style, templates, trajectories
 from . import output_folder as owned
+from . import plain_markdown as plain
 from .answers import format_answers
 from .case import LoopSpec
 from .output_folder import STAGING_OWNER as STAGING_OWNER
@@ -489,9 +490,9 @@ def timings_frame(table, samples):
     return pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
 
 
-def status_lines(table) -> list:
+def status_lines(table, escape=escape_markdown) -> list:
     """Markdown lines saying how the rows ran: the count of each status kind and every row that is
-    not "ok" (skipped rows of the same reason counted once)."""
+    not "ok" (skipped rows of the same reason counted once); labels and statuses written by `escape`."""
     counts = status_counts(table)
     lines = ["Status of the rows: " + ", ".join(f"{n} {kind}" for kind, n in counts.items() if n) + "."]
     skipped: dict = {}
@@ -499,17 +500,16 @@ def status_lines(table) -> list:
         if status.startswith("skipped"):
             skipped.setdefault(status, []).append(f"{controller} / {scenario}")
         else:
-            lines.append(
-                f"- **{escape_markdown(controller)} / {escape_markdown(scenario)}**: {escape_markdown(status)}"
-            )
+            lines.append(f"- **{escape(controller)} / {escape(scenario)}**: {escape(status)}")
     for status, where in skipped.items():
-        lines.append(f"- {escape_markdown(status)}: {escape_markdown(', '.join(where))}")
+        lines.append(f"- {escape(status)}: {escape(', '.join(where))}")
     return lines
 
 
 def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> str:
     """table.md: the caption, the verdict grid and what each row misses, how the rows ran, the metrics (angles
-    in degrees), the Monte Carlo's worst case and spread, the linear loop analysis, the notes and run time."""
+    in degrees), the Monte Carlo's worst case and spread, the linear loop analysis, the notes and run time.
+    Tables, rows and notes are written by `studies.plain_markdown` (literal once rendered, clean in a terminal)."""
     study, plant = result.study, result.plant
     columns = _unit_columns(study.tracked_unit, study.input_unit)
     rows = result.table.to_dict("records")
@@ -528,15 +528,15 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
         "",
         *specs_lines(result),
         "",
-        markdown_table(grid_rows, grid_columns),
+        plain.markdown_table(grid_rows, grid_columns),
     ]
     if failing:
         parts += ["What the rows that do not meet their specs miss:", ""]
         parts += [
-            f"- {escape_markdown(r['controller'])} / {escape_markdown(r['scenario'])}: "
+            f"- {plain.markdown_text(r['controller'])} / {plain.markdown_text(r['scenario'])}: "
             f"{verdict_text(r['verdict'])}"
             + (
-                f" — {escape_markdown(r['verdict_detail'])}"
+                f" — {plain.markdown_text(r['verdict_detail'])}"
                 if isinstance(r.get("verdict_detail"), str)
                 and r["verdict_detail"]
                 and not str(r["verdict_detail"]).startswith("skipped")
@@ -548,11 +548,11 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
     parts += [
         "## How the rows ran",
         "",
-        *status_lines(result.table),
+        *status_lines(result.table, plain.markdown_text),
         "",
         "## Metrics",
         "",
-        markdown_table(rows, columns),
+        plain.markdown_table(rows, columns),
         DEFINITIONS,
         "",
     ]
@@ -563,7 +563,7 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
         parts += [
             "## Monte Carlo: worst case and spread (sample standard deviation)",
             "",
-            markdown_table(
+            plain.markdown_table(
                 mc_rows,
                 [
                     ("controller", "controller", format_number),
@@ -586,7 +586,7 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
         parts += [
             "## Linear loop analysis (exact linearization where each block holds the plant at rest)",
             "",
-            markdown_table(
+            plain.markdown_table(
                 loop_rows,
                 [("controller", "controller", format_number), ("loop", "loop", format_number)]
                 + [(k, k.replace("_", " "), format_number) for k in keys + extra],
@@ -598,7 +598,7 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
         ]
     timing = ", ".join(f"{k[:-2].replace('_', ' ')} {v:.1f} s" for k, v in result.timing.items())
     timing = timing.replace("total", "simulations in all").replace("files", "plots, animations and files")
-    parts += ["## Notes", ""] + [f"- {escape_markdown(n)}" for n in notes or ["none"]]
+    parts += ["## Notes", ""] + [f"- {plain.markdown_text(n)}" for n in notes or ["none"]]
     parts += ["", f"Run time: {timing}.", ""]
     return "\n".join(parts)
 
