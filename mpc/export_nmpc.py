@@ -78,11 +78,11 @@ def check_exportable(controller, references) -> np.ndarray:
             f"{getattr(controller, 'name', kind)}: only mpc.NonlinearMPC is exported here; {kind} is not one"
             " (use mpc.export.export_linear_mpc for a LinearMPC)"
         )
-    rti = controller.nlp.rti
-    if not rti.compiled:
-        raise UnsupportedExport(f"{controller.name}: compiled=False (the export generates the compiled phases)")
-    if rti.whole_feedback_function is None and not rti.qp_solver.n_static:
-        raise UnsupportedExport(f"{controller.name}: a QP without variables")
+    if controller.nlp.iteration != "rti":
+        raise UnsupportedExport(
+            f"{controller.name}: iteration={controller.nlp.iteration!r} (SQP to convergence at every sample has "
+            "no bounded step time; the export runs one real-time iteration per sample)"
+        )
     if controller.plant.nu != 1 or controller.n_reference != 1:
         raise UnsupportedExport(f"{controller.name}: more than one input or reference")
     values = np.atleast_1d(np.asarray(references, dtype=float)).ravel()
@@ -191,8 +191,9 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
     Raises
     ------
     UnsupportedExport
-        For a controller that is not a NonlinearMPC, one evaluated in CasADi's virtual machine
-        (compiled=False), with more than one input, or no finite reference.
+        For a controller that is not a NonlinearMPC, one iterating to convergence at every sample
+        (iteration="sqp"), with more than one input, no finite reference, or phases CasADi cannot
+        generate as C.
     """
     name = c_name(name)
     values = check_exportable(controller, references)
@@ -245,7 +246,6 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
         data=indices(controller) + targets(controller, values),
         settings=settings,
         has_rate=int(controller._rate_per_sample is not None),
-        sqp=int(nlp.iteration == "sqp"),
         max_iterations=nlp.max_iterations,
         tolerance=c_number(nlp.tolerance),
         qp_tolerance=c_number(QP_TOLERANCE),
@@ -339,7 +339,6 @@ _SOURCE = string.Template("""/* ${p}.c: nonlinear MPC '${controller}' by codesig
 #undef NX  /* DAQP's constants.h: its workspace's size; here the plant's state count */
 
 ${sizes}#define HAS_RATE ${has_rate}
-#define SQP ${sqp}
 #define MAX_ITERATIONS ${max_iterations}
 #define TOLERANCE ${tolerance}
 #define QP_TOLERANCE ${qp_tolerance}
@@ -436,8 +435,8 @@ static int solve_qp(${p}_state *m, const double *x0) {
            && m->residuals[0] <= QP_TOLERANCE && m->residuals[1] <= QP_TOLERANCE;
 }
 
-/* The NLP at the estimate x0 (m->parameters set): one real-time iteration from the warm start, or the
- * SQP to convergence from the rolled-out plan. 0 when solved (m->w_next the solution). */
+/* The NLP at the estimate x0 (m->parameters set): one real-time iteration from the warm start, or,
+ * without one, the SQP to convergence from the rolled-out plan. 0 when solved (m->w the solution). */
 static int solve_nlp(${p}_state *m, const double *x0, const double *d, const double *plan) {
     int i, k, converged = 0;
     double step;
@@ -447,7 +446,7 @@ static int solve_nlp(${p}_state *m, const double *x0, const double *d, const dou
             for (k = 0; k <= NH; ++k)
                 for (i = 0; i < NX; ++i) m->w[STATE_INDEX[k * NX + i]] = x0[i] / STATE_SCALE[i];
     }
-    for (k = 0; k < ((m->has_guess && !SQP) ? 1 : MAX_ITERATIONS); ++k) {
+    for (k = 0; k < (m->has_guess ? 1 : MAX_ITERATIONS); ++k) {
         m->iterations = k + 1;
         call(m, (kernel) ${p}_prepare, m->w, m->parameters, NONE, NONE, NONE, m->data, NONE, NONE, NONE);
         if (!solve_qp(m, x0)) return 3;
@@ -455,7 +454,7 @@ static int solve_nlp(${p}_state *m, const double *x0, const double *d, const dou
         step = 0.0;
         for (i = 0; i < NW; ++i) if (fabs(m->w_next[i] - m->w[i]) > step) step = fabs(m->w_next[i] - m->w[i]);
         for (i = 0; i < NW; ++i) m->w[i] = m->w_next[i];
-        if (m->has_guess && !SQP) { converged = 1; break; }
+        if (m->has_guess) { converged = 1; break; }
         if (step <= TOLERANCE) { converged = 1; break; }
     }
     return converged ? 0 : 4;

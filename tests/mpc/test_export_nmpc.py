@@ -71,7 +71,7 @@ def test_a_reference_outside_the_exported_table_is_refused():
 def test_what_cannot_be_exported_is_named():
     with pytest.raises(UnsupportedExport, match=r"linear MPC: only mpc.NonlinearMPC is exported here; LinearMPC"):
         export_nonlinear_mpc(build("linear", "arm"), "nmpc", [0.5])
-    with pytest.raises(UnsupportedExport, match=r"compiled=False"):
-        export_nonlinear_mpc(build("nonlinear", "arm", compiled=False), "nmpc", [0.5])
+    with pytest.raises(UnsupportedExport, match=r"iteration='sqp' \(SQP to convergence at every sample"):
+        export_nonlinear_mpc(build("nonlinear", "arm", iteration="sqp"), "nmpc", [0.5])
     with pytest.raises(UnsupportedExport, match=r"references must be finite"):
         export_nonlinear_mpc(build("nonlinear", "arm"), "nmpc", [np.nan])
