@@ -127,9 +127,9 @@ def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     qp = ca.Function(
         f"{name}_qp", [data], [ca.densify(H), ca.densify(A.T), ca.densify(pieces["lbv"]), ca.densify(pieces["ubv"])]
     )
-    y = ca.MX.sym("y", plant.ny)
+    y = ca.SX.sym("y", plant.ny)
     q0 = plant.casadi_configuration(y, p)
-    x0 = ca.vertcat(q0, ca.MX.zeros(nx - plant.nq))
+    x0 = ca.vertcat(q0, ca.SX.zeros(nx - plant.nq))
     u0 = ca.fmin(ca.fmax(plant.casadi_equilibrium_input(q0, p), -limit), limit)
     start = ca.Function(f"{name}_start", [y], [x0, u0])
     return [output, predict, guess, prepare, vectors, recover, qp, start]
