@@ -59,9 +59,13 @@ each step timed inside C with clock_gettime, no Python in the step):
 ``exported_nmpc_step_median_ms`` and ``exported_nmpc_p99_ms`` (the first,
 cold step left out as for ours), ``exported_nmpc_max_command_diff`` against
 the Python controller's commands, ``exported_nmpc_step_allocations`` the
-allocator's calls in the steps (0). acados called from C
-(``acados_c_step_median_ms``, ``ratio_exported_nmpc_vs_acados_c``) is not
-measured yet: those keys are None and ``acados_c_unavailable`` says why.
+allocator's calls in the steps (0). acados' generated solver is called from C
+on the same recorded samples too (benchmarks/acados_c.py, run with the acados
+environment's python: its solver library built without a Python wrapper, a
+small C driver timing the set calls, the solve and reading u_0 with
+clock_gettime): ``acados_c_step_median_ms``, ``acados_c_p99_ms`` and
+``ratio_exported_nmpc_vs_acados_c`` = acados ÷ ours, both from C; where it
+cannot run, those are None and ``acados_c_unavailable`` says why.
 Its solve time on other plants is measured on their own closed loops (arm and
 pendulum by default, every plant with --all). --settling runs every plant's
 step with both MPCs on the ±5 % models with the input disturbance (the slow
