@@ -29,7 +29,7 @@ def step_reference(name: str) -> float:
     return float(plant.equilibrium()[0][plant.state_names.index(case.tracked)] + case.step)
 
 
-@pytest.mark.parametrize("name", ["pendulum", "arm"])
+@pytest.mark.parametrize("name", ["pendulum", pytest.param("arm", marks=pytest.mark.slow)])
 def test_exported_nmpc_gives_the_python_commands_in_closed_loop(name, tmp_path):
     plant, case = models.get(name), studies.get(name)
     controller, reference = build("nonlinear", name), step_reference(name)
