@@ -52,6 +52,20 @@ solved again, in the same run, by
         problem: ``do_mpc_median_ms`` over the first `--do-mpc-steps` samples.
 
 First moves of both are compared with ours (``*_max_first_move_diff``).
+
+The same nonlinear MPC exported as C (`mpc.export_nmpc`) replays that closed
+loop in a C program (`mpc.export_nmpc_replay`: the recorded measurements in,
+each step timed inside C with clock_gettime, no Python in the step):
+``exported_nmpc_step_median_ms`` and ``exported_nmpc_p99_ms`` (the first,
+cold step left out as for ours), ``exported_nmpc_max_command_diff`` against
+the Python controller's commands, ``exported_nmpc_step_allocations`` the
+allocator's calls in the steps (0). acados' generated solver is called from C
+on the same recorded samples too (benchmarks/acados_c.py, run with the acados
+environment's python: its solver library built without a Python wrapper, a
+small C driver timing the set calls, the solve and reading u_0 with
+clock_gettime): ``acados_c_step_median_ms``, ``acados_c_p99_ms`` and
+``ratio_exported_nmpc_vs_acados_c`` = acados ÷ ours, both from C; where it
+cannot run, those are None and ``acados_c_unavailable`` says why.
 Its solve time on other plants is measured on their own closed loops (arm and
 pendulum by default, every plant with --all). --settling runs every plant's
 step with both MPCs on the ±5 % models with the input disturbance (the slow
@@ -84,6 +98,8 @@ import mpc
 import studies
 from models.compile import CompilationError
 from mpc.export import export_linear_mpc
+from mpc.export_nmpc import export_nonlinear_mpc
+from mpc.export_nmpc_replay import replay
 from mpc.reference_cvxpy import CvxpySolver
 
 PATHS = {
@@ -309,8 +325,9 @@ def acados_python() -> str:
     return os.environ.get("ACADOS_PYTHON") or os.path.join(_HERE, ".venv-acados", "bin", "python")
 
 
-def run_acados(problem: dict) -> dict:
-    """benchmarks/acados_pendulum.py on `problem` in a subprocess; its result, or why it could not run."""
+def run_acados(problem: dict, script: str = "acados_pendulum.py") -> dict:
+    """benchmarks/`script` (acados_pendulum.py, or acados_c.py: the solver called from C) on `problem`
+    in a subprocess with the acados environment's python; its result, or why it could not run."""
     python = acados_python()
     if not os.path.exists(python):
         return {
@@ -340,7 +357,7 @@ def run_acados(problem: dict) -> dict:
             json.dump(problem, handle)
         try:
             done = subprocess.run(
-                [python, os.path.join(_HERE, "acados_pendulum.py"), problem_path, result_path],
+                [python, os.path.join(_HERE, script), problem_path, result_path],
                 env=environment,
                 capture_output=True,
                 text=True,
@@ -467,6 +484,7 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
         "nmpc_failures": int(sum(not s["success"] for s in info)),
         "nmpc_saturated_steps": int(np.sum(np.abs(our_moves) >= plant.input_limit[0] - 1e-9)),
     }
+    figures |= exported_nmpc_figures(controller, result, case.step)
     # The converged SQP on the same samples (the fallback comparison when acados cannot run).
     sqp = case_mpc("nonlinear", case, known, iteration="sqp", **overrides)
     sqp_times = []
@@ -529,6 +547,7 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
             "ratio_nmpc_vs_acados": None,
             "ratio_nmpc_vs_sqp": figures["sqp_median_ms"] / figures["nmpc_median_ms"],
         }
+    figures |= acados_c_figures(problem, figures, our_moves)
     subset = recorded[: max(2, do_mpc_steps)]
     try:
         done = do_mpc_run(plant, known, case, settings, subset)
@@ -542,6 +561,56 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
     except Exception as err:  # do-mpc is an optional extra
         figures |= {"do_mpc_median_ms": None, "do_mpc_unavailable": f"{type(err).__name__}: {err}"[:300]}
     return figures
+
+
+def acados_c_figures(problem: dict, figures: dict, our_moves) -> dict:
+    """acados' generated solver called from C on the recorded samples (benchmarks/acados_c.py): its
+    step's median and p99 inside C, and acados ÷ our exported NMPC's median; None and the reason where
+    either cannot run."""
+    ours = figures.get("exported_nmpc_step_median_ms")
+    acados = run_acados(problem, "acados_c.py")
+    if not acados.get("available") or ours is None:
+        reason = acados.get("reason", "unknown") if not acados.get("available") else "our exported NMPC did not run"
+        return {
+            "acados_c_step_median_ms": None,
+            "ratio_exported_nmpc_vs_acados_c": None,
+            "acados_c_unavailable": reason,
+        }
+    step_ms = np.array(acados["step_ms"])
+    moves = np.array(acados["first_moves"])[:, 0]
+    return {
+        "acados_c_step_median_ms": float(np.median(step_ms)),
+        "acados_c_p99_ms": float(np.percentile(step_ms, 99)),
+        "acados_c_failures": int(sum(code != 0 for code in acados["status"])),
+        "acados_c_max_first_move_diff": float(np.max(np.abs(moves - np.asarray(our_moves)))),
+        "ratio_exported_nmpc_vs_acados_c": float(np.median(step_ms)) / ours,
+    }
+
+
+def exported_nmpc_figures(controller, result, reference: float) -> dict:
+    """`controller` exported as C and replayed on `result`'s measurements by a C program: its step's
+    median and p99 inside C (the first, cold step left out), its largest command difference from
+    `result.u`, and the allocator's calls in the steps."""
+    try:
+        exported = export_nonlinear_mpc(controller, "bench_nmpc", [reference])
+        with tempfile.TemporaryDirectory(prefix="exported-nmpc-") as folder:
+            replayed = replay(exported, result.measured, result.r[:-1], folder)
+    except (CompilationError, subprocess.CalledProcessError, OSError) as err:
+        return {
+            "exported_nmpc_step_median_ms": None,
+            "exported_nmpc_p99_ms": None,
+            "exported_nmpc_max_command_diff": None,
+            "exported_nmpc_unavailable": f"{type(err).__name__}: {err}"[:300],
+        }
+    step_ms = 1e3 * replayed.step_seconds[1:]
+    return {
+        "exported_nmpc_step_median_ms": float(np.median(step_ms)),
+        "exported_nmpc_p99_ms": float(np.percentile(step_ms, 99)),
+        "exported_nmpc_max_ms": float(np.max(step_ms)),
+        "exported_nmpc_max_command_diff": float(np.max(np.abs(replayed.commands - np.asarray(result.u)))),
+        "exported_nmpc_failures": int(np.sum(replayed.codes != 0)),
+        "exported_nmpc_step_allocations": replayed.step_allocations,
+    }
 
 
 def settling_table() -> dict:
@@ -658,6 +727,26 @@ def main(argv=None):
         )
     else:
         print(f"(g) do-mpc: not measured ({rti['do_mpc_unavailable']})")
+
+    if rti["exported_nmpc_step_median_ms"] is not None:
+        print(
+            f"{'(h) ours exported as C (mpc.export_nmpc), from C':44s} {rti['exported_nmpc_step_median_ms']:10.4f} "
+            f"{rti['exported_nmpc_p99_ms']:8.4f} {rti['exported_nmpc_max_command_diff']:16.2e}"
+        )
+        print(f"    {rti['exported_nmpc_step_allocations']} allocations in the C steps")
+    else:
+        print(f"(h) exported as C: not measured ({rti['exported_nmpc_unavailable']})")
+    if rti["acados_c_step_median_ms"] is not None:
+        print(
+            f"{'(i) acados SQP-RTI, its generated C from C':44s} {rti['acados_c_step_median_ms']:10.4f} "
+            f"{rti['acados_c_p99_ms']:8.4f} {rti['acados_c_max_first_move_diff']:16.2e}"
+        )
+        print(f"ratio acados / ours, both from C = {rti['ratio_exported_nmpc_vs_acados_c']:.2f}")
+    else:
+        print(
+            "missing: acados_c_step_median_ms, ratio_exported_nmpc_vs_acados_c "
+            f"(acados from C did not run: {rti['acados_c_unavailable']})"
+        )
 
     names = studies.names() if args.all else ["arm", "pendulum"]
     nonlinear = {}

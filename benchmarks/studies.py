@@ -11,7 +11,12 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   python-control's `control.input_output_response` on the same loop (the same
   RK4 step as a discrete-time plant, the same block as a static controller,
   interconnected) on the first few samples; its trajectories are compared
-  with ours.
+  with ours. Beside it the arithmetic bound ``mc_bound_samples_per_s``: the
+  operations of one closed-loop sample period (CasADi instructions) x steps, per
+  sample, against the threads x one core's measured flop rate
+  (``core_flop_rate_per_s``: independent fused multiply-add chains in C, built
+  with models.compile's flags and timed inside C; ``core_flop_rate_method``
+  says how it was measured).
 
 - ``quick`` and ``full``: wall time and peak memory of ``python -m studies --quick``
   and of the default ``python -m studies``, each run as a user runs it (a child
@@ -52,12 +57,14 @@ import time
 from pathlib import Path
 
 import _path  # noqa: F401  (before our packages: drops this folder from sys.path)
+import casadi as ca
 import control
 import numpy as np
 
 import models
 import studies
 from designs.statespace_blocks import StateFeedback
+from models.closed_loop import closed_loop_function
 from models.files import write_json
 from studies import providers
 
@@ -100,6 +107,82 @@ def _consume(batch: models.MonteCarloResult) -> float:
     return float(sum(run.y[-1, 0] + run.x[-1, 0] + run.u[-1, 0] for run in batch))
 
 
+def step_operations(plant, block) -> int:
+    """Arithmetic operations of one closed-loop sample period (the block's step and `SUBSTEPS` RK4
+    sub-steps), counted as the instructions of its expanded CasADi function other than inputs, outputs
+    and constants (a sine counts as one)."""
+    fun = closed_loop_function(plant, block, 1, SUBSTEPS, False)
+    fun = fun if fun.is_a("SXFunction") else fun.expand()
+    skip = {ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_PARAMETER}
+    return sum(1 for k in range(fun.n_instructions()) if fun.instruction_id(k) not in skip)
+
+
+#: Independent multiply-add chains of the flop-rate kernel: enough to fill the vector units' pipelines
+#: (4 doubles per AVX2 register, two FMA units of latency 4 need 8 registers in flight).
+FMA_CHAINS = 64
+
+FMA_PROGRAM = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <math.h>
+#include <stdio.h>
+#include <time.h>
+#define CHAINS %(chains)d
+int main(void) {
+    static double acc[CHAINS];
+    const double a = 0.999999, b = 1e-6;
+    struct timespec began, ended;
+    double best = 1e300, seconds, sum = 0.0;
+    long k, repeat = %(repeat)d;
+    int j, trial;
+    for (trial = 0; trial < 20; ++trial) {
+        for (j = 0; j < CHAINS; ++j) acc[j] = 0.5 + 1e-3 * j;
+        clock_gettime(CLOCK_MONOTONIC, &began);
+        for (k = 0; k < repeat; ++k)
+            for (j = 0; j < CHAINS; ++j) acc[j] = fma(acc[j], a, b);
+        clock_gettime(CLOCK_MONOTONIC, &ended);
+        seconds = (ended.tv_sec - began.tv_sec) + 1e-9 * (ended.tv_nsec - began.tv_nsec);
+        if (seconds < best) best = seconds;
+        for (j = 0; j < CHAINS; ++j) sum += acc[j];
+    }
+    printf("%%.17g %%.17g\n", 2.0 * CHAINS * (double) repeat / best, sum);
+    return 0;
+}
+"""
+
+
+def numpy_flop_rate(size: int = 2048, repeat: int = 2000) -> float:
+    """Floating-point operations per second of NumPy's multiply-add on `size`-element arrays that stay
+    in the first-level cache (two flops per element), the best of five timings: a floor of the core's
+    rate (each NumPy call also pays its dispatch), used where no C compiler is found."""
+    a, b, c = (np.random.default_rng(k).random(size) for k in range(3))
+    out = np.empty(size)
+    best = float("inf")
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(repeat):
+            np.multiply(a, b, out=out)
+            np.add(out, c, out=out)
+        best = min(best, time.perf_counter() - start)
+    return 2.0 * size * repeat / best
+
+
+def core_flop_rate(repeat: int = 2_000_000) -> tuple[float, str]:
+    """(flops per second of one core, how it was measured): `FMA_CHAINS` independent fused
+    multiply-add chains in C, compiled with the project's flags (models.compile.FLAGS), the best of
+    20 timings inside C; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
+    compiler = models.compile.compiler()
+    if compiler is None:
+        return numpy_flop_rate(), "numpy multiply-add (no C compiler)"
+    with tempfile.TemporaryDirectory(prefix="flop-rate-") as folder:
+        source = Path(folder) / "fma.c"
+        source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat})
+        program = str(Path(folder) / "fma")
+        subprocess.run([*compiler, *models.compile.FLAGS, "-o", program, str(source), "-lm"], check=True)
+        printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
+    flags = " ".join(models.compile.FLAGS)
+    return float(printed.split()[0]), f"C, {FMA_CHAINS} independent fma chains, {flags}"
+
+
 def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[float, models.MonteCarloResult]:
     start = time.perf_counter()
     batch = models.monte_carlo(plant, block, reference, DURATION, samples, substeps=SUBSTEPS, threads=THREADS, jit=jit)
@@ -136,11 +219,20 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
             float(np.max(np.abs(response.outputs[-1, :-1] - batch.u[i, :, 0]))),
         )
     per_s = samples / statistics.median(times)
+    operations = step_operations(plant, block)
+    flop_rate, flop_method = core_flop_rate()
+    steps = int(round(DURATION / SAMPLE_PERIOD))
+    bound_per_s = THREADS * flop_rate / (operations * steps)
     baseline_per_s = baseline_samples / baseline_s
     return {
         "mc_samples_per_s": per_s,
         "mc_first_call_samples_per_s": samples / first_s,
         "mc_vm_samples_per_s": samples / vm_s,
+        "mc_bound_samples_per_s": bound_per_s,
+        "mc_ratio_bound_vs_measured": bound_per_s / per_s,
+        "mc_step_operations": operations,
+        "core_flop_rate_per_s": flop_rate,
+        "core_flop_rate_method": flop_method,
         "mc_compile_s": compile_s,
         "python_control_samples_per_s": baseline_per_s,
         "mc_ratio_vs_python_control": per_s / baseline_per_s,

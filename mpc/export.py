@@ -153,7 +153,7 @@ def check_exportable(controller) -> None:
             f"{getattr(controller, 'name', kind)}: only mpc.LinearMPC is exported here; "
             f"{kind} is not one"
             + (
-                " (its SQP over the plant's equations has no C export; export a LinearMPC or a Block)"
+                " (mpc.export_nmpc.export_nonlinear_mpc exports its real-time iteration)"
                 if kind == "NonlinearMPC"
                 else ""
             )
@@ -217,8 +217,8 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedMPC:
     Raises
     ------
     UnsupportedExport
-        For a controller that is not a LinearMPC (a nonlinear MPC, whose SQP over the
-        plant's equations is not exported: export a LinearMPC or a Block instead).
+        For a controller that is not a LinearMPC (a nonlinear MPC is exported by
+        `mpc.export_nmpc.export_nonlinear_mpc`).
     """
     name = c_name(name)
     check_exportable(controller)

@@ -135,7 +135,7 @@ def test_what_cannot_be_exported_is_named():
     with pytest.raises(
         UnsupportedExport,
         match=r"nonlinear MPC: only mpc.LinearMPC is exported here; "
-        r"NonlinearMPC is not one \(its SQP over the plant's equations",
+        r"NonlinearMPC is not one \(mpc.export_nmpc.export_nonlinear_mpc exports",
     ):
         export_linear_mpc(build("nonlinear", "arm"), "nmpc")
     with pytest.raises(

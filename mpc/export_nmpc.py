@@ -1,0 +1,566 @@
+"""Nonlinear MPC exported as C: the real-time iteration, its QP by DAQP, the estimator and the fallback.
+
+`export_nonlinear_mpc(controller, name, references)` writes the whole
+`NonlinearMPC.step` as C with fixed sizes:
+
+- the estimator: the prediction x̂⁺ = F(x̂, u + d̂) and the correction with
+  y − h(x̂) by the disturbance-augmented gain (`mpc.estimator`);
+- the target (x_s, v_s, P) of each reference in `references`, computed at
+  export by `NonlinearMPC.target` (the plant's equilibrium and the Riccati
+  terminal weight need a Newton solve and a Riccati solve the C does not
+  repeat): a reference outside that table is refused by the step (status 9);
+- the real-time iteration of `mpc.rti.RealTimeIteration`: the preparation
+  (``rti.prepare_function``: linearization and condensing) and the feedback's
+  two halves around the QP (``vectors_function``, ``recover_function``) as
+  CasADi's generated C; the dense condensed QP solved by DAQP's C API from
+  CasADi's installation (`mpc.export.build_flags`), set up once in
+  ``name_init`` and re-factorized in place every sample (``update_ldp``), cold
+  started as CasADi's DAQP node is; the first sample, and the first after a
+  failure, iterates to convergence from the plan rolled out through the model,
+  as the Python controller does;
+- the fallback to the shifted plan, exact clipping and the rate limit.
+
+The QP is solved whole even where the Python path first tries the slacks at
+their bounds (`mpc.slack_first`): both give the QP's unique optimum.
+
+Memory is one struct per controller (``name_state``), owned by the caller and
+zero before its first ``name_init``; DAQP's arrays are allocated once, in
+``name_init``, and released by ``name_free``. Nothing else allocates.
+"""
+
+from __future__ import annotations
+
+import string
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from models.export import UnsupportedExport, c_array, c_name, c_number, generated_code
+
+from . import export
+from .controller import NonlinearMPC
+from .qp_fast import PRIMAL_TOLERANCE
+from .rti import QP_TOLERANCE
+
+#: Status codes of ``name_step`` and ``name_init``; a non-finite command adds 16.
+STATUS = {
+    0: "optimal",
+    1: "non-finite measurement",
+    2: "non-finite estimate",
+    3: "QP failed",
+    4: "not converged",
+    5: "non-finite iterate",
+    6: "non-finite solution",
+    7: "non-finite reference",
+    8: "QP setup failed",
+    9: "reference not exported",
+}
+NONFINITE_COMMAND = export.NONFINITE_COMMAND
+
+
+def status_text(code: int) -> str:
+    """The meaning of a status code of the exported step."""
+    text = STATUS.get(code & ~NONFINITE_COMMAND, f"unknown code {code}")
+    return f"non-finite command ({text})" if code & NONFINITE_COMMAND else text
+
+
+@dataclass(frozen=True)
+class ExportedNMPC(export.ExportedMPC):
+    """An exported nonlinear MPC: `models.export.ExportedC` built with DAQP (`mpc.export.build_flags`)."""
+
+
+def check_exportable(controller, references) -> np.ndarray:
+    """The references as an array; raise `UnsupportedExport` naming what the export cannot do."""
+    if not isinstance(controller, NonlinearMPC):
+        kind = type(controller).__name__
+        raise UnsupportedExport(
+            f"{getattr(controller, 'name', kind)}: only mpc.NonlinearMPC is exported here; {kind} is not one"
+            " (use mpc.export.export_linear_mpc for a LinearMPC)"
+        )
+    if controller.nlp.iteration != "rti":
+        raise UnsupportedExport(
+            f"{controller.name}: iteration={controller.nlp.iteration!r} (SQP to convergence at every sample has "
+            "no bounded step time; the export runs one real-time iteration per sample)"
+        )
+    if controller.plant.nu != 1 or controller.n_reference != 1:
+        raise UnsupportedExport(f"{controller.name}: more than one input or reference")
+    values = np.atleast_1d(np.asarray(references, dtype=float)).ravel()
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        raise UnsupportedExport(
+            f"{controller.name}: references must be finite and at least one (the targets are computed at export)"
+        )
+    return values
+
+
+def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
+    """The CasADi Functions the C calls, named ``name_*``, the known plant's parameters baked in:
+    output (x) -> y, predict (x, v) -> x⁺, guess (x̂, d̂, plan) -> w (the rolled-out start, scaled),
+    prepare (w, P) -> data, vectors (data, x0) -> (h, lba, uba), recover (data, x0, dv, lam_a,
+    lam_x) -> (w⁺, residuals), and qp (data) -> (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it."""
+    plant, nlp = controller.plant, controller.nlp
+    rti, tr = nlp.rti, nlp.transcription
+    p = ca.DM(plant.param_vector())
+    nx, nu, N = plant.nx, plant.nu, controller.horizon
+    x, v = ca.MX.sym("x", nx), ca.MX.sym("v", nu)
+    output = ca.Function(f"{name}_output", [x], [plant.casadi_h(x, p)])
+    predict = ca.Function(f"{name}_predict", [x, v], [controller.step_model(x, v, p)])
+    d, plan = ca.MX.sym("d", nu), ca.MX.sym("plan", N * nu)
+    limit = ca.DM(controller.input_limit)
+    clipped = ca.fmin(ca.fmax(ca.reshape(plan, nu, N), -limit), limit)  # (nu, N): the plan transposed
+    X = nlp._rollout(x, clipped + ca.repmat(d, 1, N), p)
+    X = ca.horzcat(x, X)
+    w = ca.MX.zeros(tr.layout.size)
+    w[np.asarray(nlp._states).ravel().tolist()] = ca.vec(X / ca.repmat(ca.DM(rti.state_scale), 1, N + 1))
+    w[np.asarray(nlp._inputs).T.ravel().tolist()] = ca.vec(clipped / ca.repmat(ca.DM(nlp._input_scale), 1, N))
+    guess = ca.Function(f"{name}_guess", [x, d, plan], [w])
+    prepare = rename(rti.prepare_function, f"{name}_prepare")
+    vectors = rename(rti.vectors_function, f"{name}_vectors")
+    recover = rename(rti.recover_function, f"{name}_recover")
+    data = ca.MX.sym("data", rti.layout.size)
+    pieces = rti.layout.unpack(data)
+    H = ca.vertcat(
+        ca.horzcat(pieces["H_dd"], pieces["H_sd"].T),
+        ca.horzcat(pieces["H_sd"], pieces["H_ss"]),
+    )
+    A = ca.horzcat(pieces["C_d"], pieces["C_s"])
+    qp = ca.Function(
+        f"{name}_qp", [data], [ca.densify(H), ca.densify(A.T), ca.densify(pieces["lbv"]), ca.densify(pieces["ubv"])]
+    )
+    y = ca.SX.sym("y", plant.ny)
+    q0 = plant.casadi_configuration(y, p)
+    x0 = ca.vertcat(q0, ca.SX.zeros(nx - plant.nq))
+    u0 = ca.fmin(ca.fmax(plant.casadi_equilibrium_input(q0, p), -limit), limit)
+    start = ca.Function(f"{name}_start", [y], [x0, u0])
+    return [output, predict, guess, prepare, vectors, recover, qp, start]
+
+
+def rename(fun: ca.Function, name: str) -> ca.Function:
+    """`fun` called from a Function named `name` (the generated C's symbol)."""
+    args = [ca.MX.sym(fun.name_in(i), fun.sparsity_in(i)) for i in range(fun.n_in())]
+    out = fun(*args)
+    return ca.Function(name, args, list(out) if isinstance(out, (list, tuple)) else [out])
+
+
+def targets(controller: NonlinearMPC, references: np.ndarray) -> str:
+    """The target table: references, and per reference x_s, v_s and the terminal weight P (column-major)."""
+    rows = [controller.target(r) for r in references]
+    return "".join(
+        [
+            c_array("REFERENCES", references),
+            c_array("X_TARGET", np.array([r[0] for r in rows])),
+            c_array("V_TARGET", np.array([r[1] for r in rows])),
+            c_array("P_TARGET", np.array([np.asarray(r[2], dtype=float).T.ravel() for r in rows])),
+        ]
+    )
+
+
+def indices(controller: NonlinearMPC) -> str:
+    """The decisions' places as C arrays: states (N+1, nx) and inputs (N, nu) in w, the shift, the
+    parameters' offsets in P."""
+    nlp = controller.nlp
+    s = nlp._slices
+    return "".join(
+        [
+            c_array("STATE_INDEX", np.asarray(nlp._states).ravel(), "int"),
+            c_array("INPUT_INDEX", np.asarray(nlp._inputs).ravel(), "int"),
+            c_array("SHIFT_INDEX", nlp.rti.shift_index, "int"),
+            c_array("STATE_SCALE", nlp.rti.state_scale),
+            c_array("INPUT_SCALE", nlp._input_scale),
+            c_array("P_DEFAULT", nlp._parameters),
+            c_array("GAIN", controller.observer.gain),
+            c_array("LIMIT", controller.input_limit),
+            c_array("RATE", controller._rate_per_sample if controller._rate_per_sample is not None else [0.0]),
+            "".join(
+                f"#define OFFSET_{key.upper()} {s[key].start}\n" for key in ("x0", "d_hat", "x_s", "u_s", "P", "u_prev")
+            ),
+        ]
+    )
+
+
+def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> ExportedNMPC:
+    """A `NonlinearMPC` as C with the same commands (see the module docstring).
+
+    Parameters
+    ----------
+    controller : the NonlinearMPC, as designed now
+    name : C prefix of the files (``name.h``, ``name.c``) and functions (``name_step`` ...)
+    references : the reference values (absolute tracked coordinate) the C may be given; their
+        targets are computed here
+
+    Raises
+    ------
+    UnsupportedExport
+        For a controller that is not a NonlinearMPC, one iterating to convergence at every sample
+        (iteration="sqp"), with more than one input, no finite reference, or phases CasADi cannot
+        generate as C.
+    """
+    name = c_name(name)
+    values = check_exportable(controller, references)
+    nlp, plant = controller.nlp, controller.plant
+    rti = nlp.rti
+    nx, nu, ny, N = plant.nx, plant.nu, plant.ny, controller.horizon
+    functions = kernels(controller, name)
+    sizes = dict(
+        NX=nx,
+        NU=nu,
+        NY=ny,
+        NE=nx + nu,
+        NH=N,
+        NI=N * nu,
+        NW=nlp.transcription.layout.size,
+        NP=len(nlp._parameters),
+        NDATA=rti.layout.size,
+        NQ=rti.qp_solver.n_dynamic + rti.qp_solver.n_static,
+        NROWS=rti.n_rows,
+        NSTATE=nx + nu + N * nu,
+        NREF=len(values),
+    )
+    sizes["NB"] = sizes["NQ"] + sizes["NROWS"]
+    work = {key: max(max(1, getattr(f, f"sz_{key}")()) for f in functions) for key in ("arg", "res", "iw", "w")}
+    settings = f"    m->settings.primal_tol = {c_number(PRIMAL_TOLERANCE)};\n"
+    upper = name.upper()
+    header = _HEADER.substitute(
+        p=name,
+        P=upper,
+        controller=controller.name,
+        nx=nx,
+        nu=nu,
+        ny=ny,
+        N=N,
+        sizes="\n".join(f"#define {upper}_{key} {value}" for key, value in sizes.items()),
+        sample_period=c_number(controller.sample_period),
+        statuses="\n".join(
+            f"#define {upper}_{text.upper().replace(' ', '_').replace('-', '')} {code}" for code, text in STATUS.items()
+        ),
+        nonfinite_command=NONFINITE_COMMAND,
+        work_w=work["w"],
+        work_iw=work["iw"],
+    )
+    source = _SOURCE.substitute(
+        p=name,
+        P=upper,
+        controller=controller.name,
+        sizes="".join(f"#define {key} {value}\n" for key, value in sizes.items()),
+        casadi=generated_code(functions, f"{name}_casadi"),
+        data=indices(controller) + targets(controller, values),
+        settings=settings,
+        has_rate=int(controller._rate_per_sample is not None),
+        max_iterations=nlp.max_iterations,
+        tolerance=c_number(nlp.tolerance),
+        qp_tolerance=c_number(QP_TOLERANCE),
+        work_arg=work["arg"],
+        work_res=work["res"],
+        nonfinite_command=NONFINITE_COMMAND,
+    )
+    return ExportedNMPC(
+        name=name,
+        controller=controller.name,
+        header=header,
+        source=source,
+        n_state=sizes["NSTATE"],
+        n_measured=ny,
+        n_reference=nu,
+        n_input=nu,
+        sample_period=controller.sample_period,
+        measures="outputs",
+        has_init=True,
+        status_codes={code: status_text(code) for code in list(STATUS) + [c | NONFINITE_COMMAND for c in STATUS]},
+    )
+
+
+_HEADER = string.Template("""/* ${p}.h: nonlinear MPC '${controller}' exported by codesign-control (mpc.export_nmpc).
+ * ${nx} states, ${nu} input(s), ${ny} outputs; horizon ${N}; one real-time iteration per sample.
+ * Fixed sizes; the QP is solved by DAQP, which allocates its workspace once, in ${p}_init.
+ * Build with DAQP's headers and library (mpc.export.build_flags). */
+#ifndef ${P}_H
+#define ${P}_H
+
+#include <daqp/types.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+${sizes}
+#define ${P}_N_STATE ${P}_NSTATE
+#define ${P}_SAMPLE_PERIOD ${sample_period}
+
+/* Status codes of ${p}_step and ${p}_init; a non-finite command adds ${nonfinite_command}.
+ * Any status but ${P}_OPTIMAL means the shifted previous plan was followed. */
+${statuses}
+
+/* One per controller instance, owned by the caller (sizeof: ${p}_state_size()); all zero before its
+ * first ${p}_init, and not copied once initialized (DAQP's workspace points into it). */
+typedef struct {
+    double xc[${P}_NSTATE];  /* (x_hat, d_hat, plan) */
+    double w[${P}_NW], w_next[${P}_NW];  /* the warm start (scaled decisions) and the new iterate */
+    double parameters[${P}_NP], data[${P}_NDATA];
+    double H[${P}_NQ * ${P}_NQ], A[${P}_NROWS > 0 ? ${P}_NROWS * ${P}_NQ : 1];
+    double h[${P}_NQ], bupper[${P}_NB], blower[${P}_NB];
+    int sense[${P}_NB];
+    double dv[${P}_NQ], lam[${P}_NB], lam_x[${P}_NQ], lam_a[${P}_NROWS > 0 ? ${P}_NROWS : 1];
+    double residuals[2];
+    DAQPProblem problem;
+    DAQPSettings settings;
+    DAQPWorkspace workspace;
+    int set_up;        /* DAQP holds its workspace */
+    int has_guess;     /* w holds the last solution shifted by one sample */
+    int iterations;    /* SQP iterations of the last step */
+    double work[${work_w}];
+    long long int iwork[${work_iw}];
+} ${p}_state;
+
+/* The first state from the first measurement y0 and reference r0: at rest at the measured
+ * configuration, no disturbance, the holding input as plan; sets DAQP up (its one allocation).
+ * Returns 0 or a status code. */
+int ${p}_init(${p}_state *state, const double *y0, const double *r0);
+/* One sample, every ${P}_SAMPLE_PERIOD s: outputs y, reference r (one of the exported references)
+ * -> command u, within the actuator limit. Returns a status code. */
+int ${p}_step(${p}_state *state, const double *y, const double *r, double *u);
+void ${p}_set_state(${p}_state *state, const double *xc);
+void ${p}_get_state(const ${p}_state *state, double *xc);
+void ${p}_free(${p}_state *state);
+unsigned long ${p}_state_size(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* ${P}_H */
+""")
+
+_SOURCE = string.Template("""/* ${p}.c: nonlinear MPC '${controller}' by codesign-control (mpc.export_nmpc). */
+#include "${p}.h"
+#include <math.h>
+#include <daqp/api.h>
+#include <daqp/daqp.h>
+#include <daqp/utils.h>
+#undef NX  /* DAQP's constants.h: its workspace's size; here the plant's state count */
+
+${sizes}#define HAS_RATE ${has_rate}
+#define MAX_ITERATIONS ${max_iterations}
+#define TOLERANCE ${tolerance}
+#define QP_TOLERANCE ${qp_tolerance}
+#define NONFINITE_COMMAND ${nonfinite_command}
+
+${casadi}
+${data}
+static int all_finite(const double *v, int n) {
+    int i;
+    for (i = 0; i < n; ++i) if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static double clip(double v, double low, double high) {
+    return v < low ? low : (v > high ? high : v);
+}
+
+/* One CasADi-generated function: inputs in, outputs out. */
+typedef int (*kernel)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);
+static int call(${p}_state *m, kernel f, const double *a0, const double *a1, const double *a2, const double *a3,
+                const double *a4, double *r0, double *r1, double *r2, double *r3) {
+    const casadi_real *arg[${work_arg}];
+    casadi_real *res[${work_res}];
+    arg[0] = a0; arg[1] = a1; arg[2] = a2; arg[3] = a3; arg[4] = a4;
+    res[0] = r0; res[1] = r1; res[2] = r2; res[3] = r3;
+    return f(arg, res, m->iwork, m->work, 0);
+}
+#define NONE 0
+
+void ${p}_free(${p}_state *m) {
+    if (!m->set_up) return;
+    m->workspace.settings = 0;
+    free_daqp_workspace(&m->workspace);
+    free_daqp_ldp(&m->workspace);
+    m->set_up = 0;
+}
+
+/* DAQP's workspace for the dense QP of NQ variables (simple bounds) and NROWS rows, H = I until the
+ * first solve writes this sample's. */
+static int setup(${p}_state *m) {
+    static const DAQPWorkspace empty;
+    double setup_time;
+    int i;
+    ${p}_free(m);
+    for (i = 0; i < NQ * NQ; ++i) m->H[i] = (i % (NQ + 1)) == 0 ? 1.0 : 0.0;
+    for (i = 0; i < NQ; ++i) m->h[i] = 0.0;
+    for (i = 0; i < NB; ++i) { m->bupper[i] = 1.0; m->blower[i] = -1.0; m->sense[i] = 0; }
+    for (i = 0; i < (NROWS > 0 ? NROWS * NQ : 1); ++i) m->A[i] = 0.0;
+    m->problem.n = NQ;
+    m->problem.m = NB;
+    m->problem.ms = NQ;
+    m->problem.H = m->H;
+    m->problem.f = m->h;
+    m->problem.A = m->A;
+    m->problem.bupper = m->bupper;
+    m->problem.blower = m->blower;
+    m->problem.sense = m->sense;
+    daqp_default_settings(&m->settings);
+${settings}    m->workspace = empty;
+    m->workspace.settings = &m->settings;
+    if (setup_daqp(&m->problem, &m->workspace, &setup_time) < 0) {
+        m->workspace.settings = 0;
+        free_daqp_workspace(&m->workspace);
+        free_daqp_ldp(&m->workspace);
+        return 8;
+    }
+    m->set_up = 1;
+    return 0;
+}
+
+/* The prepared QP (m->data) for the initial state x0, cold started: m->dv, the multipliers and
+ * m->residuals; 1 when DAQP and the residuals say solved. */
+static int solve_qp(${p}_state *m, const double *x0) {
+    DAQPResult result;
+    double lba[NROWS > 0 ? NROWS : 1], uba[NROWS > 0 ? NROWS : 1], lbv[NQ], ubv[NQ];
+    int i;
+    call(m, (kernel) ${p}_qp, m->data, NONE, NONE, NONE, NONE, m->H, m->A, lbv, ubv);
+    call(m, (kernel) ${p}_vectors, m->data, x0, NONE, NONE, NONE, m->h, lba, uba, NONE);
+    for (i = 0; i < NQ; ++i) { m->blower[i] = lbv[i]; m->bupper[i] = ubv[i]; }
+    for (i = 0; i < NROWS; ++i) { m->blower[NQ + i] = lba[i]; m->bupper[NQ + i] = uba[i]; }
+    for (i = 0; i < NB; ++i) m->sense[i] = 0;
+    reset_daqp_workspace(&m->workspace);
+    if (update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace) < 0) {
+        for (i = 0; i < NQ; ++i) m->dv[i] = NAN;
+        return 0;
+    }
+    result.x = m->dv;
+    result.lam = m->lam;
+    daqp_solve(&result, &m->workspace);
+    for (i = 0; i < NQ; ++i) m->lam_x[i] = m->lam[i];
+    for (i = 0; i < NROWS; ++i) m->lam_a[i] = m->lam[NQ + i];
+    call(m, (kernel) ${p}_recover, m->data, x0, m->dv, m->lam_a, m->lam_x, m->w_next, m->residuals, NONE, NONE);
+    return result.exitflag > 0 && isfinite(m->residuals[0]) && isfinite(m->residuals[1])
+           && m->residuals[0] <= QP_TOLERANCE && m->residuals[1] <= QP_TOLERANCE;
+}
+
+/* The NLP at the estimate x0 (m->parameters set): one real-time iteration from the warm start, or,
+ * without one, the SQP to convergence from the rolled-out plan. 0 when solved (m->w the solution). */
+static int solve_nlp(${p}_state *m, const double *x0, const double *d, const double *plan) {
+    int i, k, converged = 0;
+    double step;
+    if (!m->has_guess) {
+        call(m, (kernel) ${p}_guess, x0, d, plan, NONE, NONE, m->w, NONE, NONE, NONE);
+        if (!all_finite(m->w, NW))
+            for (k = 0; k <= NH; ++k)
+                for (i = 0; i < NX; ++i) m->w[STATE_INDEX[k * NX + i]] = x0[i] / STATE_SCALE[i];
+    }
+    for (k = 0; k < (m->has_guess ? 1 : MAX_ITERATIONS); ++k) {
+        m->iterations = k + 1;
+        call(m, (kernel) ${p}_prepare, m->w, m->parameters, NONE, NONE, NONE, m->data, NONE, NONE, NONE);
+        if (!solve_qp(m, x0)) return 3;
+        if (!all_finite(m->w_next, NW)) return 5;
+        step = 0.0;
+        for (i = 0; i < NW; ++i) if (fabs(m->w_next[i] - m->w[i]) > step) step = fabs(m->w_next[i] - m->w[i]);
+        for (i = 0; i < NW; ++i) m->w[i] = m->w_next[i];
+        if (m->has_guess) { converged = 1; break; }
+        if (step <= TOLERANCE) { converged = 1; break; }
+    }
+    return converged ? 0 : 4;
+}
+
+int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
+    double x0[NX], u0[NU];
+    int i, k;
+    if (!all_finite(y0, NY) || !all_finite(r0, NU)) return 1;
+    for (i = 0; i < NREF && REFERENCES[i] != r0[0]; ++i) {}
+    if (i == NREF) return 9;
+    call(m, (kernel) ${p}_start, y0, NONE, NONE, NONE, NONE, x0, u0, NONE, NONE);
+    if (!all_finite(x0, NX) || !all_finite(u0, NU)) return 1;
+    for (i = 0; i < NX; ++i) m->xc[i] = x0[i];
+    for (i = 0; i < NU; ++i) m->xc[NX + i] = 0.0;
+    for (k = 0; k < NH; ++k)
+        for (i = 0; i < NU; ++i) m->xc[NE + k * NU + i] = u0[i];
+    m->has_guess = 0;
+    m->iterations = 0;
+    return setup(m);
+}
+
+int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
+    double x_hat[NX], d_hat[NU], y_hat[NY], innovation[NY], candidate[NI], inputs[NI], x_next[NX], v[NU];
+    double plan[NI], sum;
+    int i, j, k, target = 0, status = 0;
+    for (k = 0; k < NI; ++k) plan[k] = m->xc[NE + k];
+    for (i = 0; i < NX; ++i) x_hat[i] = m->xc[i];
+    for (i = 0; i < NU; ++i) d_hat[i] = m->xc[NX + i];
+    if (!all_finite(r, NU)) {
+        status = 7;
+    } else {
+        for (target = 0; target < NREF && REFERENCES[target] != r[0]; ++target) {}
+        if (target == NREF) status = 9;
+    }
+    if (status == 0 && !all_finite(y, NY)) {
+        status = 1;  /* a lost measurement: the prediction stands as the estimate */
+    } else if (status == 0) {
+        call(m, (kernel) ${p}_output, x_hat, NONE, NONE, NONE, NONE, y_hat, NONE, NONE, NONE);
+        for (i = 0; i < NY; ++i) innovation[i] = y[i] - y_hat[i];
+        for (i = 0; i < NE; ++i) {
+            sum = 0.0;
+            for (j = 0; j < NY; ++j) sum += GAIN[i * NY + j] * innovation[j];
+            if (i < NX) x_hat[i] += sum; else d_hat[i - NX] += sum;
+        }
+        if (!all_finite(x_hat, NX) || !all_finite(d_hat, NU)) status = 2;
+    }
+    if (status == 0) {
+        for (i = 0; i < NP; ++i) m->parameters[i] = P_DEFAULT[i];
+        for (i = 0; i < NX; ++i) m->parameters[OFFSET_X0 + i] = x_hat[i];
+        for (i = 0; i < NX; ++i) m->parameters[OFFSET_X_S + i] = X_TARGET[target * NX + i];
+        for (i = 0; i < NX * NX; ++i) m->parameters[OFFSET_P + i] = P_TARGET[target * NX * NX + i];
+        for (i = 0; i < NU; ++i) {
+            m->parameters[OFFSET_D_HAT + i] = d_hat[i];
+            m->parameters[OFFSET_U_S + i] = V_TARGET[target * NU + i] - d_hat[i];
+            m->parameters[OFFSET_U_PREV + i] = plan[i];
+        }
+        if (!m->set_up && (status = setup(m))) {
+            m->has_guess = 0;
+        } else {
+            status = solve_nlp(m, x_hat, d_hat, plan);
+            if (status == 0) {
+                for (k = 0; k < NI; ++k) inputs[k] = m->w[INPUT_INDEX[k]] * INPUT_SCALE[k % NU];
+                if (!all_finite(inputs, NI)) status = 6;
+            }
+            m->has_guess = status == 0;
+            if (status == 0) {
+                for (i = 0; i < NW; ++i) m->w_next[i] = m->w[SHIFT_INDEX[i]];
+                for (i = 0; i < NW; ++i) m->w[i] = m->w_next[i];
+            }
+        }
+    }
+    if (status == 0) {
+        for (k = 0; k < NI; ++k) candidate[k] = inputs[k];
+    } else {  /* follow the previous plan, shifted by one sample */
+        for (k = 0; k < NI - NU; ++k) candidate[k] = plan[k + NU];
+        for (i = 0; i < NU; ++i) candidate[NI - NU + i] = plan[NI - NU + i];
+    }
+    for (k = 0; k < NI; ++k) candidate[k] = clip(candidate[k], -LIMIT[k % NU], LIMIT[k % NU]);
+    if (HAS_RATE) {
+        for (i = 0; i < NU; ++i) {
+            candidate[i] = clip(candidate[i], plan[i] - RATE[i], plan[i] + RATE[i]);
+            candidate[i] = clip(candidate[i], -LIMIT[i], LIMIT[i]);
+        }
+    }
+    for (i = 0; i < NU; ++i) u[i] = candidate[i];
+    if (!all_finite(u, NU)) status |= NONFINITE_COMMAND;
+    for (i = 0; i < NU; ++i) v[i] = u[i] + d_hat[i];
+    call(m, (kernel) ${p}_predict, x_hat, v, NONE, NONE, NONE, x_next, NONE, NONE, NONE);
+    if (!all_finite(x_next, NX) && all_finite(x_hat, NX) && all_finite(u, NU))
+        for (i = 0; i < NX; ++i) x_next[i] = x_hat[i];  /* the model's prediction blew up: hold */
+    for (i = 0; i < NX; ++i) m->xc[i] = x_next[i];
+    for (i = 0; i < NU; ++i) m->xc[NX + i] = d_hat[i];
+    for (k = 0; k < NI; ++k) m->xc[NE + k] = candidate[k];
+    return status;
+}
+
+void ${p}_set_state(${p}_state *m, const double *xc) {
+    int i;
+    for (i = 0; i < NSTATE; ++i) m->xc[i] = xc[i];
+}
+
+void ${p}_get_state(const ${p}_state *m, double *xc) {
+    int i;
+    for (i = 0; i < NSTATE; ++i) xc[i] = m->xc[i];
+}
+
+unsigned long ${p}_state_size(void) { return (unsigned long) sizeof(${p}_state); }
+""")
