@@ -312,8 +312,8 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
         p.error(f"--sweep runs one plant; name exactly one, got {len(plants)}")
     try:
         grid = sweep.Grid.parse(args.sweep)
-    except ValueError as err:
-        p.error(str(err))
+    except ValueError as err:  # a ResourceLimitError too: too many points for memory
+        p.error(f"--sweep: {err}")
     scenario = settings["scenarios"] or ["step"]
     if len(scenario) != 1 or scenario[0] == "mc":
         p.error(f"--sweep runs one scenario other than mc; got {', '.join(scenario)}")
@@ -321,6 +321,10 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
     plant = models.get(name)
     if grid.param not in plant.params:
         p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
+    try:
+        sweep.grid_params(plant, grid)  # every value the plant accepts, before the run starts
+    except ValueError as err:
+        p.error(f"--sweep: {err}")
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
     stop_on_signals()
     study = cases.get(name)
