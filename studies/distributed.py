@@ -64,7 +64,8 @@ def die_with_parent(parent: int) -> None:
 
     On Linux the kernel sends the signal (prctl PR_SET_PDEATHSIG); a parent that died before the call
     is seen by ``os.getppid()`` no longer being `parent`, and this process ends at once. Elsewhere
-    nothing is done.
+    nothing is done. The kernel sends it when the *thread* that started the worker ends: `Local`
+    starts its pool from the thread that gives it its first tasks (the main one, for the command).
     """
     if not sys.platform.startswith("linux"):
         return

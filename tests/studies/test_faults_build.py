@@ -4,12 +4,16 @@ the other controllers of the study run."""
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 
 import example_providers
 import pytest
+from conftest import subprocess_env
 
 import models
 import studies
+from models import files
 from studies import provider_calls, runner
 
 STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
@@ -59,3 +63,24 @@ def test_the_check_leaves_the_providers_block_as_it_came():
     lqr = example_providers.controllers(studies.get("arm"), None)["LQR"]
     assert provider_calls.unbuildable("p", {"LQR": lqr}) == []
     assert "casadi_step" not in vars(lqr)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("strict", "status"), [((), 0), (("--strict",), 1)])
+def test_the_command_goes_on_past_the_block_and_exits_1_only_with_strict(tmp_path, strict, status):
+    done = subprocess.run(
+        [sys.executable, "-m", "studies", "arm", "--scenario", "step", "--mc", "0", "--quick", "--quiet"]
+        + ["--out", "out", "--provider", "test_faults_build:broken_block", *strict],
+        cwd=tmp_path,
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=1200,
+    )
+    assert done.returncode == status, done.stderr[-3000:]
+    if not strict:
+        table = (tmp_path / "out/arm/table.csv").read_text()
+        assert "broken block,step" in table and "failed: ZeroDivisionError" in table
+        assert "LQR" in table and ",ok," in table  # the case's own controllers ran
+        note = files.escape_markdown("test_faults_build:broken_block: 'broken block' failed to build")
+        assert note in (tmp_path / "out/arm/table.md").read_text()
