@@ -75,6 +75,13 @@ def make_solver(solver, problem: MPCProblem):
     return made
 
 
+def solver_name(solver) -> str:
+    """The name a QP solver object reports in step records: its ``name`` (a str) if it has one, else its
+    class's name (a custom solver needs only ``solve`` and ``reset``)."""
+    name = getattr(solver, "name", None)
+    return name if isinstance(name, str) and name else type(solver).__name__
+
+
 def _vector(value, size: int, what: str) -> np.ndarray:
     arr = real_array(value, what).reshape(-1)
     if arr.size != size:
@@ -222,6 +229,7 @@ class LinearMPC(_PlanFollower):
     rate_limit : (nu,) bound on the input's rate of change in input units per second, or None
     solver : "daqp" (condensed, fastest), "osqp" (sparse) or "cvxpy" (the readable reference),
         or a callable problem -> solver object with solve(QPParameters) -> QPSolution and reset()
+        (and optionally a ``name``, reported in step records; by default its class's name)
     tracked : coordinate whose absolute value the reference gives
     operating_point : (xe, ue) to linearize about (default: the plant's standard equilibrium)
     input_noise_std, disturbance_step_std, measurement_std : the estimator's tuning, see
@@ -323,7 +331,7 @@ class LinearMPC(_PlanFollower):
         )
         ns = self.problem.n_soft
         self._info = {
-            "solver": self.solver.name,
+            "solver": solver_name(self.solver),
             "status": status,
             "success": success,
             "iterations": solution.iterations,
@@ -347,7 +355,7 @@ class LinearMPC(_PlanFollower):
         """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state)."""
         if not self.lockstep:
             raise TypeError(
-                f"{self.name}: the {self.solver.name} solver's warm start cannot be kept per sample "
+                f"{self.name}: the {solver_name(self.solver)} solver's warm start cannot be kept per sample "
                 "(no warm_start attribute); step the samples one by one"
             )
         y0 = real_array(y0, f"{self.name}: first measurements").reshape(-1, self.plant.ny)

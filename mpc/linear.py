@@ -373,6 +373,17 @@ class MPCProblem:
         return np.maximum(0.0, np.maximum(self.soft_lower - g, g - self.soft_upper))
 
 
+def check_holding_input(name: str, needed, limit) -> None:
+    """Refuse an operating point whose holding input `needed` (nu,) is beyond the actuator limit
+    |u| <= `limit` (nu,): a ValueError naming the plant `name`, the input needed and the limit."""
+    needed = np.asarray(needed, dtype=float)
+    if np.any(np.abs(needed) > limit):
+        raise ValueError(
+            f"{name}: holding the operating point needs the input {needed}, beyond the actuator limit "
+            f"{np.asarray(limit, dtype=float)}; no admissible input holds it"
+        )
+
+
 def problem_from_model(
     model: LinearModel,
     state_weight,
@@ -404,11 +415,7 @@ def problem_from_model(
     limit = np.broadcast_to(np.asarray(input_limit, dtype=float), (model.nu,))
     if np.any(~np.isfinite(limit)) or np.any(limit <= 0):
         raise ValueError(f"input_limit must be finite and > 0, got {limit}")
-    if np.any(np.abs(model.ue) > limit):
-        raise ValueError(
-            f"{model.name}: the operating point's input {model.ue} is beyond the actuator limit "
-            f"{limit}; no admissible input holds it"
-        )
+    check_holding_input(model.name, model.ue, limit)
     soft = tuple(soft_bounds)
     rows = np.array([b.row for b in soft]).reshape(len(soft), model.nx)
     offset = rows @ model.xe

@@ -33,6 +33,7 @@ import numpy as np
 from models import Plant, interrupts
 from models.checks import integer, positive, real_array, weight_matrix
 
+from .linear import check_holding_input
 from .ocp import OptimalControlProblem
 from .rti import RealTimeIteration
 from .transcription import MultipleShooting, Transcription
@@ -120,7 +121,8 @@ class NonlinearMPCProblem:
     Raises
     ------
     ValueError
-        For a horizon < 1, non-finite or indefinite weights, substeps < 1, an unknown iteration.
+        For a horizon < 1, non-finite or indefinite weights, substeps < 1, an unknown iteration, or a
+        plant whose operating point (`Plant.equilibrium()`) needs more input than its limit.
     """
 
     def __init__(
@@ -157,6 +159,7 @@ class NonlinearMPCProblem:
         )
         if self.rate_limit is not None and (not np.all(np.isfinite(self.rate_limit)) or np.any(self.rate_limit <= 0)):
             raise ValueError(f"rate_limit must be finite and > 0 per sample, got {self.rate_limit}")
+        check_holding_input(plant.name, plant.equilibrium()[1], self.input_limit)  # as the linear MPC
         self.ocp = mpc_problem(
             plant, self.sample_period, N, state_weight, input_weight, soft_bounds=soft, rate_limit=self.rate_limit
         )

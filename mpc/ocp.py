@@ -31,6 +31,7 @@ import casadi as ca
 import numpy as np
 
 from models import Plant
+from models.checks import real
 
 from .mesh_refinement import solve_refined
 from .ocp_solver import OCPSolver
@@ -325,12 +326,16 @@ class OptimalControlProblem:
     def choose(self, name: str, lower: float, upper: float, guess: float | None = None) -> ca.SX:
         """Make the plant parameter `name` a decision in [lower, upper] (co-design).
 
-        guess : starting value (default: the plant's value, clipped into the range).
-        Returns its SX symbol (the same as ``ocp.p.<name>``).
+        guess : starting value (default: the plant's value), clipped into the range; a finite number.
+        Returns its SX symbol (the same as ``ocp.p.<name>``). A bound or guess that is not a real number
+        is a TypeError, a NaN guess or bound a ValueError, each naming it.
         """
         symbol = self.p[name]
         info = {p.name: p for p in self.plant.param_info}[name]
-        lower, upper = float(lower), float(upper)
+        lower = real(lower, f"choose({name!r}) lower", finite=False)
+        upper = real(upper, f"choose({name!r}) upper", finite=False)
+        if guess is not None:
+            guess = real(guess, f"choose({name!r}) guess ({info.unit})")  # NaN or inf refused, naming it
         floor = "> 0" if info.positive else ">= 0"
         if not np.isfinite(lower) or lower < 0 or (info.positive and lower == 0):
             raise ValueError(f"choose({name!r}): lower must be finite and {floor} ({info.unit}), got {lower}")
@@ -486,13 +491,21 @@ class OptimalControlProblem:
         bound's slack paired with the next state, an input rate limit.
         Constraints on at_start/at_end values, integrals, p and T hold once.
         Each side may use `parameter` values; a side free of decisions
-        becomes a bound.
+        becomes a bound. A bound that is NaN is refused (ValueError naming the constraint).
         """
         if isinstance(constraint, (list, tuple)):
             for item in constraint:
                 self.subject_to(item, label=label, include_start=include_start, include_end=include_end)
             return
-        for expression, lower, upper, text in self._relations(constraint):
+        relations = list(self._relations(constraint))
+        for _, lower, upper, text in relations:  # all checked before any is added
+            for side, bound in (("lower", lower), ("upper", upper)):
+                if bound.is_constant() and np.isnan(float(bound)):
+                    raise ValueError(
+                        f"subject_to({label or text}): its {side} bound is NaN; a bound is a number, ±inf or "
+                        "an expression of parameter values"
+                    )
+        for expression, lower, upper, text in relations:
             path = bool(ca.depends_on(expression, self._path_symbols)) or bool(
                 ca.depends_on(ca.vertcat(lower, upper), self._path_symbols)
             )

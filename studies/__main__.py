@@ -3,9 +3,7 @@
 import signal
 import sys
 
-from models import interrupts
-
-from .cli import main
+from .cli import interrupted_status, main
 
 
 def _exit_with(code: int) -> None:
@@ -30,5 +28,5 @@ if __name__ == "__main__":
         # A Ctrl-C that CasADi held back and re-raised after the run had already stopped (or one before
         # the run began): nothing more is written, and the exit status is the interrupt's.
         print("python -m studies: interrupted", file=sys.stderr)
-        code = 143 if interrupts.terminated() else 130
+        code = interrupted_status()
     _exit_with(code)

@@ -11,7 +11,8 @@ one plant over a grid of its true parameter instead. ``--workers N`` or
 folder is written aside and moved into OUT when the whole run succeeded: an
 interrupted or failed run leaves OUT as it was. Exit status 2 on bad
 arguments, 1 when a run fails (or, with --strict, when a provider is missing
-or a row is not ok), 130 when interrupted (Ctrl-C), 0 otherwise.
+or a row is not ok), 130 when interrupted (Ctrl-C), 143 on SIGTERM, 129 on SIGHUP (a closed
+terminal), 0 otherwise. The pool's workers (``--jobs``) end with this process, whatever ends it.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -321,8 +323,8 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
         p.error(f"--sweep runs one plant; name exactly one, got {len(plants)}")
     try:
         grid = sweep.Grid.parse(args.sweep)
-    except ValueError as err:
-        p.error(str(err))
+    except ValueError as err:  # a ResourceLimitError too: too many points for memory
+        p.error(f"--sweep: {err}")
     scenario = settings["scenarios"] or ["step"]
     if len(scenario) != 1 or scenario[0] == "mc":
         p.error(f"--sweep runs one scenario other than mc; got {', '.join(scenario)}")
@@ -330,7 +332,12 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
     plant = models.get(name)
     if grid.param not in plant.params:
         p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
+    try:
+        sweep.grid_params(plant, grid)  # every value the plant accepts, before the run starts
+    except ValueError as err:
+        p.error(f"--sweep: {err}")
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
+    stop_on_signals()
     study = cases.get(name)
     progress = Progress({name: len(study.controllers)}, stream, disable=args.quiet)
     started = time.perf_counter()
@@ -431,17 +438,43 @@ def main(argv=None) -> int:
     return _run(args, plants, settings, chosen, missing, jobs, where)
 
 
+_hung_up = False
+
+
+def _hang_up(signum, frame) -> None:
+    """SIGHUP handler: remember it, then do what SIGTERM's handler does (stop as on Ctrl-C)."""
+    global _hung_up
+    _hung_up = True
+    handler = signal.getsignal(signal.SIGTERM)
+    if callable(handler):
+        handler(signal.SIGTERM, frame)
+    else:
+        raise KeyboardInterrupt
+
+
+def stop_on_signals() -> None:
+    """SIGTERM (kill, a scheduler) and SIGHUP (a closed terminal) stop a run as Ctrl-C does, workers
+    included; `interrupted_status` then tells them apart. Only where SIGHUP has its default action."""
+    interrupts.watch()
+    if interrupts.terminate_as_interrupt() and signal.getsignal(signal.SIGHUP) in (signal.SIG_DFL, _hang_up):
+        signal.signal(signal.SIGHUP, _hang_up)
+
+
+def interrupted_status() -> int:
+    """The exit status of an interrupted run: 129 after a SIGHUP, 143 after a SIGTERM, else 130 (Ctrl-C)."""
+    return 129 if _hung_up else 143 if interrupts.terminated() else 130
+
+
 def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: int, where: str) -> int:
     """Run the plants into a staging folder, publish it into OUT when every plant is done, and print the
-    closing lines; returns the exit status (1 failed, 130/143 interrupted, 1 with --strict and a row not ok)."""
+    closing lines; returns the exit status (1 failed, 129/130/143 interrupted, 1 with --strict and a row not ok)."""
     registered = list(cases.names())
     per_plant = {name: settings | {"providers": list(cases.get(name).providers) + chosen} for name in plants}
     started = time.perf_counter()
     run_id = writers.new_run_id()
     staging = writers.new_staging(args.out, run_id)
     progress = Progress(progress_slots(plants, settings["scenarios"], settings), disable=args.quiet)
-    interrupts.watch()
-    interrupts.terminate_as_interrupt()  # kill / a scheduler's SIGTERM: stop as on Ctrl-C, workers included
+    stop_on_signals()
     published = False
     try:
         with distributed.connect(args.scheduler, args.workers, jobs) as executor:
@@ -486,7 +519,7 @@ def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: 
             ),
             file=sys.stderr,
         )
-        return 143 if interrupts.terminated() else 130
+        return interrupted_status()
     finished = sorted(finished, key=lambda d: registered.index(d["name"]))
     return _closing(args, finished, missing, f"total {time.perf_counter() - started:.1f} s {where}; run {run_id}")
 

@@ -8,7 +8,9 @@ each task finishes (the whole plants of a run, so that its progress moves as the
 Results do not depend on where they ran: every sample's noise comes from the run's seed and the
 sample's index (`models.monte_carlo`'s ``first_sample``), never from a worker.
 
-An error ending the run (Ctrl-C, SIGTERM, a failed task) ends the pool's processes at once; a Dask
+An error ending the run (Ctrl-C, SIGTERM, SIGHUP, a failed task) ends the pool's processes at once; a
+parent that dies without a word (SIGKILL) takes them with it: each asks the kernel, as it starts,
+for a SIGTERM when its parent dies (`die_with_parent`). A Dask
 cluster started by `connect` is closed with its workers. A Dask worker that dies is replaced and its
 work re-run by Dask, up to its ``distributed.scheduler.allowed-failures``; past that the run stops
 with `RunFailed`, naming what was running, and the callers write nothing.
@@ -23,9 +25,14 @@ from __future__ import annotations
 
 import concurrent.futures
 import contextlib
+import ctypes
+import ctypes.util
 import logging
 import math
 import multiprocessing
+import os
+import signal
+import sys
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING
@@ -45,6 +52,28 @@ else:  # optional (the "dask" extra), imported at the first use of a Dask execut
 
 class RunFailed(RuntimeError):
     """Work sent to the cluster could not complete (a worker died too often, or the cluster went away)."""
+
+
+#: prctl's option that sets the signal a process gets when its parent dies (linux/prctl.h).
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this process end when process `parent` (its parent) ends, by SIGTERM: a pool worker's
+    initializer, so that a parent killed by SIGKILL or a closed terminal leaves no worker running.
+
+    On Linux the kernel sends the signal (prctl PR_SET_PDEATHSIG); a parent that died before the call
+    is seen by ``os.getppid()`` no longer being `parent`, and this process ends at once. Elsewhere
+    nothing is done. The kernel sends it when the *thread* that started the worker ends: `Local`
+    starts its pool from the thread that gives it its first tasks (the main one, for the command).
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    if libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0:
+        return  # not allowed here (a sandbox): the worker lives as before
+    if os.getppid() != parent:  # the parent died before the request: end as the signal would
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 class Local:
@@ -94,7 +123,9 @@ class Local:
         """The pool, made at the first task given to it."""
         if self._pool is None:
             context = multiprocessing.get_context("spawn")
-            self._pool = concurrent.futures.ProcessPoolExecutor(self.jobs, mp_context=context)
+            self._pool = concurrent.futures.ProcessPoolExecutor(
+                self.jobs, mp_context=context, initializer=die_with_parent, initargs=(os.getpid(),)
+            )
         return self._pool
 
     @contextlib.contextmanager

@@ -15,13 +15,14 @@ without importing the designs.
 
 from __future__ import annotations
 
+import copy
 import importlib
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from models import interrupts
+from models import Block, interrupts
 
 #: provider(case, known) -> {label: controller}
 Provider = Callable[..., Mapping[str, Any]]
@@ -151,11 +152,34 @@ def resolve(values, what: str = "providers", strict: bool = False) -> tuple:
     return tuple(found)
 
 
+def _where(err: BaseException) -> str:
+    """``file:line`` of the innermost frame `err` was raised in."""
+    where = traceback.extract_tb(err.__traceback__)[-1]
+    return f"{where.filename}:{where.lineno}"
+
+
+def unbuildable(name: str, returned) -> list[str]:
+    """A note naming provider `name` for each Block of its `returned` {label: controller} whose CasADi
+    expression raises when built (on a copy: the Block itself is left as it came). Such a Block is
+    kept: its rows fail with the same error, and the other controllers run."""
+    notes = []
+    for label, controller in returned.items() if isinstance(returned, Mapping) else ():
+        if isinstance(controller, Block):
+            try:
+                copy.copy(controller).casadi_step  # noqa: B018 (building the expression is the check)
+            except Exception as err:
+                if interrupts.is_interrupt(err):
+                    raise KeyboardInterrupt from err
+                notes.append(f"{name}: {label!r} failed to build ({type(err).__name__}: {err}; at {_where(err)})")
+    return notes
+
+
 def call_all(providers: Sequence[Callable], *args, strict: bool = False) -> tuple[list, list]:
     """Call each provider with `args`.
 
     A provider that raises is noted and skipped, or with `strict` raised; one that raises
-    `NotProvided` (an `Unavailable` one included) is noted in either case.
+    `NotProvided` (an `Unavailable` one included) is noted in either case. A Block whose expression
+    raises when built is noted naming its provider (`unbuildable`) and kept: its rows fail.
 
     Returns
     -------
@@ -167,6 +191,7 @@ def call_all(providers: Sequence[Callable], *args, strict: bool = False) -> tupl
         name = name_of(provider)
         try:
             results.append((name, provider(*args)))
+            notes += unbuildable(name, results[-1][1])
         except NotProvided as err:
             notes.append(f"{name}: skipped, {err}")
         except Exception as err:
@@ -174,6 +199,5 @@ def call_all(providers: Sequence[Callable], *args, strict: bool = False) -> tupl
                 raise KeyboardInterrupt from err
             if strict:
                 raise
-            where = traceback.extract_tb(err.__traceback__)[-1]
-            notes.append(f"{name}: failed ({type(err).__name__}: {err}; at {where.filename}:{where.lineno})")
+            notes.append(f"{name}: failed ({type(err).__name__}: {err}; at {_where(err)})")
     return results, notes

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import models
-from models import Block, deferred, interrupts, metrics, specs
+from models import Block, checks, deferred, interrupts, metrics, specs
 from models.files import write_csv, write_text
 
 from . import distributed, judging, plots, runner, style
@@ -36,6 +36,11 @@ else:
     pd = deferred.module("pandas")
 
 
+#: Bytes one grid point holds before any work: its value as a float in an array and in the tuple
+#: (8 + 8 + a 24-byte Python float); `grid_params` adds a row of the plant's parameters.
+POINT_BYTES = 40
+
+
 @dataclass(frozen=True)
 class Grid:
     """The swept parameter and its values."""
@@ -45,7 +50,11 @@ class Grid:
 
     @classmethod
     def parse(cls, text: str) -> Grid:
-        """The grid of ``PARAM=LOW:HIGH:N``: "m1=0.2:0.4:5" -> m1 at 0.2, 0.25, ..., 0.4 (N >= 2, LOW < HIGH)."""
+        """The grid of ``PARAM=LOW:HIGH:N``: "m1=0.2:0.4:5" -> m1 at 0.2, 0.25, ..., 0.4 (N >= 2, LOW < HIGH).
+
+        A grid whose values alone would hold more than `models.checks.MEMORY_LIMIT_BYTES` is refused
+        before it is made (`models.checks.ResourceLimitError`, a ValueError, naming the points, the
+        size and the limit)."""
         match = re.fullmatch(r"\s*([A-Za-z_]\w*)\s*=\s*([^:]+):([^:]+):(\d+)\s*", str(text))
         if not match:
             raise ValueError(f"a sweep is PARAM=LOW:HIGH:N (e.g. m1=0.2:0.4:5), got {text!r}")
@@ -57,6 +66,7 @@ class Grid:
         count = int(count)
         if not (math.isfinite(low) and math.isfinite(high) and low < high) or count < 2:
             raise ValueError(f"a sweep needs finite LOW < HIGH and N >= 2 points, got {text!r}")
+        checks.check_memory(count * POINT_BYTES, f"a sweep of {count} points", "sweep fewer points")
         return cls(name, tuple(float(v) for v in np.linspace(low, high, count)))
 
 
@@ -65,6 +75,9 @@ def grid_params(plant: models.Plant, grid: Grid) -> np.ndarray:
     if grid.param not in plant.params:
         raise ValueError(f"{plant.name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
     index = list(plant.params).index(grid.param)
+    checks.check_memory(
+        len(grid.values) * 8 * len(plant.params), f"a sweep of {len(grid.values)} points of {plant.name}"
+    )
     rows = np.tile(plant.param_vector(), (len(grid.values), 1))
     rows[:, index] = grid.values
     for row, value in zip(rows, grid.values):

@@ -118,10 +118,12 @@ def alive(pids: set) -> set:
     return running
 
 
-def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str, sent_signal=signal.SIGINT) -> tuple:
+def interrupted_run(
+    workdir: Path, offset: float, jobs: int, tag: str, sent_signal=signal.SIGINT, grace: float = 10.0
+) -> tuple:
     """Start `python -m studies` on the arm (and the UUV with 2 jobs), wait until a nonlinear MPC run
     started, send `sent_signal` (SIGINT) `offset` seconds later. Returns (exit code, seconds to stop,
-    stderr, processes it started that are still running)."""
+    stderr, processes it started that are still running `grace` seconds after the signal)."""
     plants = ["arm"] if jobs == 1 else ["arm", "uuv"]
     log = workdir / f"stderr-{tag}.txt"
     with open(log, "w") as stream:
@@ -157,11 +159,12 @@ def interrupted_run(workdir: Path, offset: float, jobs: int, tag: str, sent_sign
             time.sleep(0.05)
         time.sleep(offset)
         children = descendants(process.pid)
+        assert len(children) >= jobs - 1, f"expected the pool's workers among {children}"
         process.send_signal(sent_signal)
         sent = time.monotonic()
         code = process.wait(timeout=120)
         delay = time.monotonic() - sent
-        while alive(children) and time.monotonic() < sent + 10:
+        while alive(children) and time.monotonic() < sent + grace:
             time.sleep(0.1)
         return code, delay, log.read_text(), alive(children)
     finally:
@@ -210,6 +213,34 @@ def test_sigterm_with_two_jobs_ends_the_workers_and_writes_nothing(workdir):
     before = previous_run(workdir / "out")
     outcome = interrupted_run(workdir, 0.4, 2, "term", signal.SIGTERM)
     assert_interrupted_cleanly(workdir, before, outcome, "SIGTERM, two jobs", status=143)
+
+
+@pytest.mark.slow
+def test_sighup_with_two_jobs_is_handled_as_sigterm_and_exits_129(workdir):
+    """SIGHUP (the terminal closed) while two workers run plants: the same exit path as SIGTERM (the
+    workers ended, nothing written, the earlier files kept), exit 129 (128 + SIGHUP), and no process
+    of the run left 5 s after the signal."""
+    before = previous_run(workdir / "out")
+    outcome = interrupted_run(workdir, 0.4, 2, "hup", signal.SIGHUP, grace=5.0)
+    assert_interrupted_cleanly(workdir, before, outcome, "SIGHUP, two jobs", status=129)
+
+
+@pytest.mark.slow
+def test_sigkill_with_two_jobs_takes_the_workers_along_and_the_next_run_removes_the_staging(workdir):
+    """SIGKILL to the command while two workers run plants: the parent cannot clean up, yet 5 s later
+    no process it started is running (each worker gets SIGTERM when its parent dies, and the resource
+    tracker sees its pipe close); the staging folder it left is removed by the next run's
+    `new_staging`, and the earlier run's files are as they were."""
+    before = previous_run(workdir / "out")
+    code, _, err, left = interrupted_run(workdir, 0.4, 2, "kill", signal.SIGKILL, grace=5.0)
+    assert code == -signal.SIGKILL, err[-3000:]
+    assert not left, f"processes of the killed run still running 5 s later: {left}"
+    out = workdir / "out"
+    assert list(out.glob(".run-*.partial")), "the killed run left no staging folder (nothing to check)"
+    fresh = writers.new_staging(out, "next")
+    assert [p.name for p in out.glob(".run-*.partial")] == [fresh.name]
+    shutil.rmtree(fresh)
+    assert snapshot(out) == before
 
 
 @pytest.mark.slow
