@@ -12,7 +12,7 @@ nbclient = pytest.importorskip("nbclient")
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.py"))
-#: The notebooks that take over 12 s on a fresh kernel (measured with pytest --durations): slow tests only.
+#: Run with the slow tests only (12-15 s each on a fresh kernel): the default suite's notebooks take about a minute.
 SLOW = {"codesign", "crane", "pendulum"}
 #: The longest a notebook may take on a fresh kernel, s.
 TIMEOUT = 60
