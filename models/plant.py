@@ -555,7 +555,7 @@ class Plant:
         """Solve f(x, u) = 0 at rest with the named coordinates (or first-order states, or inputs) fixed.
 
         `params` are the parameter values (default: the plant's own) and `tol` the largest residual
-        |f| accepted. With nothing fixed, the declaration's standard operating point is used
+        of f accepted. With nothing fixed, the declaration's standard operating point is used
         (for example the ball at the middle of the beam). Remaining unknowns
         start at zero; Gauss-Newton with minimum-norm steps picks the
         equilibrium nearest that start when several exist.
