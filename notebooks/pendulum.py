@@ -107,6 +107,21 @@ columns = ["controller", "verdict", "rise_time_s", "settling_time_s", "overshoot
 table[columns].round(3)
 
 # %% [markdown]
+# ## The linear MPC's prediction model
+#
+# The linear MPC predicts with the linearization held over each sample (zero-order hold): A_d = e^{A Ts} and
+# B_d = ∫₀^Ts e^{A τ} dτ B, both read off one matrix exponential of [[A, B], [0, 0]] Ts (Van Loan).
+
+# %%
+mpc_controller = result.controllers["linear MPC"]
+Ts = mpc_controller.sample_period
+n, m = B.shape
+block = scipy.linalg.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * Ts)
+assert np.allclose(mpc_controller.model.A, block[:n, :n], rtol=1e-8, atol=1e-10)
+assert np.allclose(mpc_controller.model.B, block[:n, n:], rtol=1e-8, atol=1e-10)
+print(f"Ts = {Ts} s; the largest |eigenvalue| of A_d: {np.max(np.abs(np.linalg.eigvals(block[:n, :n]))):.6f}")
+
+# %% [markdown]
 # ## Tuning
 #
 # The tuned controller's gains, read from the case's stored file beside its case file: the tuner started

@@ -12,8 +12,8 @@ nbclient = pytest.importorskip("nbclient")
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.py"))
-#: Run with the slow tests only (12-15 s each on a fresh kernel): the default suite's notebooks take about a minute.
-SLOW = {"codesign", "crane", "pendulum"}
+#: The longest (9-15 s each on a fresh kernel at load 2-3, 14-27 s at load 7): with the slow tests only.
+SLOW = {"ballbeam", "codesign", "crane", "pendulum"}
 #: The longest a notebook may take on a fresh kernel, s.
 TIMEOUT = 60
 
