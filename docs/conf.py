@@ -13,7 +13,15 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 project = "codesign-control"
 extensions = ["myst_nb", "sphinx.ext.autodoc", "numpydoc"]
-exclude_patterns = ["conf.py", "_build", "notes", "codesign/*.json", "**.ipynb_checkpoints", "notebooks/README*"]
+exclude_patterns = [
+    "conf.py",
+    "_build",
+    "notes",
+    "codesign/*.json",
+    "**.ipynb_checkpoints",
+    "notebooks/README*",
+    "overview_picture.py",
+]
 nb_custom_formats = {".py": ["jupytext.reads", {"fmt": "py:percent"}]}
 nb_execution_mode = "force"
 nb_execution_timeout = 120

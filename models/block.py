@@ -44,7 +44,7 @@ class Controller(Protocol):
         ...
 
     def step(self, xc: np.ndarray, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One sample: (x_c_next, u (nu,)) from the state x_c, the measurement y and the reference r."""
+        """One sample: (x_c_next, u (nu,)) from the state xc, the measurement y and the reference r."""
         ...
 
 
@@ -108,10 +108,11 @@ class Block(abc.ABC):
     # ------------------------------------------------------------- to write
     @abc.abstractmethod
     def expr(self, xc, y, r, gains: dict) -> tuple:
-        """Symbolic step: (x_c_next, u) from SX x_c (n_state,), y, r and gain symbols."""
+        """Symbolic step: (x_c_next, u) from SX xc (n_state,), y (n_measured,), r (n_reference,) and `gains`,
+        a dict name -> SX symbol shaped like the gain."""
 
     def initial_state(self, y0, r0) -> np.ndarray:
-        """x_c at the first sample from the first measurement and reference (zeros by default)."""
+        """x_c at the first sample from the first measurement y0 and reference r0 (zeros by default)."""
         return np.zeros(self.n_state)
 
     # ------------------------------------------------------------- provided
@@ -136,7 +137,7 @@ class Block(abc.ABC):
         return np.concatenate([g.ravel(order="F") for g in self.gains.values()])
 
     def gains_from_vector(self, vector) -> dict:
-        """Inverse of `gain_vector`: dict name -> array with each gain's shape."""
+        """Inverse of `gain_vector`: the flat `vector` as a dict name -> array with each gain's shape."""
         vector = as_vector(vector, self.gain_vector().size, f"{self.name} gain vector")
         out, i = {}, 0
         for k, g in self.gains.items():
@@ -179,7 +180,8 @@ class Block(abc.ABC):
         return ca.Function("step", [xc, y, r, g], [xc_next, ca.vertcat(u)], ["xc", "y", "r", "gains"], ["xc_next", "u"])
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
-        """One numeric step with the current gains: (x_c_next (n_state,), u (n_input,))."""
+        """One numeric step with the current gains from the state xc (n_state,), the measurement y
+        (n_measured,) and the reference r (n_reference,): (x_c_next (n_state,), u (n_input,))."""
         xc = as_vector(xc, self.n_state, f"{self.name} state") if self.n_state else np.zeros(0)
         y = as_vector(y, self.n_measured, f"{self.name} measurement")
         r = as_vector(r, self.n_reference, f"{self.name} reference")
@@ -191,7 +193,8 @@ class Cascade(Block):
     """Successive loop closure: the outer block's output is the inner block's reference.
 
     Both blocks read the same measurement vector. Gains are prefixed
-    ``outer.`` and ``inner.``; the state is (x_outer, x_inner).
+    ``outer.`` and ``inner.``; the state is (x_outer, x_inner). `name` labels the pair in
+    messages and tables.
     """
 
     def __init__(self, outer: Block, inner: Block, name: str = "cascade"):
@@ -225,7 +228,10 @@ class Cascade(Block):
         )
 
     def expr(self, xc, y, r, gains):
-        """The outer step gives the inner block's reference; the state is (x_outer, x_inner)."""
+        """The outer step gives the inner block's reference; the state xc is (x_outer, x_inner).
+
+        y, r and gains as in `Block.expr` (the gains' names prefixed ``outer.`` and ``inner.``).
+        """
         no = self.outer.n_state
         go = {k[6:]: v for k, v in gains.items() if k.startswith("outer.")}
         gi = {k[6:]: v for k, v in gains.items() if k.startswith("inner.")}
@@ -234,7 +240,8 @@ class Cascade(Block):
         return ca.vertcat(xo_next, xi_next), u
 
     def initial_state(self, y0, r0) -> np.ndarray:
-        """(x_outer, x_inner) at the first sample; the inner block starts at the outer step's first reference."""
+        """(x_outer, x_inner) at the first sample from the measurement y0 and reference r0; the inner block
+        starts at the outer step's first reference."""
         xo = self.outer.initial_state(y0, r0)
         _, r_inner = self.outer.step(xo, y0, r0)
         return np.concatenate([xo, self.inner.initial_state(y0, r_inner)])

@@ -55,6 +55,9 @@ class ClosedLoopResult:
     step_time : (N,) s of controller computation per sample
     status : list of per-step solver records (dicts) for optimizing controllers, else None
     input_limit : (nu,)
+    state_names, output_names, input_names : the plant's names, for `state` and `output`
+    controller : the controller's name
+    params : (n_params,) the plant parameters of the run, or None
     diverged_at : s, the first sample time at which the state left the bound or became
         non-finite, or the command or the controller state became non-finite; None if never
     """
@@ -78,11 +81,11 @@ class ClosedLoopResult:
     params: np.ndarray | None = field(default=None, repr=False)
 
     def output(self, name: str) -> np.ndarray:
-        """The named (noise-free) output over time, (N+1,)."""
+        """The output called `name` (noise-free) over time, (N+1,)."""
         return self.y[:, self.output_names.index(name)]
 
     def state(self, name: str) -> np.ndarray:
-        """The named plant state over time, (N+1,)."""
+        """The plant state called `name` over time, (N+1,)."""
         return self.x[:, self.state_names.index(name)]
 
     @classmethod
@@ -159,7 +162,7 @@ def closed_loop_function(
 ) -> ca.Function:
     """The whole run as one CasADi Function, differentiable in the gains and parameters.
 
-    Signature ``(x0, xc0, R, noise, D, p, gains) -> (X, XC, U, measured)`` with
+    Signature ``(x0, xc0, R, noise, D, p, gains) -> (X, XC, U, measured)`` over N = `n_steps` samples, with
     R (n_reference, N), noise (n_measured, N), D (nu, N); X (nx, N) and XC
     (n_state, N) the states after each sample, U (nu, N) the commands.
     The plant receives `saturate(U)`, which keeps a NaN command NaN.
@@ -335,6 +338,8 @@ def simulate_closed_loop(
     compiled : force (True) or refuse (False) the compiled path; default: compiled for Blocks
     allow_divergence : return a result with `diverged_at` set instead of raising
     jit : compile the run to machine code first (Blocks only; pays off for long or repeated runs)
+    substeps : RK4 steps of the plant per controller sample
+    xc0 : the controller's initial state; default its `initial_state` from the first measurement and reference
 
     Raises
     ------

@@ -73,7 +73,8 @@ def simulate_closed_loop_many(
         as `step_info()` gives it
     param_samples : (M, n_params) actual parameters of each run
     chunk : samples stepped together (the results do not depend on it)
-    other arguments : as `simulate_closed_loop`; every run gets the same noise (`seed`)
+    plant, reference, duration, x0, substeps, input_disturbance, noise_std, seed : as
+        `simulate_closed_loop`; every run gets the same noise (`seed`)
 
     Yields
     ------

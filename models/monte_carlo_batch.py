@@ -370,6 +370,8 @@ def monte_carlo(
 
     Parameters
     ----------
+    plant, controller, reference, duration, x0, substeps, input_disturbance, noise_std : as
+        `simulate_closed_loop`, the same for every sample
     param_samples : array (M, n_params) of actual parameter vectors (see `models.uncertainty`)
     seed : integer >= 0; the noise of sample i is drawn from the generator seeded with (seed, i)
     threads : evaluations run in parallel within a chunk
@@ -443,7 +445,9 @@ def monte_carlo_chunks(
 ) -> Iterator[MonteCarloResult]:
     """`monte_carlo`, one chunk of samples at a time: memory stays bounded by the chunk.
 
-    Arguments as `monte_carlo`; every argument is checked before the first chunk runs. Sample i
+    Arguments (plant, controller, reference, duration, param_samples, x0, substeps,
+    input_disturbance, noise_std, seed, threads, jit, chunk_size) as `monte_carlo`; every argument is
+    checked before the first chunk runs. Sample i
     gets the same noise and the same numbers as in `monte_carlo` (each chunk's `first_sample`
     says where it starts).
 

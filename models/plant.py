@@ -33,7 +33,7 @@ class Param:
     """A physical parameter: name, nominal value, SI unit.
 
     `positive=True` means the value must be > 0; otherwise it must be >= 0
-    (damping, or masses a variant sets to zero).
+    (damping, or masses a variant sets to zero). `description` says what it is, in words.
     """
 
     name: str
@@ -338,6 +338,9 @@ class _Symbolic:
 class Plant:
     """A declared plant with parameter values.
 
+    Built from `decl`, a `Declaration` (the energies, coordinates and inputs; see `models.catalog`),
+    with `params` overriding its nominal values and `input_limit` its actuator limit.
+
     Attributes
     ----------
     name, title : str
@@ -472,18 +475,20 @@ class Plant:
 
     # -------------------------------------------------------------- numerics
     def f(self, x, u, params=None) -> np.ndarray:
-        """State derivative xdot = f(x, u, p), (nx,), for one state (nx,) and input (nu,)."""
+        """State derivative xdot = f(x, u, p), (nx,), for one state (nx,) and input (nu,); p is `params`
+        (default: the plant's own)."""
         x = as_vector(x, self.nx, f"{self.name} state {self.state_names}")
         u = as_vector(u, self.nu, f"{self.name} input {self.input_names}")
         return np.asarray(self.casadi_f(x, u, self.param_vector(params))).ravel()
 
     def output(self, x, params=None) -> np.ndarray:
-        """Outputs y = h(x, p), (ny,)."""
+        """Outputs y = h(x, p), (ny,); p is `params` (default: the plant's own)."""
         x = as_vector(x, self.nx, f"{self.name} state {self.state_names}")
         return np.asarray(self.casadi_h(x, self.param_vector(params))).ravel()
 
     def energy(self, x, params=None) -> float:
-        """Total mechanical energy T + V in J at state x (the first-order states store none of it)."""
+        """Total mechanical energy T + V in J at state x (the first-order states store none of it), with
+        `params` (default: the plant's own)."""
         x = as_vector(x, self.nx, f"{self.name} state {self.state_names}")
         return float(self.casadi_energy(x, self.param_vector(params)))
 
@@ -491,7 +496,7 @@ class Plant:
         """Input holding the plant at rest at configuration q (feedforward), (nu,).
 
         Least squares when no input balances the static forces exactly; see
-        `equilibrium` for a checked solve.
+        `equilibrium` for a checked solve. `params`: the parameter values (default: the plant's own).
         """
         if self._sym.static_input is None:
             raise ValueError(f"{self.name}: the input enters the forces nonlinearly; use equilibrium() instead")
@@ -521,6 +526,7 @@ class Plant:
         """∂u_e/∂q of `equilibrium_input`, (nu, nq), at q (default the standard operating point).
 
         The ball on beam's m1 g / ell on z; zero where gravity does not load the input.
+        `params`: the parameter values (default: the plant's own).
         """
         q = (
             self.equilibrium(params=params)[0][: self.nq]
@@ -548,7 +554,8 @@ class Plant:
     def equilibrium(self, params=None, tol: float = 1e-10, **fixed) -> tuple[np.ndarray, np.ndarray]:
         """Solve f(x, u) = 0 at rest with the named coordinates (or first-order states, or inputs) fixed.
 
-        With nothing fixed, the declaration's standard operating point is used
+        `params` are the parameter values (default: the plant's own) and `tol` the largest residual
+        of f accepted. With nothing fixed, the declaration's standard operating point is used
         (for example the ball at the middle of the beam). Remaining unknowns
         start at zero; Gauss-Newton with minimum-norm steps picks the
         equilibrium nearest that start when several exist.
@@ -620,6 +627,7 @@ class Plant:
         Without arguments, about the standard operating point `equilibrium()`.
         With `check`, raises unless f(xe, ue) = 0 (to 1e-8), because away
         from an equilibrium the linear model would miss a constant term.
+        `params`: the parameter values (default: the plant's own).
         """
         check = boolean(check, "check")
         if xe is None and ue is None:

@@ -63,7 +63,7 @@ class Trajectory:
     method: str
 
     def state(self, name: str) -> np.ndarray:
-        """The trajectory of the named state, (N+1,)."""
+        """The trajectory of the state called `name`, (N+1,)."""
         return self.x[:, self.state_names.index(name)]
 
 

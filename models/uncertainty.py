@@ -59,7 +59,8 @@ def sample_params(plant: Plant, n: int, rel: float = 0.05, seed: int = 0, names=
 
 
 def corner_params(plant: Plant, rel: float = 0.05, names=None) -> np.ndarray:
-    """All 2^k corners nominal·(1 ± rel) of the named parameters, (2^k, n_params)."""
+    """All 2^k corners nominal·(1 ± rel) of `plant`'s parameters listed in `names` (default: the
+    uncertain ones), (2^k, n_params)."""
     rel = _relative(rel)
     idx = _indices(plant, names)
     check_memory(
@@ -77,7 +78,7 @@ def corner_params(plant: Plant, rel: float = 0.05, names=None) -> np.ndarray:
 def perturbed(plant: Plant, rel: float = 0.05, sign: float = 1.0, names=None) -> Plant:
     """The plant with every named parameter scaled by (1 + sign·rel): the text's known model.
 
-    `sign` is +1 or -1.
+    `sign` is +1 or -1; `names` lists the parameters (default: the uncertain ones).
     """
     rel = _relative(rel)
     sign = real(sign, "sign")

@@ -290,14 +290,16 @@ class LinearMPC(_PlanFollower):
         self._A_aug, self._B_aug = self.observer.A_aug, np.vstack([self.model.B, np.zeros((nu, nu))])
 
     def initial_state(self, y0, r0) -> np.ndarray:
-        """x_c at the first sample: at rest at the measured configuration, d̂ = 0, holding input as plan."""
+        """x_c at the first sample from the first measurement y0 and reference r0: at rest at the measured
+        configuration, d̂ = 0, holding input as plan."""
         x0, u0 = self._start(y0, r0)
         self.solver.reset()
         self._info = {}
         return np.concatenate([x0 - self._xe, np.zeros(self.plant.nu), np.tile(u0, self.horizon)])
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
-        """One sample: correct the estimate with y, solve the QP for reference r, command the first input."""
+        """One sample from the state xc: correct the estimate with y, solve the QP for reference r, command
+        the first input."""
         sx, sd, _ = self._slices
         xc, y, r, plan = self._read(xc, y, r)
         estimate = xc[self._estimate]
@@ -352,7 +354,8 @@ class LinearMPC(_PlanFollower):
         return hasattr(self.solver, "warm_start")
 
     def initial_states(self, y0, r0) -> np.ndarray:
-        """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state)."""
+        """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state),
+        all with the reference r0."""
         if not self.lockstep:
             raise TypeError(
                 f"{self.name}: the {solver_name(self.solver)} solver's warm start cannot be kept per sample "
@@ -369,6 +372,7 @@ class LinearMPC(_PlanFollower):
     def step_many(self, xc, y, r, index) -> tuple[np.ndarray, np.ndarray, list[dict]]:
         """`step` of the samples `index` (rows of the `initial_states` batch), each from its own warm start.
 
+        xc (m, n_state), y (m, ny) and r: the states, measurements and reference of those samples.
         Returns (x_c next (m, n_state), commands (m, nu), step records (m dicts, as `step_info()`)).
         """
         xc_next, commands, records = [], [], []
@@ -491,7 +495,8 @@ class NonlinearMPC(_PlanFollower):
         return self._targets[key]
 
     def initial_state(self, y0, r0) -> np.ndarray:
-        """x_c at the first sample: at rest at the measured configuration, d̂ = 0, holding input as plan."""
+        """x_c at the first sample from the first measurement y0 and reference r0: at rest at the measured
+        configuration, d̂ = 0, holding input as plan."""
         interrupts.watch()
         interrupts.clear()
         x0, u0 = self._start(y0, r0)
@@ -500,7 +505,8 @@ class NonlinearMPC(_PlanFollower):
         return np.concatenate([x0, np.zeros(self.plant.nu), np.tile(u0, self.horizon)])
 
     def step(self, xc, y, r) -> tuple[np.ndarray, np.ndarray]:
-        """One sample: correct the estimate with y, solve the NLP for reference r, command the first input.
+        """One sample from the state xc: correct the estimate with y, solve the NLP for reference r, command
+        the first input.
 
         Raises KeyboardInterrupt at the end of the step when a Ctrl-C arrived during it, and at the
         start when one arrived since the last step and was swallowed (see `models.interrupts`).
@@ -521,7 +527,8 @@ class NonlinearMPC(_PlanFollower):
     lockstep = True
 
     def initial_states(self, y0, r0) -> np.ndarray:
-        """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state).
+        """`initial_state` of m samples stepped together by `step_many`: y0 (m, ny) -> x_c (m, n_state),
+        all with the reference r0.
 
         Forgets every warm start, that of `step` included."""
         interrupts.watch()

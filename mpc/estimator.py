@@ -88,12 +88,14 @@ class DisturbanceObserver:
         self.nx, self.nu, self.ny = nx, nu, ny
 
     def correct(self, x_pred, d_pred, innovation) -> tuple[np.ndarray, np.ndarray]:
-        """Measurement update from the innovation ỹ − C x̂_{k|k−1}: (x̂_{k|k}, d̂_{k|k})."""
+        """Measurement update of the predictions x_pred = x̂_{k|k−1} (nx,) and d_pred = d̂_{k|k−1} (nu,)
+        from the innovation ỹ − C x̂_{k|k−1}: (x̂_{k|k}, d̂_{k|k})."""
         step = self.gain @ innovation
         return x_pred + step[: self.nx], d_pred + step[self.nx :]
 
     def update(self, predicted, measured) -> np.ndarray:
-        """`correct` on the stacked estimate: (x̂, d̂)_{k|k} (nx + nu,) from (x̂, d̂)_{k|k−1} and ỹ_k."""
+        """`correct` on the stacked estimate: (x̂, d̂)_{k|k} (nx + nu,) from `predicted`, (x̂, d̂)_{k|k−1}
+        (nx + nu,), and `measured`, ỹ_k."""
         return predicted + self.gain @ (measured - self.C_aug @ predicted)
 
     def error_dynamics(self) -> np.ndarray:

@@ -303,7 +303,9 @@ class NonlinearMPCProblem:
         return out
 
     def parameters(self, x_hat, d_hat, x_target, u_target, terminal_weight, u_previous) -> np.ndarray:
-        """The NLP parameter vector for these values (see `mpc_problem`)."""
+        """The NLP parameter vector for these values (see `mpc_problem`): the estimates x_hat (nx,) and
+        d_hat (nu,), the targets x_target (nx,) and u_target (nu,), the terminal_weight (nx, nx) and
+        the input applied last, u_previous (nu,)."""
         P = self._parameters.copy()
         s = self._slices
         P[s["x0"]], P[s["d_hat"]], P[s["x_s"]], P[s["u_s"]] = x_hat, d_hat, x_target, u_target
@@ -312,7 +314,8 @@ class NonlinearMPCProblem:
         return P
 
     def initial_guess(self, x_hat, d_hat, plan) -> np.ndarray:
-        """A starting point from scratch (scaled decisions): the plan (N, nu) rolled out from x̂ through the model."""
+        """A starting point from scratch (scaled decisions): the plan (N, nu) rolled out from the estimate
+        x_hat (nx,) with the disturbance estimate d_hat (nu,) through the model."""
         plan = np.clip(
             np.asarray(plan, dtype=float).reshape(self.horizon, self.nu), -self.input_limit, self.input_limit
         )

@@ -272,7 +272,7 @@ class OptimalControlProblem:
         )
 
     def parameter(self, name: str, size: int = 1, value=None) -> ca.SX:
-        """A value given at solve time (a reference, an initial state), `size` entries.
+        """A value called `name` given at solve time (a reference, an initial state), `size` entries.
 
         `value` is the default; without one every solve must give it in `params`.
         Returns the SX symbol (a scalar when size is 1).
@@ -287,7 +287,8 @@ class OptimalControlProblem:
         return symbol
 
     def control(self, name: str, lower: float = -np.inf, upper: float = np.inf) -> ca.SX:
-        """An extra decision held constant on each interval like an input, but not fed to the plant.
+        """An extra decision called `name`, bounded by lower and upper, held constant on each interval like
+        an input, but not fed to the plant.
 
         For slack variables of soft constraints, for example. Returns its SX symbol.
         """
@@ -399,7 +400,7 @@ class OptimalControlProblem:
         return expression
 
     def input_before(self, value) -> None:
-        """The input applied before the first interval, (nu,): `u_previous` on interval 0.
+        """The input applied before the first interval, (nu,): `u_previous` on interval 0 takes `value`.
 
         A number or an expression of `parameter` values, e.g. the input a controller applied
         last: ``ocp.input_before(ocp.parameter("u_prev", nu))``. Needed by constraints on
@@ -492,6 +493,7 @@ class OptimalControlProblem:
         Constraints on at_start/at_end values, integrals, p and T hold once.
         Each side may use `parameter` values; a side free of decisions
         becomes a bound. A bound that is NaN is refused (ValueError naming the constraint).
+        `label` names the constraint in the solution's largest violation.
         """
         if isinstance(constraint, (list, tuple)):
             for item in constraint:
@@ -588,7 +590,7 @@ class OptimalControlProblem:
         solver_options: dict | None = None,
         **solve_options,
     ):
-        """Transcribe, solve once and return an `OCPSolution`.
+        """Transcribe with `transcription` (default: see `solver`), solve once and return an `OCPSolution`.
 
         refine_tolerance : with collocation, halve the intervals whose collocation defect
             (see `mpc.mesh_refinement`) exceeds this many state units, re-solving

@@ -69,6 +69,8 @@ def solve_nested(
 
     Parameters
     ----------
+    transcription : of the inner problems (default: as `OptimalControlProblem.solver`)
+    max_outer_iterations : L-BFGS-B's iteration limit
     start : the outer optimizer's starting values by name (SI; default each chosen parameter's guess)
     tolerance : L-BFGS-B's ftol and gtol (on J* and its gradient in the [0, 1]-scaled parameters)
     solver_options : passed to `OCPSolver` (default tolerance 1e-10: J* must be accurate below the

@@ -26,8 +26,9 @@ def resimulate(
 ) -> np.ndarray:
     """States at the times `t` (M+1,) from `x0` under `u` (M, nu) held on [t_k, t_{k+1}).
 
-    Uses `models.simulate` once for a uniform grid, once per run of equal steps otherwise.
-    Returns (M+1, nx).
+    Uses `models.simulate` on `plant` with `params` (default: its own) once for a uniform grid, once
+    per run of equal steps otherwise, with its `method` (``"adaptive"``: CVODES to tolerances rtol
+    and atol). Returns (M+1, nx).
     """
     t = np.asarray(t, dtype=float).reshape(-1)
     u = np.asarray(u, dtype=float).reshape(t.size - 1, plant.nu)
@@ -89,6 +90,8 @@ class OCPSolution:
     decision, lam_x, lam_g, lam_p : the raw NLP vectors (scaled decisions), for warm starts
     parameter_vector : the NLP parameters P it was solved with
     refinement : list of (intervals, largest collocation defect) per mesh-refinement round, if any
+    transcription : the transcription it was solved with
+    collocation_states : the states at the collocation points, or None (multiple shooting)
     """
 
     t: np.ndarray
@@ -132,11 +135,11 @@ class OCPSolution:
         return self.plant.input_names
 
     def state(self, name: str) -> np.ndarray:
-        """The named state at the mesh points, (N+1,)."""
+        """The state called `name` at the mesh points, (N+1,)."""
         return self.states[:, _index(self.plant.state_names, name, "state", self.plant.name)]
 
     def input(self, name: str) -> np.ndarray:
-        """The named input on each interval, (N,)."""
+        """The input called `name` on each interval, (N,)."""
         return self.inputs[:, _index(self.plant.input_names, name, "input", self.plant.name)]
 
     def param_values(self) -> np.ndarray:
@@ -186,8 +189,8 @@ class OCPSolution:
 
     # ------------------------------------------------------------------ check
     def verify(self, rtol: float = 1e-10, atol: float = 1e-10) -> Verification:
-        """Re-simulate the optimal input (as the plant received it) on the nonlinear plant (CVODES)
-        and report the state defects."""
+        """Re-simulate the optimal input (as the plant received it) on the nonlinear plant (CVODES,
+        tolerances rtol and atol) and report the state defects."""
         return verify_trajectory(
             self.plant, self.t, self.states, self.plant_inputs, self.param_values(), rtol=rtol, atol=atol
         )
@@ -196,7 +199,8 @@ class OCPSolution:
 def verify_trajectory(
     plant: Plant, t, states, inputs, params=None, *, rtol: float = 1e-10, atol: float = 1e-10
 ) -> Verification:
-    """The `Verification` of states (N+1, nx) at times t (N+1,) under inputs (N, nu) held in between.
+    """The `Verification` of states (N+1, nx) at times t (N+1,) under inputs (N, nu) held in between,
+    re-simulated on `plant` with `params` (default: its own) to tolerances rtol and atol.
 
     For a trajectory from any source (another optimizer, a hand-written transcription).
     """

@@ -45,7 +45,8 @@ _STATUS = {
 
 @dataclass(frozen=True)
 class WarmStart:
-    """A primal-dual starting point in the solver's decision layout (scaled decisions)."""
+    """A primal-dual starting point in the solver's decision layout (scaled decisions): the decision
+    vector and the multipliers lam_x of its bounds and lam_g of the constraints."""
 
     decision: np.ndarray
     lam_x: np.ndarray
@@ -132,6 +133,10 @@ class OCPSolver:
         warm_start=None,
     ) -> OCPSolution:
         """Solve with these parameter values from the given starting point; see the module docstring.
+
+        x0 : the initial state where the problem takes it as a parameter;  params : `parameter` values by
+        name;  plant_params : plant parameter values by name (SI);  guess, guess_input : the starting
+        states and inputs (see `initial_guess`);  warm_start : a `WarmStart` from an earlier solve.
 
         The result reports IPOPT's status; a failed or infeasible solve is returned (with
         the constraint of largest violation named), never replaced.
@@ -236,7 +241,10 @@ class OCPSolver:
         )
 
     def largest_violation(self, w, g, lbx, ubx, lbg, ubg) -> tuple[str, float]:
-        """(label, amount) of the constraint row or decision bound violated most at w (physical units for bounds)."""
+        """(label, amount) of the constraint row or decision bound violated most at w (physical units for bounds).
+
+        g : the constraint values at w;  lbx, ubx : the decision bounds;  lbg, ubg : the constraint bounds.
+        """
         tr = self.transcription
         if not np.all(np.isfinite(w)):
             return "the decisions (not finite)", float("inf")
@@ -250,7 +258,11 @@ class OCPSolver:
 
     # ------------------------------------------------------------------ starting point
     def initial_guess(self, P, lbx, ubx, guess=None, guess_input=None) -> np.ndarray:
-        """The scaled starting decisions; see the module docstring for the three kinds."""
+        """The scaled starting decisions; see the module docstring for the three kinds.
+
+        P : the NLP parameters;  lbx, ubx : the decision bounds;  guess : an `OCPSolution`, a trajectory
+        with t, x and u, or None;  guess_input : inputs (N, nu) or a function of t, or None.
+        """
         tr = self.transcription
         layout, scale, ocp = tr.layout, tr.scale, tr.ocp
         lo, hi = lbx * scale, ubx * scale

@@ -28,6 +28,7 @@ from .linear import SoftBound
 class SoftSpec:
     """A physical bound lower <= Σ coefficient·state <= upper, softened in the MPC.
 
+    `name` labels the bound; `combination` maps state names to their coefficients.
     `upper` / `lower` may be callables of the known Plant (the beam's length).
     `backoff` tightens both sides by that fraction of the half-width inside the MPC.
     """
@@ -44,7 +45,8 @@ class SoftSpec:
         return value(self.lower), value(self.upper)
 
     def soft_bound(self, known: Plant, linear_weight: float, quadratic_weight: float) -> SoftBound:
-        """The tightened SoftBound the MPC designed on `known` uses."""
+        """The tightened SoftBound the MPC designed on `known` uses, its violation priced by linear_weight
+        and quadratic_weight."""
         lower, upper = self.bounds(known)
         margin = self.backoff * (upper - lower) / 2
         return SoftBound.on(
@@ -123,7 +125,8 @@ def linear_mpc(known: Plant, settings: MPCSettings, *, tracked: str, solver: str
 
 
 def nonlinear_mpc(known: Plant, settings: MPCSettings, *, tracked: str, **overrides) -> NonlinearMPC:
-    """The nonlinear MPC designed on `known` with `settings`; keyword arguments override them."""
+    """The nonlinear MPC designed on `known` with `settings`, tracking the coordinate `tracked`; keyword
+    arguments override the settings."""
     arguments = {"substeps": settings.substeps} | design_arguments(known, settings) | overrides
     return NonlinearMPC(known, tracked=tracked, **arguments)
 

@@ -109,7 +109,10 @@ class Collocation(_Meshed):
 
 @dataclass(frozen=True)
 class MultipleShooting(_Meshed):
-    """Multiple shooting with the plant's RK4 map: `substeps` RK4 steps per interval, N intervals."""
+    """Multiple shooting with the plant's RK4 map: `substeps` RK4 steps per interval, N intervals.
+
+    `mesh`: N + 1 increasing fractions of T from 0 to 1 (then N follows from it), or None for a
+    uniform mesh of `intervals`."""
 
     intervals: int = 50
     substeps: int = 1

@@ -11,7 +11,7 @@
 # ---
 
 # %% [markdown]
-# # The single-link arm: plant, PD, LQR
+# # The single-link arm: plant, PD, LQR, tuning, the table
 #
 # The plant is declared once by its energies (`models.get("arm")`); the designs see the model the case says
 # the controller knows (mass and length 5 % off), the runs use the true nonlinear arm with its 1 N m limit.
@@ -27,6 +27,8 @@ import studies
 from designs.pid import PID, pd_design
 from models.lqr import lqr
 from models.metrics import run_metrics
+from studies import providers, tuner
+from studies.runner import Options, run_study
 
 case = studies.get("arm")
 known = case.known_plant()
@@ -92,3 +94,46 @@ run = models.simulate_closed_loop(truth, controller, np.deg2rad(50), 8.0)
 m = run_metrics(run, "theta")
 assert np.max(np.abs(run.u)) <= limit + 1e-12  # the actuator limit holds
 print({k: round(float(v), 4) for k, v in m.items() if isinstance(v, float)})
+
+# %% [markdown]
+# ## Tuning: the PID's gains searched on the known arm
+#
+# `python -m studies.tuner arm` started from the hand design's gains and searched them on the known plant
+# against the case's specs; the result is stored beside the case file. On the linearization the PID's closed
+# loop has the denominator s³ + (a₁ + b kd) s² + (a₀ + b kp) s + b ki, whose roots stay in the left half plane.
+
+# %%
+gains = tuner.stored(case)
+print("hand design:", {k: round(v, 4) for k, v in gains["start_gains"].items()})
+print("tuned:      ", {k: round(v, 4) for k, v in gains["gains"].items()})
+tuned = gains["gains"]
+assert np.all(np.roots([1.0, a1 + b * tuned["kd"], a0 + b * tuned["kp"], b * tuned["ki"]]).real < 0)
+
+# %% [markdown]
+# ## Every controller on the text's step: the quick study's table
+#
+# The classical, state-space, MPC and tuned controllers on the true arm, on the step scenario only and without
+# the Monte Carlo (`python -m studies arm --quick` runs every scenario). Every input stays within its limit.
+
+# %%
+kinds = [providers.classical, providers.statespace, providers.mpc, providers.tuned]
+result = run_study(case, Options(scenarios=("step",), mc=0, quick=True), providers=kinds)
+table = result.table
+assert (table["peak_u"] <= table["u_limit"] + 1e-9).all(), table[["controller", "peak_u", "u_limit"]]
+columns = ["controller", "verdict", "rise_time_s", "settling_time_s", "overshoot_pct", "peak_u", "u_limit"]
+table[columns].round(3)
+
+# %% [markdown]
+# ## The linear MPC's prediction model
+#
+# The linear MPC predicts with the linearization held over each sample (zero-order hold): A_d = e^{A Ts} and
+# B_d = ∫₀^Ts e^{A τ} dτ B, both read off one matrix exponential of [[A, B], [0, 0]] Ts (Van Loan).
+
+# %%
+mpc_controller = result.controllers["linear MPC"]
+Ts = mpc_controller.sample_period
+n, m = B.shape
+block = scipy.linalg.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * Ts)
+assert np.allclose(mpc_controller.model.A, block[:n, :n], rtol=1e-8, atol=1e-10)
+assert np.allclose(mpc_controller.model.B, block[:n, n:], rtol=1e-8, atol=1e-10)
+print(f"Ts = {Ts} s")

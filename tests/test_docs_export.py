@@ -64,8 +64,9 @@ def test_the_documented_example_exports_compiles_and_agrees_with_python(tmp_path
     assert len(rows) == 3
 
 
+@pytest.mark.slow
 def test_the_documentation_site_builds_with_warnings_as_errors(tmp_path):
-    # The same command as .ci/run: the pages, the notebooks (executed once) and the API reference.
+    # The same command as .ci/run: the pages, the notebooks (executed once, minutes) and the API reference.
     pytest.importorskip("sphinx")
     pytest.importorskip("myst_nb")
     root = Path(__file__).resolve().parents[1]
@@ -77,4 +78,27 @@ def test_the_documentation_site_builds_with_warnings_as_errors(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     api = (tmp_path / "html" / "api.html").read_text(encoding="utf-8")
     assert "simulate_closed_loop" in api and "NonlinearMPC" in api
-    assert (tmp_path / "html" / "notebooks" / "arm.html").is_file()
+    for notebook in sorted((root / "notebooks").glob("*.py")):
+        assert (tmp_path / "html" / "notebooks" / f"{notebook.stem}.html").is_file(), notebook.stem
+    assert (tmp_path / "html" / "_images" / "overview.png").is_file()
+
+
+def test_the_overview_picture_sets_the_figures_side_by_side_at_one_height(tmp_path):
+    """docs/overview_picture.py's layout: two figures of aspect 2:1 and 1:2 at one height h make a picture
+    of aspect (2 + 0.5):1, each figure's colour where its share of the width puts it."""
+    import importlib.util
+
+    import matplotlib.image as mpimg
+
+    spec = importlib.util.spec_from_file_location("overview_picture", REPO / "docs" / "overview_picture.py")
+    picture = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(picture)
+    red, blue = np.zeros((100, 200, 3)), np.zeros((200, 100, 3))
+    red[..., 0], blue[..., 2] = 1.0, 1.0
+    for name, image in zip(picture.FIGURES, (red, blue)):
+        mpimg.imsave(tmp_path / name, image)
+    picture.draw(tmp_path, tmp_path / "out.png", height_in=2.0, dpi=50)
+    out = mpimg.imread(tmp_path / "out.png")
+    assert out.shape[0] == 100 and abs(out.shape[1] - 250) <= 1, out.shape
+    left, right = out[50, 40], out[50, 230]
+    assert left[0] > 0.9 > left[2] and right[2] > 0.9 > right[0]

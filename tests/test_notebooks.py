@@ -12,6 +12,8 @@ nbclient = pytest.importorskip("nbclient")
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.py"))
+#: The longest (9-15 s each on a fresh kernel at load 2-3, 14-27 s at load 7): with the slow tests only.
+SLOW = {"ballbeam", "codesign", "crane", "pendulum"}
 #: The longest a notebook may take on a fresh kernel, s.
 TIMEOUT = 60
 
@@ -20,7 +22,9 @@ def test_there_are_notebooks():
     assert NOTEBOOKS
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW else p for p in NOTEBOOKS], ids=lambda p: p.stem
+)
 def test_the_notebook_runs_on_a_fresh_kernel(path, tmp_path, monkeypatch):
     notebook = jupytext.read(path)
     assert all(not cell.get("outputs") for cell in notebook.cells if cell.cell_type == "code")
