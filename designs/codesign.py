@@ -505,7 +505,7 @@ class SizingProblem:
         if not callable(self.design):
             raise TypeError(f"design must be callable Plant -> Block, got {self.design!r}")
         if not isinstance(self.specs, Specs):
-            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(self.specs).__name__}")
+            raise TypeError(f"specs must be a models.specs.Specs, got {type(self.specs).__name__}")
 
     def setup(self, plant: Plant, block: Block, cost: Cost | None = None) -> TuningSetup:
         """The `TuningSetup` of `block` on `plant` (the plant at some limit), judged by the specs."""

@@ -96,7 +96,7 @@ def judge_run(case: CaseStudy, scenario: str, result, params: Mapping[str, float
     """Judge one closed-loop run (a `models.ClosedLoopResult`) of `scenario` on the plant with `params`
     (name -> value, SI units) against the case's specs for that scenario (`CaseStudy.specs_for`)."""
     judged = case.specs_for(scenario, params)
-    measured = metrics.run_metrics(result, case.tracked, judged.state_bounds)
+    measured = metrics.run_metrics(result, case.tracked, judged.state_bounds, band=judged.settling_band)
     status = run_status(result)
     verdict = specs.judge(judged, result, case.tracked, case.step, status, measured=measured)
     return Judgement(measured, status, verdict, result.diverged_at, solver_issues(result))

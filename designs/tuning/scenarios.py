@@ -1,82 +1,20 @@
-"""What one closed-loop run of a tuning problem is and how it is judged: `Scenario`, `Specs` and `Cost`.
+"""What one closed-loop run of a tuning problem is and what it costs: `Scenario` and `Cost`.
 
-Kept apart from the solver so that the records can move on their own (a later
-change merges `Specs` into `models.specs` and `Scenario` into `studies.case`).
+Its specs are the study tables' own record, `models.specs.Specs`; `TuningProblem`
+turns them into pointwise constraints that imply the tables' verdict.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from models.checks import integer, positive, real, real_array
+from models.specs import Specs
 
 #: The criteria a `Cost` may take.
 COSTS = ("itae", "iae", "ise")
-
-
-def _optional_time(value, what: str) -> float | None:
-    return None if value is None else positive(value, what)
-
-
-@dataclass(frozen=True)
-class Specs:
-    """Time-domain specs of one scenario, enforced at every sample of every parameter sample.
-
-    max_overshoot : fraction (>= 0) of the step the tracked output may pass the final reference
-    settling_time : s after which |e| <= settling_band * |step|
-    settling_band : fraction of the step, in (0, 1)
-    rise_time : s by which the output has covered 90 % of the step, and stays beyond
-        (sufficient for a 10-90 % rise time below it)
-    max_spectral_abscissa : 1/s, bound on the closed-loop linearization's slowest mode
-        at the final state, log(spectral radius) / Ts; checked at the solution, not
-        enforced during the search (eigenvalues are not smooth)
-    state_bounds : dict state name -> bound b > 0 (|x_i| <= b) or (low, high) with low < high
-        (either may be infinite), at every sample after the start (a crane's swing angle)
-    final_values : dict state name -> (value, tolerance > 0): |x_i(t_N) − value| <= tolerance
-        at the scenario's last sample
-
-    The first three need a step (a constant reference different from the initial
-    tracked value); the others hold for any scenario.
-    """
-
-    max_overshoot: float | None = None
-    settling_time: float | None = None
-    settling_band: float = 0.02
-    rise_time: float | None = None
-    max_spectral_abscissa: float | None = None
-    state_bounds: Mapping = field(default_factory=dict)
-    final_values: Mapping = field(default_factory=dict)
-
-    def __post_init__(self):
-        if self.max_overshoot is not None:
-            value = real(self.max_overshoot, "max_overshoot")
-            if value < 0:
-                raise ValueError(f"max_overshoot must be a fraction >= 0, got {value}")
-        _optional_time(self.settling_time, "settling_time (s)")
-        _optional_time(self.rise_time, "rise_time (s)")
-        band = real(self.settling_band, "settling_band")
-        if not 0 < band < 1:
-            raise ValueError(f"settling_band must be a fraction in (0, 1), got {band}")
-        if self.max_spectral_abscissa is not None:
-            real(self.max_spectral_abscissa, "max_spectral_abscissa (1/s)")
-        if not isinstance(self.state_bounds, Mapping):
-            raise TypeError(f"state_bounds must be a dict state name -> bound, got {self.state_bounds!r}")
-        for name, bound in self.state_bounds.items():
-            state_bound(bound, f"state_bounds[{name!r}]")
-        if not isinstance(self.final_values, Mapping):
-            raise TypeError(f"final_values must be a dict state name -> (value, tolerance), got {self.final_values!r}")
-        for name, pair in self.final_values.items():
-            final_value(pair, f"final_values[{name!r}]")
-
-    @property
-    def step_specs(self) -> tuple[str, ...]:
-        """Names of the specs set here that need a step."""
-        return tuple(
-            name for name in ("max_overshoot", "settling_time", "rise_time") if getattr(self, name) is not None
-        )
 
 
 def state_bound(bound, what: str) -> tuple[float, float]:
@@ -196,7 +134,7 @@ class Scenario:
         if self.tracked is not None and not isinstance(self.tracked, str):
             raise TypeError(f"tracked must be a state name, got {self.tracked!r}")
         if self.specs is not None and not isinstance(self.specs, Specs):
-            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(self.specs).__name__}")
+            raise TypeError(f"specs must be a models.specs.Specs, got {type(self.specs).__name__}")
         if self.cost is not None and not isinstance(self.cost, Cost):
             raise TypeError(f"cost must be a designs.tuning.Cost, got {type(self.cost).__name__}")
         if not isinstance(self.name, str):

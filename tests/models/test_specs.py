@@ -3,6 +3,7 @@ a clean step, a limit cycle, a slow drift, a divergence, bounds and final values
 
 import math
 
+import control
 import numpy as np
 import pytest
 
@@ -154,3 +155,62 @@ def test_status_words_and_monte_carlo_combination():
         specs.Specs(max_overshoot_pct=-1)
     with pytest.raises(ValueError, match=r"state_bounds\['z'\] must be \(low, high\)"):
         specs.Specs(state_bounds={"z": (1.0, 0.0)})
+
+
+@pytest.mark.parametrize(
+    "system",
+    [
+        control.tf([4.0], [1.0, 1.2, 4.0]),  # underdamped, overshoots
+        control.tf([3.6], [1.0, 3.0, 4.0]),  # overdamped, dc gain 0.9: a steady-state error
+        control.tf([2.0, 3.0], [1.0, 2.5, 3.0, 3.0]),  # third order with a zero
+    ],
+)
+@pytest.mark.parametrize("band_pct", [2.0, 5.0])
+def test_the_four_step_definitions_agree_with_python_control_step_info(system, band_pct):
+    """Rise 10-90 %, settling in the specs' band, overshoot and steady-state error, as the table measures
+    them (`models.metrics.run_metrics` on a finely sampled linear response), against `control.step_info`;
+    and the verdict of specs just above / below each value."""
+    t = np.linspace(0.0, 40.0, 40001)
+    dt = t[1] - t[0]
+    y = np.squeeze(control.step_response(system, t).outputs)
+    final = float(np.real(control.dcgain(system)))
+    info = control.step_info(system, t, SettlingTimeThreshold=band_pct / 100)
+    n = len(t) - 1
+    # A run of the tracked coordinate against the step command 1 (the steady-state error is 1 − dc gain),
+    # and the same response scaled to end at the command (rise, settling and overshoot as step_info
+    # measures them, against the final value).
+    for scale, checks in ((1.0, ("ss",)), (1.0 / final, ("rise", "settling", "overshoot"))):
+        x = np.column_stack([scale * y, np.zeros_like(t)])
+        run = ClosedLoopResult(
+            t=t,
+            x=x,
+            y=x[:, :1],
+            r=np.ones((n + 1, 1)),
+            u=np.zeros((n, 1)),
+            d=np.zeros((n, 1)),
+            measured=x[:-1, :1],
+            xc=None,
+            step_time=np.full(n, 1e-4),
+            status=None,
+            input_limit=np.array([1.0]),
+            state_names=("theta", "omega"),
+            output_names=("theta",),
+            input_names=("tau",),
+        )
+        measured = metrics.run_metrics(run, "theta", band=band_pct / 100)
+        expected = {
+            "rise": ("rise_time_s", "max_rise_time_s", info["RiseTime"], dt),
+            "settling": ("settling_time_s", "max_settling_time_s", info["SettlingTime"], dt),
+            "overshoot": ("overshoot_pct", "max_overshoot_pct", info["Overshoot"], 1e-9),
+            "ss": ("ss_error", "max_ss_error_pct", abs(1.0 - info["SteadyStateValue"]), 1e-6),
+        }
+        for name in checks:
+            column, field, value, tolerance = expected[name]
+            assert measured[column] == pytest.approx(value, abs=tolerance), name
+            bound = 100 * value if name == "ss" else value
+            room = 100 * tolerance if name == "ss" else tolerance
+            above = specs.Specs(**{field: bound + 2 * room + 1e-6}, settling_band_pct=band_pct, limit_cycle=False)
+            below = specs.Specs(**{field: max(0.0, bound - 2 * room - 1e-3)}, settling_band_pct=band_pct)
+            assert specs.judge(above, run, "theta", 1.0).ok, name
+            if bound > 2 * room + 1e-3:
+                assert specs.judge(below, run, "theta", 1.0).label == specs.VIOLATES, name
