@@ -65,9 +65,10 @@ from designs.tuning import (
     tune,
 )
 from models import files, metrics
+from models import specs as specs_module
 from models.specs import Specs
 
-from . import cases
+from . import cases, judging, runner
 from .case import CaseStudy
 from .homework import classical_design
 
@@ -351,7 +352,30 @@ def validate(case: CaseStudy, record: dict) -> dict:
         "tuned_step": {name: worst_step(case, tuned, fresh, name) for name in SCENARIOS},
         "tuned_violations": tuned_violations,
         "hand_violations": hand_violations,
+        "tuned_table_verdicts": table_verdicts(case, tuned, fresh),
     }
+
+
+def table_verdicts(case: CaseStudy, block, params: np.ndarray) -> dict:
+    """{scenario: verdict text} of `block` on the rows of `params` (n, n_params) in each of the `SCENARIOS`:
+    the study table's own rule against the case's specs (`studies.judging.judge_run` on the study's run of
+    that scenario), the samples combined as the table's Monte Carlo combines them (`models.specs.combine`)."""
+    plant = models.get(case.plant)
+    _, base = runner.tracked_equilibrium(plant, case)
+    chosen = {s.name: s for s in case.scenarios}
+    out = {}
+    for name in SCENARIOS:
+        verdicts = [
+            judging.judge_run(
+                case,
+                name,
+                runner.simulate_scenario(plant, block, chosen[name], case, runner.Options(), base, case.substeps, row),
+                dict(zip(plant.params, row)),
+            ).verdict
+            for row in params
+        ]
+        out[name] = str(specs_module.combine(verdicts))
+    return out
 
 
 def _listed(gains: dict) -> dict:
@@ -504,6 +528,8 @@ def main(argv=None) -> int:
             f"violations {v['tuned_violations'] or 'none'}; {steps}",
             flush=True,
         )
+        for scenario_name, verdict in v.get("tuned_table_verdicts", {}).items():
+            print(f"  table's verdict against the case's specs, {scenario_name}: {verdict}", flush=True)
     if failed:
         print(f"not converged: {', '.join(failed)}", flush=True)
         return 1

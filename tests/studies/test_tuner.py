@@ -196,3 +196,15 @@ def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_so
     assert tuner.main(["arm"]) == 0
     assert list((tmp_path / "cache" / "tuned").iterdir())
     assert (tuner.STORE_DIR / tuner.store_name(studies.get("arm"))).stat().st_mtime_ns == before
+
+
+def test_the_tuners_validation_judges_a_run_as_the_study_table_does():
+    """The tuner's table verdicts on the nominal plant are the study's own "tuned" rows' verdicts."""
+    case = studies.get("arm")
+    block = tuner.controllers(case)[tuner.LABEL]
+    verdicts = tuner.table_verdicts(case, block, models.get("arm").param_vector()[None, :])
+    table = studies.run(case, scenarios=list(tuner.SCENARIOS), mc=0, providers=[tuner.controllers])
+    rows = table[table.controller == tuner.LABEL].set_index("scenario")
+    for name in tuner.SCENARIOS:
+        row = rows.loc[name]
+        assert verdicts[name] == (f"{row.verdict}: {row.verdict_detail}" if row.verdict_detail else row.verdict)
