@@ -477,7 +477,8 @@ class SizingProblem:
     plant : the plant, its limit replaced by each limit tried (units of u)
     design : callable Plant -> Block, the design at the plant's limit (for example a saturation-rule PD
         whose gains depend on the limit)
-    scenario : a `designs.tuning.Scenario` or several;  specs : the `Specs` every limit is judged on
+    scenario : a `models.scenario.Scenario` or several
+    specs : the `models.specs.Specs` every limit is judged on
     low, high : the range searched, 0 < low < high (units of u)
     free, bounds, substeps, paths : of every tuning, as in `TuningSetup` (the gains to tune, default all)
 

@@ -63,7 +63,10 @@ def _scenarios(value) -> tuple[Scenario, ...]:
         raise ValueError("scenarios is empty: give at least one Scenario")
     bad = [type(s).__name__ for s in found if not isinstance(s, Scenario)]
     if bad:
-        raise TypeError(f"scenarios must all be designs.tuning.Scenario, got {bad}")
+        raise TypeError(f"scenarios must all be models.scenario.Scenario, got {bad}")
+    for s in found:
+        if s.cost is not None and not isinstance(s.cost, Cost):
+            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(s.cost).__name__}")
     return found
 
 

@@ -1,17 +1,19 @@
-"""What one closed-loop run of a tuning problem is and what it costs: `Scenario` and `Cost`.
+"""What one closed-loop run of a tuning problem costs (`Cost`), and the checks of its bounds.
 
-Its specs are the study tables' own record, `models.specs.Specs`; `TuningProblem`
-turns them into pointwise constraints that imply the tables' verdict.
+The run itself is `models.scenario.Scenario` and its specs the study tables' own
+record, `models.specs.Specs` (both re-exported here); `TuningProblem` turns the
+specs into pointwise constraints that imply the tables' verdict.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from models.checks import integer, positive, real, real_array
-from models.specs import Specs
+from models.checks import positive, real, real_array
+from models.scenario import Scenario as Scenario
+from models.specs import Specs as Specs
 
 #: The criteria a `Cost` may take.
 COSTS = ("itae", "iae", "ise")
@@ -94,48 +96,3 @@ class Cost:
         terms = (self.kind, self.state_weights, self.input_weights, self.output_weights, self.terminal_weights)
         if all(term is None for term in terms) and weight == 0:
             raise ValueError("the cost has no term: give kind, energy_weight or a weight matrix")
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """One closed-loop run of a tuning problem.
-
-    reference : constant, callable t -> r, or array (N+1, n_reference): the block's reference
-        (absolute tracked value); None for a regulation (the block's reference held at zero)
-    duration : s
-    x0 : initial plant state (nx,), default the plant's standard equilibrium
-    input_disturbance : constant, callable or array (N, nu), added at the plant input
-    tracked : state name of the coordinate that follows the reference (needed by the
-        "error" signal and the step specs; keyword only)
-    noise_std : standard deviation of Gaussian measurement noise, one number or one per
-        measurement; parameter sample j draws it from the generator seeded (seed, j)
-    seed : integer >= 0, the noise seed
-    weight : > 0, the scenario's weight in the objective
-    specs, cost : this scenario's own specs and cost (default: the problem's)
-    name : label in violation messages
-    """
-
-    reference: object
-    duration: float
-    x0: np.ndarray | None = None
-    input_disturbance: object = 0.0
-    tracked: str | None = field(default=None, kw_only=True)
-    noise_std: object = field(default=0.0, kw_only=True)
-    seed: int = field(default=0, kw_only=True)
-    weight: float = field(default=1.0, kw_only=True)
-    specs: Specs | None = field(default=None, kw_only=True)
-    cost: Cost | None = field(default=None, kw_only=True)
-    name: str = field(default="", kw_only=True)
-
-    def __post_init__(self):
-        positive(self.duration, "duration (s)")
-        positive(self.weight, "scenario weight")
-        integer(self.seed, "seed", minimum=0)
-        if self.tracked is not None and not isinstance(self.tracked, str):
-            raise TypeError(f"tracked must be a state name, got {self.tracked!r}")
-        if self.specs is not None and not isinstance(self.specs, Specs):
-            raise TypeError(f"specs must be a models.specs.Specs, got {type(self.specs).__name__}")
-        if self.cost is not None and not isinstance(self.cost, Cost):
-            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(self.cost).__name__}")
-        if not isinstance(self.name, str):
-            raise TypeError(f"name must be a string, got {self.name!r}")

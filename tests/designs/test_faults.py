@@ -305,7 +305,7 @@ def test_the_error_signal_needs_a_reference(arm):
 def test_scenarios_must_be_scenarios(arm):
     with pytest.raises(ValueError, match="scenarios is empty"):
         TuningProblem(arm, PD(), [])
-    with pytest.raises(TypeError, match="scenarios must all be designs.tuning.Scenario"):
+    with pytest.raises(TypeError, match="scenarios must all be models.scenario.Scenario"):
         TuningProblem(arm, PD(), [STEP, {"reference": 0.5}])
     with pytest.raises(TypeError, match="plant must be a models.Plant"):
         TuningProblem("arm", PD(), STEP)

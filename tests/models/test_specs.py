@@ -214,3 +214,40 @@ def test_the_four_step_definitions_agree_with_python_control_step_info(system, b
             assert specs.judge(above, run, "theta", 1.0).ok, name
             if bound > 2 * room + 1e-3:
                 assert specs.judge(below, run, "theta", 1.0).label == specs.VIOLATES, name
+
+
+def test_one_class_specs_and_one_class_scenario_in_the_packages():
+    """The tables, the tuner, co-design and the designer share `models.specs.Specs` and
+    `models.scenario.Scenario`: no package defines another class of either name."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    found: dict[str, list[str]] = {"Specs": [], "Scenario": []}
+    for package in ("models", "designs", "mpc", "studies"):
+        for path in sorted((root / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.ClassDef) and node.name in found:
+                    found[node.name].append(str(path.relative_to(root)))
+    assert found == {"Specs": ["models/specs.py"], "Scenario": ["models/scenario.py"]}
+
+
+def test_a_table_scenario_is_one_run_record():
+    """A study's scenario describes its run as a `models.scenario.Scenario` (reference, duration, the case's
+    disturbance, the tracked coordinate), the record the tuner takes."""
+    import studies
+    from designs import tuning
+    from models.scenario import Scenario
+
+    case = studies.get("arm")
+    kinds = {s.name: s for s in case.scenarios}
+    run = kinds["disturbance"].run(case, 0.25)
+    assert isinstance(run, Scenario) and tuning.Scenario is Scenario
+    assert (run.duration, run.input_disturbance, run.tracked, run.name) == (
+        case.duration,
+        case.input_disturbance,
+        case.tracked,
+        "disturbance",
+    )
+    assert float(run.reference(0.0)) == pytest.approx(0.25 + case.step)
+    assert kinds["step"].run(case, 0.0).input_disturbance == 0.0
