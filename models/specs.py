@@ -230,6 +230,7 @@ def check(
     *,
     excursions: Mapping[str, float] | None = None,
     finals: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> list[Violation]:
     """Every spec the metrics miss.
 
@@ -239,7 +240,10 @@ def check(
     step : size of the commanded step (units of the tracked coordinate) the % specs refer to
     excursions : state name -> excess beyond its bounds (`models.metrics.bound_excursions`)
     finals : state name -> final value (`models.metrics.final_values`)
+    units : state name (or "input") -> unit, written beside the values of the state's bound and final
+        value (and of the peak command); a missing one is left out
     """
+    units = units or {}
     step = abs(float(step))
     if step == 0:
         raise ValueError("step must be nonzero: the overshoot and steady-state error specs are % of it")
@@ -258,18 +262,18 @@ def check(
     if specs.input_limit:
         peak, limit = metrics.get("peak_u"), metrics.get("u_limit")
         if peak is not None and limit is not None and limit > 0:
-            over("peak command", peak, limit * (1 + metrics_module.SATURATION_TOLERANCE), "")
+            over("peak command", peak, limit * (1 + metrics_module.SATURATION_TOLERANCE), units.get("input", ""))
     for name, (low, high) in specs.state_bounds.items():
         excess = (excursions or {}).get(name)
         if excess is None:
             raise ValueError(f"the specs bound {name!r}; pass its excursion (models.metrics.bound_excursions)")
         if excess > 0:
-            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0))
+            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0, units.get(name, "")))
     for name, (value, tolerance) in specs.final_values.items():
         final = (finals or {}).get(name)
         if final is None:
             raise ValueError(f"the specs give {name!r} a final value; pass it (models.metrics.final_values)")
-        over(f"final |{name} − {value:g}|", abs(final - value), tolerance, "")
+        over(f"final |{name} − {value:g}|", abs(final - value), tolerance, units.get(name, ""))
     return found
 
 
@@ -281,18 +285,19 @@ def verdict(
     *,
     excursions: Mapping[str, float] | None = None,
     finals: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | None = None,
+    tracked: str | None = None,
 ) -> Verdict:
-    """The one verdict rule (see the module's docstring) for one run's metrics."""
+    """The one verdict rule (see the module's docstring) for one run's metrics; `units` as in `check`,
+    and the unit of the `tracked` coordinate beside a limit cycle's amplitude."""
     state = execution(status)
     if state in ("diverged", "failed", "skipped"):
         return Verdict({"diverged": DIVERGED, "failed": FAILED, "skipped": SKIPPED}[state], (), str(status))
-    violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals))
+    violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals, units=units))
     amplitude = metrics.get("oscillation_amplitude")
     if specs.limit_cycle and amplitude is not None and np.isfinite(amplitude):
-        cycle = (
-            f"amplitude {amplitude:.3g}, period {metrics.get('oscillation_period_s', math.nan):.3g} s"
-            f" at the end of the run"
-        )
+        period = metrics.get("oscillation_period_s", math.nan)
+        cycle = f"amplitude {amplitude:.3g}{_unit(units, tracked)}, period {period:.3g} s at the end of the run"
         rest = "; ".join(str(v) for v in violations)
         return Verdict(LIMIT_CYCLE, violations, cycle + (f"; {rest}" if rest else ""))
     if violations:
@@ -301,14 +306,21 @@ def verdict(
 
 
 def judge(
-    specs: Specs, result, tracked: str, step: float, status: str | None = None, measured: Mapping | None = None
+    specs: Specs,
+    result,
+    tracked: str,
+    step: float,
+    status: str | None = None,
+    measured: Mapping | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> Verdict:
     """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
 
     Metrics (unless given as `measured`, from `models.metrics.run_metrics` with the specs' settling
     band), state excursions and
     final values are computed here with `models.metrics`; a run that diverged
-    (`result.diverged_at`) is "diverged" whatever `status` says.
+    (`result.diverged_at`) is "diverged" whatever `status` says. `units`: state name (or "input") ->
+    unit, written beside the values in the verdict's detail.
     """
     if result.diverged_at is not None:
         return Verdict(DIVERGED, (), f"diverged at t = {result.diverged_at:.3g} s")
@@ -316,7 +328,9 @@ def judge(
         measured = metrics_module.run_metrics(result, tracked, specs.state_bounds, band=specs.settling_band)
     excursions = metrics_module.bound_excursions(result.x, result.state_names, specs.state_bounds)
     finals = metrics_module.final_values(result.t, result.x, result.state_names, list(specs.final_values))
-    return verdict(specs, measured, step, status or "ok", excursions=excursions, finals=finals)
+    return verdict(
+        specs, measured, step, status or "ok", excursions=excursions, finals=finals, units=units, tracked=tracked
+    )
 
 
 def combine(verdicts: Sequence[Verdict]) -> Verdict:
@@ -337,6 +351,12 @@ def combine(verdicts: Sequence[Verdict]) -> Verdict:
     where = f"in {count} of {len(verdicts)} samples" if len(verdicts) > 1 else ""
     detail = f"{where} (worst: {worst.detail})" if where and worst.detail else where or worst.detail
     return Verdict(worst.label, worst.violations, detail)
+
+
+def _unit(units: Mapping[str, str] | None, name: str | None) -> str:
+    """ " <unit>" of `name` in `units` ("" when there is none)."""
+    unit = (units or {}).get(name or "", "")
+    return f" {unit}" if unit else ""
 
 
 def _number(value) -> bool:

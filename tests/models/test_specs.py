@@ -2,6 +2,7 @@
 a clean step, a limit cycle, a slow drift, a divergence, bounds and final values."""
 
 import math
+import re
 
 import control
 import numpy as np
@@ -75,6 +76,8 @@ def test_a_limit_cycle_is_labelled_with_its_amplitude_and_period():
     # It never settles in the 2 % band either: both are said.
     assert any(v.spec == "settling time" and math.isinf(v.value) for v in found.violations)
     assert found.detail.startswith("amplitude 0.1")
+    with_units = specs.judge(SPECS, response(y, t), "y", 1.0, units={"y": "m"})
+    assert re.match(r"amplitude 0\.1\d* m, period 1\.\d+ s at the end of the run", with_units.detail)
     # The same oscillation riding on a drift is still a limit cycle (the quadratic trend is removed).
     drifting = specs.judge(SPECS, response(y + 0.05 * t, t), "y", 1.0)
     assert drifting.label == specs.LIMIT_CYCLE
@@ -251,3 +254,19 @@ def test_a_table_scenario_is_one_run_record():
     )
     assert float(run.reference(0.0)) == pytest.approx(0.25 + case.step)
     assert kinds["step"].run(case, 0.0).input_disturbance == 0.0
+
+
+def test_every_violated_value_carries_its_unit():
+    """The peak command in the input's unit, a bound's and a final value's excess in the state's."""
+    bounded = specs.Specs(state_bounds={"x": (-1.0, 1.0)}, final_values={"x": (0.0, 0.01)}, limit_cycle=False)
+    found = specs.verdict(
+        bounded,
+        {"peak_u": 2.0, "u_limit": 1.0},
+        1.0,
+        excursions={"x": 0.25},
+        finals={"x": 0.5},
+        units={"x": "m", "input": "N"},
+    )
+    assert found.detail == (
+        "peak command 2 N > 1 N (+100 %); x leaves [-1, 1] by 0.25 m; final |x − 0| 0.5 m > 0.01 m (+4900 %)"
+    )
