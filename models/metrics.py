@@ -338,6 +338,34 @@ def oscillation(t, y, r, band: float = SETTLING_BAND, step: float | None = None)
     return {"oscillation_amplitude": amplitude[1], "oscillation_period_s": 2 * float(tw[-1] - tw[0]) / total}
 
 
+def drift(t, y, r, band: float = SETTLING_BAND) -> float:
+    """The rate (units of y per s) at which the output's mean still moves steadily at the end of a run
+    (NaN when it does not).
+
+    The window is the second half of the last constant-reference segment, as for `oscillation`; a
+    straight line is fitted to each half of it. The output drifts when both slopes have the same sign,
+    the second is at least `SUSTAINED_RATIO` of the first (not an approach to rest that slows down),
+    and over the window it moves by more than ``band`` times the step. Returns the slope of a line fitted
+    to the whole window (an oscillation on the drift biases it by up to its amplitude over the window).
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    parts = segments(t, y, np.asarray(r, dtype=float))
+    a, b, before, after = parts[-1]
+    step = abs(after - before) or max((abs(p[3] - p[2]) for p in parts), default=0.0)
+    start = a + (b - a) // 2
+    if b - start < 8 or step == 0 or not np.all(np.isfinite(y[start:b])):
+        return math.nan
+    tw, yw = t[start:b], y[start:b]
+    half = len(tw) // 2
+    slopes = [float(np.polyfit(tw[i:j] - tw[i], yw[i:j], 1)[0]) for i, j in ((0, half), (half, len(tw)))]
+    steady = slopes[0] * slopes[1] > 0 and abs(slopes[1]) >= SUSTAINED_RATIO * abs(slopes[0])
+    rate = float(np.polyfit(tw - tw[0], yw, 1)[0])
+    if not steady or abs(rate) * (tw[-1] - tw[0]) <= band * step:
+        return math.nan
+    return rate
+
+
 def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None, band: float = SETTLING_BAND) -> dict:
     """Every table column for one closed-loop run (a `models.ClosedLoopResult`).
 

@@ -287,19 +287,29 @@ def verdict(
     finals: Mapping[str, float] | None = None,
     units: Mapping[str, str] | None = None,
     tracked: str | None = None,
+    drift: float | None = None,
 ) -> Verdict:
     """The one verdict rule (see the module's docstring) for one run's metrics; `units` as in `check`,
-    and the unit of the `tracked` coordinate beside a limit cycle's amplitude."""
+    and the unit of the `tracked` coordinate beside a limit cycle's amplitude. `drift`: the rate at which
+    the tracked coordinate's mean still moves at the end (`models.metrics.drift`, units per s; None or
+    NaN when it does not): with an oscillation the detail says so, without one the run "drifts" (a
+    violation, where `limit_cycle` is judged)."""
     state = execution(status)
     if state in ("diverged", "failed", "skipped"):
         return Verdict({"diverged": DIVERGED, "failed": FAILED, "skipped": SKIPPED}[state], (), str(status))
     violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals, units=units))
+    speed = abs(float(drift)) if specs.limit_cycle and drift is not None and np.isfinite(drift) else None
+    moving = speed is not None
+    rate = "" if speed is None else f"{speed:.3g}{_unit(units, tracked)}/s"
     amplitude = metrics.get("oscillation_amplitude")
     if specs.limit_cycle and amplitude is not None and np.isfinite(amplitude):
         period = metrics.get("oscillation_period_s", math.nan)
         cycle = f"amplitude {amplitude:.3g}{_unit(units, tracked)}, period {period:.3g} s at the end of the run"
+        cycle += f", its mean drifting {rate}" if moving else ""
         rest = "; ".join(str(v) for v in violations)
         return Verdict(LIMIT_CYCLE, violations, cycle + (f"; {rest}" if rest else ""))
+    if speed is not None:
+        violations += (Violation("drifts", speed, 0.0, f"{(units or {}).get(tracked or '', '')}/s".lstrip()),)
     if violations:
         return Verdict(VIOLATES, violations, "; ".join(str(v) for v in violations))
     return Verdict(MEETS)
@@ -328,8 +338,18 @@ def judge(
         measured = metrics_module.run_metrics(result, tracked, specs.state_bounds, band=specs.settling_band)
     excursions = metrics_module.bound_excursions(result.x, result.state_names, specs.state_bounds)
     finals = metrics_module.final_values(result.t, result.x, result.state_names, list(specs.final_values))
+    y = result.x[:, list(result.state_names).index(tracked)]
+    moving = metrics_module.drift(result.t, y, result.r[:, 0], specs.settling_band)
     return verdict(
-        specs, measured, step, status or "ok", excursions=excursions, finals=finals, units=units, tracked=tracked
+        specs,
+        measured,
+        step,
+        status or "ok",
+        excursions=excursions,
+        finals=finals,
+        units=units,
+        tracked=tracked,
+        drift=moving,
     )
 
 

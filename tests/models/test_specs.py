@@ -1,6 +1,7 @@
 """The verdict rule on synthetic responses whose properties are known in closed form:
 a clean step, a limit cycle, a slow drift, a divergence, bounds and final values."""
 
+import dataclasses
 import math
 import re
 
@@ -270,3 +271,23 @@ def test_every_violated_value_carries_its_unit():
     assert found.detail == (
         "peak command 2 N > 1 N (+100 %); x leaves [-1, 1] by 0.25 m; final |x − 0| 0.5 m > 0.01 m (+4900 %)"
     )
+
+
+def test_a_mean_that_moves_steadily_drifts_and_an_approach_to_rest_does_not():
+    """0.05 /s on top of a settled step: "drifts 0.05 y/s"; with an oscillation on it, a limit cycle whose
+    mean drifts; a slow exponential approach (slowing down) and a settled step: no drift."""
+    t = DT * np.arange(1001)
+    settled = 1 - np.exp(-3 * t)
+    assert math.isnan(metrics.drift(t, settled, np.ones_like(t)))
+    slowing = 1 - np.exp(-0.8 * t)  # still moving at t = 10 s, but slower and slower: not steady
+    assert math.isnan(metrics.drift(t, slowing, np.ones_like(t)))
+    drifting = settled + 0.05 * t
+    assert metrics.drift(t, drifting, np.ones_like(t)) == pytest.approx(0.05, rel=1e-3)
+    found = specs.judge(SPECS, response(drifting, t), "y", 1.0, units={"y": "m"})
+    assert found.label == specs.VIOLATES and "drifts 0.05 m/s" in found.detail
+    cycle = specs.judge(SPECS, response(drifting + 0.1 * np.sin(2 * np.pi * t / 1.5), t), "y", 1.0, units={"y": "m"})
+    assert cycle.label == specs.LIMIT_CYCLE
+    rate = float(re.search(r"its mean drifting ([0-9.]+) m/s", cycle.detail).group(1))
+    assert rate == pytest.approx(0.05, rel=0.3)  # the oscillation biases the fitted line
+    unjudged = specs.judge(dataclasses.replace(SPECS, limit_cycle=False), response(drifting, t), "y", 1.0)
+    assert "drifts" not in unjudged.detail
