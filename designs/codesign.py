@@ -483,7 +483,8 @@ class SizingProblem:
     plant : the plant, its limit replaced by each limit tried (units of u)
     design : callable Plant -> Block, the design at the plant's limit (for example a saturation-rule PD
         whose gains depend on the limit)
-    scenario : a `designs.tuning.Scenario` or several;  specs : the `Specs` every limit is judged on
+    scenario : a `models.scenario.Scenario` or several
+    specs : the `models.specs.Specs` every limit is judged on
     low, high : the range searched, 0 < low < high (units of u)
     free, bounds, substeps, paths : of every tuning, as in `TuningSetup` (the gains to tune, default all)
 
@@ -511,7 +512,7 @@ class SizingProblem:
         if not callable(self.design):
             raise TypeError(f"design must be callable Plant -> Block, got {self.design!r}")
         if not isinstance(self.specs, Specs):
-            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(self.specs).__name__}")
+            raise TypeError(f"specs must be a models.specs.Specs, got {type(self.specs).__name__}")
 
     def setup(self, plant: Plant, block: Block, cost: Cost | None = None) -> TuningSetup:
         """The `TuningSetup` of `block` on `plant` (the plant at some limit), judged by the specs."""

@@ -63,6 +63,9 @@ SATURATION_TOLERANCE = 1e-3
 #: Settling band, as a fraction of the step: the settling time and the smallest oscillation that counts.
 SETTLING_BAND = 0.02
 
+#: Fraction of a segment (or run) whose mean gives the steady-state error and the final values.
+FINAL_WINDOW = 0.05
+
 #: An oscillation is sustained when its amplitude in the second half of the window is at least this
 #: fraction of that in the first half (a decaying one, e^{-ζ ω_n T/4} over a window T, falls below it
 #: for ζ ω_n T > 0.9).
@@ -101,7 +104,7 @@ def step_metrics(
     target: float,
     band: float = SETTLING_BAND,
     rise_limits: tuple = (0.1, 0.9),
-    final_window: float = 0.05,
+    final_window: float = FINAL_WINDOW,
 ) -> dict:
     """Rise time, settling time, overshoot and steady-state error of one step.
 
@@ -275,7 +278,7 @@ def bound_violation(x: np.ndarray, state_names: Sequence[str], bounds: Mapping[s
 
 
 def final_values(
-    t: np.ndarray, x: np.ndarray, state_names: Sequence[str], names: Sequence[str], final_window: float = 0.05
+    t: np.ndarray, x: np.ndarray, state_names: Sequence[str], names: Sequence[str], final_window: float = FINAL_WINDOW
 ) -> dict:
     """Mean of each named state over the last `final_window` fraction of the run (as ss_error's window)."""
     n_final = max(1, int(math.ceil(final_window * len(t))))
@@ -335,7 +338,35 @@ def oscillation(t, y, r, band: float = SETTLING_BAND, step: float | None = None)
     return {"oscillation_amplitude": amplitude[1], "oscillation_period_s": 2 * float(tw[-1] - tw[0]) / total}
 
 
-def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None) -> dict:
+def drift(t, y, r, band: float = SETTLING_BAND) -> float:
+    """The rate (units of y per s) at which the output's mean still moves steadily at the end of a run
+    (NaN when it does not).
+
+    The window is the second half of the last constant-reference segment, as for `oscillation`; a
+    straight line is fitted to each half of it. The output drifts when both slopes have the same sign,
+    the second is at least `SUSTAINED_RATIO` of the first (not an approach to rest that slows down),
+    and over the window it moves by more than ``band`` times the step. Returns the slope of a line fitted
+    to the whole window (an oscillation on the drift biases it by up to its amplitude over the window).
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    parts = segments(t, y, np.asarray(r, dtype=float))
+    a, b, before, after = parts[-1]
+    step = abs(after - before) or max((abs(p[3] - p[2]) for p in parts), default=0.0)
+    start = a + (b - a) // 2
+    if b - start < 8 or step == 0 or not np.all(np.isfinite(y[start:b])):
+        return math.nan
+    tw, yw = t[start:b], y[start:b]
+    half = len(tw) // 2
+    slopes = [float(np.polyfit(tw[i:j] - tw[i], yw[i:j], 1)[0]) for i, j in ((0, half), (half, len(tw)))]
+    steady = slopes[0] * slopes[1] > 0 and abs(slopes[1]) >= SUSTAINED_RATIO * abs(slopes[0])
+    rate = float(np.polyfit(tw - tw[0], yw, 1)[0])
+    if not steady or abs(rate) * (tw[-1] - tw[0]) <= band * step:
+        return math.nan
+    return rate
+
+
+def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None, band: float = SETTLING_BAND) -> dict:
     """Every table column for one closed-loop run (a `models.ClosedLoopResult`).
 
     Step metrics are computed per reference segment and the worst (largest)
@@ -346,6 +377,7 @@ def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None)
     result : ClosedLoopResult of the nonlinear plant
     tracked : name of the state that follows the reference
     bounds : state name -> (low, high) in SI units, counted in `violation`
+    band : settling band, fraction of the step (the specs' `settling_band`)
 
     Returns
     -------
@@ -362,7 +394,7 @@ def run_metrics(result, tracked: str, bounds: Mapping[str, tuple] | None = None)
     for a, b, before, after in segments(t, y, r):
         if after == before or b - a < 2:
             continue
-        seg = step_metrics(t[a:b], y[a:b], initial=before, target=after)
+        seg = step_metrics(t[a:b], y[a:b], initial=before, target=after, band=band)
         for key in worst:
             worst[key] = max(worst[key], seg[key])
     metrics |= worst

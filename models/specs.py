@@ -14,7 +14,7 @@ metrics of one run (`models.metrics.run_metrics`) against them:
 
 `combine` turns the per-sample verdicts of a Monte Carlo into one (the worst
 label, and in how many samples). Step specs are measured as `models.metrics`
-defines them (10-90 % rise, 2 % settling band, overshoot and steady-state
+defines them (10-90 % rise, the settling band (2 % unless the specs say), overshoot and steady-state
 error in % of the step); a series of steps is judged by its worst step.
 """
 
@@ -46,16 +46,23 @@ _SEVERITY = {MEETS: 0, VIOLATES: 1, LIMIT_CYCLE: 2, DIVERGED: 3, FAILED: 4, SKIP
 class Specs:
     """What a closed-loop step response must do. Every field is optional (None: not judged).
 
+    The one spec record: the study tables judge runs with it (`verdict`), and the gain tuner
+    (`designs.tuning`) turns it into differentiable pointwise constraints that imply it.
+
     Attributes
     ----------
     max_rise_time_s : s, 10-90 % rise time of the (worst) step
-    max_settling_time_s : s, time to stay within the 2 % band (`models.metrics.SETTLING_BAND`)
+    max_settling_time_s : s, time from which the output stays within the settling band
     max_overshoot_pct : % of the step
-    max_ss_error_pct : steady-state error, % of the step
+    max_ss_error_pct : steady-state error, % of the step (mean over the last 5 % of the segment)
     input_limit : the command must stay within the actuator limit (to `metrics.SATURATION_TOLERANCE`)
-    state_bounds : state name -> (low, high), SI units, at every sample (a crane's swing, a ball on its beam)
+    state_bounds : state name -> (low, high), or a bound b > 0 for (-b, b), SI units, at every sample
+        (a crane's swing, a ball on its beam)
     final_values : state name -> (value, tolerance), SI units: the mean over the last 5 % of the run
     limit_cycle : a sustained oscillation (`models.metrics.oscillation`) fails the specs
+    settling_band_pct : the settling band, % of the step (default `models.metrics.SETTLING_BAND`)
+    max_spectral_abscissa : 1/s, bound on the slowest mode of the closed loop's linearization at the
+        end of the run; checked by the tuner at its solution, not judged by the tables
     source : where the numbers come from (the text's item, or the stated choice)
     """
 
@@ -67,20 +74,55 @@ class Specs:
     state_bounds: Mapping[str, tuple] = field(default_factory=dict)
     final_values: Mapping[str, tuple] = field(default_factory=dict)
     limit_cycle: bool = True
+    settling_band_pct: float = 100 * metrics_module.SETTLING_BAND
+    max_spectral_abscissa: float | None = None
     source: str = ""
 
     def __post_init__(self):
-        """Refuse a negative or non-finite bound, a bound with low >= high, a final value's tolerance <= 0."""
+        """Refuse a negative or non-finite bound, a bound with low >= high, a final value's tolerance <= 0,
+        a settling band outside (0, 100) %; a bound b > 0 on a state becomes (-b, b)."""
         for name in ("max_rise_time_s", "max_settling_time_s", "max_overshoot_pct", "max_ss_error_pct"):
             value = getattr(self, name)
-            if value is not None and not (isinstance(value, (int, float)) and value >= 0 and math.isfinite(value)):
+            if value is not None and not (_number(value) and value >= 0 and math.isfinite(value)):
                 raise ValueError(f"Specs.{name} must be a finite number >= 0 or None, got {value!r}")
+        band = self.settling_band_pct
+        if not (_number(band) and 0 < band < 100):
+            raise ValueError(f"Specs.settling_band_pct must be a percentage in (0, 100), got {band!r}")
+        abscissa = self.max_spectral_abscissa
+        if abscissa is not None and not (_number(abscissa) and math.isfinite(abscissa)):
+            raise ValueError(f"Specs.max_spectral_abscissa must be a finite number (1/s) or None, got {abscissa!r}")
+        if not isinstance(self.state_bounds, Mapping):
+            raise TypeError(f"Specs.state_bounds must be a dict state name -> (low, high), got {self.state_bounds!r}")
+        if not isinstance(self.final_values, Mapping):
+            raise TypeError(f"Specs.final_values must be a dict state name -> (value, tol), got {self.final_values!r}")
+        bounds = {}
         for state, bound in self.state_bounds.items():
+            if _number(bound):
+                if not (math.isfinite(bound) and bound > 0):
+                    raise ValueError(f"Specs.state_bounds[{state!r}] must be a bound > 0 or (low, high), got {bound!r}")
+                bound = (-float(bound), float(bound))
             if len(bound) != 2 or not bound[0] < bound[1]:
                 raise ValueError(f"Specs.state_bounds[{state!r}] must be (low, high) with low < high, got {bound!r}")
+            bounds[state] = (float(bound[0]), float(bound[1]))
+        object.__setattr__(self, "state_bounds", bounds)
         for state, target in self.final_values.items():
-            if len(target) != 2 or not target[1] > 0:
-                raise ValueError(f"Specs.final_values[{state!r}] must be (value, tolerance > 0), got {target!r}")
+            pair = np.asarray(target, dtype=float) if not isinstance(target, str) else np.array(())
+            if pair.shape != (2,) or not (np.all(np.isfinite(pair)) and pair[1] > 0):
+                raise ValueError(
+                    f"Specs.final_values[{state!r}] must be a pair (value, tolerance > 0) of finite numbers, "
+                    f"got {target!r}"
+                )
+
+    @property
+    def settling_band(self) -> float:
+        """The settling band as a fraction of the step."""
+        return self.settling_band_pct / 100
+
+    @property
+    def step_specs(self) -> tuple[str, ...]:
+        """Names of the specs set here that need a step (rise, settling, overshoot, steady-state error)."""
+        names = ("max_rise_time_s", "max_settling_time_s", "max_overshoot_pct", "max_ss_error_pct")
+        return tuple(name for name in names if getattr(self, name) is not None)
 
     def with_state_bounds(self, bounds: Mapping[str, tuple]) -> Specs:
         """These specs with more state bounds (added to, and replacing, the ones of the same state)."""
@@ -92,7 +134,12 @@ class Specs:
         if self.max_rise_time_s is not None:
             parts.append(f"rise ≤ {self.max_rise_time_s:g} s")
         if self.max_settling_time_s is not None:
-            parts.append(f"settling ≤ {self.max_settling_time_s:g} s")
+            band = (
+                ""
+                if self.settling_band_pct == 100 * metrics_module.SETTLING_BAND
+                else f" (±{self.settling_band_pct:g} %)"
+            )
+            parts.append(f"settling{band} ≤ {self.max_settling_time_s:g} s")
         if self.max_overshoot_pct is not None:
             parts.append(f"overshoot ≤ {self.max_overshoot_pct:g} %")
         if self.max_ss_error_pct is not None:
@@ -183,6 +230,7 @@ def check(
     *,
     excursions: Mapping[str, float] | None = None,
     finals: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> list[Violation]:
     """Every spec the metrics miss.
 
@@ -192,7 +240,10 @@ def check(
     step : size of the commanded step (units of the tracked coordinate) the % specs refer to
     excursions : state name -> excess beyond its bounds (`models.metrics.bound_excursions`)
     finals : state name -> final value (`models.metrics.final_values`)
+    units : state name (or "input") -> unit, written beside the values of the state's bound and final
+        value (and of the peak command); a missing one is left out
     """
+    units = units or {}
     step = abs(float(step))
     if step == 0:
         raise ValueError("step must be nonzero: the overshoot and steady-state error specs are % of it")
@@ -211,18 +262,18 @@ def check(
     if specs.input_limit:
         peak, limit = metrics.get("peak_u"), metrics.get("u_limit")
         if peak is not None and limit is not None and limit > 0:
-            over("peak command", peak, limit * (1 + metrics_module.SATURATION_TOLERANCE), "")
+            over("peak command", peak, limit * (1 + metrics_module.SATURATION_TOLERANCE), units.get("input", ""))
     for name, (low, high) in specs.state_bounds.items():
         excess = (excursions or {}).get(name)
         if excess is None:
             raise ValueError(f"the specs bound {name!r}; pass its excursion (models.metrics.bound_excursions)")
         if excess > 0:
-            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0))
+            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0, units.get(name, "")))
     for name, (value, tolerance) in specs.final_values.items():
         final = (finals or {}).get(name)
         if final is None:
             raise ValueError(f"the specs give {name!r} a final value; pass it (models.metrics.final_values)")
-        over(f"final |{name} − {value:g}|", abs(final - value), tolerance, "")
+        over(f"final |{name} − {value:g}|", abs(final - value), tolerance, units.get(name, ""))
     return found
 
 
@@ -234,41 +285,72 @@ def verdict(
     *,
     excursions: Mapping[str, float] | None = None,
     finals: Mapping[str, float] | None = None,
+    units: Mapping[str, str] | None = None,
+    tracked: str | None = None,
+    drift: float | None = None,
 ) -> Verdict:
-    """The one verdict rule (see the module's docstring) for one run's metrics."""
+    """The one verdict rule (see the module's docstring) for one run's metrics; `units` as in `check`,
+    and the unit of the `tracked` coordinate beside a limit cycle's amplitude. `drift`: the rate at which
+    the tracked coordinate's mean still moves at the end (`models.metrics.drift`, units per s; None or
+    NaN when it does not): with an oscillation the detail says so, without one the run "drifts" (a
+    violation, where `limit_cycle` is judged)."""
     state = execution(status)
     if state in ("diverged", "failed", "skipped"):
         return Verdict({"diverged": DIVERGED, "failed": FAILED, "skipped": SKIPPED}[state], (), str(status))
-    violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals))
+    violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals, units=units))
+    speed = abs(float(drift)) if specs.limit_cycle and drift is not None and np.isfinite(drift) else None
+    moving = speed is not None
+    rate = "" if speed is None else f"{speed:.3g}{_unit(units, tracked)}/s"
     amplitude = metrics.get("oscillation_amplitude")
     if specs.limit_cycle and amplitude is not None and np.isfinite(amplitude):
-        cycle = (
-            f"amplitude {amplitude:.3g}, period {metrics.get('oscillation_period_s', math.nan):.3g} s"
-            f" at the end of the run"
-        )
+        period = metrics.get("oscillation_period_s", math.nan)
+        cycle = f"amplitude {amplitude:.3g}{_unit(units, tracked)}, period {period:.3g} s at the end of the run"
+        cycle += f", its mean drifting {rate}" if moving else ""
         rest = "; ".join(str(v) for v in violations)
         return Verdict(LIMIT_CYCLE, violations, cycle + (f"; {rest}" if rest else ""))
+    if speed is not None:
+        violations += (Violation("drifts", speed, 0.0, f"{(units or {}).get(tracked or '', '')}/s".lstrip()),)
     if violations:
         return Verdict(VIOLATES, violations, "; ".join(str(v) for v in violations))
     return Verdict(MEETS)
 
 
 def judge(
-    specs: Specs, result, tracked: str, step: float, status: str | None = None, measured: Mapping | None = None
+    specs: Specs,
+    result,
+    tracked: str,
+    step: float,
+    status: str | None = None,
+    measured: Mapping | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> Verdict:
     """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
 
-    Metrics (unless given as `measured`, from `models.metrics.run_metrics`), state excursions and
+    Metrics (unless given as `measured`, from `models.metrics.run_metrics` with the specs' settling
+    band), state excursions and
     final values are computed here with `models.metrics`; a run that diverged
-    (`result.diverged_at`) is "diverged" whatever `status` says.
+    (`result.diverged_at`) is "diverged" whatever `status` says. `units`: state name (or "input") ->
+    unit, written beside the values in the verdict's detail.
     """
     if result.diverged_at is not None:
         return Verdict(DIVERGED, (), f"diverged at t = {result.diverged_at:.3g} s")
     if measured is None:
-        measured = metrics_module.run_metrics(result, tracked, specs.state_bounds)
+        measured = metrics_module.run_metrics(result, tracked, specs.state_bounds, band=specs.settling_band)
     excursions = metrics_module.bound_excursions(result.x, result.state_names, specs.state_bounds)
     finals = metrics_module.final_values(result.t, result.x, result.state_names, list(specs.final_values))
-    return verdict(specs, measured, step, status or "ok", excursions=excursions, finals=finals)
+    y = result.x[:, list(result.state_names).index(tracked)]
+    moving = metrics_module.drift(result.t, y, result.r[:, 0], specs.settling_band)
+    return verdict(
+        specs,
+        measured,
+        step,
+        status or "ok",
+        excursions=excursions,
+        finals=finals,
+        units=units,
+        tracked=tracked,
+        drift=moving,
+    )
 
 
 def combine(verdicts: Sequence[Verdict]) -> Verdict:
@@ -289,6 +371,17 @@ def combine(verdicts: Sequence[Verdict]) -> Verdict:
     where = f"in {count} of {len(verdicts)} samples" if len(verdicts) > 1 else ""
     detail = f"{where} (worst: {worst.detail})" if where and worst.detail else where or worst.detail
     return Verdict(worst.label, worst.violations, detail)
+
+
+def _unit(units: Mapping[str, str] | None, name: str | None) -> str:
+    """ " <unit>" of `name` in `units` ("" when there is none)."""
+    unit = (units or {}).get(name or "", "")
+    return f" {unit}" if unit else ""
+
+
+def _number(value) -> bool:
+    """Whether `value` is a real number (not a bool)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
 
 def _relative(violation: Violation) -> float:

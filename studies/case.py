@@ -17,9 +17,10 @@ from typing import Any
 
 import models
 from models import signals
+from models.scenario import Scenario
 from models.specs import Specs
 
-#: The scenarios a study can run, as named on the command line (`Scenario.name`).
+#: The scenarios a study can run, as named on the command line (`TableScenario.name`).
 SCENARIO_NAMES = ("step", "steps", "disturbance", "noise", "mc")
 
 #: The text's parameter error: the controller knows each uncertain parameter to ±5 % (I.11(a), II.11(a), ...).
@@ -45,8 +46,10 @@ CONTROLLERS = (
 
 # ---------------------------------------------------------------------------- scenarios
 @dataclass(frozen=True)
-class Scenario:
-    """One column block of a study table: what the closed loop is asked to do.
+class TableScenario:
+    """One column block of a study table: what the closed loop is asked to do, relative to a case.
+
+    `run` turns it into the one run record, `models.scenario.Scenario`, that the study simulates.
 
     Attributes
     ----------
@@ -81,34 +84,50 @@ class Scenario:
             [level * case.step for level in self.levels], case.duration * self.segment_fraction, equilibrium_value
         )
 
+    def run(self, case: CaseStudy, equilibrium_value: float, noise_std=0.0) -> Scenario:
+        """This scenario of `case` as a `models.scenario.Scenario`: the reference signal from the tracked
+        coordinate's `equilibrium_value`, the duration, the case's input disturbance when asked, the tracked
+        coordinate; `noise_std` the measurement noise's std per measurement (units of the measurements,
+        `studies.runner.measurement_noise_std`, which needs the controller)."""
+        return Scenario(
+            self.reference(case, equilibrium_value),
+            self.duration(case),
+            input_disturbance=case.input_disturbance if self.input_disturbance else 0.0,
+            tracked=case.tracked,
+            noise_std=noise_std,
+            name=self.name,
+        )
 
-def step() -> Scenario:
+
+def step() -> TableScenario:
     """The text's step on the tracked coordinate, from the standard equilibrium, sized to saturate."""
-    return Scenario("step", "the text's step from the equilibrium (sized to saturate the actuator)")
+    return TableScenario("step", "the text's step from the equilibrium (sized to saturate the actuator)")
 
 
-def series_of_steps(levels=(1.0, 0.0, -1.0, 0.0), segment_fraction: float = 0.5) -> Scenario:
+def series_of_steps(levels=(1.0, 0.0, -1.0, 0.0), segment_fraction: float = 0.5) -> TableScenario:
     """Steps through `levels` (multiples of the case's step), each held `segment_fraction` of the duration."""
     text = ", ".join(f"{level:+g}" for level in levels)
-    return Scenario("steps", f"a series of steps ({text} times the text's step)", tuple(levels), segment_fraction)
+    return TableScenario("steps", f"a series of steps ({text} times the text's step)", tuple(levels), segment_fraction)
 
 
-def input_disturbance() -> Scenario:
+def input_disturbance() -> TableScenario:
     """The step with the case's constant input disturbance acting from t = 0 (the text's .16/.17)."""
-    return Scenario(
+    return TableScenario(
         "disturbance", "the step with the case's constant input disturbance from t = 0", input_disturbance=True
     )
 
 
-def measurement_noise(noise: Mapping[str, float]) -> Scenario:
+def measurement_noise(noise: Mapping[str, float]) -> TableScenario:
     """The step with seeded Gaussian measurement noise of the given standard deviation per output (SI)."""
     text = ", ".join(f"{k}: {v:g}" for k, v in noise.items())
-    return Scenario("noise", f"the step with seeded measurement noise (std {text}, SI)", noise=dict(noise))
+    return TableScenario("noise", f"the step with seeded measurement noise (std {text}, SI)", noise=dict(noise))
 
 
-def parameter_monte_carlo(rel: float = KNOWN_ERROR) -> Scenario:
+def parameter_monte_carlo(rel: float = KNOWN_ERROR) -> TableScenario:
     """The step on plants whose uncertain parameters are uniform within ±rel of nominal."""
-    return Scenario("mc", f"the step on ±{100 * rel:g} % parameter samples (Monte Carlo)", monte_carlo=True, rel=rel)
+    return TableScenario(
+        "mc", f"the step on ±{100 * rel:g} % parameter samples (Monte Carlo)", monte_carlo=True, rel=rel
+    )
 
 
 def standard_scenarios(noise: Mapping[str, float]) -> tuple:

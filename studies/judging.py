@@ -92,11 +92,16 @@ class Judgement:
         )
 
 
+def units(case: CaseStudy) -> dict:
+    """{tracked state: its unit, "input": the input's unit} of a case, for the verdict's detail."""
+    return {case.tracked: case.tracked_unit, "input": case.input_unit}
+
+
 def judge_run(case: CaseStudy, scenario: str, result, params: Mapping[str, float]) -> Judgement:
     """Judge one closed-loop run (a `models.ClosedLoopResult`) of `scenario` on the plant with `params`
     (name -> value, SI units) against the case's specs for that scenario (`CaseStudy.specs_for`)."""
     judged = case.specs_for(scenario, params)
-    measured = metrics.run_metrics(result, case.tracked, judged.state_bounds)
+    measured = metrics.run_metrics(result, case.tracked, judged.state_bounds, band=judged.settling_band)
     status = run_status(result)
-    verdict = specs.judge(judged, result, case.tracked, case.step, status, measured=measured)
+    verdict = specs.judge(judged, result, case.tracked, case.step, status, measured=measured, units=units(case))
     return Judgement(measured, status, verdict, result.diverged_at, solver_issues(result))

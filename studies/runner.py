@@ -34,7 +34,7 @@ from models import Block, checks, deferred, interrupts, metrics, specs
 
 from . import distributed
 from .answers import collect
-from .case import SCENARIO_NAMES, CaseStudy, Scenario
+from .case import SCENARIO_NAMES, CaseStudy, TableScenario
 from .judging import degraded_status as degraded_status
 from .judging import judge_run, verdict_columns
 from .judging import run_status as run_status
@@ -440,7 +440,7 @@ def _checked_arguments(study, options, providers, controllers, progress, executo
     return options, chosen, distributed.executor_of(executor)
 
 
-def chosen_scenarios(study: CaseStudy, options: Options, notes: list) -> list[Scenario]:
+def chosen_scenarios(study: CaseStudy, options: Options, notes: list) -> list[TableScenario]:
     """The study's scenarios that `options` asks for, in the study's order; without samples (mc = 0)
     the Monte Carlo is left out and a note says so (appended to `notes`)."""
     scenarios = [s for s in study.scenarios if options.scenarios is None or s.name in options.scenarios]
@@ -479,7 +479,7 @@ class Simulation:
         self.truths: dict = {}
         self.seconds = {"simulate_s": 0.0, "monte_carlo_s": 0.0}
 
-    def run_all(self, designed: Mapping, scenarios: Sequence[Scenario], progress=None) -> None:
+    def run_all(self, designed: Mapping, scenarios: Sequence[TableScenario], progress=None) -> None:
         """Every controller of `designed` through every scenario, in that order; `progress(done, total,
         text)` after each row."""
         total, done = len(designed) * len(scenarios), 0
@@ -491,7 +491,7 @@ class Simulation:
                 if progress:
                     progress(done, total, f"{self.study.plant}: {label} / {scenario.name}")
 
-    def row(self, label: str, controller, truth: models.Plant, scenario: Scenario) -> dict:
+    def row(self, label: str, controller, truth: models.Plant, scenario: TableScenario) -> dict:
         """The table row of `controller` in `scenario` on `truth`: a failed row (noted) when an error
         stops it, unless the options are strict; Ctrl-C and a lost cluster stop the study."""
         tick = time.perf_counter()
@@ -525,14 +525,16 @@ class Simulation:
         interrupts.check()
         return row
 
-    def scenario_row(self, label: str, controller, truth: models.Plant, scenario: Scenario) -> dict:
+    def scenario_row(self, label: str, controller, truth: models.Plant, scenario: TableScenario) -> dict:
         """The columns of one run of `scenario` (not the Monte Carlo): metrics, status and verdict."""
         study = self.study
         result = simulate_scenario(truth, controller, scenario, study, self.options, self.base, study.substeps)
         self.runs[(label, scenario.name)] = result
         return judge_run(study, scenario.name, result, truth.params).row()
 
-    def monte_carlo_runs(self, truth: models.Plant, controller, scenario: Scenario, samples: np.ndarray) -> Iterable:
+    def monte_carlo_runs(
+        self, truth: models.Plant, controller, scenario: TableScenario, samples: np.ndarray
+    ) -> Iterable:
         """The runs of `controller` on `truth` with each row of `samples` (parameters), yielded as they are
         simulated: a Block's as one batched map (a chunk at a time here, in parts on a Dask executor), a
         lockstep controller's stepped together, any other's one by one."""
@@ -588,7 +590,7 @@ class Simulation:
             for row in samples
         )
 
-    def monte_carlo_row(self, label: str, controller, truth: models.Plant, scenario: Scenario) -> dict:
+    def monte_carlo_row(self, label: str, controller, truth: models.Plant, scenario: TableScenario) -> dict:
         """The Monte Carlo row of one controller: the worst sample's metrics (`models.metrics.aggregate`),
         the status over the samples and the combined verdict. Its per-sample rows go to `samples` (one
         DataFrame) and its envelope to `envelopes`. Samples are consumed as they are simulated: only the
@@ -666,23 +668,25 @@ def _monte_carlo_status(diverged_at: list, counts: np.ndarray, count: int) -> di
 
 
 def simulate_scenario(
-    plant, controller, scenario: Scenario, case, options: Options, base: float, substeps: int, params=None
+    plant, controller, scenario: TableScenario, case, options: Options, base: float, substeps: int, params=None
 ):
-    """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed."""
+    """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed;
+    the run as `scenario.run` describes it (`models.scenario.Scenario`)."""
     noise = (
         measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
         if scenario.noise
         else 0.0
     )
+    run = scenario.run(case, base, noise)
     return models.simulate_closed_loop(
         plant,
         controller,
-        scenario.reference(case, base),
-        scenario.duration(case),
+        run.reference,
+        run.duration,
         params=params,
         substeps=substeps,
-        input_disturbance=case.input_disturbance if scenario.input_disturbance else 0.0,
-        noise_std=noise,
+        input_disturbance=run.input_disturbance,
+        noise_std=run.noise_std,
         seed=options.seed,
         allow_divergence=True,
     )

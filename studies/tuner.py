@@ -59,15 +59,16 @@ from designs.tuning import (
     Cost,
     Scenario,
     SolveOptions,
-    Specs,
     TuningProblem,
     TuningSetup,
     check_widths,
     tune,
 )
 from models import files, metrics
+from models import specs as specs_module
+from models.specs import Specs
 
-from . import cases
+from . import cases, judging, runner
 from .case import CaseStudy
 from .homework import classical_design
 
@@ -195,8 +196,8 @@ def measured_specs(case: CaseStudy, block, params) -> tuple[dict, dict]:
         worst[name] = w = worst_step(case, block, params, name)
         settling = w["settling_time_s"]
         specs[name] = Specs(
-            max_overshoot=max(w["overshoot"], OVERSHOOT_FLOOR),
-            settling_time=settling if np.isfinite(settling) else None,
+            max_overshoot_pct=100 * max(w["overshoot"], OVERSHOOT_FLOOR),
+            max_settling_time_s=settling if np.isfinite(settling) else None,
             max_spectral_abscissa=0.0,
         )
     return specs, worst
@@ -216,19 +217,23 @@ def gain_bounds(block) -> dict:
 def with_margin(specs: Specs) -> Specs:
     """The specs tuning enforces on its few samples: tighter, so that fresh samples still meet `specs`
     (no overshoot where `specs` allows only the floor's)."""
-    assert specs.max_overshoot is not None, "measured_specs always sets max_overshoot"
+    overshoot = specs.max_overshoot_pct
+    assert overshoot is not None, "measured_specs always sets max_overshoot_pct"
+    settling = specs.max_settling_time_s
     return Specs(
-        max_overshoot=MARGIN * specs.max_overshoot if specs.max_overshoot > OVERSHOOT_FLOOR else 0.0,
-        settling_band=specs.settling_band,
-        settling_time=None if specs.settling_time is None else MARGIN * specs.settling_time,
+        max_overshoot_pct=MARGIN * overshoot if overshoot > 100 * OVERSHOOT_FLOOR else 0.0,
+        settling_band_pct=specs.settling_band_pct,
+        max_settling_time_s=None if settling is None else MARGIN * settling,
         max_spectral_abscissa=specs.max_spectral_abscissa,
     )
 
 
 def _spec_record(specs: Specs) -> dict:
+    """The stored form of a scenario's specs: overshoot and settling band as fractions of the step."""
+    overshoot = specs.max_overshoot_pct
     return {
-        "max_overshoot": specs.max_overshoot,
-        "settling_time_s": specs.settling_time,
+        "max_overshoot": None if overshoot is None else overshoot / 100,
+        "settling_time_s": specs.max_settling_time_s,
         "settling_band": specs.settling_band,
         "max_spectral_abscissa": specs.max_spectral_abscissa,
     }
@@ -238,7 +243,9 @@ def specs_from_record(record: dict) -> dict:
     """{scenario: Specs} of a stored record (without the spectral check, which needs the solution)."""
     return {
         name: Specs(
-            max_overshoot=s["max_overshoot"], settling_time=s["settling_time_s"], settling_band=s["settling_band"]
+            max_overshoot_pct=None if s["max_overshoot"] is None else 100 * s["max_overshoot"],
+            max_settling_time_s=s["settling_time_s"],
+            settling_band_pct=100 * s["settling_band"],
         )
         for name, s in record["specs"].items()
     }
@@ -345,7 +352,30 @@ def validate(case: CaseStudy, record: dict) -> dict:
         "tuned_step": {name: worst_step(case, tuned, fresh, name) for name in SCENARIOS},
         "tuned_violations": tuned_violations,
         "hand_violations": hand_violations,
+        "tuned_table_verdicts": table_verdicts(case, tuned, fresh),
     }
+
+
+def table_verdicts(case: CaseStudy, block, params: np.ndarray) -> dict:
+    """{scenario: verdict text} of `block` on the rows of `params` (n, n_params) in each of the `SCENARIOS`:
+    the study table's own rule against the case's specs (`studies.judging.judge_run` on the study's run of
+    that scenario), the samples combined as the table's Monte Carlo combines them (`models.specs.combine`)."""
+    plant = models.get(case.plant)
+    _, base = runner.tracked_equilibrium(plant, case)
+    chosen = {s.name: s for s in case.scenarios}
+    out = {}
+    for name in SCENARIOS:
+        verdicts = [
+            judging.judge_run(
+                case,
+                name,
+                runner.simulate_scenario(plant, block, chosen[name], case, runner.Options(), base, case.substeps, row),
+                dict(zip(plant.params, row)),
+            ).verdict
+            for row in params
+        ]
+        out[name] = str(specs_module.combine(verdicts))
+    return out
 
 
 def _listed(gains: dict) -> dict:
@@ -498,6 +528,8 @@ def main(argv=None) -> int:
             f"violations {v['tuned_violations'] or 'none'}; {steps}",
             flush=True,
         )
+        for scenario_name, verdict in v.get("tuned_table_verdicts", {}).items():
+            print(f"  table's verdict against the case's specs, {scenario_name}: {verdict}", flush=True)
     if failed:
         print(f"not converged: {', '.join(failed)}", flush=True)
         return 1

@@ -10,7 +10,7 @@ hand design.
 
     setup = TuningSetup(plant, block, [Scenario(0.8, 5.0, tracked="theta", name="step"),
                                        Scenario(0.8, 5.0, input_disturbance=0.2, tracked="theta")],
-                        specs=Specs(max_overshoot=0.05, settling_time=2.0))
+                        specs=Specs(max_overshoot_pct=5.0, max_settling_time_s=2.0))
     result = tune(setup, SolveOptions(max_iter=500))
     result.block          # the tuned block; result.converged, result.status, result.violations
 

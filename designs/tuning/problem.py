@@ -12,6 +12,7 @@ import numpy as np
 import models
 from models import Block, Plant
 from models.checks import as_matrix, as_vector, integer, real, real_array, weight_matrix
+from models.metrics import FINAL_WINDOW
 from models.signals import sample
 
 from .excess import Constraints, bound_scale
@@ -62,7 +63,10 @@ def _scenarios(value) -> tuple[Scenario, ...]:
         raise ValueError("scenarios is empty: give at least one Scenario")
     bad = [type(s).__name__ for s in found if not isinstance(s, Scenario)]
     if bad:
-        raise TypeError(f"scenarios must all be designs.tuning.Scenario, got {bad}")
+        raise TypeError(f"scenarios must all be models.scenario.Scenario, got {bad}")
+    for s in found:
+        if s.cost is not None and not isinstance(s.cost, Cost):
+            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(s.cost).__name__}")
     return found
 
 
@@ -156,7 +160,7 @@ class TuningProblem:
             specs=specs, cost=cost, samples=samples, robust=robust, free=free, extra_params=extra_params, paths=paths
         )
         if specs is not None and not isinstance(specs, Specs):
-            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(specs).__name__}")
+            raise TypeError(f"specs must be a models.specs.Specs, got {type(specs).__name__}")
         if cost is not None and not isinstance(cost, Cost):
             raise TypeError(f"cost must be a designs.tuning.Cost, got {type(cost).__name__}")
         self.plant, self.block = plant, block
@@ -331,7 +335,10 @@ class TuningProblem:
                 else "its final reference equals the initial tracked value"
             )
             raise ValueError(f"{', '.join(specs.step_specs)} need a step, and the scenario{where} has none: {reason}")
-        for name, when in (("settling_time", specs.settling_time), ("rise_time", specs.rise_time)):
+        for name, when in (
+            ("max_settling_time_s", specs.max_settling_time_s),
+            ("max_rise_time_s", specs.max_rise_time_s),
+        ):
             if when is not None and when > t[-1]:
                 raise ValueError(
                     f"{name} = {when:g} s is after the end of the scenario{where} ({t[-1]:g} s): "
@@ -428,46 +435,76 @@ class TuningProblem:
         return ca.vertcat(*rows), g, u_runs, lbg, ubg, names
 
     def _add_specs(self, constraints: Constraints, run: ScenarioRun, X: ca.MX, tag: str) -> None:
-        """The specs of one run on one parameter sample, X (nx, N) its states x_1 .. x_N."""
+        """The specs of one run on one parameter sample, X (nx, N) its states x_1 .. x_N.
+
+        Each `models.specs.Specs` field becomes inequalities on the samples that imply the table's
+        verdict for the same run (`models.metrics.step_metrics`, at the same sample times):
+
+        - overshoot: sign·(y_k − r) <= max_overshoot_pct/100 · |step| at every sample: the table's
+          largest excursion past the reference, exactly;
+        - settling time: |y_k − r| <= band · |step| at every sample with t_k > T_s − Ts: then the
+          last sample outside the band is at or before T_s − Ts, and the table's interpolated exit
+          from the band is at or before T_s (sufficient; equal to within one sample);
+        - rise time: sign·(y_k − y_0) >= 0.9 |step| at every sample with t_k > T_r − Ts (the output
+          has covered 90 % by T_r, at a sample, and stays): the table's 10-90 % rise time is then at
+          most T_r minus its 10 % crossing (sufficient, conservative by that crossing's time);
+        - steady-state error: |mean of y over the table's final window − r| <= max_ss_error_pct/100 ·
+          |step|: the table's definition, exactly;
+        - state bounds at every sample, and final values as the mean over the table's final window
+          (`models.metrics.final_values`): exactly the table's.
+
+        `input_limit` holds by construction (a block clips its command at the actuator limit);
+        `limit_cycle` is not a constraint (`max_spectral_abscissa` is checked at the solution).
+        """
         sp, k = run.specs, run.tracked_index
+        ts = self.block.sample_period
+        n_final = max(1, int(np.ceil(FINAL_WINDOW * len(run.t))))  # the table's final window of x_0 .. x_N
+        window = slice(max(0, X.shape[1] - n_final), X.shape[1])
         if run.step is not None:
             assert k is not None, "a step scenario has a tracked state (checked in _prepare)"
             y = X[k, :]
             r_final, amp, sign = run.r[-1, 0], abs(run.step), np.sign(run.step)
             t1 = run.t[1:]
-            if sp.max_overshoot is not None:
+            if sp.max_overshoot_pct is not None:
                 constraints.add(
-                    f"overshoot <= {100 * sp.max_overshoot:g} %{tag}",
+                    f"overshoot <= {sp.max_overshoot_pct:g} %{tag}",
                     sign * (y - r_final),
                     -np.inf,
-                    sp.max_overshoot * amp,
+                    sp.max_overshoot_pct / 100 * amp,
                 )
-            if sp.settling_time is not None:
-                late = np.flatnonzero(t1 >= sp.settling_time)
+            if sp.max_settling_time_s is not None:
+                late = np.flatnonzero(t1 > sp.max_settling_time_s - ts)
                 constraints.add(
-                    f"within {100 * sp.settling_band:g} % after {sp.settling_time:g} s{tag}",
+                    f"within {sp.settling_band_pct:g} % after {sp.max_settling_time_s:g} s{tag}",
                     y[:, late] - r_final,
                     -sp.settling_band * amp,
                     sp.settling_band * amp,
                 )
-            if sp.rise_time is not None:
-                late = np.flatnonzero(t1 >= sp.rise_time)
+            if sp.max_rise_time_s is not None:
+                late = np.flatnonzero(t1 > sp.max_rise_time_s - ts)
                 constraints.add(
-                    f"90 % of the step by {sp.rise_time:g} s{tag}",
+                    f"90 % of the step by {sp.max_rise_time_s:g} s{tag}",
                     sign * (y[:, late] - run.x0[k]),
                     0.9 * amp,
                     np.inf,
                 )
+            if sp.max_ss_error_pct is not None:
+                bound = sp.max_ss_error_pct / 100 * amp
+                constraints.add(
+                    f"ss error <= {sp.max_ss_error_pct:g} %{tag}",
+                    ca.sum2(y[:, window]) / n_final - r_final,
+                    -bound,
+                    bound,
+                )
         names = self.plant.state_names
-        for name, bound in sp.state_bounds.items():
-            lo, hi = state_bound(bound, name)
+        for name, interval in sp.state_bounds.items():
+            lo, hi = state_bound(interval, name)
             text = f"|{name}| <= {hi:g}" if lo == -hi else f"{lo:g} <= {name} <= {hi:g}"
             constraints.add(f"{text}{tag}", X[names.index(name), :], lo, hi)
         for name, pair in sp.final_values.items():
             value, tol = final_value(pair, name)
-            constraints.add(
-                f"{name}(t_N) = {value:g} ± {tol:g}{tag}", X[names.index(name), -1], value - tol, value + tol
-            )
+            mean = ca.sum2(X[names.index(name), window]) / n_final
+            constraints.add(f"final {name} = {value:g} ± {tol:g}{tag}", mean, value - tol, value + tol)
 
     def _cost(self, run: ScenarioRun, states: ca.MX, U: ca.MX, p, width=None) -> ca.MX:
         """The scenario's cost of one run: states (nx, N+1), commands U (nu, N)."""

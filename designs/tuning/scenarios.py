@@ -1,82 +1,22 @@
-"""What one closed-loop run of a tuning problem is and how it is judged: `Scenario`, `Specs` and `Cost`.
+"""What one closed-loop run of a tuning problem costs (`Cost`), and the checks of its bounds.
 
-Kept apart from the solver so that the records can move on their own (a later
-change merges `Specs` into `models.specs` and `Scenario` into `studies.case`).
+The run itself is `models.scenario.Scenario` and its specs the study tables' own
+record, `models.specs.Specs` (both re-exported here); `TuningProblem` turns the
+specs into pointwise constraints that imply the tables' verdict.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from models.checks import integer, positive, real, real_array
+from models.checks import positive, real, real_array
+from models.scenario import Scenario as Scenario
+from models.specs import Specs as Specs
 
 #: The criteria a `Cost` may take.
 COSTS = ("itae", "iae", "ise")
-
-
-def _optional_time(value, what: str) -> float | None:
-    return None if value is None else positive(value, what)
-
-
-@dataclass(frozen=True)
-class Specs:
-    """Time-domain specs of one scenario, enforced at every sample of every parameter sample.
-
-    max_overshoot : fraction (>= 0) of the step the tracked output may pass the final reference
-    settling_time : s after which |e| <= settling_band * |step|
-    settling_band : fraction of the step, in (0, 1)
-    rise_time : s by which the output has covered 90 % of the step, and stays beyond
-        (sufficient for a 10-90 % rise time below it)
-    max_spectral_abscissa : 1/s, bound on the closed-loop linearization's slowest mode
-        at the final state, log(spectral radius) / Ts; checked at the solution, not
-        enforced during the search (eigenvalues are not smooth)
-    state_bounds : dict state name -> bound b > 0 (|x_i| <= b) or (low, high) with low < high
-        (either may be infinite), at every sample after the start (a crane's swing angle)
-    final_values : dict state name -> (value, tolerance > 0): |x_i(t_N) − value| <= tolerance
-        at the scenario's last sample
-
-    The first three need a step (a constant reference different from the initial
-    tracked value); the others hold for any scenario.
-    """
-
-    max_overshoot: float | None = None
-    settling_time: float | None = None
-    settling_band: float = 0.02
-    rise_time: float | None = None
-    max_spectral_abscissa: float | None = None
-    state_bounds: Mapping = field(default_factory=dict)
-    final_values: Mapping = field(default_factory=dict)
-
-    def __post_init__(self):
-        if self.max_overshoot is not None:
-            value = real(self.max_overshoot, "max_overshoot")
-            if value < 0:
-                raise ValueError(f"max_overshoot must be a fraction >= 0, got {value}")
-        _optional_time(self.settling_time, "settling_time (s)")
-        _optional_time(self.rise_time, "rise_time (s)")
-        band = real(self.settling_band, "settling_band")
-        if not 0 < band < 1:
-            raise ValueError(f"settling_band must be a fraction in (0, 1), got {band}")
-        if self.max_spectral_abscissa is not None:
-            real(self.max_spectral_abscissa, "max_spectral_abscissa (1/s)")
-        if not isinstance(self.state_bounds, Mapping):
-            raise TypeError(f"state_bounds must be a dict state name -> bound, got {self.state_bounds!r}")
-        for name, bound in self.state_bounds.items():
-            state_bound(bound, f"state_bounds[{name!r}]")
-        if not isinstance(self.final_values, Mapping):
-            raise TypeError(f"final_values must be a dict state name -> (value, tolerance), got {self.final_values!r}")
-        for name, pair in self.final_values.items():
-            final_value(pair, f"final_values[{name!r}]")
-
-    @property
-    def step_specs(self) -> tuple[str, ...]:
-        """Names of the specs set here that need a step."""
-        return tuple(
-            name for name in ("max_overshoot", "settling_time", "rise_time") if getattr(self, name) is not None
-        )
 
 
 def state_bound(bound, what: str) -> tuple[float, float]:
@@ -156,48 +96,3 @@ class Cost:
         terms = (self.kind, self.state_weights, self.input_weights, self.output_weights, self.terminal_weights)
         if all(term is None for term in terms) and weight == 0:
             raise ValueError("the cost has no term: give kind, energy_weight or a weight matrix")
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """One closed-loop run of a tuning problem.
-
-    reference : constant, callable t -> r, or array (N+1, n_reference): the block's reference
-        (absolute tracked value); None for a regulation (the block's reference held at zero)
-    duration : s
-    x0 : initial plant state (nx,), default the plant's standard equilibrium
-    input_disturbance : constant, callable or array (N, nu), added at the plant input
-    tracked : state name of the coordinate that follows the reference (needed by the
-        "error" signal and the step specs; keyword only)
-    noise_std : standard deviation of Gaussian measurement noise, one number or one per
-        measurement; parameter sample j draws it from the generator seeded (seed, j)
-    seed : integer >= 0, the noise seed
-    weight : > 0, the scenario's weight in the objective
-    specs, cost : this scenario's own specs and cost (default: the problem's)
-    name : label in violation messages
-    """
-
-    reference: object
-    duration: float
-    x0: np.ndarray | None = None
-    input_disturbance: object = 0.0
-    tracked: str | None = field(default=None, kw_only=True)
-    noise_std: object = field(default=0.0, kw_only=True)
-    seed: int = field(default=0, kw_only=True)
-    weight: float = field(default=1.0, kw_only=True)
-    specs: Specs | None = field(default=None, kw_only=True)
-    cost: Cost | None = field(default=None, kw_only=True)
-    name: str = field(default="", kw_only=True)
-
-    def __post_init__(self):
-        positive(self.duration, "duration (s)")
-        positive(self.weight, "scenario weight")
-        integer(self.seed, "seed", minimum=0)
-        if self.tracked is not None and not isinstance(self.tracked, str):
-            raise TypeError(f"tracked must be a state name, got {self.tracked!r}")
-        if self.specs is not None and not isinstance(self.specs, Specs):
-            raise TypeError(f"specs must be a designs.tuning.Specs, got {type(self.specs).__name__}")
-        if self.cost is not None and not isinstance(self.cost, Cost):
-            raise TypeError(f"cost must be a designs.tuning.Cost, got {type(self.cost).__name__}")
-        if not isinstance(self.name, str):
-            raise TypeError(f"name must be a string, got {self.name!r}")

@@ -19,7 +19,7 @@ from designs import statespace as ss
 from designs.analysis import Loop, dc_gain, pid_tf, steady_state_errors
 from designs.filters import TransferFunctionBlock
 from designs.pid import PID, linearized_input_bound, pd_saturation
-from designs.tuning import Specs
+from models.specs import Specs
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies import providers
@@ -155,7 +155,7 @@ def sizing_start(known: models.Plant) -> models.Block:
 
 #: The arm's motor requirement (the text gives no time-domain spec for the arm): the 50° step 90 % done
 #: by 0.6 s and staying there, overshoot at most 5 %; judged on a 3 s run.
-SIZING_SPECS = Specs(rise_time=0.6, max_overshoot=0.05)
+SIZING_SPECS = Specs(max_rise_time_s=0.6, max_overshoot_pct=5.0)
 SIZING = ActuatorSizing(
     text_limit=1.0,
     high=1.2,

@@ -32,8 +32,9 @@ from designs.loopshaping import (
     prototype_phase_margin,
 )
 from designs.pid import pd_design
-from designs.tuning import Cost, SolveOptions, Specs, TuningSetup
+from designs.tuning import Cost, SolveOptions, TuningSetup
 from models import deferred
+from models.specs import Specs
 from models.state_limits import StateLimit
 from mpc import Collocation, FreeTime, MPCSettings, OptimalControlProblem, SoftSpec
 from studies import drawing as d
@@ -420,7 +421,7 @@ def cable_transfer(
     plant = models.get("crane1")
     block = statespace_controllers(CASE, plant, STATESPACE_ONE_LOAD)["pole placement"]
     scenario = step_scenario(plant, CASE.tracked, CASE.step, duration)
-    specs, cost = Specs(state_bounds={"theta": SWING_BOUND}), Cost("itae")
+    specs, cost = Specs(state_bounds={"theta": (-SWING_BOUND, SWING_BOUND)}), Cost("itae")
     result = CaseResult(
         key="crane",
         problem="crane transfer (crane1)",

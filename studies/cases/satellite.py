@@ -23,7 +23,8 @@ from designs.codesign import METHODS
 from designs.filters import TransferFunctionBlock
 from designs.loops import SuccessiveLoopClosure, cascade_blocks, coupling_tf, successive_loop_closure
 from designs.pid import PDDesign, linearized_input_bound, pd_design
-from designs.tuning import Cost, SolveOptions, Specs, TuningSetup
+from designs.tuning import Cost, SolveOptions, TuningSetup
+from models.specs import Specs
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies import providers
@@ -294,7 +295,7 @@ MPC = MPCSettings(
 #: Stiffness range (N m/rad), horizon (s) and specs.
 STIFFNESS_RANGE = (0.05, 2.0)
 STIFFNESS_DURATION = 25.0
-STIFFNESS_SPECS = Specs(max_overshoot=0.05, settling_time=23.0)
+STIFFNESS_SPECS = Specs(max_overshoot_pct=5.0, max_settling_time_s=23.0)
 #: ITAE (rad s²) one N m/rad of panel stiffness costs: 0.5 rad s² per N m/rad, so the text's
 #: k = 0.15 costs 0.075 rad s², small against the hand design's ITAE (about 14 rad s²) but
 #: comparable with what a re-tuned controller gains from a stiffer panel (about 1 rad s² per N m/rad).

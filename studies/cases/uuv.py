@@ -24,8 +24,8 @@ from designs.filters import TransferFunctionBlock, notch, proportional_integral
 from designs.loopshaping import lead_for_crossover, phase_at
 from designs.pid import pd_saturation
 from designs.rootlocus import LeadLagDesign, lead_lag_for_static_gain
-from designs.tuning import Specs
 from models import deferred
+from models.specs import Specs
 from mpc import Collocation, MPCSettings, OptimalControlProblem
 from studies import drawing as d
 from studies import providers
@@ -323,9 +323,9 @@ SIZING = ActuatorSizing(
     hand_design=sizing_hand_design,
     retune_start=sizing_hand_design,
     specs=Specs(
-        rise_time=LEAD_LAG_SPECS["rise_time"],
-        settling_time=LEAD_LAG_SPECS["settling_time"],
-        max_overshoot=LEAD_LAG_SPECS["overshoot_percent"] / 100,
+        max_rise_time_s=LEAD_LAG_SPECS["rise_time"],
+        max_settling_time_s=LEAD_LAG_SPECS["settling_time"],
+        max_overshoot_pct=LEAD_LAG_SPECS["overshoot_percent"],
     ),
     specs_origin="IV.11: rise time < 0.9 s, settling time < 3 s (2 % band), overshoot < 10 %",
     free=("num",),

@@ -61,7 +61,7 @@ from designs import tuning  # noqa: E402
 from models import Block, Cascade, export, specs  # noqa: E402
 
 from .. import cases, homework, judging, loops, providers, runner, tuner  # noqa: E402
-from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, Scenario  # noqa: E402
+from ..case import KNOWN_ERROR, CaseStudy, LoopSpec, TableScenario  # noqa: E402
 
 #: Each gain element ranges over [value / RANGE, value * RANGE] (sign kept).
 RANGE = 10.0
@@ -407,7 +407,7 @@ class Designer:
         """The block with `values` (control key -> value; others at the design) checked and set."""
         return with_values(self.block, self.controls, values or {})
 
-    def scenario(self, name: str) -> Scenario:
+    def scenario(self, name: str) -> TableScenario:
         """The scenario `name` among those the designer offers (`SCENARIOS`); ValueError naming them otherwise."""
         if name not in self.scenarios:
             raise ValueError(f"scenario must be one of {', '.join(self.scenarios)}, got {name!r}")

@@ -242,7 +242,7 @@ def test_uuv_buoyancy_offset_simultaneous_from_sequential_is_never_worse():
             RollPD(uuv.input_limit[0]),
             scenario,
             cost=Cost("itae"),
-            specs=Specs(max_overshoot=0.05),
+            specs=Specs(max_overshoot_pct=5.0),
             bounds={"kp": (0, 500), "kd": (0, 500)},
         ),
         {"L": (0.01, 0.2)},
@@ -253,7 +253,7 @@ def test_uuv_buoyancy_offset_simultaneous_from_sequential_is_never_worse():
     assert seq.feasible and sim.feasible, (seq.message, sim.message)
     assert sim.objective <= seq.objective * (1 + 1e-9)
     for res in (seq, sim):
-        problem = TuningProblem(res.plant, res.block, scenario, cost=Cost("itae"), specs=Specs(max_overshoot=0.05))
+        problem = TuningProblem(res.plant, res.block, scenario, cost=Cost("itae"), specs=Specs(max_overshoot_pct=5.0))
         value, _, violations = problem.values(problem.start())
         assert value == pytest.approx(res.closed_loop_cost, rel=1e-9) and not violations
         assert res.plant_cost == pytest.approx(0.2 * res.params["L"], rel=1e-12)
@@ -287,7 +287,7 @@ def _meets(arm, limit, block, tol=1e-6):
 def test_actuator_sizing_finds_the_edge_of_the_rise_time_spec():
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
-    specs = Specs(rise_time=0.8, max_overshoot=0.05)
+    specs = Specs(max_rise_time_s=0.8, max_overshoot_pct=5.0)
     sized = size_actuator(
         SizingProblem(arm, _arm_saturation_pd, scenario, specs, low=0.8, high=3.0), retune=False, rel_tol=0.01
     )
@@ -318,7 +318,7 @@ def test_a_decided_limit_is_the_same_loop_as_a_block_built_for_it():
 def test_simultaneous_sizing_meets_the_spec_at_no_more_than_the_nested_limit():
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
-    specs = Specs(rise_time=0.8, max_overshoot=0.05)
+    specs = Specs(max_rise_time_s=0.8, max_overshoot_pct=5.0)
     bounds = {"kp": (0, 5), "kd": (0, 1)}
     nested = size_actuator(
         SizingProblem(arm, _arm_saturation_pd, scenario, specs, low=0.75, high=3.0, bounds=bounds),
@@ -343,8 +343,8 @@ def test_simultaneous_sizing_proves_a_rise_time_beyond_the_largest_limit_out_of_
     p = arm.params
     inertia, high, step = p["m"] * p["ell"] ** 2 / 3, 3.0, np.deg2rad(50)
     fastest = np.sqrt(2 * 0.9 * step * inertia / high)
-    specs = Specs(rise_time=0.05)
-    assert specs.rise_time < fastest
+    specs = Specs(max_rise_time_s=0.05)
+    assert specs.max_rise_time_s < fastest
     scenario = Scenario(reference=step, duration=1.0, tracked="theta")
     sim = size_actuator_simultaneous(
         SizingProblem(
@@ -384,7 +384,7 @@ def test_a_numerical_stop_in_the_nested_sizing_is_retried_from_the_best_gains(mo
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     sized = size_actuator(
-        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0), retune=True
+        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(max_rise_time_s=0.8), low=0.8, high=3.0), retune=True
     )
     assert sized["converged"] and "Restoration_Failed" not in sized["statuses"]
     assert edge <= sized["limit"] <= edge * 1.01 and sized["block"].gains["kp"] == sized["limit"]
@@ -426,7 +426,7 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
     arm = models.get("arm")
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     sized = size_actuator(
-        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0), retune=True
+        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(max_rise_time_s=0.8), low=0.8, high=3.0), retune=True
     )
     assert edge <= sized["limit"] <= edge * 1.01
     assert sized["retries"] > 0 and sized["converged"]
@@ -444,7 +444,7 @@ def test_a_feasible_design_decides_a_limit_whatever_the_repeat_claims(monkeypatc
         ),
     )
     sized = size_actuator(
-        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(rise_time=0.8), low=0.8, high=3.0), retune=True
+        SizingProblem(arm, _arm_saturation_pd, scenario, Specs(max_rise_time_s=0.8), low=0.8, high=3.0), retune=True
     )
     assert sized["limit"] >= 2.0 and not sized["converged"]
 

@@ -27,6 +27,7 @@ from designs.tuning import (
 )
 from designs.tuning.result import pick_answer
 from models import metrics
+from models import specs as model_specs
 
 
 @models.declare(
@@ -134,7 +135,7 @@ def _overshoot_and_settling(res, step_from, step_to, band=0.02):
 def test_tuned_design_beats_the_start_and_meets_its_specs(arm):
     block = ArmPD(arm)
     target = np.deg2rad(50)
-    specs = Specs(max_overshoot=0.02, settling_time=1.5)
+    specs = Specs(max_overshoot_pct=2.0, max_settling_time_s=1.5)
     # Without bounds ITAE keeps falling towards bang-bang as the gains grow.
     result = tune(
         TuningSetup(
@@ -159,7 +160,7 @@ def test_infeasible_specs_are_named(arm):
             arm,
             ArmPD(arm),
             Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta"),
-            specs=Specs(rise_time=0.05, max_overshoot=0.0),
+            specs=Specs(max_rise_time_s=0.05, max_overshoot_pct=0.0),
         ),
         SolveOptions(max_iter=30),
     )
@@ -192,7 +193,7 @@ def test_an_infeasibility_verdict_contradicted_by_its_own_iterates_is_retried_fr
 
     monkeypatch.setattr(ca, "nlpsol", lambda *a, **k: Claims(real(*a, **k)))
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
-    specs = Specs(max_overshoot=0.05)
+    specs = Specs(max_overshoot_pct=5.0)
     problem = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
     result = tune(
         TuningSetup(arm, ArmPD(arm), scenario, specs=specs, bounds={"kp": (0, 1.0), "kd": (0, 0.2)}),
@@ -215,7 +216,7 @@ def test_iteration_limit_returns_the_best_feasible_point_and_says_it_did_not_con
             arm,
             ArmPD(arm),
             Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta"),
-            specs=Specs(max_overshoot=0.05),
+            specs=Specs(max_overshoot_pct=5.0),
         ),
         SolveOptions(max_iter=2, progress=lambda *a: calls.append(a)),
     )
@@ -282,7 +283,7 @@ def test_a_violated_spec_reports_its_excess_from_a_fresh_simulation(arm):
     overshoot = (np.max(run.x[:, 0]) - reference) / reference
     assert overshoot > 0.01
     bound = overshoot / 2
-    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot=bound))
+    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot_pct=100 * bound))
     (violation,) = problem.values(problem.start())[2]
     reported = float(violation.split("violated by ")[1].split(" ")[0])
     # g = peak − r against bound·step; unbounded below, so the relative scale is 1.
@@ -312,7 +313,7 @@ def test_saturating_loop_tuned_smoothly_ends_where_exact_and_smoothed_costs_agre
             block,
             scenario,
             cost=Cost("itae", energy_weight=0.01),
-            specs=Specs(max_overshoot=0.02),
+            specs=Specs(max_overshoot_pct=2.0),
             bounds={"kp": (0, 5.0), "kd": (0, 1.0)},
         )
     )
@@ -424,7 +425,7 @@ def test_multi_scenario_tuning_is_never_worse_than_the_hand_design_on_any_scenar
             tracked="theta",
             name=s.name,
             weight=s.weight,
-            specs=Specs(max_overshoot=hand[s.name][0], settling_time=hand[s.name][1]),
+            specs=Specs(max_overshoot_pct=100 * hand[s.name][0], max_settling_time_s=hand[s.name][1]),
         )
         for s in plain
     ]
@@ -619,7 +620,7 @@ def test_aggregated_path_specs_reach_the_pointwise_answer(arm):
     on the smoothed stages instead of one per sample, the same converged answer, judged pointwise."""
     block = ArmPD(arm)
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
-    kwargs = dict(specs=Specs(max_overshoot=0.02, settling_time=1.5), bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
+    kwargs = dict(specs=Specs(max_overshoot_pct=2.0, max_settling_time_s=1.5), bounds={"kp": (0, 1.0), "kd": (0, 0.2)})
     pointwise = tune(TuningSetup(arm, block, scenario, **kwargs))
     aggregated = tune(TuningSetup(arm, block, scenario, paths="aggregated", **kwargs))
     problem = TuningProblem(arm, block, scenario, specs=kwargs["specs"], paths="aggregated")
@@ -637,7 +638,10 @@ def test_phase_one_certifies_unreachable_specs_no_worse_than_a_grid(arm):
     """A 50 deg step risen in 0.05 s is beyond the 1 N m arm: phase one converges outside the spec, at an
     excess no grid point of the gain box beats (the bang-bang start bounds how far the arm can rise)."""
     problem = TuningProblem(
-        arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"), specs=Specs(rise_time=0.05)
+        arm,
+        ArmPD(arm),
+        Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"),
+        specs=Specs(max_rise_time_s=0.05),
     )
     lbx, ubx = gain_bounds(problem, {"kp": (0, 1.0), "kd": (0, 0.2)})
     found = phase_one(problem, lbx, ubx, problem.start())
@@ -656,7 +660,10 @@ def test_a_phase_one_stopped_by_a_numerical_failure_is_retried_from_where_it_sto
     """IPOPT made to report Restoration_Failed on the phase one's first solve: it is solved once more from
     that solve's answer, and the verdict (here: a certificate of infeasibility) is the second solve's."""
     problem = TuningProblem(
-        arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"), specs=Specs(rise_time=0.05)
+        arm,
+        ArmPD(arm),
+        Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"),
+        specs=Specs(max_rise_time_s=0.05),
     )
     lbx, ubx = gain_bounds(problem, {"kp": (0, 1.0), "kd": (0, 0.2)})
     real, starts, answers = ca.nlpsol, [], []
@@ -680,7 +687,10 @@ def test_a_phase_one_stopped_by_a_numerical_failure_is_retried_from_where_it_sto
     np.testing.assert_allclose(starts[1][:-1], answers[0][:-1], rtol=1e-12)  # the gains it stopped at
     monkeypatch.undo()
     fresh = TuningProblem(
-        arm, ArmPD(arm), Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"), specs=Specs(rise_time=0.05)
+        arm,
+        ArmPD(arm),
+        Scenario(reference=np.deg2rad(50), duration=1.0, tracked="theta"),
+        specs=Specs(max_rise_time_s=0.05),
     )  # the first problem keeps its (wrapped) solver
     honest = phase_one(fresh, lbx, ubx, fresh.start())
     assert found.excess == pytest.approx(honest.excess, rel=1e-6)
@@ -690,7 +700,7 @@ def test_a_problem_solved_again_reuses_its_solvers_and_answers_as_a_fresh_one(ar
     """The second solve of one problem (another start, as a nested co-design's next evaluation) builds no
     solver, and its answer and iterate history are those of the same solve on a newly built problem."""
     scenario = Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta")
-    specs = Specs(max_overshoot=0.05)
+    specs = Specs(max_overshoot_pct=5.0)
 
     def problem():
         return TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
@@ -714,7 +724,7 @@ def test_a_start_outside_the_specs_is_tuned_from_phase_ones_answer_and_converges
     """Without the phase one, this tuning ended at IPOPT's 3000-iteration cap (its restoration wandering
     along a feasible set of one corner); the answer must meet the specs on a fresh simulation."""
     target = np.deg2rad(50)
-    specs = Specs(max_overshoot=0.0, settling_time=0.8)
+    specs = Specs(max_overshoot_pct=0.0, max_settling_time_s=0.8)
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
     start = TuningProblem(arm, ArmPD(arm), scenario, specs=specs)
     assert start.values(start.start())[2]  # the start misses both specs
@@ -791,7 +801,7 @@ def test_relaxed_keeps_the_unconstrained_answer_only_where_it_meets_the_specs(ar
     it, and the result is the usual solve's, the first one named in its message."""
     scenario = Scenario(reference=np.deg2rad(50), duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
-    loose = Specs(max_overshoot=0.5)
+    loose = Specs(max_overshoot_pct=50.0)
     kept = tune(
         TuningSetup(arm, ArmPD(arm), scenario, specs=loose, bounds=bounds), SolveOptions(relaxed=True, tol=1e-10)
     )
@@ -802,7 +812,7 @@ def test_relaxed_keeps_the_unconstrained_answer_only_where_it_meets_the_specs(ar
     target = np.deg2rad(50)
     over, _ = _overshoot_and_settling(models.simulate_closed_loop(arm, kept.block, target, 3.0), 0.0, target)
     assert 0 < over < 0.5  # overshoots (so the 0 % bound below is active), within the 50 % one
-    tight = Specs(max_overshoot=0.0)
+    tight = Specs(max_overshoot_pct=0.0)
     fallback = tune(TuningSetup(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds), SolveOptions(relaxed=True))
     usual = tune(TuningSetup(arm, ArmPD(arm), scenario, specs=tight, bounds=bounds))
     assert fallback.message.startswith("without the specs: ") and "missing overshoot" in fallback.message
@@ -825,7 +835,7 @@ def test_no_coarse_level_where_it_disagrees_at_the_start(arm, monkeypatch):
 def test_until_feasible_stops_at_the_first_decision_meeting_the_specs(arm):
     """The feasibility verdict of an outer search: the same problem as above, stopped where the specs hold."""
     target = np.deg2rad(50)
-    specs = Specs(max_overshoot=0.0, settling_time=0.8)
+    specs = Specs(max_overshoot_pct=0.0, max_settling_time_s=0.8)
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
     found = tune(
@@ -873,12 +883,12 @@ def test_relative_excess_rows_are_the_judges_excess(arm, lbg, ubg):
 
 def test_bad_phase_one_input_is_named(arm):
     scenario = Scenario(reference=0.5, duration=0.2, tracked="theta")
-    problem = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1))
+    problem = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(max_rise_time_s=0.1))
     lbx, ubx = gain_bounds(problem, None)
     with pytest.raises(ValueError, match="method must be 'smooth' or 'exact'"):
         phase_one(problem, lbx, ubx, problem.start(), SolveOptions(method="fast"))
     with pytest.raises(TypeError, match="phase"):
-        tune(TuningSetup(arm, ArmPD(arm), scenario, specs=Specs(rise_time=0.1)), SolveOptions(phase="yes"))
+        tune(TuningSetup(arm, ArmPD(arm), scenario, specs=Specs(max_rise_time_s=0.1)), SolveOptions(phase="yes"))
 
 
 # ----------------------------------------------------------------- the continuation's steps, alone
@@ -899,7 +909,7 @@ def test_a_stage_judgement_is_a_fresh_simulations_cost_and_names_the_spec_missed
     overshoot = (np.max(run.x[:, 0]) - target) / target
     assert np.sum(np.abs(run.u[:, 0]) >= arm.input_limit[0] - 1e-12) >= 20 and overshoot > 0.02
     scenario = Scenario(reference=target, duration=3.0, tracked="theta")
-    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot=overshoot - 0.01))
+    problem = TuningProblem(arm, block, scenario, specs=Specs(max_overshoot_pct=100 * (overshoot - 0.01)))
     continuation = _continuation(problem, {"kp": (0, 5.0), "kd": (0, 1.0)})
     level = continuation.build(problem)
     tiny = continuation.judge_stage(level, 1e-9)
@@ -950,7 +960,7 @@ def test_the_fidelity_levels_are_a_coarse_loop_then_the_problem_only_without_spe
     bounds = {"kp": (0, 1.0), "kd": (0, 0.2)}
     assert [p.substeps for p in _continuation(free, bounds).levels] == [1, 10]
     assert [p.substeps for p in _continuation(free, bounds, SolveOptions(coarse_substeps=None)).levels] == [10]
-    with_specs = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(max_overshoot=0.5))
+    with_specs = TuningProblem(arm, ArmPD(arm), scenario, specs=Specs(max_overshoot_pct=50.0))
     assert [p.substeps for p in _continuation(with_specs, bounds).levels] == [10]
 
 
@@ -988,3 +998,48 @@ def test_solve_options_are_normalized_and_checked_again_when_replaced():
         tuning.solve(None, [], [], {"max_iter": 3})
     with pytest.raises(TypeError, match="setup must be a designs.tuning.TuningSetup, got tuple"):
         tune((None, None, None))
+
+
+def _tuner_and_table(arm, specs, kp=0.3, kd=0.1):
+    """(the tuning problem's violated specs, its constraint rows by name, the table's verdict, the table's
+    metrics) of one ArmPD step: the tuner's exact loop and `models.simulate_closed_loop` judged by
+    `models.specs.judge`, as the study tables judge a run."""
+    target = np.deg2rad(50)
+    problem = TuningProblem(
+        arm, ArmPD(arm, kp, kd), Scenario(reference=target, duration=3.0, tracked="theta"), specs=specs
+    )
+    g = np.asarray(problem.evaluate(problem.start())[1]).ravel()
+    rows = {name.split(" <=")[0].split(" after")[0].split(" by")[0]: g[sl] for name, sl in problem.constraint_names}
+    run = models.simulate_closed_loop(arm, ArmPD(arm, kp, kd), target, 3.0)
+    measured = metrics.run_metrics(run, "theta", specs.state_bounds, band=specs.settling_band)
+    return problem.violated(g), rows, model_specs.judge(specs, run, "theta", target, measured=measured), measured
+
+
+def test_the_tuners_exact_specs_are_the_tables_numbers(arm):
+    """Overshoot and steady-state error enter the tuning as the table's own numbers (the same run, to
+    1e-12 of the step), and the tuner's settling and rise constraints imply the table's verdict. (The
+    tuner tolerates an excess of 1e-6 of the step, so the bounds below the measured values are 0.01 % of
+    the step below them.)"""
+    step = np.deg2rad(50)
+    specs = model_specs.Specs(max_overshoot_pct=50.0, max_ss_error_pct=50.0, max_settling_time_s=2.5)
+    _, rows, verdict, measured = _tuner_and_table(arm, specs)
+    assert np.max(rows["overshoot"]) / step * 100 == pytest.approx(measured["overshoot_pct"], abs=1e-10)
+    assert abs(float(rows["ss error"][0])) == pytest.approx(measured["ss_error"], abs=1e-12 * step)
+    assert verdict.ok
+    for kp, kd in ((0.3, 0.1), (1.0, 0.05), (0.2, 0.2), (0.6, 0.02)):
+        _, _, _, measured = _tuner_and_table(arm, specs, kp, kd)
+        for spec in (
+            model_specs.Specs(max_overshoot_pct=measured["overshoot_pct"] * (1 + 1e-6) + 1e-9),
+            model_specs.Specs(max_overshoot_pct=max(0.0, measured["overshoot_pct"] - 0.01)),
+            model_specs.Specs(max_ss_error_pct=100 * measured["ss_error"] / step * (1 + 1e-6) + 1e-9),
+            model_specs.Specs(max_ss_error_pct=max(0.0, 100 * measured["ss_error"] / step - 0.01)),
+            model_specs.Specs(max_settling_time_s=min(measured["settling_time_s"], 2.9) + 0.02),
+            model_specs.Specs(max_settling_time_s=min(measured["settling_time_s"], 2.9) - 0.02),
+            model_specs.Specs(max_rise_time_s=min(measured["rise_time_s"], 2.9) + 0.2),
+            model_specs.Specs(max_rise_time_s=min(measured["rise_time_s"], 2.9) * 0.5),
+        ):
+            violated, _, verdict, _ = _tuner_and_table(arm, spec, kp, kd)
+            if not violated:  # met according to the tuner: met according to the table
+                assert verdict.ok, (kp, kd, spec, verdict)
+            if spec.max_overshoot_pct is not None or spec.max_ss_error_pct is not None:  # exact: the same verdict
+                assert (not violated) == verdict.ok, (kp, kd, spec, violated, verdict)

@@ -168,10 +168,12 @@ def test_widths_option_reads_a_decreasing_list():
 
 def test_tuning_enforces_the_specs_with_a_margin_and_no_overshoot_where_only_the_floor_allows_some():
     floor = tuner.OVERSHOOT_FLOOR
-    some = tuner.with_margin(Specs(max_overshoot=0.2, settling_time=4.0))
-    assert (some.max_overshoot, some.settling_time) == (tuner.MARGIN * 0.2, tuner.MARGIN * 4.0)
-    assert tuner.with_margin(Specs(max_overshoot=floor)).max_overshoot == 0.0
-    assert tuner.with_margin(Specs(max_overshoot=2 * floor)).max_overshoot == tuner.MARGIN * 2 * floor
+    some = tuner.with_margin(Specs(max_overshoot_pct=20.0, max_settling_time_s=4.0))
+    assert some.max_overshoot_pct == pytest.approx(tuner.MARGIN * 20.0, rel=1e-12)
+    assert some.max_settling_time_s == tuner.MARGIN * 4.0
+    assert tuner.with_margin(Specs(max_overshoot_pct=100 * floor)).max_overshoot_pct == 0.0
+    twice = tuner.with_margin(Specs(max_overshoot_pct=100 * (2 * floor))).max_overshoot_pct
+    assert twice == pytest.approx(tuner.MARGIN * 100 * 2 * floor, rel=1e-12)
 
 
 def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_source_by_default(tmp_path, monkeypatch):
@@ -194,3 +196,15 @@ def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_so
     assert tuner.main(["arm"]) == 0
     assert list((tmp_path / "cache" / "tuned").iterdir())
     assert (tuner.STORE_DIR / tuner.store_name(studies.get("arm"))).stat().st_mtime_ns == before
+
+
+def test_the_tuners_validation_judges_a_run_as_the_study_table_does():
+    """The tuner's table verdicts on the nominal plant are the study's own "tuned" rows' verdicts."""
+    case = studies.get("arm")
+    block = tuner.controllers(case)[tuner.LABEL]
+    verdicts = tuner.table_verdicts(case, block, models.get("arm").param_vector()[None, :])
+    table = studies.run(case, scenarios=list(tuner.SCENARIOS), mc=0, providers=[tuner.controllers])
+    rows = table[table.controller == tuner.LABEL].set_index("scenario")
+    for name in tuner.SCENARIOS:
+        row = rows.loc[name]
+        assert verdicts[name] == (f"{row.verdict}: {row.verdict_detail}" if row.verdict_detail else row.verdict)
