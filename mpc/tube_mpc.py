@@ -101,6 +101,8 @@ class TubeMPC:
     horizon : N samples
     state_weight, input_weight : Q (nx,) or (nx, nx), R (nu,) or (nu, nu) of the nominal cost
     initial_state : (nx,) absolute state the problem must be feasible at; checked at construction
+    replan : plan from the measured state at every sample (z := x − xe, so u = v_0): the nominal MPC,
+        for comparison; it keeps none of the guarantee under W
     iteration_limit : DAQP's bound on active-set changes per solve
     name : str
 
@@ -123,6 +125,7 @@ class TubeMPC:
         state_weight,
         input_weight,
         initial_state=None,
+        replan: bool = False,
         iteration_limit: int = 1000,
         name: str = "tube MPC",
     ):
@@ -134,7 +137,7 @@ class TubeMPC:
             raise ValueError("tube MPC needs a discrete model (model.sample_period is None)")
         self.sample_period = positive(model.sample_period, "sample_period (s)")
         self.horizon = N = integer(horizon, "horizon", minimum=1)
-        self.name, self.model, self.tube = name, model, tube
+        self.name, self.model, self.tube, self.replan = name, model, tube, bool(replan)
         self.iteration_limit = integer(iteration_limit, "iteration_limit", minimum=1)
         self._A, self._B, self._K = A, B, tube.feedback
         self._xe, self._ue = np.asarray(model.xe, dtype=float), np.asarray(model.ue, dtype=float)
@@ -245,13 +248,14 @@ class TubeMPC:
         return z0
 
     def step(self, xc, y, r=None) -> tuple[np.ndarray, np.ndarray]:
-        """One sample: plan from z = x_c, command u = ue + v_0 + K (x − xe − z), advance z with v_0.
+        """One sample: plan from z = x_c, command u = ue + v_0 + K (x − xe − z), advance z with v_0
+        (with `replan`, z = x − xe).
 
         y is the measured absolute state; r is not used (the tube regulates to the operating point).
         A failed solve raises RuntimeError: inside W it cannot happen, and no fallback hides it.
         """
         start = time.perf_counter()
-        z = np.asarray(xc, dtype=float)
+        z = np.asarray(y, dtype=float) - self._xe if self.replan else np.asarray(xc, dtype=float)
         V, success, status, iterations = self.solve(z)
         if not success:
             raise RuntimeError(
