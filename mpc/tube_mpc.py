@@ -212,9 +212,13 @@ class TubeMPC:
         names the constraints that need all of it.
         """
         N, m = self._shape
-        rows = np.vstack([self._rows, np.eye(N * m), -np.eye(N * m)])
-        bound = np.concatenate([self._row_bound - self._row_shift @ z0, self._v_upper, -self._v_lower])
-        names = [*self._row_names, *(f"input {j} upper at step {k}" for k in range(N) for j in range(m))]
+        X_bar = self.tube.state_constraints  # z_0 itself is fixed: its rows are constant, 0 <= bound + t
+        rows = np.vstack([np.zeros((len(X_bar.h), N * m)), self._rows, np.eye(N * m), -np.eye(N * m)])
+        bound = np.concatenate(
+            [X_bar.h - X_bar.H @ z0, self._row_bound - self._row_shift @ z0, self._v_upper, -self._v_lower]
+        )
+        names = [f"{name} at step 0" for name in self.tube.state_constraint_names] + self._row_names
+        names += [f"input {j} upper at step {k}" for k in range(N) for j in range(m)]
         names += [f"input {j} lower at step {k}" for k in range(N) for j in range(m)]
         cost = np.zeros(N * m + 1)
         cost[-1] = 1.0

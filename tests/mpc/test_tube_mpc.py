@@ -130,6 +130,13 @@ def test_refuses_an_initial_state_the_tightened_problem_cannot_start_from(tube):
         controller(tube).initial_state([0.95, 0.9])
 
 
+def test_refuses_an_initial_state_outside_the_tightened_state_constraints(tube):
+    """Position 0.9 > 1 − h_Z: no plan helps, the first state itself lacks the margin."""
+    margin = 0.9 - tube.state_constraints.h[0]
+    with pytest.raises(ValueError, match=rf"row 0 at step 0.*lack a margin of {margin:.6g}"):
+        controller(tube, initial_state=[0.9, 0.0])
+
+
 def test_refuses_an_error_set_the_constraints_cannot_hold():
     big = Zonotope.box([-0.2, -0.4], [0.2, 0.4])
     with pytest.raises(ValueError, match="larger than the constraints can hold"):
