@@ -14,6 +14,7 @@ from .qp_osqp import OsqpSolver
 from .reference_cvxpy import CvxpySolver
 from .settings import MPCSettings, SoftSpec, linear_mpc, nonlinear_mpc, physical_soft_bounds
 from .transcription import Collocation, MultipleShooting, Transcription
+from .tube_mpc import TubeMPC
 
 __all__ = [
     "CondensedDaqpSolver",
@@ -30,6 +31,7 @@ __all__ = [
     "SoftBound",
     "SoftSpec",
     "SteadyStateTarget",
+    "TubeMPC",
     "linear_mpc",
     "nonlinear_mpc",
     "physical_soft_bounds",
