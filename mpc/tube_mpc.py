@@ -186,7 +186,12 @@ class TubeMPC:
         return f, upper, lower
 
     def solve(self, z0) -> tuple[np.ndarray, bool, str, int]:
-        """The nominal plan V (N, nu) from z_0 (deviation), success, DAQP's status and iterations."""
+        """The nominal plan V (N, nu) from z_0 (deviation), success, DAQP's status and iterations.
+
+        Parameters
+        ----------
+        z0 : the nominal state's deviation from the operating point, shape (nx,)
+        """
         f, upper, lower = self._vectors(z0)
         if not self._set_up:
             flag, _ = self._model.setup(self._H, f, self._A_scaled, upper, lower)
@@ -244,7 +249,13 @@ class TubeMPC:
             )
 
     def initial_state(self, y0, r0=None) -> np.ndarray:
-        """x_c = z_0 = x_0 − xe (the error starts at 0 ∈ Z), checked feasible; y0 is the full state."""
+        """x_c = z_0 = x_0 − xe (the error starts at 0 ∈ Z), checked feasible.
+
+        Parameters
+        ----------
+        y0 : the first measured absolute state, shape (nx,)
+        r0 : the first reference; not used (the tube regulates to the operating point)
+        """
         z0 = as_vector(y0, self.n_state, f"{self.name}: first state") - self._xe
         self.check_feasible(z0)
         self.reset()
@@ -255,8 +266,13 @@ class TubeMPC:
         """One sample: plan from z = x_c, command u = ue + v_0 + K (x − xe − z), advance z with v_0
         (with `replan`, z = x − xe).
 
-        y is the measured absolute state; r is not used (the tube regulates to the operating point).
         A failed solve raises RuntimeError: inside W it cannot happen, and no fallback hides it.
+
+        Parameters
+        ----------
+        xc : the controller state, the nominal state's deviation z, shape (nx,)
+        y : the measured absolute state, shape (nx,)
+        r : the reference; not used (the tube regulates to the operating point)
         """
         start = time.perf_counter()
         z = np.asarray(y, dtype=float) - self._xe if self.replan else np.asarray(xc, dtype=float)
