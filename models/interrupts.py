@@ -97,6 +97,16 @@ def pending() -> bool:
     return _received > _handled
 
 
+def received() -> int:
+    """How many SIGINTs this process counted so far (never reset: `clear` only marks them delivered).
+
+    A KeyboardInterrupt raised while Python runs a callback whose exceptions it ignores (a weakref
+    callback, a module lock's) is lost; a command compares this count before and after its work to
+    notice it.
+    """
+    return _received
+
+
 def check() -> None:
     """Raise KeyboardInterrupt if a counted SIGINT was not delivered yet (and mark it delivered)."""
     if pending():

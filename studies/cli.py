@@ -475,6 +475,7 @@ def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: 
     staging = writers.new_staging(args.out, run_id)
     progress = Progress(progress_slots(plants, settings["scenarios"], settings), disable=args.quiet)
     stop_on_signals()
+    signals_before = interrupts.received()
     published = False
     try:
         with distributed.connect(args.scheduler, args.workers, jobs) as executor:
@@ -489,6 +490,8 @@ def _run(args, plants: list, settings: dict, chosen: list, missing: list, jobs: 
                 longest_first=RUN_SECONDS,
             )
         progress.close()
+        if interrupts.received() > signals_before:  # a KeyboardInterrupt Python ignored in a callback
+            raise KeyboardInterrupt
         with interrupts.deferred():  # every plant of the run and its summary, or none: Ctrl-C waits
             writers.publish(staging, args.out, registered, run_id)
             published = True

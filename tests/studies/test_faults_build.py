@@ -13,8 +13,7 @@ from conftest import subprocess_env
 
 import models
 import studies
-from models import files
-from studies import provider_calls, runner
+from studies import plain_markdown, provider_calls, runner
 
 STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
 
@@ -82,5 +81,5 @@ def test_the_command_goes_on_past_the_block_and_exits_1_only_with_strict(tmp_pat
         table = (tmp_path / "out/arm/table.csv").read_text()
         assert "broken block,step" in table and "failed: ZeroDivisionError" in table
         assert "LQR" in table and ",ok," in table  # the case's own controllers ran
-        note = files.escape_markdown("test_faults_build:broken_block: 'broken block' failed to build")
+        note = plain_markdown.markdown_text("test_faults_build:broken_block: 'broken block' failed to build")
         assert note in (tmp_path / "out/arm/table.md").read_text()
