@@ -116,15 +116,20 @@ def _worst(verdict, scenario: str, excess: float) -> dict:
 
 @dataclass(frozen=True)
 class WeightObjective:
-    """f(θ) of the module docstring for one case and kind (picklable: workers rebuild the case by name).
+    """f(θ) of the module docstring for one case and kind (picklable with a registered case's name).
 
+    case : a CaseStudy or a registered case's name (what a worker receives: it rebuilds the case)
     runs : `tuning_runs`;  reference : per run, the start's (ITAE, energy), or None to measure raw values
     """
 
-    plant: str
+    case: CaseStudy | str
     kind: str
     runs: tuple
     reference: tuple | None = None
+
+    def study(self) -> CaseStudy:
+        """The case (the registered one of that name when `case` is a name)."""
+        return cases.get(self.case) if isinstance(self.case, str) else self.case
 
     def run(self, case: CaseStudy, control, scenario: str, row) -> judging.Judgement:
         """One of the study's runs of `scenario` with the plant's parameters `row` (None: nominal), judged."""
@@ -137,7 +142,7 @@ class WeightObjective:
 
     def measure(self, theta) -> list[tuple[float, float]]:
         """(ITAE, energy) of every run with θ (the `reference` of a search that starts there)."""
-        case = cases.get(self.plant)
+        case = self.study()
         control = controller(case, self.kind, theta)
         out = []
         for scenario, row in self.runs:
@@ -148,7 +153,7 @@ class WeightObjective:
     def __call__(self, theta, bound: float = math.inf) -> Evaluation:
         """f(θ), stopping early (complete=False) once its lower bound reaches `bound`."""
         assert self.reference is not None, "measure the start first (with_reference)"
-        case = cases.get(self.plant)
+        case = self.study()
         try:
             control = controller(case, self.kind, theta)
         except ValueError as err:  # a weight the design refuses (a gain that is unstable when sampled)
@@ -170,7 +175,7 @@ class WeightObjective:
 
     def with_reference(self, theta) -> WeightObjective:
         """This objective normalized by the runs of θ (the start)."""
-        return WeightObjective(self.plant, self.kind, self.runs, tuple(self.measure(theta)))
+        return WeightObjective(self.case, self.kind, self.runs, tuple(self.measure(theta)))
 
 
 def objective(case: CaseStudy, kind: str, runs: Sequence | None = None) -> WeightObjective:
@@ -180,7 +185,8 @@ def objective(case: CaseStudy, kind: str, runs: Sequence | None = None) -> Weigh
     if not has_design(case, kind):
         raise ValueError(f"the {case.plant} case has no {'state-space design' if kind == 'lqr' else 'MPC settings'}")
     chosen = tuple(tuning_runs(case) if runs is None else runs)
-    return WeightObjective(case.plant, kind, chosen).with_reference(start(case, kind))
+    registered = case.plant in cases.names() and cases.get(case.plant) is case
+    return WeightObjective(case.plant if registered else case, kind, chosen).with_reference(start(case, kind))
 
 
 def infeasible_text(worst: dict | None) -> str | None:
