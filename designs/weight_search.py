@@ -89,7 +89,7 @@ class _Bounded:
 
 def poll_search(
     objective: Callable[[np.ndarray, float], Evaluation],
-    x0: Sequence[float],
+    x0: Sequence[float] | np.ndarray,
     *,
     step: float = math.log(4.0),
     min_step: float = 0.05,
