@@ -1,6 +1,7 @@
 """The tuned LQR and MPC rows: their objective's rules, their stored records and the provider."""
 
 import math
+import pickle
 
 import control
 import numpy as np
@@ -38,6 +39,8 @@ def test_early_rejection_is_a_lower_bound_of_the_complete_value():
     assert full.complete and full.runs == 3
     cut = f(theta, bound=-1.0)  # below any value: rejected after the first run
     assert not cut.complete and cut.runs == 1 and -1.0 <= cut.value <= full.value
+    # What a worker of `studies.distributed` receives: the pickled objective gives the same value.
+    assert pickle.loads(pickle.dumps(f))(theta).value == full.value
 
 
 def test_the_provider_is_standard_and_needs_stored_weights(monkeypatch):
