@@ -95,6 +95,7 @@ def poll_search(
     min_step: float = 0.05,
     max_evaluations: int = 400,
     mapper: Callable[[Callable, list], list] | None = None,
+    progress: Callable[[int, float, float], None] | None = None,
 ) -> SearchResult:
     """Minimize `objective` from `x0` by a compass search (see the module docstring).
 
@@ -108,6 +109,7 @@ def poll_search(
     mapper : ``mapper(function, items) -> results`` running a whole poll at once (a
         `studies.distributed` executor's ``map``); None polls one point at a time, taking the first
         improvement
+    progress : called as ``progress(evaluations, best value, step)`` after every poll
     """
     x = np.asarray(x0, dtype=float).ravel().copy()
     h, h_min = real(step, "step"), real(min_step, "min_step")
@@ -136,8 +138,10 @@ def poll_search(
             found = (poll[min(improving)[1]], trials[min(improving)[1]]) if improving else None
         if found is None:
             h /= 2
-            continue
-        x, best = found
-        history.append((time.perf_counter() - started, runs, best.value))
+        else:
+            x, best = found
+            history.append((time.perf_counter() - started, runs, best.value))
+        if progress is not None:
+            progress(evaluations, best.value, h)
     status = CONVERGED if h < h_min else CAPPED
     return SearchResult(x, best.value, dict(best.info), evaluations, runs, h, status, history)

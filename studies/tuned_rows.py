@@ -224,17 +224,20 @@ def infeasible_text(worst: dict | None) -> str | None:
     )
 
 
-def tune(case: CaseStudy, kind: str, executor=None, max_evaluations: int = MAX_EVALUATIONS) -> dict:
+def tune(case: CaseStudy, kind: str, executor=None, max_evaluations: int = MAX_EVALUATIONS, progress=None) -> dict:
     """Tune the `kind` row of `case`; the record its stored-weights file keeps under `kind`.
 
     executor : None (one point at a time, first improvement) or a `studies.distributed` executor whose
         ``map`` runs each poll at once
+    progress : `designs.weight_search.poll_search`'s progress callback
     """
     started = time.perf_counter()
     f = objective(case, kind, margin=MARGIN)
     theta0 = start(case, kind)
     mapper = None if executor is None else executor.map
-    found: SearchResult = poll_search(f, theta0, min_step=MIN_STEP, max_evaluations=max_evaluations, mapper=mapper)
+    found: SearchResult = poll_search(
+        f, theta0, min_step=MIN_STEP, max_evaluations=max_evaluations, mapper=mapper, progress=progress
+    )
     own = WeightObjective(f.case, kind, f.runs, f.reference)(found.x)
     feasible = own.value < BARRIER
     record = {
@@ -314,6 +317,18 @@ def summary(record: dict) -> str:
     )
 
 
+def _reporter(every: int = 20):
+    """A progress callback printing the search's state once per `every` evaluations."""
+    printed = [0]
+
+    def report(evaluations: int, value: float, step: float) -> None:
+        if evaluations >= printed[0] + every:
+            printed[0] = evaluations
+            print(f"    {evaluations:4d} evaluations: score {value:.6g}, poll step {step:.3g}", flush=True)
+
+    return report
+
+
 def main(argv=None) -> int:
     """``python -m studies.tuned_rows [PLANT ...]``: tune the weights of each case's LQR and linear MPC, write the
     record when every search converged (or with ``--force``); 1 if one did not converge."""
@@ -339,7 +354,8 @@ def main(argv=None) -> int:
             case = cases.get(name)
             kinds = [k for k in (args.kind or KINDS) if has_design(case, k)]
             print(f"tuning {name}: {', '.join(LABELS[k] for k in kinds) or 'nothing to tune'} ...", flush=True)
-            records = {k: tune(case, k, executor if distributed_run else None, args.max_evaluations) for k in kinds}
+            chosen = executor if distributed_run else None
+            records = {k: tune(case, k, chosen, args.max_evaluations, _reporter()) for k in kinds}
             for record in records.values():
                 print(summary(record), flush=True)
             converged = all(r["search"]["converged"] for r in records.values())
