@@ -1,5 +1,6 @@
 """The tuned LQR and MPC rows: their objective's rules, their stored records and the provider."""
 
+import dataclasses
 import math
 import pickle
 
@@ -7,8 +8,10 @@ import control
 import numpy as np
 import pytest
 
+import models
 from designs.statespace_blocks import TrackingModel
-from models.specs import MEETS, VIOLATES, Verdict, Violation
+from designs.weight_search import poll_search
+from models.specs import MEETS, VIOLATES, Specs, Verdict, Violation
 from studies import cases, providers, tuned_rows
 
 STORED = [
@@ -108,3 +111,21 @@ def test_stored_records_reproduce_their_score_and_verdict(name):
         judged = tuned_rows.objective(case, kind)(theta)
         assert judged.value == pytest.approx(record["objective"]["value_at_the_case_specs"], rel=1e-9)
         assert (judged.value < tuned_rows.BARRIER) == record["feasible"]
+
+
+@pytest.mark.slow
+def test_a_rise_time_below_the_actuators_bound_is_reported_infeasible():
+    """The arm (J = m ℓ²/3) from rest with |τ| ≤ τ_max accelerates at most τ_max / J while gravity and damping
+    oppose the rise; reaching 10 % of the step s at speed ≤ √(2 a 0.1 s) and covering the next 0.8 s takes
+    at least (√1.8 − √0.2) √(s / a). A spec of half that bound is out of reach for any weights."""
+    arm = cases.get("arm")
+    plant = models.get("arm")
+    inertia = plant.params["m"] * plant.params["ell"] ** 2 / 3
+    bound = (math.sqrt(1.8) - math.sqrt(0.2)) * math.sqrt(arm.step * inertia / float(plant.input_limit[0]))
+    case = dataclasses.replace(arm, specs={"*": Specs(max_rise_time_s=bound / 2)})
+    f = tuned_rows.objective(case, "lqr", runs=[("step", None)])
+    found = poll_search(f, tuned_rows.start(case, "lqr"), min_step=0.2, max_evaluations=300)
+    assert found.converged and found.value > tuned_rows.BARRIER
+    worst = found.info["worst"]
+    assert worst["spec"].startswith("rise") and worst["value"] >= bound - arm.sample_period > bound / 2
+    assert tuned_rows.infeasible_text(worst).startswith("infeasible for this structure: rise")
