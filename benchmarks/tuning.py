@@ -31,8 +31,8 @@ The "mpc" problem tunes the arm's linear MPC weights (`studies.tuned_rows`, the 
 relative excess while a spec (tightened by `tuned_rows.MARGIN`) is missed, else ITAE and energy
 relative to the start) twice from the case's own weights, in the same process: the baseline is
 Nelder-Mead on complete evaluations, with a first simplex of the same steps as the poll (weights
-x 4), capped at `MPC_BASELINE_EVALUATIONS`; ours is `designs.weight_search.poll_search` with its
-early rejection. `speedup` is the baseline's time to the worse of the two final scores over ours;
+x 4), capped at `MPC_BASELINE_EVALUATIONS`; ours is `studies.tuned_rows.search` (the poll search with its
+early rejection). `speedup` is the baseline's time to the worse of the two final scores over ours;
 `status` the poll's stopping test.
 
 Usage: python benchmarks/tuning.py [--json PATH] [--max-evaluations 20000] [--problems saturating linear mpc]
@@ -53,7 +53,6 @@ import scipy.optimize
 import models
 import studies
 from designs.tuning import Cost, Scenario, SolveOptions, TuningProblem, TuningSetup, tune
-from designs.weight_search import poll_search
 from studies import tuned_rows
 from studies.homework import statespace_controllers
 
@@ -342,7 +341,7 @@ def compare_mpc(max_evaluations=MPC_BASELINE_EVALUATIONS):
     )
     nm_s = time.perf_counter() - started
     started = time.perf_counter()
-    ours = poll_search(objective, theta0, min_step=tuned_rows.MIN_STEP, max_evaluations=tuned_rows.MAX_EVALUATIONS)
+    ours = tuned_rows.search(objective, theta0)
     ours_s = time.perf_counter() - started
     target = max(float(nm.fun), ours.value)
     nm_reached = first_reached(nm_history, target)

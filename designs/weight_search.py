@@ -96,6 +96,7 @@ def poll_search(
     max_evaluations: int = 400,
     mapper: Callable[[Callable, list], list] | None = None,
     progress: Callable[[int, float, float], None] | None = None,
+    bounds: tuple | None = None,
 ) -> SearchResult:
     """Minimize `objective` from `x0` by a compass search (see the module docstring).
 
@@ -110,18 +111,27 @@ def poll_search(
         `studies.distributed` executor's ``map``); None polls one point at a time, taking the first
         improvement
     progress : called as ``progress(evaluations, best value, step)`` after every poll
+    bounds : (lower (n,), upper (n,)) of θ, or None; poll points outside are not evaluated (x0 must be inside)
     """
     x = np.asarray(x0, dtype=float).ravel().copy()
     h, h_min = real(step, "step"), real(min_step, "min_step")
     if h <= 0 or h_min <= 0:
         raise ValueError(f"step and min_step must be > 0, got {step!r} and {min_step!r}")
     integer(max_evaluations, "max_evaluations", minimum=1)
+    lower, upper = (np.full(x.size, -np.inf), np.full(x.size, np.inf)) if bounds is None else bounds
+    lower, upper = (
+        np.broadcast_to(np.asarray(lower, float), x.shape),
+        np.broadcast_to(np.asarray(upper, float), x.shape),
+    )
+    if np.any(x < lower) or np.any(x > upper):
+        raise ValueError(f"x0 {x.tolist()} is outside its bounds")
     started = time.perf_counter()
     best = objective(x, math.inf)
     evaluations, runs = 1, best.runs
     history = [(time.perf_counter() - started, runs, best.value)]
     while h >= h_min and evaluations < max_evaluations:
-        poll = _points(x, h)[: max_evaluations - evaluations]
+        inside = [y for y in _points(x, h) if np.all(y >= lower) and np.all(y <= upper)]
+        poll = inside[: max_evaluations - evaluations]
         if mapper is None:
             found = None
             for y in poll:

@@ -37,7 +37,7 @@ import models
 import models.compile
 from designs import tuned_lqr, tuned_mpc
 from designs.statespace_blocks import TrackingModel
-from designs.weight_search import Evaluation, SearchResult, poll_search
+from designs.weight_search import Evaluation, poll_search
 from mpc import linear_mpc
 
 from . import cases, distributed, homework, judging, runner, tuner
@@ -56,6 +56,9 @@ NOMINAL = ("step", "steps", "disturbance", "noise")
 #: The scenario judged on each parameter row of the box.
 ROBUST = ("step",)
 MIN_STEP, MAX_EVALUATIONS = 0.05, 400
+#: Each weight stays within this factor of the case's own (a weight that keeps shrinking matters less and
+#: less; the box ends the drift).
+WEIGHT_RANGE = 1e3
 #: Tuning judges the runs against the case's step specs tightened by this fraction (a 10 % overshoot bound
 #: is tuned to 9.5 %), so that the Monte Carlo's fresh samples still meet the case's own; the record's
 #: verdict is the case's own specs'.
@@ -224,6 +227,21 @@ def infeasible_text(worst: dict | None) -> str | None:
     )
 
 
+def search(f: WeightObjective, theta0, max_evaluations: int = MAX_EVALUATIONS, mapper=None, progress=None):
+    """`designs.weight_search.poll_search` of `f` from θ0 as the rows run it: poll steps down to `MIN_STEP`,
+    every weight within `WEIGHT_RANGE` of θ0's. Returns its `SearchResult`."""
+    box = math.log(WEIGHT_RANGE)
+    return poll_search(
+        f,
+        theta0,
+        min_step=MIN_STEP,
+        max_evaluations=max_evaluations,
+        mapper=mapper,
+        progress=progress,
+        bounds=(np.asarray(theta0) - box, np.asarray(theta0) + box),
+    )
+
+
 def tune(case: CaseStudy, kind: str, executor=None, max_evaluations: int = MAX_EVALUATIONS, progress=None) -> dict:
     """Tune the `kind` row of `case`; the record its stored-weights file keeps under `kind`.
 
@@ -235,9 +253,7 @@ def tune(case: CaseStudy, kind: str, executor=None, max_evaluations: int = MAX_E
     f = objective(case, kind, margin=MARGIN)
     theta0 = start(case, kind)
     mapper = None if executor is None else executor.map
-    found: SearchResult = poll_search(
-        f, theta0, min_step=MIN_STEP, max_evaluations=max_evaluations, mapper=mapper, progress=progress
-    )
+    found = search(f, theta0, max_evaluations, mapper, progress)
     own = WeightObjective(f.case, kind, f.runs, f.reference)(found.x)
     feasible = own.value < BARRIER
     record = {
@@ -265,6 +281,7 @@ def tune(case: CaseStudy, kind: str, executor=None, max_evaluations: int = MAX_E
             "runs": found.runs,
             "final_step": found.step,
             "min_step": MIN_STEP,
+            "weight_range": WEIGHT_RANGE,
             "improvements": len(found.history) - 1,
             "start_value": found.history[0][2],
             "wall_time_s": time.perf_counter() - started,

@@ -56,3 +56,11 @@ def test_bad_steps_are_refused():
         poll_search(complete, np.zeros(3), step=0.0)
     with pytest.raises(ValueError, match="step"):
         poll_search(complete, np.zeros(3), min_step=-math.log(2))
+
+
+def test_bounds_keep_the_search_inside_its_box():
+    found = poll_search(complete, np.zeros(3), step=0.5, min_step=1e-3, bounds=(-np.ones(3), [1.0, 1.0, 0.5]))
+    assert found.converged
+    np.testing.assert_allclose(found.x, [1.0, -0.4, 0.5], atol=2e-3)  # CENTER with its first and last clipped
+    with pytest.raises(ValueError, match="outside"):
+        poll_search(complete, np.full(3, 2.0), bounds=(-np.ones(3), np.ones(3)))
