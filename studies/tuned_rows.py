@@ -363,6 +363,8 @@ def main(argv=None) -> int:
     unknown = [p for p in args.plants if p not in names]
     if unknown:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
+    if args.max_evaluations < 1 or (args.workers is not None and args.workers < 1):
+        parser.error("--max-evaluations and --workers must be >= 1")
     folder = tuner.STORE_DIR if args.install else (args.out or models.compile.cache_directory() / "tuned")
     failed = []
     distributed_run = args.workers is not None or args.scheduler is not None

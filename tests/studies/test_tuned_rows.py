@@ -140,3 +140,10 @@ def test_an_infeasible_record_labels_its_row(monkeypatch):
     monkeypatch.setattr(tuned_rows, "stored", lambda case, kind: record if kind == "lqr" else None)
     (label,) = tuned_rows.tuned_weights(case)
     assert label == "tuned LQR (infeasible for this structure: overshoot at best 14 % > 10 % (steps))"
+
+
+def test_the_console_refuses_bad_arguments_before_work(capsys):
+    for argv in (["nowhere"], ["arm", "--max-evaluations", "0"], ["arm", "--workers", "0"]):
+        with pytest.raises(SystemExit):
+            tuned_rows.main(argv)
+    assert ">= 1" in capsys.readouterr().err
