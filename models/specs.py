@@ -2,7 +2,8 @@
 
 A `Specs` record says what a step response must do (rise time, settling
 time, overshoot, steady-state error), that the command stays within the
-actuator limit, which states must stay within bounds, where states must end
+actuator limit, which states must stay within bounds and within the plant's
+physical limits (`models.state_limits.StateLimit`), where states must end
 up, and whether a sustained oscillation is allowed. `verdict` judges the
 metrics of one run (`models.metrics.run_metrics`) against them:
 
@@ -27,6 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import metrics as metrics_module
+from .state_limits import StateLimit, check_state_limits
 
 MEETS, VIOLATES, LIMIT_CYCLE, DIVERGED, FAILED, SKIPPED = (
     "meets specs",
@@ -59,6 +61,8 @@ class Specs:
     state_bounds : state name -> (low, high), or a bound b > 0 for (-b, b), SI units, at every sample
         (a crane's swing, a ball on its beam)
     final_values : state name -> (value, tolerance), SI units: the mean over the last 5 % of the run
+    state_limits : the plant's physical limits (`models.state_limits.StateLimit`, cart travel, beam
+        length), at every sample; a run that leaves one violates the specs by its excess
     limit_cycle : a sustained oscillation (`models.metrics.oscillation`) fails the specs
     settling_band_pct : the settling band, % of the step (default `models.metrics.SETTLING_BAND`)
     max_spectral_abscissa : 1/s, bound on the slowest mode of the closed loop's linearization at the
@@ -73,6 +77,7 @@ class Specs:
     input_limit: bool = True
     state_bounds: Mapping[str, tuple] = field(default_factory=dict)
     final_values: Mapping[str, tuple] = field(default_factory=dict)
+    state_limits: tuple = ()
     limit_cycle: bool = True
     settling_band_pct: float = 100 * metrics_module.SETTLING_BAND
     max_spectral_abscissa: float | None = None
@@ -105,6 +110,14 @@ class Specs:
                 raise ValueError(f"Specs.state_bounds[{state!r}] must be (low, high) with low < high, got {bound!r}")
             bounds[state] = (float(bound[0]), float(bound[1]))
         object.__setattr__(self, "state_bounds", bounds)
+        limits = tuple(self.state_limits)
+        for limit in limits:
+            if not isinstance(limit, StateLimit):
+                raise TypeError(f"Specs.state_limits must hold models.state_limits.StateLimit records, got {limit!r}")
+        names = [limit.name for limit in limits]
+        if len(set(names)) != len(names):
+            raise ValueError(f"Specs.state_limits must have distinct names, got {names}")
+        object.__setattr__(self, "state_limits", limits)
         for state, target in self.final_values.items():
             pair = np.asarray(target, dtype=float) if not isinstance(target, str) else np.array(())
             if pair.shape != (2,) or not (np.all(np.isfinite(pair)) and pair[1] > 0):
@@ -128,6 +141,38 @@ class Specs:
         """These specs with more state bounds (added to, and replacing, the ones of the same state)."""
         return replace(self, state_bounds={**self.state_bounds, **dict(bounds)}) if bounds else self
 
+    def with_limits(self, limits, params: Mapping[str, float] | None = None) -> Specs:
+        """These specs with the physical `limits` (`StateLimit`s) on the plant with `params` (name -> value,
+        for a limit whose bound is a parameter) added, replacing limits of the same name."""
+        limits = tuple(limit.at(params) for limit in limits)
+        if not limits:
+            return self
+        named = {limit.name: limit for limit in (*self.state_limits, *limits)}
+        return replace(self, state_limits=tuple(named.values()))
+
+    @property
+    def bounds_and_limits(self) -> dict:
+        """{state: (low, high)}: the state bounds intersected with the limits on a single state (the form
+        of a constraint on the states at every sample, e.g. for a tuner)."""
+        bounds = dict(self.state_bounds)
+        for limit in self.state_limits:
+            if limit.relative_to is None:
+                low, high = bounds.get(limit.state, (-math.inf, math.inf))
+                bounds[limit.state] = (max(low, limit.lower), min(high, limit.upper))
+        return bounds
+
+    def implied_bounds(self) -> set:
+        """The states whose bound a physical limit on that state implies (the limit's interval within it):
+        judged once, by the named limit."""
+        return {
+            state
+            for state, (low, high) in self.state_bounds.items()
+            if any(
+                limit.relative_to is None and limit.state == state and low <= limit.lower and limit.upper <= high
+                for limit in self.state_limits
+            )
+        }
+
     def describe(self, unit: str = "", scale: float = 1.0) -> str:
         """The specs in one line, e.g. "rise ≤ 0.9 s, settling ≤ 3 s, overshoot ≤ 10 %"."""
         parts = []
@@ -146,7 +191,11 @@ class Specs:
             parts.append(f"ss error ≤ {self.max_ss_error_pct:g} % of the step")
         if self.input_limit:
             parts.append("command within the actuator limit")
-        parts += [f"{low:g} ≤ {name} ≤ {high:g}" for name, (low, high) in self.state_bounds.items()]
+        implied = self.implied_bounds()
+        parts += [
+            f"{low:g} ≤ {name} ≤ {high:g}" for name, (low, high) in self.state_bounds.items() if name not in implied
+        ]
+        parts += [limit.describe() for limit in self.state_limits]
         parts += [f"{name} ends at {value:g} ± {tol:g}" for name, (value, tol) in self.final_values.items()]
         if self.limit_cycle:
             parts.append("no sustained oscillation")
@@ -231,6 +280,7 @@ def check(
     excursions: Mapping[str, float] | None = None,
     finals: Mapping[str, float] | None = None,
     units: Mapping[str, str] | None = None,
+    departures: Mapping[str, float] | None = None,
 ) -> list[Violation]:
     """Every spec the metrics miss.
 
@@ -242,6 +292,8 @@ def check(
     finals : state name -> final value (`models.metrics.final_values`)
     units : state name (or "input") -> unit, written beside the values of the state's bound and final
         value (and of the peak command); a missing one is left out
+    departures : limit name -> largest excess beyond that limit of `specs.state_limits` (the limit's
+        units, 0 when the run stays inside; `models.state_limits.check_state_limits`)
     """
     units = units or {}
     step = abs(float(step))
@@ -263,12 +315,21 @@ def check(
         peak, limit = metrics.get("peak_u"), metrics.get("u_limit")
         if peak is not None and limit is not None and limit > 0:
             over("peak command", peak, limit * (1 + metrics_module.SATURATION_TOLERANCE), units.get("input", ""))
+    implied = specs.implied_bounds()
     for name, (low, high) in specs.state_bounds.items():
+        if name in implied:
+            continue
         excess = (excursions or {}).get(name)
         if excess is None:
             raise ValueError(f"the specs bound {name!r}; pass its excursion (models.metrics.bound_excursions)")
         if excess > 0:
             found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0, units.get(name, "")))
+    for limit in specs.state_limits:
+        excess = (departures or {}).get(limit.name)
+        if excess is None:
+            raise ValueError(f"the specs limit {limit.name!r}; pass its excess (state_limits.check_state_limits)")
+        if excess > 0:
+            found.append(Violation(f"leaves {limit.name} by", float(excess), 0.0, limit.unit))
     for name, (value, tolerance) in specs.final_values.items():
         final = (finals or {}).get(name)
         if final is None:
@@ -288,16 +349,20 @@ def verdict(
     units: Mapping[str, str] | None = None,
     tracked: str | None = None,
     drift: float | None = None,
+    departures: Mapping[str, float] | None = None,
 ) -> Verdict:
     """The one verdict rule (see the module's docstring) for one run's metrics; `units` as in `check`,
     and the unit of the `tracked` coordinate beside a limit cycle's amplitude. `drift`: the rate at which
     the tracked coordinate's mean still moves at the end (`models.metrics.drift`, units per s; None or
     NaN when it does not): with an oscillation the detail says so, without one the run "drifts" (a
-    violation, where `limit_cycle` is judged)."""
+    violation, where `limit_cycle` is judged). `departures`: the excess beyond each physical limit, as in
+    `check`."""
     state = execution(status)
     if state in ("diverged", "failed", "skipped"):
         return Verdict({"diverged": DIVERGED, "failed": FAILED, "skipped": SKIPPED}[state], (), str(status))
-    violations = tuple(check(specs, metrics, step, excursions=excursions, finals=finals, units=units))
+    violations = tuple(
+        check(specs, metrics, step, excursions=excursions, finals=finals, units=units, departures=departures)
+    )
     speed = abs(float(drift)) if specs.limit_cycle and drift is not None and np.isfinite(drift) else None
     moving = speed is not None
     rate = "" if speed is None else f"{speed:.3g}{_unit(units, tracked)}/s"
@@ -327,7 +392,7 @@ def judge(
     """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
 
     Metrics (unless given as `measured`, from `models.metrics.run_metrics` with the specs' settling
-    band), state excursions and
+    band), state excursions, the excess beyond each physical limit (`models.state_limits`) and
     final values are computed here with `models.metrics`; a run that diverged
     (`result.diverged_at`) is "diverged" whatever `status` says. `units`: state name (or "input") ->
     unit, written beside the values in the verdict's detail.
@@ -338,6 +403,8 @@ def judge(
         measured = metrics_module.run_metrics(result, tracked, specs.state_bounds, band=specs.settling_band)
     excursions = metrics_module.bound_excursions(result.x, result.state_names, specs.state_bounds)
     finals = metrics_module.final_values(result.t, result.x, result.state_names, list(specs.final_values))
+    left = check_state_limits(result.t, result.x, result.state_names, specs.state_limits)
+    departures = {outcome.limit.name: outcome.excess for outcome in left}
     y = result.x[:, list(result.state_names).index(tracked)]
     moving = metrics_module.drift(result.t, y, result.r[:, 0], specs.settling_band)
     return verdict(
@@ -350,6 +417,7 @@ def judge(
         units=units,
         tracked=tracked,
         drift=moving,
+        departures=departures,
     )
 
 
