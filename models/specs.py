@@ -118,6 +118,25 @@ class Specs:
         if len(set(names)) != len(names):
             raise ValueError(f"Specs.state_limits must have distinct names, got {names}")
         object.__setattr__(self, "state_limits", limits)
+        self._refuse_contradictions()
+
+    def _refuse_contradictions(self) -> None:
+        """ValueError when a final value cannot lie within its state's bound or physical limit."""
+        intervals = [
+            (f"Specs.state_bounds[{state!r}]", state, low, high) for state, (low, high) in self.state_bounds.items()
+        ]
+        intervals += [
+            (f"Specs.state_limits {limit.name!r}", limit.state, limit.lower, limit.upper)
+            for limit in self.state_limits
+            if limit.relative_to is None
+        ]
+        for state, (value, tolerance) in self.final_values.items():
+            for what, bounded, low, high in intervals:
+                if bounded == state and (value + tolerance < low or value - tolerance > high):
+                    raise ValueError(
+                        f"Specs.final_values[{state!r}] = ({value:g}, {tolerance:g}) lies outside {what} = "
+                        f"({low:g}, {high:g}): no run can meet both"
+                    )
         for state, target in self.final_values.items():
             pair = np.asarray(target, dtype=float) if not isinstance(target, str) else np.array(())
             if pair.shape != (2,) or not (np.all(np.isfinite(pair)) and pair[1] > 0):
@@ -136,6 +155,81 @@ class Specs:
         """Names of the specs set here that need a step (rise, settling, overshoot, steady-state error)."""
         names = ("max_rise_time_s", "max_settling_time_s", "max_overshoot_pct", "max_ss_error_pct")
         return tuple(name for name in names if getattr(self, name) is not None)
+
+    def validate(
+        self,
+        states: Sequence[str],
+        *,
+        tracked: str | None = None,
+        targets: Sequence[float] = (),
+        duration: float | None = None,
+        where: str = "",
+    ) -> None:
+        """Refuse, before any run, specs the run cannot judge or that contradict it: ValueError naming the
+        field and its value.
+
+        Parameters
+        ----------
+        states : the plant's state names; every state a bound, final value or limit names must be one
+        tracked : the coordinate that follows the reference (a state), when the run tracks one
+        targets : the tracked coordinate's reference values over the run, its initial value first
+            (units of the coordinate); a step spec needs one that differs from the first, and every
+            one must lie within the tracked coordinate's bounds and limits
+        duration : length of the run, s; a rise or settling time after it constrains nothing
+        where : how the message names the run (" 'steps' of pendulum")
+        """
+        states = tuple(states)
+        if tracked is not None and tracked not in states:
+            raise ValueError(f"tracked = {tracked!r}: the plant has no such state; its states are {states}")
+        for what, table in (("state_bounds", self.state_bounds), ("final_values", self.final_values)):
+            for name in table:
+                if name not in states:
+                    raise ValueError(
+                        f"Specs.{what}[{name!r}]: the plant has no state {name!r}; its states are {states}"
+                    )
+        for limit in self.state_limits:
+            for name in limit.states:
+                if name not in states:
+                    raise ValueError(
+                        f"Specs.state_limits {limit.name!r} reads the state {name!r}, which the plant does not "
+                        f"have; its states are {states}"
+                    )
+        targets = [float(v) for v in targets]
+        stepped = any(v != targets[0] for v in targets[1:])
+        if self.step_specs and not stepped:
+            name = self.step_specs[0]
+            reason = (
+                "it tracks no coordinate"
+                if tracked is None or not targets
+                else f"its reference stays at {tracked} = {targets[0]:g} (a disturbance or regulation run)"
+            )
+            raise ValueError(
+                f"Specs.{name} = {getattr(self, name)!r} needs a step, and the scenario{where} has none: {reason}"
+            )
+        for name in ("max_rise_time_s", "max_settling_time_s"):
+            when = getattr(self, name)
+            if when is not None and duration is not None and when > duration:
+                raise ValueError(
+                    f"Specs.{name} = {when:g} s is after the end of the scenario{where} ({duration:g} s): "
+                    "it would constrain nothing"
+                )
+        if tracked is None:
+            return
+        intervals = (
+            [(f"Specs.state_bounds[{tracked!r}]", *self.state_bounds[tracked])] if tracked in self.state_bounds else []
+        )
+        intervals += [
+            (f"Specs.state_limits {limit.name!r}", limit.lower, limit.upper)
+            for limit in self.state_limits
+            if limit.state == tracked and limit.relative_to is None
+        ]
+        for what, low, high in intervals:
+            outside = [v for v in targets if not low <= v <= high]
+            if outside:
+                raise ValueError(
+                    f"{what} = ({low:g}, {high:g}) excludes the scenario{where}'s commanded {tracked} = "
+                    f"{outside[0]:g}: no run can track it within the bound"
+                )
 
     def with_state_bounds(self, bounds: Mapping[str, tuple]) -> Specs:
         """These specs with more state bounds (added to, and replacing, the ones of the same state)."""

@@ -97,6 +97,28 @@ def units(case: CaseStudy) -> dict:
     return {case.tracked: case.tracked_unit, "input": case.input_unit}
 
 
+def check_specs(case: CaseStudy, plant) -> None:
+    """Refuse, before any work, a case whose specs its scenarios or its plant (a `models.Plant`) cannot
+    meet or judge (`models.specs.Specs.validate`): a step spec on a scenario without a step, a time spec
+    after a scenario's end, a bound, final value or limit on a state the plant does not have, a tracked
+    coordinate's bound that excludes a commanded level. ValueError naming the scenario, the field and
+    its value."""
+    xe, _ = plant.equilibrium()
+    if case.tracked not in plant.state_names:
+        raise ValueError(f"{case.name}: tracked = {case.tracked!r}, and {plant.name} has no such state")
+    base = float(xe[list(plant.state_names).index(case.tracked)])
+    for scenario in case.scenarios:
+        judged = case.specs_for(scenario.name, plant.params)
+        targets = [base, *(base + level * case.step for level in scenario.levels)]
+        judged.validate(
+            plant.state_names,
+            tracked=case.tracked,
+            targets=targets,
+            duration=scenario.duration(case),
+            where=f" {scenario.name!r} of {case.name}",
+        )
+
+
 def judge_run(case: CaseStudy, scenario: str, result, params: Mapping[str, float]) -> Judgement:
     """Judge one closed-loop run (a `models.ClosedLoopResult`) of `scenario` on the plant with `params`
     (name -> value, SI units) against the case's specs for that scenario (`CaseStudy.specs_for`)."""

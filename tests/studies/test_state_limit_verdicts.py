@@ -17,27 +17,26 @@ from studies import runner
 from studies.case import CaseStudy, parameter_monte_carlo, step
 
 NAME = "test_travel_limited_mass"
-M, K, B, LIMIT = 1.0, 4.0, 1.2, 20.0
+M, B, LIMIT = 1.0, 1.2, 20.0
 SAMPLES, REL = 12, 0.3
 
 
 @models.declare(
     name=NAME,
-    title="mass on a spring and damper on a limited track (test)",
+    title="mass with a damper on a limited track (test)",
     coordinates=("x",),
     inputs=("F",),
-    params=(models.Param("m", M, "kg"), models.Param("k", K, "N/m"), models.Param("b", B, "N s/m")),
+    params=(models.Param("m", M, "kg"), models.Param("b", B, "N s/m")),
     input_limit=LIMIT,
-    uncertain=("m", "k", "b"),
+    uncertain=("m", "b"),
 )
 def limited_mass(q, dq, u, p):
-    return models.Physics(
-        kinetic=p.m * dq.x**2 / 2, potential=p.k * q.x**2 / 2, forces=[u.F - p.b * dq.x], outputs={"x": q.x}
-    )
+    return models.Physics(kinetic=p.m * dq.x**2 / 2, potential=0 * q.x, forces=[u.F - p.b * dq.x], outputs={"x": q.x})
 
 
 def lightly_damped_pd(case, known):
-    """A PD with ζ ≈ 0.3 on the nominal mass: its overshoot, so its peak, moves with the parameters."""
+    """A PD with ζ ≈ 0.4 on the nominal mass (no spring: it comes to rest at the command): its overshoot,
+    so its peak, moves with the parameters."""
     return {
         "PD": PID(
             known,
