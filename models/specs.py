@@ -30,6 +30,16 @@ import numpy as np
 from . import metrics as metrics_module
 from .state_limits import StateLimit, check_state_limits
 
+#: The frequency fields of `Specs`, each with the `designs.analysis.robustness.FrequencyMeasures` attribute it
+#: bounds, whether it is a least value, its unit and its name in a verdict.
+FREQUENCY_SPECS = {
+    "min_gain_margin_db": ("gain_margin_db", True, "dB", "gain margin"),
+    "min_phase_margin_deg": ("phase_margin_deg", True, "deg", "phase margin"),
+    "min_disk_margin": ("disk_margin", True, "", "disk margin"),
+    "min_bandwidth_rad_s": ("bandwidth_rad_s", True, "rad/s", "bandwidth"),
+    "max_bandwidth_rad_s": ("bandwidth_rad_s", False, "rad/s", "bandwidth"),
+}
+
 MEETS, VIOLATES, LIMIT_CYCLE, DIVERGED, FAILED, SKIPPED = (
     "meets specs",
     "violates",
@@ -65,6 +75,12 @@ class Specs:
         length), at every sample; a run that leaves one violates the specs by its excess
     limit_cycle : a sustained oscillation (`models.metrics.oscillation`) fails the specs
     settling_band_pct : the settling band, % of the step (default `models.metrics.SETTLING_BAND`)
+    min_gain_margin_db, min_phase_margin_deg : dB, deg: least gain and phase margins of the row's
+        linearized loop (broken at the plant input, at the run's final rest point)
+    min_disk_margin : least balanced disk margin α of that loop (dimensionless, in (0, 2])
+    min_bandwidth_rad_s, max_bandwidth_rad_s : rad/s, bounds on that loop's closed-loop −3 dB bandwidth
+        (the frequency fields, `FREQUENCY_SPECS`: measured by `designs.analysis.robustness.frequency_measures`,
+        judged where the row has a linear loop)
     max_spectral_abscissa : 1/s, bound on the slowest mode of the closed loop's linearization at the
         end of the run; checked by the tuner at its solution, not judged by the tables
     source : where the numbers come from (the text's item, or the stated choice)
@@ -80,6 +96,11 @@ class Specs:
     state_limits: tuple = ()
     limit_cycle: bool = True
     settling_band_pct: float = 100 * metrics_module.SETTLING_BAND
+    min_gain_margin_db: float | None = None
+    min_phase_margin_deg: float | None = None
+    min_disk_margin: float | None = None
+    min_bandwidth_rad_s: float | None = None
+    max_bandwidth_rad_s: float | None = None
     max_spectral_abscissa: float | None = None
     source: str = ""
 
@@ -93,6 +114,21 @@ class Specs:
         band = self.settling_band_pct
         if not (_number(band) and 0 < band < 100):
             raise ValueError(f"Specs.settling_band_pct must be a percentage in (0, 100), got {band!r}")
+        for name in FREQUENCY_SPECS:
+            value = getattr(self, name)
+            if value is not None and not (_number(value) and value > 0 and math.isfinite(value)):
+                raise ValueError(f"Specs.{name} must be a finite number > 0 or None, got {value!r}")
+        if self.min_disk_margin is not None and self.min_disk_margin > 2:
+            raise ValueError(
+                f"Specs.min_disk_margin must be at most 2 (a balanced disk margin beyond 2 only adds phase), "
+                f"got {self.min_disk_margin!r}"
+            )
+        low, high = self.min_bandwidth_rad_s, self.max_bandwidth_rad_s
+        if low is not None and high is not None and not low < high:
+            raise ValueError(
+                f"Specs.min_bandwidth_rad_s = {low!r} must be below Specs.max_bandwidth_rad_s = {high!r}: "
+                "no loop can meet both"
+            )
         abscissa = self.max_spectral_abscissa
         if abscissa is not None and not (_number(abscissa) and math.isfinite(abscissa)):
             raise ValueError(f"Specs.max_spectral_abscissa must be a finite number (1/s) or None, got {abscissa!r}")
@@ -149,6 +185,11 @@ class Specs:
     def settling_band(self) -> float:
         """The settling band as a fraction of the step."""
         return self.settling_band_pct / 100
+
+    @property
+    def frequency_specs(self) -> tuple[str, ...]:
+        """Names of the frequency fields set here (judged on a row's linearized loop)."""
+        return tuple(name for name in FREQUENCY_SPECS if getattr(self, name) is not None)
 
     @property
     def step_specs(self) -> tuple[str, ...]:
@@ -290,6 +331,9 @@ class Specs:
             f"{low:g} ≤ {name} ≤ {high:g}" for name, (low, high) in self.state_bounds.items() if name not in implied
         ]
         parts += [limit.describe() for limit in self.state_limits]
+        for name in self.frequency_specs:
+            _, least, unit, what = FREQUENCY_SPECS[name]
+            parts.append(f"{what} {'≥' if least else '≤'} {getattr(self, name):g}{f' {unit}' if unit else ''}")
         parts += [f"{name} ends at {value:g} ± {tol:g}" for name, (value, tol) in self.final_values.items()]
         if self.limit_cycle:
             parts.append("no sustained oscillation")
@@ -304,14 +348,19 @@ class Violation:
     value: float
     bound: float
     unit: str = ""
+    minimum: bool = False
 
     @property
     def excess(self) -> float:
-        """value − bound, in the spec's unit (inf when the value is)."""
-        return self.value - self.bound
+        """By how much the value misses: value − bound (bound − value for a least value, `minimum`), in
+        the spec's unit (inf when the value is)."""
+        return self.bound - self.value if self.minimum else self.value - self.bound
 
     def __str__(self) -> str:
         digits = 3 if f"{self.value:.3g}" != f"{self.bound:.3g}" else 5
+        if self.minimum:
+            unit = f" {self.unit}" if self.unit else ""
+            return f"{self.spec} {self.value:.{digits}g}{unit} < {self.bound:.3g}{unit}"
         value = "∞" if math.isinf(self.value) else f"{self.value:.{digits}g}"
         unit = f" {self.unit}" if self.unit else ""
         if self.unit == "%":
@@ -375,6 +424,7 @@ def check(
     finals: Mapping[str, float] | None = None,
     units: Mapping[str, str] | None = None,
     departures: Mapping[str, float] | None = None,
+    frequency: Mapping[str, float] | None = None,
 ) -> list[Violation]:
     """Every spec the metrics miss.
 
@@ -388,6 +438,9 @@ def check(
         value (and of the peak command); a missing one is left out
     departures : limit name -> largest excess beyond that limit of `specs.state_limits` (the limit's
         units, 0 when the run stays inside; `models.state_limits.check_state_limits`)
+    frequency : the measures of the row's linearized loop by name
+        (`designs.analysis.robustness.FrequencyMeasures.as_dict`); None when the row has no linear loop,
+        and the frequency specs are not judged
     """
     units = units or {}
     step = abs(float(step))
@@ -424,6 +477,13 @@ def check(
             raise ValueError(f"the specs limit {limit.name!r}; pass its excess (state_limits.check_state_limits)")
         if excess > 0:
             found.append(Violation(f"leaves {limit.name} by", float(excess), 0.0, limit.unit))
+    for name in specs.frequency_specs:
+        if frequency is None:
+            break
+        measure, least, unit, what = FREQUENCY_SPECS[name]
+        bound, value = float(getattr(specs, name)), float(frequency[measure])
+        if math.isnan(value) or (value < bound if least else value > bound):
+            found.append(Violation(what, value, bound, unit, minimum=least))
     for name, (value, tolerance) in specs.final_values.items():
         final = (finals or {}).get(name)
         if final is None:
@@ -444,18 +504,28 @@ def verdict(
     tracked: str | None = None,
     drift: float | None = None,
     departures: Mapping[str, float] | None = None,
+    frequency: Mapping[str, float] | None = None,
 ) -> Verdict:
     """The one verdict rule (see the module's docstring) for one run's metrics; `units` as in `check`,
     and the unit of the `tracked` coordinate beside a limit cycle's amplitude. `drift`: the rate at which
     the tracked coordinate's mean still moves at the end (`models.metrics.drift`, units per s; None or
     NaN when it does not): with an oscillation the detail says so, without one the run "drifts" (a
-    violation, where `limit_cycle` is judged). `departures`: the excess beyond each physical limit, as in
-    `check`."""
+    violation, where `limit_cycle` is judged). `departures` and `frequency`: the excess beyond each
+    physical limit and the measures of the linearized loop, as in `check`."""
     state = execution(status)
     if state in ("diverged", "failed", "skipped"):
         return Verdict({"diverged": DIVERGED, "failed": FAILED, "skipped": SKIPPED}[state], (), str(status))
     violations = tuple(
-        check(specs, metrics, step, excursions=excursions, finals=finals, units=units, departures=departures)
+        check(
+            specs,
+            metrics,
+            step,
+            excursions=excursions,
+            finals=finals,
+            units=units,
+            departures=departures,
+            frequency=frequency,
+        )
     )
     speed = abs(float(drift)) if specs.limit_cycle and drift is not None and np.isfinite(drift) else None
     moving = speed is not None
@@ -482,6 +552,7 @@ def judge(
     status: str | None = None,
     measured: Mapping | None = None,
     units: Mapping[str, str] | None = None,
+    frequency: Mapping[str, float] | None = None,
 ) -> Verdict:
     """The verdict of one closed-loop run (a `models.ClosedLoopResult`) on the tracked coordinate.
 
@@ -489,7 +560,8 @@ def judge(
     band), state excursions, the excess beyond each physical limit (`models.state_limits`) and
     final values are computed here with `models.metrics`; a run that diverged
     (`result.diverged_at`) is "diverged" whatever `status` says. `units`: state name (or "input") ->
-    unit, written beside the values in the verdict's detail.
+    unit, written beside the values in the verdict's detail. `frequency`: the measures of the row's
+    linearized loop (as in `check`; None: the frequency specs are not judged).
     """
     if result.diverged_at is not None:
         return Verdict(DIVERGED, (), f"diverged at t = {result.diverged_at:.3g} s")
@@ -512,6 +584,7 @@ def judge(
         tracked=tracked,
         drift=moving,
         departures=departures,
+        frequency=frequency,
     )
 
 

@@ -531,7 +531,7 @@ class Simulation:
         study = self.study
         result = simulate_scenario(truth, controller, scenario, study, self.options, self.base, study.substeps)
         self.runs[(label, scenario.name)] = result
-        return judge_run(study, scenario.name, result, truth.params).row()
+        return judge_run(study, scenario.name, result, truth.params, controller=controller, plant=truth).row()
 
     def monte_carlo_runs(
         self, truth: models.Plant, controller, scenario: TableScenario, samples: np.ndarray
