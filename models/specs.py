@@ -16,7 +16,11 @@ metrics of one run (`models.metrics.run_metrics`) against them:
 `combine` turns the per-sample verdicts of a Monte Carlo into one (the worst
 label, and in how many samples). Step specs are measured as `models.metrics`
 defines them (10-90 % rise, the settling band (2 % unless the specs say), overshoot and steady-state
-error in % of the step); a series of steps is judged by its worst step.
+error in % of the step); a series of steps is judged by its worst step. The
+frequency fields (margins, disk margin, bandwidth) are judged on measures of the
+row's linearized loop that the caller passes (`designs.analysis.robustness`;
+models imports no other package of ours). `Specs.validate` refuses, before any
+run, specs that the run or the plant cannot judge.
 """
 
 from __future__ import annotations
