@@ -238,8 +238,8 @@ def run_plants(
     longest_first : plant -> seconds it is expected to take: parallel tasks start with the longest (an
         unknown plant first of all), so that they finish together; every order writes the same files
     """
+    reports: list = []
     if len(plants) < 2 or not (executor.distributed or executor.workers > 1):
-        reports = []
         for name in plants:
             reports.append(run_plant(name, settings[name], out, answers, progress, executor, run_id))
             progress(name, 1, 1, f"{name} done")  # its files are written too
@@ -247,7 +247,6 @@ def run_plants(
     seconds = longest_first or {}
     order = sorted(plants, key=lambda name: -seconds.get(name, math.inf))
     tasks = [(name, settings[name], answers, run_id) for name in order]
-    reports: list = []
     files: dict = {}
     for report, written in executor.as_completed(plant_task, tasks, labels=[f"plant-{name}" for name in order]):
         reports.append(report)
