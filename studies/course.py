@@ -7,6 +7,7 @@ numbers when the two disagree: the notebooks (``notebooks/<case>.py``) show the 
 on a fresh kernel, the same numbers the tests check. Every record's `report()` is the text a notebook
 prints.
 
+>>> import numpy as np
 >>> import studies
 >>> from studies import course
 >>> case = studies.get("arm")
@@ -60,6 +61,12 @@ __all__ = [
 TABLE_COLUMNS = ["controller", "verdict", "rise_time_s", "settling_time_s", "overshoot_pct", "peak_u", "u_limit"]
 #: The controller kinds of the quick table: the case's own designs and its stored tuned gains.
 KINDS = (providers.classical, providers.statespace, providers.mpc, providers.tuned)
+
+
+def _check(ok, detail) -> None:
+    """Raise AssertionError(`detail`) unless `ok` (a check that ``python -O`` keeps, unlike ``assert``)."""
+    if not ok:
+        raise AssertionError(detail)
 
 
 def rounded(values: dict, digits: int = 4) -> dict:
@@ -127,7 +134,7 @@ def linearization(case: CaseStudy) -> Linearization:
     C = np.eye(A.shape[0])[[linear.state_names.index(case.tracked)]]
     G = control.ss2tf(A, B, C, np.zeros((1, 1)))
     poles = np.roots(np.ravel(G.den[0][0]))
-    assert all(np.min(np.abs(eigenvalues - p)) <= 1e-6 * max(1.0, abs(p)) for p in poles), (poles, eigenvalues)
+    _check(all(np.min(np.abs(eigenvalues - p)) <= 1e-6 * max(1.0, abs(p)) for p in poles), (poles, eigenvalues))
     limit = float(known.input_limit[0])
     return Linearization(case, known, linear, A, B, input_name, limit, eigenvalues, G, poles)
 
@@ -211,11 +218,11 @@ def pd_by_poles(loop, wn: float, zeta: float) -> PolePlacement:
     num, den = np.ravel(loop.num[0][0]), np.ravel(loop.den[0][0])
     b, a1, a0 = num[-1] / den[0], den[1] / den[0], den[2] / den[0]
     pd = pd_design(loop, zeta=zeta, wn=wn)
-    assert np.isclose(pd.kp, (wn**2 - a0) / b, rtol=1e-9), (pd.kp, (wn**2 - a0) / b)
-    assert np.isclose(pd.kd, (2 * zeta * wn - a1) / b, rtol=1e-9), (pd.kd, (2 * zeta * wn - a1) / b)
+    _check(np.isclose(pd.kp, (wn**2 - a0) / b, rtol=1e-9), (pd.kp, (wn**2 - a0) / b))
+    _check(np.isclose(pd.kd, (2 * zeta * wn - a1) / b, rtol=1e-9), (pd.kd, (2 * zeta * wn - a1) / b))
     closed = np.roots([1.0, a1 + b * pd.kd, a0 + b * pd.kp])
-    assert np.allclose(np.abs(closed), wn, rtol=1e-9), closed
-    assert np.allclose(-closed.real / np.abs(closed), zeta, rtol=1e-9), closed
+    _check(np.allclose(np.abs(closed), wn, rtol=1e-9), closed)
+    _check(np.allclose(-closed.real / np.abs(closed), zeta, rtol=1e-9), closed)
     return PolePlacement(pd, float(b), float(a1), float(a0), wn, zeta, closed)
 
 
@@ -236,9 +243,9 @@ def lqr_gain(A, B, Q, R) -> np.ndarray:
     K = np.linalg.solve(R, B.T @ P)
     K_project = np.atleast_2d(lqr(A, B, Q, R)[0])
     K_control, _, _ = control.lqr(A, B, Q, R)
-    assert np.allclose(K_project, K, rtol=1e-8), (K_project, K)
-    assert np.allclose(K_control, K, rtol=1e-8), (K_control, K)
-    assert np.all(np.linalg.eigvals(A - B @ K).real < 0), np.linalg.eigvals(A - B @ K)
+    _check(np.allclose(K_project, K, rtol=1e-8), (K_project, K))
+    _check(np.allclose(K_control, K, rtol=1e-8), (K_control, K))
+    _check(np.all(np.linalg.eigvals(A - B @ K).real < 0), np.linalg.eigvals(A - B @ K))
     return K_project
 
 
@@ -262,8 +269,8 @@ def quick_table(case: CaseStudy, expected: Sequence[str] = ()) -> StudyResult:
     """
     result = run_study(case, Options(scenarios=("step",), mc=0, quick=True), providers=list(KINDS))
     table = result.table
-    assert (table["peak_u"] <= table["u_limit"] + 1e-9).all(), table[["controller", "peak_u", "u_limit"]]
-    assert set(expected) <= set(table["controller"]), set(expected) - set(table["controller"])
+    _check((table["peak_u"] <= table["u_limit"] + 1e-9).all(), table[["controller", "peak_u", "u_limit"]])
+    _check(set(expected) <= set(table["controller"]), set(expected) - set(table["controller"]))
     return result
 
 
@@ -304,8 +311,8 @@ def prediction_model(controller, A, B) -> PredictionModel:
     n, m = B.shape
     block = linalg.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * Ts)
     Ad, Bd = np.asarray(controller.model.A, dtype=float), np.asarray(controller.model.B, dtype=float)
-    assert np.allclose(Ad, block[:n, :n], rtol=1e-8, atol=1e-10), (Ad, block[:n, :n])
-    assert np.allclose(Bd, block[:n, n:], rtol=1e-8, atol=1e-10), (Bd, block[:n, n:])
+    _check(np.allclose(Ad, block[:n, :n], rtol=1e-8, atol=1e-10), (Ad, block[:n, :n]))
+    _check(np.allclose(Bd, block[:n, n:], rtol=1e-8, atol=1e-10), (Bd, block[:n, n:]))
     return PredictionModel(Ts, Ad, Bd)
 
 
@@ -319,8 +326,9 @@ def tuned_gains(case: CaseStudy) -> dict:
         When the case has no stored gains, or the two records name different gains.
     """
     record = tuner.stored(case)
-    assert record is not None, f"{case.plant} has no stored tuned gains (python -m studies.tuner {case.plant})"
-    assert set(record["gains"]) == set(record["start_gains"]), (record["gains"], record["start_gains"])
+    if record is None:
+        raise AssertionError(f"{case.plant} has no stored tuned gains (python -m studies.tuner {case.plant})")
+    _check(set(record["gains"]) == set(record["start_gains"]), (record["gains"], record["start_gains"]))
     return record
 
 
