@@ -53,6 +53,10 @@ class ClosedLoopWork:
         self.problem, self.method, self.nested_tol, self.step = problem, method, nested_tol, step
         self.answers: dict = {}
 
+    def __getstate__(self) -> dict:
+        """The work without the answers kept here (only the sweep travels to other processes)."""
+        return dict(self.__dict__) | {"answers": {}}
+
     def evaluate(self, values: tuple) -> tuple[float, bool]:
         """(objective the nested method sees, converged and feasible) with the parameters fixed at `values`."""
         result, value = self.problem.inner(np.array(values, dtype=float), [], from_nearest=False)

@@ -19,10 +19,12 @@ collects them is `studies.codesign_report`):
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -59,6 +61,19 @@ GLOBAL = "global"
 #: The global layer's sweep there: a grid of this many points over the range, ends included, the best
 #: `GLOBAL_KEEP` local minima refined by the simultaneous method, within `GLOBAL_MAX_SECONDS` (estimated).
 GLOBAL_SAMPLES, GLOBAL_KEEP, GLOBAL_MAX_SECONDS = 12, 2, 4 * 3600.0
+#: Where the global layer's sweep runs when `codesign_case` is given no ``map``: set by `sweep_on`.
+_SWEEP_MAP: contextvars.ContextVar[Callable | None] = contextvars.ContextVar("sweep_map", default=None)
+
+
+@contextlib.contextmanager
+def sweep_on(map: Callable | None) -> Iterator[None]:
+    """Within the block, the global layer of every `codesign_case` sweeps through `map(function, items)`
+    (a `studies.distributed` executor's ``map``; the case files' problem functions need not pass it)."""
+    token = _SWEEP_MAP.set(map)
+    try:
+        yield
+    finally:
+        _SWEEP_MAP.reset(token)
 
 
 # ----------------------------------------------------------------- records
@@ -550,7 +565,7 @@ def codesign_case(
     methods : which of `METHODS` to run, and `GLOBAL` for the global layer (`result.global_layer`)
     options, nested_start : of every solve and of the nested method (`designs.codesign.codesign`)
     map : the global layer's ``map(function, items)`` for its sweep (a `studies.distributed` executor's),
-        or None (this process)
+        or None: the one of `sweep_on`, else this process
     """
     local = tuple(m for m in methods if m != GLOBAL)
     if local:
@@ -579,7 +594,7 @@ def codesign_case(
             samples=GLOBAL_SAMPLES,
             keep=GLOBAL_KEEP,
             max_seconds=GLOBAL_MAX_SECONDS,
-            map=map,
+            map=map if map is not None else _SWEEP_MAP.get(),
         )
         result.global_layer = global_summary(found, name)
         log.info("%s: global layer, %s", result.problem, found.how)

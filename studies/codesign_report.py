@@ -49,8 +49,8 @@ from typing import Any
 from designs.codesign import METHODS, SIZING_COST_WEIGHT, SIZING_TIE_BREAK
 from models import files
 
-from . import cases
-from .codesign_problems import GLOBAL, CaseResult, Design
+from . import cases, distributed
+from .codesign_problems import GLOBAL, CaseResult, Design, sweep_on
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign.md"
 
@@ -343,6 +343,30 @@ def _listed_methods(methods) -> str:
     return "" if methods is None else " --methods " + " ".join(f"'{m}'" if " " in m else m for m in methods)
 
 
+def _solve(args, found: dict, keys: list, records: Path | None) -> list[CaseResult]:
+    """Each problem of `keys` solved (or, with --reuse, read), its record written as soon as it is solved."""
+    results = []
+    for i, key in enumerate(keys, 1):
+        saved = records / f"{key}.json" if records is not None else None
+        earlier = json.loads(saved.read_text()) if saved is not None and saved.exists() else None
+        if args.reuse and earlier is not None:
+            results.append(from_record(earlier))
+            print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
+            continue
+        print(f"[{i}/{len(keys)}] {key} ...", flush=True)
+        # Taken before solving: the code that runs is the one checked out now.
+        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
+        started = time.perf_counter()
+        r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
+        values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
+        print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
+        record = to_record(r, run, earlier if args.methods else None)
+        if saved is not None:
+            files.write_json(saved, record)
+        results.append(from_record(record) if args.methods else r)
+    return results
+
+
 def main(argv=None) -> int:
     """``python -m studies.codesign_report``: solve (or read) each problem, save its record, write the document;
     1 unless every problem converged."""
@@ -367,31 +391,26 @@ def main(argv=None) -> int:
         choices=(*METHODS, GLOBAL),
         help="solve only these methods; the problem's record keeps its other methods' designs",
     )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="run the global layer's sweep (--methods global) on a Dask LocalCluster of N worker processes "
+        "(studies.distributed; the same numbers as in one process)",
+    )
     args = parser.parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers must be a whole number >= 1, got {args.workers}")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
     keys = args.only or list(found)
     out = DOC if args.write_docs else args.out
     records = args.records or (out.with_suffix("") if out is not None else None)
     command = "python -m studies.codesign_report" + ("" if args.only is None else " --only " + " ".join(keys))
-    results = []
-    for i, key in enumerate(keys, 1):
-        saved = records / f"{key}.json" if records is not None else None
-        earlier = json.loads(saved.read_text()) if saved is not None and saved.exists() else None
-        if args.reuse and earlier is not None:
-            results.append(from_record(earlier))
-            print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
-            continue
-        print(f"[{i}/{len(keys)}] {key} ...", flush=True)
-        # Taken before solving: the code that runs is the one checked out now.
-        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
-        started = time.perf_counter()
-        r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
-        values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
-        print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
-        record = to_record(r, run, earlier if args.methods else None)
-        if saved is not None:
-            files.write_json(saved, record)
-        results.append(from_record(record) if args.methods else r)
+    if args.workers is None:
+        results = _solve(args, found, keys, records)
+    else:
+        with distributed.connect(None, args.workers) as executor, sweep_on(executor.map):
+            results = _solve(args, found, keys, records)
     text = report(results, command + (" --reuse" if args.reuse else ""))
     if out is None:
         print(text)
