@@ -271,8 +271,8 @@ local answers. The actuator sizings are bisections on a monotone feasibility, to
 nothing: they are not swept.
 
 For each plant-parameter problem: the local optima the sweep found, the best, and how far each method's
-local answer is above it (relative objective; "already global" below {same:g}); a record whose answers
-were already global keeps them.
+feasible local answer is above it (relative objective; "already global" below {same:g}); a record whose
+answers were already global keeps them.
 
 {table}
 
@@ -309,7 +309,10 @@ def global_table(results: list[CaseResult]) -> str:
             f"{_number(o['value'])} → {_number(o['objective'])}{'' if o['success'] else ' (not converged)'}"
             for o in layer["optima"]
         )
-        gaps = "; ".join(f"{m}: {gap_text(d.objective, best['objective'])}" for m, d in r.designs.items())
+        gaps = "; ".join(
+            f"{m}: {gap_text(d.objective, best['objective']) if d.feasible else 'infeasible'}"
+            for m, d in r.designs.items()
+        )
         rows.append(
             {
                 "problem": f"{r.problem} ({r.parameter}, {r.unit})",
