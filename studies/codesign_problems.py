@@ -580,10 +580,9 @@ def codesign_case(
         )
         for method, answer in answers.items():
             result.designs[method] = _codesign_design(answer, name, result)
-        result.notes.append(
-            "plant-only objective of the sequential method: the plant's price alone, "
-            f"minimized over [{low:g}, {high:g}]"
-        )
+    result.notes.append(
+        f"plant-only objective of the sequential method: the plant's price alone, minimized over [{low:g}, {high:g}]"
+    )
     if GLOBAL in methods:
         found = codesign_globally(
             setup,

@@ -468,7 +468,7 @@ def test_the_global_table_states_the_optima_and_each_methods_gap_to_the_best():
     assert "simultaneous from sequential: already global" in row
     assert cr.gap_text(0.85 * (1 + 1e-7), 0.85) == "already global"
     sizing, bare = _fake_result("a"), _fake_result("b")
-    sizing.parameter, bare.parameter = "input limit", "cable length"
+    sizing.parameter, bare.parameter = "torque limit", "cable length"
     assert cr.global_table([sizing]) == "(none)"
     assert "not run under the global layer" in cr.global_table([bare])
 
