@@ -338,7 +338,9 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
         estimate = sweep.check_time(cases.get(name), grid, scenario[0], accept=args.long)
     except ValueError as err:
         p.error(f"--sweep: {err}")
-    print(f"{name}: sweep of {len(grid.values)} points, estimated {sweep.format_duration(estimate)}", file=stream)
+    print(
+        f"{name}: sweep of {len(grid.values)} points, estimated {sweep.format_duration(estimate)} of runs", file=stream
+    )
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
     stop_on_signals()
     study = cases.get(name)
