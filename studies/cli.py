@@ -138,6 +138,7 @@ def parser() -> argparse.ArgumentParser:
         help="instead of the study: every controller of one plant on N values of its true parameter "
         "PARAM from LOW to HIGH (writes OUT/PLANT/sweep.csv, sweep.png, sweep.md)",
     )
+    p.add_argument("--long", action="store_true", help="run a --sweep estimated beyond studies.sweep.TIME_LIMIT_S")
     p.add_argument(
         "--list",
         action="store_true",
@@ -341,8 +342,12 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
         p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
     try:
         sweep.grid_params(plant, grid)  # every value the plant accepts, before the run starts
+        estimate = sweep.check_time(cases.get(name), grid, scenario[0], accept=args.long)
     except ValueError as err:
         p.error(f"--sweep: {err}")
+    print(
+        f"{name}: sweep of {len(grid.values)} points, estimated {sweep.format_duration(estimate)} of runs", file=stream
+    )
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
     stop_on_signals()
     study = cases.get(name)
