@@ -191,7 +191,7 @@ def closed_loop_function(
         f"closed_loop_function of {n_steps} steps of {plant.name}",
         "use fewer steps",
     )
-    rk4 = plant.step_function(controller.sample_period, substeps)
+    advance = closed_loop_step(plant, controller, substeps)
     nx, nc = plant.nx, controller.n_state
     s = ca.SX.sym("s", nx + nc)
     r = ca.SX.sym("r", controller.n_reference)
@@ -199,11 +199,10 @@ def closed_loop_function(
     d = ca.SX.sym("d", plant.nu)
     p = ca.SX.sym("p", plant.n_params)
     g = ca.SX.sym("gains", controller.gain_vector().size)
-    x, xc = s[:nx], s[nx:]
+    x = s[:nx]
     meas = (plant.casadi_h(x, p) if controller.measures == "outputs" else x) + noise
-    xc_next, u = controller.casadi_step(xc, meas, r, g)
-    x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
-    one = ca.Function("closed_loop_step", [s, r, noise, d, p, g], [ca.vertcat(x_next, xc_next), u, meas])
+    s_next, u = advance(s, meas, r, d, p, g)
+    one = ca.Function("closed_loop_step", [s, r, noise, d, p, g], [s_next, u, meas])
     if smooth:
         one = smoothed(one)
     run = one.mapaccum("closed_loop_run", n_steps)
@@ -224,6 +223,35 @@ def closed_loop_function(
     return fun
 
 
+def closed_loop_step(plant: Plant, controller: Block, substeps: int) -> ca.Function:
+    """One closed-loop sample after the measurement, as an SX Function.
+
+    ``(s, meas, r, d, p, gains) -> (s_next, u)``: s = (x, x_c) (nx + n_state,), meas (n_measured,) what the
+    controller reads, r (n_reference,), d (nu,) the input disturbance, p (n_params,); the controller's step
+    gives (x_c_next, u) and the plant takes `substeps` RK4 steps over the sample period with
+    ``saturate(u) + d``. `closed_loop_function` and the compiled Monte Carlo kernel (`models.mc_kernel`)
+    are both built on it.
+    """
+    rk4 = plant.step_function(controller.sample_period, substeps)
+    nx, nc = plant.nx, controller.n_state
+    s = ca.SX.sym("s", nx + nc)
+    meas = ca.SX.sym("meas", controller.n_measured)
+    r = ca.SX.sym("r", controller.n_reference)
+    d = ca.SX.sym("d", plant.nu)
+    p = ca.SX.sym("p", plant.n_params)
+    g = ca.SX.sym("gains", controller.gain_vector().size)
+    x, xc = s[:nx], s[nx:]
+    xc_next, u = controller.casadi_step(xc, meas, r, g)
+    x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
+    return ca.Function(
+        "closed_loop_advance",
+        [s, meas, r, d, p, g],
+        [ca.vertcat(x_next, xc_next), u],
+        ["s", "meas", "r", "d", "p", "gains"],
+        ["s_next", "u"],
+    )
+
+
 def release(plant: Plant, controller: Block) -> int:
     """Drop the closed-loop Functions of `controller` cached on `plant`, with the work memory and output
     buffers they hold (hundreds of MB for a long run at a short sample period); returns how many.
@@ -236,7 +264,7 @@ def release(plant: Plant, controller: Block) -> int:
         key
         for key, value in plant.function_cache.items()
         if isinstance(key, tuple)
-        and key[0] in ("closed_loop", "closed_loop_batch")
+        and key[0] in ("closed_loop", "closed_loop_batch", "mc_kernel")
         and isinstance(value, tuple)
         and value[0] is step
     ]
