@@ -46,10 +46,20 @@ LANES = 8
 #: ``omp declare simd`` so that the lane loop calls them on vectors.
 VECTOR_MATH = ("sin", "cos", "exp", "log")
 
-#: The kernel's compiler flags: the project's, vector loops marked with ``omp simd`` (no OpenMP runtime),
-#: no errno from the math functions (a side effect that would stop vectorization), and no builtin
-#: sine and cosine (which gcc would fuse into a scalar sincos).
-KERNEL_FLAGS = (*compiling.FLAGS, "-fopenmp-simd", "-fno-math-errno", *(f"-fno-builtin-{f}" for f in VECTOR_MATH))
+#: The kernel's compiler flags: the project's; vector loops marked with ``omp simd`` (no OpenMP runtime);
+#: no errno from the math functions (a side effect that would stop vectorization); no builtin sine and
+#: cosine (which gcc would fuse into a scalar sincos); 512-bit vectors where the machine has them (gcc
+#: prefers 256 bits otherwise); and a division by a value used more than once as one reciprocal and
+#: multiplications (rounding differs from the division's in the last bit). Each halved the kernel's time
+#: on the development machine (figures: docs/performance.md).
+KERNEL_FLAGS = (
+    *compiling.FLAGS,
+    "-fopenmp-simd",
+    "-fno-math-errno",
+    *(f"-fno-builtin-{f}" for f in VECTOR_MATH),
+    "-mprefer-vector-width=512",
+    "-freciprocal-math",
+)
 
 _UNARY = {
     ca.OP_NEG: "(-{0})",
