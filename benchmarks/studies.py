@@ -6,7 +6,8 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   under its pole-placement block (II.15(c), designed on the +5 % known model,
   Ts = 0.01 s), 1,000 samples of the ±5 % parameter box, 20 s each after the
   text's 2 m step, 2 RK4 sub-steps per sample (the studies' setting), 2
-  threads, JIT-compiled: the studies' Monte Carlo scenario. Timed from the
+  threads, JIT-compiled (the C kernel of `models.mc_kernel`, ``mc_engine``):
+  the studies' Monte Carlo scenario. Timed from the
   call to having read every sample's outputs, states and commands. Baseline:
   python-control's `control.input_output_response` on the same loop (the same
   RK4 step as a discrete-time plant, the same block as a static controller,
@@ -15,8 +16,8 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   operations of one closed-loop sample period (CasADi instructions) x steps, per
   sample, against the threads x one core's measured flop rate
   (``core_flop_rate_per_s``: independent fused multiply-add chains in C, built
-  with models.compile's flags and timed inside C; ``core_flop_rate_method``
-  says how it was measured).
+  with models.compile's flags and with the Monte Carlo kernel's, timed inside C,
+  the faster; ``core_flop_rate_method`` says how it was measured).
 
 - ``quick`` and ``full``: wall time and peak memory of ``python -m studies --quick``
   and of the default ``python -m studies``, each run as a user runs it (a child
@@ -64,8 +65,11 @@ import numpy as np
 import models
 import studies
 from designs.statespace_blocks import StateFeedback
+from models import mc_kernel
 from models.closed_loop import closed_loop_function
 from models.files import write_json
+from models.monte_carlo_batch import MonteCarloPlan
+from models.run_setup import RunSetup
 from studies import providers
 
 PLANT, SAMPLE_PERIOD, DURATION, SUBSTEPS, THREADS, REL = "pendulum", 0.01, 20.0, 2, 2, 0.05
@@ -166,21 +170,29 @@ def numpy_flop_rate(size: int = 2048, repeat: int = 2000) -> float:
     return 2.0 * size * repeat / best
 
 
+#: The flags the flop-rate kernel is built with, each timed: the project's (gcc picks 256-bit vectors on
+#: some AVX-512 machines) and the Monte Carlo kernel's (512-bit vectors where there are some).
+FLOP_RATE_FLAGS = (models.compile.FLAGS, mc_kernel.KERNEL_FLAGS)
+
+
 def core_flop_rate(repeat: int = 2_000_000) -> tuple[float, str]:
     """(flops per second of one core, how it was measured): `FMA_CHAINS` independent fused
-    multiply-add chains in C, compiled with the project's flags (models.compile.FLAGS), the best of
-    20 timings inside C; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
+    multiply-add chains in C, compiled with each of `FLOP_RATE_FLAGS`, the best of 20 timings inside C,
+    the faster build; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
     compiler = models.compile.compiler()
     if compiler is None:
         return numpy_flop_rate(), "numpy multiply-add (no C compiler)"
+    rates = {}
     with tempfile.TemporaryDirectory(prefix="flop-rate-") as folder:
         source = Path(folder) / "fma.c"
         source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat})
         program = str(Path(folder) / "fma")
-        subprocess.run([*compiler, *models.compile.FLAGS, "-o", program, str(source), "-lm"], check=True)
-        printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
-    flags = " ".join(models.compile.FLAGS)
-    return float(printed.split()[0]), f"C, {FMA_CHAINS} independent fma chains, {flags}"
+        for flags in FLOP_RATE_FLAGS:
+            subprocess.run([*compiler, *flags, "-o", program, str(source), "-lm"], check=True)
+            printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
+            rates[" ".join(flags)] = float(printed.split()[0])
+    flags = max(rates, key=rates.__getitem__)
+    return rates[flags], f"C, {FMA_CHAINS} independent fma chains, {flags}"
 
 
 def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[float, models.MonteCarloResult]:
@@ -219,6 +231,8 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
             float(np.max(np.abs(response.outputs[-1, :-1] - batch.u[i, :, 0]))),
         )
     per_s = samples / statistics.median(times)
+    setup = RunSetup.build(plant, block, reference, DURATION, substeps=SUBSTEPS)
+    engine = MonteCarloPlan.build(plant, block, setup, params[:1], jit=True).engine
     operations = step_operations(plant, block)
     flop_rate, flop_method = core_flop_rate()
     steps = int(round(DURATION / SAMPLE_PERIOD))
@@ -226,6 +240,8 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
     baseline_per_s = baseline_samples / baseline_s
     return {
         "mc_samples_per_s": per_s,
+        "mc_best_samples_per_s": samples / min(times),
+        "mc_engine": engine,
         "mc_first_call_samples_per_s": samples / first_s,
         "mc_vm_samples_per_s": samples / vm_s,
         "mc_bound_samples_per_s": bound_per_s,
