@@ -279,6 +279,12 @@ def _cache_key(controller: Block, n_steps: int, substeps: int, jit: bool, smooth
     return key + (("smooth",) if smooth else ())
 
 
+#: Steps per call of a single run's closed loop: building CasADi's mapaccum of a run costs time that grows
+#: with its length (about 0.4 s at 10,000 steps, 20 ms at 1,000), so longer runs call a Function of this
+#: many steps once per block. The numbers do not depend on it.
+RUN_BLOCK_STEPS = 1024
+
+
 def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool) -> NumpyCall:
     """The cached `closed_loop_function` wrapped for fast numpy evaluation."""
     closed_loop_function(plant, controller, n_steps, substeps, jit)
@@ -441,15 +447,36 @@ def _initial_controller_state(plant: Plant, controller, setup: RunSetup, p, nois
 
 
 def _compiled_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc_init, jit: bool) -> _Trace:
-    """The run of a Block as one call of its cached `closed_loop_function`; noise (N, n_measured)."""
+    """The run of a Block by its cached `closed_loop_function`: one call, or for a run longer than
+    `RUN_BLOCK_STEPS` one call per block of that many steps, each from the state the last left (the
+    same numbers: the same steps in the same order); noise (N, n_measured)."""
     n = setup.n_steps
-    run = _numpy_run(plant, controller, n, setup.substeps, jit)
-    X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
+    X, XC, U, M = _blocked_run(plant, controller, setup, p, noise, xc_init, jit)
     x = np.vstack([setup.x0, X.T])
     xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
     u, measured = U.T, M.T
     step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
     return _Trace(x, u, measured, step_time, None, xc, xc)
+
+
+def _blocked_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc_init, jit: bool) -> list:
+    """(X, XC, U, M) of `closed_loop_function`'s whole run, computed a block of at most `RUN_BLOCK_STEPS`
+    steps at a time (the last block's inputs padded with zeros, its extra steps dropped)."""
+    n, gains = setup.n_steps, controller.gain_vector()
+    inputs = [setup.r[:-1].T, noise.T, setup.d.T]
+    if n <= RUN_BLOCK_STEPS:
+        return _numpy_run(plant, controller, n, setup.substeps, jit)(setup.x0, xc_init, *inputs, p, gains)
+    run = _numpy_run(plant, controller, RUN_BLOCK_STEPS, setup.substeps, jit)
+    blocks = -(-n // RUN_BLOCK_STEPS)
+    padded = [np.hstack([a, np.zeros((a.shape[0], blocks * RUN_BLOCK_STEPS - n))]) for a in inputs]
+    x, xc, parts = setup.x0, xc_init, []
+    for b in range(blocks):
+        columns = slice(b * RUN_BLOCK_STEPS, (b + 1) * RUN_BLOCK_STEPS)
+        with np.errstate(all="ignore"):  # the padded steps past the run may overflow; they are dropped
+            out = run(x, xc, *(a[:, columns] for a in padded), p, gains)
+        parts.append(out)
+        x, xc = out[0][:, -1], out[1][:, -1]
+    return [np.hstack([part[i] for part in parts])[:, :n] for i in range(4)]
 
 
 def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
