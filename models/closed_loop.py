@@ -33,6 +33,7 @@ from .block import Block, saturate
 from .checks import SimulationError, as_vector, boolean, check_memory, integer
 from .compile import NumpyCall
 from .compile import jit as compile_jit
+from .mc_kernel import KernelUnavailable, closed_loop_step, kernel
 from .plant import Plant
 from .run_setup import RunSetup, check_sizes, doubles_per_step
 from .simulate import DIVERGENCE_BOUND, output_call
@@ -136,6 +137,7 @@ class _Trace:
     status : the controller's per-step records, or None
     xc : (N+1, n_state) the controller state of a Block, else None
     xc_check : the controller states as an array, for the fault check (None when their shape changed)
+    y : (N+1, ny) the noise-free outputs where the run computed them (the C kernel), else None
     """
 
     x: np.ndarray
@@ -145,6 +147,7 @@ class _Trace:
     status: list | None
     xc: np.ndarray | None
     xc_check: np.ndarray | None
+    y: np.ndarray | None = None
 
 
 def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray:
@@ -221,35 +224,6 @@ def closed_loop_function(
         fun = compile_jit(fun)
     cache[key] = (controller.casadi_step, fun, NumpyCall(fun))
     return fun
-
-
-def closed_loop_step(plant: Plant, controller: Block, substeps: int) -> ca.Function:
-    """One closed-loop sample after the measurement, as an SX Function.
-
-    ``(s, meas, r, d, p, gains) -> (s_next, u)``: s = (x, x_c) (nx + n_state,), meas (n_measured,) what the
-    controller reads, r (n_reference,), d (nu,) the input disturbance, p (n_params,); the controller's step
-    gives (x_c_next, u) and the plant takes `substeps` RK4 steps over the sample period with
-    ``saturate(u) + d``. `closed_loop_function` and the compiled Monte Carlo kernel (`models.mc_kernel`)
-    are both built on it.
-    """
-    rk4 = plant.step_function(controller.sample_period, substeps)
-    nx, nc = plant.nx, controller.n_state
-    s = ca.SX.sym("s", nx + nc)
-    meas = ca.SX.sym("meas", controller.n_measured)
-    r = ca.SX.sym("r", controller.n_reference)
-    d = ca.SX.sym("d", plant.nu)
-    p = ca.SX.sym("p", plant.n_params)
-    g = ca.SX.sym("gains", controller.gain_vector().size)
-    x, xc = s[:nx], s[nx:]
-    xc_next, u = controller.casadi_step(xc, meas, r, g)
-    x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
-    return ca.Function(
-        "closed_loop_advance",
-        [s, meas, r, d, p, g],
-        [ca.vertcat(x_next, xc_next), u],
-        ["s", "meas", "r", "d", "p", "gains"],
-        ["s_next", "u"],
-    )
 
 
 def release(plant: Plant, controller: Block) -> int:
@@ -371,7 +345,9 @@ def simulate_closed_loop(
     seed : seed of the noise generator (None, an integer >= 0, or a numpy SeedSequence)
     compiled : force (True) or refuse (False) the compiled path; default: compiled for Blocks
     allow_divergence : return a result with `diverged_at` set instead of raising
-    jit : compile the run to machine code first (Blocks only; pays off for long or repeated runs)
+    jit : compile the run to machine code first (Blocks only; pays off for long or repeated runs): the C
+        kernel of `models.mc_kernel` as a batch of one, the numbers `monte_carlo(..., jit=True)` gives
+        this sample; where there is none, the compiled CasADi run
     substeps : RK4 steps of the plant per controller sample
     xc0 : the controller's initial state; default its `initial_state` from the first measurement and reference
 
@@ -417,7 +393,7 @@ def simulate_closed_loop(
         controller,
         setup,
         x=x,
-        y=batch_outputs(plant, x[None], p[None])[0],
+        y=batch_outputs(plant, x[None], p[None])[0] if trace.y is None else trace.y,
         u=u,
         measured=trace.measured,
         xc=trace.xc,
@@ -451,6 +427,24 @@ def _compiled_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc
     `RUN_BLOCK_STEPS` one call per block of that many steps, each from the state the last left (the
     same numbers: the same steps in the same order); noise (N, n_measured)."""
     n = setup.n_steps
+    if jit:
+        try:
+            compiled = kernel(plant, controller, setup.substeps)
+        except KernelUnavailable:
+            pass  # the compiled CasADi run below
+        else:
+            out = {
+                "x": np.empty((1, n + 1, plant.nx)),
+                "xc": np.empty((1, n + 1, controller.n_state)),
+                "y": np.empty((1, n + 1, plant.ny)),
+                "u": np.empty((1, n, plant.nu)),
+                "measured": np.empty((1, n, setup.n_measured)),
+            }
+            noisy = noise[None] if setup.noisy else None
+            compiled.run(setup.x0, xc_init[None], setup.r[:-1], noisy, setup.d, p[None], controller.gain_vector(), out)
+            x, xc, u, measured = out["x"][0], out["xc"][0], out["u"][0], out["measured"][0]
+            step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
+            return _Trace(x, u, measured, step_time, None, xc, xc, out["y"][0])
     X, XC, U, M = _blocked_run(plant, controller, setup, p, noise, xc_init, jit)
     x = np.vstack([setup.x0, X.T])
     xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))

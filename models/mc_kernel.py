@@ -34,8 +34,7 @@ import casadi as ca
 import numpy as np
 
 from . import compile as compiling
-from .block import Block
-from .closed_loop import closed_loop_step
+from .block import Block, saturate
 from .plant import Plant
 
 #: Samples one pass of the kernel's body computes together: 8 doubles fill an AVX-512 register, or two AVX2
@@ -295,6 +294,35 @@ def kernel_source(plant: Plant, controller: Block, substeps: int, name: str = "c
         "output_body": "\n".join(indent + line for line in output_body),
         "step_body": "\n".join(indent + line for line in step_body),
     }
+
+
+def closed_loop_step(plant: Plant, controller: Block, substeps: int) -> ca.Function:
+    """One closed-loop sample after the measurement, as an SX Function.
+
+    ``(s, meas, r, d, p, gains) -> (s_next, u)``: s = (x, x_c) (nx + n_state,), meas (n_measured,) what the
+    controller reads, r (n_reference,), d (nu,) the input disturbance, p (n_params,); the controller's step
+    gives (x_c_next, u) and the plant takes `substeps` RK4 steps over the sample period with
+    ``saturate(u) + d``. `closed_loop_function` and the compiled Monte Carlo kernel (`kernel`)
+    are both built on it.
+    """
+    rk4 = plant.step_function(controller.sample_period, substeps)
+    nx, nc = plant.nx, controller.n_state
+    s = ca.SX.sym("s", nx + nc)
+    meas = ca.SX.sym("meas", controller.n_measured)
+    r = ca.SX.sym("r", controller.n_reference)
+    d = ca.SX.sym("d", plant.nu)
+    p = ca.SX.sym("p", plant.n_params)
+    g = ca.SX.sym("gains", controller.gain_vector().size)
+    x, xc = s[:nx], s[nx:]
+    xc_next, u = controller.casadi_step(xc, meas, r, g)
+    x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
+    return ca.Function(
+        "closed_loop_advance",
+        [s, meas, r, d, p, g],
+        [ca.vertcat(x_next, xc_next), u],
+        ["s", "meas", "r", "d", "p", "gains"],
+        ["s_next", "u"],
+    )
 
 
 _DOUBLES = ctypes.POINTER(ctypes.c_double)

@@ -146,3 +146,28 @@ def test_a_diverging_sample_diverges_at_the_same_time_on_the_kernel(blow_up_plan
     casadi = models.monte_carlo(blow_up_plant, block, 0.0, 2.0, samples, jit=False, **kw)
     assert np.all(np.isfinite(kernel.diverged_at))
     np.testing.assert_array_equal(kernel.diverged_at, casadi.diverged_at)
+
+
+def test_a_single_run_with_jit_is_its_monte_carlo_sample_bit_for_bit():
+    """`simulate_closed_loop(..., jit=True)` runs the kernel as a batch of one: the numbers of the same
+    sample in `monte_carlo(..., jit=True)`, its noise seeded by (seed, index)."""
+    pend = models.get("pendulum")
+    _require_kernel(pend, PendulumPI())
+    samples = models.sample_params(pend, 3, seed=6)
+    pend, block, batch = _pendulum_runs(samples, jit=True)
+    for i, row in enumerate(samples):
+        single = models.simulate_closed_loop(
+            pend,
+            block,
+            0.3,
+            2.0,
+            params=row,
+            noise_std=1e-3,
+            substeps=2,
+            input_disturbance=0.1,
+            seed=np.random.SeedSequence([21, i]),
+            jit=True,
+            allow_divergence=True,
+        )
+        for name in FIELDS:
+            np.testing.assert_array_equal(getattr(single, name), getattr(batch, name)[i], err_msg=name)
