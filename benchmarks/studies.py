@@ -389,8 +389,8 @@ _MPC_KINDS = ("linear MPC", "nonlinear MPC")
 
 
 def _wall_by_kind(results: Path) -> dict:
-    """Seconds of the run's rows (timings.csv's wall_s, summed over plants) per controller kind, the
-    MPCs' Monte Carlo rows also alone."""
+    """Seconds of the run's rows (timings.csv's wall_s, summed over plants) per controller kind, and of
+    their Monte Carlo rows alone."""
     import pandas as pd
 
     tables = [pd.read_csv(path) for path in sorted(results.glob("*/timings.csv"))]
@@ -400,11 +400,9 @@ def _wall_by_kind(results: Path) -> dict:
     table = table[table["sample"].isna()]  # the rows' totals (per-sample lines have a sample number)
     kind = table["controller"].where(table["controller"].isin(_MPC_KINDS), "blocks").str.replace(" ", "_")
     out = {f"rows_{k}_s": float(v) for k, v in table["wall_s"].groupby(kind).sum().items()}
-    mc = table[table["scenario"] == "mc"]
-    for label in _MPC_KINDS:
-        rows = mc[mc["controller"] == label]
-        if len(rows):
-            out[f"mc_rows_{label.replace(' ', '_')}_s"] = float(rows["wall_s"].sum())
+    mc = table["scenario"] == "mc"
+    for name, seconds in table["wall_s"][mc].groupby(kind[mc]).sum().items():
+        out[f"mc_rows_{name}_s"] = float(seconds)
     return out
 
 
@@ -417,7 +415,7 @@ def run_studies_command(*arguments: str) -> dict:
     on a shared machine the wall time grows with the load, this much less); peak_mb, the largest
     resident set of any one process of the command (ru_maxrss of RUSAGE_CHILDREN, children
     included); tree_peak_mb, the largest sum over its processes at once; rows_<kind>_s, the rows'
-    wall_s (timings.csv) summed per kind (blocks, linear_MPC, nonlinear_MPC; the Monte Carlo rows of the MPCs
+    wall_s (timings.csv) summed per kind (blocks, linear_MPC, nonlinear_MPC; their Monte Carlo rows
     also alone, mc_rows_<kind>_s)
     """
     repo = Path(__file__).resolve().parent.parent
