@@ -81,6 +81,8 @@ DAQP_ENTRY_POINTS = (
     "daqp_default_settings",
     "free_daqp_workspace",
     "free_daqp_ldp",
+    "deactivate_constraints",
+    "reset_daqp_workspace",
 )
 #: DAQP settings the exported C takes from the Python path's solver (the others stay DAQP's defaults;
 #: no proximal iterations: H is positive definite).
@@ -541,6 +543,8 @@ static int solve(${p}_state *m, const double *p) {
     daqp_solve(&result, &m->workspace);
     m->iterations = result.iter;
     if (result.exitflag > 0) return 0;
+    deactivate_constraints(&m->workspace);  /* the next solve starts from an empty working set, */
+    reset_daqp_workspace(&m->workspace);    /* as after a failure in DAQP's Python interface */
     return result.exitflag == EXIT_INFEASIBLE ? 3 : (result.exitflag == EXIT_ITERLIMIT ? 4 : 5);
 }
 
