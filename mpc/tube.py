@@ -46,6 +46,7 @@ __all__ = [
     "InvariantApproximation",
     "minimal_rpi_approximation",
     "invariant_polytope",
+    "check_minimal_margins",
     "tighten",
     "TubeOptions",
     "TubeSets",
@@ -283,8 +284,9 @@ def minimal_rpi_approximation(
     Raises
     ------
     ValueError
-        The tube is empty: A_K not Schur, 0 not in the interior of W (W flat, e.g. an input
-        disturbance alone), or no s ≤ max_terms meets the accuracy (the message gives α°(max_terms)).
+        The tube is empty (A_K not Schur, 0 not in the interior of W: W flat, e.g. an input
+        disturbance alone), or not computed: no s ≤ max_terms meets the accuracy (the message gives α°(max_terms)
+        and about how many more terms it would take at the rate ρ(A_K) per term).
     """
     A_K = _schur(closed_loop)
     n = A_K.shape[0]
@@ -304,10 +306,14 @@ def minimal_rpi_approximation(
         if alpha <= target:
             break
     if alpha > target:
+        rho = float(np.max(np.abs(np.linalg.eigvals(A_K))))
+        more = int(np.ceil(np.log(alpha / target) / -np.log(rho))) if 0 < rho < 1 else 0
         raise ValueError(
-            f"the tube is empty to the accuracy asked: A_K^s W ⊆ α W needs α <= {target:.4g} "
-            f"(relative_epsilon {rel:g}), but at s = max_terms = {max_terms} the smallest α is {alpha:.4g}"
-            + (" (α >= 1: the error grows)" if alpha >= 1 else "; raise max_terms or relative_epsilon")
+            f"the tube is not computed to the accuracy asked: A_K^s W ⊆ α W needs α <= {target:.4g} "
+            f"(relative_epsilon {rel:g}), but at s = max_terms = {max_terms} the smallest α is {alpha:.4g}; "
+            f"A_K is Schur (spectral radius {rho:.6g}), so α falls about {rho:.6g}× per term and about "
+            f"{more} more terms would reach it (a W thin in some direction, as a small interior box makes it, "
+            "needs many): raise max_terms or relative_epsilon, or make K faster"
         )
     epsilon = alpha / (1 - alpha) * np.maximum(reach[:n], reach[n:])
     return InvariantApproximation(A_K, disturbance, max(alpha, 0.0), terms, epsilon)
@@ -443,6 +449,39 @@ def invariant_polytope(
 
 
 # ------------------------------------------------------------------ tightening and the tube's record
+def check_minimal_margins(approximation: InvariantApproximation, rows, bounds, labels: Sequence[str]) -> None:
+    """Refuse, before any polytope is built, a row {rows_i e ≤ bounds_i} that no RPI set of A_K and W fits.
+
+    Every RPI set of e⁺ = A_K e + w, w ∈ W, containing 0 contains F_∞, so its margin h_Z(d) is at
+    least h_{F_∞}(d) ≥ (1 − α) h_{F(α,s)}(d) (`InvariantApproximation`): a row whose bound is not above
+    that lower bound cannot be tightened by any tube of this K and W, whatever Z is computed.
+
+    Parameters
+    ----------
+    approximation : F(α, s) of A_K and W;  rows : (r, nx) the rows d_i;  bounds : (r,)
+    labels : (r,) what each row is, for the message ("state constraint 'theta1 upper'")
+
+    Raises
+    ------
+    ValueError
+        Naming every such row: its name, its bound, the least margin it needs and at least how much it lacks.
+    """
+    needed = (1 - approximation.alpha) * approximation.support(rows)
+    bounds = np.asarray(bounds, dtype=float)
+    bad = [int(i) for i in np.flatnonzero(needed >= bounds)]
+    if bad:
+        parts = [
+            f"{labels[i]} (bound {bounds[i]:.6g}) needs a margin of at least {needed[i]:.6g} (the minimal "
+            f"RPI set's support in its direction) and lacks at least {needed[i] - bounds[i]:.3g}"
+            for i in bad
+        ]
+        raise ValueError(
+            "the error set is larger than the constraints can hold, for every RPI set of this K and W: "
+            + "; ".join(parts)
+            + ". Loosen the constraint, shrink W (the parametric region or the disturbance) or change K"
+        )
+
+
 def tighten(rows, bounds, error_set: ConvexSet, names: Sequence[str], what: str = "constraint"):
     """{y : rows y ≤ bounds} ⊖ S as bounds − h_S(rows_i) (exact for any convex S), refusing a row it empties.
 
@@ -610,7 +649,9 @@ def build_tube(
     ValueError
         Naming the culprit: non-finite or misshapen data; an empty tube (A + B K not Schur,
         0 ∉ int W, α not reached); a constraint the error set does not fit in (row, bound,
-        margin lacking); an empty terminal set or one that does not contain the origin.
+        margin lacking), refused from the minimal RPI set's lower bound before Z is built when no RPI
+        set of this K and W fits (`check_minimal_margins`), else from Z; an empty terminal set or one
+        that does not contain the origin.
     """
     options = TubeOptions() if options is None else options
     A, B = state_input_pair(A, B)
@@ -630,6 +671,15 @@ def build_tube(
     if len(names) != len(state_constraints.h):
         raise ValueError(f"need {len(state_constraints.h)} state_constraint_names, got {len(names)}")
     approximation = minimal_rpi_approximation(A + B @ K, disturbance, options.relative_epsilon, options.max_terms)
+    input_rows, input_bounds = np.vstack([K, -K]), np.concatenate([upper, -lower])
+    input_names = [f"input {j} upper, u_{j} <= bound" for j in range(m)]
+    input_names += [f"input {j} lower, -u_{j} <= bound" for j in range(m)]
+    check_minimal_margins(
+        approximation,
+        np.vstack([state_constraints.H, input_rows]),
+        np.concatenate([state_constraints.h, input_bounds]),
+        [*(f"state constraint {name!r}" for name in names), *(f"input bound {name!r}" for name in input_names)],
+    )
     Z, exact = invariant_polytope(
         approximation,
         facet_limit=options.facet_limit,
@@ -638,9 +688,7 @@ def build_tube(
         iterations=options.iterations,
     )
     g_bar, state_margins = tighten(state_constraints.H, state_constraints.h, Z, names, "state constraint")
-    input_names = [f"input {j} upper, u_{j} <= bound" for j in range(m)]
-    input_names += [f"input {j} lower, -u_{j} <= bound" for j in range(m)]
-    u_bar, input_margins = tighten(np.vstack([K, -K]), np.concatenate([upper, -lower]), Z, input_names, "input bound")
+    u_bar, input_margins = tighten(input_rows, input_bounds, Z, input_names, "input bound")
     X_bar = Polytope(state_constraints.H, g_bar)
     eye = np.eye(m)
     admissible = X_bar.intersect(Polytope(np.vstack([eye, -eye]), u_bar).preimage(K))
