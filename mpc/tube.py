@@ -528,6 +528,9 @@ class TubeOptions:
         (the constraint rows G and ±K are always added; `invariant_polytope`)
     contraction : λ of the template's contractive set, in (ρ(A_K), 1); None: (1 + ρ(A_K)) / 2
     iterations : the Gilbert–Tan cap, of the terminal set and of the template's contractive set
+    zonotope : Z is F(α, s) itself as a zonotope (W must be one), RPI by Raković et al.'s theorem with
+        support values in closed form: no facets and no LP, for a state whose template LP is too large
+        (its size grows with the contractive core's rows squared); membership costs an LP per point
     """
 
     relative_epsilon: float = 0.01
@@ -536,6 +539,7 @@ class TubeOptions:
     template: np.ndarray | None = None
     contraction: float | None = None
     iterations: int = 200
+    zonotope: bool = False
 
 
 @dataclass(frozen=True)
@@ -560,7 +564,8 @@ class TubeSets:
     of Z also needs the MPC's terminal cost to be a Lyapunov function of A_K (the Riccati
     P when K is the LQR gain of the same Q, R); these sets do not fix the cost.
 
-    Numbers: Z is verified RPI by LP after a dilation that leaves each row a margin of at least
+    Numbers: a zonotope Z (`TubeOptions.zonotope`) is F(α, s), RPI by Raković et al.'s theorem for
+    the α found with A_K^s W ⊆ α W (support values, exact up to round-off); a polytope Z is verified RPI by LP after a dilation that leaves each row a margin of at least
     1e-8·max h_Z against the LPs' round-off (`invariant_polytope`); the margins are DAQP LP
     optima (exact to about 1e-12 relative in the tests); X_f is invariant to 1e-10·max(1, |d|)
     (`maximal_invariant_set`).
@@ -579,7 +584,8 @@ class TubeSets:
     feedback : (nu, nx) K of u = v + K (x − z) (note: −(models.lqr.dlqr's K))
     closed_loop : (nx, nx) A + B K
     disturbance : W;  approximation : F(α, s) with alpha, terms (s) and epsilon (ε per state)
-    error_set : Z, an RPI Polytope ⊇ F_∞;  error_set_exact : whether Z is F(α, s) (its facets) or a template's
+    error_set : Z, an RPI Polytope ⊇ F_∞, or F(α, s) as a Zonotope (`TubeOptions.zonotope`);
+        error_set_exact : whether Z is F(α, s) (its facets, or the zonotope) or a template's
     state_constraints : X̄ = {G x ≤ g − h_Z(G_i)};  state_margins : (ns,) h_Z(G_i)
     state_constraint_names : (ns,) names of X's rows, for messages
     input_lower, input_upper : (nu,) the tightened input bounds (v's);  input_margins : (2 nu,)
@@ -591,7 +597,7 @@ class TubeSets:
     closed_loop: np.ndarray
     disturbance: Zonotope | Polytope
     approximation: InvariantApproximation
-    error_set: Polytope
+    error_set: Polytope | Zonotope
     error_set_exact: bool
     state_constraints: Polytope
     state_margins: np.ndarray
@@ -680,13 +686,19 @@ def build_tube(
         np.concatenate([state_constraints.h, input_bounds]),
         [*(f"state constraint {name!r}" for name in names), *(f"input bound {name!r}" for name in input_names)],
     )
-    Z, exact = invariant_polytope(
-        approximation,
-        facet_limit=options.facet_limit,
-        template=np.vstack([*([] if options.template is None else [options.template]), state_constraints.H, K, -K]),
-        contraction=options.contraction,
-        iterations=options.iterations,
-    )
+    Z: Polytope | Zonotope
+    if options.zonotope:
+        if not isinstance(disturbance, Zonotope):
+            raise TypeError(f"TubeOptions.zonotope needs W as a Zonotope, got {type(disturbance).__name__}")
+        Z, exact = approximation.zonotope(), True
+    else:
+        Z, exact = invariant_polytope(
+            approximation,
+            facet_limit=options.facet_limit,
+            template=np.vstack([*([] if options.template is None else [options.template]), state_constraints.H, K, -K]),
+            contraction=options.contraction,
+            iterations=options.iterations,
+        )
     g_bar, state_margins = tighten(state_constraints.H, state_constraints.h, Z, names, "state constraint")
     u_bar, input_margins = tighten(input_rows, input_bounds, Z, input_names, "input bound")
     X_bar = Polytope(state_constraints.H, g_bar)

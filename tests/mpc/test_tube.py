@@ -410,3 +410,18 @@ def test_disturbance_bounds_are_checked():
         input_disturbance_set(B, -0.1)
     with pytest.raises(ValueError, match="needs its region"):
         disturbance_set(A, B, vertex_models=mass_models())
+
+
+def test_a_zonotope_error_set_is_f_alpha_s_and_robustly_invariant():
+    """TubeOptions.zonotope: Z = F(α, s) with A_K Z ⊕ W ⊆ Z, checked by support values in many directions
+    (h_Z(A_Kᵀ d) + h_W(d) ≤ h_Z(d)), and the same margins as the exact polytope of F(α, s) to round-off."""
+    options = TubeOptions(zonotope=True)
+    sets = build_tube(A, B, W_BOX, LIMITS, [-1.0], [1.0], state_weight=np.eye(2), input_weight=1.0, options=options)
+    exact = build_tube(A, B, W_BOX, LIMITS, [-1.0], [1.0], state_weight=np.eye(2), input_weight=1.0)
+    assert isinstance(sets.error_set, Zonotope) and sets.error_set_exact and exact.error_set_exact
+    angles = np.linspace(0, 2 * np.pi, 721)
+    D = np.column_stack([np.cos(angles), np.sin(angles)])
+    Z = sets.error_set
+    assert np.all(Z.support(D @ sets.closed_loop) + W_BOX.support(D) <= Z.support(D) * (1 + 1e-12))
+    np.testing.assert_allclose(sets.state_margins, exact.state_margins, rtol=1e-6)
+    np.testing.assert_allclose(sets.input_margins, exact.input_margins, rtol=1e-6)
