@@ -117,6 +117,8 @@ class NonlinearMPCProblem:
     tolerance : convergence test of the SQP, max ``|Δw|`` in scaled units (inputs / limit)
     compiled : compile the iteration to machine code (`models.compile`, cached); False runs
         CasADi's virtual machine
+    constrain : callable ocp -> None adding constraints to the `mpc_problem` before it is transcribed
+        (a scenario tree's non-anticipativity), or None
 
     Raises
     ------

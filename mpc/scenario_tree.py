@@ -372,7 +372,9 @@ class ScenarioTreeMPC(NonlinearMPC):
                 x, v = plant.equilibrium(**{self.tracked: key})
                 lin = plant.linearize(x, v).discretize(self.sample_period)
                 P, _ = riccati_terminal_cost(lin.A, lin.B, self.Q, self.R)
-                xs.append(x), vs.append(v), blocks.append(w * P)
+                xs.append(x)
+                vs.append(v)
+                blocks.append(w * P)
             if len(self._targets) > 64:
                 self._targets.clear()
             self._targets[key] = (np.concatenate(xs), np.concatenate(vs), _block_diagonal(blocks))
@@ -392,8 +394,15 @@ def _block_diagonal(blocks) -> np.ndarray:
 def scenario_tree_mpc(
     known: Plant, settings: MPCSettings, branches, *, tracked: str, weights=None, robust_horizon: int = 1, **overrides
 ) -> ScenarioTreeMPC:
-    """The scenario-tree NMPC designed on `known` with the case's `settings` (as `mpc.nonlinear_mpc`) over
-    `branches`; keyword arguments override the settings."""
+    """The scenario-tree NMPC designed on `known` with the case's `settings` (as `mpc.nonlinear_mpc`).
+
+    Parameters
+    ----------
+    known : Plant, the controller's model;  settings : MPCSettings
+    branches, weights, robust_horizon : as `ScenarioTreeMPC`
+    tracked : coordinate whose absolute value the reference gives
+    overrides : keyword arguments of `ScenarioTreeMPC` replacing the settings' values
+    """
     arguments = {"substeps": settings.substeps} | design_arguments(known, settings) | overrides
     return ScenarioTreeMPC(
         known, branches, weights=weights, robust_horizon=robust_horizon, tracked=tracked, **arguments
