@@ -1,0 +1,56 @@
+"""The robust rows of a study: the scenario tree's branches and settings, the tube's note."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import models
+import studies
+from models.state_limits import StateLimit
+from mpc import ScenarioTreeMPC
+from studies import providers, robust_rows
+from studies.cases import pendulum
+
+
+def test_branches_are_the_two_opposite_corners_of_the_box():
+    plant = models.get("pendulum")
+    low, high = robust_rows.branches(plant)
+    for i, name in enumerate(plant.params):
+        factor = (0.95, 1.05) if name in plant.uncertain_params else (1.0, 1.0)
+        assert low[i] == pytest.approx(plant.params[name] * factor[0], rel=1e-15)
+        assert high[i] == pytest.approx(plant.params[name] * factor[1], rel=1e-15)
+
+
+def test_state_limits_become_soft_bounds_unless_already_bound_within_them():
+    settings = studies.get("pendulum").mpc
+    limited = robust_rows.with_limits(settings, pendulum.STATE_LIMITS)
+    assert limited.soft[: len(settings.soft)] == settings.soft
+    (travel,) = limited.soft[len(settings.soft) :]
+    assert travel.combination == {"z": 1.0} and (travel.lower, travel.upper) == (-0.5, 0.5)
+    wider = StateLimit("swing", "theta", -0.3, 0.3, source="test")  # the case already holds |theta| <= 0.2
+    assert robust_rows.with_limits(settings, [wider]).soft == settings.soft
+    with pytest.raises(TypeError, match="StateLimit"):
+        robust_rows.with_limits(settings, [("z", -1, 1)])
+
+
+def test_the_robust_rows_are_standard_providers():
+    assert robust_rows.scenario_tree in providers.STANDARD and robust_rows.tube in providers.STANDARD
+
+
+@pytest.mark.slow  # builds (and compiles) the pendulum's tree: about 20 s
+def test_the_scenario_tree_row_is_built_on_the_case_settings():
+    case = studies.get("pendulum")
+    known = case.known_plant()
+    (controller,) = robust_rows.scenario_tree(case, known).values()
+    assert isinstance(controller, ScenarioTreeMPC) and controller.name == robust_rows.LABEL
+    np.testing.assert_array_equal(controller.branch_params, robust_rows.branches(models.get("pendulum")))
+    assert controller.horizon == case.mpc.horizon and controller.robust_horizon == 1
+    no_mpc = dataclasses.replace(case, mpc=None)
+    with pytest.raises(providers.NotProvided, match="no MPC settings"):
+        robust_rows.scenario_tree(no_mpc, known)
+
+
+def test_the_tube_row_is_absent_with_the_reason():
+    with pytest.raises(providers.NotProvided, match="takes no reference"):
+        robust_rows.tube(studies.get("pendulum"))
