@@ -1,5 +1,11 @@
 """The robust controllers' rows of a study, beside nominal MPC: the providers `scenario_tree` and `tube`.
 
+They are not among a case's own providers (`studies.providers.STANDARD`): a tree's step costs a few
+times the nominal NMPC's (docs/robust_mpc.md has the measurement), more than a quick run has room
+for. A run adds them by name::
+
+    python -m studies pendulum --provider studies.robust_rows:scenario_tree --provider studies.robust_rows:tube
+
 `scenario_tree` gives "scenario-tree NMPC": `mpc.ScenarioTreeMPC` with the case's own MPC settings
 (those of its "nonlinear MPC" row) over `branches`, the two opposite corners of the text's ±5 % box
 around the case's plant (every uncertain parameter 5 % low, every one 5 % high; the known model,

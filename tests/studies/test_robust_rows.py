@@ -11,6 +11,7 @@ from models.state_limits import StateLimit
 from mpc import ScenarioTreeMPC
 from studies import providers, robust_rows
 from studies.cases import pendulum
+from studies.provider_calls import find
 
 
 def test_branches_are_the_two_opposite_corners_of_the_box():
@@ -34,8 +35,9 @@ def test_state_limits_become_soft_bounds_unless_already_bound_within_them():
         robust_rows.with_limits(settings, [("z", -1, 1)])
 
 
-def test_the_robust_rows_are_standard_providers():
-    assert robust_rows.scenario_tree in providers.STANDARD and robust_rows.tube in providers.STANDARD
+def test_the_robust_rows_are_providers_the_command_line_finds():
+    assert find("studies.robust_rows:scenario_tree") is robust_rows.scenario_tree
+    assert find("studies.robust_rows:tube") is robust_rows.tube
 
 
 @pytest.mark.slow  # builds (and compiles) the pendulum's tree: about 20 s
