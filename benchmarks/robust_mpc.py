@@ -41,6 +41,7 @@ import argparse
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -182,6 +183,11 @@ def nmpc_controllers(name: str, case, known):
     return nominal, tree, branches, time.perf_counter() - begin
 
 
+def progress(text: str) -> None:
+    """One line of progress on stderr."""
+    print(f"{time.strftime('%H:%M:%S')} {text}", file=sys.stderr, flush=True)
+
+
 def run_plant(name: str, samples: int) -> dict:
     """Every controller's Monte Carlo on plant `name` (see the module docstring)."""
     case, plant = studies.get(name), models.get(name)
@@ -191,8 +197,13 @@ def run_plant(name: str, samples: int) -> dict:
     nominal, tree, branches, tree_build_s = nmpc_controllers(name, case, known)
     out["branches"] = len(branches)
     out["tree_build_s"] = tree_build_s
-    results = {"nominal": monte_carlo(name, case, nominal, samples), "robust": monte_carlo(name, case, tree, samples)}
+    progress(f"{name}: tree of {len(branches)} branches built in {tree_build_s:.1f} s")
+    results = {"nominal": monte_carlo(name, case, nominal, samples)}
+    progress(f"{name}: nominal NMPC done")
+    results["robust"] = monte_carlo(name, case, tree, samples)
+    progress(f"{name}: scenario tree done")
     model, tube, tube_refused, tube_build_s, parametric_refused, twin = tube_sets(name, case, known)
+    progress(f"{name}: tube {'refused' if tube is None else 'built'} ({tube_build_s:.1f} s)")
     out["tube_build_s"], out["parametric_tube_refused"], out["tube_refused"] = (
         tube_build_s,
         parametric_refused,
