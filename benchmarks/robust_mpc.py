@@ -340,7 +340,9 @@ def main() -> None:
     out: dict = {}
     for name in args.plants.split(","):
         out[name] = run_plant(name, args.samples)
-        print(f"{name}: done", flush=True)
+        with open(args.json, "w") as handle:  # each plant's results as soon as they are in
+            json.dump(out, handle, indent=2)
+        progress(f"{name}: done")
     if "pendulum" in out:
         pendulum = out["pendulum"]
         for key in ("nominal_violations", "robust_violations", "tube_violations", "robust_step_median_ms"):
