@@ -45,16 +45,26 @@ def tree(branches=BRANCHES, **overrides):
     return scenario_tree_mpc(KNOWN, CASE.mpc, branches, **arguments)
 
 
-def test_first_move_is_the_same_on_every_branch_and_later_moves_react():
-    controller = tree(robust_horizon=3)
+@pytest.fixture(scope="module")
+def solved():
+    """A converged solve from START of the tree with robust horizon 3 and the cart-travel bound, and the
+    nominal NMPC's plan from there with the same settings: (controller, inputs (N, S, nu), nominal plan)."""
+    converged = dict(iteration="sqp", soft_bounds=(TRAVEL,))
+    nominal = nonlinear_mpc(KNOWN, CASE.mpc, tracked="z", compiled=False, horizon=30, **converged)
+    controller = tree(robust_horizon=3, **converged)
     one_step(controller, START)
-    inputs = controller.nlp.branch_inputs(controller.nlp.last)  # (N, S, nu)
+    return controller, controller.nlp.branch_inputs(controller.nlp.last), one_step(nominal, START)
+
+
+def test_first_move_is_the_same_on_every_branch_and_later_moves_react(solved):
+    controller, inputs, _ = solved
     assert controller.step_info()["success"]
     spread = np.ptp(inputs, axis=1).max(axis=1)
     assert spread[:3].max() < 1e-9  # shared moves: non-anticipativity
     assert spread[3:].max() > 1e-3  # after the robust horizon each branch plans for its own model
 
 
+@pytest.mark.slow  # builds a second tree: about 10 s
 def test_robust_horizon_equal_to_the_horizon_shares_every_move():
     controller = tree(robust_horizon=30)
     one_step(controller, START)
@@ -73,13 +83,8 @@ def test_one_branch_equals_the_nominal_nmpc_in_closed_loop():
     np.testing.assert_allclose(b.x, a.x, rtol=0, atol=1e-9)
 
 
-def test_state_bound_holds_on_every_branch_where_the_nominal_plan_leaves_it():
-    converged = dict(iteration="sqp", soft_bounds=(TRAVEL,))
-    nominal_plan = one_step(nonlinear_mpc(KNOWN, CASE.mpc, tracked="z", compiled=False, horizon=30, **converged), START)
-    controller = tree(**converged)
-    one_step(controller, START)
-    assert controller.step_info()["success"]
-    inputs = controller.nlp.branch_inputs(controller.nlp.last)
+def test_state_bound_holds_on_every_branch_where_the_nominal_plan_leaves_it(solved):
+    controller, inputs, nominal_plan = solved
     # The nominal plan, rolled through the branches' models, leaves the travel on some branch ...
     assert max(largest_travel(nominal_plan, p) for p in BRANCHES) > 0.5 + 1e-3
     # ... the tree's plan for each branch, rolled through that branch's model, does not.
