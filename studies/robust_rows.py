@@ -63,9 +63,14 @@ def with_limits(settings: MPCSettings, limits, backoff: float = 0.1) -> MPCSetti
 
 def _inside(spec: SoftSpec, limit: StateLimit) -> bool:
     """Whether the soft bound `spec` is on `limit`'s state alone, with constant bounds within the limit."""
-    if spec.combination != {limit.state: 1.0} or callable(spec.lower) or callable(spec.upper):
+    lower, upper = spec.lower, spec.upper
+    if (
+        spec.combination != {limit.state: 1.0}
+        or not isinstance(lower, (int, float))
+        or not isinstance(upper, (int, float))
+    ):
         return False
-    return limit.lower <= float(spec.lower) and float(spec.upper) <= limit.upper
+    return limit.lower <= float(lower) and float(upper) <= limit.upper
 
 
 def scenario_tree(case: CaseStudy, known: models.Plant | None = None) -> dict:
