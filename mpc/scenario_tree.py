@@ -37,9 +37,10 @@ What the construction guarantees, and what it does not:
 It does not guarantee that the true plant stays within the bounds: a parameter vector inside the
 box but not on a branch, an input disturbance other than the estimated one, estimation error and
 a single real-time iteration per sample (not a converged solve) are not covered; nor recursive
-feasibility (the soft bounds keep every problem feasible instead). For a convex-in-parameters
-linear prediction the corners' predictions bound every parameter in the box, for this nonlinear
-one they do not in general. The Monte Carlo of `benchmarks/robust_mpc.py` measures what happens.
+feasibility (the soft bounds keep every problem feasible instead). The corners' predictions need not
+bound those of the parameters inside the box: past one step the predicted state is not affine in
+the parameters, even for a linear model. The Monte Carlo of `benchmarks/robust_mpc.py` measures
+what happens on the true plant.
 """
 
 from __future__ import annotations
