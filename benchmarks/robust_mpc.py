@@ -7,11 +7,11 @@ drawn uniformly from the ±5 % box about the text's values (`models.uncertainty.
 seed 0), the text's constant input disturbance acting (pendulum 0.5 N, II.16(c); crane 500 N, the
 case's 10 % of 5 kN), reference 0. The pendulum starts with the cart 0.35 m out moving outwards at
 0.3 m/s (3 s runs), the crane at rest at the origin (20 s runs). Violations are counted by
-`models.state_limits` against the case's STATE_LIMITS (pendulum: cart travel ±0.5 m; crane: the
-swing angles ±0.2 rad).
+`models.state_limits` (pendulum: the cart travel of the tube's region, ±0.5 m, SWING_UP_TRAVEL; crane:
+the case's STATE_LIMITS, the swing angles ±0.2 rad).
 
 - nominal MPC: `mpc.nonlinear_mpc` designed on the case's known model (nominal·1.05) with the
-  case's MPC settings, its STATE_LIMITS added as soft bounds (`studies.robust_rows.with_limits`);
+  case's MPC settings, those limits added as soft bounds (`studies.robust_rows.with_limits`);
 - scenario-tree NMPC: `mpc.ScenarioTreeMPC` with the same settings; branches chosen corners of the
   ±5 % box, the other parameters nominal (pendulum: the 4 corners of the rod's mass and length m2,
   ell; crane: the 4 corners of the cable lengths ell1, ell2), equal weights, robust horizon 1
@@ -51,7 +51,7 @@ from _path import HERE as _HERE  # noqa: F401  (drops this folder from sys.path,
 
 import models
 import studies
-from models.state_limits import check_state_limits, summarize_limit_violations
+from models.state_limits import StateLimit, check_state_limits, summarize_limit_violations
 from models.uncertainty import corner_params, sample_params
 from mpc import nonlinear_mpc, riccati_terminal_cost, scenario_tree_mpc
 from mpc.scenario_tree import ScenarioTreeProblem
@@ -59,16 +59,22 @@ from mpc.sets import Polytope, Zonotope
 from mpc.tube import TubeOptions, ancillary_feedback, build_tube, disturbance_set
 from mpc.tube_mpc import TubeMPC, nominal_sets
 from studies.cases import crane as crane_case
-from studies.cases import pendulum as pendulum_case
+from studies.cases.pendulum import SWING_UP_TRAVEL
 from studies.robust_rows import with_limits
 
 FOLDER = Path(__file__).resolve().parent
 DOMPC_PYTHON = FOLDER / ".venv-dompc" / "bin" / "python"
-#: Per plant: the case's limits, the start, the run's length (s), the parameters whose ±5 % corners are the
-#: tree's branches (the others nominal), the tube's region (deviations, every state) and its ancillary LQR weights.
+#: The pendulum's limit here: the cart travel of the tube's region, ±0.5 m (the case's physical track is ±2.5 m,
+#: which none of these regulation runs comes near).
+PENDULUM_LIMITS = (
+    StateLimit("cart travel", "z", -SWING_UP_TRAVEL, SWING_UP_TRAVEL, source="SWING_UP_TRAVEL", unit="m"),
+)
+#: Per plant: the limits the violations are counted against, the start, the run's length (s), the parameters
+#: whose ±5 % corners are the tree's branches (the others nominal), the tube's region (deviations, every state)
+#: and its ancillary LQR weights.
 PLANTS = {
     "pendulum": dict(
-        limits=pendulum_case.STATE_LIMITS,
+        limits=PENDULUM_LIMITS,
         start=np.array([0.35, 0.0, 0.3, 0.0]),
         duration=3.0,
         branch_names=("m2", "ell"),

@@ -49,28 +49,34 @@ def branches(plant: models.Plant, rel: float = BOX) -> np.ndarray:
 
 def with_limits(settings: MPCSettings, limits, backoff: float = 0.1) -> MPCSettings:
     """`settings` with each `models.state_limits.StateLimit` of `limits` added as a soft bound (tightened by
-    `backoff` of its half-width, as the case's own soft bounds); the bounds the settings already have stay,
-    and a limit on a state they already bound within it adds nothing."""
+    `backoff` of its half-width, as the case's own soft bounds): on x[state] − x[relative_to] for a
+    deflection, up to the known plant's parameter for an `upper_parameter` limit. The bounds the settings
+    already have stay, and a limit on a state they already bound within it adds nothing."""
     extra = []
     for limit in limits:
         if not isinstance(limit, StateLimit):
             raise TypeError(f"limits must be models.state_limits.StateLimit records, got {limit!r}")
         if any(_inside(spec, limit) for spec in settings.soft):
             continue  # the settings already bound that state within the limit
-        extra.append(SoftSpec(limit.name, {limit.state: 1.0}, limit.lower, limit.upper, backoff=backoff))
+        combination = {limit.state: 1.0} | ({} if limit.relative_to is None else {limit.relative_to: -1.0})
+        upper = limit.upper if limit.upper_parameter is None else _parameter(limit.upper_parameter)
+        extra.append(SoftSpec(limit.name, combination, limit.lower, upper, backoff=backoff))
     return dataclasses.replace(settings, soft=tuple(settings.soft) + tuple(extra))
+
+
+def _parameter(name: str):
+    """The known plant's parameter `name`, as a SoftSpec bound (a callable of the known Plant)."""
+    return lambda plant: plant.params[name]
 
 
 def _inside(spec: SoftSpec, limit: StateLimit) -> bool:
     """Whether the soft bound `spec` is on `limit`'s state alone, with constant bounds within the limit."""
     lower, upper = spec.lower, spec.upper
-    if (
-        spec.combination != {limit.state: 1.0}
-        or not isinstance(lower, (int, float))
-        or not isinstance(upper, (int, float))
-    ):
+    if not isinstance(lower, (int, float)) or not isinstance(upper, (int, float)):
         return False
-    return limit.lower <= float(lower) and float(upper) <= limit.upper
+    if limit.relative_to is not None or limit.upper_parameter is not None or spec.combination != {limit.state: 1.0}:
+        return False
+    return limit.lower <= lower and upper <= limit.upper
 
 
 def scenario_tree(case: CaseStudy, known: models.Plant | None = None) -> dict:

@@ -28,7 +28,12 @@ def test_state_limits_become_soft_bounds_unless_already_bound_within_them():
     limited = robust_rows.with_limits(settings, pendulum.STATE_LIMITS)
     assert limited.soft[: len(settings.soft)] == settings.soft
     (travel,) = limited.soft[len(settings.soft) :]
-    assert travel.combination == {"z": 1.0} and (travel.lower, travel.upper) == (-0.5, 0.5)
+    (limit,) = pendulum.STATE_LIMITS
+    assert travel.combination == {"z": 1.0} and (travel.lower, travel.upper) == (limit.lower, limit.upper)
+    deflection = StateLimit("gap", "z", -1.0, 1.0, source="test", relative_to="theta", upper_parameter="ell")
+    (gap,) = robust_rows.with_limits(settings, [deflection]).soft[len(settings.soft) :]
+    known = models.get("pendulum").with_params(ell=0.7)
+    assert gap.combination == {"z": 1.0, "theta": -1.0} and gap.bounds(known) == (-1.0, 0.7)
     wider = StateLimit("swing", "theta", -0.3, 0.3, source="test")  # the case already holds |theta| <= 0.2
     assert robust_rows.with_limits(settings, [wider]).soft == settings.soft
     with pytest.raises(TypeError, match="StateLimit"):
