@@ -117,6 +117,8 @@ class NonlinearMPCProblem:
     tolerance : convergence test of the SQP, max ``|Δw|`` in scaled units (inputs / limit)
     compiled : compile the iteration to machine code (`models.compile`, cached); False runs
         CasADi's virtual machine
+    constrain : callable ocp -> None adding constraints to the `mpc_problem` before it is transcribed
+        (a scenario tree's non-anticipativity), or None
 
     Raises
     ------
@@ -140,6 +142,7 @@ class NonlinearMPCProblem:
         max_iterations: int = 50,
         tolerance: float = 1e-8,
         compiled: bool = True,
+        constrain=None,
     ):
         N = integer(horizon, "horizon", minimum=1)
         self.max_iterations = integer(max_iterations, "max_iterations", minimum=1)
@@ -163,6 +166,8 @@ class NonlinearMPCProblem:
         self.ocp = mpc_problem(
             plant, self.sample_period, N, state_weight, input_weight, soft_bounds=soft, rate_limit=self.rate_limit
         )
+        if constrain is not None:
+            constrain(self.ocp)
         self.rti = RealTimeIteration(
             Transcription(self.ocp, MultipleShooting(intervals=N, substeps=substeps)), compiled=compiled
         )

@@ -169,10 +169,11 @@ def parser() -> argparse.ArgumentParser:
 class Progress:
     """One tqdm bar over every plant's runs, its total fixed before the run starts.
 
-    Each plant has a share of the total: the expected costs of its declared controllers' runs
-    (`progress_slots`, `studies.batch.run_weights`), or a number of equal runs. `update(plant, done,
-    total, text)` after each simulation, or once when a plant run elsewhere is done, moves the bar to
-    the cost of the plant's first `done` runs (or its share times done/total when a provider added or
+    Each plant has a share of the total: the expected costs of its declared controllers' runs, the
+    first carrying its designs, and of its files (`progress_slots`, `studies.batch.plant_costs`: a
+    pair (weights, after)), or a number of equal runs. `update(plant, done, total, text)` after each
+    simulation, and (1, 1) once the plant is done (its files written), moves the bar to the cost of
+    the plant's first `done` runs (or its share times done/total when a provider added or
     lacked controllers), so the remaining time follows the work left, not the count of runs. The
     estimate is the run's average rate (no smoothing): elapsed x whole / done.
     """
@@ -180,11 +181,13 @@ class Progress:
     def __init__(self, slots: dict, stream=None, disable: bool = False):
         stream = stream or sys.stderr
         tty = stream.isatty()
+        after = {plant: float(w[1]) if isinstance(w, tuple) else 0.0 for plant, w in slots.items()}
+        slots = {plant: w[0] if isinstance(w, tuple) else w for plant, w in slots.items()}
         self.weights = {
             plant: [1.0] * int(w) if isinstance(w, (int, float)) else [float(x) for x in w]
             for plant, w in slots.items()
         }
-        self.slots = {plant: sum(w) for plant, w in self.weights.items()}
+        self.slots = {plant: sum(w) + after[plant] for plant, w in self.weights.items()}
         self.done = dict.fromkeys(self.slots, 0.0)
         self.runs = dict.fromkeys(self.slots, 0)
         self.bar = tqdm.tqdm(
@@ -221,12 +224,12 @@ class Progress:
 
 
 def progress_slots(plants, scenarios, settings: dict) -> dict:
-    """plant -> expected cost of each run it will make (`studies.batch.run_weights`): its declared
-    controllers through the scenarios it will run."""
+    """plant -> (expected cost of each run it will make, of its files) (`studies.batch.plant_costs`): its
+    declared controllers through the scenarios it will run."""
     slots = {}
     for name in plants:
-        weights = batch.run_weights(cases.get(name), scenarios, int(settings.get("mc") or 0))
-        slots[name] = weights or [1.0]
+        weights, after = batch.plant_costs(cases.get(name), scenarios, int(settings.get("mc") or 0))
+        slots[name] = (weights or [1.0], after)
     return slots
 
 
