@@ -42,6 +42,7 @@ from . import export
 from .controller import NonlinearMPC
 from .qp_fast import PRIMAL_TOLERANCE
 from .rti import QP_TOLERANCE
+from .scenario_tree import ScenarioTreeMPC
 
 #: Status codes of ``name_step`` and ``name_init``; a non-finite command adds 16.
 STATUS = {
@@ -77,6 +78,14 @@ def check_exportable(controller, references) -> np.ndarray:
         raise UnsupportedExport(
             f"{getattr(controller, 'name', kind)}: only mpc.NonlinearMPC is exported here; {kind} is not one"
             " (use mpc.export.export_linear_mpc for a LinearMPC)"
+        )
+    if isinstance(controller, ScenarioTreeMPC):
+        raise UnsupportedExport(
+            f"{controller.name}: a scenario tree ({len(controller.branch_params)} branches, robust horizon "
+            f"{controller.robust_horizon}) is not exported: the C runs the real-time iteration of one plant's "
+            "problem, and the tree's is the stacked problem of mpc.scenario_tree.ScenarioTreeProblem (the "
+            "estimate, disturbance, previous input and plan repeated over the branches, each branch's target "
+            "and terminal weight, branch 1's moves taken out)"
         )
     if controller.nlp.iteration != "rti":
         raise UnsupportedExport(
@@ -191,9 +200,9 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
     Raises
     ------
     UnsupportedExport
-        For a controller that is not a NonlinearMPC, one iterating to convergence at every sample
-        (iteration="sqp"), with more than one input, no finite reference, or phases CasADi cannot
-        generate as C.
+        For a controller that is not a NonlinearMPC, a scenario tree (`mpc.ScenarioTreeMPC`), one
+        iterating to convergence at every sample (iteration="sqp"), with more than one input, no
+        finite reference, or phases CasADi cannot generate as C.
     """
     name = c_name(name)
     values = check_exportable(controller, references)
