@@ -566,8 +566,9 @@ class TubeSets:
 
     Numbers: a zonotope Z (`TubeOptions.zonotope`) is F(α, s), RPI by Raković et al.'s theorem for
     the α found with A_K^s W ⊆ α W (support values, exact up to round-off); a polytope Z is verified
-    RPI by LP after a dilation that leaves each row a margin of at least 1e-8·max h_Z against the LPs' round-off (`invariant_polytope`); the margins are DAQP LP
-    optima (exact to about 1e-12 relative in the tests); X_f is invariant to 1e-10·max(1, |d|)
+    RPI by LP after a dilation that leaves each row a margin of at least 1e-8·max h_Z against the
+    LPs' round-off (`invariant_polytope`); the margins are DAQP LP optima (exact to about 1e-12
+    relative in the tests); X_f is invariant to 1e-10·max(1, |d|)
     (`maximal_invariant_set`).
 
     For a nonlinear plant, only what W covers is guaranteed: the guarantee holds while the
