@@ -83,6 +83,7 @@ DAQP_ENTRY_POINTS = (
     "free_daqp_ldp",
     "deactivate_constraints",
     "reset_daqp_workspace",
+    "activate_constraints",
 )
 #: DAQP settings the exported C takes from the Python path's solver (the others stay DAQP's defaults;
 #: no proximal iterations: H is positive definite).
