@@ -1,4 +1,4 @@
-"""Linear MPC exported as C: estimator, target and the condensed QP solved by DAQP.
+"""Linear and tube MPC exported as C: estimator, target and the condensed QP solved by DAQP.
 
 `export_linear_mpc(controller, name)` writes the whole `LinearMPC.step` as C
 with fixed sizes: the disturbance observer's update, the steady-state target,
@@ -7,6 +7,13 @@ solves, in the same scaled variables), the fallback to the shifted plan,
 exact clipping and the rate limit, and the one-sample prediction of the
 estimate. The first state comes from the first measurement as in Python
 (``name_init``).
+
+A `mpc.TubeMPC` goes through the same function and the same C around its QP
+(DAQP's setup and warm-started solve): its condensed QP (`TubeMPC.qp`, whose
+parameters are the nominal state z_0), the ancillary law u = ue + v_0 +
+K (x − xe − z) and the nominal update z⁺ = A z + B v_0 replace the estimator,
+the target and the fallback; a failed solve returns its status with a NaN
+command, where the Python step raises.
 
 The QP is solved by DAQP, the dual active-set solver the Python path
 (`mpc.qp_fast.CondensedDaqpSolver`) uses, called the same way: its matrices

@@ -23,6 +23,13 @@
 The QP is solved whole even where the Python path first tries the slacks at
 their bounds (`mpc.slack_first`): both give the QP's unique optimum.
 
+A `mpc.ScenarioTreeMPC` is exported the same way: the C solves its stacked
+problem (`ScenarioTreeProblem.inner`) with the estimate, disturbance estimate,
+previous input and plan repeated over the S branches, the stacked targets
+and terminal weights of its `target`, and commands branch 1's moves; the
+shared moves are equality rows, which DAQP keeps in its working set (active
+and immutable, as CasADi's DAQP node marks them).
+
 Memory is one struct per controller (``name_state``), owned by the caller and
 zero before its first ``name_init``; DAQP's arrays are allocated once, in
 ``name_init``, and released by ``name_free``. Nothing else allocates.
