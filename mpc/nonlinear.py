@@ -178,6 +178,8 @@ class NonlinearMPCProblem:
     build_time_limit : s, refuse a build estimated longer (`build_estimate`; default `BUILD_TIME_LIMIT_S`)
     progress : called as progress(phase, seconds since the build began) after each phase of the build
         (each phase is also logged at INFO on ``mpc.nonlinear``)
+    constrain : callable ocp -> None adding constraints to the `mpc_problem` before it is transcribed
+        (a scenario tree's non-anticipativity), or None
 
     Raises
     ------
@@ -204,6 +206,7 @@ class NonlinearMPCProblem:
         compiled: bool = True,
         build_time_limit: float | None = None,
         progress: Callable[[str, float], None] | None = None,
+        constrain=None,
     ):
         N = integer(horizon, "horizon", minimum=1)
         self.max_iterations = integer(max_iterations, "max_iterations", minimum=1)
@@ -238,6 +241,8 @@ class NonlinearMPCProblem:
         self.ocp = mpc_problem(
             plant, self.sample_period, N, state_weight, input_weight, soft_bounds=soft, rate_limit=self.rate_limit
         )
+        if constrain is not None:
+            constrain(self.ocp)
         transcription = Transcription(self.ocp, MultipleShooting(intervals=N, substeps=substeps))
         phase("problem stated and transcribed")
         self.rti = RealTimeIteration(transcription, compiled=compiled, progress=phase)
