@@ -94,8 +94,8 @@ GAIN_RANGE = 100.0
 #: A re-tuning reproduces a stored record when its cost agrees to this, relative.
 REPRODUCED = 1e-6
 #: The specs' form on the smoothed stages: one soft maximum per spec and run. Pointwise, the arm's 6 samples
-#: of 4 runs make 22,122 inequalities on 3 gains, and IPOPT's factorizations of their dense columns cost
-#: more than the closed loop's evaluations.
+#: of 4 runs make 22,122 inequalities on 3 gains (dense columns), and a stack sample of that phase one
+#: found IPOPT in MUMPS's dense kernels.
 PATHS_DEFAULT = "aggregated"
 #: How the stored gains are tuned: compiled, the phase one first where the hand design misses a spec.
 TUNE_OPTIONS = SolveOptions(jit=True)
@@ -253,22 +253,29 @@ def infeasible_text(case: CaseStudy, specs: dict, worst: dict) -> str | None:
     return "infeasible for this structure: " + "; ".join(missed) if missed else None
 
 
-def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str = PATHS_DEFAULT) -> dict:
+def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str = PATHS_DEFAULT, log=None) -> dict:
     """Tune the case's hand design against its specs, validate it; the record its stored-gains file keeps.
 
     options : how the tuning is solved (default `TUNE_OPTIONS`); its tol, widths, Hessian and jit are stored
         in the record
     paths : the specs' form on the smoothed stages (`designs.tuning.TuningSetup`), stored in the record
+    log : optional callable(text) told what each step found as it ends
     """
     started = time.perf_counter()
+    say = log or (lambda text: None)
     setup, specs, chosen, train = tuning_setup(case)
     setup = replace(setup, paths=paths)
     problem = setup.problem()
     lbx, ubx = decision_bounds(problem, setup.bounds)
     start = problem.start()
     found = None
+    say(f"  {chosen}; {problem.g.numel()} spec inequalities; the hand design's cost {problem.values(start)[0]:.6g}")
     if problem.largest_excess(start) > AGREEMENT:
         found = phase_one(problem, lbx, ubx, start, options)
+        say(
+            f"  phase one: IPOPT {found.status}, {found.iterations} iterations, largest excess {found.excess:.3g} "
+            f"({time.perf_counter() - started:.0f} s)"
+        )
     block, result, infeasible = setup.block, None, None
     if found is not None and found.infeasible:
         infeasible = infeasible_text(case, specs, worst_metrics(case, problem.block_at(found.decision), train))
@@ -559,7 +566,7 @@ def main(argv=None) -> int:
                 widths=args.widths,
                 hessian=args.hessian,
             )
-            record = tune_case(case, options, paths=args.paths)
+            record = tune_case(case, options, paths=args.paths, log=lambda text: print(text, flush=True))
         if not _report(case, record, before, args, folder):
             failed.append(name)
     if failed:

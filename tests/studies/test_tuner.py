@@ -168,7 +168,7 @@ def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_so
     tuning = {"status": "Maximum_Iterations_Exceeded", "converged": False, "message": "cap", "iterations": 1}
     tuning |= {"wall_time_s": 0.0, "initial_cost": 1.0, "cost": 1.0}
     record = {"tuning": tuning, "validation": validation, "infeasible": None, "start_gains": {}}
-    monkeypatch.setattr(tuner, "tune_case", lambda case, options, paths: record)
+    monkeypatch.setattr(tuner, "tune_case", lambda case, options, paths, log: record)
     monkeypatch.setenv("CODESIGN_CONTROL_CACHE", str(tmp_path / "cache"))
     before = (tuner.STORE_DIR / tuner.store_name(studies.get("arm"))).stat().st_mtime_ns
     assert tuner.main(["arm", "--out", str(tmp_path / "out")]) == 1
