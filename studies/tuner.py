@@ -124,20 +124,27 @@ def table_scenarios(case: CaseStudy) -> dict:
     return {name: chosen[name] for name in SCENARIOS}
 
 
-def scenarios(case: CaseStudy, block, specs: dict | None = None) -> list[Scenario]:
-    """The `SCENARIOS` as the table runs them (`TableScenario.run`, the noise `block` reads), each with its
-    specs from `specs` (scenario name -> Specs) when given."""
-    plant = models.get(case.plant)
+def scenario(case: CaseStudy, name: str = "disturbance", block=None, specs: Specs | None = None) -> Scenario:
+    """One of the `SCENARIOS` as the table runs it (`TableScenario.run`), with `specs` when given; the noise
+    scenario's noise is that of the measurements `block` reads (`studies.runner.measurement_noise_std`)."""
+    tables = table_scenarios(case)
+    if name not in tables:
+        raise ValueError(f"unknown tuning scenario {name!r}; choose from {', '.join(SCENARIOS)}")
+    table, plant = tables[name], models.get(case.plant)
+    if table.noise and block is None:
+        raise ValueError(f"the {name!r} scenario's noise depends on what the controller reads: give the block")
     _, base = runner.tracked_equilibrium(plant, case)
-    out = []
-    for name, table in table_scenarios(case).items():
-        noise = (
-            runner.measurement_noise_std(plant, block, table.noise, sigma=case.derivative_time_constant)
-            if table.noise
-            else 0.0
-        )
-        out.append(replace(table.run(case, base, noise), specs=(specs or {}).get(name)))
-    return out
+    noise = (
+        runner.measurement_noise_std(plant, block, table.noise, sigma=case.derivative_time_constant)
+        if table.noise
+        else 0.0
+    )
+    return replace(table.run(case, base, noise), specs=specs)
+
+
+def scenarios(case: CaseStudy, block, specs: dict | None = None) -> list[Scenario]:
+    """The `SCENARIOS` (`scenario`), each with its specs from `specs` (scenario name -> Specs) when given."""
+    return [scenario(case, name, block, (specs or {}).get(name)) for name in SCENARIOS]
 
 
 def hand_design(case: CaseStudy, known: models.Plant | None = None):
