@@ -21,9 +21,8 @@ import time
 
 import _path  # noqa: F401  (before our packages: drops this folder from sys.path)
 
-import models
 import studies
-from designs.tuning import Cost, SolveOptions, TuningProblem, gain_bounds, solve
+from designs.tuning import SolveOptions, TuningProblem, gain_bounds, solve
 from studies import tuner
 
 ORDERINGS = {"auto": 7, "qamd": 6}
@@ -31,21 +30,9 @@ ORDERINGS = {"auto": 7, "qamd": 6}
 
 def tuner_problem(name: str) -> tuple[TuningProblem, tuple]:
     """The tuner's problem for case `name` and its gain bounds (lbx, ubx)."""
-    case = studies.get(name)
-    block = tuner.hand_design(case)
-    train, _ = tuner.tuning_samples(case)
-    specs, _ = tuner.measured_specs(case, block, train)
-    itae, energy = tuner._start_itae_and_energy(case, block, train)
-    weight = tuner.ENERGY_SHARE / (1 - tuner.ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
-    problem = TuningProblem(
-        models.get(case.plant),
-        block,
-        tuner.scenarios(case, {n: tuner.with_margin(s) for n, s in specs.items()}),
-        cost=Cost("itae", energy_weight=weight),
-        samples=train,
-        substeps=tuner.SUBSTEPS,
-    )
-    return problem, gain_bounds(problem, tuner.gain_bounds(block))
+    setup = tuner.tuning_setup(studies.get(name))[0]
+    problem = setup.problem()
+    return problem, gain_bounds(problem, setup.bounds)
 
 
 def first_iterate_s(problem: TuningProblem, bounds: tuple, order: int) -> float:

@@ -1,28 +1,39 @@
-"""Tube MPC against a nominal MPC on the pendulum's cart travel, over a Monte Carlo of the ±5 % box.
+"""Robust MPC on the pendulum and the crane, over a Monte Carlo of the ±5 % box and the text's disturbance.
 
-    python benchmarks/robust_mpc.py --json PATH [--samples 200] [--duration 3.0]
+    python benchmarks/robust_mpc.py --json PATH [--samples 200] [--plants pendulum,crane] [--dompc-steps 10]
 
-Both controllers are `mpc.TubeMPC` on the same condensed DAQP QP, horizon and cost; the nominal
-one plans from the measured state every sample with the untightened sets and the same terminal
-construction (`mpc.tube_mpc.nominal_sets`, `replan=True`), the tube
-the sets of `mpc.tube.build_tube` for the text's 0.5 N input disturbance (II.16(c)). Every
-sample starts at the same state, the cart 0.35 m out and moving outwards at 0.3 m/s, with the
-0.5 N disturbance pushing outwards; the truth is the nonlinear pendulum with parameters drawn
-uniformly from the ±5 % box (`models.uncertainty.sample_params`, seed 0), simulated by
-`models.simulate_closed_loop`. Violations are counted by `models.state_limits` against the
-case's STATE_LIMITS (cart travel ±0.5 m).
+Per plant, the same runs for every controller: the truth is the nonlinear plant with parameters
+drawn uniformly from the ±5 % box about the text's values (`models.uncertainty.sample_params`,
+seed 0), the text's constant input disturbance acting (pendulum 0.5 N, II.16(c); crane 500 N, the
+case's 10 % of 5 kN), reference 0. The pendulum starts with the cart 0.35 m out moving outwards at
+0.2 m/s (3 s runs), the crane at rest at the origin (20 s runs). Violations are counted by
+`models.state_limits` (pendulum: the cart travel of the tube's region, ±0.5 m, SWING_UP_TRAVEL; crane:
+the case's STATE_LIMITS, the swing angles ±0.2 rad).
 
-What the tube guarantees here: W covers the input disturbance on the known model's
-linearization only. The tube with the ±5 % box's parametric error in W as well
-(`mpc.tube.disturbance_set` with the box's corner models) is attempted and, on the pendulum,
-refused at construction: its error set is larger than the constraints can hold; the JSON gives
-the refusal's message (`parametric_tube_refused`). So tube_violations counts what the
-disturbance-only tube does on models outside its W; it is measured, not guaranteed.
+- nominal MPC: `mpc.nonlinear_mpc` designed on the case's known model (nominal·1.05) with the
+  case's MPC settings, those limits added as soft bounds at the limit itself (no back-off,
+  `studies.robust_rows.with_limits`), so that what the model error does shows;
+- scenario-tree NMPC: `mpc.ScenarioTreeMPC` with the same settings; branches chosen corners of the
+  ±5 % box, the other parameters nominal (pendulum: the 4 corners of the rod's mass and length m2,
+  ell; crane: the 4 corners of the cable lengths ell1, ell2), equal weights, robust horizon 1
+  (first move shared, later moves per branch), one real-time iteration a sample. The full boxes'
+  16 and 64 corners cost too much per step here: the QP has N·S inputs;
+- tube MPC (`mpc.TubeMPC`, linear, regulating to the operating point) and its nominal twin on the
+  same QP (`nominal_sets`, the untightened sets, `nominal_linear_*`): W covers the input
+  disturbance on the known model's linearization; the tube with the box's parametric error in W
+  as well is attempted and its refusal reported (`parametric_tube_refused`). The crane's tube is
+  attempted the same way; when its construction refuses, `tube_refused` gives the message.
 
-Keys: nominal_violations, tube_violations ({count, largest} per limit over the samples),
-cost_ratio_tube_vs_nominal (median over samples of the runs' quadratic costs), nominal_step_median_ms,
-tube_step_median_ms, tube_build_s, tube margins, load average; {key}_closest_to_a_limit is the
-smallest distance to a limit over all runs (state units, negative when left). The scenario-tree NMPC is not built.
+Costs are the runs' Σ (x − x_s)ᵀ Q (x − x_s) + R u² with the case's MPC weights, compared sample by
+sample (the median of the ratios). Per-step times are medians over one closed loop on the nominal
+truth; the Monte Carlo runs step the samples together (`models.simulate_closed_loop_many`).
+
+do-mpc: its multi-stage MPC (n_robust = 1, IPOPT) on the pendulum's tree problem (the same 4 corners,
+the case's Q and R, a terminal xᵀ P x, |F| ≤ 5 N, no state bounds), run in its own virtual
+environment benchmarks/.venv-dompc by `benchmarks/dompc_multistage.py` (skipped, saying so, when the
+environment is missing). Our tree solves the same problem to convergence (``iteration="sqp"``) and
+the first moves are compared (`first_move_difference`); do-mpc's per-step time in a closed loop is
+compared with our tree's real-time iteration (`ratio_robust_vs_do_mpc`, do-mpc's over ours).
 """
 
 from __future__ import annotations
@@ -30,45 +41,79 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from _path import HERE as _HERE  # noqa: F401  (drops this folder from sys.path, see _path.py)
 
 import models
 import studies
-from models.state_limits import check_state_limits, summarize_limit_violations
+from models.state_limits import StateLimit, check_state_limits, summarize_limit_violations
 from models.uncertainty import corner_params, sample_params
+from mpc import nonlinear_mpc, riccati_terminal_cost, scenario_tree_mpc
+from mpc.scenario_tree import ScenarioTreeProblem
 from mpc.sets import Polytope, Zonotope
 from mpc.tube import TubeOptions, ancillary_feedback, build_tube, disturbance_set
 from mpc.tube_mpc import TubeMPC, nominal_sets
-from studies.cases.pendulum import STATE_LIMITS
+from studies.cases import crane as crane_case
+from studies.cases.pendulum import SWING_UP_TRAVEL
+from studies.robust_rows import with_limits
 
-HORIZON = 50
-#: The region the tube holds the state in, deviations (z, θ, ż, θ̇): the cart travel, the MPC's |θ| <= 0.2 rad,
-#: and a stated ±2 m/s, ±2 rad/s for the rates.
-REGION = np.array([0.5, 0.2, 2.0, 2.0])
-#: The nominal cost (the case's MPC weights) and the ancillary LQR (stiffer, so that Z fits in the region).
-COST = (np.diag([1.0, 10.0, 0.1, 0.1]), 1e-2)
-ANCILLARY = (np.diag([100.0, 100.0, 1.0, 1.0]), 1e-2)
-START = np.array([0.35, 0.0, 0.3, 0.0])
+FOLDER = Path(__file__).resolve().parent
+DOMPC_PYTHON = FOLDER / ".venv-dompc" / "bin" / "python"
+#: The pendulum's limit here: the cart travel of the tube's region, ±0.5 m (the case's physical track is ±2.5 m,
+#: which none of these regulation runs comes near).
+PENDULUM_LIMITS = (
+    StateLimit("cart travel", "z", -SWING_UP_TRAVEL, SWING_UP_TRAVEL, source="SWING_UP_TRAVEL", unit="m"),
+)
+#: Per plant: the limits the violations are counted against, the start, the run's length (s), the parameters
+#: whose ±5 % corners are the tree's branches (the others nominal), the tube's region (deviations, every state)
+#: and its ancillary LQR weights.
+PLANTS = {
+    "pendulum": dict(
+        limits=PENDULUM_LIMITS,
+        start=np.array([0.35, 0.0, 0.2, 0.0]),
+        duration=3.0,
+        branch_names=("m2", "ell"),
+        region=np.array([0.5, 0.2, 2.0, 2.0]),
+        ancillary=(np.diag([100.0, 100.0, 1.0, 1.0]), 1e-2),
+    ),
+    "crane": dict(
+        limits=crane_case.STATE_LIMITS,
+        start=np.zeros(6),
+        duration=20.0,
+        branch_names=("ell1", "ell2"),
+        region=np.array([5.0, 0.2, 0.2, 2.0, 1.0, 1.0]),
+        ancillary=(np.diag([1.0, 100.0, 100.0, 1.0, 1000.0, 1000.0]), 1 / 5000**2),
+    ),
+}
+#: do-mpc's and our converged solve start here, (z, θ, ż, θ̇): near enough upright that the first move is
+#: inside the 5 N limit (a saturated first move would agree trivially).
+DOMPC_START = np.array([0.1, 0.0, 0.0, 0.0])
+#: The tube MPC's horizon on the pendulum (its sample period is the case's MPC's).
+TUBE_HORIZON = 50
 #: A box added to W so that 0 is in its interior (B·[−d, d] alone is flat), in the states' units.
 INTERIOR = 1e-6
 
 
-def pendulum_tube():
-    """The known model, the disturbance-only tube (with its build time) and the parametric attempt's refusal."""
-    plant, case = models.get("pendulum"), studies.get("pendulum")
-    known = case.known_plant(plant)
+def tube_sets(name: str, case, known):
+    """The known model's discrete linearization, the disturbance-only tube (or the refusal's message), its
+    build time, the parametric attempt's refusal and the nominal twin's sets."""
+    spec, plant = PLANTS[name], models.get(name)
     xe, ue = known.equilibrium()
-    model = known.linearize(xe, ue).discretize(case.sample_period)
+    model = known.linearize(xe, ue).discretize(case.mpc.sample_period)
     A, B, umax = model.A, model.B, plant.input_limit
-    K = ancillary_feedback(A, B, *ANCILLARY)
-    X = Polytope.box(-REGION, REGION)
+    K = ancillary_feedback(A, B, *spec["ancillary"])
+    region = spec["region"]
+    X = Polytope.box(-region, region)
     names = [f"{s} upper" for s in plant.state_names] + [f"{s} lower" for s in plant.state_names]
     options = TubeOptions(facet_limit=0)
-    interior = Zonotope.box(-INTERIOR * np.ones(4), INTERIOR * np.ones(4))
-    corners = [plant.linearize(xe, ue, params=p).discretize(case.sample_period) for p in corner_params(plant)]
+    interior = Zonotope.box(-INTERIOR * np.ones(plant.nx), INTERIOR * np.ones(plant.nx))
+    corners = [plant.linearize(xe, ue, params=p).discretize(case.mpc.sample_period) for p in corner_params(plant)]
     refused = None
     try:
         W_box = disturbance_set(
@@ -76,8 +121,8 @@ def pendulum_tube():
             B,
             input_bound=case.input_disturbance,
             vertex_models=[(m.A, m.B) for m in corners],
-            state_lower=-REGION,
-            state_upper=REGION,
+            state_lower=-region,
+            state_upper=region,
             input_lower=-umax,
             input_upper=umax,
         ).plus(interior)
@@ -85,31 +130,210 @@ def pendulum_tube():
     except ValueError as error:
         refused = str(error)
     begin = time.perf_counter()
-    W = disturbance_set(A, B, input_bound=case.input_disturbance).plus(interior)
-    tube = build_tube(A, B, W, X, -umax, umax, feedback=K, state_constraint_names=names, options=options)
-    return plant, case, model, tube, time.perf_counter() - begin, refused, nominal_sets(A, B, K, X, -umax, umax, names)
+    tube, tube_refused = None, None
+    try:
+        W = disturbance_set(A, B, input_bound=case.input_disturbance).plus(interior)
+        tube = build_tube(A, B, W, X, -umax, umax, feedback=K, state_constraint_names=names, options=options)
+    except ValueError as error:
+        tube_refused = str(error)
+    built = time.perf_counter() - begin
+    nominal = nominal_sets(A, B, K, X, -umax, umax, names)
+    return model, tube, tube_refused, built, refused, nominal
 
 
-def monte_carlo(plant, case, controller, samples: int, duration: float) -> dict:
-    """Per-sample limit checks, quadratic costs and the controller's step times over the ±5 % box."""
-    runs, costs, steps, closest = [], [], [], np.inf
-    Q, R = COST
-    for params in sample_params(plant, samples, seed=0):
-        result = models.simulate_closed_loop(
-            plant, controller, 0.0, duration, x0=START, params=params, input_disturbance=case.input_disturbance
+def cost_matrices(case):
+    """The case's MPC weights Q (nx, nx) and R (scalar)."""
+    return np.diag(case.mpc.state_weight), float(case.mpc.input_weight)
+
+
+def monte_carlo(name: str, case, controller, samples: int) -> dict:
+    """Per-sample limit checks and quadratic costs over the ±5 % box (stepped together where the controller
+    can), and the median step time of one closed loop on the nominal truth."""
+    spec, plant = PLANTS[name], models.get(name)
+    Q, R = cost_matrices(case)
+    xs = plant.equilibrium(**{case.tracked: 0.0})[0]
+    params = sample_params(plant, samples, seed=0)
+    common = dict(x0=spec["start"], input_disturbance=case.input_disturbance)
+    if getattr(controller, "lockstep", False):
+        runs = models.simulate_closed_loop_many(plant, controller, 0.0, spec["duration"], params, **common)
+    else:
+        runs = (
+            models.simulate_closed_loop(plant, controller, 0.0, spec["duration"], params=p, **common) for p in params
         )
-        runs.append(check_state_limits(result.t, result.x, plant.state_names, STATE_LIMITS))
-        for limit in STATE_LIMITS:
+    checks, costs, closest = [], [], np.inf
+    for result in runs:
+        checks.append(check_state_limits(result.t, result.x, plant.state_names, spec["limits"]))
+        for limit in spec["limits"]:
             column = result.x[:, plant.state_names.index(limit.state)]
-            closest = min(closest, float(limit.upper - column.max()), float(column.min() - limit.lower))
-        x, u = result.x[:-1], result.u
-        costs.append(float(np.einsum("ki,ij,kj->", x, Q, x) + R * np.sum(u**2)))
-        steps.extend(result.step_time)
+            closest = min(closest, float(limit.upper - np.nanmax(column)), float(np.nanmin(column) - limit.lower))
+        e = result.x[:-1] - xs
+        costs.append(float(np.einsum("ki,ij,kj->", e, Q, e) + R * np.sum(result.u**2)))
+    alone = models.simulate_closed_loop(plant, controller, 0.0, spec["duration"], **common)
     return {
-        "violations": summarize_limit_violations(runs),
+        "violations": summarize_limit_violations(checks),
         "closest": closest,
-        "costs": costs,
-        "step_ms": 1e3 * np.asarray(steps),
+        "costs": np.array(costs),
+        "step_median_ms": 1e3 * float(np.median(alone.step_time)),
+        "step_max_ms": 1e3 * float(np.max(alone.step_time)),
+    }
+
+
+def nmpc_controllers(name: str, case, known):
+    """(nominal NMPC, scenario-tree NMPC, the tree's branches, its build time s) on `case`'s settings with
+    its STATE_LIMITS as soft bounds."""
+    spec, plant = PLANTS[name], models.get(name)
+    settings = with_limits(case.mpc, spec["limits"], backoff=0.0)
+    nominal = nonlinear_mpc(known, settings, tracked=case.tracked)
+    branches = corner_params(plant, names=spec["branch_names"])
+    begin = time.perf_counter()
+    tree = scenario_tree_mpc(known, settings, branches, tracked=case.tracked)
+    return nominal, tree, branches, time.perf_counter() - begin
+
+
+def progress(text: str) -> None:
+    """One line of progress on stderr."""
+    print(f"{time.strftime('%H:%M:%S')} {text}", file=sys.stderr, flush=True)
+
+
+def run_plant(name: str, samples: int) -> dict:
+    """Every controller's Monte Carlo on plant `name` (see the module docstring)."""
+    case, plant = studies.get(name), models.get(name)
+    known = case.known_plant(plant)
+    spec = PLANTS[name]
+    out: dict = {"samples": samples, "duration_s": spec["duration"], "start": spec["start"].tolist()}
+    nominal, tree, branches, tree_build_s = nmpc_controllers(name, case, known)
+    out["branches"] = len(branches)
+    out["tree_build_s"] = tree_build_s
+    progress(f"{name}: tree of {len(branches)} branches built in {tree_build_s:.1f} s")
+    results = {"nominal": monte_carlo(name, case, nominal, samples)}
+    progress(f"{name}: nominal NMPC done")
+    results["robust"] = monte_carlo(name, case, tree, samples)
+    progress(f"{name}: scenario tree done")
+    model, tube, tube_refused, tube_build_s, parametric_refused, twin = tube_sets(name, case, known)
+    progress(f"{name}: tube {'refused' if tube is None else 'built'} ({tube_build_s:.1f} s)")
+    out["tube_build_s"], out["parametric_tube_refused"], out["tube_refused"] = (
+        tube_build_s,
+        parametric_refused,
+        tube_refused,
+    )
+    if tube is not None:
+        Q, R = cost_matrices(case)
+        for key, sets in (("nominal_linear", twin), ("tube", tube)):
+            controller = TubeMPC(
+                model,
+                sets,
+                horizon=TUBE_HORIZON,
+                state_weight=Q,
+                input_weight=R,
+                initial_state=spec["start"],
+                replan=key == "nominal_linear",
+                name=key,
+            )
+            results[key] = monte_carlo(name, case, controller, samples)
+        out["tube_state_margins"] = dict(zip(tube.state_constraint_names, tube.state_margins.tolist()))
+        out["tube_W"] = "the input disturbance on the known model's linearization (B·[-d, d])"
+    else:
+        out["tube_violations"] = None
+    for key, result in results.items():
+        out[f"{key}_violations"] = result["violations"]
+        out[f"{key}_closest_to_a_limit"] = result["closest"]
+        out[f"{key}_step_median_ms"] = result["step_median_ms"]
+        out[f"{key}_step_max_ms"] = result["step_max_ms"]
+    ratio = lambda a, b: float(np.median(results[a]["costs"] / results[b]["costs"]))
+    out["cost_ratio_robust_vs_nominal"] = ratio("robust", "nominal")
+    if tube is not None:
+        out["cost_ratio_tube_vs_nominal_linear"] = ratio("tube", "nominal_linear")
+    return out
+
+
+def dompc_problem(known, case, branches, folder: Path, steps: int) -> tuple[dict, np.ndarray]:
+    """The pendulum's tree problem for do-mpc (written into `folder`) and our converged first move on it."""
+    plant = models.get(case.plant)
+    settings = case.mpc
+    Ts, N, nx = settings.sample_period, settings.horizon, known.nx
+    Q, R = cost_matrices(case)
+    step = known.step_function(Ts, settings.substeps)
+    step.save(str(folder / "step.casadi"))
+    lin = known.linearize().discretize(Ts)
+    P, _ = riccati_terminal_cost(lin.A, lin.B, Q, R)
+    uncertain = {
+        n: sorted({float(row[list(plant.params).index(n)]) for row in branches}) for n in plant.uncertain_params
+    }
+    x0 = DOMPC_START
+    spec = {
+        "model": str(folder / "step.casadi"),
+        "parameter_names": list(known.params),
+        "parameter_values": known.param_vector().tolist(),
+        "nominal_parameters": plant.param_vector().tolist(),
+        "uncertain": uncertain,
+        "Q": Q.tolist(),
+        "R": [[R]],
+        "P": P.tolist(),
+        "horizon": N,
+        "sample_period": Ts,
+        "input_limit": float(known.input_limit[0]),
+        "x0": x0.tolist(),
+        "steps": steps,
+        "tolerance": 1e-10,
+    }
+    S = len(branches)
+    problem = ScenarioTreeProblem(
+        known,
+        branches,
+        None,
+        1,
+        Ts,
+        N,
+        Q,
+        R,
+        substeps=settings.substeps,
+        iteration="sqp",
+        tolerance=1e-10,
+        compiled=False,
+    )
+    terminal = np.kron(np.eye(S) / S, P)
+    solution = problem.solve(x0, np.zeros(1), np.zeros(S * nx), np.zeros(S), terminal, np.zeros(1), np.zeros((N, 1)))
+    if not solution.success:
+        raise RuntimeError(f"our converged tree solve failed: {solution.status}")
+    return spec, solution.inputs[0]
+
+
+def compare_dompc(robust_step_ms: float, steps: int) -> dict:
+    """do-mpc's multi-stage MPC on the pendulum's tree problem against ours (see the module docstring)."""
+    if not DOMPC_PYTHON.exists():
+        return {
+            "do_mpc_skipped": f"no {DOMPC_PYTHON}: python3 -m venv benchmarks/.venv-dompc && "
+            "benchmarks/.venv-dompc/bin/pip install do-mpc"
+        }
+    case, plant = studies.get("pendulum"), models.get("pendulum")
+    known = case.known_plant(plant)
+    branches = corner_params(plant, names=PLANTS["pendulum"]["branch_names"])
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        spec, ours = dompc_problem(known, case, branches, folder, steps)
+        (folder / "problem.json").write_text(json.dumps(spec))
+        done = subprocess.run(
+            [str(DOMPC_PYTHON), str(FOLDER / "dompc_multistage.py"), str(folder / "problem.json")],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    if done.returncode != 0:
+        return {"do_mpc_failed": done.stderr.strip().splitlines()[-5:]}
+    theirs = json.loads(done.stdout.strip().splitlines()[-1])
+    median = 1e3 * float(np.median(theirs["step_s"]))
+    return {
+        "do_mpc_version": theirs["do_mpc_version"],
+        "do_mpc_scenarios": theirs["scenarios"],
+        "do_mpc_first_solve": f"{theirs['first_solve_status']} in {theirs['first_solve_iterations']} iterations",
+        "do_mpc_robust_step_median_ms": median,
+        "do_mpc_steps": len(theirs["step_s"]),
+        "ratio_robust_vs_do_mpc": median / robust_step_ms,
+        "first_move_ours": float(ours[0]),
+        "first_move_do_mpc": float(theirs["first_move"][0]),
+        "first_move_difference": float(abs(ours[0] - theirs["first_move"][0])),
+        "first_move_saturated": bool(abs(ours[0]) >= known.input_limit[0] - 1e-6),
+        "do_mpc_start": DOMPC_START.tolist(),
     }
 
 
@@ -117,39 +341,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", required=True, help="where to write the results")
     parser.add_argument("--samples", type=int, default=200)
-    parser.add_argument("--duration", type=float, default=3.0, help="s per run")
+    parser.add_argument("--plants", default="pendulum,crane", help="comma-separated, of " + ", ".join(PLANTS))
+    parser.add_argument("--dompc-steps", type=int, default=10, help="do-mpc's closed-loop steps timed")
     args = parser.parse_args()
-    plant, case, model, tube, build_s, refused, nominal = pendulum_tube()
-    out: dict = {"plant": "pendulum", "samples": args.samples, "duration_s": args.duration, "start": START.tolist()}
-    for key, sets in (("nominal", nominal), ("tube", tube)):
-        controller = TubeMPC(
-            model,
-            sets,
-            horizon=HORIZON,
-            state_weight=COST[0],
-            input_weight=COST[1],
-            initial_state=START,
-            replan=key == "nominal",
-            name=key,
-        )
-        result = monte_carlo(plant, case, controller, args.samples, args.duration)
-        out[f"{key}_violations"] = result["violations"]
-        out[f"{key}_closest_to_a_limit"] = result["closest"]
-        out[f"{key}_step_median_ms"] = float(np.median(result["step_ms"]))
-        out[f"{key}_step_max_ms"] = float(np.max(result["step_ms"]))
-        out[f"_{key}_costs"] = result["costs"]
-    ratio = np.asarray(out.pop("_tube_costs")) / np.asarray(out.pop("_nominal_costs"))
-    out["cost_ratio_tube_vs_nominal"] = float(np.median(ratio))
-    out["tube_build_s"] = build_s
-    out["tube_state_margins"] = dict(zip(tube.state_constraint_names, tube.state_margins.tolist()))
-    out["tube_input_bounds"] = [tube.input_lower.tolist(), tube.input_upper.tolist()]
-    out["tube_W"] = "the 0.5 N input disturbance on the known model's linearization (B·[-0.5, 0.5] N)"
-    out["parametric_tube_refused"] = refused
-    out["robust_violations"] = None  # the scenario-tree NMPC is not built
+    out: dict = {}
+    for name in args.plants.split(","):
+        out[name] = run_plant(name, args.samples)
+        with open(args.json, "w") as handle:  # each plant's results as soon as they are in
+            json.dump(out, handle, indent=2)
+        progress(f"{name}: done")
+    if "pendulum" in out:
+        pendulum = out["pendulum"]
+        for key in ("nominal_violations", "robust_violations", "tube_violations", "robust_step_median_ms"):
+            out[key] = pendulum.get(key)
+        out |= compare_dompc(pendulum["robust_step_median_ms"], args.dompc_steps)
     out["load_average"] = os.getloadavg()
     with open(args.json, "w") as handle:
         json.dump(out, handle, indent=2)
-    print(json.dumps({k: v for k, v in out.items() if k != "parametric_tube_refused"}, indent=2))
+    print(json.dumps(out, indent=2))
 
 
 if __name__ == "__main__":

@@ -6,7 +6,10 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   under its pole-placement block (II.15(c), designed on the +5 % known model,
   Ts = 0.01 s), 1,000 samples of the ±5 % parameter box, 20 s each after the
   text's 2 m step, 2 RK4 sub-steps per sample (the studies' setting), 2
-  threads, JIT-compiled: the studies' Monte Carlo scenario. Timed from the
+  threads, JIT-compiled (the C kernel of `models.mc_kernel`, ``mc_engine``):
+  the studies' Monte Carlo scenario. Beside it, in the same run, the best of
+  the same Monte Carlo on the JIT-compiled CasADi map (``mc_casadi_map_*``,
+  the engine where there is no kernel). Timed from the
   call to having read every sample's outputs, states and commands. Baseline:
   python-control's `control.input_output_response` on the same loop (the same
   RK4 step as a discrete-time plant, the same block as a static controller,
@@ -15,8 +18,8 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   operations of one closed-loop sample period (CasADi instructions) x steps, per
   sample, against the threads x one core's measured flop rate
   (``core_flop_rate_per_s``: independent fused multiply-add chains in C, built
-  with models.compile's flags and timed inside C; ``core_flop_rate_method``
-  says how it was measured).
+  with models.compile's flags and with the Monte Carlo kernel's, timed inside C,
+  the faster; ``core_flop_rate_method`` says how it was measured).
 
 - ``quick`` and ``full``: wall time and peak memory of ``python -m studies --quick``
   and of the default ``python -m studies``, each run as a user runs it (a child
@@ -46,6 +49,7 @@ Usage: python benchmarks/studies.py [--json PATH] [--only mc quick full dask] [-
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import shutil
 import statistics
@@ -64,8 +68,11 @@ import numpy as np
 import models
 import studies
 from designs.statespace_blocks import StateFeedback
+from models import mc_kernel
 from models.closed_loop import closed_loop_function
 from models.files import write_json
+from models.monte_carlo_batch import MonteCarloPlan
+from models.run_setup import RunSetup
 from studies import providers
 
 PLANT, SAMPLE_PERIOD, DURATION, SUBSTEPS, THREADS, REL = "pendulum", 0.01, 20.0, 2, 2, 0.05
@@ -166,21 +173,29 @@ def numpy_flop_rate(size: int = 2048, repeat: int = 2000) -> float:
     return 2.0 * size * repeat / best
 
 
+#: The flags the flop-rate kernel is built with, each timed: the project's (gcc picks 256-bit vectors on
+#: some AVX-512 machines) and the Monte Carlo kernel's (512-bit vectors where there are some).
+FLOP_RATE_FLAGS = (models.compile.FLAGS, mc_kernel.KERNEL_FLAGS)
+
+
 def core_flop_rate(repeat: int = 2_000_000) -> tuple[float, str]:
     """(flops per second of one core, how it was measured): `FMA_CHAINS` independent fused
-    multiply-add chains in C, compiled with the project's flags (models.compile.FLAGS), the best of
-    20 timings inside C; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
+    multiply-add chains in C, compiled with each of `FLOP_RATE_FLAGS`, the best of 20 timings inside C,
+    the faster build; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
     compiler = models.compile.compiler()
     if compiler is None:
         return numpy_flop_rate(), "numpy multiply-add (no C compiler)"
+    rates = {}
     with tempfile.TemporaryDirectory(prefix="flop-rate-") as folder:
         source = Path(folder) / "fma.c"
         source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat})
         program = str(Path(folder) / "fma")
-        subprocess.run([*compiler, *models.compile.FLAGS, "-o", program, str(source), "-lm"], check=True)
-        printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
-    flags = " ".join(models.compile.FLAGS)
-    return float(printed.split()[0]), f"C, {FMA_CHAINS} independent fma chains, {flags}"
+        for flags in FLOP_RATE_FLAGS:
+            subprocess.run([*compiler, *flags, "-o", program, str(source), "-lm"], check=True)
+            printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
+            rates[" ".join(flags)] = float(printed.split()[0])
+    flags = max(rates, key=rates.__getitem__)
+    return rates[flags], f"C, {FMA_CHAINS} independent fma chains, {flags}"
 
 
 def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[float, models.MonteCarloResult]:
@@ -188,6 +203,21 @@ def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[flo
     batch = models.monte_carlo(plant, block, reference, DURATION, samples, substeps=SUBSTEPS, threads=THREADS, jit=jit)
     _consume(batch)
     return time.perf_counter() - start, batch
+
+
+def _timed_casadi_map(plant, block, reference, samples) -> float:
+    """Seconds of the same Monte Carlo on the JIT-compiled CasADi map (the engine without the C kernel),
+    its results read as `_consume` reads them."""
+    setup = RunSetup.build(plant, block, reference, DURATION, substeps=SUBSTEPS)
+    plan = MonteCarloPlan.build(plant, block, setup, samples, threads=THREADS, jit=True)
+    plan = dataclasses.replace(plan, kernel=None, engine="CasADi map")
+    plan = dataclasses.replace(plan, chunk=MonteCarloPlan.build(plant, block, setup, samples, threads=THREADS).chunk)
+    start = time.perf_counter()
+    out = plan.allocate(len(samples))
+    for first, last in plan.chunks():
+        plan.run_chunk(first, last, tuple(None if a is None else a[first:last] for a in out))
+    _consume(plan.result(out, 0, len(samples)))
+    return time.perf_counter() - start
 
 
 def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_samples: int = 3) -> dict:
@@ -205,6 +235,9 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
     first_s, batch = _timed_monte_carlo(plant, block, reference, params, jit=True)
     times = [_timed_monte_carlo(plant, block, reference, params, jit=True)[0] for _ in range(repeat)]
     vm_s, _ = _timed_monte_carlo(plant, block, reference, params, jit=False)
+    _timed_casadi_map(plant, block, reference, params[:2])  # compiled once, outside the timing
+    casadi_map_s = min(_timed_casadi_map(plant, block, reference, params) for _ in range(repeat))
+    best_kernel_s = min(times)
 
     loop = python_control_loop(plant, block)
     t = SAMPLE_PERIOD * np.arange(int(round(DURATION / SAMPLE_PERIOD)) + 1)
@@ -219,6 +252,8 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
             float(np.max(np.abs(response.outputs[-1, :-1] - batch.u[i, :, 0]))),
         )
     per_s = samples / statistics.median(times)
+    setup = RunSetup.build(plant, block, reference, DURATION, substeps=SUBSTEPS)
+    engine = MonteCarloPlan.build(plant, block, setup, params[:1], jit=True).engine
     operations = step_operations(plant, block)
     flop_rate, flop_method = core_flop_rate()
     steps = int(round(DURATION / SAMPLE_PERIOD))
@@ -226,6 +261,10 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
     baseline_per_s = baseline_samples / baseline_s
     return {
         "mc_samples_per_s": per_s,
+        "mc_best_samples_per_s": samples / best_kernel_s,
+        "mc_casadi_map_best_samples_per_s": samples / casadi_map_s,
+        "mc_ratio_best_vs_casadi_map": casadi_map_s / best_kernel_s,
+        "mc_engine": engine,
         "mc_first_call_samples_per_s": samples / first_s,
         "mc_vm_samples_per_s": samples / vm_s,
         "mc_bound_samples_per_s": bound_per_s,
@@ -350,8 +389,8 @@ _MPC_KINDS = ("linear MPC", "nonlinear MPC")
 
 
 def _wall_by_kind(results: Path) -> dict:
-    """Seconds of the run's rows (timings.csv's wall_s, summed over plants) per controller kind, the
-    MPCs' Monte Carlo rows also alone."""
+    """Seconds of the run's rows (timings.csv's wall_s, summed over plants) per controller kind, and of
+    their Monte Carlo rows alone."""
     import pandas as pd
 
     tables = [pd.read_csv(path) for path in sorted(results.glob("*/timings.csv"))]
@@ -361,11 +400,9 @@ def _wall_by_kind(results: Path) -> dict:
     table = table[table["sample"].isna()]  # the rows' totals (per-sample lines have a sample number)
     kind = table["controller"].where(table["controller"].isin(_MPC_KINDS), "blocks").str.replace(" ", "_")
     out = {f"rows_{k}_s": float(v) for k, v in table["wall_s"].groupby(kind).sum().items()}
-    mc = table[table["scenario"] == "mc"]
-    for label in _MPC_KINDS:
-        rows = mc[mc["controller"] == label]
-        if len(rows):
-            out[f"mc_rows_{label.replace(' ', '_')}_s"] = float(rows["wall_s"].sum())
+    mc = table["scenario"] == "mc"
+    for name, seconds in table["wall_s"][mc].groupby(kind[mc]).sum().items():
+        out[f"mc_rows_{name}_s"] = float(seconds)
     return out
 
 
@@ -378,7 +415,7 @@ def run_studies_command(*arguments: str) -> dict:
     on a shared machine the wall time grows with the load, this much less); peak_mb, the largest
     resident set of any one process of the command (ru_maxrss of RUSAGE_CHILDREN, children
     included); tree_peak_mb, the largest sum over its processes at once; rows_<kind>_s, the rows'
-    wall_s (timings.csv) summed per kind (blocks, linear_MPC, nonlinear_MPC; the Monte Carlo rows of the MPCs
+    wall_s (timings.csv) summed per kind (blocks, linear_MPC, nonlinear_MPC; their Monte Carlo rows
     also alone, mc_rows_<kind>_s)
     """
     repo = Path(__file__).resolve().parent.parent

@@ -249,6 +249,17 @@ class Codesign:
         self.lbx, self.ubx = self.joint_bounds(self.joint)
         self.cost_fn = _plant_cost_function(self.names, plant_cost)
 
+    def __getstate__(self) -> dict:
+        """Everything but the joint problem (CasADi MX, not picklable), which `__setstate__` builds again
+        from the setup: the problem travels to other processes (`designs.codesign_global`'s sweep)."""
+        state = dict(self.__dict__)
+        state.pop("joint")
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.joint = self.setup.problem(self.names)
+
     def joint_bounds(self, problem: TuningProblem) -> tuple[np.ndarray, np.ndarray]:
         """(lbx, ubx) of a joint problem: the setup's gain bounds, then each designed parameter's range."""
         lbx, ubx = gain_bounds(problem, self.setup.bounds)

@@ -53,6 +53,10 @@ class ClosedLoopWork:
         self.problem, self.method, self.nested_tol, self.step = problem, method, nested_tol, step
         self.answers: dict = {}
 
+    def __getstate__(self) -> dict:
+        """The work without the answers kept here (only the sweep travels to other processes)."""
+        return dict(self.__dict__) | {"answers": {}}
+
     def evaluate(self, values: tuple) -> tuple[float, bool]:
         """(objective the nested method sees, converged and feasible) with the parameters fixed at `values`."""
         result, value = self.problem.inner(np.array(values, dtype=float), [], from_nearest=False)
@@ -89,6 +93,7 @@ def codesign_globally(
     nested_tol: float = 1e-3,
     max_seconds: float = MAX_SECONDS,
     max_memory: float = MAX_MEMORY,
+    map: Callable | None = None,
 ) -> GlobalResult:
     """Closed-loop co-design of `design_params` with the block's gains, under the global layer.
 
@@ -97,8 +102,10 @@ def codesign_globally(
     samples, keep, tolerance, seed : the sweep (`mpc.global_search.search`; default `DEFAULT_SAMPLES` per
         parameter), refused (ValueError naming `samples`) when one timed tuning makes the search exceed
         `max_seconds` (s) or `max_memory` (bytes)
+    map : ``map(function, items) -> list`` for the sweep's tunings (a `studies.distributed` executor's
+        ``map``: the work is pickled with its problem, and the numbers are those of this process), or None
 
-    Runs in this process (the tunings share one compiled problem). Returns the `GlobalResult`: every
+    The refinements run in this process (their answers are kept whole). Returns the `GlobalResult`: every
     distinct local optimum, the best, and its `CodesignResult` as ``answer``.
     """
     if not isinstance(setup, TuningSetup):
@@ -117,7 +124,16 @@ def codesign_globally(
     check_budget(
         samples, len(ranges), keep, seconds, 8.0 * 4 * trial.size, max_seconds=max_seconds, max_memory=max_memory
     )
-    result = search(work.evaluate, work.refine, ranges, samples=samples, keep=keep, tolerance=tolerance, seed=seed)
+    spread = None
+    if map is not None:
+        elsewhere = map
+
+        def spread(function, items):  # the sweep elsewhere, the refinements here (`work.answers` keeps them)
+            return elsewhere(function, items) if function == work.evaluate else [function(item) for item in items]
+
+    result = search(
+        work.evaluate, work.refine, ranges, samples=samples, keep=keep, tolerance=tolerance, seed=seed, map=spread
+    )
     chosen: CodesignResult = work.answers[tuple(result.best.start[n] for n in problem.names)]
     result.answer = chosen
     result.extra["method"] = method

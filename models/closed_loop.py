@@ -33,6 +33,7 @@ from .block import Block, saturate
 from .checks import SimulationError, as_vector, boolean, check_memory, integer
 from .compile import NumpyCall
 from .compile import jit as compile_jit
+from .mc_kernel import KernelUnavailable, closed_loop_step, kernel
 from .plant import Plant
 from .run_setup import RunSetup, check_sizes, doubles_per_step
 from .simulate import DIVERGENCE_BOUND, output_call
@@ -136,6 +137,7 @@ class _Trace:
     status : the controller's per-step records, or None
     xc : (N+1, n_state) the controller state of a Block, else None
     xc_check : the controller states as an array, for the fault check (None when their shape changed)
+    y : (N+1, ny) the noise-free outputs where the run computed them (the C kernel), else None
     """
 
     x: np.ndarray
@@ -145,6 +147,7 @@ class _Trace:
     status: list | None
     xc: np.ndarray | None
     xc_check: np.ndarray | None
+    y: np.ndarray | None = None
 
 
 def batch_outputs(plant: Plant, x: np.ndarray, params: np.ndarray) -> np.ndarray:
@@ -191,7 +194,7 @@ def closed_loop_function(
         f"closed_loop_function of {n_steps} steps of {plant.name}",
         "use fewer steps",
     )
-    rk4 = plant.step_function(controller.sample_period, substeps)
+    advance = closed_loop_step(plant, controller, substeps)
     nx, nc = plant.nx, controller.n_state
     s = ca.SX.sym("s", nx + nc)
     r = ca.SX.sym("r", controller.n_reference)
@@ -199,11 +202,10 @@ def closed_loop_function(
     d = ca.SX.sym("d", plant.nu)
     p = ca.SX.sym("p", plant.n_params)
     g = ca.SX.sym("gains", controller.gain_vector().size)
-    x, xc = s[:nx], s[nx:]
+    x = s[:nx]
     meas = (plant.casadi_h(x, p) if controller.measures == "outputs" else x) + noise
-    xc_next, u = controller.casadi_step(xc, meas, r, g)
-    x_next = rk4(x, saturate(u, plant.input_limit) + d, p)
-    one = ca.Function("closed_loop_step", [s, r, noise, d, p, g], [ca.vertcat(x_next, xc_next), u, meas])
+    s_next, u = advance(s, meas, r, d, p, g)
+    one = ca.Function("closed_loop_step", [s, r, noise, d, p, g], [s_next, u, meas])
     if smooth:
         one = smoothed(one)
     run = one.mapaccum("closed_loop_run", n_steps)
@@ -236,7 +238,7 @@ def release(plant: Plant, controller: Block) -> int:
         key
         for key, value in plant.function_cache.items()
         if isinstance(key, tuple)
-        and key[0] in ("closed_loop", "closed_loop_batch")
+        and key[0] in ("closed_loop", "closed_loop_batch", "mc_kernel")
         and isinstance(value, tuple)
         and value[0] is step
     ]
@@ -249,6 +251,12 @@ def _cache_key(controller: Block, n_steps: int, substeps: int, jit: bool, smooth
     """The key of a `closed_loop_function` in the plant's function cache."""
     key: tuple = ("closed_loop", id(controller.casadi_step), controller.sample_period, n_steps, substeps, jit)
     return key + (("smooth",) if smooth else ())
+
+
+#: Steps per call of a single run's closed loop: building CasADi's mapaccum of a run costs time that grows
+#: with its length (about 0.4 s at 10,000 steps, 20 ms at 1,000), so longer runs call a Function of this
+#: many steps once per block. The numbers do not depend on it.
+RUN_BLOCK_STEPS = 1024
 
 
 def _numpy_run(plant: Plant, controller: Block, n_steps: int, substeps: int, jit: bool) -> NumpyCall:
@@ -337,7 +345,9 @@ def simulate_closed_loop(
     seed : seed of the noise generator (None, an integer >= 0, or a numpy SeedSequence)
     compiled : force (True) or refuse (False) the compiled path; default: compiled for Blocks
     allow_divergence : return a result with `diverged_at` set instead of raising
-    jit : compile the run to machine code first (Blocks only; pays off for long or repeated runs)
+    jit : compile the run to machine code first (Blocks only; pays off for long or repeated runs): the C
+        kernel of `models.mc_kernel` as a batch of one, the numbers `monte_carlo(..., jit=True)` gives
+        this sample; where there is none, the compiled CasADi run
     substeps : RK4 steps of the plant per controller sample
     xc0 : the controller's initial state; default its `initial_state` from the first measurement and reference
 
@@ -383,7 +393,7 @@ def simulate_closed_loop(
         controller,
         setup,
         x=x,
-        y=batch_outputs(plant, x[None], p[None])[0],
+        y=batch_outputs(plant, x[None], p[None])[0] if trace.y is None else trace.y,
         u=u,
         measured=trace.measured,
         xc=trace.xc,
@@ -413,10 +423,29 @@ def _initial_controller_state(plant: Plant, controller, setup: RunSetup, p, nois
 
 
 def _compiled_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc_init, jit: bool) -> _Trace:
-    """The run of a Block as one call of its cached `closed_loop_function`; noise (N, n_measured)."""
+    """The run of a Block by its cached `closed_loop_function`: one call, or for a run longer than
+    `RUN_BLOCK_STEPS` one call per block of that many steps, each from the state the last left (the
+    same numbers: the same steps in the same order); noise (N, n_measured)."""
     n = setup.n_steps
-    run = _numpy_run(plant, controller, n, setup.substeps, jit)
-    X, XC, U, M = run(setup.x0, xc_init, setup.r[:-1].T, noise.T, setup.d.T, p, controller.gain_vector())
+    if jit:
+        try:
+            compiled = kernel(plant, controller, setup.substeps)
+        except KernelUnavailable:
+            pass  # the compiled CasADi run below
+        else:
+            out = {
+                "x": np.empty((1, n + 1, plant.nx)),
+                "xc": np.empty((1, n + 1, controller.n_state)),
+                "y": np.empty((1, n + 1, plant.ny)),
+                "u": np.empty((1, n, plant.nu)),
+                "measured": np.empty((1, n, setup.n_measured)),
+            }
+            noisy = noise[None] if setup.noisy else None
+            compiled.run(setup.x0, xc_init[None], setup.r[:-1], noisy, setup.d, p[None], controller.gain_vector(), out)
+            x, xc, u, measured = out["x"][0], out["xc"][0], out["u"][0], out["measured"][0]
+            step_time = _time_block(controller, xc[:-1], measured, setup.r[:-1])
+            return _Trace(x, u, measured, step_time, None, xc, xc, out["y"][0])
+    X, XC, U, M = _blocked_run(plant, controller, setup, p, noise, xc_init, jit)
     x = np.vstack([setup.x0, X.T])
     xc = np.vstack([xc_init, XC.T]) if controller.n_state else np.zeros((n + 1, 0))
     u, measured = U.T, M.T
@@ -424,14 +453,36 @@ def _compiled_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc
     return _Trace(x, u, measured, step_time, None, xc, xc)
 
 
+def _blocked_run(plant: Plant, controller: Block, setup: RunSetup, p, noise, xc_init, jit: bool) -> list:
+    """(X, XC, U, M) of `closed_loop_function`'s whole run, computed a block of at most `RUN_BLOCK_STEPS`
+    steps at a time (the last block's inputs padded with zeros, its extra steps dropped)."""
+    n, gains = setup.n_steps, controller.gain_vector()
+    inputs = [setup.r[:-1].T, noise.T, setup.d.T]
+    if n <= RUN_BLOCK_STEPS:
+        return _numpy_run(plant, controller, n, setup.substeps, jit)(setup.x0, xc_init, *inputs, p, gains)
+    run = _numpy_run(plant, controller, RUN_BLOCK_STEPS, setup.substeps, jit)
+    blocks = -(-n // RUN_BLOCK_STEPS)
+    padded = [np.hstack([a, np.zeros((a.shape[0], blocks * RUN_BLOCK_STEPS - n))]) for a in inputs]
+    x, xc, parts = setup.x0, xc_init, []
+    for b in range(blocks):
+        columns = slice(b * RUN_BLOCK_STEPS, (b + 1) * RUN_BLOCK_STEPS)
+        with np.errstate(all="ignore"):  # the padded steps past the run may overflow; they are dropped
+            out = run(x, xc, *(a[:, columns] for a in padded), p, gains)
+        parts.append(out)
+        x, xc = out[0][:, -1], out[1][:, -1]
+    return [np.hstack([part[i] for part in parts])[:, :n] for i in range(4)]
+
+
 def _time_block(controller: Block, xc, measured, r) -> np.ndarray:
-    """Controller-only compute time per sample: the step mapped over the recorded inputs."""
+    """Controller-only compute time per sample, (N,) s, each the mean: the step mapped over the first
+    `RUN_BLOCK_STEPS` recorded inputs (building the map of a longer run costs more than the timing tells)."""
     n = len(measured)
-    mapped = controller.casadi_step.map(n)
-    args = (xc.T if controller.n_state else np.zeros((0, n)), measured.T, r.T, controller.gain_vector())
+    m = min(n, RUN_BLOCK_STEPS)
+    mapped = controller.casadi_step.map(m)
+    args = (xc[:m].T if controller.n_state else np.zeros((0, m)), measured[:m].T, r[:m].T, controller.gain_vector())
     start = time.perf_counter()
     mapped(*args)
-    return np.full(n, (time.perf_counter() - start) / n)
+    return np.full(n, (time.perf_counter() - start) / max(m, 1))
 
 
 def _python_loop(plant: Plant, controller, setup: RunSetup, p, noise, xc) -> _Trace:

@@ -1,9 +1,14 @@
 """Monte Carlo: a `Block`'s closed loop on many parameter samples, batched.
 
-The run of `models.closed_loop.closed_loop_function` is mapped over a chunk of
-samples (one CasADi ``map``, `threads` evaluations in parallel) and the chunks
-run one after another; `monte_carlo` holds every sample's results,
-`monte_carlo_chunks` one chunk's at a time. Sample i's numbers do not depend on
+A chunk of samples runs in one call and the chunks run one after another;
+`monte_carlo` holds every sample's results, `monte_carlo_chunks` one chunk's at
+a time. With ``jit=True`` a chunk is one call of the compiled kernel of
+`models.mc_kernel` (the closed loop in C over samples x steps, vectorized across
+samples, `threads` ranges of samples in parallel). Without it, or where there is
+no kernel (an operation the kernel's generator does not write, or no compiled
+library: `MonteCarloPlan.engine` says which and why), the run of
+`models.closed_loop.closed_loop_function` is mapped over the chunk (one CasADi
+``map``, `threads` evaluations in parallel). Sample i's numbers do not depend on
 the chunking, nor on which process runs it (``first_sample``): its noise is
 drawn from the generator seeded with (seed, i).
 """
@@ -20,6 +25,7 @@ from .block import Block
 from .checks import as_matrix, boolean, check_memory, format_bytes, integer
 from .closed_loop import ClosedLoopResult, batch_outputs, closed_loop_function, first_faults
 from .compile import NumpyCall
+from .mc_kernel import KernelUnavailable, MonteCarloKernel, kernel
 from .plant import Plant
 from .run_setup import RunSetup
 
@@ -50,11 +56,25 @@ class MonteCarloResult(Sequence):
     diverged_at : (M,) s, NaN where the sample did not diverge (the rule: `models.closed_loop`)
     first_sample : index of this batch's first sample in the whole sample set
         (non-zero for the chunks of `monte_carlo_chunks`)
-    y : (M, N+1, ny) noise-free outputs, computed on first use
+    y : (M, N+1, ny) noise-free outputs (given, or computed on first use)
     """
 
     def __init__(
-        self, *, plant: Plant, controller: str, t, r, d, x, xc, u, measured, params, diverged_at, first_sample: int = 0
+        self,
+        *,
+        plant: Plant,
+        controller: str,
+        t,
+        r,
+        d,
+        x,
+        xc,
+        u,
+        measured,
+        params,
+        diverged_at,
+        first_sample: int = 0,
+        y=None,
     ):
         self._plant = plant
         self.controller = controller
@@ -64,7 +84,7 @@ class MonteCarloResult(Sequence):
         self.first_sample = first_sample
         self.input_limit = plant.input_limit.copy()
         self.state_names, self.output_names, self.input_names = plant.state_names, plant.output_names, plant.input_names
-        self._y: np.ndarray | None = None
+        self._y: np.ndarray | None = y
         self._step_time = np.full(len(t) - 1, np.nan)
         for arr in (
             self.t,
@@ -78,6 +98,7 @@ class MonteCarloResult(Sequence):
             self.diverged_at,
             self.input_limit,
             self._step_time,
+            *(() if y is None else (y,)),
         ):
             arr.setflags(write=False)
 
@@ -190,6 +211,8 @@ class MonteCarloPlan:
     chunk : samples per batched call
     chunk_bytes : estimated working memory of one chunk's call, bytes
     first_sample : index of the first row of `samples` in the whole sample set (it sets the noise)
+    kernel : the compiled kernel a chunk runs on (`models.mc_kernel`), or None for the CasADi map
+    engine : what runs a chunk, in words: "C kernel", or "CasADi map" with the reason there is no kernel
     """
 
     plant: Plant
@@ -201,6 +224,8 @@ class MonteCarloPlan:
     chunk: int
     chunk_bytes: float
     first_sample: int = 0
+    kernel: MonteCarloKernel | None = None
+    engine: str = "CasADi map"
 
     @classmethod
     def build(
@@ -221,8 +246,9 @@ class MonteCarloPlan:
         ----------
         setup : from `RunSetup.build` for `plant` and `controller`
         param_samples : (M, n_params), M >= 1, every entry a valid value of its parameter
+        jit : run the compiled kernel (`models.mc_kernel`) where there is one, else the compiled CasADi map
         chunk_size : samples per batched call; default the most that keeps one chunk within
-            `MONTE_CARLO_CHUNK_BYTES` and `MONTE_CARLO_CHUNK_STEPS` (at least `threads`)
+            `MONTE_CARLO_CHUNK_BYTES` and, for the CasADi map, `MONTE_CARLO_CHUNK_STEPS` (at least `threads`)
 
         Raises
         ------
@@ -247,13 +273,20 @@ class MonteCarloPlan:
         n, m, nc = setup.n_steps, samples.shape[0], controller.n_state
         nm = setup.n_measured
         work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if setup.noisy else 2) * nm + controller.n_reference)
+        compiled, engine = None, "CasADi map (jit=False)"
+        if jit:
+            try:
+                compiled, engine = kernel(plant, controller, setup.substeps), "C kernel"
+            except KernelUnavailable as err:
+                engine = f"CasADi map (no C kernel: {err})"
         if chunk_size is None:
-            by_steps = max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
+            # The step budget bounds the cost of building a CasADi map; the kernel has none.
+            by_steps = m if compiled else max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
             chunk = int(min(m, max(1, min(by_steps, MONTE_CARLO_CHUNK_BYTES // work))))
         else:
             chunk = min(m, integer(chunk_size, "chunk_size", minimum=1))
         first_sample = integer(first_sample, "first_sample", minimum=0)
-        return cls(plant, controller, setup, samples, threads, jit, chunk, chunk * work, first_sample)
+        return cls(plant, controller, setup, samples, threads, jit, chunk, chunk * work, first_sample, compiled, engine)
 
     def sample_bytes(self) -> float:
         """Bytes the results of one sample hold: x, xc, y over N+1 samples, u and measured over N."""
@@ -269,7 +302,8 @@ class MonteCarloPlan:
 
     def allocate(self, m: int) -> tuple:
         """Uninitialized result arrays of m samples: x (m, N+1, nx), xc (m, N+1, n_state), u (m, N, nu),
-        measured (m, N, n_measured), diverged_at (m,)."""
+        measured (m, N, n_measured), diverged_at (m,), and y (m, N+1, ny) when the kernel computes the
+        outputs (else None: the result computes them on first use)."""
         n, nm = self.setup.n_steps, self.setup.n_measured
         return (
             np.empty((m, n + 1, self.plant.nx)),
@@ -277,13 +311,15 @@ class MonteCarloPlan:
             np.empty((m, n, self.plant.nu)),
             np.empty((m, n, nm)),
             np.empty(m),
+            None if self.kernel is None else np.empty((m, n + 1, self.plant.ny)),
         )
 
     def run_chunk(self, start: int, stop: int, out: tuple) -> None:
         """Run samples start..stop-1 into `out`, arrays as `allocate` gives for stop - start samples.
 
-        One call of the batched closed loop; the controller's initial states come from each sample's
-        first measurement, and diverged_at is the time of each sample's first fault (NaN if none).
+        One call of the batched closed loop (the kernel, or the CasADi map: `engine`); the controller's
+        initial states come from each sample's first measurement, and diverged_at is the time of each
+        sample's first fault (NaN if none).
         """
         plant, controller, setup = self.plant, self.controller, self.setup
         n, c = setup.n_steps, stop - start
@@ -294,14 +330,22 @@ class MonteCarloPlan:
             for j in range(c):
                 noise[j] = setup.noise(sample=self.first_sample + start + j)
         xc0 = self._initial_states(params, None if noise is None or not n else noise[:, 0])
-        call = _batch_run(plant, controller, n, setup.substeps, self.jit, c, self.threads, setup.noisy)
-        noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
-        X, XC, U, M = call(setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, params.T, controller.gain_vector())
-        x, xc, u, measured, diverged_at = out
-        x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
-        xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
-        u[:] = U.T.reshape(c, n, plant.nu)
-        measured[:] = M.T.reshape(c, n, nm)
+        x, xc, u, measured, diverged_at, y = out
+        if self.kernel is not None:
+            arrays = {"x": x, "xc": xc, "y": y, "u": u, "measured": measured}
+            self.kernel.run(
+                setup.x0, xc0, setup.r[:-1], noise, setup.d, params, controller.gain_vector(), arrays, self.threads
+            )
+        else:
+            call = _batch_run(plant, controller, n, setup.substeps, self.jit, c, self.threads, setup.noisy)
+            noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
+            X, XC, U, M = call(
+                setup.x0, xc0.T, setup.r[:-1].T, noise_arg, setup.d.T, params.T, controller.gain_vector()
+            )
+            x[:, 0], x[:, 1:] = setup.x0, X.T.reshape(c, n, nx)
+            xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
+            u[:] = U.T.reshape(c, n, plant.nu)
+            measured[:] = M.T.reshape(c, n, nm)
         first = first_faults(x, u, xc)
         diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
 
@@ -326,7 +370,7 @@ class MonteCarloPlan:
     def result(self, out: tuple, start: int, stop: int) -> MonteCarloResult:
         """The samples start..stop-1 of the plan, whose arrays `out` holds, as a `MonteCarloResult`
         (its first sample first_sample + start of the whole sample set)."""
-        x, xc, u, measured, diverged_at = out
+        x, xc, u, measured, diverged_at, y = out
         return MonteCarloResult(
             plant=self.plant,
             controller=self.controller.name,
@@ -340,6 +384,7 @@ class MonteCarloPlan:
             params=np.array(self.samples[start:stop]),
             diverged_at=diverged_at,
             first_sample=self.first_sample + start,
+            y=y,
         )
 
 
@@ -423,7 +468,7 @@ def monte_carlo(
     )
     out = plan.allocate(m)
     for start, stop in plan.chunks():
-        plan.run_chunk(start, stop, tuple(a[start:stop] for a in out))
+        plan.run_chunk(start, stop, tuple(None if a is None else a[start:stop] for a in out))
     return plan.result(out, 0, m)
 
 

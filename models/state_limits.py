@@ -3,31 +3,42 @@
 A case declares its limits (cart travel, beam length, swing angle, panel
 deflection) as :class:`StateLimit` records with their source; :func:`check_state_limits`
 reads one run (sample times and state trajectory) and reports, per limit, whether
-it was left, by how much and when first.
+it was left, by how much and when first. A limit bounds one state, or the
+difference of two (a panel's deflection φ − θ from the body it hangs on), and
+its upper bound may be a plant parameter (a beam's length), read from the
+parameters of the plant the run simulated (:meth:`StateLimit.at`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 
 @dataclass(frozen=True)
 class StateLimit:
-    """A physical bound ``lower <= x[state] <= upper`` on one state.
+    """A physical bound ``lower <= x[state] - x[relative_to] <= upper`` (``x[state]`` alone without `relative_to`).
 
     Parameters
     ----------
     name : str
-        What the limit is ("cart travel").
+        What the limit is ("cart travel"); the verdict says "leaves cart travel by 0.03 m".
     state : str
         The plant's state name the bound applies to.
     lower, upper : float
         Bounds in the state's units (``-inf``/``inf`` for one-sided limits).
     source : str
         Where the number comes from (the text's section or the case's reasoning).
+    unit : str
+        The state's unit, written beside the excess ("m", "rad").
+    relative_to : str or None
+        A second state: the bound is on ``x[state] - x[relative_to]`` (a deflection).
+    upper_parameter : str or None
+        A plant parameter whose value is the upper bound on the plant simulated (the beam's
+        length ``ell``); `upper` is its nominal value.
     """
 
     name: str
@@ -35,12 +46,53 @@ class StateLimit:
     lower: float
     upper: float
     source: str
+    unit: str = ""
+    relative_to: str | None = None
+    upper_parameter: str | None = None
 
     def __post_init__(self) -> None:
         if not self.lower < self.upper:
             raise ValueError(f"state limit {self.name!r}: lower {self.lower} must be below upper {self.upper}")
+        if math.isnan(self.lower) or math.isnan(self.upper):
+            raise ValueError(f"state limit {self.name!r}: bounds must be numbers, got ({self.lower}, {self.upper})")
         if not self.source:
             raise ValueError(f"state limit {self.name!r}: give its source")
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """The states the limit reads: (state,) or (state, relative_to)."""
+        return (self.state,) if self.relative_to is None else (self.state, self.relative_to)
+
+    def at(self, params: Mapping[str, float] | None) -> StateLimit:
+        """This limit on the plant with `params` (name -> value): the upper bound read from
+        `upper_parameter` when it has one (ValueError when `params` lacks it), else itself."""
+        if self.upper_parameter is None or params is None:
+            return self
+        if self.upper_parameter not in params:
+            raise ValueError(
+                f"state limit {self.name!r}: its upper bound is the parameter {self.upper_parameter!r}, "
+                f"which is not one of {sorted(params)}"
+            )
+        return replace(self, upper=float(params[self.upper_parameter]), upper_parameter=None)
+
+    def values(self, x: np.ndarray, state_names: Sequence[str]) -> np.ndarray:
+        """The limited quantity over a run: x[:, state] (− x[:, relative_to]), shape (N,)."""
+        names = list(state_names)
+        for name in self.states:
+            if name not in names:
+                raise ValueError(f"state limit {self.name!r}: no state {name!r} among {names}")
+        column = x[:, names.index(self.state)]
+        return column if self.relative_to is None else column - x[:, names.index(self.relative_to)]
+
+    def describe(self) -> str:
+        """One line: "cart travel: -2.5 ≤ z ≤ 2.5 m"."""
+        what = self.state if self.relative_to is None else f"{self.state} − {self.relative_to}"
+        unit = f" {self.unit}" if self.unit else ""
+        if math.isinf(self.lower):
+            return f"{self.name}: {what} ≤ {self.upper:g}{unit}"
+        if math.isinf(self.upper):
+            return f"{self.name}: {what} ≥ {self.lower:g}{unit}"
+        return f"{self.name}: {self.lower:g} ≤ {what} ≤ {self.upper:g}{unit}"
 
 
 @dataclass(frozen=True)
@@ -86,9 +138,7 @@ def check_state_limits(
         raise ValueError(f"states of shape {x.shape} do not match {t.shape[0]} times and {len(state_names)} states")
     out = []
     for lim in limits:
-        if lim.state not in state_names:
-            raise ValueError(f"state limit {lim.name!r}: no state {lim.state!r} among {list(state_names)}")
-        col = x[:, list(state_names).index(lim.state)]
+        col = lim.values(x, state_names)
         over = np.maximum(col - lim.upper, lim.lower - col)
         excess = float(max(np.max(over, initial=-np.inf), 0.0))
         outside = np.flatnonzero(over > tol)

@@ -12,6 +12,7 @@ from .ocp_solver import OCPSolver, WarmStart
 from .qp_fast import CondensedDaqpSolver
 from .qp_osqp import OsqpSolver
 from .reference_cvxpy import CvxpySolver
+from .scenario_tree import ScenarioTreeMPC, scenario_tree_mpc
 from .settings import MPCSettings, SoftSpec, linear_mpc, nonlinear_mpc, physical_soft_bounds
 from .transcription import Collocation, MultipleShooting, Transcription
 from .tube_mpc import TubeMPC
@@ -31,10 +32,12 @@ __all__ = [
     "SoftBound",
     "SoftSpec",
     "SteadyStateTarget",
+    "ScenarioTreeMPC",
     "TubeMPC",
     "linear_mpc",
     "nonlinear_mpc",
     "physical_soft_bounds",
+    "scenario_tree_mpc",
     "problem_from_model",
     "riccati_terminal_cost",
     # optimal control problems

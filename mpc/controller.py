@@ -451,7 +451,7 @@ class NonlinearMPC(_PlanFollower):
         per_sample_rate = None if rate_limit is None else real_array(rate_limit, "rate_limit") * self.sample_period
         self._rate_per_sample = per_sample_rate
         self.soft_bounds = _soft_bounds(soft_bounds)
-        self.nlp = NonlinearMPCProblem(
+        self.nlp = self._problem(
             known,
             self.sample_period,
             self.horizon,
@@ -481,6 +481,10 @@ class NonlinearMPC(_PlanFollower):
         self._soft_rows = np.array([b.row for b in self.soft_bounds]).reshape(-1, nx)
         self._soft_lower = np.array([b.lower for b in self.soft_bounds])
         self._soft_upper = np.array([b.upper for b in self.soft_bounds])
+
+    def _problem(self, known: Plant, *arguments, **options):
+        """The NLP this controller solves each sample (`NonlinearMPCProblem`; a subclass may solve another)."""
+        return NonlinearMPCProblem(known, *arguments, **options)
 
     def target(self, reference: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x_s, input holding it without disturbance, terminal weight P) for an absolute reference."""

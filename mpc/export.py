@@ -1,4 +1,4 @@
-"""Linear MPC exported as C: estimator, target and the condensed QP solved by DAQP.
+"""Linear and tube MPC exported as C: estimator, target and the condensed QP solved by DAQP.
 
 `export_linear_mpc(controller, name)` writes the whole `LinearMPC.step` as C
 with fixed sizes: the disturbance observer's update, the steady-state target,
@@ -7,6 +7,13 @@ solves, in the same scaled variables), the fallback to the shifted plan,
 exact clipping and the rate limit, and the one-sample prediction of the
 estimate. The first state comes from the first measurement as in Python
 (``name_init``).
+
+A `mpc.TubeMPC` goes through the same function and the same C around its QP
+(DAQP's setup and warm-started solve): its condensed QP (`TubeMPC.qp`, whose
+parameters are the nominal state z_0), the ancillary law u = ue + v_0 +
+K (x − xe − z) and the nominal update z⁺ = A z + B v_0 replace the estimator,
+the target and the fallback; a failed solve returns its status with a NaN
+command, where the Python step raises.
 
 The QP is solved by DAQP, the dual active-set solver the Python path
 (`mpc.qp_fast.CondensedDaqpSolver`) uses, called the same way: its matrices
@@ -55,6 +62,7 @@ from models.export import (
 
 from .controller import LinearMPC
 from .qp_fast import PRIMAL_TOLERANCE, CondensedDaqpSolver, CondensedQP, condense
+from .tube_mpc import TubeMPC
 
 #: Status codes of ``name_step`` (and ``name_init``, ``name_solve_qp``); a non-finite command adds 16.
 #: 5 is every DAQP failure but infeasibility and the iteration limit (cycling, an overdetermined
@@ -80,6 +88,9 @@ DAQP_ENTRY_POINTS = (
     "daqp_default_settings",
     "free_daqp_workspace",
     "free_daqp_ldp",
+    "deactivate_constraints",
+    "reset_daqp_workspace",
+    "activate_constraints",
 )
 #: DAQP settings the exported C takes from the Python path's solver (the others stay DAQP's defaults;
 #: no proximal iterations: H is positive definite).
@@ -121,15 +132,18 @@ class ExportedMPC(ExportedC):
         return super().load(initial_state, (*flags, *build_flags()))
 
 
-def daqp_settings(controller: LinearMPC) -> dict[str, float]:
+def daqp_settings(controller: LinearMPC | TubeMPC) -> dict[str, float]:
     """The DAQP settings of `controller`'s Python path: `DAQP_SETTINGS` from the `daqp` package's
-    defaults, its primal tolerance, and its solver's iteration limit (1000 when the controller
-    solves with another solver)."""
+    defaults, its primal tolerance, and its solver's iteration limit (a TubeMPC's own; 1000 when a
+    LinearMPC solves with another solver)."""
     defaults = daqp.Model().settings
     settings = {key: defaults[key] for key in DAQP_SETTINGS}
     settings["primal_tol"] = PRIMAL_TOLERANCE
-    solver = controller.solver
-    settings["iter_limit"] = int(solver.iteration_limit if isinstance(solver, CondensedDaqpSolver) else 1000)
+    if isinstance(controller, TubeMPC):
+        settings["iter_limit"] = controller.iteration_limit
+    else:
+        solver = controller.solver
+        settings["iter_limit"] = int(solver.iteration_limit if isinstance(solver, CondensedDaqpSolver) else 1000)
     return settings
 
 
@@ -145,12 +159,27 @@ def init_kernel(controller: LinearMPC, name: str) -> ca.Function:
     return ca.Function(f"{name}_init_kernel", [y], [x0 - ca.DM(controller.model.xe), u0], ["y"], ["x0", "u0"])
 
 
+#: The methods of TubeMPC whose law the exported C writes out; a subclass that overrides one is refused.
+TUBE_METHODS = ("step", "solve", "initial_state", "check_feasible", "_vectors")
+
+
 def check_exportable(controller) -> None:
-    """Raise `UnsupportedExport` unless `controller` is a LinearMPC tracking one coordinate per input."""
+    """Raise `UnsupportedExport` unless `controller` is a LinearMPC tracking one coordinate per input,
+    or a TubeMPC whose law is TubeMPC's own (no method of `TUBE_METHODS` overridden)."""
+    if isinstance(controller, TubeMPC):
+        changed = [
+            method for method in TUBE_METHODS if getattr(type(controller), method) is not getattr(TubeMPC, method)
+        ]
+        if changed:
+            raise UnsupportedExport(
+                f"{controller.name}: {type(controller).__name__} overrides TubeMPC.{', TubeMPC.'.join(changed)}; "
+                "the export writes TubeMPC's own plan, ancillary law and nominal update, not a changed one"
+            )
+        return
     if not isinstance(controller, LinearMPC):
         kind = type(controller).__name__
         raise UnsupportedExport(
-            f"{getattr(controller, 'name', kind)}: only mpc.LinearMPC is exported here; "
+            f"{getattr(controller, 'name', kind)}: only mpc.LinearMPC and mpc.TubeMPC are exported here; "
             f"{kind} is not one"
             + (
                 " (mpc.export_nmpc.export_nonlinear_mpc exports its real-time iteration)"
@@ -206,65 +235,129 @@ def controller_data(controller: LinearMPC, qp: CondensedQP) -> str:
     )
 
 
-def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedMPC:
-    """A `LinearMPC` as C with the same commands (see the module docstring).
+def export_linear_mpc(controller: LinearMPC | TubeMPC, name: str) -> ExportedMPC:
+    """A `LinearMPC` or a `TubeMPC` as C with the same commands (see the module docstring).
+
+    A TubeMPC's C holds its condensed QP (`TubeMPC.qp`, parameters p = z_0), the ancillary law
+    u = ue + v_0 + K (x − xe − z) and the nominal update z⁺ = A z + B v_0 (z = x − xe with `replan`);
+    ``name_init`` starts z at the first state and refuses it (status 3) where the tightened problem
+    is infeasible. Where the Python step raises (a failed solve), the C step returns the status with
+    a NaN command and the state unchanged: no fallback.
 
     Parameters
     ----------
-    controller : the LinearMPC, as designed now
+    controller : the LinearMPC or TubeMPC, as designed now
     name : C prefix of the files (``name.h``, ``name.c``) and functions (``name_step`` ...)
 
     Raises
     ------
     UnsupportedExport
-        For a controller that is not a LinearMPC (a nonlinear MPC is exported by
-        `mpc.export_nmpc.export_nonlinear_mpc`).
+        For a controller that is neither (a nonlinear MPC is exported by
+        `mpc.export_nmpc.export_nonlinear_mpc`), or a TubeMPC whose law a subclass changed.
     """
     name = c_name(name)
     check_exportable(controller)
+    if isinstance(controller, TubeMPC):
+        return _export_tube(controller, name)
     qp = condense(controller.problem)
     plant, N = controller.plant, controller.horizon
     nx, nu, ny = plant.nx, plant.nu, plant.ny
     init = init_kernel(controller, name)
     work = work_sizes(init)
+    sizes = dict(NX=nx, NU=nu, NY=ny, NE=nx + nu, NH=N, NI=N * nu, NSTATE=nx + nu + N * nu)
+    defines = {
+        "HAS_RATE": int(controller.problem.rate_limit is not None),
+        "REFERENCE_OFFSET": c_number(controller.model.xe[controller.tracked_index]),
+    }
+    kernels = _LINEAR_KERNELS.substitute(p=name, work_arg=work["arg"], work_res=work["res"])
+    text = dict(
+        kind="linear MPC",
+        signals=f"{nx} states, {ny} outputs ({', '.join(plant.output_names)})",
+        state="(x_hat - xe, d_hat, plan): one-sample predictions and the input plan",
+        init=_LINEAR_INIT_DOC,
+        step="outputs y (${P}_N_MEASURED), reference r (absolute tracked coordinate) -> command u "
+        "(${P}_N_INPUT), within the actuator limit",
+        parameters="p = (x0, d, x_s, u_s, u_previous)",
+        fallback="Any status but ${P}_OPTIMAL means the shifted previous plan was followed.",
+    )
+    data = controller_data(controller, qp)
+    casadi = generated_code([init], f"{name}_casadi")
+    return _exported(controller, name, qp, sizes, defines, data + casadi, kernels, text, work, n_reference=nu)
+
+
+def _export_tube(controller: TubeMPC, name: str) -> ExportedMPC:
+    """The C of a TubeMPC (see `export_linear_mpc`)."""
+    qp, tube = controller.qp, controller.tube
+    nx, nu = controller.n_state, controller.tube.feedback.shape[0]
+    X_bar = tube.state_constraints
+    sizes = dict(NX=nx, NU=nu, NG=len(X_bar.h), NSTATE=nx)
+    defines = {"REPLAN": int(controller.replan), "FEASIBILITY_TOLERANCE": c_number(FEASIBILITY_TOLERANCE)}
+    data = "".join(
+        [
+            c_array("A_NOMINAL", controller.model.A),
+            c_array("B_NOMINAL", controller.model.B),
+            c_array("K_ANCILLARY", tube.feedback),
+            c_array("XE", controller.model.xe),
+            c_array("UE", controller.model.ue),
+            c_array("G_TIGHT", X_bar.H),
+            c_array("G_TIGHT_BOUND", X_bar.h),
+            c_array("SCALE", qp.scale),
+        ]
+    )
+    text = dict(
+        kind="tube MPC",
+        signals=f"{nx} measured states",
+        state="z - xe, the nominal state's deviation (the plan starts there)",
+        init=_TUBE_INIT_DOC,
+        step="the measured state x (${P}_N_MEASURED), reference r (not used: the tube regulates to its "
+        "operating point) -> command u = ue + v_0 + K (x - xe - z) (${P}_N_INPUT)",
+        parameters="p = z_0 - xe",
+        fallback="Any status but ${P}_OPTIMAL comes with a NaN command and the state unchanged (no fallback).",
+    )
+    kernels = _TUBE_KERNELS.substitute(p=name)
+    return _exported(controller, name, qp, sizes, defines, data, kernels, text, dict(w=1, iw=1), n_reference=1)
+
+
+#: The tube's C init accepts a first state whose tightened rows G z_0 <= g exceed their bound by at most this.
+FEASIBILITY_TOLERANCE = 1e-9
+
+
+def _exported(controller, name, qp, sizes, defines, data, kernels, text, work, *, n_reference) -> ExportedMPC:
+    """The header and source of an MPC whose QP is `qp` (DAQP's setup and warm-started solve, shared)
+    around its own `kernels` (``name_init``, ``name_step``), as an `ExportedMPC`."""
+    upper = name.upper()
     n_rows = qp.rows.shape[0]
-    sizes = dict(NX=nx, NU=nu, NY=ny, NE=nx + nu, NH=N, NI=N * nu, NZ=qp.n, NP=qp.n_parameters, NROWS=n_rows)
-    sizes |= dict(NB=qp.n + n_rows, NSTATE=nx + nu + N * nu)
+    sizes = sizes | dict(NZ=qp.n, NP=qp.n_parameters, NROWS=n_rows, NB=qp.n + n_rows)
+    n_measured = sizes.get("NY", sizes["NX"])
     settings = "".join(
         f"    m->settings.{key} = {value if isinstance(value, int) else c_number(value)};\n"
         for key, value in daqp_settings(controller).items()
     )
-    upper = name.upper()
+    described = {key: string.Template(value).substitute(P=upper) for key, value in text.items()}
     header = _HEADER.substitute(
         p=name,
         P=upper,
         controller=controller.name,
-        nx=nx,
-        nu=nu,
-        ny=ny,
-        N=N,
+        nu=sizes["NU"],
+        N=controller.horizon,
         nz=qp.n,
-        sizes=_header_sizes(upper, sizes, ny, nu, qp),
+        sizes=_header_sizes(upper, sizes, n_measured, n_reference, qp),
         sample_period=c_number(controller.sample_period),
-        outputs=", ".join(plant.output_names),
         statuses=_header_statuses(upper),
         work_w=work["w"],
         work_iw=work["iw"],
+        **described,
     )
     source = _SOURCE.substitute(
         p=name,
-        P=upper,
+        kind=text["kind"],
         controller=controller.name,
-        sizes="".join(f"#define {key} {value}\n" for key, value in sizes.items()),
-        casadi=generated_code([init], f"{name}_casadi"),
-        data=controller_data(controller, qp) + qp_data(qp),
+        sizes="".join(f"#define {key} {value}\n" for key, value in (sizes | defines).items()),
+        data=data + qp_data(qp),
         settings=settings,
-        reference_offset=c_number(controller.model.xe[controller.tracked_index]),
-        has_rate=int(controller.problem.rate_limit is not None),
         rows_vary=int(qp.rows_vary),
-        work_arg=work["arg"],
-        work_res=work["res"],
         nonfinite_command=NONFINITE_COMMAND,
+        kernels=kernels,
     )
     return ExportedMPC(
         name=name,
@@ -272,22 +365,22 @@ def export_linear_mpc(controller: LinearMPC, name: str) -> ExportedMPC:
         header=header,
         source=source,
         n_state=sizes["NSTATE"],
-        n_measured=ny,
-        n_reference=nu,
-        n_input=nu,
+        n_measured=n_measured,
+        n_reference=n_reference,
+        n_input=sizes["NU"],
         sample_period=controller.sample_period,
-        measures="outputs",
+        measures=controller.measures,
         has_init=True,
         status_codes={code: status_text(code) for code in list(STATUS) + [c | NONFINITE_COMMAND for c in STATUS]},
     )
 
 
-def _header_sizes(upper: str, sizes: dict, ny: int, nu: int, qp: CondensedQP) -> str:
+def _header_sizes(upper: str, sizes: dict, n_measured: int, n_reference: int, qp: CondensedQP) -> str:
     named = (
         ("N_STATE", sizes["NSTATE"]),
-        ("N_MEASURED", ny),
-        ("N_REFERENCE", nu),
-        ("N_INPUT", nu),
+        ("N_MEASURED", n_measured),
+        ("N_REFERENCE", n_reference),
+        ("N_INPUT", sizes["NU"]),
         ("N_DECISIONS", qp.n),
         ("N_PARAMETERS", qp.n_parameters),
         ("N_BOUNDS", max(1, sizes["NB"])),
@@ -302,8 +395,14 @@ def _header_statuses(upper: str) -> str:
     return "\n".join([*lines, f"#define {upper}_NONFINITE_COMMAND {NONFINITE_COMMAND}"])
 
 
-_HEADER = string.Template("""/* ${p}.h: linear MPC '${controller}' exported by codesign-control (mpc.export).
- * ${nx} states, ${nu} input(s), ${ny} outputs (${outputs}); horizon ${N}, ${nz} QP decisions.
+_LINEAR_INIT_DOC = """The first state from the first measurement y0 (${P}_N_MEASURED) and reference r0: at rest at the
+ * measured configuration, no disturbance, the holding input as plan"""
+_TUBE_INIT_DOC = """The first state z_0 = y0 - xe from the first measured state y0 (${P}_N_MEASURED; r0 not used),
+ * refused with ${P}_QP_INFEASIBLE where the tightened problem is infeasible there (a row of X - Z at z_0
+ * beyond its bound, or the QP)"""
+
+_HEADER = string.Template("""/* ${p}.h: ${kind} '${controller}' exported by codesign-control (mpc.export).
+ * ${signals}, ${nu} input(s); horizon ${N}, ${nz} QP decisions.
  * Fixed sizes; the QP is solved by DAQP, which allocates its workspace once, in ${p}_init.
  * Build with DAQP's headers and library (mpc.export.build_flags). */
 #ifndef ${P}_H
@@ -319,14 +418,14 @@ ${sizes}
 #define ${P}_SAMPLE_PERIOD ${sample_period}
 
 /* Status codes of ${p}_step, ${p}_init and ${p}_solve_qp; a non-finite command adds
- * ${P}_NONFINITE_COMMAND. Any status but ${P}_OPTIMAL means the shifted previous plan was followed. */
+ * ${P}_NONFINITE_COMMAND. ${fallback} */
 ${statuses}
 
 /* One per controller instance, owned by the caller (sizeof: ${p}_state_size()); all zero before its
  * first ${p}_init (static storage, or cleared), and not copied once initialized (DAQP's workspace
  * points into it). */
 typedef struct {
-    double xc[${P}_N_STATE];  /* (x_hat - xe, d_hat, plan): one-sample predictions and the input plan */
+    double xc[${P}_N_STATE];  /* ${state} */
     double f[${P}_N_DECISIONS];  /* the QP's linear term for this sample */
     double bupper[${P}_N_BOUNDS], blower[${P}_N_BOUNDS];  /* simple bounds, then the rows' */
     int sense[${P}_N_BOUNDS];
@@ -341,15 +440,13 @@ typedef struct {
     long long int iwork[${work_iw}];
 } ${p}_state;
 
-/* The first state from the first measurement y0 (${P}_N_MEASURED) and reference r0: at rest at the
- * measured configuration, no disturbance, the holding input as plan; sets DAQP up (its one
+/* ${init}; sets DAQP up (its one
  * allocation; again on a struct already initialized, the old workspace freed). Returns 0 or a status code. */
 int ${p}_init(${p}_state *state, const double *y0, const double *r0);
-/* One sample, every ${P}_SAMPLE_PERIOD s: outputs y (${P}_N_MEASURED), reference r (absolute tracked
- * coordinate) -> command u (${P}_N_INPUT), within the actuator limit. Returns a status code. */
+/* One sample, every ${P}_SAMPLE_PERIOD s: ${step}. Returns a status code. */
 int ${p}_step(${p}_state *state, const double *y, const double *r, double *u);
-/* The condensed QP alone for parameters p = (x0, d, x_s, u_s, u_previous) (${P}_N_PARAMETERS, deviation
- * coordinates): its solution z = (inputs, slacks) (${P}_N_DECISIONS). Returns a status code. */
+/* The condensed QP alone for parameters ${parameters} (${P}_N_PARAMETERS, deviation
+ * coordinates): its solution z (${P}_N_DECISIONS, unscaled). Returns a status code. */
 int ${p}_solve_qp(${p}_state *state, const double *p, double *z);
 void ${p}_set_state(${p}_state *state, const double *xc);
 void ${p}_get_state(const ${p}_state *state, double *xc);
@@ -364,29 +461,21 @@ unsigned long ${p}_state_size(void);
 #endif /* ${P}_H */
 """)
 
-_SOURCE = string.Template("""/* ${p}.c: linear MPC '${controller}', generated by codesign-control (mpc.export). */
+_SOURCE = string.Template("""/* ${p}.c: ${kind} '${controller}', generated by codesign-control (mpc.export). */
 #include "${p}.h"
 #include <math.h>
 #include <daqp/api.h>
 #include <daqp/utils.h>
 #undef NX  /* DAQP's constants.h: its workspace's size; here the plant's state count */
 
-${sizes}#define HAS_RATE ${has_rate}
-#define ROWS_VARY ${rows_vary}
+${sizes}#define ROWS_VARY ${rows_vary}
 #define NONFINITE_COMMAND ${nonfinite_command}
-#define REFERENCE_OFFSET ${reference_offset}
 
-${casadi}
 ${data}
 static int all_finite(const double *v, int n) {
     int i;
     for (i = 0; i < n; ++i) if (!isfinite(v[i])) return 0;
     return 1;
-}
-
-/* v limited to [low, high]; NaN stays NaN (fmin/fmax would turn it into a bound). */
-static double clip(double v, double low, double high) {
-    return v < low ? low : (v > high ? high : v);
 }
 
 void ${p}_free(${p}_state *m) {
@@ -397,8 +486,8 @@ void ${p}_free(${p}_state *m) {
     m->set_up = 0;
 }
 
-/* DAQP's setup of the QP, as mpc.qp_fast.CondensedDaqpSolver's: H and the rows fixed, the vectors at
- * p = 0 (each solve updates them); the settings of the Python path. */
+/* DAQP's setup of the QP, as the Python path's: H and the rows fixed, the vectors at p = 0 (each
+ * solve updates them); the settings of the Python path. */
 static int setup(${p}_state *m) {
     static const DAQPWorkspace empty;
     double setup_time;
@@ -462,6 +551,8 @@ static int solve(${p}_state *m, const double *p) {
     daqp_solve(&result, &m->workspace);
     m->iterations = result.iter;
     if (result.exitflag > 0) return 0;
+    deactivate_constraints(&m->workspace);  /* the next solve starts from an empty working set, */
+    reset_daqp_workspace(&m->workspace);    /* as after a failure in DAQP's Python interface */
     return result.exitflag == EXIT_INFEASIBLE ? 3 : (result.exitflag == EXIT_ITERLIMIT ? 4 : 5);
 }
 
@@ -469,6 +560,78 @@ int ${p}_solve_qp(${p}_state *m, const double *p, double *z) {
     int i, status = solve(m, p);
     for (i = 0; i < NZ; ++i) z[i] = m->z[i] * SCALE[i];
     return status;
+}
+${kernels}
+void ${p}_set_state(${p}_state *m, const double *xc) {
+    int i;
+    for (i = 0; i < NSTATE; ++i) m->xc[i] = xc[i];
+}
+
+void ${p}_get_state(const ${p}_state *m, double *xc) {
+    int i;
+    for (i = 0; i < NSTATE; ++i) xc[i] = m->xc[i];
+}
+
+unsigned long ${p}_state_size(void) { return (unsigned long) sizeof(${p}_state); }
+""")
+
+#: The tube MPC's init and step: z from the state (or the measurement with REPLAN), the plan's first
+#: move v_0, the ancillary law and the nominal update.
+_TUBE_KERNELS = string.Template("""
+int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
+    double row;
+    int i, j, status;
+    (void) r0;
+    if (!all_finite(y0, NX)) return 1;
+    for (i = 0; i < NX; ++i) m->xc[i] = y0[i] - XE[i];
+    m->iterations = 0;
+    m->input_excess = 0.0;
+    for (i = 0; i < NG; ++i) {  /* z_0 itself in X - Z */
+        row = 0.0;
+        for (j = 0; j < NX; ++j) row += G_TIGHT[i * NX + j] * m->xc[j];
+        if (row > G_TIGHT_BOUND[i] + FEASIBILITY_TOLERANCE) return 3;
+    }
+    if ((status = setup(m)) || (status = solve(m, m->xc))) return status;
+    return setup(m);  /* the first step starts DAQP afresh, as the Python path does */
+}
+
+int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
+    double z[NX], v[NU], sum;
+    int i, j, status = 0;
+    (void) r;
+    for (i = 0; i < NX; ++i) z[i] = REPLAN ? y[i] - XE[i] : m->xc[i];
+    if (!all_finite(y, NX)) {
+        status = 1;
+    } else if (!all_finite(z, NX)) {
+        status = 2;
+    } else if (!(status = solve(m, z))) {
+        for (i = 0; i < NU; ++i) v[i] = m->z[i] * SCALE[i];
+        if (!all_finite(v, NU)) status = 6;
+    }
+    if (status) {  /* the Python step raises here: no command, the state unchanged */
+        for (i = 0; i < NU; ++i) u[i] = NAN;
+        return status | NONFINITE_COMMAND;
+    }
+    for (i = 0; i < NU; ++i) {  /* u = ue + v_0 + K (x - xe - z) */
+        sum = UE[i] + v[i];
+        for (j = 0; j < NX; ++j) sum += K_ANCILLARY[i * NX + j] * (y[j] - XE[j] - z[j]);
+        u[i] = sum;
+    }
+    for (i = 0; i < NX; ++i) {  /* z+ = A z + B v_0 */
+        sum = 0.0;
+        for (j = 0; j < NX; ++j) sum += A_NOMINAL[i * NX + j] * z[j];
+        for (j = 0; j < NU; ++j) sum += B_NOMINAL[i * NU + j] * v[j];
+        m->xc[i] = sum;
+    }
+    return all_finite(u, NU) ? 0 : NONFINITE_COMMAND;
+}
+""")
+
+#: The linear MPC's init and step: the estimator, the target, the QP, the fallback, clipping and the rate limit.
+_LINEAR_KERNELS = string.Template("""
+/* v limited to [low, high]; NaN stays NaN (fmin/fmax would turn it into a bound). */
+static double clip(double v, double low, double high) {
+    return v < low ? low : (v > high ? high : v);
 }
 
 int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
@@ -564,16 +727,4 @@ int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
     for (k = 0; k < NI; ++k) m->xc[NE + k] = candidate[k];
     return status;
 }
-
-void ${p}_set_state(${p}_state *m, const double *xc) {
-    int i;
-    for (i = 0; i < NSTATE; ++i) m->xc[i] = xc[i];
-}
-
-void ${p}_get_state(const ${p}_state *m, double *xc) {
-    int i;
-    for (i = 0; i < NSTATE; ++i) xc[i] = m->xc[i];
-}
-
-unsigned long ${p}_state_size(void) { return (unsigned long) sizeof(${p}_state); }
 """)

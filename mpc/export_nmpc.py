@@ -23,6 +23,13 @@
 The QP is solved whole even where the Python path first tries the slacks at
 their bounds (`mpc.slack_first`): both give the QP's unique optimum.
 
+A `mpc.ScenarioTreeMPC` is exported the same way: the C solves its stacked
+problem (`ScenarioTreeProblem.inner`) with the estimate, disturbance estimate,
+previous input and plan repeated over the S branches, the stacked targets
+and terminal weights of its `target`, and commands branch 1's moves; the
+shared moves are equality rows, which DAQP keeps in its working set (active
+and immutable, as CasADi's DAQP node marks them).
+
 Memory is one struct per controller (``name_state``), owned by the caller and
 zero before its first ``name_init``; DAQP's arrays are allocated once, in
 ``name_init``, and released by ``name_free``. Nothing else allocates.
@@ -40,8 +47,10 @@ from models.export import UnsupportedExport, c_array, c_name, c_number, generate
 
 from . import export
 from .controller import NonlinearMPC
+from .nonlinear import NonlinearMPCProblem
 from .qp_fast import PRIMAL_TOLERANCE
 from .rti import QP_TOLERANCE
+from .scenario_tree import ScenarioTreeMPC
 
 #: Status codes of ``name_step`` and ``name_init``; a non-finite command adds 16.
 STATUS = {
@@ -93,12 +102,23 @@ def check_exportable(controller, references) -> np.ndarray:
     return values
 
 
+def problem(controller: NonlinearMPC) -> tuple[NonlinearMPCProblem, int]:
+    """The NLP the C solves and the branches S it repeats the estimate, disturbance, previous input
+    and plan over: a scenario tree's stacked problem (`ScenarioTreeProblem.inner`) and its S, else
+    the controller's own problem and 1."""
+    if isinstance(controller, ScenarioTreeMPC):
+        return controller.nlp.inner, controller.nlp.branches
+    return controller.nlp, 1
+
+
 def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     """The CasADi Functions the C calls, named ``name_*``, the known plant's parameters baked in:
     output (x) -> y, predict (x, v) -> x⁺, guess (x̂, d̂, plan) -> w (the rolled-out start, scaled),
     prepare (w, P) -> data, vectors (data, x0) -> (h, lba, uba), recover (data, x0, dv, lam_a,
-    lam_x) -> (w⁺, residuals), and qp (data) -> (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it."""
-    plant, nlp = controller.plant, controller.nlp
+    lam_x) -> (w⁺, residuals), and qp (data) -> (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it.
+    For a scenario tree, guess repeats (x̂, d̂, plan) over the branches, as `ScenarioTreeProblem.solve` does."""
+    plant = controller.plant
+    nlp, S = problem(controller)
     rti, tr = nlp.rti, nlp.transcription
     p = ca.DM(plant.param_vector())
     nx, nu, N = plant.nx, plant.nu, controller.horizon
@@ -108,8 +128,9 @@ def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     d, plan = ca.MX.sym("d", nu), ca.MX.sym("plan", N * nu)
     limit = ca.DM(controller.input_limit)
     clipped = ca.fmin(ca.fmax(ca.reshape(plan, nu, N), -limit), limit)  # (nu, N): the plan transposed
-    X = nlp._rollout(x, clipped + ca.repmat(d, 1, N), p)
-    X = ca.horzcat(x, X)
+    X = nlp._rollout(ca.repmat(x, S), ca.repmat(clipped + ca.repmat(d, 1, N), S, 1), ca.DM(nlp._known))
+    X = ca.horzcat(ca.repmat(x, S), X)
+    clipped = ca.repmat(clipped, S, 1)
     w = ca.MX.zeros(tr.layout.size)
     w[np.asarray(nlp._states).ravel().tolist()] = ca.vec(X / ca.repmat(ca.DM(rti.state_scale), 1, N + 1))
     w[np.asarray(nlp._inputs).T.ravel().tolist()] = ca.vec(clipped / ca.repmat(ca.DM(nlp._input_scale), 1, N))
@@ -158,7 +179,7 @@ def targets(controller: NonlinearMPC, references: np.ndarray) -> str:
 def indices(controller: NonlinearMPC) -> str:
     """The decisions' places as C arrays: states (N+1, nx) and inputs (N, nu) in w, the shift, the
     parameters' offsets in P."""
-    nlp = controller.nlp
+    nlp, _ = problem(controller)
     s = nlp._slices
     return "".join(
         [
@@ -191,13 +212,14 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
     Raises
     ------
     UnsupportedExport
-        For a controller that is not a NonlinearMPC, one iterating to convergence at every sample
-        (iteration="sqp"), with more than one input, no finite reference, or phases CasADi cannot
-        generate as C.
+        For a controller that is not a NonlinearMPC (a `mpc.ScenarioTreeMPC` is one), one
+        iterating to convergence at every sample (iteration="sqp"), with more than one input, no
+        finite reference, or phases CasADi cannot generate as C.
     """
     name = c_name(name)
     values = check_exportable(controller, references)
-    nlp, plant = controller.nlp, controller.plant
+    plant = controller.plant
+    nlp, S = problem(controller)
     rti = nlp.rti
     nx, nu, ny, N = plant.nx, plant.nu, plant.ny, controller.horizon
     functions = kernels(controller, name)
@@ -215,6 +237,9 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
         NROWS=rti.n_rows,
         NSTATE=nx + nu + N * nu,
         NREF=len(values),
+        NS=S,
+        NXS=S * nx,
+        NUS=S * nu,
     )
     sizes["NB"] = sizes["NQ"] + sizes["NROWS"]
     work = {key: max(max(1, getattr(f, f"sz_{key}")()) for f in functions) for key in ("arg", "res", "iw", "w")}
@@ -419,9 +444,11 @@ static int solve_qp(${p}_state *m, const double *x0) {
     call(m, (kernel) ${p}_vectors, m->data, x0, NONE, NONE, NONE, m->h, lba, uba, NONE);
     for (i = 0; i < NQ; ++i) { m->blower[i] = lbv[i]; m->bupper[i] = ubv[i]; }
     for (i = 0; i < NROWS; ++i) { m->blower[NQ + i] = lba[i]; m->bupper[NQ + i] = uba[i]; }
-    for (i = 0; i < NB; ++i) m->sense[i] = 0;
+    for (i = 0; i < NB; ++i)  /* an equality (a scenario tree's shared moves) active and immutable, as CasADi's node */
+        m->sense[i] = m->blower[i] == m->bupper[i] ? ACTIVE + IMMUTABLE : 0;
     reset_daqp_workspace(&m->workspace);
-    if (update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace) < 0) {
+    if (update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace) < 0
+        || activate_constraints(&m->workspace) < 0) {  /* the equalities start in the working set */
         for (i = 0; i < NQ; ++i) m->dv[i] = NAN;
         return 0;
     }
@@ -435,16 +462,19 @@ static int solve_qp(${p}_state *m, const double *x0) {
            && m->residuals[0] <= QP_TOLERANCE && m->residuals[1] <= QP_TOLERANCE;
 }
 
-/* The NLP at the estimate x0 (m->parameters set): one real-time iteration from the warm start, or,
- * without one, the SQP to convergence from the rolled-out plan. 0 when solved (m->w the solution). */
-static int solve_nlp(${p}_state *m, const double *x0, const double *d, const double *plan) {
-    int i, k, converged = 0;
+/* The NLP at the estimate x (x0: x repeated over the branches; m->parameters set): one real-time
+ * iteration from the warm start, or, without one, the SQP to convergence from the rolled-out plan.
+ * 0 when solved (m->w the solution). */
+static int solve_nlp(${p}_state *m, const double *x0, const double *x, const double *d, const double *plan) {
+    int b, i, k, converged = 0;
     double step;
     if (!m->has_guess) {
-        call(m, (kernel) ${p}_guess, x0, d, plan, NONE, NONE, m->w, NONE, NONE, NONE);
+        call(m, (kernel) ${p}_guess, x, d, plan, NONE, NONE, m->w, NONE, NONE, NONE);
         if (!all_finite(m->w, NW))
             for (k = 0; k <= NH; ++k)
-                for (i = 0; i < NX; ++i) m->w[STATE_INDEX[k * NX + i]] = x0[i] / STATE_SCALE[i];
+                for (b = 0; b < NS; ++b)
+                    for (i = 0; i < NX; ++i)
+                        m->w[STATE_INDEX[k * NXS + b * NX + i]] = x[i] / STATE_SCALE[b * NX + i];
     }
     for (k = 0; k < (m->has_guess ? 1 : MAX_ITERATIONS); ++k) {
         m->iterations = k + 1;
@@ -479,8 +509,8 @@ int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
 
 int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
     double x_hat[NX], d_hat[NU], y_hat[NY], innovation[NY], candidate[NI], inputs[NI], x_next[NX], v[NU];
-    double plan[NI], sum;
-    int i, j, k, target = 0, status = 0;
+    double plan[NI], x0[NXS], sum;
+    int b, i, j, k, target = 0, status = 0;
     for (k = 0; k < NI; ++k) plan[k] = m->xc[NE + k];
     for (i = 0; i < NX; ++i) x_hat[i] = m->xc[i];
     for (i = 0; i < NU; ++i) d_hat[i] = m->xc[NX + i];
@@ -504,20 +534,23 @@ int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
     }
     if (status == 0) {
         for (i = 0; i < NP; ++i) m->parameters[i] = P_DEFAULT[i];
-        for (i = 0; i < NX; ++i) m->parameters[OFFSET_X0 + i] = x_hat[i];
-        for (i = 0; i < NX; ++i) m->parameters[OFFSET_X_S + i] = X_TARGET[target * NX + i];
-        for (i = 0; i < NX * NX; ++i) m->parameters[OFFSET_P + i] = P_TARGET[target * NX * NX + i];
-        for (i = 0; i < NU; ++i) {
-            m->parameters[OFFSET_D_HAT + i] = d_hat[i];
-            m->parameters[OFFSET_U_S + i] = V_TARGET[target * NU + i] - d_hat[i];
-            m->parameters[OFFSET_U_PREV + i] = plan[i];
+        for (b = 0; b < NS; ++b) {  /* every branch starts at the estimate */
+            for (i = 0; i < NX; ++i) x0[b * NX + i] = m->parameters[OFFSET_X0 + b * NX + i] = x_hat[i];
+            for (i = 0; i < NU; ++i) {
+                m->parameters[OFFSET_D_HAT + b * NU + i] = d_hat[i];
+                m->parameters[OFFSET_U_S + b * NU + i] = V_TARGET[target * NUS + b * NU + i] - d_hat[i];
+                m->parameters[OFFSET_U_PREV + b * NU + i] = plan[i];
+            }
         }
+        for (i = 0; i < NXS; ++i) m->parameters[OFFSET_X_S + i] = X_TARGET[target * NXS + i];
+        for (i = 0; i < NXS * NXS; ++i) m->parameters[OFFSET_P + i] = P_TARGET[target * NXS * NXS + i];
         if (!m->set_up && (status = setup(m))) {
             m->has_guess = 0;
         } else {
-            status = solve_nlp(m, x_hat, d_hat, plan);
-            if (status == 0) {
-                for (k = 0; k < NI; ++k) inputs[k] = m->w[INPUT_INDEX[k]] * INPUT_SCALE[k % NU];
+            status = solve_nlp(m, x0, x_hat, d_hat, plan);
+            if (status == 0) {  /* the first branch's moves (the first N_r are every branch's) */
+                for (k = 0; k < NH; ++k)
+                    for (i = 0; i < NU; ++i) inputs[k * NU + i] = m->w[INPUT_INDEX[k * NUS + i]] * INPUT_SCALE[i];
                 if (!all_finite(inputs, NI)) status = 6;
             }
             m->has_guess = status == 0;

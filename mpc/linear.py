@@ -174,6 +174,7 @@ class QPSolution:
     status : str, the solver's own status text
     iterations : int
     solve_time : float, s (wall clock of the solver call and the vector update)
+    extra : dict, what a solver reports beyond these fields (its own names and values), empty by default
     """
 
     inputs: np.ndarray
@@ -348,14 +349,36 @@ class MPCProblem:
         return Phi, Gamma
 
     def simulate(self, x0, inputs, disturbance) -> np.ndarray:
-        """States x_0..x_N (N+1, nx) of the model under the plan `inputs` (N, nu) and disturbance d."""
+        """States x_0..x_N (N+1, nx) of the model under the plan `inputs` (N, nu) and disturbance d.
+
+        Parameters
+        ----------
+        x0 : (nx,) initial deviation state x̃_0
+        inputs : (N, nu) or (N nu,) planned deviation inputs ũ_0..ũ_{N-1}
+        disturbance : (nu,) input disturbance d added to every input
+
+        Returns
+        -------
+        (N+1, nx) the deviation states x̃_0..x̃_N
+        """
         x = [np.asarray(x0, dtype=float)]
         for u in np.asarray(inputs, dtype=float).reshape(self.horizon, self.nu):
             x.append(self.A @ x[-1] + self.B @ (u + disturbance))
         return np.array(x)
 
     def cost(self, params: QPParameters, inputs, slacks=None) -> float:
-        """The objective of the module docstring at a plan (N, nu) and slacks (N, ns)."""
+        """The objective of the module docstring at a plan and its slacks.
+
+        Parameters
+        ----------
+        params : QPParameters, the sample's initial state, disturbance and targets
+        inputs : (N, nu) planned deviation inputs ũ_0..ũ_{N-1}
+        slacks : (N, ns) soft-bound slacks, in each bound's unit; None for zero
+
+        Returns
+        -------
+        float, the objective's value (dimensionless, as weighted)
+        """
         x = self.simulate(params.x0, inputs, params.disturbance)
         ex = x - params.x_target
         eu = np.asarray(inputs).reshape(self.horizon, self.nu) - params.u_target
@@ -367,7 +390,17 @@ class MPCProblem:
         return float(total)
 
     def soft_violation(self, params: QPParameters, inputs) -> np.ndarray:
-        """Violation of each soft bound at x_1..x_N under a plan, (N, ns), zero where respected."""
+        """Violation of each soft bound at x_1..x_N under a plan, zero where respected.
+
+        Parameters
+        ----------
+        params : QPParameters, the sample's initial state and disturbance
+        inputs : (N, nu) planned deviation inputs ũ_0..ũ_{N-1}
+
+        Returns
+        -------
+        (N, ns) how far G x̃_k lies outside [soft_lower, soft_upper], in each bound's unit
+        """
         x = self.simulate(params.x0, inputs, params.disturbance)[1:]
         g = x @ self.soft_rows.T
         return np.maximum(0.0, np.maximum(self.soft_lower - g, g - self.soft_upper))
@@ -400,9 +433,17 @@ def problem_from_model(
     Parameters
     ----------
     model : discrete LinearModel; its operating point (xe, ue) defines the deviations
+    state_weight : Q, scalar, (nx,) diagonal or (nx, nx), positive semidefinite (as `MPCProblem`)
+    input_weight : R, scalar, (nu,) or (nu, nu), positive definite
+    horizon : N >= 1 samples
     input_limit : (nu,) symmetric limit ``|u|`` <= limit on the TOTAL input u = ue + ũ
     rate_limit : (nu,) bound on ``|u_k − u_{k-1}|`` per sample, or None
     soft_bounds : sequence of SoftBound on the absolute state
+    terminal_weight : (nx, nx) P, default the Riccati solution for (A, B, Q, R)
+
+    Returns
+    -------
+    MPCProblem, in deviations from the operating point, input bounds -limit - ue and limit - ue
 
     Raises
     ------

@@ -24,13 +24,15 @@ iterates to convergence.
 
 from __future__ import annotations
 
+import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from models import Plant, interrupts
+from models import Plant, checks, interrupts
 from models.checks import integer, positive, real_array, weight_matrix
 
 from .linear import check_holding_input
@@ -40,6 +42,62 @@ from .transcription import MultipleShooting, Transcription
 
 #: How each sample is solved: one real-time iteration, or SQP iterations to convergence.
 ITERATIONS = ("rti", "sqp")
+
+log = logging.getLogger(__name__)
+
+#: A build estimated (`build_estimate`) to take longer than this (s) is refused; read at every call, and
+#: overridden per problem by ``build_time_limit`` (math.inf accepts any).
+BUILD_TIME_LIMIT_S = 600.0
+#: The build's cost model, fitted to builds of the arm and the pendulum at N = 10 to 160 with an empty
+#: compile cache on an idle core (docs/reliability.md): a fixed part, one per instruction of the plant's
+#: sample map, and the compilation of the linearization at -O3, which grows as (N (nx + nu + ns))².
+BUILD_FIXED_S, BUILD_S_PER_INSTRUCTION, BUILD_S_QUADRATIC = 0.3, 2e-3, 4.5e-5
+#: The construction without compilation (``compiled=False``): seconds per interval and stage variable.
+BUILD_S_PER_STAGE_VARIABLE = 5e-4
+#: Dense matrices of the condensed QP (Hessian, the states' sensitivities, their copies) the build holds.
+BUILD_MATRIX_COPIES = 4
+
+
+@dataclass(frozen=True)
+class BuildEstimate:
+    """What building a `NonlinearMPCProblem` is expected to take, before any of it is built.
+
+    seconds : wall time of a build not in the compile cache (s), on an idle core;  nbytes : memory of
+    its dense condensed matrices (bytes);  horizon, stage : N and the variables per interval (nx + nu + ns)
+    """
+
+    seconds: float
+    nbytes: float
+    horizon: int
+    stage: int
+
+
+def build_estimate(plant: Plant, horizon: int, *, n_soft: int = 0, compiled: bool = True) -> BuildEstimate:
+    """The time and memory a `NonlinearMPCProblem` of `horizon` intervals on `plant` with `n_soft` soft
+    bounds will take to build (`BUILD_FIXED_S` ...: within a factor of 2 on the arm and the pendulum for N
+    from 20 to 160; the crane's linearization, compiled at -O1, builds several times faster than estimated)."""
+    N = integer(horizon, "horizon", minimum=1)
+    stage = plant.nx + plant.nu + int(n_soft)
+    nbytes = 8.0 * BUILD_MATRIX_COPIES * (N * plant.nu) * (N * stage)
+    if not compiled:
+        return BuildEstimate(BUILD_FIXED_S + BUILD_S_PER_STAGE_VARIABLE * N * stage, nbytes, N, stage)
+    code = plant.step_function(1.0, 1).n_instructions()
+    seconds = BUILD_FIXED_S + BUILD_S_PER_INSTRUCTION * code + BUILD_S_QUADRATIC * (N * stage) ** 2
+    return BuildEstimate(seconds, nbytes, N, stage)
+
+
+def check_build(estimate: BuildEstimate, plant: Plant, limit: float | None = None) -> None:
+    """Refuse (`models.checks.ResourceLimitError`, a ValueError naming the horizon) a build whose estimate
+    exceeds `limit` seconds (default `BUILD_TIME_LIMIT_S`) or `models.checks.MEMORY_LIMIT_BYTES`."""
+    limit = BUILD_TIME_LIMIT_S if limit is None else float(limit)
+    what = f"a nonlinear MPC on {plant.name} with horizon = {estimate.horizon}"
+    checks.check_memory(estimate.nbytes, what, "give a shorter horizon (or a longer sample period)")
+    if estimate.seconds > limit:
+        raise checks.ResourceLimitError(
+            f"{what} is estimated to build in {estimate.seconds:.0f} s, above the limit of {limit:g} s "
+            "(mpc.nonlinear.BUILD_TIME_LIMIT_S, or build_time_limit): give a shorter horizon (or a longer "
+            "sample period), or raise the limit (math.inf accepts any)"
+        )
 
 
 @dataclass
@@ -117,12 +175,18 @@ class NonlinearMPCProblem:
     tolerance : convergence test of the SQP, max ``|Δw|`` in scaled units (inputs / limit)
     compiled : compile the iteration to machine code (`models.compile`, cached); False runs
         CasADi's virtual machine
+    build_time_limit : s, refuse a build estimated longer (`build_estimate`; default `BUILD_TIME_LIMIT_S`)
+    progress : called as progress(phase, seconds since the build began) after each phase of the build
+        (each phase is also logged at INFO on ``mpc.nonlinear``)
+    constrain : callable ocp -> None adding constraints to the `mpc_problem` before it is transcribed
+        (a scenario tree's non-anticipativity), or None
 
     Raises
     ------
     ValueError
         For a horizon < 1, non-finite or indefinite weights, substeps < 1, an unknown iteration, or a
-        plant whose operating point (`Plant.equilibrium()`) needs more input than its limit.
+        plant whose operating point (`Plant.equilibrium()`) needs more input than its limit; a
+        `models.checks.ResourceLimitError` naming the horizon for a build estimated beyond its limits.
     """
 
     def __init__(
@@ -140,6 +204,9 @@ class NonlinearMPCProblem:
         max_iterations: int = 50,
         tolerance: float = 1e-8,
         compiled: bool = True,
+        build_time_limit: float | None = None,
+        progress: Callable[[str, float], None] | None = None,
+        constrain=None,
     ):
         N = integer(horizon, "horizon", minimum=1)
         self.max_iterations = integer(max_iterations, "max_iterations", minimum=1)
@@ -160,12 +227,26 @@ class NonlinearMPCProblem:
         if self.rate_limit is not None and (not np.all(np.isfinite(self.rate_limit)) or np.any(self.rate_limit <= 0)):
             raise ValueError(f"rate_limit must be finite and > 0 per sample, got {self.rate_limit}")
         check_holding_input(plant.name, plant.equilibrium()[1], self.input_limit)  # as the linear MPC
+        self.build_estimate = build_estimate(plant, N, n_soft=ns, compiled=compiled)
+        check_build(self.build_estimate, plant, build_time_limit)
+        began = time.perf_counter()
+
+        def phase(text: str) -> None:
+            elapsed = time.perf_counter() - began
+            log.info("nonlinear MPC on %s, horizon %d: %s (%.1f s)", plant.name, N, text, elapsed)
+            if progress is not None:
+                progress(text, elapsed)
+
+        phase(f"building, estimated {self.build_estimate.seconds:.0f} s unless cached")
         self.ocp = mpc_problem(
             plant, self.sample_period, N, state_weight, input_weight, soft_bounds=soft, rate_limit=self.rate_limit
         )
-        self.rti = RealTimeIteration(
-            Transcription(self.ocp, MultipleShooting(intervals=N, substeps=substeps)), compiled=compiled
-        )
+        if constrain is not None:
+            constrain(self.ocp)
+        transcription = Transcription(self.ocp, MultipleShooting(intervals=N, substeps=substeps))
+        phase("problem stated and transcribed")
+        self.rti = RealTimeIteration(transcription, compiled=compiled, progress=phase)
+        phase("built")
         tr = self.transcription = self.rti.transcription
         self.qp_solver = "daqp (condensed)"
         self._slices = tr.parameter_slices

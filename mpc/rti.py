@@ -161,6 +161,7 @@ class RealTimeIteration:
     slack_shortcut : first solve the QP with every static control (slack) at its lower bound and the
         rows holding them left out, and solve the whole QP only when that answer is not its optimum
         (same answer; the small QP is what a sample with every soft bound inactive needs)
+    progress : None, or called as progress(text) when the construction reaches its compilation
 
     Attributes
     ----------
@@ -193,7 +194,9 @@ class RealTimeIteration:
     row_index : (m,) int, the NLP's constraint rows (indices into g) of the QP's rows, in order
     """
 
-    def __init__(self, transcription: Transcription, *, compiled: bool = True, slack_shortcut: bool = True):
+    def __init__(
+        self, transcription: Transcription, *, compiled: bool = True, slack_shortcut: bool = True, progress=None
+    ):
         checked = rti_linearization.check(transcription)
         self.transcription = transcription
         self.intervals, self.nx, self.nq = checked.intervals, checked.nx, checked.nq
@@ -229,6 +232,8 @@ class RealTimeIteration:
             settings={"primal_tol": PRIMAL_TOLERANCE},
             tolerance=10 * PRIMAL_TOLERANCE,
         )
+        if progress is not None:  # progress(text): the phase done, before the longest one
+            progress("linearized and condensed; compiling" if compiled else "linearized and condensed")
         self._compile(compiled, stages, structure, prepare, linearize, feedback)
         self.shift_index = shift_index(checked.states, checked.stage_q)
 

@@ -263,6 +263,24 @@ class Zonotope:
         D = as_directions(directions, self.dimension)
         return self.support(D), self.center + np.sign(D @ self.generators) @ self.generators.T
 
+    def contains(self, points, tolerance: float = 1e-9) -> np.ndarray:
+        """Whether each point x (k, n) is c + G ξ with every |ξ_j| ≤ 1 + tolerance (a relative tolerance
+        on the zonotope's gauge): bool (k,), by one feasibility LP per point (n rows, m bounded columns)."""
+        X = as_directions(points, self.dimension)
+        m = self.generators.shape[1]
+        inside = np.zeros(len(X), dtype=bool)
+        for k, x in enumerate(X):
+            result = scipy.optimize.linprog(
+                np.zeros(m),
+                A_eq=self.generators,
+                b_eq=x - self.center,
+                bounds=(-1 - tolerance, 1 + tolerance),
+                method="highs",
+                options=HIGHS_OPTIONS,
+            )
+            inside[k] = result.status == 0
+        return inside
+
     def linear_map(self, matrix) -> Zonotope:
         """{M x : x ∈ self} = (M c, M G), exact for any M (p, n)."""
         M = as_matrix(matrix, self.dimension, "matrix")

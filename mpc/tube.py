@@ -46,6 +46,7 @@ __all__ = [
     "InvariantApproximation",
     "minimal_rpi_approximation",
     "invariant_polytope",
+    "check_minimal_margins",
     "tighten",
     "TubeOptions",
     "TubeSets",
@@ -283,8 +284,9 @@ def minimal_rpi_approximation(
     Raises
     ------
     ValueError
-        The tube is empty: A_K not Schur, 0 not in the interior of W (W flat, e.g. an input
-        disturbance alone), or no s ≤ max_terms meets the accuracy (the message gives α°(max_terms)).
+        The tube is empty (A_K not Schur, 0 not in the interior of W: W flat, e.g. an input
+        disturbance alone), or not computed: no s ≤ max_terms meets the accuracy (the message gives α°(max_terms)
+        and about how many more terms it would take at the rate ρ(A_K) per term).
     """
     A_K = _schur(closed_loop)
     n = A_K.shape[0]
@@ -304,10 +306,14 @@ def minimal_rpi_approximation(
         if alpha <= target:
             break
     if alpha > target:
+        rho = float(np.max(np.abs(np.linalg.eigvals(A_K))))
+        more = int(np.ceil(np.log(alpha / target) / -np.log(rho))) if 0 < rho < 1 else 0
         raise ValueError(
-            f"the tube is empty to the accuracy asked: A_K^s W ⊆ α W needs α <= {target:.4g} "
-            f"(relative_epsilon {rel:g}), but at s = max_terms = {max_terms} the smallest α is {alpha:.4g}"
-            + (" (α >= 1: the error grows)" if alpha >= 1 else "; raise max_terms or relative_epsilon")
+            f"the tube is not computed to the accuracy asked: A_K^s W ⊆ α W needs α <= {target:.4g} "
+            f"(relative_epsilon {rel:g}), but at s = max_terms = {max_terms} the smallest α is {alpha:.4g}; "
+            f"A_K is Schur (spectral radius {rho:.6g}), so α falls about {rho:.6g}× per term and about "
+            f"{more} more terms would reach it (a W thin in some direction, as a small interior box makes it, "
+            "needs many): raise max_terms or relative_epsilon, or make K faster"
         )
     epsilon = alpha / (1 - alpha) * np.maximum(reach[:n], reach[n:])
     return InvariantApproximation(A_K, disturbance, max(alpha, 0.0), terms, epsilon)
@@ -443,6 +449,39 @@ def invariant_polytope(
 
 
 # ------------------------------------------------------------------ tightening and the tube's record
+def check_minimal_margins(approximation: InvariantApproximation, rows, bounds, labels: Sequence[str]) -> None:
+    """Refuse, before any polytope is built, a row {rows_i e ≤ bounds_i} that no RPI set of A_K and W fits.
+
+    Every RPI set of e⁺ = A_K e + w, w ∈ W, containing 0 contains F_∞, so its margin h_Z(d) is at
+    least h_{F_∞}(d) ≥ (1 − α) h_{F(α,s)}(d) (`InvariantApproximation`): a row whose bound is not above
+    that lower bound cannot be tightened by any tube of this K and W, whatever Z is computed.
+
+    Parameters
+    ----------
+    approximation : F(α, s) of A_K and W;  rows : (r, nx) the rows d_i;  bounds : (r,)
+    labels : (r,) what each row is, for the message ("state constraint 'theta1 upper'")
+
+    Raises
+    ------
+    ValueError
+        Naming every such row: its name, its bound, the least margin it needs and at least how much it lacks.
+    """
+    needed = (1 - approximation.alpha) * approximation.support(rows)
+    bounds = np.asarray(bounds, dtype=float)
+    bad = [int(i) for i in np.flatnonzero(needed >= bounds)]
+    if bad:
+        parts = [
+            f"{labels[i]} (bound {bounds[i]:.6g}) needs a margin of at least {needed[i]:.6g} (the minimal "
+            f"RPI set's support in its direction) and lacks at least {needed[i] - bounds[i]:.3g}"
+            for i in bad
+        ]
+        raise ValueError(
+            "the error set is larger than the constraints can hold, for every RPI set of this K and W: "
+            + "; ".join(parts)
+            + ". Loosen the constraint, shrink W (the parametric region or the disturbance) or change K"
+        )
+
+
 def tighten(rows, bounds, error_set: ConvexSet, names: Sequence[str], what: str = "constraint"):
     """{y : rows y ≤ bounds} ⊖ S as bounds − h_S(rows_i) (exact for any convex S), refusing a row it empties.
 
@@ -489,6 +528,9 @@ class TubeOptions:
         (the constraint rows G and ±K are always added; `invariant_polytope`)
     contraction : λ of the template's contractive set, in (ρ(A_K), 1); None: (1 + ρ(A_K)) / 2
     iterations : the Gilbert–Tan cap, of the terminal set and of the template's contractive set
+    zonotope : Z is F(α, s) itself as a zonotope (W must be one), RPI by Raković et al.'s theorem with
+        support values in closed form: no facets and no LP, for a state whose template LP is too large
+        (its size grows with the contractive core's rows squared); membership costs an LP per point
     """
 
     relative_epsilon: float = 0.01
@@ -497,6 +539,7 @@ class TubeOptions:
     template: np.ndarray | None = None
     contraction: float | None = None
     iterations: int = 200
+    zonotope: bool = False
 
 
 @dataclass(frozen=True)
@@ -521,9 +564,11 @@ class TubeSets:
     of Z also needs the MPC's terminal cost to be a Lyapunov function of A_K (the Riccati
     P when K is the LQR gain of the same Q, R); these sets do not fix the cost.
 
-    Numbers: Z is verified RPI by LP after a dilation that leaves each row a margin of at least
-    1e-8·max h_Z against the LPs' round-off (`invariant_polytope`); the margins are DAQP LP
-    optima (exact to about 1e-12 relative in the tests); X_f is invariant to 1e-10·max(1, |d|)
+    Numbers: a zonotope Z (`TubeOptions.zonotope`) is F(α, s), RPI by Raković et al.'s theorem for
+    the α found with A_K^s W ⊆ α W (support values, exact up to round-off); a polytope Z is verified
+    RPI by LP after a dilation that leaves each row a margin of at least 1e-8·max h_Z against the
+    LPs' round-off (`invariant_polytope`); the margins are DAQP LP optima (exact to about 1e-12
+    relative in the tests); X_f is invariant to 1e-10·max(1, |d|)
     (`maximal_invariant_set`).
 
     For a nonlinear plant, only what W covers is guaranteed: the guarantee holds while the
@@ -540,7 +585,8 @@ class TubeSets:
     feedback : (nu, nx) K of u = v + K (x − z) (note: −(models.lqr.dlqr's K))
     closed_loop : (nx, nx) A + B K
     disturbance : W;  approximation : F(α, s) with alpha, terms (s) and epsilon (ε per state)
-    error_set : Z, an RPI Polytope ⊇ F_∞;  error_set_exact : whether Z is F(α, s) (its facets) or a template's
+    error_set : Z, an RPI Polytope ⊇ F_∞, or F(α, s) as a Zonotope (`TubeOptions.zonotope`);
+        error_set_exact : whether Z is F(α, s) (its facets, or the zonotope) or a template's
     state_constraints : X̄ = {G x ≤ g − h_Z(G_i)};  state_margins : (ns,) h_Z(G_i)
     state_constraint_names : (ns,) names of X's rows, for messages
     input_lower, input_upper : (nu,) the tightened input bounds (v's);  input_margins : (2 nu,)
@@ -552,7 +598,7 @@ class TubeSets:
     closed_loop: np.ndarray
     disturbance: Zonotope | Polytope
     approximation: InvariantApproximation
-    error_set: Polytope
+    error_set: Polytope | Zonotope
     error_set_exact: bool
     state_constraints: Polytope
     state_margins: np.ndarray
@@ -610,7 +656,9 @@ def build_tube(
     ValueError
         Naming the culprit: non-finite or misshapen data; an empty tube (A + B K not Schur,
         0 ∉ int W, α not reached); a constraint the error set does not fit in (row, bound,
-        margin lacking); an empty terminal set or one that does not contain the origin.
+        margin lacking), refused from the minimal RPI set's lower bound before Z is built when no RPI
+        set of this K and W fits (`check_minimal_margins`), else from Z; an empty terminal set or one
+        that does not contain the origin.
     """
     options = TubeOptions() if options is None else options
     A, B = state_input_pair(A, B)
@@ -630,17 +678,30 @@ def build_tube(
     if len(names) != len(state_constraints.h):
         raise ValueError(f"need {len(state_constraints.h)} state_constraint_names, got {len(names)}")
     approximation = minimal_rpi_approximation(A + B @ K, disturbance, options.relative_epsilon, options.max_terms)
-    Z, exact = invariant_polytope(
-        approximation,
-        facet_limit=options.facet_limit,
-        template=np.vstack([*([] if options.template is None else [options.template]), state_constraints.H, K, -K]),
-        contraction=options.contraction,
-        iterations=options.iterations,
-    )
-    g_bar, state_margins = tighten(state_constraints.H, state_constraints.h, Z, names, "state constraint")
+    input_rows, input_bounds = np.vstack([K, -K]), np.concatenate([upper, -lower])
     input_names = [f"input {j} upper, u_{j} <= bound" for j in range(m)]
     input_names += [f"input {j} lower, -u_{j} <= bound" for j in range(m)]
-    u_bar, input_margins = tighten(np.vstack([K, -K]), np.concatenate([upper, -lower]), Z, input_names, "input bound")
+    check_minimal_margins(
+        approximation,
+        np.vstack([state_constraints.H, input_rows]),
+        np.concatenate([state_constraints.h, input_bounds]),
+        [*(f"state constraint {name!r}" for name in names), *(f"input bound {name!r}" for name in input_names)],
+    )
+    Z: Polytope | Zonotope
+    if options.zonotope:
+        if not isinstance(disturbance, Zonotope):
+            raise TypeError(f"TubeOptions.zonotope needs W as a Zonotope, got {type(disturbance).__name__}")
+        Z, exact = approximation.zonotope(), True
+    else:
+        Z, exact = invariant_polytope(
+            approximation,
+            facet_limit=options.facet_limit,
+            template=np.vstack([*([] if options.template is None else [options.template]), state_constraints.H, K, -K]),
+            contraction=options.contraction,
+            iterations=options.iterations,
+        )
+    g_bar, state_margins = tighten(state_constraints.H, state_constraints.h, Z, names, "state constraint")
+    u_bar, input_margins = tighten(input_rows, input_bounds, Z, input_names, "input bound")
     X_bar = Polytope(state_constraints.H, g_bar)
     eye = np.eye(m)
     admissible = X_bar.intersect(Polytope(np.vstack([eye, -eye]), u_bar).preimage(K))

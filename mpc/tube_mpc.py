@@ -37,7 +37,7 @@ from models.checks import as_matrix, as_vector, integer, positive, weight_matrix
 from models.lqr import dlqr
 
 from .linear import INFINITY
-from .qp_fast import DAQP_STATUS, PRIMAL_TOLERANCE
+from .qp_fast import DAQP_STATUS, PRIMAL_TOLERANCE, CondensedQP
 from .sets import HIGHS_OPTIONS, Polytope, maximal_invariant_set
 from .tube import TubeSets
 
@@ -106,6 +106,11 @@ class TubeMPC:
     iteration_limit : DAQP's bound on active-set changes per solve
     name : str
 
+    Attributes
+    ----------
+    qp : the scaled condensed QP as an `mpc.qp_fast.CondensedQP` whose parameter vector is p = z_0
+        (nx,): the data DAQP solves here and in the C export (`mpc.export.export_linear_mpc`)
+
     Raises
     ------
     ValueError
@@ -159,9 +164,23 @@ class TubeMPC:
         self._row_names = [f"{names[i]} at step {k + 1}" for k in range(N - 1) for i in range(len(g))]
         self._row_names += [f"terminal set row {i}" for i in range(len(hf))]
         self._v_lower, self._v_upper = np.tile(tube.input_lower, N), np.tile(tube.input_upper, N)
-        self._scale = 1 / np.sqrt(np.diag(H))
-        self._H = H * np.outer(self._scale, self._scale)
-        self._A_scaled = self._rows * self._scale
+        scale = 1 / np.sqrt(np.diag(H))
+        n_rows = len(self._row_bound)
+        self.qp = CondensedQP(
+            H=H * np.outer(scale, scale),
+            scale=scale,
+            F=self._f_per_z * scale[:, None],
+            f=np.zeros(N * m),
+            lower=self._v_lower / scale,
+            upper=self._v_upper / scale,
+            rows=self._rows * scale,
+            row_lower_constant=np.full(n_rows, -INFINITY),
+            row_lower_matrix=np.zeros((n_rows, n)),
+            row_upper_constant=self._row_bound,
+            row_upper_matrix=-self._row_shift,
+            n_inputs=N * m,
+            n_slacks=0,
+        )
         self._shape = (N, m)
         self._info: dict = {}
         self.reset()
@@ -180,10 +199,10 @@ class TubeMPC:
         self._set_up = False
 
     def _vectors(self, z0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        f = (self._f_per_z @ z0) * self._scale
-        upper = np.concatenate([self._v_upper / self._scale, self._row_bound - self._row_shift @ z0])
-        lower = np.concatenate([self._v_lower / self._scale, np.full(len(self._row_bound), -INFINITY)])
-        return f, upper, lower
+        qp = self.qp  # p = z0
+        upper = np.concatenate([qp.upper, qp.row_upper_constant + qp.row_upper_matrix @ z0])
+        lower = np.concatenate([qp.lower, qp.row_lower_constant + qp.row_lower_matrix @ z0])
+        return qp.F @ z0 + qp.f, upper, lower
 
     def solve(self, z0) -> tuple[np.ndarray, bool, str, int]:
         """The nominal plan V (N, nu) from z_0 (deviation), success, DAQP's status and iterations.
@@ -194,14 +213,14 @@ class TubeMPC:
         """
         f, upper, lower = self._vectors(z0)
         if not self._set_up:
-            flag, _ = self._model.setup(self._H, f, self._A_scaled, upper, lower)
+            flag, _ = self._model.setup(self.qp.H, f, self.qp.rows, upper, lower)
             self._set_up = True
             if flag < 0:
                 return np.full(self._shape, np.nan), False, f"setup failed ({DAQP_STATUS.get(flag, flag)})", 0
         else:
             self._model.update(f=f, bupper=upper, blower=lower)
         V, _, flag, info = self._model.solve()
-        V = V * self._scale
+        V = V * self.qp.scale
         return (
             V.reshape(self._shape),
             flag > 0 and bool(np.isfinite(V).all()),
@@ -284,13 +303,14 @@ class TubeMPC:
             )
         error = np.asarray(y, dtype=float) - self._xe - z
         u = self._ue + V[0] + self._K @ error
+        elapsed = time.perf_counter() - start  # the membership check below is a record, not the law
         inside = self.tube.error_set.contains(error[None, :], tolerance=1e-9)[0]
         self._info = {
             "solver": "daqp",
             "status": status,
             "success": success,
             "iterations": iterations,
-            "solve_time": time.perf_counter() - start,
+            "solve_time": elapsed,
             "error_in_tube": bool(inside),
         }
         return self._A @ z + self._B @ V[0], u

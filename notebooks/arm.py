@@ -15,43 +15,29 @@
 #
 # The plant is declared once by its energies (`models.get("arm")`); the designs see the model the case says
 # the controller knows (mass and length 5 % off), the runs use the true nonlinear arm with its 1 N m limit.
-# Each step checks its numbers against an independent derivation.
+# Each step is a function of `studies.course`, shared by every case's notebook: it returns its numbers and
+# checks them against an independent derivation (an AssertionError names the numbers that disagree).
 
 # %%
-import control
 import numpy as np
-import scipy.linalg
 
 import models
 import studies
-from designs.pid import PID, pd_design
-from models.lqr import lqr
+from designs.pid import PID
 from models.metrics import run_metrics
-from studies import providers, tuner
-from studies.runner import Options, run_study
+from studies import course
 
 case = studies.get("arm")
-known = case.known_plant()
-truth = models.get("arm")
-limit = float(known.input_limit[0])
 
 # %% [markdown]
 # ## The plant, linearized about the level arm
 #
-# The linearization's transfer function θ/τ = b / (s² + a₁ s + a₀); its poles are the roots of that
-# denominator, which must be the eigenvalues of the linearization's A.
+# The transfer function θ/τ = b / (s² + a₁ s + a₀) of the two-state linearization: its poles are the
+# eigenvalues of A.
 
 # %%
-linear = known.linearize()
-G = linear.tf("theta", "tau")
-num, den = np.ravel(G.num[0][0]), np.ravel(G.den[0][0])
-den = den / den[0]
-b = num[-1] / 1.0
-a1, a0 = den[1], den[2]
-hand = np.roots([1.0, a1, a0])
-eigs = np.linalg.eigvals(np.asarray(linear.A, dtype=float))
-assert np.allclose(np.sort_complex(hand), np.sort_complex(eigs), atol=1e-9), (hand, eigs)
-print("poles:", hand)
+plant = course.linearization(case)
+print(plant.report())
 
 # %% [markdown]
 # ## Classical: a PD placing the closed-loop poles at ωn = 10 rad/s, ζ = 0.707
@@ -60,40 +46,28 @@ print("poles:", hand)
 # kp = (ωn² − a₀) / b and kd = (2 ζ ωn − a₁) / b.
 
 # %%
-WN, ZETA = 10.0, 0.707
-pd = pd_design(G, zeta=ZETA, wn=WN)
-assert np.isclose(pd.kp, (WN**2 - a0) / b, rtol=1e-9), pd.kp
-assert np.isclose(pd.kd, (2 * ZETA * WN - a1) / b, rtol=1e-9), pd.kd
-print(f"kp = {pd.kp:.6g} N m/rad, kd = {pd.kd:.6g} N m s/rad")
+pd = course.pd_by_poles(course.loop_model(case), wn=10.0, zeta=0.707)
+print(pd.report("N m"))
 
 # %% [markdown]
 # ## State space: the LQR's Riccati solution
 #
-# The project's continuous LQR (`models.lqr.lqr`) against K = R⁻¹ Bᵀ P with P from scipy's
-# `solve_continuous_are`, and against python-control's `lqr`; the closed loop A − B K is stable.
+# Bryson's rule: at most 0.2 rad of angle, 5 rad/s of rate and the full 1 N m. The project's continuous LQR
+# against K = R⁻¹ Bᵀ P from SciPy's Riccati solver and against python-control's `lqr`.
 
 # %%
-A, B = np.asarray(linear.A, dtype=float), np.asarray(linear.B, dtype=float)
-Q, R = np.diag([1 / 0.2**2, 1 / 5.0**2]), np.array([[1 / limit**2]])
-P = scipy.linalg.solve_continuous_are(A, B, Q, R)
-K = np.linalg.solve(R, B.T @ P)
-K_project = np.atleast_2d(lqr(A, B, Q, R)[0])
-K_control, _, _ = control.lqr(A, B, Q, R)
-assert np.allclose(K_project, K, rtol=1e-8), (K_project, K)
-assert np.allclose(K_control, K, rtol=1e-8), (K_control, K)
-assert np.all(np.linalg.eigvals(A - B @ K).real < 0)
-print("K =", K)
+Q, R = np.diag([1 / 0.2**2, 1 / 5.0**2]), np.array([[1 / plant.limit**2]])
+print("K =", course.lqr_gain(plant.A, plant.B, Q, R))
 
 # %% [markdown]
 # ## The PD on the true nonlinear arm, the text's 50° step
 
 # %%
 timing = dict(sample_period=case.sample_period, sigma=case.derivative_time_constant)
-controller = PID(known, "theta", kp=pd.kp, kd=pd.kd, output_limit=limit, name="PD", **timing)
-run = models.simulate_closed_loop(truth, controller, np.deg2rad(50), 8.0)
-m = run_metrics(run, "theta")
-assert np.max(np.abs(run.u)) <= limit + 1e-12  # the actuator limit holds
-print({k: round(float(v), 4) for k, v in m.items() if isinstance(v, float)})
+controller = PID(plant.known, "theta", kp=pd.kp, kd=pd.kd, output_limit=plant.limit, name="PD", **timing)
+run = models.simulate_closed_loop(models.get("arm"), controller, np.deg2rad(50), 8.0)
+assert np.max(np.abs(run.u)) <= plant.limit + 1e-12  # the actuator limit holds
+print({k: v for k, v in course.rounded(run_metrics(run, "theta")).items() if isinstance(v, float)})
 
 # %% [markdown]
 # ## Tuning: the PID's gains searched on the known arm
@@ -103,11 +77,10 @@ print({k: round(float(v), 4) for k, v in m.items() if isinstance(v, float)})
 # loop has the denominator s³ + (a₁ + b kd) s² + (a₀ + b kp) s + b ki, whose roots stay in the left half plane.
 
 # %%
-gains = tuner.stored(case)
-print("hand design:", {k: round(v, 4) for k, v in gains["start_gains"].items()})
-print("tuned:      ", {k: round(v, 4) for k, v in gains["gains"].items()})
-tuned = gains["gains"]
-assert np.all(np.roots([1.0, a1 + b * tuned["kd"], a0 + b * tuned["kp"], b * tuned["ki"]]).real < 0)
+gains = course.tuned_gains(case)
+print("hand design:", course.rounded(gains["start_gains"]))
+print("tuned:      ", course.rounded(gains["gains"]))
+assert np.all(pd.pid_poles(**gains["gains"]).real < 0)
 
 # %% [markdown]
 # ## Every controller on the text's step: the quick study's table
@@ -116,12 +89,8 @@ assert np.all(np.roots([1.0, a1 + b * tuned["kd"], a0 + b * tuned["kp"], b * tun
 # the Monte Carlo (`python -m studies arm --quick` runs every scenario). Every input stays within its limit.
 
 # %%
-kinds = [providers.classical, providers.statespace, providers.mpc, providers.tuned]
-result = run_study(case, Options(scenarios=("step",), mc=0, quick=True), providers=kinds)
-table = result.table
-assert (table["peak_u"] <= table["u_limit"] + 1e-9).all(), table[["controller", "peak_u", "u_limit"]]
-columns = ["controller", "verdict", "rise_time_s", "settling_time_s", "overshoot_pct", "peak_u", "u_limit"]
-table[columns].round(3)
+result = course.quick_table(case, expected=["PD", "LQR", "linear MPC", "tuned"])
+result.table[course.TABLE_COLUMNS].round(3)
 
 # %% [markdown]
 # ## The linear MPC's prediction model
@@ -130,10 +99,4 @@ table[columns].round(3)
 # B_d = ∫₀^Ts e^{A τ} dτ B, both read off one matrix exponential of [[A, B], [0, 0]] Ts (Van Loan).
 
 # %%
-mpc_controller = result.controllers["linear MPC"]
-Ts = mpc_controller.sample_period
-n, m = B.shape
-block = scipy.linalg.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * Ts)
-assert np.allclose(mpc_controller.model.A, block[:n, :n], rtol=1e-8, atol=1e-10)
-assert np.allclose(mpc_controller.model.B, block[:n, n:], rtol=1e-8, atol=1e-10)
-print(f"Ts = {Ts} s")
+print(course.prediction_model(result.controllers["linear MPC"], plant.A, plant.B).report())

@@ -42,6 +42,29 @@ NONLINEAR_MPC_SAMPLE_MS_PER_STAGE = 8e-3
 FIRST_MONTE_CARLO_MS = 200.0
 #: The nonlinear MPC steps its Monte Carlo samples together: each sample costs this fraction of a run alone.
 NONLINEAR_MPC_BATCH = 0.4
+#: A plant's work before its first run (the designs, per controller) and after its last (its files, per
+#: run), in the same ms: a recorded ``python -m studies arm --quick``'s run.json (timing design_s and
+#: files_s, about as long as its rows together; tests/studies/data/quick_run_phases.csv), scaled as its rows.
+DESIGN_MS_PER_CONTROLLER = 240.0
+FILES_MS_PER_RUN = 53.0
+
+
+def plant_costs(case, scenarios=None, samples: int = 0, controllers=None) -> tuple[list, float]:
+    """The whole expected cost of studying `case`, in `run_weights`' ms: each run's weight, the first one
+    carrying the designs made before it (`DESIGN_MS_PER_CONTROLLER`), and the cost of the files written
+    after the last run (`FILES_MS_PER_RUN` per run), reached when the plant is done.
+
+    Parameters are those of `run_weights`.
+
+    Returns
+    -------
+    weights : list of float, one per run;  after : float, the files' cost
+    """
+    weights = run_weights(case, scenarios, samples, controllers)
+    labels = case.controllers if controllers is None else controllers
+    if weights:
+        weights[0] += DESIGN_MS_PER_CONTROLLER * len(labels)
+    return weights, FILES_MS_PER_RUN * len(weights)
 
 
 def controller_kind(label: str) -> str:
@@ -210,16 +233,20 @@ def run_plants(
     settings : plant -> keyword arguments of `studies.run_study` (providers, scenarios, mc, ...)
     executor : a `studies.distributed` executor; with more than one worker (a `Local` pool, or Dask)
         and more than one plant, each plant is a task of its own, else they run here one by one
-    progress : progress(plant, done, total, text): after each simulation here, as each plant ends elsewhere
+    progress : progress(plant, done, total, text): after each simulation here, and (1, 1) as each plant
+        ends, its files written
     longest_first : plant -> seconds it is expected to take: parallel tasks start with the longest (an
         unknown plant first of all), so that they finish together; every order writes the same files
     """
+    reports: list = []
     if len(plants) < 2 or not (executor.distributed or executor.workers > 1):
-        return [run_plant(name, settings[name], out, answers, progress, executor, run_id) for name in plants]
+        for name in plants:
+            reports.append(run_plant(name, settings[name], out, answers, progress, executor, run_id))
+            progress(name, 1, 1, f"{name} done")  # its files are written too
+        return reports
     seconds = longest_first or {}
     order = sorted(plants, key=lambda name: -seconds.get(name, math.inf))
     tasks = [(name, settings[name], answers, run_id) for name in order]
-    reports: list = []
     files: dict = {}
     for report, written in executor.as_completed(plant_task, tasks, labels=[f"plant-{name}" for name in order]):
         reports.append(report)

@@ -195,6 +195,8 @@ class CaseStudy:
     answer_providers : callables ``provider(case) -> {item: {name: value}}`` of the homework answers
         (keyword only; `studies.providers.STANDARD_ANSWERS` are the case's own)
     bounds : params dict -> {state name: (low, high)}, counted as constraint violation and judged as a spec
+    state_limits : the plant's physical limits (`models.state_limits.StateLimit`, with their source), judged
+        on every scenario and Monte Carlo sample (`specs_for`)
     specs : scenario name -> `models.specs.Specs` the rows of that scenario are judged by; "*" for the
         scenarios not named (default: no step specs, only the actuator limit, the bounds and no limit cycle)
     loops : the loopshaping specs (`LoopSpec`), one Bode plot each
@@ -241,6 +243,7 @@ class CaseStudy:
     providers: tuple = field(kw_only=True)
     answer_providers: tuple = field(kw_only=True)
     bounds: Callable[[dict], dict] | None = None
+    state_limits: tuple = ()
     specs: Mapping[str, Specs] = field(default_factory=dict)
     loops: tuple = ()
     cascade: tuple | None = None
@@ -272,9 +275,10 @@ class CaseStudy:
         return dict(self.bounds(dict(params))) if self.bounds else {}
 
     def specs_for(self, scenario: str, params: Mapping[str, float]) -> Specs:
-        """The specs of `scenario` on the plant with `params`: the case's, with its state bounds added."""
+        """The specs of `scenario` on the plant with `params`: the case's, with its state bounds and its
+        physical limits (`state_limits`, at `params`) added."""
         chosen = self.specs.get(scenario, self.specs.get("*", Specs()))
-        return chosen.with_state_bounds(self.state_bounds(params))
+        return chosen.with_state_bounds(self.state_bounds(params)).with_limits(self.state_limits, params)
 
     def known_plant(self, plant: models.Plant | None = None) -> models.Plant:
         """The model the controllers are designed from: the uncertain parameters of `plant` (default the

@@ -138,6 +138,7 @@ def parser() -> argparse.ArgumentParser:
         help="instead of the study: every controller of one plant on N values of its true parameter "
         "PARAM from LOW to HIGH (writes OUT/PLANT/sweep.csv, sweep.png, sweep.md)",
     )
+    p.add_argument("--long", action="store_true", help="run a --sweep estimated beyond studies.sweep.TIME_LIMIT_S")
     p.add_argument(
         "--list",
         action="store_true",
@@ -169,10 +170,11 @@ def parser() -> argparse.ArgumentParser:
 class Progress:
     """One tqdm bar over every plant's runs, its total fixed before the run starts.
 
-    Each plant has a share of the total: the expected costs of its declared controllers' runs
-    (`progress_slots`, `studies.batch.run_weights`), or a number of equal runs. `update(plant, done,
-    total, text)` after each simulation, or once when a plant run elsewhere is done, moves the bar to
-    the cost of the plant's first `done` runs (or its share times done/total when a provider added or
+    Each plant has a share of the total: the expected costs of its declared controllers' runs, the
+    first carrying its designs, and of its files (`progress_slots`, `studies.batch.plant_costs`: a
+    pair (weights, after)), or a number of equal runs. `update(plant, done, total, text)` after each
+    simulation, and (1, 1) once the plant is done (its files written), moves the bar to the cost of
+    the plant's first `done` runs (or its share times done/total when a provider added or
     lacked controllers), so the remaining time follows the work left, not the count of runs. The
     estimate is the run's average rate (no smoothing): elapsed x whole / done.
     """
@@ -180,11 +182,13 @@ class Progress:
     def __init__(self, slots: dict, stream=None, disable: bool = False):
         stream = stream or sys.stderr
         tty = stream.isatty()
+        after = {plant: float(w[1]) if isinstance(w, tuple) else 0.0 for plant, w in slots.items()}
+        slots = {plant: w[0] if isinstance(w, tuple) else w for plant, w in slots.items()}
         self.weights = {
             plant: [1.0] * int(w) if isinstance(w, (int, float)) else [float(x) for x in w]
             for plant, w in slots.items()
         }
-        self.slots = {plant: sum(w) for plant, w in self.weights.items()}
+        self.slots = {plant: sum(w) + after[plant] for plant, w in self.weights.items()}
         self.done = dict.fromkeys(self.slots, 0.0)
         self.runs = dict.fromkeys(self.slots, 0)
         self.bar = tqdm.tqdm(
@@ -221,12 +225,12 @@ class Progress:
 
 
 def progress_slots(plants, scenarios, settings: dict) -> dict:
-    """plant -> expected cost of each run it will make (`studies.batch.run_weights`): its declared
-    controllers through the scenarios it will run."""
+    """plant -> (expected cost of each run it will make, of its files) (`studies.batch.plant_costs`): its
+    declared controllers through the scenarios it will run."""
     slots = {}
     for name in plants:
-        weights = batch.run_weights(cases.get(name), scenarios, int(settings.get("mc") or 0))
-        slots[name] = weights or [1.0]
+        weights, after = batch.plant_costs(cases.get(name), scenarios, int(settings.get("mc") or 0))
+        slots[name] = (weights or [1.0], after)
     return slots
 
 
@@ -261,12 +265,16 @@ def _list(plants, providers) -> str:
 
 
 def _plant_line(done: dict) -> str:
-    """A plant's closing line: "arm: 12 controllers, 60 rows: 50 meet specs, 10 violate; best step ITAE: LQR"."""
+    """A plant's closing line: "arm: 12 controllers, 60 rows: 50 meet specs, 10 violate; best step ITAE: LQR".
+
+    The best is the lowest step ITAE among the rows that meet their specs (`StudyResult.best`); when none
+    does the line says so ("best step ITAE: none, no step row meets the specs"), never naming a row that
+    violates them."""
     plural = {"meets specs": "meet specs", "violates": "violate"}
     counts = ", ".join(
         f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items() if n
     )
-    best = f"; best step ITAE: {done['best']}" if done.get("best") else ""
+    best = f"; best step ITAE: {done['best'] or 'none, no step row meets the specs'}" if "best" in done else ""
     return f"{done['name']}: {done['controllers']} controllers, {done['rows']} rows: {counts or 'no verdicts'}{best}"
 
 
@@ -334,8 +342,12 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
         p.error(f"{name} has no parameter {grid.param!r}; its parameters are {', '.join(plant.params)}")
     try:
         sweep.grid_params(plant, grid)  # every value the plant accepts, before the run starts
+        estimate = sweep.check_time(cases.get(name), grid, scenario[0], accept=args.long)
     except ValueError as err:
         p.error(f"--sweep: {err}")
+    print(
+        f"{name}: sweep of {len(grid.values)} points, estimated {sweep.format_duration(estimate)} of runs", file=stream
+    )
     options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
     stop_on_signals()
     study = cases.get(name)

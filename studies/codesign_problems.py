@@ -19,10 +19,12 @@ collects them is `studies.codesign_report`):
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -36,6 +38,7 @@ from designs.codesign import (
     size_actuator,
     size_actuator_simultaneous,
 )
+from designs.codesign_global import codesign_globally
 from designs.pid import PID, max_equilibrium_input
 from designs.tuning import Cost, Scenario, SolveOptions, Specs, TuningProblem, TuningSetup, checked_options, tune
 from models import catalog, deferred
@@ -52,6 +55,25 @@ log = logging.getLogger(__name__)
 CODESIGN_SOLVE_OPTIONS = SolveOptions(jit=True, hessian="exact")
 #: Their specs' form on the smoothed stages: one soft maximum per spec and run, not one row per sample.
 CODESIGN_PATHS = "aggregated"
+#: The method name that runs the global layer (`designs.codesign_global.codesign_globally`) on a
+#: plant-parameter problem, beside (or, given alone, instead of) the local `METHODS`.
+GLOBAL = "global"
+#: The global layer's sweep there: a grid of this many points over the range, ends included, the best
+#: `GLOBAL_KEEP` local minima refined by the simultaneous method, within `GLOBAL_MAX_SECONDS` (estimated).
+GLOBAL_SAMPLES, GLOBAL_KEEP, GLOBAL_MAX_SECONDS = 12, 2, 4 * 3600.0
+#: Where the global layer's sweep runs when `codesign_case` is given no ``map``: set by `sweep_on`.
+_SWEEP_MAP: contextvars.ContextVar[Callable | None] = contextvars.ContextVar("sweep_map", default=None)
+
+
+@contextlib.contextmanager
+def sweep_on(map: Callable | None) -> Iterator[None]:
+    """Within the block, the global layer of every `codesign_case` sweeps through `map(function, items)`
+    (a `studies.distributed` executor's ``map``; the case files' problem functions need not pass it)."""
+    token = _SWEEP_MAP.set(map)
+    try:
+        yield
+    finally:
+        _SWEEP_MAP.reset(token)
 
 
 # ----------------------------------------------------------------- records
@@ -111,6 +133,7 @@ class CaseResult:
     scenario, specs, cost : the closed-loop run every design is judged on (None when read from a record)
     designs : method -> Design, for the `METHODS` run
     notes : choices made, in words
+    global_layer : the global layer's answer (`global_summary`), or None where it was not run
     """
 
     key: str
@@ -125,6 +148,7 @@ class CaseResult:
     cost: Cost | None = field(repr=False)
     designs: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    global_layer: dict | None = None
 
     def best(self, methods) -> Design | None:
         """The feasible design of lowest objective among `methods`, None when none is feasible."""
@@ -307,6 +331,7 @@ def actuator_sizing(
     methods : which of `METHODS` to run
     options : SolveOptions of every tuning (phase one always on; default `SolveOptions()`)
     """
+    methods = tuple(m for m in methods if m != GLOBAL)  # a bisection on a monotone feasibility: one basin
     check_methods(methods)
     run = CaseSizing(case, sizing, rel_tol, checked_options(options))
     for method in METHODS:
@@ -529,6 +554,7 @@ def codesign_case(
     methods=METHODS,
     options: SolveOptions = CODESIGN_SOLVE_OPTIONS,
     nested_start: str = "nearest",
+    map: Callable | None = None,
 ) -> CaseResult:
     """Fill `result` with `designs.codesign.codesign`'s answers (its own numbers, plus a fresh `measure`).
 
@@ -536,23 +562,68 @@ def codesign_case(
     name : the plant parameter decided within [low, high]
     plant_cost : its price (dict name -> value or CasADi symbol -> objective units), which is also
         the sequential method's plant-only objective
+    methods : which of `METHODS` to run, and `GLOBAL` for the global layer (`result.global_layer`)
     options, nested_start : of every solve and of the nested method (`designs.codesign.codesign`)
+    map : the global layer's ``map(function, items)`` for its sweep (a `studies.distributed` executor's),
+        or None: the one of `sweep_on`, else this process
     """
-    answers = codesign(
-        setup,
-        {name: (low, high)},
-        plant_cost=plant_cost,
-        options=options,
-        methods=tuple(methods),
-        nested_start=nested_start,
-        progress=lambda answer: announce(result.problem, answer),
-    )
-    for method, answer in answers.items():
-        result.designs[method] = _codesign_design(answer, name, result)
+    local = tuple(m for m in methods if m != GLOBAL)
+    if local:
+        answers = codesign(
+            setup,
+            {name: (low, high)},
+            plant_cost=plant_cost,
+            options=options,
+            methods=local,
+            nested_start=nested_start,
+            progress=lambda answer: announce(result.problem, answer),
+        )
+        for method, answer in answers.items():
+            result.designs[method] = _codesign_design(answer, name, result)
     result.notes.append(
         f"plant-only objective of the sequential method: the plant's price alone, minimized over [{low:g}, {high:g}]"
     )
+    if GLOBAL in methods:
+        found = codesign_globally(
+            setup,
+            {name: (low, high)},
+            method="simultaneous",
+            plant_cost=plant_cost,
+            options=options,
+            samples=GLOBAL_SAMPLES,
+            keep=GLOBAL_KEEP,
+            max_seconds=GLOBAL_MAX_SECONDS,
+            map=map if map is not None else _SWEEP_MAP.get(),
+        )
+        result.global_layer = global_summary(found, name)
+        log.info("%s: global layer, %s", result.problem, found.how)
     return result
+
+
+def global_summary(found, name: str) -> dict:
+    """JSON-able record of a `mpc.global_search.GlobalResult` on the one parameter `name`: the sweep's
+    design, every distinct local optimum (value, objective, converged, status, start), the best, how it was
+    chosen, whether it converged, and the wall time (s)."""
+    optima = [
+        {
+            "value": float(o.params[name]),
+            "objective": float(o.objective),
+            "success": bool(o.success),
+            "status": str(o.status),
+            "start": float(o.start[name]),
+        }
+        for o in found.optima
+    ]
+    return {
+        "method": str(found.extra.get("method", "")),
+        "design": found.design,
+        "sweep": [[float(p[name]), float(v), bool(ok)] for p, v, ok in found.sweep],
+        "optima": optima,
+        "best": {"value": float(found.best.params[name]), "objective": float(found.best.objective)},
+        "converged": bool(found.converged),
+        "how": found.how,
+        "wall_time": float(found.wall_time),
+    }
 
 
 # ---------------------------------------------------------------------------- the spring-mass

@@ -49,8 +49,8 @@ from typing import Any
 from designs.codesign import METHODS, SIZING_COST_WEIGHT, SIZING_TIE_BREAK
 from models import files
 
-from . import cases
-from .codesign_problems import CaseResult, Design
+from . import cases, distributed
+from .codesign_problems import GLOBAL, CaseResult, Design, sweep_on
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "codesign.md"
 
@@ -71,9 +71,13 @@ def to_record(result: CaseResult, run: dict, kept: dict | None = None) -> dict:
     designs |= {
         m: {name: getattr(d, name) for name in RECORDED} | {"run": dict(run)} for m, d in result.designs.items()
     }
+    layer = (kept or {}).get("global_layer")
+    if result.global_layer is not None:
+        layer = result.global_layer | {"run": dict(run)}
     return {
         **{name: getattr(result, name) for name in RECORDED_CASE},
         "designs": {m: designs[m] for m in METHODS if m in designs},
+        **({"global_layer": layer} if layer is not None else {}),
     }
 
 
@@ -94,6 +98,7 @@ def from_record(record: dict) -> CaseResult:
         cost=None,
         designs=designs,
         notes=list(record["notes"]),
+        global_layer=record.get("global_layer"),
     )
     result.text_value = float(result.text_value)
     runs: dict[tuple, list] = {}
@@ -247,26 +252,35 @@ def notes(results: list[CaseResult]) -> str:
     return "".join(parts)
 
 
-#: What the global layer says about each case (a measured statement; see `global_layer`).
+#: A local answer whose objective is within this fraction of the global layer's best is that optimum.
+SAME_OPTIMUM = 1e-6
+
 GLOBAL_LAYER = """
 ## Local optima: the global layer
 
 Every method above is local: the nested method's bounded Brent search and the simultaneous IPOPT solve
 stop on the first local optimum of the plant parameter. `designs.codesign_global.codesign_globally` (over
-`mpc.global_search.search`) sweeps the parameter first (a grid of `samples` points, default 12, each a
-converged tuning from the block's own gains) and refines the sweep's best local minima with the nested or
-the simultaneous method; its answer lists every distinct local optimum (parameter, objective, status),
-and says converged only when the best of them converged. It is tested on a first-order loop with four
-known local optima (tests/designs/test_codesign_global.py).
+`mpc.global_search.search`) sweeps the parameter first (a grid over its range, ends included, each point a
+converged tuning from the block's own gains), then refines the sweep's best local minima with the
+simultaneous method; its answer lists every distinct local optimum (parameter, objective, status), and
+says converged only when the best of them converged. It is tested on a first-order loop with four known
+local optima (tests/designs/test_codesign_global.py). `--methods global` runs it on the plant-parameter
+problems (`studies.codesign_problems.GLOBAL_SAMPLES` points, the best `GLOBAL_KEEP` refined; `--workers N`
+spreads the sweep over a Dask LocalCluster of N processes, with the same numbers), keeping the record's
+local answers. The actuator sizings are bisections on a monotone feasibility, to which a sweep adds
+nothing: they are not swept.
 
-The closed-loop cases above have not been re-run under it: their records keep the local answers of
-each method, which are not claimed global. Its cost there is estimable from the records: a sweep of 12
-tunings plus about 15 per refinement against the nested method's 13 (satellite) and 16 (crane) inner
-tunings, so about three to four times the nested method's time per refined basin. The plant-parameter
-answers agree across nested, simultaneous and the start from the sequential answer (satellite
-k = 0.9086 N m/rad by all three; crane ℓ = 5 m, the range's end, by all three), which is evidence but not
-proof of a single basin; the actuator sizings are bisections on a monotone feasibility, to which the
-sweep adds nothing.
+For each plant-parameter problem: the local optima the sweep found, the best, and how far each method's
+feasible local answer is above it (relative objective; "already global" below {same:g}); a record whose
+answers were already global keeps them.
+
+{table}
+
+A problem without a layer record has not been run under it. The crane's: its one timed tuning (the
+layer's estimate) took 732 s on the shared 2-core machine at load 12, which puts the default sweep (12
+points, 2 refinements) at an estimated 6.5 h, refused by `GLOBAL_MAX_SECONDS` (4 h); its local answers
+agree on the range's end (ℓ = 5 m by nested, simultaneous and the start from (1)), and its open-loop
+counterpart below is global.
 
 The open-loop problems (docs/codesign_open_loop.md, `python -m studies.codesign_open_loop`) run under
 the layer by default; for each, local optima found by the sweep (simultaneous / nested) and the plain
@@ -280,11 +294,51 @@ local answer's gap to the best:
 | crane, cable length | 1 / 1 | < 1e-7 relative | already global (the range's end) |
 """
 
+
+def gap_text(objective: float, best: float) -> str:
+    """A local answer's distance above the global layer's best: "already global", or a percentage."""
+    gap = (objective - best) / abs(best)
+    return "already global" if gap <= SAME_OPTIMUM else f"{_percent(gap)} above"
+
+
+def global_table(results: list[CaseResult]) -> str:
+    """One row per plant-parameter problem: the layer's sweep, its local optima, its best, each method's gap."""
+    rows = []
+    for r in results:
+        layer = r.global_layer
+        if layer is None:
+            if not r.parameter.endswith(" limit"):  # an actuator sizing (a bisection) is not swept
+                rows.append({"problem": r.problem, "sweep": "not run under the global layer (see below)"})
+            continue
+        best = layer["best"]
+        optima = "; ".join(
+            f"{_number(o['value'])} → {_number(o['objective'])}{'' if o['success'] else ' (not converged)'}"
+            for o in layer["optima"]
+        )
+        gaps = "; ".join(
+            f"{m}: {gap_text(d.objective, best['objective']) if d.feasible else 'infeasible'}"
+            for m, d in r.designs.items()
+        )
+        rows.append(
+            {
+                "problem": f"{r.problem} ({r.parameter}, {r.unit})",
+                "sweep": f"{layer['design']}; {layer['wall_time']:.0f} s",
+                "local optima": f"{len(layer['optima'])}: {optima}",
+                "best": f"{_number(best['value'])} → {_number(best['objective'])}"
+                + ("" if layer["converged"] else " (not converged)"),
+                "each method's answer": gaps or "—",
+            }
+        )
+    columns = ("problem", "sweep", "local optima", "best", "each method's answer")
+    cell = lambda value: "" if value is None else str(value)
+    return files.markdown_table(rows, [(c, c, cell) for c in columns], literal=False) if rows else "(none)"
+
+
 #: The document's sections in order: each a callable (results, command) -> Markdown.
 SECTIONS = (
     lambda results, command: HEADER.format(command=command, weight=SIZING_COST_WEIGHT, tie_break=SIZING_TIE_BREAK),
     lambda results, command: "\n" + table(results) + "\n",
-    lambda results, command: GLOBAL_LAYER + "\n",
+    lambda results, command: GLOBAL_LAYER.format(same=SAME_OPTIMUM, table=global_table(results)) + "\n",
     lambda results, command: notes(results),
 )
 
@@ -296,6 +350,30 @@ def report(results: list[CaseResult], command: str, sections=SECTIONS) -> str:
 
 def _listed_methods(methods) -> str:
     return "" if methods is None else " --methods " + " ".join(f"'{m}'" if " " in m else m for m in methods)
+
+
+def _solve(args, found: dict, keys: list, records: Path | None) -> list[CaseResult]:
+    """Each problem of `keys` solved (or, with --reuse, read), its record written as soon as it is solved."""
+    results = []
+    for i, key in enumerate(keys, 1):
+        saved = records / f"{key}.json" if records is not None else None
+        earlier = json.loads(saved.read_text()) if saved is not None and saved.exists() else None
+        if args.reuse and earlier is not None:
+            results.append(from_record(earlier))
+            print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
+            continue
+        print(f"[{i}/{len(keys)}] {key} ...", flush=True)
+        # Taken before solving: the code that runs is the one checked out now.
+        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
+        started = time.perf_counter()
+        r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
+        values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
+        print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
+        record = to_record(r, run, earlier if args.methods else None)
+        if saved is not None:
+            files.write_json(saved, record)
+        results.append(from_record(record) if args.methods else r)
+    return results
 
 
 def main(argv=None) -> int:
@@ -319,34 +397,29 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--methods",
         nargs="+",
-        choices=METHODS,
+        choices=(*METHODS, GLOBAL),
         help="solve only these methods; the problem's record keeps its other methods' designs",
     )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="run the global layer's sweep (--methods global) on a Dask LocalCluster of N worker processes "
+        "(studies.distributed; the same numbers as in one process)",
+    )
     args = parser.parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers must be a whole number >= 1, got {args.workers}")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
     keys = args.only or list(found)
     out = DOC if args.write_docs else args.out
     records = args.records or (out.with_suffix("") if out is not None else None)
     command = "python -m studies.codesign_report" + ("" if args.only is None else " --only " + " ".join(keys))
-    results = []
-    for i, key in enumerate(keys, 1):
-        saved = records / f"{key}.json" if records is not None else None
-        earlier = json.loads(saved.read_text()) if saved is not None and saved.exists() else None
-        if args.reuse and earlier is not None:
-            results.append(from_record(earlier))
-            print(f"[{i}/{len(keys)}] {key}: read {saved}", flush=True)
-            continue
-        print(f"[{i}/{len(keys)}] {key} ...", flush=True)
-        # Taken before solving: the code that runs is the one checked out now.
-        run = _provenance(f"python -m studies.codesign_report --only {key}" + _listed_methods(args.methods))
-        started = time.perf_counter()
-        r = found[key](**({} if args.methods is None else {"methods": tuple(args.methods)}))
-        values = ", ".join(f"{m} {_number(d.value)}" for m, d in r.designs.items())
-        print(f"{values} {r.unit} ({time.perf_counter() - started:.0f} s; record {saved})", flush=True)
-        record = to_record(r, run, earlier if args.methods else None)
-        if saved is not None:
-            files.write_json(saved, record)
-        results.append(from_record(record) if args.methods else r)
+    if args.workers is None:
+        results = _solve(args, found, keys, records)
+    else:
+        with distributed.connect(None, args.workers) as executor, sweep_on(executor.map):
+            results = _solve(args, found, keys, records)
     text = report(results, command + (" --reuse" if args.reuse else ""))
     if out is None:
         print(text)

@@ -5,7 +5,10 @@ the sweep and the designer call on each closed-loop run: the metrics of
 `models.metrics.run_metrics` on the tracked coordinate, the status of
 `run_status` ("ok", "degraded: ...", "diverged at t = ... s") and the verdict
 of `models.specs.judge` against the case's specs for that scenario on the
-plant with the run's parameters.
+plant with the run's parameters: the physical limits of the case
+(`CaseStudy.state_limits`) on every run, and the frequency specs
+(`models.specs.FREQUENCY_SPECS`) where the row has a linear loop (a
+`models.Block`, linearized at the run's final rest point, `studies.loops`).
 """
 
 from __future__ import annotations
@@ -14,8 +17,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from models import metrics, specs
+from designs.analysis.robustness import frequency_measures
+from models import Block, metrics, specs
 
+from . import loops
 from .case import CaseStudy
 
 
@@ -97,11 +102,54 @@ def units(case: CaseStudy) -> dict:
     return {case.tracked: case.tracked_unit, "input": case.input_unit}
 
 
-def judge_run(case: CaseStudy, scenario: str, result, params: Mapping[str, float]) -> Judgement:
+def check_specs(case: CaseStudy, plant) -> None:
+    """Refuse, before any work, a case whose specs its scenarios or its plant (a `models.Plant`) cannot
+    meet or judge (`models.specs.Specs.validate`): a step spec on a scenario without a step, a time spec
+    after a scenario's end, a bound, final value or limit on a state the plant does not have, a tracked
+    coordinate's bound that excludes a commanded level. ValueError naming the scenario, the field and
+    its value."""
+    xe, _ = plant.equilibrium()
+    if case.tracked not in plant.state_names:
+        raise ValueError(f"{case.name}: tracked = {case.tracked!r}, and {plant.name} has no such state")
+    base = float(xe[list(plant.state_names).index(case.tracked)])
+    for scenario in case.scenarios:
+        judged = case.specs_for(scenario.name, plant.params)
+        targets = [base, *(base + level * case.step for level in scenario.levels)]
+        judged.validate(
+            plant.state_names,
+            tracked=case.tracked,
+            targets=targets,
+            duration=scenario.duration(case),
+            where=f" {scenario.name!r} of {case.name}",
+        )
+
+
+def linear_loop_measures(plant, controller, result) -> dict | None:
+    """The frequency measures (`designs.analysis.robustness.FrequencyMeasures.as_dict`) of `controller`'s loop
+    on `plant` (a `models.Plant`), broken at the plant input and linearized at the run's final rest point
+    (`studies.loops`); None when the row has no linear loop (a controller that is not a `models.Block`, or
+    a run that diverged)."""
+    if not isinstance(controller, Block) or plant is None or result.diverged_at is not None:
+        return None
+    point = loops.final_point(plant, controller, result)
+    return frequency_measures(loops.loop(plant, controller, point)).as_dict()
+
+
+def judge_run(
+    case: CaseStudy, scenario: str, result, params: Mapping[str, float], *, controller=None, plant=None
+) -> Judgement:
     """Judge one closed-loop run (a `models.ClosedLoopResult`) of `scenario` on the plant with `params`
-    (name -> value, SI units) against the case's specs for that scenario (`CaseStudy.specs_for`)."""
+    (name -> value, SI units) against the case's specs for that scenario (`CaseStudy.specs_for`).
+
+    `controller` and `plant` (the `models.Plant` simulated): where the specs have frequency fields and the
+    controller is a `models.Block`, its linearized loop is measured (`linear_loop_measures`) and judged;
+    without them, or for a controller without a linear loop, the frequency specs are not judged.
+    """
     judged = case.specs_for(scenario, params)
     measured = metrics.run_metrics(result, case.tracked, judged.state_bounds, band=judged.settling_band)
     status = run_status(result)
-    verdict = specs.judge(judged, result, case.tracked, case.step, status, measured=measured, units=units(case))
+    frequency = linear_loop_measures(plant, controller, result) if judged.frequency_specs else None
+    verdict = specs.judge(
+        judged, result, case.tracked, case.step, status, measured=measured, units=units(case), frequency=frequency
+    )
     return Judgement(measured, status, verdict, result.diverged_at, solver_issues(result))

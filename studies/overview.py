@@ -68,12 +68,12 @@ def step_rows(table):
 
 def relative_itae(table) -> dict:
     """controller -> step ITAE divided by the smallest finite step ITAE on that plant among the "ok" rows that
-    meet their specs (among all finite rows when none meets; NaN where no row has a number)."""
+    meet their specs (the best, 1×); NaN everywhere when no row meets them (no row is called best) and
+    where a row has no number."""
     rows = step_rows(table)
     itae = rows.itae.astype(float)
     meets = (rows.verdict == specs.MEETS) & (rows.status == "ok") if "status" in rows else rows.verdict == specs.MEETS
     finite = itae[np.isfinite(itae) & (itae > 0) & meets]
-    finite = finite if len(finite) else itae[np.isfinite(itae) & (itae > 0)]
     best = float(finite.min()) if len(finite) else math.nan
     return {
         label: float(value) / best if np.isfinite(value) and best > 0 else math.nan for label, value in itae.items()

@@ -35,8 +35,8 @@ from models import Block, checks, deferred, interrupts, metrics, specs
 from . import distributed
 from .answers import collect
 from .case import SCENARIO_NAMES, CaseStudy, TableScenario
+from .judging import check_specs, judge_run, verdict_columns
 from .judging import degraded_status as degraded_status
-from .judging import judge_run, verdict_columns
 from .judging import run_status as run_status
 from .judging import solver_counts as solver_counts
 from .provider_calls import NotProvided as NotProvided  # raised by providers; callers catch it from here too
@@ -389,6 +389,7 @@ def run_study(
     """
     options, chosen, executor = _checked_arguments(study, options, providers, controllers, progress, executor)
     plant = models.get(study.plant)
+    check_specs(study, plant)  # specs its scenarios or plant cannot judge are refused before any work
     check_resources(study, options, plant.n_params)
     interrupts.watch()  # Ctrl-C stops the study even where CasADi swallows it
     interrupts.clear()
@@ -530,7 +531,7 @@ class Simulation:
         study = self.study
         result = simulate_scenario(truth, controller, scenario, study, self.options, self.base, study.substeps)
         self.runs[(label, scenario.name)] = result
-        return judge_run(study, scenario.name, result, truth.params).row()
+        return judge_run(study, scenario.name, result, truth.params, controller=controller, plant=truth).row()
 
     def monte_carlo_runs(
         self, truth: models.Plant, controller, scenario: TableScenario, samples: np.ndarray

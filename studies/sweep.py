@@ -27,7 +27,7 @@ import models
 from models import Block, checks, deferred, interrupts, metrics, specs
 from models.files import write_csv, write_text
 
-from . import distributed, judging, plots, runner, style
+from . import batch, distributed, judging, plots, runner, style
 from .case import CaseStudy
 
 if TYPE_CHECKING:
@@ -39,6 +39,9 @@ else:
 #: Bytes one grid point holds before any work: its value as a float in an array and in the tuple
 #: (8 + 8 + a 24-byte Python float); `grid_params` adds a row of the plant's parameters.
 POINT_BYTES = 40
+#: A sweep whose estimated time (`estimate_seconds`) exceeds this many seconds is refused unless accepted
+#: (`check_time`; ``python -m studies --sweep ... --long``); read at every call.
+TIME_LIMIT_S = 1800.0
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,50 @@ def grid_params(plant: models.Plant, grid: Grid) -> np.ndarray:
         except ValueError as err:
             raise ValueError(f"sweep of {grid.param} at {value:g}: {err}") from None
     return rows
+
+
+def estimate_seconds(study: CaseStudy, grid: Grid, scenario: str = "step", labels: Sequence[str] | None = None):
+    """The expected wall time (s) of `run_sweep` over `grid`: {label: s} per controller, and their sum.
+
+    From the recorded cost of one run (`studies.batch.run_weights`, measured on ``python -m studies arm
+    --quick``): a Block's N points are one batched Monte Carlo of N samples (the fixed cost of a row and of
+    the batch's compilation once, then N times the simulated samples); any other controller's points run one
+    at a time (N whole runs). The designs made before the points are not counted.
+
+    labels : the controllers (default the study's declared ones)
+    """
+    labels = list(study.controllers if labels is None else labels)
+    count = len(grid.values)
+    per_run = batch.run_weights(study, [scenario], 0, labels)
+    seconds = {}
+    for label, ms in zip(labels, per_run):
+        if batch.controller_kind(label) == "block":
+            ms = batch.ROW_MS + batch.FIRST_MONTE_CARLO_MS + (ms - batch.ROW_MS) * count
+        else:
+            ms *= count
+        seconds[label] = ms / 1000.0
+    return seconds, sum(seconds.values())
+
+
+def check_time(study: CaseStudy, grid: Grid, scenario: str = "step", accept: bool = False) -> float:
+    """The sweep's estimated seconds (`estimate_seconds`); raises `models.checks.ResourceLimitError` (a
+    ValueError naming the points, the estimate and the limit) above `TIME_LIMIT_S` unless `accept`."""
+    _, seconds = estimate_seconds(study, grid, scenario)
+    if seconds > TIME_LIMIT_S and not accept:
+        raise checks.ResourceLimitError(
+            f"a sweep of {len(grid.values)} points of {grid.param} on {study.plant} is estimated at "
+            f"{format_duration(seconds)}, above the limit of {format_duration(TIME_LIMIT_S)} "
+            "(studies.sweep.TIME_LIMIT_S); "
+            "sweep fewer points, or accept the time (--long)"
+        )
+    return seconds
+
+
+def format_duration(seconds: float) -> str:
+    """ "42 s", "12 min", "3.5 h" """
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
 
 
 def run_sweep(

@@ -6,8 +6,7 @@ For a case with a state-space design, the LQR's weights Q (the integrator-augmen
 every run is the study's run (`studies.runner.simulate_scenario`, the nonlinear plant with its
 saturating actuator) judged by `studies.judging.judge_run` against the case's `models.specs.Specs`.
 The runs (`tuning_runs`) are the table's step, series of steps, input disturbance and noise on the
-nominal plant, then the step on the tuner's parameter rows of the ±known_rel box
-(`studies.tuner.tuning_samples`), so that the Monte Carlo's samples meet the specs too.
+nominal plant, then the step on the corners of the ±known_rel box, so that the Monte Carlo's samples meet the specs too.
 
 The objective is lexicographic in one number: a point that misses a spec on some run scores
 `BARRIER` plus its largest relative excess (the phase one: how far the structure is from the specs);
@@ -53,8 +52,10 @@ DIVERGED_EXCESS = 1e2
 ENERGY_WEIGHT = 0.1
 #: The table's scenarios judged on the nominal plant, in the order the objective runs them.
 NOMINAL = ("step", "steps", "disturbance", "noise")
-#: The scenario judged on each parameter row of the box.
+#: The scenario judged on each parameter row of the box: its 2^k corners, or where there are more than
+#: `MAX_CORNERS`, `N_SAMPLES` uniform samples (seed `SAMPLES_SEED`).
 ROBUST = ("step",)
+MAX_CORNERS, N_SAMPLES, SAMPLES_SEED = 16, 8, 1
 MIN_STEP, MAX_EVALUATIONS = 0.05, 400
 #: Each weight stays within this factor of the case's own (a weight that keeps shrinking matters less and
 #: less; the box ends the drift).
@@ -96,7 +97,10 @@ def controller(case: CaseStudy, kind: str, theta, known: models.Plant | None = N
 def tuning_runs(case: CaseStudy) -> list[tuple[str, np.ndarray | None]]:
     """(scenario name, parameter row or None for the nominal plant) of every run the objective judges."""
     names = {s.name for s in case.scenarios}
-    rows, _ = tuner.tuning_samples(case)
+    plant = models.get(case.plant)
+    rows = models.corner_params(plant, case.known_rel)
+    if len(rows) > MAX_CORNERS:
+        rows = models.sample_params(plant, N_SAMPLES, case.known_rel, SAMPLES_SEED)
     nominal = [(name, None) for name in NOMINAL if name in names]
     return nominal + [(name, row) for name in ROBUST if name in names for row in rows]
 
@@ -159,8 +163,10 @@ class WeightObjective:
         chosen = {s.name: s for s in case.scenarios}[scenario]
         _, base = runner.tracked_equilibrium(plant, case)
         result = runner.simulate_scenario(plant, control, chosen, case, runner.Options(), base, case.substeps, row)
-        params = plant.params if row is None else dict(zip(plant.params, row))
-        return judging.judge_run(tightened(case, self.margin), scenario, result, params)
+        judged = tightened(case, self.margin)
+        if row is None:  # as the table judges its nominal rows (with the loop's frequency specs, if any)
+            return judging.judge_run(judged, scenario, result, plant.params, controller=control, plant=plant)
+        return judging.judge_run(judged, scenario, result, dict(zip(plant.params, row)))
 
     def measure(self, theta) -> list[tuple[float, float]]:
         """(ITAE, energy) of every run with θ (the `reference` of a search that starts there)."""

@@ -15,13 +15,7 @@ IMPLICIT = {"self", "cls"}
 #: "package.qualname": reason. The gaps found when this test was written: their parameters are named in
 #: the signature but not yet in the docstring. Each is removed from here once documented (the test
 #: `test_the_exceptions_are_still_needed` fails on an entry that no longer needs to be here).
-UNDOCUMENTED: dict[str, str] = {
-    "mpc.MPCProblem.cost": "to document: params, inputs",
-    "mpc.MPCProblem.simulate": "to document: x0",
-    "mpc.MPCProblem.soft_violation": "to document: params, inputs",
-    "mpc.QPSolution.__init__": "to document: extra",
-    "mpc.problem_from_model": "to document: state_weight, input_weight, horizon, terminal_weight",
-}
+UNDOCUMENTED: dict[str, str] = {}
 
 
 def public_api(package: str):

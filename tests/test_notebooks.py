@@ -12,7 +12,7 @@ nbclient = pytest.importorskip("nbclient")
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.py"))
-#: The longest (9-15 s each on a fresh kernel at load 2-3, 14-27 s at load 7): with the slow tests only.
+#: The longest (11-18 s each on a fresh kernel at load 3.4-4.8; the others 6-11 s): with the slow tests only.
 SLOW = {"ballbeam", "codesign", "crane", "pendulum"}
 #: The longest a notebook may take on a fresh kernel, s.
 TIMEOUT = 60

@@ -56,7 +56,7 @@ complementarity reformulation, smoothing |e| too), and the measurements behind
 the defaults, are in docs/notes/tuning.md.
 """
 
-from .continuation import Continuation, Judgement, Level
+from .continuation import Continuation, Judgement, Kept, Level
 from .excess import relative_excess, soft_max_excess
 from .iterations import IterationLog, IterationRecorder
 from .options import SolveOptions, TuningSetup
@@ -77,12 +77,16 @@ from .settings import (
     MAX_ITER,
     METHODS,
     PATHS,
+    PATIENCE,
     PHASE_ONE_MARGIN,
     RETRIED,
     ROBUST,
+    SLACK,
     STAGE_TOL_FACTOR,
+    STOPPED,
     TOL,
     WARM_START,
+    WATCH_MARGIN,
     WIDTHS,
     check_widths,
 )
@@ -104,17 +108,22 @@ __all__ = [
     "METHODS",
     "PATHS",
     "PHASE_ONE_MARGIN",
+    "PATIENCE",
     "RETRIED",
     "ROBUST",
+    "SLACK",
     "STAGE_TOL_FACTOR",
+    "STOPPED",
     "TOL",
     "WARM_START",
+    "WATCH_MARGIN",
     "WIDTHS",
     "Continuation",
     "Cost",
     "IterationLog",
     "IterationRecorder",
     "Judgement",
+    "Kept",
     "Level",
     "PhaseOne",
     "Scenario",

@@ -5,6 +5,15 @@ the whole problem at one integration fidelity (an optional coarse level first, t
 The continuation stops at the first converged stage whose exact and smoothed objectives agree to
 `AGREEMENT` with the same specs violated, and whose answer no longer moves the exact objective (or has
 every switch outside its band, gap 0).
+
+A stage that makes the exact problem worse than the best point seen so far (the start, or an earlier
+stage's answer; judged on the exact loop: a higher cost that bought no smaller excess of the specs,
+`Continuation.worse`) is stopped and undone, its start kept: at its end, or during it, once the objective
+IPOPT sees has stayed `WATCH_MARGIN` above the best exact cost for `PATIENCE` iterations and the exact
+loop confirms it (IPOPT then returns `STOPPED`). The next width starts from the kept point; the verdict is the kept
+point's (converged only if it is a converged stage's answer). Every
+stage's record says why it ended (`stop`) and IPOPT's stationarity measure at its last iterate (the
+scaled dual infeasibility, `stationarity`).
 """
 
 from __future__ import annotations
@@ -31,9 +40,13 @@ from .settings import (
     COARSE_AGREEMENT,
     INFEASIBLE,
     IPOPT_OPTIONS,
+    PATIENCE,
     RETRIED,
+    SLACK,
     STAGE_TOL_FACTOR,
+    STOPPED,
     WARM_START,
+    WATCH_MARGIN,
     converged,
 )
 from .spectral import missed_specs
@@ -60,6 +73,16 @@ class Level:
     exact_total: ca.Function
     smoothed_total: ca.Function
     smoothed_g: ca.Function
+
+
+@dataclass
+class Kept:
+    """The best point seen so far: its merit (`Continuation.merit`), IPOPT's scaled point and multipliers
+    there, and the verdict (status, gap, settled) of the stage that ended there (None: the start)."""
+
+    merit: tuple[float, float]
+    z: np.ndarray
+    verdict: tuple[str, float, bool] | None
 
 
 @dataclass
@@ -140,6 +163,9 @@ class Continuation:
         self.stages: list[dict[str, Any]] = []
         self.iterations = 0
         self.status, self.gap, self.settled = "not solved", 0.0, not self.continuation
+        self.total = total_objective(problem, plant_cost, cost_weight)
+        self.best: Kept | None = None
+        self.above, self.stationarity = 0, np.nan
 
     # ------------------------------------------------------------ setting up
     def fidelity_levels(self) -> list[TuningProblem]:
@@ -236,6 +262,51 @@ class Continuation:
             smoothed_g=ca.Function("smoothed_constraints", [xl, level.width], [spec_rows]),
         )
 
+    # ------------------------------------------------------------ the worsening rule
+    def merit(self, decision: np.ndarray) -> tuple[float, float]:
+        """(the exact specs' largest relative excess, 0 where every spec holds; the exact total) at a decision;
+        a run that is not finite has an infinite total."""
+        value = float(self.total(decision))
+        excess = self.problem.largest_excess(decision)
+        return (max(float(excess), 0.0), value if np.isfinite(value) else np.inf)
+
+    @staticmethod
+    def worse(now: tuple[float, float], best: tuple[float, float]) -> bool:
+        """Whether merit `now` is worse than `best`. Meeting the specs means an excess within `AGREEMENT`.
+        From a best that meets them: a higher exact total (by `AGREEMENT` relative) that still meets them,
+        or one that misses them by more than `SLACK` (a smoothed stage may miss them by its width on the
+        way). From a best that misses them: a higher total with a larger excess (by `AGREEMENT`)."""
+        higher = not now[1] <= best[1] + AGREEMENT * abs(best[1])
+        if best[0] <= AGREEMENT:
+            return higher and (now[0] <= AGREEMENT or now[0] > SLACK)
+        return higher and now[0] > best[0] + AGREEMENT
+
+    @staticmethod
+    def better(now: tuple[float, float], best: tuple[float, float]) -> bool:
+        """Whether merit `now` replaces `best` as the best point: meeting the specs (excess within
+        `AGREEMENT`) first, then the lower total; among points missing them, the smaller excess."""
+        if now[0] <= AGREEMENT:
+            return best[0] > AGREEMENT or now[1] < best[1]
+        return best[0] > AGREEMENT and now[0] < best[0]
+
+    def watch(self, x: np.ndarray, objective: float) -> bool:
+        """IPOPT's iteration callback: True (stop) once the objective IPOPT sees has stayed more than
+        `WATCH_MARGIN` above the best exact total for a multiple of `PATIENCE` iterations in a row and the
+        exact loop at this iterate x (IPOPT's scaled point) is worse than the best point (`worse`) by as
+        much."""
+        best = self.best
+        if best is None or not np.isfinite(best.merit[1]):
+            return False
+        ceiling = best.merit[1] + WATCH_MARGIN * abs(best.merit[1])
+        if np.isfinite(objective) and objective <= ceiling:
+            self.above = 0
+            return False
+        self.above += 1
+        if self.above % PATIENCE:
+            return False
+        merit = self.merit(np.clip(self.scale[: self.n] * x[: self.n], self.lbx, self.ubx))
+        return self.worse(merit, best.merit) and not merit[1] <= ceiling
+
     # ------------------------------------------------------------ one stage
     def decision(self) -> np.ndarray:
         """The decision at the current point `z` (n_decision,), within the bounds (IPOPT relaxes them ~1e-8)."""
@@ -252,6 +323,7 @@ class Continuation:
         """
         done, status = 0, "not solved"
         n, scale = self.n, self.scale
+        self.above = 0
         for attempt in range(2):
             warm_now = warm and attempt == 0
             mark = len(self.log.iterates)
@@ -268,6 +340,8 @@ class Continuation:
             stats = this.stats()
             status = stats["return_status"]
             done += int(stats.get("iter_count", 0))
+            dual = stats.get("iterations", {}).get("inf_du", [])
+            self.stationarity = float(dual[-1]) if len(dual) else np.nan
             self.z = np.asarray(sol["x"]).ravel()
             self.multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
             if status == INFEASIBLE and attempt == 0:
@@ -342,6 +416,9 @@ class Continuation:
             "smoothed": judged.smoothed,
             "exact": exact,
             "gap": judged.gap,
+            "settled": self.settled,
+            "stationarity": self.stationarity,
+            "stop": _stop_reason(status, tight),
         }
         return record, ends
 
@@ -349,12 +426,21 @@ class Continuation:
     def run_level(self, level: Level, first: int, last: bool) -> list[dict]:
         """The level's stages from width index `first`: a stage stopped at IPOPT's iteration cap hands its
         last point on, cold (the verdict rests on the last stage alone, which must converge); two capped
-        stages in a row, a numerical failure or a non-finite run end the level, reported, not hidden."""
+        stages in a row, a numerical failure or a non-finite run end the level, reported, not hidden. A
+        stage that ends worse than the best point seen so far (`worse`), or that `watch` stopped, is undone
+        (`undone`): the next width starts from the best point, cold; at the last width the level ends there."""
         own: list[dict] = []
         for w in self.widths[first:] if self.smooth else (None,):
+            mark = len(self.log.iterates)
             record, ends = self.stage(level, w, last, own[-1] if own else None)
             own.append(record)
-            if not np.isfinite(record["exact"]):
+            ends = ends and converged(record["status"])
+            undone = self.undone(record, mark, ends)
+            if undone and ends:
+                break  # converged, at a worse point than the one kept
+            if undone and (record["status"] == STOPPED or converged(record["status"])):
+                continue  # the next width, from the kept point
+            if not undone and not np.isfinite(record["exact"]):
                 break  # no closed-loop run to go on from
             if not converged(record["status"]):
                 if (
@@ -369,10 +455,51 @@ class Continuation:
                 break
         return own
 
+    def undone(self, record: dict, mark: int, ends: bool) -> bool:
+        """The worsening rule on the stage just run (its `record`; its iterates are those logged from index
+        `mark` on; `ends`: it passed the continuation's test): True when its answer is worse than the best
+        point seen so far, or `watch` stopped it. Then its lowest iterate (by the objective IPOPT saw) is
+        judged on the exact loop too, the best point seen so far is kept (the stage's start, unless that
+        iterate beat it) and the stage's record says so. The verdict stays the stage's when it passed the
+        test (a converged stage whose answer is worse than a point kept); otherwise it is the kept point's
+        (not converged unless that is a converged stage's answer). When not undone, the best point is
+        updated with the stage's answer."""
+        assert self.best is not None, "run() sets the start as the best point"
+        now = self.merit(self.decision())
+        if record["status"] != STOPPED and not self.worse(now, self.best.merit):
+            if self.better(now, self.best.merit):
+                self.best = Kept(now, self.z.copy(), (self.status, self.gap, self.settled))
+            return False
+        worst_seen = self.best.merit
+        seen = [(f, zz) for zz, f, _ in self.log.iterates[mark:] if np.isfinite(f)]
+        if seen:
+            z = min(seen, key=lambda item: item[0])[1]
+            merit = self.merit(np.clip(self.scale[: self.n] * z[: self.n], self.lbx, self.ubx))
+            if self.better(merit, self.best.merit):
+                self.best = Kept(merit, z.copy(), None)
+        record["undone"] = True
+        record["stop"] = (
+            f"worse than the best point so far (exact total {now[1]:.6g} against {worst_seen[1]:.6g}, specs' "
+            f"excess {now[0]:.3g} against {worst_seen[0]:.3g}): undone, "
+            + ("its start kept" if self.best.merit == worst_seen else "its best iterate kept")
+        )
+        self.z, self.multipliers = self.best.z.copy(), {}
+        if ends:
+            return True
+        verdict = self.best.verdict
+        self.status, self.gap, self.settled = verdict or (
+            f"{STOPPED}: kept a point no stage converged at",
+            np.inf,
+            False,
+        )
+        return True
+
     def run(self) -> None:
         """Every level in turn, each from where the coarser one settled (from the start again when it
         failed); the stages, status, gap and point are left in `stages`, `status`, `gap` and `z`."""
         first = 0  # the width a level starts at: where the coarser one settled
+        self.best = Kept(self.merit(self.decision()), self.z.copy(), None)
+        self.log.watch = self.watch
         for number, at in enumerate(self.levels):
             last = number == len(self.levels) - 1
             own = self.run_level(self.build(at), first, last)
@@ -382,6 +509,7 @@ class Continuation:
                     self.z, self.multipliers = self.start_z / self.scale, {}  # the next level starts afresh
                 else:
                     first = self.widths.index(own[-1]["width"])
+        self.log.watch = None
 
     @property
     def converged(self) -> bool:
@@ -446,3 +574,15 @@ class Continuation:
             method=self.options.method,
             phase_one=found,
         )
+
+
+def _stop_reason(status: str, tight: bool) -> str:
+    """Why a stage ended, from IPOPT's status: its convergence test (to which tolerance), its iteration cap,
+    the worsening rule's stop, or a failure; `stationarity` in the stage's record gives the measure."""
+    if converged(status):
+        return f"IPOPT's convergence test ({'the tolerance' if tight else 'the loose stage tolerance'})"
+    if status == CAPPED:
+        return "IPOPT's iteration cap"
+    if status == STOPPED:
+        return "stopped: worse than the best point so far"
+    return f"IPOPT: {status}"

@@ -14,18 +14,22 @@ class IterationLog:
 
     progress : optional callable(iteration, objective IPOPT saw, seconds since `started`)
     started : time.perf_counter() the seconds count from (default: now)
+
+    `watch`, when set, is called with each iterate and its objective; True asks IPOPT to stop there.
     """
 
     def __init__(self, progress: Callable[[int, float, float], None] | None = None, started: float | None = None):
         self.progress = progress
         self.started = time.perf_counter() if started is None else started
         self.iterates: list[tuple[np.ndarray, float, float]] = []
+        self.watch: Callable[[np.ndarray, float], bool] | None = None
 
-    def add(self, x: np.ndarray, value: float) -> None:
-        """Record IPOPT's (scaled) decision `x` and the objective it saw there."""
+    def add(self, x: np.ndarray, value: float) -> bool:
+        """Record IPOPT's (scaled) decision `x` and the objective it saw there; True: stop IPOPT here."""
         self.iterates.append((x, value, time.perf_counter()))
         if self.progress is not None:
             self.progress(len(self.iterates) - 1, value, self.iterates[-1][2] - self.started)
+        return bool(self.watch is not None and self.watch(x, value))
 
 
 class IterationRecorder(ca.Callback):
@@ -59,6 +63,6 @@ class IterationRecorder(ca.Callback):
         return ca.Sparsity.dense(self.sizes[ca.nlpsol_out(i)], 1)
 
     def eval(self, arg):
-        if self.log is not None:
-            self.log.add(np.asarray(arg[0]).ravel().copy(), float(arg[1]))
-        return [0]
+        # A nonzero return makes IPOPT stop with User_Requested_Stop.
+        stop = self.log is not None and self.log.add(np.asarray(arg[0]).ravel().copy(), float(arg[1]))
+        return [1 if stop else 0]

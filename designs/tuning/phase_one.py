@@ -55,9 +55,9 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     excess (as `TuningProblem.excess` measures it) <= s, on the smoothed loop through the
     continuation's widths, each stage from the last one's answer; it stops at the first
     stage whose answer meets the exact specs. The problem is feasible for every decision
-    (s large), so IPOPT has no restoration phase to fail in and stops on its convergence
-    test (a local minimum of the largest excess), where the tuning problem itself, started
-    outside its specs, can end in Restoration_Failed.
+    (s large), so IPOPT usually stops on its convergence test (a local minimum of the largest
+    excess), where the tuning problem itself, started outside its specs, can end in
+    Restoration_Failed; a failed stage (not `converged`) is no certificate.
 
     Parameters
     ----------

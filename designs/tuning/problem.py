@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import casadi as ca
 import numpy as np
@@ -12,7 +12,7 @@ import numpy as np
 import models
 from models import Block, Plant
 from models.checks import as_matrix, as_vector, integer, real, real_array, weight_matrix
-from models.metrics import FINAL_WINDOW
+from models.metrics import FINAL_WINDOW, segments
 from models.signals import sample
 
 from .excess import Constraints, bound_scale
@@ -28,6 +28,9 @@ class ScenarioRun:
     noise : one (n, n_measured) array per parameter sample
     tracked_index : index of the tracked state (None without one)
     step : final reference − initial tracked value, when the reference is one constant step (else None)
+    segments : the run's steps as `models.metrics.segments` splits them, (start index, end index
+        (exclusive), level before, commanded level) over the samples 0..n, only those with a step: the step
+        specs hold on each (a series of steps is judged by its worst step, as the tables judge it)
     target, input_target : x* (nx,) and u* (nu,) of the cost
     weights : the cost's weight matrices by name ("state_weights", ...), only those given
     label : the scenario's name in messages ("" for the only unnamed one)
@@ -50,6 +53,7 @@ class ScenarioRun:
     weights: dict
     label: str
     signal_size: float = 0.0
+    segments: tuple = ()
 
 
 def _scenarios(value) -> tuple[Scenario, ...]:
@@ -91,6 +95,18 @@ def _frozen(value):
     if isinstance(value, (list, tuple)):
         return tuple(_frozen(v) for v in value)
     return value
+
+
+def _tagged(tag: str, more: str) -> str:
+    """The tag " (scenario, sample 2)" with `more` added inside its parentheses (" (more)" when `tag` is empty)."""
+    return f"{tag[:-1]}, {more})" if tag else f" ({more})"
+
+
+def _late(t: np.ndarray, after: float, skip: int) -> np.ndarray:
+    """Indices k >= skip of the samples with t_k > after, or the last one when none is (a segment shorter
+    than the spec: the table then needs its last sample inside, or its time is inf)."""
+    late = np.flatnonzero((t > after) & (np.arange(t.size) >= skip))
+    return late if late.size else np.array([t.size - 1])
 
 
 def _outputs(plant: Plant, X: ca.MX, p) -> ca.MX:
@@ -281,16 +297,23 @@ class TuningProblem:
             if sc.tracked not in self.plant.state_names:
                 raise ValueError(f"{self.plant.name} has no state {sc.tracked!r}; states are {self.plant.state_names}")
             k = self.plant.state_names.index(sc.tracked)
-        step = None
+        step, steps = None, cast(tuple, ())
         if sc.reference is not None and k is not None and self.block.n_measured and self.block.n_reference:
             constant = np.all(r[1:, 0] == r[-1, 0])
             if constant and r[-1, 0] != x0[k]:
                 step = float(r[-1, 0] - x0[k])
+            steps = tuple(
+                (a, b, before, after)
+                for a, b, before, after in segments(t, np.full(n + 1, x0[k]), r[:, 0])
+                if after != before and b - a >= 2
+            )
         where = f" ({label})" if label else ""
-        self._check_specs(sc, specs, r, t, k, step, where)
+        self._check_specs(sc, specs, r, t, k, steps, where)
         self._check_cost(sc, cost, k, where)
         weights, target, input_target, size = self._cost_terms(cost, r, x0, k, step)
-        return ScenarioRun(sc, specs, cost, n, t, x0, r, d, noise, k, step, target, input_target, weights, label, size)
+        return ScenarioRun(
+            sc, specs, cost, n, t, x0, r, d, noise, k, step, target, input_target, weights, label, size, steps
+        )
 
     def _signals(self, sc: Scenario, label: str) -> tuple:
         """(n, t, x0, r, d, noise) of a scenario: samples, times (n+1,) s, initial state (nx,), reference
@@ -320,19 +343,17 @@ class TuningProblem:
         ]
         return n, t, x0, r, d, noise
 
-    def _check_specs(self, sc: Scenario, specs: Specs, r, t, k, step, where: str) -> None:
+    def _check_specs(self, sc: Scenario, specs: Specs, r, t, k, steps, where: str) -> None:
         """ValueError for a spec the run cannot judge: a step spec without a step, a time after the run's
         end, a bound on a state the plant does not have."""
         plant = self.plant
-        if specs.step_specs and step is None:
+        if specs.step_specs and not steps:
             reason = (
                 "it regulates (reference None)"
                 if sc.reference is None
                 else "it names no tracked state"
                 if k is None
-                else "its reference is not constant"
-                if not np.all(r[1:, 0] == r[-1, 0])
-                else "its final reference equals the initial tracked value"
+                else "its reference never changes from the initial tracked value"
             )
             raise ValueError(f"{', '.join(specs.step_specs)} need a step, and the scenario{where} has none: {reason}")
         for name, when in (
@@ -438,13 +459,16 @@ class TuningProblem:
         """The specs of one run on one parameter sample, X (nx, N) its states x_1 .. x_N.
 
         Each `models.specs.Specs` field becomes inequalities on the samples that imply the table's
-        verdict for the same run (`models.metrics.step_metrics`, at the same sample times):
+        verdict for the same run (`models.metrics.step_metrics`, at the same sample times). The step
+        specs hold on every step of the run (`ScenarioRun.segments`, the table's worst step), y_0 the
+        level before that step, r the commanded one, t_k counted from the step:
 
         - overshoot: sign·(y_k − r) <= max_overshoot_pct/100 · |step| at every sample: the table's
           largest excursion past the reference, exactly;
         - settling time: |y_k − r| <= band · |step| at every sample with t_k > T_s − Ts: then the
           last sample outside the band is at or before T_s − Ts, and the table's interpolated exit
-          from the band is at or before T_s (sufficient; equal to within one sample);
+          from the band is at or before T_s (sufficient; equal to within one sample; a step shorter
+          than T_s: its last sample);
         - rise time: sign·(y_k − y_0) >= 0.9 |step| at every sample with t_k > T_r − Ts (the output
           has covered 90 % by T_r, at a sample, and stays): the table's 10-90 % rise time is then at
           most T_r minus its 10 % crossing (sufficient, conservative by that crossing's time);
@@ -460,42 +484,12 @@ class TuningProblem:
         ts = self.block.sample_period
         n_final = max(1, int(np.ceil(FINAL_WINDOW * len(run.t))))  # the table's final window of x_0 .. x_N
         window = slice(max(0, X.shape[1] - n_final), X.shape[1])
-        if run.step is not None:
-            assert k is not None, "a step scenario has a tracked state (checked in _prepare)"
-            y = X[k, :]
-            r_final, amp, sign = run.r[-1, 0], abs(run.step), np.sign(run.step)
-            t1 = run.t[1:]
-            if sp.max_overshoot_pct is not None:
-                constraints.add(
-                    f"overshoot <= {sp.max_overshoot_pct:g} %{tag}",
-                    sign * (y - r_final),
-                    -np.inf,
-                    sp.max_overshoot_pct / 100 * amp,
-                )
-            if sp.max_settling_time_s is not None:
-                late = np.flatnonzero(t1 > sp.max_settling_time_s - ts)
-                constraints.add(
-                    f"within {sp.settling_band_pct:g} % after {sp.max_settling_time_s:g} s{tag}",
-                    y[:, late] - r_final,
-                    -sp.settling_band * amp,
-                    sp.settling_band * amp,
-                )
-            if sp.max_rise_time_s is not None:
-                late = np.flatnonzero(t1 > sp.max_rise_time_s - ts)
-                constraints.add(
-                    f"90 % of the step by {sp.max_rise_time_s:g} s{tag}",
-                    sign * (y[:, late] - run.x0[k]),
-                    0.9 * amp,
-                    np.inf,
-                )
-            if sp.max_ss_error_pct is not None:
-                bound = sp.max_ss_error_pct / 100 * amp
-                constraints.add(
-                    f"ss error <= {sp.max_ss_error_pct:g} %{tag}",
-                    ca.sum2(y[:, window]) / n_final - r_final,
-                    -bound,
-                    bound,
-                )
+        if k is not None:
+            states = ca.horzcat(ca.DM(run.x0), X)  # x_0 .. x_N, indexed as the table's samples
+            for number, (a, b, before, after) in enumerate(run.segments):
+                where = tag if len(run.segments) == 1 else _tagged(tag, f"step {number + 1}")
+                y, t = states[k, a:b], run.t[a:b] - run.t[a]
+                self._add_step_specs(constraints, sp, y, t, (before, after), ts, where, int(a == 0))
         names = self.plant.state_names
         for name, interval in sp.state_bounds.items():
             lo, hi = state_bound(interval, name)
@@ -505,6 +499,40 @@ class TuningProblem:
             value, tol = final_value(pair, name)
             mean = ca.sum2(X[names.index(name), window]) / n_final
             constraints.add(f"final {name} = {value:g} ± {tol:g}{tag}", mean, value - tol, value + tol)
+
+    @staticmethod
+    def _add_step_specs(constraints: Constraints, sp: Specs, y: ca.MX, t: np.ndarray, levels, ts, tag, skip: int):
+        """The step specs on one segment: y (1, L) the tracked samples from the step on, t (L,) their times
+        after it (s), levels (the level before the step, the commanded one), Ts (s); the first `skip` samples
+        (the run's given initial state, a constant) carry no constraint (see `_add_specs`)."""
+        before, after = levels
+        amp, sign = abs(after - before), np.sign(after - before)
+        if sp.max_overshoot_pct is not None:
+            constraints.add(
+                f"overshoot <= {sp.max_overshoot_pct:g} %{tag}",
+                sign * (y[:, skip:] - after),
+                -np.inf,
+                sp.max_overshoot_pct / 100 * amp,
+            )
+        if sp.max_settling_time_s is not None:
+            late = _late(t, sp.max_settling_time_s - ts, skip)
+            constraints.add(
+                f"within {sp.settling_band_pct:g} % after {sp.max_settling_time_s:g} s{tag}",
+                y[:, late] - after,
+                -sp.settling_band * amp,
+                sp.settling_band * amp,
+            )
+        if sp.max_rise_time_s is not None:
+            late = _late(t, sp.max_rise_time_s - ts, skip)
+            constraints.add(
+                f"90 % of the step by {sp.max_rise_time_s:g} s{tag}", sign * (y[:, late] - before), 0.9 * amp, np.inf
+            )
+        if sp.max_ss_error_pct is not None:
+            bound = sp.max_ss_error_pct / 100 * amp
+            n_final = max(1, int(np.ceil(FINAL_WINDOW * len(t))))  # the table's window of the segment
+            constraints.add(
+                f"ss error <= {sp.max_ss_error_pct:g} %{tag}", ca.sum2(y[:, -n_final:]) / n_final - after, -bound, bound
+            )
 
     def _cost(self, run: ScenarioRun, states: ca.MX, U: ca.MX, p, width=None) -> ca.MX:
         """The scenario's cost of one run: states (nx, N+1), commands U (nu, N)."""

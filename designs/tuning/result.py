@@ -33,7 +33,9 @@ class TuningResult:
     decision : the returned decision vector (n_decision,)
     phase_one : the `PhaseOne` run first when the start missed a spec (None otherwise)
     stages : one dict per solve: width (None for the exact loop), substeps, status, tol, iterations,
-        smoothed (the objective IPOPT saw), exact objective and their relative gap at its answer
+        smoothed (the objective IPOPT saw), exact objective and their relative gap at its answer, settled,
+        stop (why it ended: IPOPT's convergence test, its cap, a failure, or the worsening rule's stop,
+        its start kept) and stationarity (IPOPT's scaled dual infeasibility at its last iterate)
     smoothing_gap : |exact − smoothed| / |exact| at the last stage's answer (0 for "exact")
     history : [(seconds since the call began, the objective IPOPT saw)] per IPOPT iteration
         (smoothed at that stage's width)
@@ -140,6 +142,9 @@ def continuation_note(stages: list[dict], gap: float, settled: bool) -> str:
         note += f" (not within {AGREEMENT:g})"
     if not settled:
         note += "; the exact objective still changed at the last width"
+    undone = [stage for stage in stages if str(stage.get("stop", "")).startswith("worse")]
+    if undone:
+        note += f"; the stage at width {undone[-1]['width']:g} was {undone[-1]['stop']}"
     return note
 
 

@@ -28,6 +28,18 @@ CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 CAPPED = "Maximum_Iterations_Exceeded"
 #: IPOPT's verdict of local infeasibility (its restoration converged outside the constraints).
 INFEASIBLE = "Infeasible_Problem_Detected"
+#: IPOPT's status when the iteration callback stopped it: a stage making the exact cost worse (`PATIENCE`).
+STOPPED = "User_Requested_Stop"
+#: A stage is stopped during its solve once the objective IPOPT sees has stayed more than `WATCH_MARGIN`
+#: (relative) above the best exact cost seen so far for this many iterations in a row and the exact loop at
+#: its iterate confirms the point is worse by that much; its start is kept. Each confirmation costs one
+#: exact closed-loop evaluation. Smaller rises are judged at the stage's end (`AGREEMENT`): an interior
+#: point method leaves a start on a constraint's boundary uphill before it converges.
+PATIENCE = 20
+WATCH_MARGIN = 0.01
+#: How far (relative excess) a smoothed stage's answer may miss the specs on the exact loop, from a point
+#: meeting them, without counting as worse for a lower cost: the widest default width.
+SLACK = 1e-2
 #: IPOPT statuses of a numerical failure, retried once from the failed solve's last point.
 RETRIED = ("Error_In_Step_Computation", "Restoration_Failed", "Search_Direction_Becomes_Too_Small")
 #: IPOPT iterations per solve: a safety cap, not the stopping rule (a stop here is reported).

@@ -479,6 +479,21 @@ SPECS = {
     )
 }
 
+#: The plant's physical limits, judged on every scenario and Monte Carlo sample (`CaseStudy.state_limits`).
+#: The ball rolls on the beam: z is measured from the pivot at one end (Figure 5.1) and the beam is
+#: ℓ = 0.5 m long (V's parameters), so 0 ≤ z ≤ ℓ, with ℓ of the plant simulated (a Monte Carlo sample's).
+STATE_LIMITS = (
+    StateLimit(
+        "beam length",
+        "z",
+        0.0,
+        0.5,
+        source="V: z from the pivot (Figure 5.1), on a beam of length ell = 0.5 m: 0 <= z <= ell",
+        unit="m",
+        upper_parameter="ell",
+    ),
+)
+
 CASE = CaseStudy(
     plant="ballbeam",
     numeral="V",
@@ -507,13 +522,7 @@ CASE = CaseStudy(
     mpc=MPC,
     codesign={"ballbeam": actuator_sizing},
     specs=SPECS,
+    state_limits=STATE_LIMITS,
     drawing=draw,
     errata=ERRATA,
-)
-
-#: Physical state limits, checked on every run by models.state_limits.check_state_limits.
-STATE_LIMITS = (
-    StateLimit(
-        "beam length", "z", 0.0, 0.5, source="0 <= z <= ell, the beam length ell = 0.5 m of the catalog's plant"
-    ),
 )

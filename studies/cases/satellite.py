@@ -25,6 +25,7 @@ from designs.loops import SuccessiveLoopClosure, cascade_blocks, coupling_tf, su
 from designs.pid import PDDesign, linearized_input_bound, pd_design
 from designs.tuning import Cost, SolveOptions, TuningSetup
 from models.specs import Specs
+from models.state_limits import StateLimit
 from mpc import MPCSettings, SoftSpec
 from studies import drawing as d
 from studies import providers
@@ -446,6 +447,23 @@ SPECS = {
     )
 }
 
+#: The plant's physical limits, judged on every scenario and Monte Carlo sample (`CaseStudy.state_limits`).
+#: The text gives no deflection limit for its flexible panels (a rigid sheet on a torsional spring, III's
+#: model, meant for small twists). The case states one, once: the ±0.2 rad (11°) twist φ − θ of the panel
+#: from the body that its MPC keeps (`MPC.soft`, "panel deflection"); every row is held to it.
+PANEL_DEFLECTION = MPC.soft[0].bounds(models.get("satellite"))
+STATE_LIMITS = (
+    StateLimit(
+        "panel deflection",
+        "phi",
+        PANEL_DEFLECTION[0],
+        PANEL_DEFLECTION[1],
+        source="the text gives no deflection limit; |phi - theta| <= 0.2 rad, the case's MPC soft bound (stated)",
+        unit="rad",
+        relative_to="theta",
+    ),
+)
+
 CASE = CaseStudy(
     plant="satellite",
     numeral="III",
@@ -470,6 +488,7 @@ CASE = CaseStudy(
     mpc=MPC,
     codesign={"satellite": panel_stiffness},
     specs=SPECS,
+    state_limits=STATE_LIMITS,
     drawing=draw,
     errata=ERRATA,
 )

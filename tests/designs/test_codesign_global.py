@@ -6,15 +6,18 @@ tests/designs/test_codesign.py) minimized over k at each b on a fine scan gives 
 minima in b ∈ [0.1, 2] the layer must list, and whose least it must return, from either method.
 """
 
+import pickle
+
 import casadi as ca
 import numpy as np
 import pytest
 import scipy.optimize
 
 import models
-from designs.codesign import codesign
-from designs.codesign_global import GLOBAL_METHODS, codesign_globally
-from designs.tuning import Cost, Scenario, SolveOptions, TuningSetup
+from designs.codesign import Codesign, check_ranges, codesign
+from designs.codesign_global import GLOBAL_METHODS, ClosedLoopWork, codesign_globally
+from designs.tuning import Cost, Scenario, SolveOptions, TuningSetup, checked_options
+from studies import distributed
 
 Q, R, W, RIPPLE, PERIOD, TS = 1.0, 1.0, 0.5, 0.05, 0.5, 0.1
 B_RANGE, K_BOUNDS = (0.1, 2.0), (0.0, 10.0)
@@ -120,3 +123,37 @@ def test_a_plain_simultaneous_solve_from_the_middle_stops_on_a_local_optimum(sca
 def test_a_sweep_beyond_the_budget_is_refused_before_it_runs():
     with pytest.raises(ValueError, match="samples = 1000"):
         codesign_globally(setup(), {"b": B_RANGE}, plant_cost=price, samples=1000, max_seconds=1.0)
+
+
+def _arm_work():
+    """The layer's work on the arm's length ℓ in [0.2, 0.4] m with a PD (a registered plant: it travels)."""
+    from tests.designs.test_tuning import ArmPD  # deferred: a test module, imported only by the tests using it
+
+    arm = models.get("arm")
+    scenario = Scenario(reference=np.deg2rad(50), duration=2.0, tracked="theta")
+    setup = TuningSetup(
+        arm, ArmPD(arm, kp=2.0, kd=0.2), scenario, cost=Cost("itae"), bounds={"kp": (0, 5), "kd": (0, 1)}
+    )
+    return setup
+
+
+def test_the_sweeps_work_travels_by_pickle_with_the_same_numbers():
+    """What a worker process receives: the work pickled (the joint problem left out and built again on
+    arrival) gives the tuning at a point bit for bit."""
+    setup = _arm_work()
+    problem = Codesign(setup, check_ranges(setup.plant, {"ell": (0.2, 0.4)}), None, None, checked_options(None))
+    work = ClosedLoopWork(problem, "nested", 1e-3, np.array([0.1]))
+    travelled = pickle.loads(pickle.dumps(work.evaluate))
+    assert travelled.__self__.problem is not problem
+    assert travelled((0.3,)) == work.evaluate((0.3,))
+
+
+@pytest.mark.slow
+def test_the_closed_loop_layer_on_two_worker_processes_equals_the_one_process_run_bit_for_bit():
+    """The sweep on a Dask LocalCluster of two processes (`studies.distributed`) and in this one: the same
+    sweep, optima and answer."""
+    here = codesign_globally(_arm_work(), {"ell": (0.2, 0.4)}, samples=4, keep=1)
+    with distributed.connect(workers=2) as executor:
+        there = codesign_globally(_arm_work(), {"ell": (0.2, 0.4)}, samples=4, keep=1, map=executor.map)
+    assert here.sweep == there.sweep and here.optima == there.optima
+    assert here.answer.params == there.answer.params and here.answer.objective == there.answer.objective

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import models
+from models import specs
 from models.state_limits import StateLimit, check_state_limits, summarize_limit_violations
 
 TRAVEL = StateLimit("cart travel", "z", -1.0, 1.0, source="test")
@@ -56,3 +57,34 @@ def test_case_limits_name_their_plants_states(case):
     assert mod.STATE_LIMITS
     for lim in mod.STATE_LIMITS:
         assert lim.state in names and lim.source
+
+
+def test_a_deflection_limit_reads_the_difference_of_two_states():
+    deflection = StateLimit("panel deflection", "z", -0.2, 0.2, source="test", unit="rad", relative_to="theta")
+    t = np.array([0.0, 1.0, 2.0])
+    x = np.array([[0.0, 0.0], [0.5, 0.2], [0.1, 0.4]])  # z − θ = 0, 0.3, −0.3
+    (v,) = check_state_limits(t, x, ["z", "theta"], [deflection])
+    assert v.violated and v.excess == pytest.approx(0.1) and v.first_time == 1.0
+    with pytest.raises(ValueError, match="no state 'phi'"):
+        check_state_limits(t, x, ["z", "theta"], [StateLimit("d", "z", -1, 1, "s", relative_to="phi")])
+
+
+def test_a_limit_whose_bound_is_a_parameter_reads_the_plant_simulated():
+    beam = StateLimit("beam length", "z", 0.0, 0.5, source="test", unit="m", upper_parameter="ell")
+    assert beam.at({"ell": 0.45}).upper == 0.45 and beam.at(None) is beam
+    with pytest.raises(ValueError, match="'ell'"):
+        beam.at({"m1": 1.0})
+
+
+def test_the_verdict_names_the_limit_and_its_excess_once():
+    """A spec bound that the named limit implies is not reported twice."""
+    swing = StateLimit("swing", "theta", -0.2, 0.2, source="test", unit="rad")
+    judged = specs.Specs(state_bounds={"theta": 0.25}).with_limits([swing])
+    found = specs.check(judged, {}, 1.0, excursions={"theta": 0.0}, departures={"swing": 0.033})
+    assert [str(v) for v in found] == ["leaves swing by 0.033 rad"]
+    tighter = specs.Specs(state_bounds={"theta": 0.1}).with_limits([swing])
+    found = specs.check(tighter, {}, 1.0, excursions={"theta": 0.133}, departures={"swing": 0.033})
+    assert len(found) == 2
+    assert judged.bounds_and_limits == {"theta": (-0.2, 0.2)}
+    with pytest.raises(ValueError, match="'swing'; pass its excess"):
+        specs.check(judged, {}, 1.0, excursions={"theta": 0.0})

@@ -134,7 +134,7 @@ def test_status_codes_are_named_in_the_header():
 def test_what_cannot_be_exported_is_named():
     with pytest.raises(
         UnsupportedExport,
-        match=r"nonlinear MPC: only mpc.LinearMPC is exported here; "
+        match=r"nonlinear MPC: only mpc.LinearMPC and mpc.TubeMPC are exported here; "
         r"NonlinearMPC is not one \(mpc.export_nmpc.export_nonlinear_mpc exports",
     ):
         export_linear_mpc(build("nonlinear", "arm"), "nmpc")

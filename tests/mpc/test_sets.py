@@ -137,3 +137,16 @@ def test_zonotope_corners_cover_its_box_corners():
     assert box.generators.shape == (3, 2)
     expected = {(a, 0.0, b) for a, b in itertools.product((-1.0, 1.0), (2.0, 3.0))}
     assert {tuple(c) for c in box.corners()} == expected
+
+
+def test_zonotope_membership_agrees_with_its_exact_facets():
+    """Points of a random 3-D zonotope's box, judged by the LP and by the zonotope's facets (exact H-rep)."""
+    rng = np.random.default_rng(4)
+    Z = Zonotope(rng.normal(size=3), rng.normal(size=(3, 6)))
+    lower, upper = Z.interval_hull()
+    points = rng.uniform(lower, upper, (60, 3))
+    facets = Z.facets()
+    slack = np.max(points @ facets.H.T - facets.h, axis=1)
+    clear = np.abs(slack) > 1e-6  # away from the boundary, where the tolerances differ
+    np.testing.assert_array_equal(Z.contains(points[clear]), slack[clear] <= 0)
+    assert 0 < np.count_nonzero(slack[clear] <= 0) < np.count_nonzero(clear)  # both kinds

@@ -18,6 +18,7 @@ from mpc.tube import (
     invariant_polytope,
     minimal_rpi_approximation,
     parametric_error_set,
+    tighten,
 )
 
 SAMPLE_PERIOD = 0.1
@@ -271,8 +272,9 @@ def test_refuses_a_flat_disturbance_set():
         build_tube(A, B, input_disturbance_set(B, 0.1), LIMITS, [-1.0], [1.0], state_weight=np.eye(2), input_weight=1.0)
 
 
-def test_refuses_an_accuracy_not_reached_within_the_cap():
-    with pytest.raises(ValueError, match=r"at s = max_terms = 2 the smallest α is"):
+def test_refuses_an_accuracy_not_reached_within_the_cap_and_says_about_how_many_terms_it_needs():
+    """The estimate of the terms still needed (at ρ(A_K) per term) against the s the accuracy takes."""
+    with pytest.raises(ValueError, match=r"at s = max_terms = 2 the smallest α is") as refusal:
         build_tube(
             A,
             B,
@@ -284,6 +286,12 @@ def test_refuses_an_accuracy_not_reached_within_the_cap():
             input_weight=1.0,
             options=TubeOptions(max_terms=2),
         )
+    message = str(refusal.value)
+    assert "A_K is Schur" in message and "grows" not in message  # the error does not grow
+    more = int(re.search(r"about (\d+) more terms would reach it", message).group(1))
+    K = ancillary_feedback(A, B, np.eye(2), 1.0)
+    needed = minimal_rpi_approximation(A + B @ K, W_BOX).terms - 2
+    assert needed / 2 <= more <= 2 * needed
 
 
 NUMBER = r"-?\d+(?:\.\d+)?(?:e[-+]?\d+)?"
@@ -291,33 +299,63 @@ NUMBER = r"-?\d+(?:\.\d+)?(?:e[-+]?\d+)?"
 
 def lacking(message: str, name: str) -> tuple[float, float, float]:
     """(bound, margin, lacks) of the row `name` in a refusal."""
-    found = re.search(rf"'{name}' \(bound ({NUMBER})\) needs a margin of ({NUMBER}) .*? and lacks ({NUMBER})", message)
+    found = re.search(
+        rf"'{name}' \(bound ({NUMBER})\) needs a margin of (?:at least )?({NUMBER}) .*? "
+        rf"and lacks (?:at least )?({NUMBER})",
+        message,
+    )
     assert found, message
     bound, margin, lacks = (float(v) for v in found.groups())
     return bound, margin, lacks
 
 
-def test_refuses_a_state_constraint_the_error_set_does_not_fit_in(tube):
+def minimal_rpi_support(closed_loop, d, terms: int = 3000) -> float:
+    """h_{F_∞}(d) = Σ_i h_W((A_K^i)ᵀ d), truncated where ρ(A_K)^terms is far below round-off: W_BOX's
+    support is |d|ᵀ(half-widths) in closed form."""
+    half, total, d = np.array([0.01, 0.02]), 0.0, np.asarray(d, dtype=float)
+    for _ in range(terms):
+        total += float(np.abs(d) @ half)
+        d = d @ closed_loop
+    return total
+
+
+def test_refuses_a_state_constraint_no_error_set_fits_in_before_building_one(tube):
+    """|position| <= 0.3 is below the minimal RPI set's support: refused with a margin between that
+    support's lower bound and Z's, before Z is built."""
     narrow = Polytope.box([-0.3, -1.0], [0.3, 1.0])
-    with pytest.raises(ValueError, match="larger than the constraints can hold") as refusal:
+    with pytest.raises(ValueError, match="larger than the constraints can hold, for every RPI set") as refusal:
         build_tube(
             A, B, W_BOX, narrow, [-1.0], [1.0], state_weight=np.eye(2), input_weight=1.0, state_constraint_names=NAMES
         )
     message = str(refusal.value)
     assert "velocity" not in message  # only the rows that fail are named
-    needed = cvxpy_support(tube.error_set, [1.0, 0.0])  # the same Z: same W, K and options
+    least = minimal_rpi_support(tube.closed_loop, [1.0, 0.0])
     for name in ("position upper", "position lower"):
         bound, margin, lacks = lacking(message, name)
         assert bound == 0.3
-        assert margin == pytest.approx(needed, rel=1e-5)
-        assert lacks == pytest.approx(needed - 0.3, rel=1e-2)
+        assert (1 - 0.01) * least <= margin <= least * (1 + 1e-12)  # α <= 0.01 by the default accuracy
+        assert margin <= cvxpy_support(tube.error_set, [1.0, 0.0])  # and below what the Z built needs
+        assert lacks == pytest.approx(margin - 0.3, rel=1e-2)
+
+
+def test_tightening_refuses_a_row_the_error_set_does_not_fit_in(tube):
+    """Between the minimal RPI set's support and Z's, the refusal comes from Z itself: its margin."""
+    needed = cvxpy_support(tube.error_set, [1.0, 0.0])
+    with pytest.raises(ValueError, match="larger than the constraints can hold") as refusal:
+        tighten(
+            np.array([[1.0, 0.0]]), np.array([0.9 * needed]), tube.error_set, ["position upper"], "state constraint"
+        )
+    bound, margin, lacks = lacking(str(refusal.value), "position upper")
+    assert margin == pytest.approx(needed, rel=1e-5)
+    assert lacks == pytest.approx(needed - bound, rel=1e-2)
 
 
 def test_refuses_input_bounds_the_error_set_does_not_fit_in(tube):
     with pytest.raises(ValueError, match="input bound 'input 0 upper, u_0 <= bound'") as refusal:
         build_tube(A, B, W_BOX, LIMITS, [-0.2], [0.2], state_weight=np.eye(2), input_weight=1.0)
     bound, margin, lacks = lacking(str(refusal.value), "input 0 upper, u_0 <= bound")
-    assert margin == pytest.approx(cvxpy_support(tube.error_set, tube.feedback[0]), rel=1e-5)
+    least = minimal_rpi_support(tube.closed_loop, tube.feedback[0])
+    assert (1 - 0.01) * least <= margin <= min(least * (1 + 1e-12), cvxpy_support(tube.error_set, tube.feedback[0]))
     assert (bound, lacks) == (0.2, pytest.approx(margin - 0.2, rel=1e-2))
 
 
@@ -372,3 +410,18 @@ def test_disturbance_bounds_are_checked():
         input_disturbance_set(B, -0.1)
     with pytest.raises(ValueError, match="needs its region"):
         disturbance_set(A, B, vertex_models=mass_models())
+
+
+def test_a_zonotope_error_set_is_f_alpha_s_and_robustly_invariant():
+    """TubeOptions.zonotope: Z = F(α, s) with A_K Z ⊕ W ⊆ Z, checked by support values in many directions
+    (h_Z(A_Kᵀ d) + h_W(d) ≤ h_Z(d)), and the same margins as the exact polytope of F(α, s) to round-off."""
+    options = TubeOptions(zonotope=True)
+    sets = build_tube(A, B, W_BOX, LIMITS, [-1.0], [1.0], state_weight=np.eye(2), input_weight=1.0, options=options)
+    exact = build_tube(A, B, W_BOX, LIMITS, [-1.0], [1.0], state_weight=np.eye(2), input_weight=1.0)
+    assert isinstance(sets.error_set, Zonotope) and sets.error_set_exact and exact.error_set_exact
+    angles = np.linspace(0, 2 * np.pi, 721)
+    D = np.column_stack([np.cos(angles), np.sin(angles)])
+    Z = sets.error_set
+    assert np.all(Z.support(D @ sets.closed_loop) + W_BOX.support(D) <= Z.support(D) * (1 + 1e-12))
+    np.testing.assert_allclose(sets.state_margins, exact.state_margins, rtol=1e-6)
+    np.testing.assert_allclose(sets.input_margins, exact.input_margins, rtol=1e-6)

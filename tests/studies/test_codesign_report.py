@@ -1,5 +1,6 @@
 """Co-design of the case studies: every reported number re-checked on a fresh simulation or evaluation."""
 
+import contextlib
 import json
 from dataclasses import replace
 
@@ -434,3 +435,116 @@ def test_committed_document_lists_every_problem_converged():
         row = next(line for line in doc.splitlines() if line.startswith(f"| {problem} |"))
         assert row.rstrip().endswith("| yes |"), row
     assert "Maximum_Iterations_Exceeded" not in doc
+
+
+# ----------------------------------------------------------------- the global layer in the report
+def _layer(best_value=0.85, best_objective=0.85):
+    """A global layer's record (as `codesign_problems.global_summary` writes it) with two local optima."""
+    return {
+        "method": "simultaneous",
+        "design": "grid of 4 points, ends included",
+        "sweep": [[0.5, 1.2, True], [0.7, 0.9, True], [0.9, 0.95, True], [1.1, 0.87, True]],
+        "optima": [
+            {"value": best_value, "objective": best_objective, "success": True, "status": "ok", "start": 1.1},
+            {"value": 0.7, "objective": 0.88, "success": True, "status": "ok", "start": 0.7},
+        ],
+        "best": {"value": best_value, "objective": best_objective},
+        "converged": True,
+        "how": "least objective",
+        "wall_time": 12.0,
+    }
+
+
+def test_the_global_table_states_the_optima_and_each_methods_gap_to_the_best():
+    """Gaps by hand against the best objective 0.85: sequential 1.0 is 17.6 % above, nested 0.9 5.9 %, the
+    start from (1) at 0.85 is the best itself, the infeasible simultaneous answer is not compared; a sizing
+    problem has no row, a problem without a layer says so."""
+    result = _fake_result()
+    result.parameter, result.global_layer = "stiffness", _layer()
+    text = cr.global_table([result])
+    row = next(line for line in text.splitlines() if line.startswith(f"| {result.problem} (stiffness"))
+    assert "| 2: 0.85 → 0.85; 0.7 → 0.88 |" in row and "| 0.85 → 0.85 |" in row
+    assert "sequential: 17.6 % above; nested: 5.9 % above; simultaneous: infeasible;" in row
+    assert "simultaneous from sequential: already global" in row
+    assert cr.gap_text(0.85 * (1 + 1e-7), 0.85) == "already global"
+    sizing, bare = _fake_result("a"), _fake_result("b")
+    sizing.parameter, bare.parameter = "torque limit", "cable length"
+    assert cr.global_table([sizing]) == "(none)"
+    assert "not run under the global layer" in cr.global_table([bare])
+
+
+def test_a_global_run_keeps_the_local_answers_and_a_local_run_keeps_the_layer(tmp_path, monkeypatch):
+    """--methods global adds the layer to the record without touching its designs; a later --methods
+    simultaneous replaces that design and keeps the layer."""
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda **options: _fake_result()})
+    out, records = tmp_path / "codesign.md", tmp_path / "saved"
+    cr.main(["--out", str(out), "--records", str(records)])
+    layered = _fake_result()
+    layered.designs, layered.global_layer = {}, _layer()
+    asked = []
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda **options: asked.append(options) or layered})
+    cr.main(["--out", str(out), "--records", str(records), "--methods", "global"])
+    assert asked == [{"methods": ("global",)}]
+    saved = json.loads((records / "fake.json").read_text())
+    assert [d["value"] for d in saved["designs"].values()] == [1.0, 0.9, 0.8, 0.85]
+    assert saved["global_layer"]["optima"] == _layer()["optima"]
+    assert saved["global_layer"]["run"]["command"] == "python -m studies.codesign_report --only fake --methods global"
+    assert "simultaneous from sequential: already global" in out.read_text()
+    again = _fake_result()
+    again.designs = {"simultaneous": again.designs["simultaneous"]}
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": lambda **options: again})
+    cr.main(["--out", str(out), "--records", str(records), "--methods", "simultaneous"])
+    assert json.loads((records / "fake.json").read_text())["global_layer"]["optima"] == _layer()["optima"]
+
+
+def test_workers_send_the_layers_sweep_through_studies_distributed(tmp_path, monkeypatch):
+    """--workers 2 opens `studies.distributed.connect(None, 2)` and the problem's `codesign_case` hands its
+    executor's map to `codesign_globally`; without --workers no map is given."""
+    opened, maps = [], []
+
+    class Executor:
+        def map(self, function, items):
+            return [function(item) for item in items]
+
+    executor = Executor()
+
+    @contextlib.contextmanager
+    def connect(scheduler=None, workers=None):
+        opened.append((scheduler, workers))
+        yield executor
+
+    def globally(*args, map=None, **kwargs):
+        maps.append(map)
+        raise RuntimeError("stop at the layer")
+
+    def solve(**options):
+        result = _fake_result()
+        with pytest.raises(RuntimeError, match="stop at the layer"):
+            cp.codesign_case(result, None, "k", 0.1, 1.0, None, methods=("global",))
+        return result
+
+    monkeypatch.setattr(cr.distributed, "connect", connect)
+    monkeypatch.setattr(cp, "codesign_globally", globally)
+    monkeypatch.setattr(cr, "problems", lambda: {"fake": solve})
+    cr.main(["--records", str(tmp_path / "saved"), "--methods", "global", "--workers", "2"])
+    cr.main(["--records", str(tmp_path / "saved"), "--methods", "global"])
+    assert opened == [(None, 2)] and maps == [executor.map, None]
+    with pytest.raises(SystemExit):
+        cr.main(["--workers", "0"])
+
+
+def test_the_committed_satellite_layer_is_consistent_with_its_sweep_and_its_local_answers():
+    """The committed record's global layer: its best is no worse than any converged sweep point (a refinement
+    from the best of them), every sweep point is a converged tuning, and the nested and simultaneous answers
+    recorded beside it are that optimum (parameter to 1e-4 of the range, objective to 1e-6)."""
+    record = json.loads((cr.DOC.with_suffix("") / "satellite.json").read_text())
+    layer = record["global_layer"]
+    best = layer["best"]
+    assert layer["converged"] and all(ok for _, _, ok in layer["sweep"])
+    assert best["objective"] <= min(j for _, j, _ in layer["sweep"])
+    low, high = layer["sweep"][0][0], layer["sweep"][-1][0]
+    for method in ("nested", "simultaneous", "simultaneous from sequential"):
+        design = record["designs"][method]
+        assert abs(design["value"] - best["value"]) <= 1e-4 * (high - low), method
+        assert design["objective"] == pytest.approx(best["objective"], rel=1e-6), method
+    assert "satellite panel (panel stiffness k, N m/rad)" in cr.DOC.read_text()

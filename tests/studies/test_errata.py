@@ -13,7 +13,7 @@ def registered():
 
 def test_committed_document_equals_the_generated_one():
     assert errata.DOC.read_text(encoding="utf-8") == errata.document(registered()), (
-        "docs/errata.md is stale: run python -m studies.errata"
+        "docs/errata.md is stale: run python -m studies.errata --write-docs"
     )
 
 

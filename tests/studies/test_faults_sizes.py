@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import time
 import tracemalloc
+from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
 import models.checks
+import mpc
+import studies
 from studies import cli, sweep
+
+#: The recorded rows of ``python -m studies arm --quick`` (s), which the estimates are calibrated on.
+RECORDED = Path(__file__).parent / "data" / "arm_quick_row_seconds.csv"
 
 
 def refused(argv, capsys) -> str:
@@ -61,3 +70,65 @@ def test_a_value_the_plant_refuses_exits_2_before_the_run(tmp_path, capsys, no_r
     assert line.startswith("python -m studies: error: --sweep: sweep of m at -1: arm: parameter m"), line
     assert "must be finite and > 0" in line
     assert list((tmp_path / "out").glob("**/*")) == []
+
+
+def test_a_sweep_estimated_beyond_the_time_limit_is_refused_naming_the_estimate(tmp_path, capsys, no_run):
+    """200 000 points of the arm (8 MB: within memory) with its nonlinear MPC at about 0.27 s a point in the
+    recorded study (tests/studies/data/arm_quick_row_seconds.csv): many hours, refused with exit 2 naming
+    --sweep, the estimate and the limit, before any design."""
+    line = refused(["arm", "--sweep", "m=0.3:0.7:200000", "--out", str(tmp_path / "out")], capsys)
+    assert line.startswith("python -m studies: error: --sweep: a sweep of 200000 points of m on arm is estimated at ")
+    assert "above the limit of 30 min (studies.sweep.TIME_LIMIT_S)" in line and "--long" in line
+    _, seconds = sweep.estimate_seconds(studies.get("arm"), sweep.Grid.parse("m=0.3:0.7:200000"))
+    assert seconds > 200000 * 0.2  # the nonlinear MPC's points alone, by the recorded row
+    assert list((tmp_path / "out").glob("**/*")) == []
+
+
+def test_long_accepts_the_estimate_and_the_estimate_is_printed_before_the_run(tmp_path, capsys, monkeypatch):
+    """With --long the same sweep reaches the run, and the estimate was printed before it started."""
+    seen = []
+
+    def reached(*args, **kwargs):
+        seen.append(capsys.readouterr().err)
+        raise RuntimeError("stopped at the run")
+
+    monkeypatch.setattr(sweep, "run_sweep", reached)
+    assert cli.main(["arm", "--sweep", "m=0.3:0.7:200000", "--long", "--quiet", "--out", str(tmp_path / "out")]) == 1
+    assert len(seen) == 1 and "arm: sweep of 200000 points, estimated " in seen[0]
+
+
+def test_the_time_limit_is_read_at_each_call(monkeypatch):
+    """`check_time` refuses what exceeds `TIME_LIMIT_S` at the call, and accepts it when asked."""
+    case, grid = studies.get("arm"), sweep.Grid.parse("m=0.3:0.7:10")
+    _, seconds = sweep.estimate_seconds(case, grid)
+    monkeypatch.setattr(sweep, "TIME_LIMIT_S", seconds / 2)
+    with pytest.raises(models.checks.ResourceLimitError, match="a sweep of 10 points of m on arm is estimated"):
+        sweep.check_time(case, grid)
+    assert sweep.check_time(case, grid, accept=True) == seconds
+
+
+def _linear_mpc_sweep_seconds(points: int) -> float:
+    """Wall time of `run_sweep` of the arm's linear MPC alone over `points` masses (its design excluded)."""
+    case = studies.get("arm")
+    controller = mpc.linear_mpc(case.known_plant(models.get("arm")), case.mpc, tracked=case.tracked)
+    grid = sweep.Grid("m", tuple(np.linspace(0.4, 0.6, points)))
+    started = time.perf_counter()
+    sweep.run_sweep(case, grid, providers=[], controllers={"linear MPC": controller})
+    return time.perf_counter() - started
+
+
+def test_the_estimate_scales_as_a_measured_sweep():
+    """The estimate grows with the points as measured sweeps do: the linear MPC's points run one by one, so
+    8 and 32 points take 4 times as long in both (a ratio within 1.5 of the measured one, whatever the
+    machine's load); and the estimate of one point is the recorded study's step row of the linear MPC."""
+    case = studies.get("arm")
+    estimate = {
+        n: sweep.estimate_seconds(case, sweep.Grid("m", (0.5,) * n), "step", ["linear MPC"])[1] for n in (8, 32)
+    }
+    _linear_mpc_sweep_seconds(2)  # the first run's imports and caches
+    measured = {n: _linear_mpc_sweep_seconds(n) for n in (8, 32)}
+    ratio = (estimate[32] / estimate[8]) / (measured[32] / measured[8])
+    assert 1 / 1.5 <= ratio <= 1.5, (estimate, measured)
+    recorded = pd.read_csv(RECORDED)
+    row = recorded[(recorded.controller == "linear MPC") & (recorded.scenario == "step")].wall_s.item()
+    assert estimate[8] / 8 == pytest.approx(row, rel=0.5)

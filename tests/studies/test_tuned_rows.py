@@ -106,6 +106,11 @@ def test_stored_records_reproduce_their_score_and_verdict(name):
         if record is None:
             continue
         theta = np.asarray(record["log_weights"])
+        runs = [(name, None if row is None else np.asarray(row)) for name, row in record["runs"]]
+        now = tuned_rows.tuning_runs(case)
+        assert [name for name, _ in runs] == [name for name, _ in now]
+        for (_, row), (_, row_now) in zip(runs, now):
+            assert (row is None and row_now is None) or np.array_equal(row, row_now)
         tuned = tuned_rows.objective(case, kind, margin=record["objective"]["margin"])(theta)
         assert tuned.value == pytest.approx(record["objective"]["value"], rel=1e-9)
         judged = tuned_rows.objective(case, kind)(theta)

@@ -1,0 +1,173 @@
+"""The Monte Carlo's compiled kernel (`models.mc_kernel`): a batch of N is N batches of one bit for bit, it
+agrees with CasADi's run of the same closed loop, and where it cannot be built the CasADi map runs and the
+plan says why."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import models
+from models import mc_kernel
+from models.monte_carlo_batch import MonteCarloPlan
+from models.run_setup import RunSetup
+
+
+class PendulumPI(models.Block):
+    """Reads the pendulum's two outputs: u = -kp y_0 ... with a clamped integral of the angle's error and a
+    filtered angle (a test fixture with state, a conditional and every comparison the designs use)."""
+
+    def __init__(self, remainder: bool = False):
+        super().__init__(
+            sample_period=0.01,
+            n_state=2,
+            n_measured=2,
+            n_reference=1,
+            n_input=1,
+            gains={"K": np.array([-4.0, 40.0]), "ki": 2.0, "a": 0.6},
+        )
+        self.remainder = remainder
+
+    def expr(self, xc, y, r, g):
+        e = r[0] - y[0]
+        integral = ca.if_else(ca.fabs(xc[0] + 0.01 * e) < 1.0, xc[0] + 0.01 * e, xc[0])
+        filtered = g["a"] * xc[1] + (1 - g["a"]) * y[1]
+        u = -g["K"][0] * e + g["K"][1] * filtered + g["ki"] * integral
+        if self.remainder:  # an operation the kernel's generator does not write
+            u = u + 1e-3 * ca.remainder(y[1], 0.5)
+        return ca.vertcat(integral, filtered), u
+
+
+def _pendulum_runs(samples, **kw):
+    pend = models.get("pendulum")
+    block = PendulumPI()
+    args = dict(noise_std=1e-3, seed=21, input_disturbance=0.1, substeps=2)
+    return pend, block, models.monte_carlo(pend, block, 0.3, 2.0, samples, **(args | kw))
+
+
+def _require_kernel(plant, block, substeps=2):
+    try:
+        mc_kernel.kernel(plant, block, substeps)
+    except mc_kernel.KernelUnavailable as err:
+        pytest.skip(f"no compiled kernel here: {err}")
+
+
+FIELDS = ("x", "xc", "y", "u", "measured")
+
+
+def test_a_batch_of_n_is_n_batches_of_one_bit_for_bit_whatever_the_threads_and_chunks():
+    """11 samples (one full block of 8 lanes, one of 3 padded with copies) against each alone (lane 0, a
+    block of 1): the same bits, for 1 and 2 threads and chunks of 4."""
+    pend = models.get("pendulum")
+    _require_kernel(pend, PendulumPI())
+    samples = models.sample_params(pend, 11, seed=8)
+    _, _, whole = _pendulum_runs(samples, jit=True, threads=2)
+    _, _, chunked = _pendulum_runs(samples, jit=True, threads=1, chunk_size=4)
+    for i in range(len(samples)):
+        _, _, alone = _pendulum_runs(samples[i : i + 1], jit=True, threads=1, first_sample=i)
+        for name in FIELDS:
+            np.testing.assert_array_equal(getattr(whole, name)[i], getattr(alone, name)[0], err_msg=name)
+            np.testing.assert_array_equal(getattr(chunked, name)[i], getattr(alone, name)[0], err_msg=name)
+    assert not np.allclose(whole.x[0], whole.x[1])  # the samples differ
+
+
+def test_the_kernel_agrees_with_casadis_run_of_the_same_closed_loop():
+    """The kernel's runs against the CasADi map in its virtual machine (jit=False) over the whole 2 s run,
+    noise and disturbance included: within 1e-9 (rounding alone: the compiler may fuse a multiply and
+    an add), and the divergence times the same."""
+    pend = models.get("pendulum")
+    _require_kernel(pend, PendulumPI())
+    samples = models.sample_params(pend, 10, seed=3)
+    _, _, kernel = _pendulum_runs(samples, jit=True)
+    _, _, casadi = _pendulum_runs(samples, jit=False)
+    for name in FIELDS:
+        np.testing.assert_allclose(getattr(kernel, name), getattr(casadi, name), rtol=0, atol=1e-9, err_msg=name)
+    np.testing.assert_array_equal(kernel.diverged_at, casadi.diverged_at)
+    assert np.ptp(kernel.u) > 1.0  # the run does something (the step and the saturation's range)
+
+
+def test_state_feedback_runs_on_the_kernel_with_the_plans_engine_saying_so():
+    pend = models.get("pendulum")
+    lin = pend.linearize()
+    import control
+
+    K = control.place(lin.A, lin.B, [-3, -3.5, -4, -4.5])[0]
+
+    class StateFeedback(models.Block):
+        def __init__(self):
+            super().__init__(
+                sample_period=0.01, n_state=0, n_measured=4, n_reference=1, n_input=1, gains={"K": K}, measures="state"
+            )
+
+        def expr(self, xc, y, r, g):
+            return xc, -ca.dot(g["K"], y) + 2.0 * r[0]
+
+    block = StateFeedback()
+    _require_kernel(pend, block)
+    setup = RunSetup.build(pend, block, 0.3, 2.0, substeps=2)
+    samples = models.sample_params(pend, 5, seed=1)
+    plan = MonteCarloPlan.build(pend, block, setup, samples, jit=True)
+    assert plan.engine == "C kernel" and plan.kernel is not None
+    kernel = models.monte_carlo(pend, block, 0.3, 2.0, samples, substeps=2, jit=True)
+    casadi = models.monte_carlo(pend, block, 0.3, 2.0, samples, substeps=2, jit=False)
+    for name in FIELDS:
+        np.testing.assert_allclose(getattr(kernel, name), getattr(casadi, name), rtol=0, atol=1e-9, err_msg=name)
+
+
+def test_without_a_kernel_the_casadi_map_runs_and_the_plan_names_the_operation():
+    pend = models.get("pendulum")
+    block = PendulumPI(remainder=True)
+    setup = RunSetup.build(pend, block, 0.3, 1.0, substeps=2)
+    samples = models.sample_params(pend, 3, seed=1)
+    plan = MonteCarloPlan.build(pend, block, setup, samples, jit=True)
+    assert plan.kernel is None and "OP_REMAINDER" in plan.engine and plan.engine.startswith("CasADi map")
+    with pytest.raises(mc_kernel.KernelUnavailable, match="OP_REMAINDER"):
+        mc_kernel.kernel(pend, block, 2)
+    batch = models.monte_carlo(pend, block, 0.3, 1.0, samples, substeps=2, jit=True)
+    single = models.simulate_closed_loop(pend, block, 0.3, 1.0, params=samples[1], substeps=2)
+    np.testing.assert_allclose(batch[1].u, single.u, rtol=0, atol=1e-12)  # the compiled map: rounding alone
+
+
+def test_a_diverging_sample_diverges_at_the_same_time_on_the_kernel(blow_up_plant):
+    """q'' = 4 q^3 from q = 1 escapes at about 0.93 s whatever the (zero) command: the kernel's run goes
+    non-finite like CasADi's, and the fault rule gives the same sample time."""
+
+    class Zero(models.Block):
+        def __init__(self):
+            super().__init__(sample_period=0.01, n_state=0, n_measured=1, n_reference=1, n_input=1, gains={"k": 0.0})
+
+        def expr(self, xc, y, r, g):
+            return xc, g["k"] * y[0]
+
+    block = Zero()
+    _require_kernel(blow_up_plant, block, 10)
+    samples = np.array([[1.0], [0.5]])
+    kw = dict(x0=[1.0, 0.0], substeps=10)
+    kernel = models.monte_carlo(blow_up_plant, block, 0.0, 2.0, samples, jit=True, **kw)
+    casadi = models.monte_carlo(blow_up_plant, block, 0.0, 2.0, samples, jit=False, **kw)
+    assert np.all(np.isfinite(kernel.diverged_at))
+    np.testing.assert_array_equal(kernel.diverged_at, casadi.diverged_at)
+
+
+def test_a_single_run_with_jit_is_its_monte_carlo_sample_bit_for_bit():
+    """`simulate_closed_loop(..., jit=True)` runs the kernel as a batch of one: the numbers of the same
+    sample in `monte_carlo(..., jit=True)`, its noise seeded by (seed, index)."""
+    pend = models.get("pendulum")
+    _require_kernel(pend, PendulumPI())
+    samples = models.sample_params(pend, 3, seed=6)
+    pend, block, batch = _pendulum_runs(samples, jit=True)
+    for i, row in enumerate(samples):
+        single = models.simulate_closed_loop(
+            pend,
+            block,
+            0.3,
+            2.0,
+            params=row,
+            noise_std=1e-3,
+            substeps=2,
+            input_disturbance=0.1,
+            seed=np.random.SeedSequence([21, i]),
+            jit=True,
+            allow_divergence=True,
+        )
+        for name in FIELDS:
+            np.testing.assert_array_equal(getattr(single, name), getattr(batch, name)[i], err_msg=name)
