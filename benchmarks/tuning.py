@@ -26,7 +26,16 @@ cost ("faster to an equal cost"), `gradient_total_s` its whole run, and
 `gradient_status` IPOPT's final status (`gradient_converged`: it stopped on
 its convergence test and the continuation settled, not at an iteration cap).
 
-Usage: python benchmarks/tuning.py [--json PATH] [--max-evaluations 20000] [--problems saturating linear]
+The "mpc" problem tunes the arm's linear MPC weights (`studies.tuned_rows`, the objective its
+"tuned MPC" row is tuned on: every run judged by the table's own verdict, `BARRIER` plus the largest
+relative excess while a spec (tightened by `tuned_rows.MARGIN`) is missed, else ITAE and energy
+relative to the start) twice from the case's own weights, in the same process: the baseline is
+Nelder-Mead on complete evaluations, with a first simplex of the same steps as the poll (weights
+x 4), capped at `MPC_BASELINE_EVALUATIONS`; ours is `studies.tuned_rows.search` (the poll search with its
+early rejection). `speedup` is the baseline's time to the worse of the two final scores over ours;
+`status` the poll's stopping test.
+
+Usage: python benchmarks/tuning.py [--json PATH] [--max-evaluations 20000] [--problems saturating linear mpc]
        [--compare]
 """
 
@@ -44,6 +53,7 @@ import scipy.optimize
 import models
 import studies
 from designs.tuning import Cost, Scenario, SolveOptions, TuningProblem, TuningSetup, tune
+from studies import tuned_rows
 from studies.homework import statespace_controllers
 
 PLANT, LABEL, DURATION = "pendulum", "pole placement + integrator", 10.0
@@ -297,6 +307,66 @@ def compare(step, max_evaluations, alternatives=False):
     return out
 
 
+MPC_PLANT = "arm"
+#: Nelder-Mead's evaluation cap on the MPC problem (each evaluation is up to eight closed-loop MPC runs).
+MPC_BASELINE_EVALUATIONS = 150
+
+
+def first_reached(history, target):
+    """Seconds at which a (seconds, best score) history first reached `target` (relative `REACHED`), or None."""
+    return time_to_reach(history, target)
+
+
+def compare_mpc(max_evaluations=MPC_BASELINE_EVALUATIONS):
+    """The MPC weight problem: Nelder-Mead (complete evaluations) against the poll search, one process."""
+    case = studies.get(MPC_PLANT)
+    objective = tuned_rows.objective(case, "mpc", margin=tuned_rows.MARGIN)
+    theta0 = tuned_rows.start(case, "mpc")
+    started, best, nm_history, nm_runs = time.perf_counter(), [np.inf], [], [0]
+
+    def value(x):
+        evaluation = objective(x)
+        nm_runs[0] += evaluation.runs
+        if evaluation.value < best[0]:
+            best[0] = evaluation.value
+            nm_history.append((time.perf_counter() - started, evaluation.value))
+        return evaluation.value
+
+    simplex = np.vstack([theta0, theta0 + np.log(4.0) * np.eye(theta0.size)])
+    nm = scipy.optimize.minimize(
+        value,
+        theta0,
+        method="Nelder-Mead",
+        options={"maxfev": max_evaluations, "initial_simplex": simplex, "xatol": tuned_rows.MIN_STEP, "fatol": 1e-9},
+    )
+    nm_s = time.perf_counter() - started
+    started = time.perf_counter()
+    ours = tuned_rows.search(objective, theta0)
+    ours_s = time.perf_counter() - started
+    target = max(float(nm.fun), ours.value)
+    nm_reached = first_reached(nm_history, target)
+    ours_reached = first_reached([(t, v) for t, _, v in ours.history], target)
+    return {
+        "plant": MPC_PLANT,
+        "decisions": int(theta0.size),
+        "start_score": ours.history[0][2],
+        "nelder_mead_s": nm_s,
+        "nelder_mead_score": float(nm.fun),
+        "nelder_mead_evaluations": int(nm.nfev),
+        "nelder_mead_runs": nm_runs[0],
+        "nelder_mead_message": str(nm.message),
+        "poll_s": ours_reached if ours_reached is not None else ours_s,
+        "poll_total_s": ours_s,
+        "poll_score": ours.value,
+        "poll_evaluations": ours.evaluations,
+        "poll_runs": ours.runs,
+        "target_score": target,
+        "speedup": (nm_reached if nm_reached is not None else nm_s) / max(ours_reached or ours_s, 1e-9),
+        "status": ours.status,
+        "converged": ours.converged,
+    }
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -306,7 +376,7 @@ def main(argv=None):
         "nelder_mead_cost, speedup (of the first problem) and every problem's figures",
     )
     parser.add_argument("--max-evaluations", type=int, default=20000, help="Nelder-Mead's evaluation budget")
-    parser.add_argument("--problems", nargs="+", default=list(STEPS), choices=list(STEPS))
+    parser.add_argument("--problems", nargs="+", default=[*STEPS, "mpc"], choices=[*STEPS, "mpc"])
     parser.add_argument(
         "--compare", action="store_true", help="also time IPOPT on the exact loop, single and multiple shooting"
     )
@@ -318,6 +388,19 @@ def main(argv=None):
     print(f"{'problem':17s} {'method':18s} {'wall s':>8s} {'cost':>12s}  notes")
     problems = {}
     for name in args.problems:
+        if name == "mpc":
+            r = problems[name] = compare_mpc()
+            print(
+                f"{'mpc (' + r['plant'] + ')':17s} {'nelder-mead':18s} {r['nelder_mead_s']:8.2f} "
+                f"{r['nelder_mead_score']:12.8g}  {r['nelder_mead_evaluations']} evaluations, "
+                f"{r['nelder_mead_runs']} closed-loop runs: {r['nelder_mead_message']}"
+            )
+            print(
+                f"{'':17s} {'poll search':18s} {r['poll_s']:8.2f} {r['poll_score']:12.8g}  {r['status']}; "
+                f"{r['poll_evaluations']} evaluations, {r['poll_runs']} runs, {r['poll_total_s']:.2f} s in all"
+            )
+            print(f"{'':17s} speedup to the worse final score ({r['target_score']:.6g}): {r['speedup']:.1f}x")
+            continue
         r = problems[name] = compare(STEPS[name], args.max_evaluations, args.compare)
         label = f"{name} ({r['step_m']:g} m)"
         print(
@@ -339,8 +422,12 @@ def main(argv=None):
                     f"{a['reached_nelder_mead_cost']}"
                 )
         print(f"{'':17s} speedup to Nelder-Mead's cost: {r['speedup']:.1f}x")
-    first = problems[args.problems[0]]
-    figures = {k: first[k] for k in ("gradient_s", "gradient_cost", "nelder_mead_s", "nelder_mead_cost", "speedup")} | {
+    first = problems[next((p for p in args.problems if p != "mpc"), args.problems[0])]
+    figures = {
+        k: first[k]
+        for k in ("gradient_s", "gradient_cost", "nelder_mead_s", "nelder_mead_cost", "speedup")
+        if k in first
+    } | {
         "problem": args.problems[0],
         "problems": problems,
     }

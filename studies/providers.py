@@ -13,7 +13,7 @@ from __future__ import annotations
 import models
 from mpc import linear_mpc, nonlinear_mpc
 
-from . import cases, homework, tuner
+from . import cases, homework, tuned_rows, tuner
 from .case import CaseStudy
 from .provider_calls import AnswerProvider, Provider
 from .provider_calls import NotProvided as NotProvided  # what these raise; callers catch it from here too
@@ -77,6 +77,6 @@ def statespace_answers(case: CaseStudy | str) -> dict:
 
 
 #: A case's own controllers, by kind: each provides nothing (`NotProvided`) for a case without that design.
-STANDARD: tuple[Provider, ...] = (classical, statespace, mpc, tuned)
+STANDARD: tuple[Provider, ...] = (classical, statespace, mpc, tuned, tuned_rows.tuned_weights)
 #: A case's own homework answers, by kind.
 STANDARD_ANSWERS: tuple[AnswerProvider, ...] = (classical_answers, statespace_answers)

@@ -444,9 +444,11 @@ def _listed(gains: dict) -> dict:
     return {k: np.asarray(v, dtype=float).tolist() for k, v in gains.items()}
 
 
-def stored(case: CaseStudy) -> dict | None:
-    """The case's stored tuning record (package data beside the case files), or None when there is none."""
-    data = resources.files(cases.__name__).joinpath(store_name(case))
+def stored(case: CaseStudy, name: str | None = None, folder: Path | None = None) -> dict | None:
+    """The case's stored tuning record (package data beside the case files, or file `name` (default
+    `store_name`) in `folder`), or None when there is none."""
+    name = store_name(case) if name is None else name
+    data = resources.files(cases.__name__).joinpath(name) if folder is None else Path(folder) / name
     if not data.is_file():
         return None
     return json.loads(data.read_text(encoding="utf-8"))
@@ -488,9 +490,10 @@ def _report_every(n: int):
     return report
 
 
-def write(case: CaseStudy, record: dict, folder: Path = STORE_DIR) -> Path:
-    """Store `record` as the case's tuned gains in `folder` (default beside the case files)."""
-    return files.write_json(Path(folder) / store_name(case), record)
+def write(case: CaseStudy, record: dict, folder: Path = STORE_DIR, name: str | None = None) -> Path:
+    """Store `record` as the case's tuned gains (file `name`, default `store_name`) in `folder` (default
+    beside the case files)."""
+    return files.write_json(Path(folder) / (store_name(case) if name is None else name), record)
 
 
 def _widths(text: str) -> tuple[float, ...]:

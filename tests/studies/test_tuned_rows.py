@@ -1,0 +1,154 @@
+"""The tuned LQR and MPC rows: their objective's rules, their stored records and the provider."""
+
+import dataclasses
+import math
+import pickle
+
+import control
+import numpy as np
+import pytest
+
+import models
+from designs.statespace_blocks import TrackingModel
+from designs.weight_search import poll_search
+from models.specs import MEETS, VIOLATES, Specs, Verdict, Violation
+from studies import cases, providers, tuned_rows
+
+STORED = [
+    name for name in cases.names() if tuned_rows.tuner.stored(cases.get(name), tuned_rows.store_name(cases.get(name)))
+]
+
+
+def test_relative_excess_reads_the_worst_violation():
+    assert tuned_rows.relative_excess(Verdict(MEETS)) == 0.0
+    verdict = Verdict(VIOLATES, (Violation("overshoot", 14.0, 10.0, "%"), Violation("settling", 3.0, 2.0, "s")))
+    assert tuned_rows.relative_excess(verdict) == pytest.approx(0.5)
+    assert tuned_rows.relative_excess(Verdict(VIOLATES, (Violation("drifts", 0.25, 0.0, "rad/s"),))) == 0.25
+    assert tuned_rows.relative_excess(Verdict("diverged")) == tuned_rows.DIVERGED_EXCESS
+    assert tuned_rows.relative_excess(Verdict(VIOLATES, (Violation("x", math.inf, 1.0),))) == tuned_rows.DIVERGED_EXCESS
+
+
+def test_infeasible_text_names_the_spec_and_how_close_the_best_came():
+    worst = {"scenario": "step", "spec": "overshoot", "value": 14.04, "bound": 10.0, "unit": "%"}
+    assert tuned_rows.infeasible_text(worst) == "infeasible for this structure: overshoot at best 14 % > 10 % (step)"
+    assert tuned_rows.infeasible_text(None) is None
+
+
+def test_early_rejection_is_a_lower_bound_of_the_complete_value():
+    case = cases.get("arm")
+    f = tuned_rows.objective(case, "lqr", runs=[("step", None), ("disturbance", None), ("steps", None)])
+    theta = tuned_rows.start(case, "lqr") + np.array([0.5, 0.0, 0.5, -0.5])
+    full = f(theta)
+    assert full.complete and full.runs == 3
+    cut = f(theta, bound=-1.0)  # below any value: rejected after the first run
+    assert not cut.complete and cut.runs == 1 and -1.0 <= cut.value <= full.value
+    # What a worker of `studies.distributed` receives: the pickled objective gives the same value.
+    assert pickle.loads(pickle.dumps(f))(theta).value == full.value
+
+
+def test_the_provider_is_standard_and_needs_stored_weights(monkeypatch):
+    assert tuned_rows.tuned_weights in providers.STANDARD
+    monkeypatch.setattr(tuned_rows, "stored", lambda case, kind: None)
+    with pytest.raises(providers.NotProvided, match="tuned_rows"):
+        tuned_rows.tuned_weights("arm")
+
+
+@pytest.mark.parametrize("name", STORED)
+def test_stored_lqr_weights_give_the_lqr_of_the_linearization(name):
+    case = cases.get(name)
+    record = tuned_rows.stored(case, "lqr")
+    if record is None:
+        pytest.skip(f"{name}: no tuned LQR stored")
+    known = case.known_plant()
+    Q = np.diag(np.exp(record["log_weights"][:-1]))
+    R = np.exp(record["log_weights"][-1])
+    model = TrackingModel.from_plant(known, case.tracked)
+    lin, index = known.linearize(), known.state_names.index(case.tracked)
+    A_I = np.block([[lin.A, np.zeros((model.nx, 1))], [-np.eye(model.nx)[[index]], np.zeros((1, 1))]])
+    B_I = np.vstack([lin.B, [[0.0]]])
+    K_ref, _, _ = control.lqr(A_I, B_I, Q, R)
+    np.testing.assert_allclose(record["K_augmented"], K_ref, rtol=1e-7, atol=1e-9)
+    rows = tuned_rows.tuned_weights(case, known)
+    block = next(c for label, c in rows.items() if label.startswith("tuned LQR"))
+    np.testing.assert_allclose(np.ravel(block.gains["K"]), K_ref[0, :-1], rtol=1e-7, atol=1e-9)
+    assert float(np.ravel(block.gains["ki"])[0]) == pytest.approx(-K_ref[0, -1], rel=1e-7)
+
+
+@pytest.mark.parametrize("name", STORED)
+def test_rows_are_labelled_by_their_record(name):
+    case = cases.get(name)
+    rows = tuned_rows.tuned_weights(case)
+    for kind in tuned_rows.KINDS:
+        record = tuned_rows.stored(case, kind)
+        if record is None:
+            continue
+        (label,) = [label for label in rows if label.startswith(tuned_rows.LABELS[kind])]
+        assert (label == tuned_rows.LABELS[kind]) == record["feasible"]
+        assert record["search"]["converged"]
+
+
+def test_a_changed_start_is_refused(monkeypatch):
+    if "arm" not in STORED:
+        pytest.skip("no weights stored for the arm")
+    shifted = tuned_rows.start
+    monkeypatch.setattr(tuned_rows, "start", lambda case, kind: shifted(case, kind) + 0.1)
+    with pytest.raises(ValueError, match="different design"):
+        tuned_rows.tuned_weights("arm")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", STORED)
+def test_stored_records_reproduce_their_score_and_verdict(name):
+    """The stored weights, judged again by the table's rule on the same runs, give the stored score."""
+    case = cases.get(name)
+    for kind in tuned_rows.KINDS:
+        record = tuned_rows.stored(case, kind)
+        if record is None:
+            continue
+        theta = np.asarray(record["log_weights"])
+        runs = [(name, None if row is None else np.asarray(row)) for name, row in record["runs"]]
+        now = tuned_rows.tuning_runs(case)
+        assert [name for name, _ in runs] == [name for name, _ in now]
+        for (_, row), (_, row_now) in zip(runs, now):
+            assert (row is None and row_now is None) or np.array_equal(row, row_now)
+        tuned = tuned_rows.objective(case, kind, margin=record["objective"]["margin"])(theta)
+        assert tuned.value == pytest.approx(record["objective"]["value"], rel=1e-9)
+        judged = tuned_rows.objective(case, kind)(theta)
+        assert judged.value == pytest.approx(record["objective"]["value_at_the_case_specs"], rel=1e-9)
+        assert (judged.value < tuned_rows.BARRIER) == record["feasible"]
+
+
+@pytest.mark.slow
+def test_a_rise_time_below_the_actuators_bound_is_reported_infeasible():
+    """The arm (J = m ℓ²/3) from rest with |τ| ≤ τ_max accelerates at most τ_max / J while gravity and damping
+    oppose the rise; reaching 10 % of the step s at speed ≤ √(2 a 0.1 s) and covering the next 0.8 s takes
+    at least (√1.8 − √0.2) √(s / a). A spec of half that bound is out of reach for any weights."""
+    arm = cases.get("arm")
+    plant = models.get("arm")
+    inertia = plant.params["m"] * plant.params["ell"] ** 2 / 3
+    bound = (math.sqrt(1.8) - math.sqrt(0.2)) * math.sqrt(arm.step * inertia / float(plant.input_limit[0]))
+    case = dataclasses.replace(arm, specs={"*": Specs(max_rise_time_s=bound / 2)})
+    f = tuned_rows.objective(case, "lqr", runs=[("step", None)])
+    found = poll_search(f, tuned_rows.start(case, "lqr"), min_step=0.2, max_evaluations=300)
+    assert found.converged and found.value > tuned_rows.BARRIER
+    worst = found.info["worst"]
+    assert worst["spec"].startswith("rise") and worst["value"] >= bound - arm.sample_period > bound / 2
+    assert tuned_rows.infeasible_text(worst).startswith("infeasible for this structure: rise")
+
+
+def test_an_infeasible_record_labels_its_row(monkeypatch):
+    if "arm" not in STORED:
+        pytest.skip("no weights stored for the arm")
+    case = cases.get("arm")
+    record = dict(tuned_rows.stored(case, "lqr"), feasible=False)
+    record["worst"] = {"scenario": "steps", "spec": "overshoot", "value": 14.0, "bound": 10.0, "unit": "%"}
+    monkeypatch.setattr(tuned_rows, "stored", lambda case, kind: record if kind == "lqr" else None)
+    (label,) = tuned_rows.tuned_weights(case)
+    assert label == "tuned LQR (infeasible for this structure: overshoot at best 14 % > 10 % (steps))"
+
+
+def test_the_console_refuses_bad_arguments_before_work(capsys):
+    for argv in (["nowhere"], ["arm", "--max-evaluations", "0"], ["arm", "--workers", "0"]):
+        with pytest.raises(SystemExit):
+            tuned_rows.main(argv)
+    assert ">= 1" in capsys.readouterr().err
