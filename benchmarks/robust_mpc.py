@@ -195,8 +195,9 @@ def progress(text: str) -> None:
     print(f"{time.strftime('%H:%M:%S')} {text}", file=sys.stderr, flush=True)
 
 
-def run_plant(name: str, samples: int) -> dict:
-    """Every controller's Monte Carlo on plant `name` (see the module docstring)."""
+def run_plant(name: str, samples: int, save=lambda partial: None) -> dict:
+    """Every controller's Monte Carlo on plant `name` (see the module docstring); `save(partial)` after each
+    controller's, with the results so far."""
     case, plant = studies.get(name), models.get(name)
     known = case.known_plant(plant)
     spec = PLANTS[name]
@@ -209,6 +210,7 @@ def run_plant(name: str, samples: int) -> dict:
     progress(f"{name}: nominal NMPC done")
     results["robust"] = monte_carlo(name, case, tree, samples)
     progress(f"{name}: scenario tree done")
+    save(out | {f"{k}_violations": r["violations"] for k, r in results.items()})
     model, tube, tube_refused, tube_build_s, parametric_refused, twin = tube_sets(name, case, known)
     progress(f"{name}: tube {'refused' if tube is None else 'built'} ({tube_build_s:.1f} s)")
     out["tube_build_s"], out["parametric_tube_refused"], out["tube_refused"] = (
@@ -345,10 +347,14 @@ def main() -> None:
     parser.add_argument("--dompc-steps", type=int, default=10, help="do-mpc's closed-loop steps timed")
     args = parser.parse_args()
     out: dict = {}
+
+    def save(results: dict) -> None:
+        with open(args.json, "w") as handle:
+            json.dump(results, handle, indent=2)
+
     for name in args.plants.split(","):
-        out[name] = run_plant(name, args.samples)
-        with open(args.json, "w") as handle:  # each plant's results as soon as they are in
-            json.dump(out, handle, indent=2)
+        out[name] = run_plant(name, args.samples, lambda partial, name=name: save(out | {name: partial}))
+        save(out)  # each plant's results as soon as they are in
         progress(f"{name}: done")
     if "pendulum" in out:
         pendulum = out["pendulum"]
