@@ -161,7 +161,8 @@ class Specs:
         self._refuse_contradictions()
 
     def _refuse_contradictions(self) -> None:
-        """ValueError when a final value cannot lie within its state's bound or physical limit."""
+        """ValueError for a final value that is not a (value, tolerance > 0) pair, or that cannot lie within its
+        state's bound or physical limit."""
         intervals = [
             (f"Specs.state_bounds[{state!r}]", state, low, high) for state, (low, high) in self.state_bounds.items()
         ]
@@ -170,13 +171,6 @@ class Specs:
             for limit in self.state_limits
             if limit.relative_to is None
         ]
-        for state, (value, tolerance) in self.final_values.items():
-            for what, bounded, low, high in intervals:
-                if bounded == state and (value + tolerance < low or value - tolerance > high):
-                    raise ValueError(
-                        f"Specs.final_values[{state!r}] = ({value:g}, {tolerance:g}) lies outside {what} = "
-                        f"({low:g}, {high:g}): no run can meet both"
-                    )
         for state, target in self.final_values.items():
             pair = np.asarray(target, dtype=float) if not isinstance(target, str) else np.array(())
             if pair.shape != (2,) or not (np.all(np.isfinite(pair)) and pair[1] > 0):
@@ -184,6 +178,13 @@ class Specs:
                     f"Specs.final_values[{state!r}] must be a pair (value, tolerance > 0) of finite numbers, "
                     f"got {target!r}"
                 )
+        for state, (value, tolerance) in self.final_values.items():
+            for what, bounded, low, high in intervals:
+                if bounded == state and (value + tolerance < low or value - tolerance > high):
+                    raise ValueError(
+                        f"Specs.final_values[{state!r}] = ({value:g}, {tolerance:g}) lies outside {what} = "
+                        f"({low:g}, {high:g}): no run can meet both"
+                    )
 
     @property
     def settling_band(self) -> float:

@@ -360,11 +360,15 @@ class TuningProblem:
             ("max_settling_time_s", specs.max_settling_time_s),
             ("max_rise_time_s", specs.max_rise_time_s),
         ):
-            if when is not None and when > t[-1]:
-                raise ValueError(
-                    f"{name} = {when:g} s is after the end of the scenario{where} ({t[-1]:g} s): "
-                    "the spec would constrain nothing"
+            span = max((t[b - 1] - t[a] for a, b, _, _ in steps), default=t[-1])
+            if when is not None and when > span:
+                late = span < t[-1] - t[0]
+                what = (
+                    f"longer than any step of the scenario{where} lasts ({span:g} s)"
+                    if late
+                    else (f"after the end of the scenario{where} ({t[-1]:g} s)")
                 )
+                raise ValueError(f"{name} = {when:g} s is {what}: the spec would constrain nothing")
         for what, table in (("state_bounds", specs.state_bounds), ("final_values", specs.final_values)):
             for name in table:
                 if name not in plant.state_names:

@@ -347,7 +347,7 @@ ROLL_OFFSET_RANGE = (0.005, 0.1)
 def roll_agility(quick: bool) -> TrajectorySetup:
     """The offset L and the torque history that roll furthest in ROLL_TIME s and stop there, holdable.
 
-    The hydrostatic moment m g L sin φ is the UUV's spring: as the issue's spring-mass, a stiffer roll
+    The hydrostatic moment m g L sin φ is the UUV's spring: as in the spring-mass problem, a stiffer roll
     stores energy on the way and gives it back, too stiff a one pulls the vehicle back. At the end the
     thrusters must be able to hold the angle: m g L sin φ(T) <= 50 N m.
     """
@@ -367,7 +367,7 @@ def roll_agility(quick: bool) -> TrajectorySetup:
         f"From upright at rest, roll as far as possible in {ROLL_TIME:g} s and stop there (φ'(T) = 0), |τ| ≤ 50 N m, "
         "with the thrusters able to hold the final angle (m g L sin φ(T) ≤ 50 N m), choosing the centre-of-gravity "
         f"offset L in [{ROLL_OFFSET_RANGE[0]:g}, {ROLL_OFFSET_RANGE[1]:g}] m with the torque history. The "
-        "hydrostatic moment acts as the spring of the issue's spring-mass problem.",
+        "hydrostatic moment acts as the spring of the spring-mass problem.",
     )
 
 

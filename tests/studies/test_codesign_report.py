@@ -146,7 +146,8 @@ def test_satellite_stiffness_short_run_reports_what_it_designed():
     assert result.designs["sequential"].value == pytest.approx(low, abs=1e-6)  # its price alone: the cheapest
     for design in result.designs.values():
         assert low <= design.value <= high
-        assert not design.converged and "Maximum_Iterations_Exceeded" in design.status  # 3 iterations: reported
+        assert not design.converged  # 3 iterations: reported as the cap, or as a kept start no stage converged at
+        assert "Maximum_Iterations_Exceeded" in design.status or "no stage converged" in design.status
 
 
 def test_crane_short_run_reports_what_it_designed():
