@@ -226,7 +226,7 @@ def test_every_arm_controller_exports_under_a_distinct_c_name_it_shows():
     labels, make = designer.catalog("arm")
     exported = {label: make(label).export() for label in labels}
     names = {label: data["c_name"] for label, data in exported.items()}
-    assert len(set(names.values())) == len(labels) == 11
+    assert len(labels) >= 11 and len(set(names.values())) == len(labels)  # the 11 hand and tuned ones, and more
     for label, data in exported.items():
         assert models.export.c_name(data["c_name"]) == data["c_name"] and data["c_name"].startswith("arm_")
         assert sorted(data["c"]) == [f"{data['c_name']}.c", f"{data['c_name']}.h"], label
