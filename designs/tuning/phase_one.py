@@ -62,7 +62,9 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     Parameters
     ----------
     problem : TuningProblem;  lbx, ubx : decision bounds (n_decision,);  start : (n_decision,)
-    options : its method, widths, tol, max_iter and jit are used (L-BFGS, IPOPT's own options)
+    options : its method, widths, tol, max_iter, hessian, jit and ipopt_options are used (with the
+        default L-BFGS; IPOPT's own default, the exact Hessian, would also differentiate the soft maxima
+        of every run twice)
     """
     options = options or SolveOptions()
     lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
@@ -82,7 +84,16 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     excess_of = ca.Function("excess", [problem.decision, width], [excess])
     rows = excess_of(scaling * z, width) - s
     tol = options.tol
-    ipopt = IPOPT_OPTIONS | {"max_iter": int(options.max_iter), "tol": tol, "acceptable_tol": 100 * tol}
+    ipopt = (
+        IPOPT_OPTIONS
+        | {
+            "max_iter": int(options.max_iter),
+            "tol": tol,
+            "acceptable_tol": 100 * tol,
+            "hessian_approximation": options.hessian,
+        }
+        | dict(options.ipopt_options or {})
+    )
     settings: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
     solver = problem.cached(

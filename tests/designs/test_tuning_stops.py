@@ -162,3 +162,21 @@ def test_phase_one_proves_a_rise_time_below_the_actuators_bound_out_of_reach():
     # bang-bang bound at t = 1 s, within the sampled, saturated loop's reach).
     assert found.excess <= bound + 0.1
     assert found.excess > AGREEMENT
+
+
+@pytest.mark.parametrize("hessian", ["limited-memory", "exact"])
+def test_phase_one_uses_the_hessian_its_options_ask_for(hessian):
+    """The phase one's IPOPT evaluates second derivatives only when `SolveOptions.hessian` is "exact": on
+    the default (L-BFGS) it never calls the Lagrangian's Hessian, which IPOPT's own default would."""
+    problem = TuningProblem(
+        models.Plant(_double_integrator),
+        SaturatedPD(),
+        Scenario(reference=1.0, duration=4.0, x0=[0.0, 0.0], tracked="s"),
+        specs=Specs(max_rise_time_s=1.0),
+        substeps=2,
+    )
+    lbx, ubx = gain_bounds(problem, {"kp": (0.01, 100.0), "kd": (0.01, 100.0)})
+    phase_one(problem, lbx, ubx, problem.start(), SolveOptions(hessian=hessian, widths=(1e-2,)))
+    (solver,) = problem._solvers.values()
+    calls = solver.stats().get("n_call_nlp_hess_l", 0)
+    assert (calls > 0) == (hessian == "exact"), calls
