@@ -25,6 +25,8 @@ class PhaseOne:
     excess : the largest relative excess of the exact specs there (<= 0: every spec holds)
     status : IPOPT's return status of its last solve;  converged : that status is in `CONVERGED`
     iterations : IPOPT iterations over its stages
+    uphill : a stage ended farther outside the exact specs than the start: the start is returned, not
+        `converged` (a smoothed stage's local minimum that the exact loop contradicts is no certificate)
     """
 
     decision: np.ndarray
@@ -32,6 +34,7 @@ class PhaseOne:
     status: str
     converged: bool
     iterations: int
+    uphill: bool = False
 
     @property
     def infeasible(self) -> bool:
@@ -62,9 +65,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     Parameters
     ----------
     problem : TuningProblem;  lbx, ubx : decision bounds (n_decision,);  start : (n_decision,)
-    options : its method, widths, tol, max_iter, hessian, jit and ipopt_options are used (with the
-        default L-BFGS; IPOPT's own default, the exact Hessian, would also differentiate the soft maxima
-        of every run twice)
+    options : its method, widths, tol, max_iter, phase_hessian, jit and ipopt_options are used
     """
     options = options or SolveOptions()
     lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
@@ -90,7 +91,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
             "max_iter": int(options.max_iter),
             "tol": tol,
             "acceptable_tol": 100 * tol,
-            "hessian_approximation": options.hessian,
+            "hessian_approximation": options.phase_hessian,
         }
         | dict(options.ipopt_options or {})
     )
@@ -106,6 +107,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     )
 
     decision, worst = start, np.inf  # widths is never empty: the loop sets both
+    at_start = problem.largest_excess(start)
     status, iterations = "not solved", 0
     z_now = start / scale
     for w in options.widths if smooth else (None,):
@@ -127,6 +129,8 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
                 break
         decision = np.clip(scale * z_now, lbx, ubx)
         worst = problem.largest_excess(decision)
+        if worst > at_start:
+            return PhaseOne(start, at_start, status, False, iterations, uphill=True)
         if worst <= 0 or not converged(status):
             break
     return PhaseOne(decision, worst, status, converged(status), iterations)
