@@ -14,7 +14,7 @@ from models.checks import as_vector
 from .excess import relative_excess
 from .options import SolveOptions
 from .problem import TuningProblem
-from .settings import AGREEMENT, IPOPT_OPTIONS, PHASE_ONE_MARGIN, RETRIED, converged
+from .settings import AGREEMENT, IPOPT_OPTIONS, PHASE_ONE_MARGIN, RETRIED, WARM_START, converged
 
 
 @dataclass
@@ -97,34 +97,43 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     )
     settings: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
-    solver = problem.cached(
+    variants = {"phase_one": settings, "phase_one_warm": settings | {"ipopt": ipopt | WARM_START}}
+    solvers = problem.cached(
         ("phase one", smooth, options.jit, settings),
         lambda: (
-            models.compile.jit_nlpsols("ipopt", nlp, {"phase_one": settings})["phase_one"]
+            models.compile.jit_nlpsols("ipopt", nlp, variants)
             if options.jit
-            else ca.nlpsol("phase_one", "ipopt", nlp, settings)
+            else {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in variants.items()}
         ),
     )
 
     decision, worst = start, np.inf  # widths is never empty: the loop sets both
     at_start = problem.largest_excess(start)
     status, iterations = "not solved", 0
-    z_now = start / scale
+    z_now, s_now, multipliers = start / scale, 0.0, None
     for w in options.widths if smooth else (None,):
         for _ in range(2):
-            # A numerical failure is retried once from where it stopped, as the tuning's stages are.
+            # With L-BFGS a later stage starts at the last answer and its multipliers with the barrier
+            # already small (as the continuation's): cold, a fresh memory's first steps left the answer (the
+            # UUV's: from 0.11 to 3). A numerical failure is retried once from where it stopped, cold, as the
+            # tuning's stages are.
             s0 = float(ca.mmax(excess_of(scale * z_now, [] if w is None else w)))
+            solver = solvers["phase_one" if multipliers is None else "phase_one_warm"]
             sol = solver(
-                x0=np.concatenate([z_now, [max(s0, 0.0)]]),
+                x0=np.concatenate([z_now, [max(s0, 0.0)] if multipliers is None else [max(s0, s_now)]]),
                 lbx=np.concatenate([lbx / scale, [-PHASE_ONE_MARGIN]]),
                 ubx=np.concatenate([ubx / scale, [np.inf]]),
                 lbg=-np.inf,
                 ubg=0.0,
                 p=np.concatenate([[] if w is None else [w], scale]),
+                **(multipliers or {}),
             )
             stats = solver.stats()
             status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
-            z_now = np.asarray(sol["x"]).ravel()[:n]
+            x_now = np.asarray(sol["x"]).ravel()
+            z_now, s_now = x_now[:n], float(x_now[n])
+            warm = options.phase_hessian == "limited-memory" and status not in RETRIED
+            multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]} if warm else None
             if status not in RETRIED:
                 break
         decision = np.clip(scale * z_now, lbx, ubx)

@@ -177,8 +177,8 @@ def test_phase_one_uses_the_hessian_its_options_ask_for(hessian):
     )
     lbx, ubx = gain_bounds(problem, {"kp": (0.01, 100.0), "kd": (0.01, 100.0)})
     phase_one(problem, lbx, ubx, problem.start(), SolveOptions(phase_hessian=hessian, widths=(1e-2,)))
-    (solver,) = problem._solvers.values()
-    calls = solver.stats().get("n_call_nlp_hess_l", 0)
+    (solvers,) = problem._solvers.values()
+    calls = solvers["phase_one"].stats().get("n_call_nlp_hess_l", 0)
     assert (calls > 0) == (hessian == "exact"), calls
 
 
