@@ -14,7 +14,15 @@ from models.checks import as_vector
 from .excess import relative_excess
 from .options import SolveOptions
 from .problem import TuningProblem
-from .settings import AGREEMENT, IPOPT_OPTIONS, PHASE_ONE_MARGIN, RETRIED, WARM_START, converged
+from .settings import (
+    AGREEMENT,
+    IPOPT_OPTIONS,
+    PHASE_ONE_FLAGS,
+    PHASE_ONE_MARGIN,
+    RETRIED,
+    WARM_START,
+    converged,
+)
 
 
 @dataclass
@@ -101,7 +109,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     solvers = problem.cached(
         ("phase one", smooth, options.jit, settings),
         lambda: (
-            models.compile.jit_nlpsols("ipopt", nlp, variants)
+            models.compile.jit_nlpsols("ipopt", nlp, variants, PHASE_ONE_FLAGS)
             if options.jit
             else {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in variants.items()}
         ),
