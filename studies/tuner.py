@@ -97,8 +97,9 @@ REPRODUCED = 1e-6
 #: of 4 runs make 22,122 inequalities on 3 gains (dense columns), and a stack sample of that phase one
 #: found IPOPT in MUMPS's dense kernels.
 PATHS_DEFAULT = "aggregated"
-#: How the stored gains are tuned: compiled, the phase one first where the hand design misses a spec.
-TUNE_OPTIONS = SolveOptions(jit=True)
+#: How the stored gains are tuned: compiled, the phase one first where the hand design misses a spec, with
+#: L-BFGS (docs/guide.md's tuning section: with the exact Hessian the arm's failed).
+TUNE_OPTIONS = SolveOptions(jit=True, phase_hessian="limited-memory")
 #: Folder of the stored gains when writing them (beside the case files).
 STORE_DIR = Path(cases.__file__).resolve().parent
 #: What the infeasibility text calls each step spec, its metric column and unit.
@@ -291,7 +292,9 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         tuned = {"cost": float(problem.values(decision)[0]), "status": found.status, "converged": found.converged}
         tuned |= {
             "message": f"phase one (IPOPT: {found.status}, {found.iterations} iterations) ended "
-            f"{found.excess:.3g} relative outside the specs" + (f": {infeasible}" if infeasible else "")
+            + ("farther outside the specs than its start (kept): no certificate; " if found.uphill else "")
+            + f"{found.excess:.3g} relative outside the specs"
+            + (f": {infeasible}" if infeasible else "")
         }
         tuned |= {"iterations": found.iterations, "stages": [], "feasible": False, "method": "phase one"}
     else:
@@ -333,6 +336,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
             "widths": [float(w) for w in options.widths],
             "paths": paths,
             "hessian": options.hessian,
+            "phase_hessian": options.phase_hessian,
             "jit": options.jit,
             "wall_time_s": time.perf_counter() - started,
         },
@@ -575,6 +579,7 @@ def main(argv=None) -> int:
                 progress=_report_every(10),
                 widths=args.widths,
                 hessian=args.hessian,
+                phase_hessian=TUNE_OPTIONS.phase_hessian,
             )
             record = tune_case(case, options, paths=args.paths, log=lambda text: print(text, flush=True))
         if not _report(case, record, before, args, folder):

@@ -35,6 +35,8 @@ class SolveOptions:
         override `IPOPT_OPTIONS` and the ones set from the fields above
     phase : when the start misses a spec, run a phase one first (`phase_one`) and tune from its
         answer; off by default, since on a two-scenario, four-sample PID tuning it took half an hour
+    phase_hessian : the phase one's Hessian (`phase_one`), as `hessian`; the case studies' tuner takes
+        "limited-memory" (docs/guide.md's tuning section says why)
     until_feasible : with `phase`, stop at the first decision that meets the specs (a verdict on the
         specs, not a tuned cost: what an outer search over the plant needs, `size_actuator`)
     coarse_substeps : RK4 sub-steps per sample of a coarser problem whose continuation runs first and
@@ -53,6 +55,7 @@ class SolveOptions:
     widths: Sequence[float] = WIDTHS
     ipopt_options: Mapping[str, Any] | None = None
     phase: bool = False
+    phase_hessian: str = "exact"
     until_feasible: bool = False
     coarse_substeps: int | None = COARSE_SUBSTEPS
     relaxed: bool = False
@@ -62,8 +65,9 @@ class SolveOptions:
         normalized = object.__setattr__
         normalized(self, "max_iter", integer(self.max_iter, "max_iter", minimum=1))
         normalized(self, "tol", positive(self.tol, "tol"))
-        if self.hessian not in HESSIANS:
-            raise ValueError(f"hessian must be 'limited-memory' or 'exact', got {self.hessian!r}")
+        for name in ("hessian", "phase_hessian"):
+            if getattr(self, name) not in HESSIANS:
+                raise ValueError(f"{name} must be 'limited-memory' or 'exact', got {getattr(self, name)!r}")
         normalized(self, "jit", boolean(self.jit, "jit"))
         if self.progress is not None and not callable(self.progress):
             raise TypeError(f"progress must be callable(iteration, objective, seconds) or None, got {self.progress!r}")

@@ -14,7 +14,15 @@ from models.checks import as_vector
 from .excess import relative_excess
 from .options import SolveOptions
 from .problem import TuningProblem
-from .settings import AGREEMENT, IPOPT_OPTIONS, PHASE_ONE_MARGIN, RETRIED, converged
+from .settings import (
+    AGREEMENT,
+    IPOPT_OPTIONS,
+    PHASE_ONE_FLAGS,
+    PHASE_ONE_MARGIN,
+    RETRIED,
+    WARM_START,
+    converged,
+)
 
 
 @dataclass
@@ -25,6 +33,8 @@ class PhaseOne:
     excess : the largest relative excess of the exact specs there (<= 0: every spec holds)
     status : IPOPT's return status of its last solve;  converged : that status is in `CONVERGED`
     iterations : IPOPT iterations over its stages
+    uphill : a stage ended farther outside the exact specs than the start: the start is returned, not
+        `converged` (a smoothed stage's local minimum that the exact loop contradicts is no certificate)
     """
 
     decision: np.ndarray
@@ -32,6 +42,7 @@ class PhaseOne:
     status: str
     converged: bool
     iterations: int
+    uphill: bool = False
 
     @property
     def infeasible(self) -> bool:
@@ -62,7 +73,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     Parameters
     ----------
     problem : TuningProblem;  lbx, ubx : decision bounds (n_decision,);  start : (n_decision,)
-    options : its method, widths, tol, max_iter and jit are used (L-BFGS, IPOPT's own options)
+    options : its method, widths, tol, max_iter, phase_hessian, jit and ipopt_options are used
     """
     options = options or SolveOptions()
     lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
@@ -82,40 +93,61 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     excess_of = ca.Function("excess", [problem.decision, width], [excess])
     rows = excess_of(scaling * z, width) - s
     tol = options.tol
-    ipopt = IPOPT_OPTIONS | {"max_iter": int(options.max_iter), "tol": tol, "acceptable_tol": 100 * tol}
+    ipopt = (
+        IPOPT_OPTIONS
+        | {
+            "max_iter": int(options.max_iter),
+            "tol": tol,
+            "acceptable_tol": 100 * tol,
+            "hessian_approximation": options.phase_hessian,
+        }
+        | dict(options.ipopt_options or {})
+    )
     settings: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
-    solver = problem.cached(
+    variants = {"phase_one": settings, "phase_one_warm": settings | {"ipopt": ipopt | WARM_START}}
+    solvers = problem.cached(
         ("phase one", smooth, options.jit, settings),
         lambda: (
-            models.compile.jit_nlpsols("ipopt", nlp, {"phase_one": settings})["phase_one"]
+            models.compile.jit_nlpsols("ipopt", nlp, variants, PHASE_ONE_FLAGS)
             if options.jit
-            else ca.nlpsol("phase_one", "ipopt", nlp, settings)
+            else {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in variants.items()}
         ),
     )
 
     decision, worst = start, np.inf  # widths is never empty: the loop sets both
+    at_start = problem.largest_excess(start)
     status, iterations = "not solved", 0
-    z_now = start / scale
+    z_now, s_now, multipliers = start / scale, 0.0, None
     for w in options.widths if smooth else (None,):
         for _ in range(2):
-            # A numerical failure is retried once from where it stopped, as the tuning's stages are.
+            # With L-BFGS a later stage starts at the last answer and its multipliers with the barrier
+            # already small (as the continuation's): cold, a fresh memory's first steps left the answer (the
+            # UUV's: from 0.11 to 3). A numerical failure is retried once from where it stopped, cold, as the
+            # tuning's stages are.
             s0 = float(ca.mmax(excess_of(scale * z_now, [] if w is None else w)))
+            solver = solvers["phase_one" if multipliers is None else "phase_one_warm"]
             sol = solver(
-                x0=np.concatenate([z_now, [max(s0, 0.0)]]),
+                x0=np.concatenate([z_now, [max(s0, 0.0)] if multipliers is None else [max(s0, s_now)]]),
                 lbx=np.concatenate([lbx / scale, [-PHASE_ONE_MARGIN]]),
                 ubx=np.concatenate([ubx / scale, [np.inf]]),
                 lbg=-np.inf,
                 ubg=0.0,
                 p=np.concatenate([[] if w is None else [w], scale]),
+                **(multipliers or {}),
             )
             stats = solver.stats()
             status, iterations = stats["return_status"], iterations + int(stats.get("iter_count", 0))
-            z_now = np.asarray(sol["x"]).ravel()[:n]
+            x_now = np.asarray(sol["x"]).ravel()
+            z_now, s_now = x_now[:n], float(x_now[n])
+            warm = options.phase_hessian == "limited-memory" and status not in RETRIED
+            multipliers = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]} if warm else None
             if status not in RETRIED:
                 break
         decision = np.clip(scale * z_now, lbx, ubx)
         worst = problem.largest_excess(decision)
+        if worst > at_start:
+            return PhaseOne(start, at_start, status, False, iterations, uphill=True)
         if worst <= 0 or not converged(status):
             break
     return PhaseOne(decision, worst, status, converged(status), iterations)

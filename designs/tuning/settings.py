@@ -69,6 +69,9 @@ WARM_START = {
     "warm_start_slack_bound_push": 1e-9,
     "warm_start_mult_bound_push": 1e-9,
 }
+#: Compiler flags of the phase one's NLP (`models.compile.jit_nlpsols`): gcc at -O1 builds it in less than
+#: half the time of -O3 and the solves it runs are as fast (docs/guide.md's tuning section).
+PHASE_ONE_FLAGS = ("-O1", "-march=native")
 #: Phase one stops improving once every spec holds with this relative margin (its lower bound on s).
 PHASE_ONE_MARGIN = 1e-3
 

@@ -162,3 +162,41 @@ def test_phase_one_proves_a_rise_time_below_the_actuators_bound_out_of_reach():
     # bang-bang bound at t = 1 s, within the sampled, saturated loop's reach).
     assert found.excess <= bound + 0.1
     assert found.excess > AGREEMENT
+
+
+@pytest.mark.parametrize("hessian", ["limited-memory", "exact"])
+def test_phase_one_uses_the_hessian_its_options_ask_for(hessian):
+    """The phase one's IPOPT evaluates second derivatives only when `SolveOptions.phase_hessian` is "exact":
+    with L-BFGS it never calls the Lagrangian's Hessian."""
+    problem = TuningProblem(
+        models.Plant(_double_integrator),
+        SaturatedPD(),
+        Scenario(reference=1.0, duration=4.0, x0=[0.0, 0.0], tracked="s"),
+        specs=Specs(max_rise_time_s=1.0),
+        substeps=2,
+    )
+    lbx, ubx = gain_bounds(problem, {"kp": (0.01, 100.0), "kd": (0.01, 100.0)})
+    phase_one(problem, lbx, ubx, problem.start(), SolveOptions(phase_hessian=hessian, widths=(1e-2,)))
+    (solvers,) = problem._solvers.values()
+    calls = solvers["phase_one"].stats().get("n_call_nlp_hess_l", 0)
+    assert (calls > 0) == (hessian == "exact"), calls
+
+
+def test_a_phase_one_ending_farther_outside_the_exact_specs_than_its_start_returns_the_start_uncertified():
+    """When the exact loop says a stage's answer misses the specs by more than the start did (here made so
+    by replacing the exact measure), the phase one keeps the start and claims no certificate."""
+    problem = TuningProblem(
+        models.Plant(_double_integrator),
+        SaturatedPD(),
+        Scenario(reference=1.0, duration=4.0, x0=[0.0, 0.0], tracked="s"),
+        specs=Specs(max_rise_time_s=1.0),
+        substeps=2,
+    )
+    lbx, ubx = gain_bounds(problem, {"kp": (0.01, 100.0), "kd": (0.01, 100.0)})
+    start = problem.start()
+    exact = problem.largest_excess
+    problem.largest_excess = lambda d: 0.5 if np.array_equal(d, start) else 1.0 + exact(d)
+    found = phase_one(problem, lbx, ubx, start, SolveOptions(widths=(1e-2,)))
+    assert found.uphill and not found.converged and not found.infeasible
+    np.testing.assert_array_equal(found.decision, start)
+    assert found.excess == 0.5
