@@ -186,7 +186,12 @@ def _legend(fig: Figure, labels: list, marker: bool = True) -> None:
     for i, text in enumerate(legend.get_texts()):
         text.set_gid(f"legend-label-{i}")  # found by the browser test, and by anyone scripting the page
     rows = -(-len(labels) // ncol)
-    fig.subplots_adjust(bottom=(0.35 + 0.22 * rows) / fig.get_figheight())
+    below, height = 0.35 + 0.22 * rows, fig.get_figheight()  # inches the legend needs under the axes
+    above = height * (1 - fig.subplotpars.top)
+    if below + above > 0.6 * height:  # long labels (an infeasibility's text): a taller figure, same axes room
+        height = (below + above) / 0.6
+        fig.set_figheight(height)
+    fig.subplots_adjust(top=1 - above / height, bottom=below / height)
 
 
 def step_specs(name: str) -> specs.Specs | None:
