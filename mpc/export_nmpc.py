@@ -355,7 +355,8 @@ unsigned long ${p}_state_size(void);
 #endif /* ${P}_H */
 """)
 
-_SOURCE = string.Template("""/* ${p}.c: nonlinear MPC '${controller}' by codesign-control (mpc.export_nmpc). */
+_SOURCE = string.Template(
+    """/* ${p}.c: nonlinear MPC '${controller}' by codesign-control (mpc.export_nmpc). */
 #include "${p}.h"
 #include <math.h>
 #include <daqp/api.h>
@@ -371,12 +372,9 @@ ${sizes}#define HAS_RATE ${has_rate}
 
 ${casadi}
 ${data}
-static int all_finite(const double *v, int n) {
-    int i;
-    for (i = 0; i < n; ++i) if (!isfinite(v[i])) return 0;
-    return 1;
-}
-
+"""
+    + export.DAQP_HELPERS_C
+    + """
 static double clip(double v, double low, double high) {
     return v < low ? low : (v > high ? high : v);
 }
@@ -392,14 +390,6 @@ static int call(${p}_state *m, kernel f, const double *a0, const double *a1, con
     return f(arg, res, m->iwork, m->work, 0);
 }
 #define NONE 0
-
-void ${p}_free(${p}_state *m) {
-    if (!m->set_up) return;
-    m->workspace.settings = 0;
-    free_daqp_workspace(&m->workspace);
-    free_daqp_ldp(&m->workspace);
-    m->set_up = 0;
-}
 
 /* DAQP's workspace for the dense QP of NQ variables (simple bounds) and NROWS rows, H = I until the
  * first solve writes this sample's. */
@@ -596,4 +586,5 @@ void ${p}_get_state(const ${p}_state *m, double *xc) {
 }
 
 unsigned long ${p}_state_size(void) { return (unsigned long) sizeof(${p}_state); }
-""")
+"""
+)
