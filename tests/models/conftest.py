@@ -1,6 +1,8 @@
+import control
 import pytest
 
 import models
+from models.linear_plant import LinearPlant
 
 
 @pytest.fixture
@@ -23,3 +25,23 @@ def blow_up_plant():
         return models.Physics(kinetic=dq.q**2 / 2, potential=-p.k * q.q**4, forces=[u.u], outputs={"q": q.q})
 
     return models.Plant(blowup)
+
+
+@pytest.fixture(scope="module")
+def pendulum_plants():
+    """The declared pendulum on a cart and a python-control StateSpace of its linearization (a models.LinearPlant),
+    same limit."""
+    declared = models.get("pendulum")
+    lin = declared.linearize()
+    sys = control.ss(
+        lin.A,
+        lin.B,
+        lin.C,
+        lin.D,
+        states=list(lin.state_names),
+        inputs=list(lin.input_names),
+        outputs=list(lin.output_names),
+        name="pendulum",
+    )
+    user = LinearPlant(sys, declared.input_limit, xe=lin.xe, ue=lin.ue)
+    return declared, user

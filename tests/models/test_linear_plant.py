@@ -4,7 +4,6 @@ import control
 import numpy as np
 import pytest
 
-import models
 from designs import statespace_design as ssd
 from designs.loops import cascade_plants
 from designs.pid import PID, pd_design
@@ -17,27 +16,8 @@ Q = np.diag([10.0, 10.0, 1.0, 1.0, 5.0])
 R = np.array([[1.0]])
 
 
-@pytest.fixture(scope="module")
-def plants():
-    """The declared pendulum on a cart and a python-control StateSpace of its linearization, same limit."""
-    declared = models.get("pendulum")
-    lin = declared.linearize()
-    sys = control.ss(
-        lin.A,
-        lin.B,
-        lin.C,
-        lin.D,
-        states=list(lin.state_names),
-        inputs=list(lin.input_names),
-        outputs=list(lin.output_names),
-        name="pendulum",
-    )
-    user = LinearPlant(sys, declared.input_limit, xe=lin.xe, ue=lin.ue)
-    return declared, user
-
-
-def test_the_adapter_answers_as_the_declared_plant(plants):
-    declared, user = plants
+def test_the_adapter_answers_as_the_declared_plant(pendulum_plants):
+    declared, user = pendulum_plants
     a, b = declared.linearize(), user.linearize()
     for key in ("A", "B", "C", "D", "xe", "ue", "ye"):
         np.testing.assert_array_equal(getattr(a, key), getattr(b, key))
@@ -63,8 +43,8 @@ def test_a_transfer_function_becomes_a_state_space_plant():
         LinearPlant(np.eye(2), 1.0)
 
 
-def test_state_space_and_lqr_designs_match_the_declared_plant(plants):
-    designs = [ssd.design(p, "z", poles=POLES, Q=Q, R=R, sample_period=TS) for p in plants]
+def test_state_space_and_lqr_designs_match_the_declared_plant(pendulum_plants):
+    designs = [ssd.design(p, "z", poles=POLES, Q=Q, R=R, sample_period=TS) for p in pendulum_plants]
     for key in (
         "K",
         "kr",
@@ -91,12 +71,12 @@ def test_state_space_and_lqr_designs_match_the_declared_plant(plants):
     assert abs(u[0][0]) > 1e-3
 
 
-def test_linear_mpc_matches_the_declared_plant(plants):
+def test_linear_mpc_matches_the_declared_plant(pendulum_plants):
     kwargs = dict(sample_period=0.05, horizon=20, state_weight=[10.0, 10.0, 1.0, 1.0], input_weight=0.1, tracked="z")
-    controllers = [LinearMPC(p, **kwargs) for p in plants]
+    controllers = [LinearMPC(p, **kwargs) for p in pendulum_plants]
     for key in ("A", "B", "C"):
         np.testing.assert_allclose(getattr(controllers[1].model, key), getattr(controllers[0].model, key), rtol=1e-12)
-    y0 = plants[0].output(plants[0].linearize().xe + np.array([0.1, 0.05, 0.0, 0.0]))
+    y0 = pendulum_plants[0].output(pendulum_plants[0].linearize().xe + np.array([0.1, 0.05, 0.0, 0.0]))
     commands = []
     for c in controllers:
         xc = c.initial_state(y0, np.array([0.0]))
@@ -108,8 +88,8 @@ def test_linear_mpc_matches_the_declared_plant(plants):
     assert np.min(np.abs(commands[:n])) > 1e-3
 
 
-def test_pd_loops_match_the_declared_plant(plants):
-    cascades = [cascade_plants(p, "theta", "z") for p in plants]
+def test_pd_loops_match_the_declared_plant(pendulum_plants):
+    cascades = [cascade_plants(p, "theta", "z") for p in pendulum_plants]
     for part in ("inner", "outer"):
         for a, b in zip(control.tfdata(getattr(cascades[0], part)), control.tfdata(getattr(cascades[1], part))):
             np.testing.assert_allclose(np.asarray(b[0][0]), np.asarray(a[0][0]), rtol=1e-9, atol=1e-12)
@@ -117,9 +97,9 @@ def test_pd_loops_match_the_declared_plant(plants):
     assert (pds[1].kp, pds[1].kd) == pytest.approx((pds[0].kp, pds[0].kd), rel=1e-9)
     blocks = [
         PID(p, "theta", kp=pd.kp, kd=pd.kd, sample_period=TS, sigma=0.05, output_limit=5.0)
-        for p, pd in zip(plants, pds)
+        for p, pd in zip(pendulum_plants, pds)
     ]
-    y = plants[0].output(plants[0].linearize().xe + np.array([0.2, 0.1, 0.0, 0.0]))
+    y = pendulum_plants[0].output(pendulum_plants[0].linearize().xe + np.array([0.2, 0.1, 0.0, 0.0]))
     r = np.array([0.3])
     u = [blk.step(blk.initial_state(y, r), y, r)[1] for blk in blocks]
     np.testing.assert_allclose(u[1], u[0], rtol=1e-9, atol=1e-12)

@@ -4,13 +4,11 @@ is the linearization of; and python-control's own closed loop of the user's LQR 
 
 import control
 import numpy as np
-import pytest
 
 import models
 from designs import statespace_design as ssd
 from designs.loops import cascade_plants
 from designs.pid import PID, pd_design
-from models.linear_plant import LinearPlant
 from mpc import LinearMPC
 
 TS = 0.01
@@ -20,24 +18,6 @@ R = np.array([[1.0]])
 #: Every closed loop starts off the equilibrium and is asked to move the cart.
 X0 = np.array([0.0, 0.05, 0.0, 0.0])
 REFERENCE = 0.2
-
-
-@pytest.fixture(scope="module")
-def plants():
-    """The declared pendulum on a cart and a python-control StateSpace of its linearization, same limit."""
-    declared = models.get("pendulum")
-    lin = declared.linearize()
-    sys = control.ss(
-        lin.A,
-        lin.B,
-        lin.C,
-        lin.D,
-        states=list(lin.state_names),
-        inputs=list(lin.input_names),
-        outputs=list(lin.output_names),
-        name="pendulum",
-    )
-    return declared, LinearPlant(sys, declared.input_limit, xe=lin.xe, ue=lin.ue)
 
 
 def closed_loops(truth, controllers, reference, duration):
@@ -54,20 +34,20 @@ def assert_same_runs(runs):
     assert np.max(np.abs(a.u)) > 1e-2  # the loops did something
 
 
-def test_the_pid_closed_loops_match(plants):
-    pds = [pd_design(cascade_plants(p, "theta", "z").inner, zeta=0.7, wn=4.0) for p in plants]
+def test_the_pid_closed_loops_match(pendulum_plants):
+    pds = [pd_design(cascade_plants(p, "theta", "z").inner, zeta=0.7, wn=4.0) for p in pendulum_plants]
     blocks = [
         PID(p, "theta", kp=pd.kp, kd=pd.kd, ki=0.5, sample_period=TS, sigma=0.05, output_limit=5.0)
-        for p, pd in zip(plants, pds)
+        for p, pd in zip(pendulum_plants, pds)
     ]
-    assert_same_runs(closed_loops(plants[0], blocks, 0.0, 2.0))
+    assert_same_runs(closed_loops(pendulum_plants[0], blocks, 0.0, 2.0))
 
 
-def test_the_lqr_closed_loops_match_and_python_control_has_its_poles(plants):
-    designs = [ssd.design(p, "z", poles=POLES, Q=Q, R=R, sample_period=TS) for p in plants]
-    assert_same_runs(closed_loops(plants[0], [ssd.controllers(d)["LQR"] for d in designs], REFERENCE, 3.0))
+def test_the_lqr_closed_loops_match_and_python_control_has_its_poles(pendulum_plants):
+    designs = [ssd.design(p, "z", poles=POLES, Q=Q, R=R, sample_period=TS) for p in pendulum_plants]
+    assert_same_runs(closed_loops(pendulum_plants[0], [ssd.controllers(d)["LQR"] for d in designs], REFERENCE, 3.0))
     # The user's model and gain closed in python-control: the integrator-augmented loop's poles.
-    user = plants[1].linearize()
+    user = pendulum_plants[1].linearize()
     i = user.state_names.index("z")
     A = np.block([[user.A, np.zeros((4, 1))], [np.eye(4)[[i]], np.zeros((1, 1))]])
     B = np.vstack([user.B, np.zeros((1, 1))])
@@ -76,7 +56,7 @@ def test_the_lqr_closed_loops_match_and_python_control_has_its_poles(plants):
     np.testing.assert_allclose(np.sort_complex(poles), np.sort_complex(designs[0].lqr_poles), rtol=1e-8, atol=1e-9)
 
 
-def test_the_linear_mpc_closed_loops_match(plants):
+def test_the_linear_mpc_closed_loops_match(pendulum_plants):
     kwargs = dict(sample_period=0.05, horizon=20, state_weight=[10.0, 10.0, 1.0, 1.0], input_weight=0.1, tracked="z")
-    controllers = [LinearMPC(p, **kwargs) for p in plants]
-    assert_same_runs(closed_loops(plants[0], controllers, REFERENCE, 2.0))
+    controllers = [LinearMPC(p, **kwargs) for p in pendulum_plants]
+    assert_same_runs(closed_loops(pendulum_plants[0], controllers, REFERENCE, 2.0))
