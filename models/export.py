@@ -247,9 +247,14 @@ class ExportedC:
         models.compile.CompilationError
             When no library can be built (no compiler, no cache, compiler errors).
         """
-        library = compiling.load_library(self.files(), flags, fallback=False)
+        library = compiling.load_library(self.files(), (*flags, *self.build_flags()), fallback=False)
         assert library is not None  # fallback=False raises instead of returning None
         return CompiledController(self, library, initial_state)
+
+    def build_flags(self) -> tuple[str, ...]:
+        """Compiler arguments the C needs beside the optimization flags (a library it calls): none for a
+        Block; an MPC's name DAQP (`mpc.export.build_flags`)."""
+        return ()
 
 
 def _header(

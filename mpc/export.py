@@ -50,7 +50,6 @@ import daqp
 import numpy as np
 
 from models.export import (
-    LOAD_FLAGS,
     ExportedC,
     UnsupportedExport,
     c_array,
@@ -126,10 +125,9 @@ def build_flags() -> tuple[str, ...]:
 class ExportedMPC(ExportedC):
     """An exported linear MPC: `models.export.ExportedC` whose C is built with DAQP (`build_flags`)."""
 
-    def load(self, initial_state=None, flags=LOAD_FLAGS):
-        """Compile with DAQP (`models.compile`, cached) and load as a `models.Controller`; see
-        `ExportedC.load`."""
-        return super().load(initial_state, (*flags, *build_flags()))
+    def build_flags(self) -> tuple[str, ...]:
+        """DAQP's header folder and library (`build_flags`)."""
+        return build_flags()
 
 
 def daqp_settings(controller: LinearMPC | TubeMPC) -> dict[str, float]:

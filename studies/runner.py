@@ -24,15 +24,15 @@ import shutil
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 import models
 import models.closed_loop
-from models import Block, checks, deferred, interrupts, metrics, specs
+from models import Block, checks, deferred, exported_loop, interrupts, metrics, specs
 
-from . import distributed
+from . import distributed, exported_runs
 from .answers import collect
 from .case import SCENARIO_NAMES, CaseStudy, TableScenario
 from .judging import check_specs, judge_run, verdict_columns
@@ -534,11 +534,12 @@ class Simulation:
         return judge_run(study, scenario.name, result, truth.params, controller=controller, plant=truth).row()
 
     def monte_carlo_runs(
-        self, truth: models.Plant, controller, scenario: TableScenario, samples: np.ndarray
+        self, label: str, truth: models.Plant, controller, scenario: TableScenario, samples: np.ndarray
     ) -> Iterable:
         """The runs of `controller` on `truth` with each row of `samples` (parameters), yielded as they are
-        simulated: a Block's as one batched map (a chunk at a time here, in parts on a Dask executor), a
-        lockstep controller's stepped together, any other's one by one."""
+        simulated: a Block's as one batched map (a chunk at a time here, in parts on a Dask executor), an
+        MPC's by its exported C (`studies.exported_runs`) or else stepped together in Python, any other's
+        one by one."""
         study, options, base = self.study, self.options, self.base
         duration = scenario.duration(study)
         steps = int(round(duration / controller.sample_period))
@@ -575,17 +576,23 @@ class Simulation:
                 if scenario.noise
                 else 0.0
             )
-            return models.simulate_closed_loop_many(
-                truth,
-                controller,
-                scenario.reference(study, base),
-                duration,
-                samples,
+            reference = scenario.reference(study, base)
+            common: dict[str, Any] = dict(
                 substeps=study.substeps,
                 input_disturbance=study.input_disturbance if scenario.input_disturbance else 0.0,
                 noise_std=noise,
                 seed=options.seed,
             )
+            loop = None
+            if exported_runs.wanted(options.jit, controller):
+                loop = exported_runs.exported_loop(
+                    label, controller, truth, reference, duration, study.substeps, self.notes
+                )
+            if loop is not None:
+                return exported_loop.simulate_exported_many(
+                    truth, controller, loop, reference, duration, samples, threads=options.threads, **common
+                )
+            return models.simulate_closed_loop_many(truth, controller, reference, duration, samples, **common)
         return (
             simulate_scenario(truth, controller, scenario, study, options, base, study.substeps, params=row)
             for row in samples
@@ -611,7 +618,7 @@ class Simulation:
         counts = np.zeros(3, dtype=int)
         t: np.ndarray | None = None
         reference: np.ndarray | None = None
-        for result, row in zip(self.monte_carlo_runs(truth, controller, scenario, samples), samples):
+        for result, row in zip(self.monte_carlo_runs(label, truth, controller, scenario, samples), samples):
             judgement = judge_run(study, scenario.name, result, dict(zip(names, row)))
             per_sample.append(judgement.metrics)
             verdicts.append(judgement.verdict)
