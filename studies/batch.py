@@ -122,7 +122,8 @@ def not_ok_lines(table, width: int = 118) -> list:
 
     Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
     scenarios, so the list stays short while naming every (controller, scenario). A row that did not
-    run as designed says so beside its verdict: "violates (degraded)".
+    run as designed says so beside its verdict: "violates (degraded)". Then each controller's remark
+    (``controller.remark``, the table's remark column): "  tuned: infeasible for this structure: ...".
     """
     scenarios = list(dict.fromkeys(table.scenario))
     groups: dict = {}
@@ -146,6 +147,13 @@ def not_ok_lines(table, width: int = 118) -> list:
             by_set.setdefault(tag, []).append(controller)
         text = "; ".join(f"{', '.join(controllers)} [{tag}]" for tag, controllers in by_set.items())
         lines += textwrap.wrap(f"{key}: {text}", width, initial_indent="  ", subsequent_indent="      ")
+    remarks = {} if "remark" not in table else table.dropna(subset=["remark"]).groupby("controller", sort=False)
+    for controller, rows in remarks:
+        for remark in dict.fromkeys(rows["remark"]):
+            if remark:
+                lines += textwrap.wrap(
+                    f"{controller}: {remark}", width, initial_indent="  ", subsequent_indent="      "
+                )
     return lines
 
 

@@ -72,6 +72,17 @@ def verdict_columns(verdict: specs.Verdict) -> dict:
     return {"verdict": verdict.label, "verdict_detail": verdict.detail}
 
 
+def remarked(detail, remark: str) -> str:
+    """A row's verdict detail with its controller's remark first (``controller.remark``, a text every row
+    of that controller carries, such as a tuned design's certificate that its structure cannot meet the
+    case's specs): "infeasible for this structure: overshoot at best 19 % > 10 %; this run: overshoot
+    25.8 % > 10 %". The detail alone when there is no remark."""
+    detail = "" if detail is None or (isinstance(detail, float) and math.isnan(detail)) else str(detail)
+    if not remark:
+        return detail
+    return f"{remark}; this run: {detail}" if detail else remark
+
+
 @dataclass(frozen=True)
 class Judgement:
     """One run judged: `metrics` (the columns of `models.metrics.run_metrics`), `status` (`run_status`),

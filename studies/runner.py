@@ -14,7 +14,10 @@ controller runs every scenario on the same samples: there is no time budget,
 so the same command gives the same table on any machine.
 
 A provider that has nothing for the case, or fails, is skipped with a note;
-the notes travel with the results into the tables.
+the notes travel with the results into the tables. A controller may carry a
+``remark`` (text): every row of it then says it first in its verdict detail,
+and in its ``remark`` column (a tuned design's certificate that its structure
+cannot meet the case's specs).
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from models import Block, checks, deferred, exported_loop, interrupts, metrics, 
 from . import distributed, exported_runs
 from .answers import collect
 from .case import SCENARIO_NAMES, CaseStudy, TableScenario
-from .judging import check_specs, judge_run, verdict_columns
+from .judging import check_specs, judge_run, remarked, verdict_columns
 from .judging import degraded_status as degraded_status
 from .judging import run_status as run_status
 from .judging import solver_counts as solver_counts
@@ -512,6 +515,10 @@ class Simulation:
                 raise
             row |= failed_row(err)
             self.notes.append(f"{label} / {scenario.name}: {row['status']}")
+        remark = getattr(controller, "remark", "")
+        if remark:
+            row["verdict_detail"] = remarked(row.get("verdict_detail"), remark)
+            row["remark"] = remark
         elapsed = time.perf_counter() - tick
         row["wall_s"] = elapsed
         self.seconds["monte_carlo_s" if scenario.monte_carlo else "simulate_s"] += elapsed
@@ -706,6 +713,7 @@ TABLE_COLUMNS = (
     "status",
     "verdict",
     "verdict_detail",
+    "remark",
     *metrics.METRIC_COLUMNS,
     "solver_issues",
     "samples",

@@ -13,7 +13,7 @@ import models
 import studies
 from designs.discrete import dirty_derivative
 from models import metrics, specs
-from studies import provider_calls, runner
+from studies import batch, provider_calls, runner
 
 EXAMPLE = "example_providers:controllers"
 STEP_ONLY = runner.Options(scenarios=("step",), mc=0)
@@ -281,3 +281,28 @@ def test_best_is_never_a_violating_or_degraded_row():
     result.table = table.assign(verdict=specs.VIOLATES)
     assert result.best("step") is None
     assert studies.overview.relative_itae(table) == pytest.approx({"fast": 0.2, "degraded": 0.4, "slow": 1.0})
+
+
+def test_a_controllers_remark_leads_the_verdict_detail_of_each_of_its_rows_and_the_console():
+    """A tuned design's certificate travels on the controller (`remark`), not in its label: every row of it,
+    the Monte Carlo's included, says it first in the verdict detail and in the remark column, its own
+    verdict is still the run's, and the console lists it once under the plant."""
+    study = arm_study(providers=(example_providers.lqr_only,))
+    plant = models.get("arm")
+    lqr = example_providers.lqr_only(study, study.known_plant(plant))["LQR"]
+    lqr.remark = "infeasible for this structure: overshoot at best 19 % > 10 %"
+    options = runner.Options(scenarios=("step", "mc"), mc=3)
+    result = runner.run_study(study, options, providers=[], controllers={"remarked LQR": lqr})
+    plain = runner.run_study(study, options)
+    rows = result.table.set_index("scenario")
+    assert list(rows.remark) == [lqr.remark] * 2
+    for scenario in ("step", "mc"):
+        expected = plain.table.set_index("scenario").loc[scenario]
+        detail = rows.loc[scenario, "verdict_detail"]
+        assert rows.loc[scenario, "verdict"] == expected.verdict
+        assert detail == (
+            f"{lqr.remark}; this run: {expected.verdict_detail}" if expected.verdict_detail else lqr.remark
+        )
+    assert plain.table.remark.isna().all()
+    lines = batch.not_ok_lines(result.table)
+    assert lines.count(f"  remarked LQR: {lqr.remark}") == 1
