@@ -114,8 +114,10 @@ def problem(controller: NonlinearMPC) -> tuple[NonlinearMPCProblem, int]:
 def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     """The CasADi Functions the C calls, named ``name_*``, the known plant's parameters baked in:
     output (x) -> y, predict (x, v) -> x⁺, guess (x̂, d̂, plan) -> w (the rolled-out start, scaled),
-    prepare (w, P) -> data, vectors (data, x0) -> (h, lba, uba), recover (data, x0, dv, lam_a,
-    lam_x) -> (w⁺, residuals), and qp (data) -> (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it.
+    prepare (w, P) -> lin (the linearization, which the condensing turns into the QP's data; the data
+    itself where the RTI has no condensing), vectors (data, x0) -> (h, lba, uba), recover (data, x0, dv,
+    lam_a, lam_x) -> (w⁺, residuals), and, where the QP is solved whole (not slack first), qp (data) ->
+    (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it.
     For a scenario tree, guess repeats (x̂, d̂, plan) over the branches, as `ScenarioTreeProblem.solve` does."""
     plant = controller.plant
     nlp, S = problem(controller)
@@ -155,6 +157,12 @@ def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     x0 = ca.vertcat(q0, ca.SX.zeros(nx - plant.nq))
     u0 = ca.fmin(ca.fmax(plant.casadi_equilibrium_input(q0, p), -limit), limit)
     start = ca.Function(f"{name}_start", [y], [x0, u0])
+    # The QP's vectors as SX: as MX they move the whole data through the work vector every instance's
+    # struct holds (the pendulum's: 22,824 doubles, 407 as SX). The recovery and the preparation stay MX:
+    # as SX their code takes gcc minutes and gigabytes to compile.
+    vectors = vectors.expand()
+    if rti.qp_solver.slack_first:  # the whole QP's dense H and A are not needed
+        return [output, predict, guess, prepare, vectors, recover, start]
     return [output, predict, guess, prepare, vectors, recover, qp, start]
 
 

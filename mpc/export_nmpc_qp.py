@@ -28,8 +28,8 @@ from .qp_fast import PRIMAL_TOLERANCE
 
 def constants(nlp: NonlinearMPCProblem) -> str:
     """The C constants of the QP of `nlp`'s real-time iteration: the split of v into ND dynamic inputs
-    and NSL slacks, the patterns of H_σσ (H_ROW, H_COLUMN) and C_σ (C_ROW, C_COLUMN) in the order their values sit in the
-    prepared data, the soft rows, the data's offsets, and the slack-first sequence's settings."""
+    and NSL slacks, the patterns of H_σσ (H_ROW, H_COLUMN) and C_σ (C_ROW, C_COLUMN) in the order their
+    values sit in the prepared data, the soft rows, the data's offsets, and the sequence's settings."""
     rti = nlp.rti
     qp, at = rti.qp_solver, rti.layout.slice
     soft = np.zeros(qp.m, dtype=int)
@@ -133,6 +133,7 @@ static int daqp_on(${p}_state *m, int n, int mr) {
     return result.exitflag;
 }
 
+#if !SLACK_FIRST
 /* The whole QP: v in m->dv, the multipliers in m->lam_x and m->lam_a; DAQP's exit flag. */
 static int whole(${p}_state *m) {
     double lbv[NQ], ubv[NQ];
@@ -145,6 +146,7 @@ static int whole(${p}_state *m) {
     for (i = 0; i < NROWS; ++i) m->lam_a[i] = m->y[NQ + i];
     return flag;
 }
+#else
 
 /* The restricted QP of the sequence: the free slacks (m->free_list, k of them) and the kept rows (m->rows,
  * mr of them) with every other slack at m->sigma, written for daqp_on. */
@@ -157,7 +159,8 @@ static int restricted(${p}_state *m, int k, int mr) {
     for (i = 0; i < ND; ++i)
         for (j = 0; j < ND; ++j) m->H[i * n + j] = Hdd[i * ND + j];
     for (t = 0; t < NHV; ++t)
-        if (m->at[H_ROW[t]] >= 0 && m->at[H_COLUMN[t]] >= 0) m->H[(ND + m->at[H_ROW[t]]) * n + ND + m->at[H_COLUMN[t]]] = hv[t];
+        if (m->at[H_ROW[t]] >= 0 && m->at[H_COLUMN[t]] >= 0)
+            m->H[(ND + m->at[H_ROW[t]]) * n + ND + m->at[H_COLUMN[t]]] = hv[t];
     /* the fixed slacks' contributions: to the free slacks' gradient (H_σσ σ) and to the rows (C_σ σ) */
     for (j = 0; j < NSL; ++j) m->gradient[j] = 0.0;
     for (t = 0; t < NHV; ++t) m->gradient[H_ROW[t]] += hv[t] * m->sigma[H_COLUMN[t]];
@@ -178,7 +181,8 @@ static int restricted(${p}_state *m, int k, int mr) {
         m->bupper[n + q] = m->uba[i] - m->shift[i];
     }
     for (t = 0; t < NCV; ++t)
-        if (m->row_at[C_ROW[t]] >= 0 && m->at[C_COLUMN[t]] >= 0) m->A[m->row_at[C_ROW[t]] * n + ND + m->at[C_COLUMN[t]]] = cv[t];
+        if (m->row_at[C_ROW[t]] >= 0 && m->at[C_COLUMN[t]] >= 0)
+            m->A[m->row_at[C_ROW[t]] * n + ND + m->at[C_COLUMN[t]]] = cv[t];
     return daqp_on(m, n, mr);
 }
 
@@ -250,19 +254,20 @@ static int sequence(${p}_state *m, int near) {
         for (j = 0; j < NSL; ++j) if (m->freed[j]) m->sigma[j] = 0.0;
     }
 }
+#endif
 
 /* The prepared QP (m->data) for the initial state x0, cold started as the Python path: m->dv, the
  * multipliers and m->residuals; 1 when DAQP and the residuals say solved. */
 static int solve_qp(${p}_state *m, const double *x0) {
     int flag;
     call(m, (kernel) ${p}_vectors, m->data, x0, NONE, NONE, NONE, m->hq, m->lba, m->uba, NONE);
-    if (SLACK_FIRST) {
-        flag = sequence(m, NEAR_FIRST);
-        if (flag < 0 && NEAR_FIRST)  /* the soft rows kept may be infeasible together: without them */
-            flag = sequence(m, 0);
-    } else {
-        flag = whole(m);
-    }
+#if SLACK_FIRST
+    flag = sequence(m, NEAR_FIRST);
+    if (flag < 0 && NEAR_FIRST)  /* the soft rows kept may be infeasible together: without them */
+        flag = sequence(m, 0);
+#else
+    flag = whole(m);
+#endif
     if (flag <= 0) return 0;
     call(m, (kernel) ${p}_recover, m->data, x0, m->dv, m->lam_a, m->lam_x, m->w_next, m->residuals, NONE, NONE);
     return isfinite(m->residuals[0]) && isfinite(m->residuals[1])
