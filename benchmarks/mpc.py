@@ -781,9 +781,10 @@ def main(argv=None):
             f"{rti['acados_p99_ms']:8.4f} {rti['acados_max_first_move_diff']:16.2e}"
         )
         print(f"ratio acados / ours = {rti['ratio_nmpc_vs_acados']:.2f}")
+        converged = rti["acados_converged_first_move_diff"]
         print(
             f"    same problem: first moves of both solved cold to convergence on {rti['acados_converged_samples']} "
-            f"samples differ by at most {rti['acados_converged_first_move_diff']}"
+            f"samples differ by at most {'(a solve failed)' if converged is None else f'{converged:.1e}'}"
         )
     else:
         print(

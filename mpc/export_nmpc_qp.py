@@ -82,8 +82,6 @@ SOURCE = """
 /* DAQP's workspace for the whole QP (NQ variables, simple bounds, and NROWS rows), H = I until the
  * first solve writes one; every solve after writes its QP, of these sizes or fewer, into it. */
 static int setup(${p}_state *m) {
-    static const DAQPWorkspace empty;
-    double setup_time;
     int i;
     ${p}_free(m);
     for (i = 0; i < NQ * NQ; ++i) m->H[i] = (i % (NQ + 1)) == 0 ? 1.0 : 0.0;
@@ -99,17 +97,7 @@ static int setup(${p}_state *m) {
     m->problem.bupper = m->bupper;
     m->problem.blower = m->blower;
     m->problem.sense = m->sense;
-    daqp_default_settings(&m->settings);
-${settings}    m->workspace = empty;
-    m->workspace.settings = &m->settings;
-    if (setup_daqp(&m->problem, &m->workspace, &setup_time) < 0) {
-        m->workspace.settings = 0;
-        free_daqp_workspace(&m->workspace);
-        free_daqp_ldp(&m->workspace);
-        return 8;
-    }
-    m->set_up = 1;
-    return 0;
+    return setup_workspace(m);
 }
 
 /* DAQP on the QP of n variables and mr rows written in m->H (n x n), m->f (n), m->A (mr x n, row-major)
