@@ -6,9 +6,11 @@ poses: `build_ocp`)::
     <acados python> benchmarks/acados_c.py PROBLEM.json RESULT.json
 
 acados generates and builds its solver (``libacados_ocp_solver_<model>.so``, no Python wrapper); a
-small C program, compiled with -O3 -march=native, then runs every recorded sample: sets x̂ (the
-initial state's bounds), d̂ (the parameters) and the references of every stage, solves once and reads
-u_0, timed inside C with clock_gettime around those calls (what a controller step pays). The first
+small C program, compiled with -O3 -march=native, then runs every recorded sample: shifts the last
+solution by one interval (the last state and input repeated, as our real-time iteration's warm start),
+sets x̂ (the initial state's bounds), d̂ (the parameters) and the references of every stage, solves once
+and reads u_0, timed inside C with clock_gettime around those calls (what a controller step pays): the
+wall clock, and the thread's CPU time (without the time other processes took the core). The first
 `warm_up` samples start cold and are iterated 50 times, untimed, as in acados_pendulum.py.
 """
 
@@ -38,8 +40,8 @@ DRIVER = r"""
 %(data)s
 int main(void) {
     %(model)s_solver_capsule *capsule = %(model)s_acados_create_capsule();
-    struct timespec began, ended;
-    double yref[NX + NU], u0[NU];
+    struct timespec began, ended, cpu_began, cpu_ended;
+    double yref[NX + NU], u0[NU], shifted[NX + NU];
     int k, i, j, code;
     if (%(model)s_acados_create(capsule)) { printf("create failed\n"); return 1; }
     ocp_nlp_config *config = %(model)s_acados_get_nlp_config(capsule);
@@ -47,7 +49,16 @@ int main(void) {
     ocp_nlp_in *in = %(model)s_acados_get_nlp_in(capsule);
     ocp_nlp_out *out = %(model)s_acados_get_nlp_out(capsule);
     for (k = 0; k < STEPS; ++k) {
+        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu_began);
         clock_gettime(CLOCK_MONOTONIC, &began);
+        for (j = 0; k > 0 && j < NH; ++j) {  /* the last solution one interval later, the last repeated */
+            ocp_nlp_out_get(config, dims, out, j + 1, "x", shifted);
+            ocp_nlp_out_set(config, dims, out, j, "x", shifted);
+            if (j + 1 < NH) {
+                ocp_nlp_out_get(config, dims, out, j + 1, "u", shifted);
+                ocp_nlp_out_set(config, dims, out, j, "u", shifted);
+            }
+        }
         ocp_nlp_constraints_model_set(config, dims, in, 0, "lbx", (void *) (X_HAT + k * NX));
         ocp_nlp_constraints_model_set(config, dims, in, 0, "ubx", (void *) (X_HAT + k * NX));
         for (i = 0; i < NX; ++i) yref[i] = X_S[k * NX + i];
@@ -61,12 +72,15 @@ int main(void) {
         code = %(model)s_acados_solve(capsule);
         ocp_nlp_out_get(config, dims, out, 0, "u", u0);
         clock_gettime(CLOCK_MONOTONIC, &ended);
+        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu_ended);
         if (k < WARM) {
             for (i = 0; i < 50; ++i) code = %(model)s_acados_solve(capsule);
             ocp_nlp_out_get(config, dims, out, 0, "u", u0);
         }
-        printf("%%d %%lld", code, (long long) ((ended.tv_sec - began.tv_sec) * 1000000000LL
-                                              + (ended.tv_nsec - began.tv_nsec)));
+        printf("%%d %%lld %%lld", code,
+               (long long) ((ended.tv_sec - began.tv_sec) * 1000000000LL + (ended.tv_nsec - began.tv_nsec)),
+               (long long) ((cpu_ended.tv_sec - cpu_began.tv_sec) * 1000000000LL
+                            + (cpu_ended.tv_nsec - cpu_began.tv_nsec)));
         for (i = 0; i < NU; ++i) printf(" %%.17g", u0[i]);
         printf("\n");
     }
@@ -128,8 +142,9 @@ def main(problem_path: str, result_path: str) -> None:
         result = {
             "available": True,
             "step_ms": (rows[warm:, 1] * 1e-6).tolist(),
+            "cpu_ms": (rows[warm:, 2] * 1e-6).tolist(),
             "status": rows[:, 0].astype(int).tolist(),
-            "first_moves": rows[:, 2:].tolist(),
+            "first_moves": rows[:, 3:].tolist(),
         }
     except Exception as err:
         detail = getattr(err, "stderr", "") or ""

@@ -57,15 +57,23 @@ The same nonlinear MPC exported as C (`mpc.export_nmpc`) replays that closed
 loop in a C program (`mpc.export_nmpc_replay`: the recorded measurements in,
 each step timed inside C with clock_gettime, no Python in the step):
 ``exported_nmpc_step_median_ms`` and ``exported_nmpc_p99_ms`` (the first,
-cold step left out as for ours), ``exported_nmpc_max_command_diff`` against
+cold step left out as for ours; the wall clock, which includes the process's
+pre-emption on a loaded machine: ``exported_nmpc_cpu_median_ms`` and
+``exported_nmpc_cpu_p99_ms`` are the thread's CPU time, without it; the load
+average beside them), ``exported_nmpc_max_command_diff`` against
 the Python controller's commands, ``exported_nmpc_step_allocations`` the
 allocator's calls in the steps (0). acados' generated solver is called from C
 on the same recorded samples too (benchmarks/acados_c.py, run with the acados
 environment's python: its solver library built without a Python wrapper, a
 small C driver timing the set calls, the solve and reading u_0 with
-clock_gettime): ``acados_c_step_median_ms``, ``acados_c_p99_ms`` and
-``ratio_exported_nmpc_vs_acados_c`` = acados ÷ ours, both from C; where it
-cannot run, those are None and ``acados_c_unavailable`` says why.
+clock_gettime): ``acados_c_step_median_ms``, ``acados_c_p99_ms`` (and its
+CPU times) and ``ratio_exported_nmpc_vs_acados_c`` = acados ÷ ours, both from
+C; where it cannot run, those are None and ``acados_c_unavailable`` says why.
+acados' iterate is shifted by one interval before each sample, as ours is
+(its RTI otherwise linearizes at the unshifted solution: first moves up to
+0.09 N apart). That both pose the same problem is checked on every 25th
+sample solved cold and iterated to convergence by acados and by our SQP:
+``acados_converged_first_move_diff``.
 Its solve time on other plants is measured on their own closed loops (arm and
 pendulum by default, every plant with --all). --settling runs every plant's
 step with both MPCs on the ±5 % models with the input disturbance (the slow
@@ -429,6 +437,68 @@ def do_mpc_run(plant, known, case, settings: dict, recorded: list) -> dict:
     return {"step_ms": [1e3 * t for t in times], "first_moves": first}
 
 
+#: Samples whose problem acados and our SQP solve again cold and tightly converged: the check that both
+#: pose the same problem, apart from the real-time iteration's iterates (every 25th sample).
+CONVERGED_CHECK = {"every": 25, "tolerance": 1e-10, "max_iterations": 200}
+
+
+def acados_problem(controller, known, case, recorded: list, settings: dict) -> dict:
+    """The NMPC problem of `controller` as benchmarks/acados_pendulum.py reads it: the model as Python
+    source, the weights, the soft bounds and the recorded samples."""
+    plant = controller.plant
+    return {
+        "nx": plant.nx,
+        "nu": plant.nu,
+        "horizon": controller.horizon,
+        "sample_period": controller.sample_period,
+        "substeps": case.mpc.substeps,
+        "params": known.param_vector().tolist(),
+        "model_code": casadi_to_python(known.casadi_f),
+        "input_limit": known.input_limit.tolist(),
+        "Q": settings["Q"],
+        "R": settings["R"],
+        "P": settings["P"],
+        "steps": recorded,
+        "soft": [
+            {
+                "row": b.row.tolist(),
+                "lower": b.lower,
+                "upper": b.upper,
+                "linear_weight": b.linear_weight,
+                "quadratic_weight": b.quadratic_weight,
+            }
+            for b in controller.soft_bounds
+        ],
+    }
+
+
+def converged_first_moves(sqp, recorded: list, check: dict) -> list:
+    """First moves of our SQP (`sqp`, iteration="sqp") on every check["every"]-th recorded sample, each
+    solved cold (from the plan of zeros rolled out) to the step tolerance check["tolerance"]."""
+    nlp, moves = sqp.nlp, []
+    nlp.tolerance, nlp.max_iterations = check["tolerance"], check["max_iterations"]
+    for record in recorded[:: check["every"]]:
+        nlp.reset()
+        answer = nlp.solve(
+            record["x_hat"],
+            record["d_hat"],
+            record["x_s"],
+            record["u_s"],
+            np.array(record["P"]),
+            np.zeros(sqp.plant.nu),
+            np.zeros((sqp.horizon, sqp.plant.nu)),
+        )
+        moves.append(np.asarray(answer.inputs)[0].tolist() if answer.success else None)
+    return moves
+
+
+def converged_difference(ours: list, theirs: list) -> float | None:
+    """The largest difference of the first moves of the converged check; None where a solve failed."""
+    if len(ours) != len(theirs) or any(m is None for m in [*ours, *theirs]):
+        return None
+    return float(np.max(np.abs(np.array(ours) - np.array(theirs))))
+
+
 def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
     """Our NMPC's closed loop on the pendulum, each sample's problem solved again by acados and do-mpc."""
     name = "pendulum"
@@ -502,30 +572,9 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
         sqp_times.append(time.perf_counter() - begin)
     figures["sqp_median_ms"] = 1e3 * float(np.median(sqp_times))
 
-    problem = {
-        "nx": plant.nx,
-        "nu": plant.nu,
-        "horizon": controller.horizon,
-        "sample_period": controller.sample_period,
-        "substeps": case.mpc.substeps,
-        "params": known.param_vector().tolist(),
-        "model_code": casadi_to_python(known.casadi_f),
-        "input_limit": known.input_limit.tolist(),
-        "Q": settings["Q"],
-        "R": settings["R"],
-        "P": settings["P"],
-        "steps": recorded,
-        "soft": [
-            {
-                "row": b.row.tolist(),
-                "lower": b.lower,
-                "upper": b.upper,
-                "linear_weight": b.linear_weight,
-                "quadratic_weight": b.quadratic_weight,
-            }
-            for b in controller.soft_bounds
-        ],
-    }
+    problem = acados_problem(controller, known, case, recorded, settings)
+    problem["converged_check"] = CONVERGED_CHECK
+    converged = converged_first_moves(sqp, recorded, CONVERGED_CHECK)
     acados = run_acados(problem)
     if acados.get("available"):
         step_ms = np.array(acados["step_ms"])
@@ -538,6 +587,8 @@ def nmpc_pendulum_benchmark(steps: int, soft: bool, do_mpc_steps: int) -> dict:
             "acados_build_s": acados["build_s"],
             "acados_max_first_move_diff": float(np.max(np.abs(moves - our_moves))),
             "acados_failures": int(sum(code not in (0,) for code in acados["status"])),
+            "acados_converged_first_move_diff": converged_difference(converged, acados["converged_first_moves"]),
+            "acados_converged_samples": len(converged),
         }
         figures["ratio_nmpc_vs_acados"] = figures["acados_median_ms"] / figures["nmpc_median_ms"]
     else:
@@ -576,15 +627,27 @@ def acados_c_figures(problem: dict, figures: dict, our_moves) -> dict:
             "ratio_exported_nmpc_vs_acados_c": None,
             "acados_c_unavailable": reason,
         }
-    step_ms = np.array(acados["step_ms"])
+    step_ms, cpu_ms = np.array(acados["step_ms"]), np.array(acados["cpu_ms"])
     moves = np.array(acados["first_moves"])[:, 0]
     return {
         "acados_c_step_median_ms": float(np.median(step_ms)),
         "acados_c_p99_ms": float(np.percentile(step_ms, 99)),
+        "acados_c_cpu_median_ms": float(np.median(cpu_ms)),
+        "acados_c_cpu_p99_ms": float(np.percentile(cpu_ms, 99)),
+        "acados_c_load_average": load_average(),
         "acados_c_failures": int(sum(code != 0 for code in acados["status"])),
         "acados_c_max_first_move_diff": float(np.max(np.abs(moves - np.asarray(our_moves)))),
         "ratio_exported_nmpc_vs_acados_c": float(np.median(step_ms)) / ours,
     }
+
+
+def load_average() -> float:
+    """The machine's load average over the last minute (/proc/loadavg; NaN where there is none)."""
+    try:
+        with open("/proc/loadavg") as handle:
+            return float(handle.read().split()[0])
+    except OSError:
+        return float("nan")
 
 
 def exported_nmpc_figures(controller, result, reference: float) -> dict:
@@ -602,10 +665,13 @@ def exported_nmpc_figures(controller, result, reference: float) -> dict:
             "exported_nmpc_max_command_diff": None,
             "exported_nmpc_unavailable": f"{type(err).__name__}: {err}"[:300],
         }
-    step_ms = 1e3 * replayed.step_seconds[1:]
+    step_ms, cpu_ms = 1e3 * replayed.step_seconds[1:], 1e3 * replayed.cpu_seconds[1:]
     return {
         "exported_nmpc_step_median_ms": float(np.median(step_ms)),
         "exported_nmpc_p99_ms": float(np.percentile(step_ms, 99)),
+        "exported_nmpc_cpu_median_ms": float(np.median(cpu_ms)),
+        "exported_nmpc_cpu_p99_ms": float(np.percentile(cpu_ms, 99)),
+        "exported_nmpc_load_average": load_average(),
         "exported_nmpc_max_ms": float(np.max(step_ms)),
         "exported_nmpc_max_command_diff": float(np.max(np.abs(replayed.commands - np.asarray(result.u)))),
         "exported_nmpc_failures": int(np.sum(replayed.codes != 0)),
@@ -715,6 +781,11 @@ def main(argv=None):
             f"{rti['acados_p99_ms']:8.4f} {rti['acados_max_first_move_diff']:16.2e}"
         )
         print(f"ratio acados / ours = {rti['ratio_nmpc_vs_acados']:.2f}")
+        converged = rti["acados_converged_first_move_diff"]
+        print(
+            f"    same problem: first moves of both solved cold to convergence on {rti['acados_converged_samples']} "
+            f"samples differ by at most {'(a solve failed)' if converged is None else f'{converged:.1e}'}"
+        )
     else:
         print(
             f"(f) acados: not measured ({rti['acados_unavailable']}); converged SQP / RTI = "
@@ -733,13 +804,21 @@ def main(argv=None):
             f"{'(h) ours exported as C (mpc.export_nmpc), from C':44s} {rti['exported_nmpc_step_median_ms']:10.4f} "
             f"{rti['exported_nmpc_p99_ms']:8.4f} {rti['exported_nmpc_max_command_diff']:16.2e}"
         )
-        print(f"    {rti['exported_nmpc_step_allocations']} allocations in the C steps")
+        print(
+            f"    CPU time (the thread's clock) median {rti['exported_nmpc_cpu_median_ms']:.4f}, p99 "
+            f"{rti['exported_nmpc_cpu_p99_ms']:.4f} ms; {rti['exported_nmpc_step_allocations']} allocations in "
+            f"the C steps; load average {rti['exported_nmpc_load_average']}"
+        )
     else:
         print(f"(h) exported as C: not measured ({rti['exported_nmpc_unavailable']})")
     if rti["acados_c_step_median_ms"] is not None:
         print(
             f"{'(i) acados SQP-RTI, its generated C from C':44s} {rti['acados_c_step_median_ms']:10.4f} "
             f"{rti['acados_c_p99_ms']:8.4f} {rti['acados_c_max_first_move_diff']:16.2e}"
+        )
+        print(
+            f"    CPU time median {rti['acados_c_cpu_median_ms']:.4f}, p99 {rti['acados_c_cpu_p99_ms']:.4f} ms; "
+            f"load average {rti['acados_c_load_average']}"
         )
         print(f"ratio acados / ours, both from C = {rti['ratio_exported_nmpc_vs_acados_c']:.2f}")
     else:

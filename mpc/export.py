@@ -460,7 +460,8 @@ unsigned long ${p}_state_size(void);
 """)
 
 #: C every exported DAQP controller holds (the linear, tube and nonlinear MPC's sources): a finiteness
-#: test and ${p}_free, the release of DAQP's workspace (templated on the controller's prefix ${p}).
+#: test, ${p}_free, the release of DAQP's workspace, and setup_workspace, its setup (templated on the
+#: controller's prefix ${p} and DAQP's settings ${settings}).
 DAQP_HELPERS_C = """static int all_finite(const double *v, int n) {
     int i;
     for (i = 0; i < n; ++i) if (!isfinite(v[i])) return 0;
@@ -473,6 +474,24 @@ void ${p}_free(${p}_state *m) {
     free_daqp_workspace(&m->workspace);
     free_daqp_ldp(&m->workspace);
     m->set_up = 0;
+}
+
+/* DAQP's workspace for m->problem (filled in by the caller) with the Python path's settings; 8 when
+ * DAQP's setup fails. */
+static int setup_workspace(${p}_state *m) {
+    static const DAQPWorkspace empty;
+    double setup_time;
+    daqp_default_settings(&m->settings);
+${settings}    m->workspace = empty;
+    m->workspace.settings = &m->settings;
+    if (setup_daqp(&m->problem, &m->workspace, &setup_time) < 0) {
+        m->workspace.settings = 0;
+        free_daqp_workspace(&m->workspace);  /* both guard against what is freed already */
+        free_daqp_ldp(&m->workspace);
+        return 8;
+    }
+    m->set_up = 1;
+    return 0;
 }
 """
 
@@ -494,8 +513,6 @@ ${data}
 /* DAQP's setup of the QP, as the Python path's: H and the rows fixed, the vectors at p = 0 (each
  * solve updates them); the settings of the Python path. */
 static int setup(${p}_state *m) {
-    static const DAQPWorkspace empty;
-    double setup_time;
     int i;
     ${p}_free(m);
     for (i = 0; i < NZ; ++i) {
@@ -517,17 +534,7 @@ static int setup(${p}_state *m) {
     m->problem.bupper = m->bupper;
     m->problem.blower = m->blower;
     m->problem.sense = m->sense;
-    daqp_default_settings(&m->settings);
-${settings}    m->workspace = empty;
-    m->workspace.settings = &m->settings;
-    if (setup_daqp(&m->problem, &m->workspace, &setup_time) < 0) {
-        m->workspace.settings = 0;
-        free_daqp_workspace(&m->workspace);  /* both guard against what is freed already */
-        free_daqp_ldp(&m->workspace);
-        return 8;
-    }
-    m->set_up = 1;
-    return 0;
+    return setup_workspace(m);
 }
 
 /* The QP for parameters p: the linear term and the row bounds, then DAQP from the last working set.

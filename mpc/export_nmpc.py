@@ -10,18 +10,18 @@
   terminal weight need a Newton solve and a Riccati solve the C does not
   repeat): a reference outside that table is refused by the step (status 9);
 - the real-time iteration of `mpc.rti.RealTimeIteration`: the preparation
-  (``rti.prepare_function``: linearization and condensing) and the feedback's
-  two halves around the QP (``vectors_function``, ``recover_function``) as
-  CasADi's generated C; the dense condensed QP solved by DAQP's C API from
-  CasADi's installation (`mpc.export.build_flags`), set up once in
-  ``name_init`` and re-factorized in place every sample (``update_ldp``), cold
-  started as CasADi's DAQP node is; the first sample, and the first after a
-  failure, iterates to convergence from the plan rolled out through the model,
-  as the Python controller does;
+  as the Python path runs it (the linearization, ``rti.linearize_expression``,
+  as CasADi's generated C, then the generated condensing of `mpc.condensing`;
+  ``rti.prepare_function`` whole where the RTI has no condensing), and the
+  feedback's two halves around the QP (``vectors_function``,
+  ``recover_function``) as CasADi's generated C; the dense condensed QP
+  solved by DAQP's C API from CasADi's installation (`mpc.export.build_flags`)
+  as the Python path solves it (`mpc.export_nmpc_qp`): slack first where
+  `mpc.slack_first.SlackFirstQP` is, else whole, each QP from an empty working
+  set in one workspace set up in ``name_init``; the first sample, and the first
+  after a failure, iterates to convergence from the plan rolled out through
+  the model, as the Python controller does;
 - the fallback to the shifted plan, exact clipping and the rate limit.
-
-The QP is solved whole even where the Python path first tries the slacks at
-their bounds (`mpc.slack_first`): both give the QP's unique optimum.
 
 A `mpc.ScenarioTreeMPC` is exported the same way: the C solves its stacked
 problem (`ScenarioTreeProblem.inner`) with the estimate, disturbance estimate,
@@ -37,6 +37,7 @@ zero before its first ``name_init``; DAQP's arrays are allocated once, in
 
 from __future__ import annotations
 
+import re
 import string
 from dataclasses import dataclass
 
@@ -45,10 +46,9 @@ import numpy as np
 
 from models.export import UnsupportedExport, c_array, c_name, c_number, generated_code
 
-from . import export
+from . import condensing, export, export_nmpc_qp
 from .controller import NonlinearMPC
 from .nonlinear import NonlinearMPCProblem
-from .qp_fast import PRIMAL_TOLERANCE
 from .rti import QP_TOLERANCE
 from .scenario_tree import ScenarioTreeMPC
 
@@ -114,8 +114,10 @@ def problem(controller: NonlinearMPC) -> tuple[NonlinearMPCProblem, int]:
 def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     """The CasADi Functions the C calls, named ``name_*``, the known plant's parameters baked in:
     output (x) -> y, predict (x, v) -> x⁺, guess (x̂, d̂, plan) -> w (the rolled-out start, scaled),
-    prepare (w, P) -> data, vectors (data, x0) -> (h, lba, uba), recover (data, x0, dv, lam_a,
-    lam_x) -> (w⁺, residuals), and qp (data) -> (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it.
+    prepare (w, P) -> lin (the linearization, which the condensing turns into the QP's data; the data
+    itself where the RTI has no condensing), vectors (data, x0) -> (h, lba, uba), recover (data, x0, dv,
+    lam_a, lam_x) -> (w⁺, residuals), and, where the QP is solved whole (not slack first), qp (data) ->
+    (H, Aᵀ, lbv, ubv), the dense QP as DAQP reads it.
     For a scenario tree, guess repeats (x̂, d̂, plan) over the branches, as `ScenarioTreeProblem.solve` does."""
     plant = controller.plant
     nlp, S = problem(controller)
@@ -135,7 +137,9 @@ def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     w[np.asarray(nlp._states).ravel().tolist()] = ca.vec(X / ca.repmat(ca.DM(rti.state_scale), 1, N + 1))
     w[np.asarray(nlp._inputs).T.ravel().tolist()] = ca.vec(clipped / ca.repmat(ca.DM(nlp._input_scale), 1, N))
     guess = ca.Function(f"{name}_guess", [x, d, plan], [w])
-    prepare = rename(rti.prepare_function, f"{name}_prepare")
+    # The Python path's preparation: the linearization, then the generated condensing (`condensing_c`).
+    expanded = rti.linearize_expression if rti.condensing is not None else rti.prepare_function
+    prepare = rename(expanded, f"{name}_prepare")
     vectors = rename(rti.vectors_function, f"{name}_vectors")
     recover = rename(rti.recover_function, f"{name}_recover")
     data = ca.MX.sym("data", rti.layout.size)
@@ -153,7 +157,27 @@ def kernels(controller: NonlinearMPC, name: str) -> list[ca.Function]:
     x0 = ca.vertcat(q0, ca.SX.zeros(nx - plant.nq))
     u0 = ca.fmin(ca.fmax(plant.casadi_equilibrium_input(q0, p), -limit), limit)
     start = ca.Function(f"{name}_start", [y], [x0, u0])
+    # The QP's vectors as SX: as MX they move the whole data through the work vector every instance's
+    # struct holds (the pendulum's: 22,824 doubles, 407 as SX). The recovery and the preparation stay MX:
+    # as SX their code takes gcc minutes and gigabytes to compile.
+    vectors = vectors.expand()
+    if rti.qp_solver.slack_first:  # the whole QP's dense H and A are not needed
+        return [output, predict, guess, prepare, vectors, recover, start]
     return [output, predict, guess, prepare, vectors, recover, qp, start]
+
+
+def condensing_c(controller: NonlinearMPC, name: str) -> str:
+    """The C of the Python path's condensing (`mpc.condensing.source`: linearization -> prepared data) as
+    ``name_condense``, its macros undefined after it; empty when the controller has none (the CasADi
+    preparation is generated whole then)."""
+    rti = problem(controller)[0].rti
+    if rti.condensing is None:
+        return ""
+    text = condensing.source(rti.condensing.structure, rti.layout.offsets)
+    macros = sorted(set(re.findall(r"^#define (\w+)", text, flags=re.MULTILINE)))
+    return f"#define condense {name}_condense\n#define one {name}_condense_one\n{text}\n" + "".join(
+        f"#undef {macro}\n" for macro in [*macros, "condense", "one"]
+    )
 
 
 def rename(fun: ca.Function, name: str) -> ca.Function:
@@ -240,10 +264,13 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
         NS=S,
         NXS=S * nx,
         NUS=S * nu,
+        NSTATIC=max(1, rti.qp_solver.n_static),
+        HAS_CONDENSING=int(rti.condensing is not None),
+        NLINEAR=rti.condensing.structure.layout()["size"] if rti.condensing is not None else 1,
+        NCONDENSING=condensing.work_size(rti.condensing.structure) if rti.condensing is not None else 1,
     )
     sizes["NB"] = sizes["NQ"] + sizes["NROWS"]
     work = {key: max(max(1, getattr(f, f"sz_{key}")()) for f in functions) for key in ("arg", "res", "iw", "w")}
-    settings = f"    m->settings.primal_tol = {c_number(PRIMAL_TOLERANCE)};\n"
     upper = name.upper()
     header = _HEADER.substitute(
         p=name,
@@ -268,8 +295,9 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
         controller=controller.name,
         sizes="".join(f"#define {key} {value}\n" for key, value in sizes.items()),
         casadi=generated_code(functions, f"{name}_casadi"),
-        data=indices(controller) + targets(controller, values),
-        settings=settings,
+        condensing=condensing_c(controller, name),
+        data=indices(controller) + targets(controller, values) + export_nmpc_qp.constants(nlp),
+        settings=export_nmpc_qp.settings(),
         has_rate=int(controller._rate_per_sample is not None),
         max_iterations=nlp.max_iterations,
         tolerance=c_number(nlp.tolerance),
@@ -294,7 +322,8 @@ def export_nonlinear_mpc(controller: NonlinearMPC, name: str, references) -> Exp
     )
 
 
-_HEADER = string.Template("""/* ${p}.h: nonlinear MPC '${controller}' exported by codesign-control (mpc.export_nmpc).
+_HEADER = string.Template(
+    """/* ${p}.h: nonlinear MPC '${controller}' exported by codesign-control (mpc.export_nmpc).
  * ${nx} states, ${nu} input(s), ${ny} outputs; horizon ${N}; one real-time iteration per sample.
  * Fixed sizes; the QP is solved by DAQP, which allocates its workspace once, in ${p}_init.
  * Build with DAQP's headers and library (mpc.export.build_flags). */
@@ -321,11 +350,10 @@ typedef struct {
     double xc[${P}_NSTATE];  /* (x_hat, d_hat, plan) */
     double w[${P}_NW], w_next[${P}_NW];  /* the warm start (scaled decisions) and the new iterate */
     double parameters[${P}_NP], data[${P}_NDATA];
-    double H[${P}_NQ * ${P}_NQ], A[${P}_NROWS > 0 ? ${P}_NROWS * ${P}_NQ : 1];
-    double h[${P}_NQ], bupper[${P}_NB], blower[${P}_NB];
-    int sense[${P}_NB];
-    double dv[${P}_NQ], lam[${P}_NB], lam_x[${P}_NQ], lam_a[${P}_NROWS > 0 ? ${P}_NROWS : 1];
-    double residuals[2];
+    double lin[${P}_NLINEAR], condensing[${P}_NCONDENSING];  /* the linearization, the condensing's work */
+"""
+    + export_nmpc_qp.FIELDS
+    + """    double residuals[2];
     DAQPProblem problem;
     DAQPSettings settings;
     DAQPWorkspace workspace;
@@ -353,7 +381,8 @@ unsigned long ${p}_state_size(void);
 #endif
 
 #endif /* ${P}_H */
-""")
+"""
+)
 
 _SOURCE = string.Template(
     """/* ${p}.c: nonlinear MPC '${controller}' by codesign-control (mpc.export_nmpc). */
@@ -364,6 +393,7 @@ _SOURCE = string.Template(
 #include <daqp/utils.h>
 #undef NX  /* DAQP's constants.h: its workspace's size; here the plant's state count */
 
+${condensing}
 ${sizes}#define HAS_RATE ${has_rate}
 #define MAX_ITERATIONS ${max_iterations}
 #define TOLERANCE ${tolerance}
@@ -391,67 +421,9 @@ static int call(${p}_state *m, kernel f, const double *a0, const double *a1, con
 }
 #define NONE 0
 
-/* DAQP's workspace for the dense QP of NQ variables (simple bounds) and NROWS rows, H = I until the
- * first solve writes this sample's. */
-static int setup(${p}_state *m) {
-    static const DAQPWorkspace empty;
-    double setup_time;
-    int i;
-    ${p}_free(m);
-    for (i = 0; i < NQ * NQ; ++i) m->H[i] = (i % (NQ + 1)) == 0 ? 1.0 : 0.0;
-    for (i = 0; i < NQ; ++i) m->h[i] = 0.0;
-    for (i = 0; i < NB; ++i) { m->bupper[i] = 1.0; m->blower[i] = -1.0; m->sense[i] = 0; }
-    for (i = 0; i < (NROWS > 0 ? NROWS * NQ : 1); ++i) m->A[i] = 0.0;
-    m->problem.n = NQ;
-    m->problem.m = NB;
-    m->problem.ms = NQ;
-    m->problem.H = m->H;
-    m->problem.f = m->h;
-    m->problem.A = m->A;
-    m->problem.bupper = m->bupper;
-    m->problem.blower = m->blower;
-    m->problem.sense = m->sense;
-    daqp_default_settings(&m->settings);
-${settings}    m->workspace = empty;
-    m->workspace.settings = &m->settings;
-    if (setup_daqp(&m->problem, &m->workspace, &setup_time) < 0) {
-        m->workspace.settings = 0;
-        free_daqp_workspace(&m->workspace);
-        free_daqp_ldp(&m->workspace);
-        return 8;
-    }
-    m->set_up = 1;
-    return 0;
-}
-
-/* The prepared QP (m->data) for the initial state x0, cold started: m->dv, the multipliers and
- * m->residuals; 1 when DAQP and the residuals say solved. */
-static int solve_qp(${p}_state *m, const double *x0) {
-    DAQPResult result;
-    double lba[NROWS > 0 ? NROWS : 1], uba[NROWS > 0 ? NROWS : 1], lbv[NQ], ubv[NQ];
-    int i;
-    call(m, (kernel) ${p}_qp, m->data, NONE, NONE, NONE, NONE, m->H, m->A, lbv, ubv);
-    call(m, (kernel) ${p}_vectors, m->data, x0, NONE, NONE, NONE, m->h, lba, uba, NONE);
-    for (i = 0; i < NQ; ++i) { m->blower[i] = lbv[i]; m->bupper[i] = ubv[i]; }
-    for (i = 0; i < NROWS; ++i) { m->blower[NQ + i] = lba[i]; m->bupper[NQ + i] = uba[i]; }
-    for (i = 0; i < NB; ++i)  /* an equality (a scenario tree's shared moves) active and immutable, as CasADi's node */
-        m->sense[i] = m->blower[i] == m->bupper[i] ? ACTIVE + IMMUTABLE : 0;
-    reset_daqp_workspace(&m->workspace);
-    if (update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace) < 0
-        || activate_constraints(&m->workspace) < 0) {  /* the equalities start in the working set */
-        for (i = 0; i < NQ; ++i) m->dv[i] = NAN;
-        return 0;
-    }
-    result.x = m->dv;
-    result.lam = m->lam;
-    daqp_solve(&result, &m->workspace);
-    for (i = 0; i < NQ; ++i) m->lam_x[i] = m->lam[i];
-    for (i = 0; i < NROWS; ++i) m->lam_a[i] = m->lam[NQ + i];
-    call(m, (kernel) ${p}_recover, m->data, x0, m->dv, m->lam_a, m->lam_x, m->w_next, m->residuals, NONE, NONE);
-    return result.exitflag > 0 && isfinite(m->residuals[0]) && isfinite(m->residuals[1])
-           && m->residuals[0] <= QP_TOLERANCE && m->residuals[1] <= QP_TOLERANCE;
-}
-
+"""
+    + export_nmpc_qp.SOURCE
+    + """
 /* The NLP at the estimate x (x0: x repeated over the branches; m->parameters set): one real-time
  * iteration from the warm start, or, without one, the SQP to convergence from the rolled-out plan.
  * 0 when solved (m->w the solution). */
@@ -468,7 +440,12 @@ static int solve_nlp(${p}_state *m, const double *x0, const double *x, const dou
     }
     for (k = 0; k < (m->has_guess ? 1 : MAX_ITERATIONS); ++k) {
         m->iterations = k + 1;
+#if HAS_CONDENSING  /* the linearization, then the condensing, as the Python path */
+        call(m, (kernel) ${p}_prepare, m->w, m->parameters, NONE, NONE, NONE, m->lin, NONE, NONE, NONE);
+        ${p}_condense(1, m->lin, m->data, m->condensing);
+#else
         call(m, (kernel) ${p}_prepare, m->w, m->parameters, NONE, NONE, NONE, m->data, NONE, NONE, NONE);
+#endif
         if (!solve_qp(m, x0)) return 3;
         if (!all_finite(m->w_next, NW)) return 5;
         step = 0.0;

@@ -1,5 +1,6 @@
 """An exported controller's steps run by a small C program: the commands, each step's time measured
-inside C (``clock_gettime``), and the allocator's calls counted (GNU ld's ``--wrap``).
+inside C (``clock_gettime``: the wall clock and the thread's CPU time), and the allocator's calls counted
+(GNU ld's ``--wrap``).
 
 The program is given the measurements and references of a closed loop (recorded from a run of the
 same controller, in Python or through ctypes): the exported step is deterministic, so it replays that
@@ -45,24 +46,28 @@ void __wrap_free(void *p) { if (p) ++releases; __real_free(p); }
 %(data)s
 static %(p)s_state state;
 static double commands[STEPS * NU];
-static long long nanoseconds[STEPS];
+static long long nanoseconds[STEPS], cpu_nanoseconds[STEPS];
 static int codes[STEPS];
 int main(void) {
-    struct timespec began, ended;
+    struct timespec began, ended, cpu_began, cpu_ended;
     long init_allocations, init_releases;
     int k, i;
     int code = %(p)s_init(&state, MEASUREMENTS, REFERENCES_GIVEN);
     init_allocations = allocations;
     init_releases = releases;
     for (k = 0; k < STEPS; ++k) {
+        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu_began);
         clock_gettime(CLOCK_MONOTONIC, &began);
         codes[k] = %(p)s_step(&state, MEASUREMENTS + k * NY, REFERENCES_GIVEN + k * NR, commands + k * NU);
         clock_gettime(CLOCK_MONOTONIC, &ended);
+        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu_ended);
         nanoseconds[k] = (ended.tv_sec - began.tv_sec) * 1000000000LL + (ended.tv_nsec - began.tv_nsec);
+        cpu_nanoseconds[k] = (cpu_ended.tv_sec - cpu_began.tv_sec) * 1000000000LL
+                             + (cpu_ended.tv_nsec - cpu_began.tv_nsec);
     }
     printf("%%d %%ld %%ld %%ld %%ld\n", code, init_allocations, init_releases, allocations, releases);
     for (k = 0; k < STEPS; ++k) {
-        printf("%%d %%lld", codes[k], nanoseconds[k]);
+        printf("%%d %%lld %%lld", codes[k], nanoseconds[k], cpu_nanoseconds[k]);
         for (i = 0; i < NU; ++i) printf(" %%.17g", commands[k * NU + i]);
         printf("\n");
     }
@@ -77,7 +82,8 @@ class Replay:
     """What the C program reports.
 
     init_code : ``name_init``'s status;  codes : (steps,) each step's status
-    commands : (steps, nu);  step_seconds : (steps,) each step's time inside C, s
+    commands : (steps, nu);  step_seconds : (steps,) each step's time inside C, s (wall clock, the
+    process's pre-emption included);  cpu_seconds : (steps,) each step's CPU time (the thread's clock), s
     init_allocations : allocator calls during ``name_init``;  step_allocations : during the steps
     """
 
@@ -85,6 +91,7 @@ class Replay:
     codes: np.ndarray
     commands: np.ndarray
     step_seconds: np.ndarray
+    cpu_seconds: np.ndarray
     init_allocations: int
     step_allocations: int
 
@@ -137,8 +144,9 @@ def replay(
     return Replay(
         init_code=init_code,
         codes=rows[:, 0].astype(int),
-        commands=rows[:, 2:],
+        commands=rows[:, 3:],
         step_seconds=rows[:, 1] * 1e-9,
+        cpu_seconds=rows[:, 2] * 1e-9,
         init_allocations=init_allocations,
         step_allocations=allocations - init_allocations,
     )

@@ -171,6 +171,8 @@ class RealTimeIteration:
     linearize_function : casadi.Function or None
         ``linearize(w, P) -> lin``, compiled: the preparation's first part, the intervals' Jacobians
         and Hessians (laid out as `mpc.condensing.Structure.layout` says)
+    linearize_expression : casadi.Function
+        `linearize_function` as CasADi expressions, not compiled (what an export generates as C)
     condensing : mpc.condensing.Condensing or None
         The preparation's second part in generated C, ``condensing(lin rows) -> data rows`` (the same
         numbers as `prepare_function`'s to rounding, faster: it skips Γ_k's zero columns); None when
@@ -217,6 +219,7 @@ class RealTimeIteration:
         )
         prepare, structure, bounds = self._lay_out(checked, stages, linearized, condensed, rows, slack_shortcut)
         linearize = self._linearize_function(linearized, condensed, rows, bounds, structure)
+        self.linearize_expression = linearize
         feedback = rti_feedback.feedback_functions(self.layout, self.state_scale, checked.states[0])
         self.step_function = rti_feedback.step_function(
             prepare, feedback.whole, self.decision_size, self.parameter_size, self.nx

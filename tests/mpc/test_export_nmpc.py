@@ -1,7 +1,8 @@
 """Nonlinear MPC exported as C (mpc.export_nmpc): the C closed loop on the project's simulator gives the
-Python controller's commands to 1e-9 over 10 s on two plants (the pendulum with its soft bound, and
-the arm); a C program replaying that loop gives them again with no allocation after init; what
-cannot be exported, and a reference outside the exported table, are named."""
+Python controller's commands to 1e-9 over 10 s on two plants (the pendulum with its soft bound, whose QP
+both solve slack first, slacks freed at some samples; and the arm); a C program replaying that loop
+gives them again with no allocation after init; what cannot be exported, and a reference outside the
+exported table, are named."""
 
 from __future__ import annotations
 
@@ -35,6 +36,15 @@ def test_exported_nmpc_gives_the_python_commands_in_closed_loop(name, tmp_path):
     controller, reference = build("nonlinear", name), step_reference(name)
     exported = export_nonlinear_mpc(controller, f"nmpc_{name}", [reference - 0.1, reference])
     compiled = exported.load()
+    qp, rounds = controller.nlp.rti.qp_solver, []  # the Python path's QPs per sample (SlackFirstQP.solve)
+    solve = qp.solve
+
+    def counted(*args):
+        answer = solve(*args)
+        rounds.append(answer[4])
+        return answer
+
+    qp.solve = counted
     runs = [
         models.simulate_closed_loop(
             plant, c, reference, DURATION, input_disturbance=case.input_disturbance, noise_std=1e-4, seed=3
@@ -46,6 +56,8 @@ def test_exported_nmpc_gives_the_python_commands_in_closed_loop(name, tmp_path):
     assert all(s["success"] for s in runs[0].status)
     assert all(s["success"] for s in runs[1].status)
     np.testing.assert_allclose(runs[1].u, runs[0].u, atol=1e-9, rtol=0)
+    if name == "pendulum":  # its soft bound: the C's sequence must free slacks where Python's did
+        assert qp.slack_first and max(rounds) > 1
     # The same loop replayed by a C program: the same commands, and the steps allocate nothing.
     replayed = replay(exported, runs[0].measured, runs[0].r[:-1], tmp_path)
     assert replayed.init_code == 0 and np.all(replayed.codes == 0)
