@@ -1,12 +1,14 @@
-"""The Monte Carlo of an MPC row run by its exported C (`models.exported_loop`).
+"""An MPC row's runs by its exported C (`models.exported_loop`).
 
-An MPC steps in Python (`models.simulate_closed_loop_many`); its C export
+An MPC steps in Python (`models.simulate_closed_loop`, and the lockstep
+`models.simulate_closed_loop_many` for a Monte Carlo); its C export
 (`mpc.exporting.export_controller`) gives the same commands to 1e-9 without
 Python in the step. Where the options allow compiled code (``Options.jit``:
-True, or "auto" with a C compiler found) and the controller has an export, a
-Monte Carlo row runs the samples through the C closed loop; its step times
-are then the C step's. A controller the export refuses, or a library that
-cannot be built, runs in Python, and the run's notes say why.
+True, or "auto" with a C compiler found) and the controller has an export,
+every run of its rows (each scenario and the Monte Carlo's samples) goes
+through the one C closed loop compiled for it, and the rows' step times are
+the C step's. A controller the export refuses, or a library that cannot be
+built, runs in Python, and the run's notes say why.
 """
 
 from __future__ import annotations
@@ -34,15 +36,17 @@ def wanted(jit, controller) -> bool:
     return bool(jit)
 
 
-def exported_loop(
-    label: str, controller, truth: models.Plant, reference, duration: float, substeps: int, notes: list
-) -> ExportedLoop | None:
-    """The compiled C closed loop of `controller` on `truth` for runs of `reference` (its values are the
-    references the export prepares), or None with a note in `notes` saying why it runs in Python."""
-    setup = RunSetup.build(truth, controller, reference, duration, substeps=substeps)
+def exported_loop(label: str, controller, truth: models.Plant, runs, substeps: int, notes: list) -> ExportedLoop | None:
+    """The compiled C closed loop of `controller` on `truth`, or None with a note in `notes` saying why it
+    runs in Python.
+
+    runs : (reference, duration) of every run it will make; the values their references take are the
+        references the export prepares (a nonlinear MPC's targets)
+    """
+    values = [RunSetup.build(truth, controller, r, d, substeps=substeps).r for r, d in runs]
     try:
-        exported = export_controller(controller, c_identifiers([f"mc {label}"])[0], np.unique(setup.r))
+        exported = export_controller(controller, c_identifiers([f"mc {label}"])[0], np.unique(np.concatenate(values)))
         return compile_loop(truth, exported, substeps)
     except (UnsupportedExport, CompilationError) as err:
-        notes.append(f"{label}: Monte Carlo stepped in Python, not its C ({err})")
+        notes.append(f"{label}: stepped in Python, not its C ({err})")
         return None

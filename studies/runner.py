@@ -482,6 +482,7 @@ class Simulation:
         self.samples: list[pd.DataFrame] = []
         self.truths: dict = {}
         self.seconds = {"simulate_s": 0.0, "monte_carlo_s": 0.0}
+        self.loops: dict = {}
 
     def run_all(self, designed: Mapping, scenarios: Sequence[TableScenario], progress=None) -> None:
         """Every controller of `designed` through every scenario, in that order; `progress(done, total,
@@ -533,10 +534,32 @@ class Simulation:
         interrupts.check()
         return row
 
+    def exported(self, label: str, controller, truth: models.Plant):
+        """The C closed loop of an MPC row (`studies.exported_runs`), compiled once for all its runs (the
+        references of every scenario of the study); None where it steps in Python."""
+        if label not in self.loops:
+            self.loops[label] = None
+            if exported_runs.wanted(self.options.jit, controller):
+                study = self.study
+                runs = [(s.reference(study, self.base), s.duration(study)) for s in study.scenarios]
+                self.loops[label] = exported_runs.exported_loop(
+                    label, controller, truth, runs, study.substeps, self.notes
+                )
+        return self.loops[label]
+
     def scenario_row(self, label: str, controller, truth: models.Plant, scenario: TableScenario) -> dict:
         """The columns of one run of `scenario` (not the Monte Carlo): metrics, status and verdict."""
         study = self.study
-        result = simulate_scenario(truth, controller, scenario, study, self.options, self.base, study.substeps)
+        result = simulate_scenario(
+            truth,
+            controller,
+            scenario,
+            study,
+            self.options,
+            self.base,
+            study.substeps,
+            loop=self.exported(label, controller, truth),
+        )
         self.runs[(label, scenario.name)] = result
         return judge_run(study, scenario.name, result, truth.params, controller=controller, plant=truth).row()
 
@@ -590,11 +613,7 @@ class Simulation:
                 noise_std=noise,
                 seed=options.seed,
             )
-            loop = None
-            if exported_runs.wanted(options.jit, controller):
-                loop = exported_runs.exported_loop(
-                    label, controller, truth, reference, duration, study.substeps, self.notes
-                )
+            loop = self.exported(label, controller, truth)
             if loop is not None:
                 return exported_loop.simulate_exported_many(
                     truth, controller, loop, reference, duration, samples, threads=options.threads, **common
@@ -683,16 +702,39 @@ def _monte_carlo_status(diverged_at: list, counts: np.ndarray, count: int) -> di
 
 
 def simulate_scenario(
-    plant, controller, scenario: TableScenario, case, options: Options, base: float, substeps: int, params=None
+    plant,
+    controller,
+    scenario: TableScenario,
+    case,
+    options: Options,
+    base: float,
+    substeps: int,
+    params=None,
+    loop=None,
 ):
     """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed;
-    the run as `scenario.run` describes it (`models.scenario.Scenario`)."""
+    the run as `scenario.run` describes it (`models.scenario.Scenario`); by `controller`'s exported C
+    closed loop `loop` (`models.exported_loop`) where given, the same run to 1e-9."""
     noise = (
         measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
         if scenario.noise
         else 0.0
     )
     run = scenario.run(case, base, noise)
+    if loop is not None:
+        runs = exported_loop.simulate_exported_many(
+            plant,
+            controller,
+            loop,
+            run.reference,
+            run.duration,
+            plant.param_vector(params)[None],
+            substeps=substeps,
+            input_disturbance=run.input_disturbance,
+            noise_std=run.noise_std,
+            seed=options.seed,
+        )
+        return next(iter(runs))
     return models.simulate_closed_loop(
         plant,
         controller,
