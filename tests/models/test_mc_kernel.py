@@ -1,6 +1,9 @@
-"""The Monte Carlo's compiled kernel (`models.mc_kernel`): a batch of N is N batches of one bit for bit, it
+"""The Monte Carlo's compiled kernel (`models.mc_kernel`): a batch of N is N batches of one bit for bit, a
+sample's numbers are the same in every lane and group, its sine and cosine are the C library's to rounding, it
 agrees with CasADi's run of the same closed loop, and where it cannot be built the CasADi map runs and the
 plan says why."""
+
+import math
 
 import casadi as ca
 import numpy as np
@@ -68,6 +71,51 @@ def test_a_batch_of_n_is_n_batches_of_one_bit_for_bit_whatever_the_threads_and_c
             np.testing.assert_array_equal(getattr(whole, name)[i], getattr(alone, name)[0], err_msg=name)
             np.testing.assert_array_equal(getattr(chunked, name)[i], getattr(alone, name)[0], err_msg=name)
     assert not np.allclose(whole.x[0], whole.x[1])  # the samples differ
+
+
+def test_a_samples_numbers_are_the_same_in_every_lane_and_group():
+    """Two blocks and three samples more of one parameter row, without noise: every lane of every group
+    (and the padding of the last block) computes the same bits."""
+    pend = models.get("pendulum")
+    block = PendulumPI()
+    _require_kernel(pend, block)
+    size = mc_kernel.kernel(pend, block, 2).block
+    assert size % mc_kernel.GROUPS == 0 and size >= 2 * mc_kernel.GROUPS
+    row = models.sample_params(pend, 1, seed=4)
+    batch = models.monte_carlo(
+        pend, block, 0.3, 2.0, np.repeat(row, 2 * size + 3, axis=0), input_disturbance=0.1, substeps=2, jit=True
+    )
+    for name in FIELDS:
+        values = getattr(batch, name)
+        for i in range(1, values.shape[0]):
+            np.testing.assert_array_equal(values[i], values[0], err_msg=f"{name}, sample {i}")
+    assert np.ptp(batch.x[0, :, 1]) > 0.01  # the angle moves: the sines matter
+
+
+def test_the_kernels_sine_and_cosine_are_the_c_librarys_to_rounding():
+    """Against Python's math.sin and math.cos (the C library): within 2 units in the last place and
+    2.3e-16 over [-1e5, 1e5], exact zeros' signs; beyond 1e5 and for infinities and NaN, the C library's
+    own values (the kernel calls it there), lanes of either kind mixed in one vector."""
+    pend = models.get("pendulum")
+    _require_kernel(pend, PendulumPI())
+    kernel = mc_kernel.kernel(pend, PendulumPI(), 2)
+    rng = np.random.default_rng(2)
+    x = np.concatenate([rng.uniform(-4.0, 4.0, 20000), rng.uniform(-1e5, 1e5, 20000)])
+    x = np.concatenate([x, np.nextafter(np.arange(-2000, 2000) * (np.pi / 2), np.inf), [0.0, -0.0, 1e-300, -5e-324]])
+    sine, cosine = kernel.sincos(x)
+    for got, fun in ((sine, math.sin), (cosine, math.cos)):
+        want = np.array([fun(v) for v in x])
+        assert np.max(np.abs(got - want)) <= 2.3e-16
+        assert np.max(np.abs(got - want) / np.spacing(np.abs(want))) <= 2.0
+        assert np.mean(got == want) > 0.75  # most are the same bits
+    np.testing.assert_array_equal(np.signbit(sine[-4:]), np.signbit(x[-4:]))  # sin(-0.) = -0.
+    far = np.array([1.0, 1e5, -np.nextafter(1e5, 2e5), 3e7, 1.0, 1e300, np.inf, -np.inf, np.nan, 0.5, -1e6])
+    beyond = ~(np.abs(far) <= 1e5)
+    sine, cosine = kernel.sincos(far)
+    for got, fun in ((sine, math.sin), (cosine, math.cos)):
+        want = np.array([fun(v) if math.isfinite(v) else math.nan for v in far])
+        np.testing.assert_array_equal(got[beyond], want[beyond])  # the C library's bits
+        np.testing.assert_allclose(got[~beyond], want[~beyond], rtol=0, atol=2.3e-16)
 
 
 def test_the_kernel_agrees_with_casadis_run_of_the_same_closed_loop():
