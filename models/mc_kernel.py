@@ -46,6 +46,7 @@ import numpy as np
 from . import compile as compiling
 from .block import Block, saturate
 from .plant import Plant
+from .simulate import DIVERGENCE_BOUND
 
 #: Vectors of samples the kernel's body computes side by side, each statement once per vector: their
 #: independent chains of operations keep the vector units busy while one chain waits for an operand
@@ -445,11 +446,15 @@ void %(name)s_sincos(int n, const double *restrict x, double *restrict s, double
 /* Samples first..last-1 of m (first a multiple of BLOCK), n steps each. Results in the layout of
    models.MonteCarloResult: X (m, n+1, NX), XC (m, n+1, NC), Y (m, n+1, NY), U (m, n, NU), MEAS (m, n, NM).
    noise (m, n, NM) or NULL for none; R (n, NR), D (n, NU), x0 (NX,) and G shared; xc0 (m, NC), P (m, NP).
-   A group's vectors end in its number (s0_1: the first state of group 1's samples). */
+   SUSPECT (m,), or NULL: 1 for a sample that may have faulted (some x_k non-finite or beyond bound, or
+   u_k or xc_k non-finite: then the sum of the squares of x_k, plus xc_k and u_k times 0, is not at most
+   bound2; the converse may fail), else 0. A group's vectors end in its number (s0_1: the first state
+   of group 1's samples). */
 void %(name)s_run(int m, int n, int first, int last, const double *restrict x0, const double *restrict xc0,
                   const double *restrict R, const double *restrict noise, const double *restrict D,
                   const double *restrict P, const double *restrict G, double *restrict X,
-                  double *restrict XC, double *restrict Y, double *restrict U, double *restrict MEAS)
+                  double *restrict XC, double *restrict Y, double *restrict U, double *restrict MEAS,
+                  double bound2, unsigned char *restrict SUSPECT)
 {
     long idx[BLOCK];
     int b, c, j, k;
@@ -464,6 +469,7 @@ void %(name)s_run(int m, int n, int first, int last, const double *restrict x0, 
             const double *restrict r = R + (long) k * NR, *restrict d = D + (long) k * NU;
 %(outputs)s
 %(store_states)s
+%(check)s
             if (k == n) break;
             if (noise) {
 %(noise)s
@@ -472,6 +478,9 @@ void %(name)s_run(int m, int n, int first, int last, const double *restrict x0, 
 %(step)s
 %(store_inputs)s
 %(advance)s
+        }
+        if (SUSPECT) {
+%(suspect)s
         }
     }
 }
@@ -498,6 +507,9 @@ _PER_GROUP = {
     {store_inputs}
 }}""",
     "advance": "{advance}",
+    "check": "flag@ |= ~(vu) ({check} <= bound2);",
+    "suspect": """for (j = 0; j < LANES && j < c - GROUP * LANES; ++j)
+    SUSPECT[b + GROUP * LANES + j] = flag@[j] != 0;""",
 }
 
 
@@ -532,14 +544,18 @@ def _kernel_parts(plant: Plant, controller: Block, substeps: int, name: str) -> 
         return " ".join(form.format(q=q, i=first + q) for form, count, first in forms for q in range(count))
 
     vectors = {"s": nx + nc, "sn": nx + nc, "p": plant.n_params, "y": ny, "ms": nm, "u": nu, "nz": nm}
+    # x_k's squares, and xc_k and u_{k-1} times 0 (0., or NaN where they are not finite)
+    check = [f"s{q}@ * s{q}@" for q in range(nx)] + [f"s{nx + q}@ * 0." for q in range(nc)]
+    check += [f"u{q}@ * 0." for q in range(nu)]
     measured = "y" if controller.measures == "outputs" else "s"
     fields = {
-        "variables": ", ".join(f"{v}{q}@" for v, count in vectors.items() for q in range(count)),
+        "variables": ", ".join(f"{v}{q}@" for v, count in vectors.items() for q in range(count)) + "; vu flag@ = {0}",
         "start": each(
             ("p{q}@[j] = P[i * NP + {q}];", plant.n_params, 0),
             ("s{q}@[j] = x0[{q}];", nx, 0),
             ("s{i}@[j] = xc0[i * NC + {q}];", nc, nx),
             ("nz{q}@[j] = 0.;", nm, 0),
+            ("u{q}@[j] = 0.;", nu, 0),
         ),
         "store_states": each(
             ("X[at * NX + {q}] = s{q}@[j];", nx, 0),
@@ -550,8 +566,10 @@ def _kernel_parts(plant: Plant, controller: Block, substeps: int, name: str) -> 
         "measure": each((f"ms{{q}}@ = {measured}{{q}}@ + nz{{q}}@;", nm, 0)),
         "store_inputs": each(("U[at * NU + {q}] = u{q}@[j];", nu, 0), ("MEAS[at * NM + {q}] = ms{q}@[j];", nm, 0)),
         "advance": each(("s{q}@ = sn{q}@;", nx + nc, 0)),
+        "check": "(" + " + ".join(check) + ")",
+        "suspect": "",
     }
-    indents = {"variables": 8, "start": 8, "noise": 16}
+    indents = {"variables": 8, "start": 8, "noise": 16, "suspect": 12}
 
     def groups(part: str) -> str:
         text = _PER_GROUP[part].format(**{part: fields[part]}).splitlines()
@@ -660,9 +678,12 @@ class MonteCarloKernel:
         x0 : (nx,);  xc0 : (m, nc);  R : (n, nr);  noise : (m, n, nm) or None;  D : (n, nu);  P : (m, n_params)
         G : the controller's gain vector
         out : arrays "x" (m, n+1, nx), "xc" (m, n+1, nc), "y" (m, n+1, ny), "u" (m, n, nu), "measured"
-            (m, n, nm), C-contiguous float64, written in place
+            (m, n, nm), C-contiguous float64, written in place; and, if given, "suspect" (m,) uint8: 0
+            for a sample that did not fault (no x_k non-finite or beyond `DIVERGENCE_BOUND`, no u_k or
+            xc_k non-finite), 1 for one that may have (`models.closed_loop.first_faults` says when)
         """
-        fun = self.library.function("codesign_mc_run", [ctypes.c_int] * 4 + [_DOUBLES] * 12)
+        signature = [ctypes.c_int] * 4 + [_DOUBLES] * 12 + [ctypes.c_double, ctypes.POINTER(ctypes.c_uint8)]
+        fun = self.library.function("codesign_mc_run", signature)
         m, n = P.shape[0], R.shape[0]
         keep = [np.ascontiguousarray(a, dtype=float) for a in (x0, xc0, R, D, P, G)]
         keep.append(np.zeros(1))  # a valid pointer for empty arrays
@@ -676,8 +697,15 @@ class MonteCarloKernel:
         def pointer(arr):
             return _pointer(arr if arr.size else spare)
 
+        suspect = out.get("suspect")
+        if suspect is not None and not (suspect.flags.c_contiguous and suspect.dtype == np.uint8):
+            raise ValueError("the kernel writes its suspect flags into a C-contiguous uint8 array")
         args = [pointer(a) for a in (x0_, xc0_, R_)] + [_pointer(noise_)]
         args += [pointer(a) for a in (D_, P_, G_)] + [pointer(a) for a in outs]
+        args += [
+            DIVERGENCE_BOUND**2,
+            None if suspect is None else suspect.ctypes.data_as(ctypes.POINTER(ctypes.c_uint8)),
+        ]
         blocks = -(-m // self.block)
         parts = max(1, min(int(threads), blocks))
         edges = [self.block * (blocks * i // parts) for i in range(parts)] + [m]

@@ -196,6 +196,43 @@ def test_a_diverging_sample_diverges_at_the_same_time_on_the_kernel(blow_up_plan
     np.testing.assert_array_equal(kernel.diverged_at, casadi.diverged_at)
 
 
+class Faulty(models.Block):
+    """On the pendulum at rest: u = b² with a state x_c_next = a x_c + 1. With a = 1e100 the state overflows
+    at its fifth sample (0, 1, 1e100, 1e200, 1e300, inf) while x and u stay finite; with b = 1e300 the
+    command is infinite from the first sample (saturated, the plant does not see it)."""
+
+    def __init__(self, a: float, b: float):
+        super().__init__(
+            sample_period=0.01,
+            n_state=1,
+            n_measured=4,
+            n_reference=1,
+            n_input=1,
+            gains={"a": a, "b": b},
+            measures="state",
+        )
+
+    def expr(self, xc, y, r, g):
+        return g["a"] * xc + 1.0, g["b"] * g["b"] + 0.0 * y[0]
+
+
+@pytest.mark.parametrize(("a", "b", "when"), [(1e100, 0.0, 0.05), (1.0, 1e300, 0.0), (1.0, 0.0, None)])
+def test_the_kernel_flags_every_fault_the_rule_finds(a, b, when):
+    """A controller state that overflows with x and u finite, a command that is not finite, and neither:
+    the kernel's divergence times are CasADi's (the rule of `models.closed_loop.first_faults`, which runs on
+    the samples the kernel flags), and the expected ones."""
+    pend = models.get("pendulum")
+    faulty = Faulty(a, b)
+    _require_kernel(pend, faulty)
+    samples = np.repeat(pend.param_vector()[None], 5, axis=0)
+    kernel = models.monte_carlo(pend, faulty, 0.0, 0.3, samples, substeps=2, jit=True)
+    casadi = models.monte_carlo(pend, faulty, 0.0, 0.3, samples, substeps=2, jit=False)
+    np.testing.assert_array_equal(kernel.diverged_at, casadi.diverged_at)
+    np.testing.assert_array_equal(kernel.diverged_at, np.nan if when is None else when)
+    clean = models.monte_carlo(pend, PendulumPI(), 0.3, 0.3, samples, substeps=2, jit=True)
+    assert np.all(np.isnan(clean.diverged_at))
+
+
 def test_a_single_run_with_jit_is_its_monte_carlo_sample_bit_for_bit():
     """`simulate_closed_loop(..., jit=True)` runs the kernel as a batch of one: the numbers of the same
     sample in `monte_carlo(..., jit=True)`, its noise seeded by (seed, index)."""
