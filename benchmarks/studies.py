@@ -146,7 +146,7 @@ int main(void) {
     double best = 1e300, seconds, sum = 0.0;
     long k, repeat = %(repeat)d;
     int j, trial;
-    for (trial = 0; trial < 20; ++trial) {
+    for (trial = 0; trial < %(trials)d; ++trial) {
         for (j = 0; j < CHAINS; ++j) acc[j] = 0.5 + 1e-3 * j;
         clock_gettime(CLOCK_MONOTONIC, &began);
         for (k = 0; k < repeat; ++k)
@@ -187,24 +187,25 @@ FLOP_RATE_FLAGS = (
 )
 
 
-def core_flop_rate(repeat: int = 2_000_000) -> tuple[float, str]:
+def core_flop_rate(repeat: int = 200_000, trials: int = 200) -> tuple[float, str]:
     """(flops per second of one core, how it was measured): `FMA_CHAINS` independent fused
-    multiply-add chains in C, compiled with each of `FLOP_RATE_FLAGS`, the best of 20 timings inside C,
-    the faster build; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
+    multiply-add chains in C, compiled with each of `FLOP_RATE_FLAGS`, the best of `trials` timings inside C
+    (short bursts, about 0.5 ms each: on a shared machine the best is one no other job interrupted), the
+    faster build; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
     compiler = models.compile.compiler()
     if compiler is None:
         return numpy_flop_rate(), "numpy multiply-add (no C compiler)"
     rates = {}
     with tempfile.TemporaryDirectory(prefix="flop-rate-") as folder:
         source = Path(folder) / "fma.c"
-        source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat})
+        source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat, "trials": trials})
         program = str(Path(folder) / "fma")
         for flags in FLOP_RATE_FLAGS:
             subprocess.run([*compiler, *flags, "-o", program, str(source), "-lm"], check=True)
             printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
             rates[" ".join(flags)] = float(printed.split()[0])
     flags = max(rates, key=rates.__getitem__)
-    return rates[flags], f"C, {FMA_CHAINS} independent fma chains, {flags}"
+    return rates[flags], f"C, {FMA_CHAINS} independent fma chains, best of {trials} bursts, {flags}"
 
 
 def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[float, models.MonteCarloResult]:
