@@ -15,19 +15,27 @@ from models.monte_carlo_batch import MonteCarloPlan
 from models.run_setup import RunSetup
 
 
-class PendulumPI(models.Block):
+class FixtureBlock(models.Block):
+    """The test controllers' common declaration: Ts = 0.01 s, one reference, one command."""
+
+    def __init__(self, gains: dict, n_state: int, n_measured: int, measures: str = "outputs"):
+        super().__init__(
+            sample_period=0.01,
+            n_state=n_state,
+            n_measured=n_measured,
+            n_reference=1,
+            n_input=1,
+            gains=gains,
+            measures=measures,
+        )
+
+
+class PendulumPI(FixtureBlock):
     """Reads the pendulum's two outputs: u = -kp y_0 ... with a clamped integral of the angle's error and a
     filtered angle (a test fixture with state, a conditional and every comparison the designs use)."""
 
     def __init__(self, remainder: bool = False):
-        super().__init__(
-            sample_period=0.01,
-            n_state=2,
-            n_measured=2,
-            n_reference=1,
-            n_input=1,
-            gains={"K": np.array([-4.0, 40.0]), "ki": 2.0, "a": 0.6},
-        )
+        super().__init__({"K": np.array([-4.0, 40.0]), "ki": 2.0, "a": 0.6}, n_state=2, n_measured=2)
         self.remainder = remainder
 
     def expr(self, xc, y, r, g):
@@ -133,20 +141,12 @@ def test_the_kernel_agrees_with_casadis_run_of_the_same_closed_loop():
     assert np.ptp(kernel.u) > 1.0  # the run does something (the step and the saturation's range)
 
 
-class EveryOperation(models.Block):
+class EveryOperation(FixtureBlock):
     """State feedback plus 1e-3 times a sum of every function, comparison and logic operation the kernel's
     generator writes, of bounded arguments v in (-1, 1) and w in (0.25, 0.75), and a filtered state."""
 
     def __init__(self):
-        super().__init__(
-            sample_period=0.01,
-            n_state=1,
-            n_measured=4,
-            n_reference=1,
-            n_input=1,
-            gains={"K": np.array([-4.0, 40.0, -6.0, 6.0])},
-            measures="state",
-        )
+        super().__init__({"K": np.array([-4.0, 40.0, -6.0, 6.0])}, n_state=1, n_measured=4, measures="state")
 
     def expr(self, xc, y, r, g):
         v, w = ca.tanh(y[1] + 0.1 * ca.sin(y[0])), 0.5 + 0.25 * ca.cos(y[2])
@@ -186,11 +186,9 @@ def test_state_feedback_runs_on_the_kernel_with_the_plans_engine_saying_so():
 
     K = control.place(lin.A, lin.B, [-3, -3.5, -4, -4.5])[0]
 
-    class StateFeedback(models.Block):
+    class StateFeedback(FixtureBlock):
         def __init__(self):
-            super().__init__(
-                sample_period=0.01, n_state=0, n_measured=4, n_reference=1, n_input=1, gains={"K": K}, measures="state"
-            )
+            super().__init__({"K": K}, n_state=0, n_measured=4, measures="state")
 
         def expr(self, xc, y, r, g):
             return xc, -ca.dot(g["K"], y) + 2.0 * r[0]
@@ -225,9 +223,9 @@ def test_a_diverging_sample_diverges_at_the_same_time_on_the_kernel(blow_up_plan
     """q'' = 4 q^3 from q = 1 escapes at about 0.93 s whatever the (zero) command: the kernel's run goes
     non-finite like CasADi's, and the fault rule gives the same sample time."""
 
-    class Zero(models.Block):
+    class Zero(FixtureBlock):
         def __init__(self):
-            super().__init__(sample_period=0.01, n_state=0, n_measured=1, n_reference=1, n_input=1, gains={"k": 0.0})
+            super().__init__({"k": 0.0}, n_state=0, n_measured=1)
 
         def expr(self, xc, y, r, g):
             return xc, g["k"] * y[0]
@@ -242,21 +240,13 @@ def test_a_diverging_sample_diverges_at_the_same_time_on_the_kernel(blow_up_plan
     np.testing.assert_array_equal(kernel.diverged_at, casadi.diverged_at)
 
 
-class Faulty(models.Block):
+class Faulty(FixtureBlock):
     """On the pendulum at rest: u = b² with a state x_c_next = a x_c + 1. With a = 1e100 the state overflows
     at its fifth sample (0, 1, 1e100, 1e200, 1e300, inf) while x and u stay finite; with b = 1e300 the
     command is infinite from the first sample (saturated, the plant does not see it)."""
 
     def __init__(self, a: float, b: float):
-        super().__init__(
-            sample_period=0.01,
-            n_state=1,
-            n_measured=4,
-            n_reference=1,
-            n_input=1,
-            gains={"a": a, "b": b},
-            measures="state",
-        )
+        super().__init__({"a": a, "b": b}, n_state=1, n_measured=4, measures="state")
 
     def expr(self, xc, y, r, g):
         return g["a"] * xc + 1.0, g["b"] * g["b"] + 0.0 * y[0]
