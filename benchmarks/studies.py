@@ -15,11 +15,16 @@ Measurements (one function each, registered in `MEASUREMENTS`; ``--only`` picks 
   RK4 step as a discrete-time plant, the same block as a static controller,
   interconnected) on the first few samples; its trajectories are compared
   with ours. Beside it the arithmetic bound ``mc_bound_samples_per_s``: the
-  operations of one closed-loop sample period (CasADi instructions) x steps, per
-  sample, against the threads x one core's measured flop rate
-  (``core_flop_rate_per_s``: independent fused multiply-add chains in C, built
-  with models.compile's flags and with the Monte Carlo kernel's, timed inside C,
-  the faster; ``core_flop_rate_method`` says how it was measured).
+  operations of one closed-loop sample period x steps, per sample, against the
+  threads x one core's measured flop rate (``core_flop_rate_per_s``: independent
+  fused multiply-add chains in C, built with models.compile's flags, with them
+  and 512-bit vectors, and with the Monte Carlo kernel's, timed inside C, the
+  fastest; ``core_flop_rate_method`` says how it was measured). The operations
+  of a sample period (``mc_bound_step_operations``) are those the engine runs
+  every step: the kernel's own count (``mc_kernel_step_operations``; what it
+  runs once per block of samples, ``mc_kernel_block_operations``, is not
+  counted), or the CasADi instructions of the closed loop
+  (``mc_step_operations``) on the CasADi map.
 
 - ``quick`` and ``full``: wall time and peak memory of ``python -m studies --quick``
   and of the default ``python -m studies``, each run as a user runs it (a child
@@ -115,9 +120,9 @@ def _consume(batch: models.MonteCarloResult) -> float:
 
 
 def step_operations(plant, block) -> int:
-    """Arithmetic operations of one closed-loop sample period (the block's step and `SUBSTEPS` RK4
-    sub-steps), counted as the instructions of its expanded CasADi function other than inputs, outputs
-    and constants (a sine counts as one)."""
+    """Arithmetic operations of one closed-loop sample period (the measurement, the block's step and
+    `SUBSTEPS` RK4 sub-steps), counted as the instructions of its expanded CasADi function other than
+    inputs, outputs and constants (a sine counts as one): what the CasADi map runs every step."""
     fun = closed_loop_function(plant, block, 1, SUBSTEPS, False)
     fun = fun if fun.is_a("SXFunction") else fun.expand()
     skip = {ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_PARAMETER}
@@ -141,7 +146,7 @@ int main(void) {
     double best = 1e300, seconds, sum = 0.0;
     long k, repeat = %(repeat)d;
     int j, trial;
-    for (trial = 0; trial < 20; ++trial) {
+    for (trial = 0; trial < %(trials)d; ++trial) {
         for (j = 0; j < CHAINS; ++j) acc[j] = 0.5 + 1e-3 * j;
         clock_gettime(CLOCK_MONOTONIC, &began);
         for (k = 0; k < repeat; ++k)
@@ -174,28 +179,33 @@ def numpy_flop_rate(size: int = 2048, repeat: int = 2000) -> float:
 
 
 #: The flags the flop-rate kernel is built with, each timed: the project's (gcc picks 256-bit vectors on
-#: some AVX-512 machines) and the Monte Carlo kernel's (512-bit vectors where there are some).
-FLOP_RATE_FLAGS = (models.compile.FLAGS, mc_kernel.KERNEL_FLAGS)
+#: some AVX-512 machines), with 512-bit vectors where there are some, and the Monte Carlo kernel's.
+FLOP_RATE_FLAGS = (
+    models.compile.FLAGS,
+    (*models.compile.FLAGS, "-mprefer-vector-width=512"),
+    mc_kernel.KERNEL_FLAGS,
+)
 
 
-def core_flop_rate(repeat: int = 2_000_000) -> tuple[float, str]:
+def core_flop_rate(repeat: int = 200_000, trials: int = 200) -> tuple[float, str]:
     """(flops per second of one core, how it was measured): `FMA_CHAINS` independent fused
-    multiply-add chains in C, compiled with each of `FLOP_RATE_FLAGS`, the best of 20 timings inside C,
-    the faster build; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
+    multiply-add chains in C, compiled with each of `FLOP_RATE_FLAGS`, the best of `trials` timings inside C
+    (short bursts, about 0.5 ms each: on a shared machine the best is one no other job interrupted), the
+    faster build; NumPy's multiply-add (`numpy_flop_rate`) where no compiler is found."""
     compiler = models.compile.compiler()
     if compiler is None:
         return numpy_flop_rate(), "numpy multiply-add (no C compiler)"
     rates = {}
     with tempfile.TemporaryDirectory(prefix="flop-rate-") as folder:
         source = Path(folder) / "fma.c"
-        source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat})
+        source.write_text(FMA_PROGRAM % {"chains": FMA_CHAINS, "repeat": repeat, "trials": trials})
         program = str(Path(folder) / "fma")
         for flags in FLOP_RATE_FLAGS:
             subprocess.run([*compiler, *flags, "-o", program, str(source), "-lm"], check=True)
             printed = subprocess.run([program], check=True, capture_output=True, text=True).stdout
             rates[" ".join(flags)] = float(printed.split()[0])
     flags = max(rates, key=rates.__getitem__)
-    return rates[flags], f"C, {FMA_CHAINS} independent fma chains, {flags}"
+    return rates[flags], f"C, {FMA_CHAINS} independent fma chains, best of {trials} bursts, {flags}"
 
 
 def _timed_monte_carlo(plant, block, reference, samples, jit: bool) -> tuple[float, models.MonteCarloResult]:
@@ -253,23 +263,27 @@ def monte_carlo_throughput(samples: int = 1000, repeat: int = 3, baseline_sample
         )
     per_s = samples / statistics.median(times)
     setup = RunSetup.build(plant, block, reference, DURATION, substeps=SUBSTEPS)
-    engine = MonteCarloPlan.build(plant, block, setup, params[:1], jit=True).engine
+    plan = MonteCarloPlan.build(plant, block, setup, params[:1], jit=True)
     operations = step_operations(plant, block)
+    counted = operations if plan.kernel is None else plan.kernel.step_operations
     flop_rate, flop_method = core_flop_rate()
     steps = int(round(DURATION / SAMPLE_PERIOD))
-    bound_per_s = THREADS * flop_rate / (operations * steps)
+    bound_per_s = THREADS * flop_rate / (counted * steps)
     baseline_per_s = baseline_samples / baseline_s
     return {
         "mc_samples_per_s": per_s,
         "mc_best_samples_per_s": samples / best_kernel_s,
         "mc_casadi_map_best_samples_per_s": samples / casadi_map_s,
         "mc_ratio_best_vs_casadi_map": casadi_map_s / best_kernel_s,
-        "mc_engine": engine,
+        "mc_engine": plan.engine,
         "mc_first_call_samples_per_s": samples / first_s,
         "mc_vm_samples_per_s": samples / vm_s,
         "mc_bound_samples_per_s": bound_per_s,
         "mc_ratio_bound_vs_measured": bound_per_s / per_s,
         "mc_step_operations": operations,
+        "mc_kernel_step_operations": None if plan.kernel is None else plan.kernel.step_operations,
+        "mc_kernel_block_operations": None if plan.kernel is None else plan.kernel.block_operations,
+        "mc_bound_step_operations": counted,
         "core_flop_rate_per_s": flop_rate,
         "core_flop_rate_method": flop_method,
         "mc_compile_s": compile_s,

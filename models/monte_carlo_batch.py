@@ -332,10 +332,16 @@ class MonteCarloPlan:
         xc0 = self._initial_states(params, None if noise is None or not n else noise[:, 0])
         x, xc, u, measured, diverged_at, y = out
         if self.kernel is not None:
-            arrays = {"x": x, "xc": xc, "y": y, "u": u, "measured": measured}
+            suspect = np.empty(c, dtype=np.uint8)
+            arrays = {"x": x, "xc": xc, "y": y, "u": u, "measured": measured, "suspect": suspect}
             self.kernel.run(
                 setup.x0, xc0, setup.r[:-1], noise, setup.d, params, controller.gain_vector(), arrays, self.threads
             )
+            # The kernel flags every sample that may have faulted; the others are not read again.
+            first = np.full(c, -1)
+            rows = np.flatnonzero(suspect)
+            if rows.size:
+                first[rows] = first_faults(x[rows], u[rows], xc[rows])
         else:
             call = _batch_run(plant, controller, n, setup.substeps, self.jit, c, self.threads, setup.noisy)
             noise_arg = noise.reshape(c * n, nm).T if noise is not None else np.zeros((nm, n))
@@ -346,7 +352,7 @@ class MonteCarloPlan:
             xc[:, 0], xc[:, 1:] = xc0, XC.T.reshape(c, n, nc)
             u[:] = U.T.reshape(c, n, plant.nu)
             measured[:] = M.T.reshape(c, n, nm)
-        first = first_faults(x, u, xc)
+            first = first_faults(x, u, xc)
         diverged_at[:] = np.where(first >= 0, setup.t[np.maximum(first, 0)], np.nan)
 
     def _initial_states(self, params: np.ndarray, first_noise: np.ndarray | None) -> np.ndarray:
