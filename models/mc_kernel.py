@@ -557,14 +557,12 @@ def _kernel_parts(plant: Plant, controller: Block, substeps: int, name: str) -> 
             ("nz{q}@[j] = 0.;", nm, 0),
             ("u{q}@[j] = 0.;", nu, 0),
         ),
-        "store_states": each(
-            ("X[at * NX + {q}] = s{q}@[j];", nx, 0),
-            ("XC[at * NC + {q}] = s{i}@[j];", nc, nx),
-            ("Y[at * NY + {q}] = y{q}@[j];", ny, 0),
-        ),
+        "store_states": each(("X[at * NX + {q}] = s{q}@[j];", nx, 0), ("XC[at * NC + {q}] = s{i}@[j];", nc, nx))
+        + (" if (Y) { " + each(("Y[at * NY + {q}] = y{q}@[j];", ny, 0)) + " }" if ny else ""),
         "noise": each(("nz{q}@[j] = e[{q}];", nm, 0)),
         "measure": each((f"ms{{q}}@ = {measured}{{q}}@ + nz{{q}}@;", nm, 0)),
-        "store_inputs": each(("U[at * NU + {q}] = u{q}@[j];", nu, 0), ("MEAS[at * NM + {q}] = ms{q}@[j];", nm, 0)),
+        "store_inputs": each(("U[at * NU + {q}] = u{q}@[j];", nu, 0))
+        + (" if (MEAS) { " + each(("MEAS[at * NM + {q}] = ms{q}@[j];", nm, 0)) + " }" if nm else ""),
         "advance": each(("s{q}@ = sn{q}@;", nx + nc, 0)),
         "check": "(" + " + ".join(check) + ")",
         "suspect": "",
@@ -678,7 +676,8 @@ class MonteCarloKernel:
         x0 : (nx,);  xc0 : (m, nc);  R : (n, nr);  noise : (m, n, nm) or None;  D : (n, nu);  P : (m, n_params)
         G : the controller's gain vector
         out : arrays "x" (m, n+1, nx), "xc" (m, n+1, nc), "y" (m, n+1, ny), "u" (m, n, nu), "measured"
-            (m, n, nm), C-contiguous float64, written in place; and, if given, "suspect" (m,) uint8: 0
+            (m, n, nm), C-contiguous float64, written in place ("y" and "measured" may be None: not
+            written, as where the caller reads them off "x"); and, if given, "suspect" (m,) uint8: 0
             for a sample that did not fault (no x_k non-finite or beyond `DIVERGENCE_BOUND`, no u_k or
             xc_k non-finite), 1 for one that may have (`models.closed_loop.first_faults` says when)
         """
@@ -691,11 +690,11 @@ class MonteCarloKernel:
         noise_ = None if noise is None else np.ascontiguousarray(noise, dtype=float)
         outs = [out[name] for name in ("x", "xc", "y", "u", "measured")]
         for arr in outs:
-            if not (arr.flags.c_contiguous and arr.dtype == np.float64):
+            if arr is not None and not (arr.flags.c_contiguous and arr.dtype == np.float64):
                 raise ValueError("the kernel writes C-contiguous float64 arrays")
 
         def pointer(arr):
-            return _pointer(arr if arr.size else spare)
+            return None if arr is None else _pointer(arr if arr.size else spare)
 
         suspect = out.get("suspect")
         if suspect is not None and not (suspect.flags.c_contiguous and suspect.dtype == np.uint8):

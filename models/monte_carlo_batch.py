@@ -303,16 +303,29 @@ class MonteCarloPlan:
     def allocate(self, m: int) -> tuple:
         """Uninitialized result arrays of m samples: x (m, N+1, nx), xc (m, N+1, n_state), u (m, N, nu),
         measured (m, N, n_measured), diverged_at (m,), and y (m, N+1, ny) when the kernel computes the
-        outputs (else None: the result computes them on first use)."""
+        outputs (else None: the result computes them on first use). With the kernel, y and measured are
+        None where they repeat x (`read_off_states`): the result reads them off x."""
         n, nm = self.setup.n_steps, self.setup.n_measured
+        y_off, measured_off = self.read_off_states()
         return (
             np.empty((m, n + 1, self.plant.nx)),
             np.empty((m, n + 1, self.controller.n_state)),
             np.empty((m, n, self.plant.nu)),
-            np.empty((m, n, nm)),
+            None if measured_off else np.empty((m, n, nm)),
             np.empty(m),
-            None if self.kernel is None else np.empty((m, n + 1, self.plant.ny)),
+            None if self.kernel is None or y_off else np.empty((m, n + 1, self.plant.ny)),
         )
+
+    def read_off_states(self) -> tuple[bool, bool]:
+        """(y, measured): whether the kernel's results hold them as views of x instead of copies: the
+        outputs where they are consecutive states (`output_states`), the measurement where it is the state
+        or those outputs without noise. Writing them costs the kernel more than its arithmetic at 2,000
+        steps a sample (docs/performance.md)."""
+        if self.kernel is None:
+            return False, False
+        y_off = output_states(self.plant) is not None
+        by_state = self.controller.measures == "state" or y_off
+        return y_off, by_state and not self.setup.noisy
 
     def run_chunk(self, start: int, stop: int, out: tuple) -> None:
         """Run samples start..stop-1 into `out`, arrays as `allocate` gives for stop - start samples.
@@ -377,6 +390,11 @@ class MonteCarloPlan:
         """The samples start..stop-1 of the plan, whose arrays `out` holds, as a `MonteCarloResult`
         (its first sample first_sample + start of the whole sample set)."""
         x, xc, u, measured, diverged_at, y = out
+        states = output_states(self.plant)
+        if y is None and self.kernel is not None and states is not None:
+            y = x[:, :, states]
+        if measured is None:
+            measured = (x if self.controller.measures == "state" else y)[:, :-1, :]
         return MonteCarloResult(
             plant=self.plant,
             controller=self.controller.name,
@@ -392,6 +410,23 @@ class MonteCarloPlan:
             first_sample=self.first_sample + start,
             y=y,
         )
+
+
+def output_states(plant: Plant) -> slice | None:
+    """The states the outputs are, when y = h(x) is x[k], x[k+1], ... for every parameter: that slice of
+    x, else None. Found from h's expression, cached on the plant."""
+    key = ("output_states",)
+    cache = plant.function_cache
+    if key not in cache:
+        x, p = ca.SX.sym("x", plant.nx), ca.SX.sym("p", plant.n_params)
+        h = ca.densify(plant.casadi_h(x, p))
+        places = []
+        for i in range(h.numel()):
+            matches = [k for k in range(plant.nx) if ca.is_equal(h[i], x[k])]
+            places.append(matches[0] if matches else None)
+        consecutive = places and None not in places and places == list(range(places[0], places[0] + len(places)))
+        cache[key] = slice(places[0], places[0] + len(places)) if consecutive else None
+    return cache[key]
 
 
 def _require_block(controller) -> None:

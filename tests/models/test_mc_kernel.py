@@ -292,3 +292,23 @@ def test_a_single_run_with_jit_is_its_monte_carlo_sample_bit_for_bit():
         )
         for name in FIELDS:
             np.testing.assert_array_equal(getattr(single, name), getattr(batch, name)[i], err_msg=name)
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-3])
+def test_outputs_and_measurements_that_repeat_the_state_are_read_off_it(noise):
+    """The pendulum's outputs are its first two states: with the kernel, y is a view of x, and without
+    noise so is what the block measured; their values are CasADi's run's (a separate computation of
+    h(x) and of the measurement), and with noise the measurement is its own array."""
+    pend = models.get("pendulum")
+    assert models.monte_carlo_batch.output_states(pend) == slice(0, 2)
+    assert models.monte_carlo_batch.output_states(models.get("satellite")) is None  # phi - theta is no state
+    block = PendulumPI()
+    _require_kernel(pend, block)
+    samples = models.sample_params(pend, 3, rel=0.05, seed=2)
+    args = dict(noise_std=noise, seed=21, substeps=2)
+    fast = models.monte_carlo(pend, block, 0.3, 1.0, samples, jit=True, **args)
+    vm = models.monte_carlo(pend, block, 0.3, 1.0, samples, jit=False, **args)
+    assert np.shares_memory(fast.y, fast.x)
+    assert np.shares_memory(fast.measured, fast.x) == (noise == 0.0)
+    np.testing.assert_allclose(fast.y, vm.y, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(fast.measured, vm.measured, atol=1e-9, rtol=0)
