@@ -11,7 +11,9 @@ import sys
 from example_providers import PythonStateFeedback, controllers
 
 import models
+from models.exported_loop import ExportedLoop
 from mpc.controller import NonlinearMPC
+from mpc.export_nmpc import ExportedNMPC
 
 
 class SolverAlwaysFails(PythonStateFeedback):
@@ -77,7 +79,8 @@ def hostile_labels(case, known: models.Plant | None = None) -> dict:
 
 def announce_nonlinear_mpc(case, known: models.Plant | None = None) -> dict:
     """No controller: makes every nonlinear MPC print 'NMPC RUN STARTED' on stderr as each of its runs
-    starts, so a test can interrupt the command while the case's own nonlinear MPC is solving."""
+    starts, in Python or by its exported C (`models.exported_loop`), so a test can interrupt the command
+    while the case's own nonlinear MPC is solving."""
     start = NonlinearMPC.initial_state
     if not getattr(start, "announces", False):
 
@@ -88,6 +91,16 @@ def announce_nonlinear_mpc(case, known: models.Plant | None = None) -> dict:
 
         initial_state.announces = True
         NonlinearMPC.initial_state = initial_state
+    run = ExportedLoop.run
+    if not getattr(run, "announces", False):
+
+        def exported_run(self, *args, **kwargs):
+            if isinstance(self.exported, ExportedNMPC):
+                print("NMPC RUN STARTED", file=sys.stderr, flush=True)
+            return run(self, *args, **kwargs)
+
+        exported_run.announces = True
+        ExportedLoop.run = exported_run
     return {}
 
 
