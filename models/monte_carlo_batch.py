@@ -420,11 +420,14 @@ def output_states(plant: Plant) -> slice | None:
     if key not in cache:
         x, p = ca.SX.sym("x", plant.nx), ca.SX.sym("p", plant.n_params)
         h = ca.densify(plant.casadi_h(x, p))
-        places = []
+        places: list[int] = []
         for i in range(h.numel()):
             matches = [k for k in range(plant.nx) if ca.is_equal(h[i], x[k])]
-            places.append(matches[0] if matches else None)
-        consecutive = places and None not in places and places == list(range(places[0], places[0] + len(places)))
+            if not matches:
+                break
+            places.append(matches[0])
+        whole = len(places) == h.numel() > 0
+        consecutive = whole and places == list(range(places[0], places[0] + len(places)))
         cache[key] = slice(places[0], places[0] + len(places)) if consecutive else None
     return cache[key]
 
