@@ -154,7 +154,10 @@ def tracking_terminal_set(
         ]
     )
     bounds = np.concatenate([g, u_bound, lam * g, lam * u_bound])
-    keep = np.linalg.norm(rows, axis=1) > 0  # a steady state's zero rows (velocities) bound nothing
+    # A steady state's velocity rows are zero but for round-off (1e-16): drop them, as a unit-scaled row
+    # with a bound of 1e15 would swamp the LPs' scaling of the others.
+    lengths = np.linalg.norm(rows, axis=1)
+    keep = lengths > 1e-12 * np.max(lengths)
     try:
         return maximal_invariant_set(closed, Polytope(rows[keep], bounds[keep]), iterations)
     except ValueError as error:  # EmptySetError or the iteration cap, said of Ω_t
