@@ -136,7 +136,8 @@ class ConstructionRefused(ValueError):
 @dataclasses.dataclass(frozen=True)
 class Refused:
     """The stand-in of a controller whose construction was refused: a `models.Controller` that raises
-    `ConstructionRefused` with `reason` at its first sample, so that each of its rows fails saying why.
+    `ConstructionRefused` with `reason` at its first sample, so that each of its rows fails saying why
+    (the status keeps the message's first 200 characters; `remark` carries all of it).
 
     Attributes
     ----------
@@ -149,6 +150,11 @@ class Refused:
     sample_period: float
     measures: str = "state"
     n_reference: int = 1
+
+    @property
+    def remark(self) -> str:
+        """What every row of it says first (the runner's ``controller.remark``): the whole refusal."""
+        return f"refused at construction: {self.reason}"
 
     def refusal(self) -> ConstructionRefused:
         """The error its rows fail with."""
@@ -201,7 +207,8 @@ def region(case: CaseStudy, plant: models.Plant, known: models.Plant) -> tuple[n
 
 def tube_constraints(case: CaseStudy, plant: models.Plant, known: models.Plant) -> tuple[Polytope, list]:
     """X in deviations from the known operating point: `region`'s box, then two rows per limit on a
-    difference of states; and the rows' names ("theta upper (excursion)")."""
+    difference of states; and the rows' names ("theta upper (excursion)"), which say where a row's
+    bound comes from and, for a difference, its unit-length scaling (a refusal gives bounds as X has them)."""
     xe, _ = known.equilibrium()
     lower, upper, source = region(case, plant, known)
     n = plant.nx
@@ -216,7 +223,8 @@ def tube_constraints(case: CaseStudy, plant: models.Plant, known: models.Plant) 
         row[plant.state_names.index(limit.relative_to)] = -1.0
         rows += [row[None, :], -row[None, :]]
         bounds += [[limit.upper - row @ xe], [row @ xe - limit.lower]]
-        names += [f"{limit.name} upper (limit)", f"{limit.name} lower (limit)"]
+        unit = f"limit, as ({limit.state} - {limit.relative_to})/√2"  # X's rows are unit length
+        names += [f"{limit.name} upper ({unit})", f"{limit.name} lower ({unit})"]
     return Polytope(np.vstack(rows), np.concatenate(bounds)), names
 
 

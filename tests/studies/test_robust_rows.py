@@ -92,7 +92,7 @@ def test_a_deflection_limit_is_two_rows_of_the_tube_constraints():
     case, plant = studies.get("satellite"), models.get("satellite")
     X, names = robust_rows.tube_constraints(case, plant, case.known_plant())
     theta, phi = plant.state_names.index("theta"), plant.state_names.index("phi")
-    row = names.index("panel deflection upper (limit)")
+    row = names.index("panel deflection upper (limit, as (phi - theta)/√2)")
     expected = np.zeros(plant.nx)
     expected[[phi, theta]] = [1.0, -1.0]
     np.testing.assert_allclose(X.H[row] * np.sqrt(2), expected, atol=1e-15)  # Polytope rows are unit length
@@ -147,6 +147,7 @@ def test_a_refused_tube_is_a_row_that_says_why():
         robust_rows.ConstructionRefused, match=r"tube MPC: the error set is larger.*'input 0 upper' lacks"
     ):
         refused.initial_state(np.zeros(4), [0.0])
+    assert refused.remark == f"refused at construction: {refused.reason}" and "lacks at least" in refused.reason
     result = studies.run_study(case, scenarios=("step", "mc"), mc=2, providers=[robust_rows.tube])
     rows = result.table[result.table.controller == robust_rows.TUBE_LABEL]
     assert list(rows.scenario) == ["step", "mc"]
