@@ -10,7 +10,7 @@ estimate. The first state comes from the first measurement as in Python
 
 A `mpc.TubeMPC` goes through the same function and the same C around its QP
 (DAQP's setup and warm-started solve): its condensed QP (`TubeMPC.qp`, whose
-parameters are the nominal state z_0), the ancillary law u = ue + v_0 +
+parameters are the nominal state z_0 and, tracking, the reference), the ancillary law u = ue + v_0 +
 K (x − xe − z) and the nominal update z⁺ = A z + B v_0 replace the estimator,
 the target and the fallback; a failed solve returns its status with a NaN
 command, where the Python step raises.
@@ -236,8 +236,9 @@ def controller_data(controller: LinearMPC, qp: CondensedQP) -> str:
 def export_linear_mpc(controller: LinearMPC | TubeMPC, name: str) -> ExportedMPC:
     """A `LinearMPC` or a `TubeMPC` as C with the same commands (see the module docstring).
 
-    A TubeMPC's C holds its condensed QP (`TubeMPC.qp`, parameters p = z_0), the ancillary law
-    u = ue + v_0 + K (x − xe − z) and the nominal update z⁺ = A z + B v_0 (z = x − xe with `replan`);
+    A TubeMPC's C holds its condensed QP (`TubeMPC.qp`, parameters p = z_0, or (z_0, r − H xe) when
+    it tracks, with θ among its decisions), the ancillary law u = ue + v_0 + K (x − xe − z) and the
+    nominal update z⁺ = A z + B v_0 (z = x − xe with `replan`);
     ``name_init`` starts z at the first state and refuses it (status 3) where the tightened problem
     is infeasible. Where the Python step raises (a failed solve), the C step returns the status with
     a NaN command and the state unchanged: no fallback.
@@ -288,8 +289,12 @@ def _export_tube(controller: TubeMPC, name: str) -> ExportedMPC:
     qp, tube = controller.qp, controller.tube
     nx, nu = controller.n_state, controller.tube.feedback.shape[0]
     X_bar = tube.state_constraints
-    sizes = dict(NX=nx, NU=nu, NG=len(X_bar.h), NSTATE=nx)
-    defines = {"REPLAN": int(controller.replan), "FEASIBILITY_TOLERANCE": c_number(FEASIBILITY_TOLERANCE)}
+    sizes = dict(NX=nx, NU=nu, NG=len(X_bar.h), NR=controller.n_reference, NSTATE=nx)
+    defines = {
+        "REPLAN": int(controller.replan),
+        "TRACKING": int(controller.tracking),
+        "FEASIBILITY_TOLERANCE": c_number(FEASIBILITY_TOLERANCE),
+    }
     data = "".join(
         [
             c_array("A_NOMINAL", controller.model.A),
@@ -299,21 +304,30 @@ def _export_tube(controller: TubeMPC, name: str) -> ExportedMPC:
             c_array("UE", controller.model.ue),
             c_array("G_TIGHT", X_bar.H),
             c_array("G_TIGHT_BOUND", X_bar.h),
+            c_array("REFERENCE_OFFSET", controller.reference_offset if controller.tracking else [0.0]),
             c_array("SCALE", qp.scale),
         ]
+    )
+    reference = (
+        "the absolute tracked coordinates (${P}_N_REFERENCE)"
+        if controller.tracking
+        else "not used: the tube regulates to its operating point"
     )
     text = dict(
         kind="tube MPC",
         signals=f"{nx} measured states",
         state="z - xe, the nominal state's deviation (the plan starts there)",
         init=_TUBE_INIT_DOC,
-        step="the measured state x (${P}_N_MEASURED), reference r (not used: the tube regulates to its "
-        "operating point) -> command u = ue + v_0 + K (x - xe - z) (${P}_N_INPUT)",
-        parameters="p = z_0 - xe",
+        step=f"the measured state x (${{P}}_N_MEASURED), reference r ({reference}) "
+        "-> command u = ue + v_0 + K (x - xe - z) (${P}_N_INPUT)",
+        parameters="p = (z_0 - xe, r - H xe)" if controller.tracking else "p = z_0 - xe",
         fallback="Any status but ${P}_OPTIMAL comes with a NaN command and the state unchanged (no fallback).",
     )
     kernels = _TUBE_KERNELS.substitute(p=name)
-    return _exported(controller, name, qp, sizes, defines, data, kernels, text, dict(w=1, iw=1), n_reference=1)
+    work = dict(w=1, iw=1)
+    return _exported(
+        controller, name, qp, sizes, defines, data, kernels, text, work, n_reference=controller.n_reference
+    )
 
 
 #: The tube's C init accepts a first state whose tightened rows G z_0 <= g exceed their bound by at most this.
@@ -395,9 +409,9 @@ def _header_statuses(upper: str) -> str:
 
 _LINEAR_INIT_DOC = """The first state from the first measurement y0 (${P}_N_MEASURED) and reference r0: at rest at the
  * measured configuration, no disturbance, the holding input as plan"""
-_TUBE_INIT_DOC = """The first state z_0 = y0 - xe from the first measured state y0 (${P}_N_MEASURED; r0 not used),
- * refused with ${P}_QP_INFEASIBLE where the tightened problem is infeasible there (a row of X - Z at z_0
- * beyond its bound, or the QP)"""
+_TUBE_INIT_DOC = """The first state z_0 = y0 - xe from the first measured state y0 (${P}_N_MEASURED) and reference
+ * r0 (tracking; feasibility does not depend on it), refused with ${P}_QP_INFEASIBLE where the tightened
+ * problem is infeasible there (a row of X - Z at z_0 beyond its bound, or the QP)"""
 
 _HEADER = string.Template("""/* ${p}.h: ${kind} '${controller}' exported by codesign-control (mpc.export).
  * ${signals}, ${nu} input(s); horizon ${N}, ${nz} QP decisions.
@@ -591,10 +605,19 @@ unsigned long ${p}_state_size(void) { return (unsigned long) sizeof(${p}_state);
 #: The tube MPC's init and step: z from the state (or the measurement with REPLAN), the plan's first
 #: move v_0, the ancillary law and the nominal update.
 _TUBE_KERNELS = string.Template("""
+/* p = (z, r - H xe) tracking, z regulating; 0, or 7 for a non-finite reference. */
+static int parameters(const double *z, const double *r, double *p) {
+    int i;
+    for (i = 0; i < NX; ++i) p[i] = z[i];
+    if (!TRACKING) return 0;
+    if (!all_finite(r, NR)) return 7;
+    for (i = 0; i < NR; ++i) p[NX + i] = r[i] - REFERENCE_OFFSET[i];
+    return 0;
+}
+
 int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
-    double row;
+    double row, p[NP];
     int i, j, status;
-    (void) r0;
     if (!all_finite(y0, NX)) return 1;
     for (i = 0; i < NX; ++i) m->xc[i] = y0[i] - XE[i];
     m->iterations = 0;
@@ -604,20 +627,19 @@ int ${p}_init(${p}_state *m, const double *y0, const double *r0) {
         for (j = 0; j < NX; ++j) row += G_TIGHT[i * NX + j] * m->xc[j];
         if (row > G_TIGHT_BOUND[i] + FEASIBILITY_TOLERANCE) return 3;
     }
-    if ((status = setup(m)) || (status = solve(m, m->xc))) return status;
+    if ((status = parameters(m->xc, r0, p)) || (status = setup(m)) || (status = solve(m, p))) return status;
     return setup(m);  /* the first step starts DAQP afresh, as the Python path does */
 }
 
 int ${p}_step(${p}_state *m, const double *y, const double *r, double *u) {
-    double z[NX], v[NU], sum;
+    double z[NX], v[NU], p[NP], sum;
     int i, j, status = 0;
-    (void) r;
     for (i = 0; i < NX; ++i) z[i] = REPLAN ? y[i] - XE[i] : m->xc[i];
     if (!all_finite(y, NX)) {
         status = 1;
     } else if (!all_finite(z, NX)) {
         status = 2;
-    } else if (!(status = solve(m, z))) {
+    } else if (!(status = parameters(z, r, p)) && !(status = solve(m, p))) {
         for (i = 0; i < NU; ++i) v[i] = m->z[i] * SCALE[i];
         if (!all_finite(v, NU)) status = 6;
     }

@@ -39,6 +39,7 @@ from .sets import HIGHS_OPTIONS, ConvexSet, EmptySetError, Polytope, Zonotope, a
 scipy = deferred.module("scipy")
 
 __all__ = [
+    "vertex_models",
     "input_disturbance_set",
     "parametric_error_set",
     "disturbance_set",
@@ -68,6 +69,31 @@ def input_disturbance_set(B, bound) -> Zonotope:
     if np.any(bound < 0):
         raise ValueError(f"the input disturbance bound must be >= 0, got {bound}")
     return Zonotope(np.zeros(B.shape[0]), B * bound)
+
+
+def vertex_models(plant, parameters, state, input, sample_period: float) -> tuple[list, list]:
+    """The discrete affine models x⁺ = x_e + A_i (x − x_e) + B_i (u − u_e) + a_i of `plant` with each row of
+    `parameters` (S, n_params), linearized at one point (state, input) and held over `sample_period` (ZOH).
+
+    a_i = ∫₀^Ts e^{A_i s} ds f_i(x_e, u_e) is what model i drifts in a sample from (x_e, u_e), not its
+    equilibrium (the arm's gravity, the ball's weight): the `offsets` of `parametric_error_set`.
+
+    Returns
+    -------
+    (models, offsets) : [(A_i (nx, nx), B_i (nx, nu))], [a_i (nx,)], one each per row of `parameters`
+    """
+    Ts = positive(sample_period, "sample_period (s)")
+    n, m = plant.nx, plant.nu
+    models, offsets = [], []
+    for row in np.atleast_2d(parameters):
+        continuous = plant.linearize(state, input, params=row, check=False)
+        block = np.zeros((n + m + 1, n + m + 1))
+        block[:n, :n], block[:n, n : n + m] = continuous.A, continuous.B
+        block[:n, -1] = np.asarray(plant.f(state, input, plant.param_vector(row)), dtype=float).ravel()
+        held = scipy.linalg.expm(block * Ts)
+        models.append((held[:n, :n], held[:n, n : n + m]))
+        offsets.append(held[:n, -1])
+    return models, offsets
 
 
 def parametric_error_set(A, B, vertex_models, state_lower, state_upper, input_lower, input_upper, offsets=None):
@@ -464,22 +490,31 @@ def check_minimal_margins(approximation: InvariantApproximation, rows, bounds, l
     Raises
     ------
     ValueError
-        Naming every such row: its name, its bound, the least margin it needs and at least how much it lacks.
+        Naming every such row, the largest lack relative to its bound first: its name, at least how much
+        it lacks, its bound and the least margin it needs.
     """
     needed = (1 - approximation.alpha) * approximation.support(rows)
     bounds = np.asarray(bounds, dtype=float)
-    bad = [int(i) for i in np.flatnonzero(needed >= bounds)]
+    bad = lacking_rows(needed, bounds)
     if bad:
         parts = [
-            f"{labels[i]} (bound {bounds[i]:.6g}) needs a margin of at least {needed[i]:.6g} (the minimal "
-            f"RPI set's support in its direction) and lacks at least {needed[i] - bounds[i]:.3g}"
+            f"{labels[i]} lacks at least {needed[i] - bounds[i]:.3g} (bound {bounds[i]:.6g}, needs a margin of at "
+            f"least {needed[i]:.6g})"
             for i in bad
         ]
         raise ValueError(
             "the error set is larger than the constraints can hold, for every RPI set of this K and W: "
             + "; ".join(parts)
-            + ". Loosen the constraint, shrink W (the parametric region or the disturbance) or change K"
+            + " (a margin at least the minimal RPI set's support in the row's direction). Loosen the "
+            "constraint, shrink W (the parametric region or the disturbance) or change K"
         )
+
+
+def lacking_rows(margins: np.ndarray, bounds: np.ndarray) -> list[int]:
+    """The rows whose margin is not below their bound, the largest lack relative to its bound first."""
+    bad = np.flatnonzero(margins >= bounds)
+    relative = (margins[bad] - bounds[bad]) / np.maximum(np.abs(bounds[bad]), 1e-300)
+    return [int(i) for i in bad[np.argsort(-relative, kind="stable")]]
 
 
 def tighten(rows, bounds, error_set: ConvexSet, names: Sequence[str], what: str = "constraint"):
@@ -496,15 +531,17 @@ def tighten(rows, bounds, error_set: ConvexSet, names: Sequence[str], what: str 
     ------
     ValueError
         Naming every row whose tightened bound is ≤ 0 (the operating point is then not strictly
-        inside it): its name, its bound, the margin h_S it needs and how much it lacks.
+        inside it), the largest lack relative to its bound first: its name, how much it lacks, its
+        bound and the margin h_S it needs.
     """
     margins = error_set.support(rows)
-    tightened = np.asarray(bounds, dtype=float) - margins
-    bad = [int(i) for i in np.flatnonzero(tightened <= 0)]
+    bounds = np.asarray(bounds, dtype=float)
+    tightened = bounds - margins
+    bad = lacking_rows(margins, bounds)
     if bad:
         parts = [
-            f"{what} {names[i]!r} (bound {bounds[i]:.6g}) needs a margin of {margins[i]:.6g} for the error set "
-            f"and lacks {margins[i] - bounds[i]:.3g}"
+            f"{what} {names[i]!r} lacks {margins[i] - bounds[i]:.3g} (bound {bounds[i]:.6g}, needs a margin of "
+            f"{margins[i]:.6g} for the error set)"
             for i in bad
         ]
         raise ValueError(
@@ -679,8 +716,7 @@ def build_tube(
         raise ValueError(f"need {len(state_constraints.h)} state_constraint_names, got {len(names)}")
     approximation = minimal_rpi_approximation(A + B @ K, disturbance, options.relative_epsilon, options.max_terms)
     input_rows, input_bounds = np.vstack([K, -K]), np.concatenate([upper, -lower])
-    input_names = [f"input {j} upper, u_{j} <= bound" for j in range(m)]
-    input_names += [f"input {j} lower, -u_{j} <= bound" for j in range(m)]
+    input_names = [f"input {j} upper" for j in range(m)] + [f"input {j} lower" for j in range(m)]
     check_minimal_margins(
         approximation,
         np.vstack([state_constraints.H, input_rows]),

@@ -2,7 +2,8 @@
 
 Each receives the `studies.CaseStudy` it designs for (registered or not) and reads its record:
 `classical` and `classical_answers` its ``classical`` design, `statespace` and `statespace_answers`
-its ``statespace`` choices, `mpc` its ``mpc`` settings, `tuned` its stored tuned gains
+its ``statespace`` choices, `mpc` its ``mpc`` settings (and, from the same settings, the robust rows
+of `studies.robust_rows`: the scenario-tree NMPC and the tube MPC), `tuned` its stored tuned gains
 (`studies.tuner`). A case without that design has nothing to provide: `NotProvided`, which the run
 notes. `STANDARD` and `STANDARD_ANSWERS` are the lists a case file gives as ``providers=`` and
 ``answer_providers=``. How providers are found and called is `studies.provider_calls`.
@@ -13,7 +14,7 @@ from __future__ import annotations
 import models
 from mpc import linear_mpc, nonlinear_mpc
 
-from . import cases, homework, tuned_rows, tuner
+from . import cases, homework, robust_rows, tuned_rows, tuner
 from .case import CaseStudy
 from .provider_calls import AnswerProvider, Provider
 from .provider_calls import NotProvided as NotProvided  # what these raise; callers catch it from here too
@@ -77,6 +78,14 @@ def statespace_answers(case: CaseStudy | str) -> dict:
 
 
 #: A case's own controllers, by kind: each provides nothing (`NotProvided`) for a case without that design.
-STANDARD: tuple[Provider, ...] = (classical, statespace, mpc, tuned, tuned_rows.tuned_weights)
+STANDARD: tuple[Provider, ...] = (
+    classical,
+    statespace,
+    mpc,
+    robust_rows.scenario_tree,
+    robust_rows.tube,
+    tuned,
+    tuned_rows.tuned_weights,
+)
 #: A case's own homework answers, by kind.
 STANDARD_ANSWERS: tuple[AnswerProvider, ...] = (classical_answers, statespace_answers)

@@ -135,6 +135,32 @@ def test_exported_tube_mpc_gives_the_python_commands_under_disturbances_in_w(dou
     assert not np.allclose(z_python, x)  # the error x − z is not zero: the ancillary law acts
 
 
+def test_exported_tracking_tube_mpc_gives_the_python_commands_across_reference_changes(double_integrator):
+    """Tracking the position through references within reach, beyond the limit and back, with w at
+    W's corners: the C's commands, nominal states and QP solutions (the plan and θ) are the Python
+    ones to 1e-9; a non-finite reference is refused with its status and a NaN command."""
+    model, tube = double_integrator
+    python = small_tube_mpc(double_integrator, tracked_rows=[[1.0, 0.0]], name="tracking tube")
+    compiled = export_linear_mpc(python, "tracking_tube").load()
+    assert compiled.n_reference == 1
+    rng, x = np.random.default_rng(4), np.array([0.1, 0.0])
+    corners = W_BOX.corners()
+    references = np.concatenate([np.full(40, 0.5), np.full(40, 3.0), np.full(40, -0.8)])
+    z_python, z_c = python.initial_state(x, references[:1]), compiled.initial_state(x, references[:1])
+    targets = []
+    for r in references:
+        z = z_python
+        (z_python, u_python), (z_c, u_c) = python.step(z, x, [r]), compiled.step(z_c, x, [r])
+        np.testing.assert_allclose(u_c, u_python, atol=1e-9, rtol=0)
+        np.testing.assert_allclose(z_c, z_python, atol=1e-9, rtol=0)
+        assert compiled.step_info()["code"] == 0
+        targets.append(python.step_info()["target"][0])
+        x = model.A @ x + model.B @ u_python + corners[rng.integers(len(corners))]
+    assert max(targets) < 1.0 < 3.0  # the far reference is held back to an admissible steady state
+    _, u = compiled.step(z_c, x, [np.nan])
+    assert np.isnan(u).all() and compiled.step_info()["code"] == 7 | 16
+
+
 def test_exported_init_refuses_where_the_tightened_problem_is_infeasible(double_integrator):
     """0.95 m out, moving outwards at 0.45 m/s: too close to the position limit to stop inside the
     tightened set; Python's feasibility LP refuses it, and so does the C's init."""
