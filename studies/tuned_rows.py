@@ -105,17 +105,19 @@ def tuning_runs(case: CaseStudy) -> list[tuple[str, np.ndarray | None]]:
     return nominal + [(name, row) for name in ROBUST if name in names for row in rows]
 
 
+def excess_of(violation) -> float:
+    """How far one `models.specs.Violation` misses, relative: its excess / bound, or the excess itself (in the
+    spec's unit) for a zero bound, a physical limit's "leaves ... by" or a drift. Positive for every
+    violation, a least value's (a margin below its minimum) included."""
+    return violation.excess / violation.bound if violation.bound > 0 else violation.excess
+
+
 def relative_excess(verdict) -> float:
-    """The largest relative excess (value − bound) / bound of a verdict's violations (0 when it meets its
-    specs, `DIVERGED_EXCESS` for a run that diverged, failed or oscillates without a listed violation)."""
+    """The largest relative excess (`excess_of`) of a verdict's violations (0 when it meets its specs,
+    `DIVERGED_EXCESS` for a run that diverged, failed or oscillates without a listed violation)."""
     if verdict.ok:
         return 0.0
-    excess = [
-        (v.value - v.bound) / v.bound if v.bound > 0 else v.value - v.bound
-        for v in verdict.violations
-        if not math.isnan(v.value)
-    ]
-    finite = [min(e, DIVERGED_EXCESS) for e in excess]
+    finite = [min(excess_of(v), DIVERGED_EXCESS) for v in verdict.violations if not math.isnan(v.value)]
     return max(finite) if finite else DIVERGED_EXCESS
 
 
@@ -123,8 +125,9 @@ def _worst(verdict, scenario: str, excess: float) -> dict:
     """The record of a run's worst violation: scenario, spec, value, bound, unit, relative excess."""
     if not verdict.violations:
         return {"scenario": scenario, "spec": verdict.label, "value": None, "bound": None, "unit": "", "excess": excess}
-    v = max(verdict.violations, key=lambda v: (v.value - v.bound) / v.bound if v.bound > 0 else v.value - v.bound)
-    return {"scenario": scenario, "spec": v.spec, "value": float(v.value), "bound": float(v.bound), "unit": v.unit}
+    v = max(verdict.violations, key=excess_of)
+    out = {"scenario": scenario, "spec": v.spec, "value": float(v.value), "bound": float(v.bound), "unit": v.unit}
+    return out | ({"minimum": True} if v.minimum else {})
 
 
 def tightened(case: CaseStudy, margin: float) -> CaseStudy:
@@ -227,8 +230,12 @@ def infeasible_text(worst: dict | None) -> str | None:
     if worst.get("value") is None:
         return f"infeasible for this structure: {worst['spec']}"
     unit = f" {worst['unit']}" if worst.get("unit") else ""
+    if worst["bound"] == 0:  # a physical limit's or a bound's excess: "leaves swing angle 1 by 0.012 rad"
+        value = f"{worst['value']:.3g}{unit}"
+        return f"infeasible for this structure: {worst['spec']} {value} at best ({worst['scenario']})"
+    side = "<" if worst.get("minimum") else ">"
     return (
-        f"infeasible for this structure: {worst['spec']} at best {worst['value']:.3g}{unit} > "
+        f"infeasible for this structure: {worst['spec']} at best {worst['value']:.3g}{unit} {side} "
         f"{worst['bound']:.3g}{unit} ({worst['scenario']})"
     )
 
