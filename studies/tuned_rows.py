@@ -37,6 +37,7 @@ import models.compile
 from designs import tuned_lqr, tuned_mpc
 from designs.statespace_blocks import TrackingModel
 from designs.weight_search import Evaluation, poll_search
+from models import specs
 from mpc import linear_mpc
 
 from . import cases, distributed, homework, judging, runner, tuner
@@ -337,6 +338,37 @@ def tuned_weights(case: CaseStudy | str, known: models.Plant | None = None) -> d
     return out
 
 
+def monte_carlo_check(case: CaseStudy, kind: str, theta, samples: int = 200, seed: int = 0) -> list:
+    """The judged runs (`studies.judging.Judgement`) of the `kind` row with log-weights θ on the table's
+    Monte Carlo, one per sample.
+
+    Its scenario (the step on parameters uniform within ±rel, `studies.case.parameter_monte_carlo`), `samples`
+    rows drawn as the table draws them (`models.sample_params`, `seed`), each run by the study's
+    `studies.runner.simulate_scenario` and judged by `studies.judging.judge_run` against the case's own
+    specs, its physical limits included: fresh points the search never judged (it ran the box's corners).
+    """
+    plant = models.get(case.plant)
+    scenario = next(s for s in case.scenarios if s.monte_carlo)
+    rows = models.sample_params(plant, samples, rel=scenario.rel, seed=seed)
+    judge, control = WeightObjective(case, kind, ()), controller(case, kind, theta)
+    return [judge.run(case, control, scenario.name, row) for row in rows]
+
+
+def check_stored(case: CaseStudy, kinds, samples: int, folder: Path | None = None) -> list[str]:
+    """One line per stored `kinds` row of `case` (in `folder`, default the installed records): how many of
+    `samples` Monte Carlo samples meet every spec (`monte_carlo_check`) and the worst one's verdict."""
+    record = tuner.stored(case, store_name(case), folder) or {}
+    out = []
+    for kind in kinds:
+        if kind not in record:
+            out.append(f"  {LABELS[kind]}: no record stored")
+            continue
+        verdicts = [j.verdict for j in monte_carlo_check(case, kind, np.asarray(record[kind]["log_weights"]), samples)]
+        met = sum(v.ok for v in verdicts)
+        out.append(f"  {LABELS[kind]}: meets every spec on {met} of {samples} samples; {specs.combine(verdicts)}")
+    return out
+
+
 def summary(record: dict) -> str:
     """One line of a record: status, evaluations, score and the verdict."""
     s = record["search"]
@@ -372,13 +404,31 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="folder (default: tuned/ in the user cache)")
     parser.add_argument("--install", action="store_true", help=f"write into {tuner.STORE_DIR} instead")
     parser.add_argument("--force", action="store_true", help="write also when a search did not converge")
+    parser.add_argument(
+        "--check",
+        type=int,
+        default=None,
+        metavar="N",
+        help="instead of tuning: judge the installed rows (or those in --out) on N Monte Carlo samples",
+    )
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in names]
     if unknown:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
-    if args.max_evaluations < 1 or (args.workers is not None and args.workers < 1):
-        parser.error("--max-evaluations and --workers must be >= 1")
+    if (
+        args.max_evaluations < 1
+        or (args.workers is not None and args.workers < 1)
+        or (args.check is not None and args.check < 1)
+    ):
+        parser.error("--max-evaluations, --workers and --check must be >= 1")
     folder = tuner.STORE_DIR if args.install else (args.out or models.compile.cache_directory() / "tuned")
+    if args.check is not None:
+        for name in args.plants:
+            case = cases.get(name)
+            print(f"{name}, {args.check} Monte Carlo samples:", flush=True)
+            kinds = [k for k in (args.kind or KINDS) if has_design(case, k)]
+            print("\n".join(check_stored(case, kinds, args.check, args.out)), flush=True)
+        return 0
     failed = []
     distributed_run = args.workers is not None or args.scheduler is not None
     with distributed.connect(args.scheduler, args.workers) as executor:

@@ -187,8 +187,25 @@ def test_an_infeasible_record_labels_its_row(monkeypatch):
     assert label == "tuned LQR (infeasible for this structure: overshoot at best 14 % > 10 % (steps))"
 
 
+def test_the_monte_carlo_check_is_the_tables_monte_carlo():
+    """The check's samples and runs are the study's own: the runner's Monte Carlo (the LQR's as a batched map,
+    the MPC's run by run) gives each sample the same metrics and verdict."""
+    if "arm" not in STORED:
+        pytest.skip("no weights stored for the arm")
+    case = cases.get("arm")
+    table = runner.run_study(
+        case, runner.Options(scenarios=("mc",), mc=4, seed=0), providers=(tuned_rows.tuned_weights,)
+    ).samples
+    for kind in tuned_rows.KINDS:
+        judged = tuned_rows.monte_carlo_check(case, kind, np.asarray(tuned_rows.stored(case, kind)["log_weights"]), 4)
+        rows = table[table.controller == tuned_rows.LABELS[kind]]
+        np.testing.assert_allclose([j.metrics["itae"] for j in judged], rows.itae, rtol=1e-6)
+        np.testing.assert_allclose([j.metrics["energy"] for j in judged], rows.energy, rtol=1e-6)
+        assert [j.verdict.label for j in judged] == list(rows.verdict)
+
+
 def test_the_console_refuses_bad_arguments_before_work(capsys):
-    for argv in (["nowhere"], ["arm", "--max-evaluations", "0"], ["arm", "--workers", "0"]):
+    for argv in (["nowhere"], ["arm", "--max-evaluations", "0"], ["arm", "--workers", "0"], ["arm", "--check", "0"]):
         with pytest.raises(SystemExit):
             tuned_rows.main(argv)
     assert ">= 1" in capsys.readouterr().err
