@@ -97,3 +97,15 @@ def test_early_rejection_keeps_the_path_with_a_sufficient_decrease():
     np.testing.assert_allclose(full.x, CENTER, atol=5e-3)
     with pytest.raises(ValueError, match="decrease"):
         poll_search(complete, np.zeros(3), decrease=-1.0)
+
+
+def test_a_poll_starts_with_the_direction_of_the_last_improvement():
+    """f = |x − 5 e₃|² from 0, steps of 1 down to 0.5. By hand: the start; the first poll finds +e₃ fifth;
+    with the direction that improved polled first, the next four steps cost one evaluation each; at 5 e₃ a
+    poll of all six fails at h = 1 and at h = 0.5, and h = 0.25 ends the search: 1 + 5 + 4 + 6 + 6 = 22."""
+    target = np.array([0.0, 0.0, 5.0])
+    found = poll_search(
+        lambda x, bound: Evaluation(float(np.sum((x - target) ** 2))), np.zeros(3), step=1.0, min_step=0.5
+    )
+    np.testing.assert_array_equal(found.x, target)
+    assert found.converged and found.evaluations == 22 and len(found.history) == 6
