@@ -37,6 +37,7 @@ import models.compile
 from designs import tuned_lqr, tuned_mpc
 from designs.statespace_blocks import TrackingModel
 from designs.weight_search import Evaluation, poll_search
+from models import specs
 from mpc import linear_mpc
 
 from . import cases, distributed, homework, judging, runner, tuner
@@ -57,6 +58,9 @@ NOMINAL = ("step", "steps", "disturbance", "noise")
 ROBUST = ("step",)
 MAX_CORNERS, N_SAMPLES, SAMPLES_SEED = 16, 8, 1
 MIN_STEP, MAX_EVALUATIONS = 0.05, 400
+#: The poll's sufficient decrease c: a point is taken when it lowers the score by more than c h² (h its poll
+#: step; `designs.weight_search`), 1.9e-3 at the first step, 2.5e-6 at the last (scores are near 1).
+DECREASE = 1e-3
 #: Each weight stays within this factor of the case's own (a weight that keeps shrinking matters less and
 #: less; the box ends the drift).
 WEIGHT_RANGE = 1e3
@@ -105,17 +109,19 @@ def tuning_runs(case: CaseStudy) -> list[tuple[str, np.ndarray | None]]:
     return nominal + [(name, row) for name in ROBUST if name in names for row in rows]
 
 
+def excess_of(violation) -> float:
+    """How far one `models.specs.Violation` misses, relative: its excess / bound, or the excess itself (in the
+    spec's unit) for a zero bound, a physical limit's "leaves ... by" or a drift. Positive for every
+    violation, a least value's (a margin below its minimum) included."""
+    return violation.excess / violation.bound if violation.bound > 0 else violation.excess
+
+
 def relative_excess(verdict) -> float:
-    """The largest relative excess (value − bound) / bound of a verdict's violations (0 when it meets its
-    specs, `DIVERGED_EXCESS` for a run that diverged, failed or oscillates without a listed violation)."""
+    """The largest relative excess (`excess_of`) of a verdict's violations (0 when it meets its specs,
+    `DIVERGED_EXCESS` for a run that diverged, failed or oscillates without a listed violation)."""
     if verdict.ok:
         return 0.0
-    excess = [
-        (v.value - v.bound) / v.bound if v.bound > 0 else v.value - v.bound
-        for v in verdict.violations
-        if not math.isnan(v.value)
-    ]
-    finite = [min(e, DIVERGED_EXCESS) for e in excess]
+    finite = [min(excess_of(v), DIVERGED_EXCESS) for v in verdict.violations if not math.isnan(v.value)]
     return max(finite) if finite else DIVERGED_EXCESS
 
 
@@ -123,8 +129,9 @@ def _worst(verdict, scenario: str, excess: float) -> dict:
     """The record of a run's worst violation: scenario, spec, value, bound, unit, relative excess."""
     if not verdict.violations:
         return {"scenario": scenario, "spec": verdict.label, "value": None, "bound": None, "unit": "", "excess": excess}
-    v = max(verdict.violations, key=lambda v: (v.value - v.bound) / v.bound if v.bound > 0 else v.value - v.bound)
-    return {"scenario": scenario, "spec": v.spec, "value": float(v.value), "bound": float(v.bound), "unit": v.unit}
+    v = max(verdict.violations, key=excess_of)
+    out = {"scenario": scenario, "spec": v.spec, "value": float(v.value), "bound": float(v.bound), "unit": v.unit}
+    return out | ({"minimum": True} if v.minimum else {})
 
 
 def tightened(case: CaseStudy, margin: float) -> CaseStudy:
@@ -227,15 +234,22 @@ def infeasible_text(worst: dict | None) -> str | None:
     if worst.get("value") is None:
         return f"infeasible for this structure: {worst['spec']}"
     unit = f" {worst['unit']}" if worst.get("unit") else ""
+    if worst["bound"] == 0:  # a physical limit's or a bound's excess: "leaves swing angle 1 by 0.012 rad"
+        value = f"{worst['value']:.3g}{unit}"
+        return f"infeasible for this structure: {worst['spec']} {value} at best ({worst['scenario']})"
+    side = "<" if worst.get("minimum") else ">"
     return (
-        f"infeasible for this structure: {worst['spec']} at best {worst['value']:.3g}{unit} > "
+        f"infeasible for this structure: {worst['spec']} at best {worst['value']:.3g}{unit} {side} "
         f"{worst['bound']:.3g}{unit} ({worst['scenario']})"
     )
 
 
-def search(f: WeightObjective, theta0, max_evaluations: int = MAX_EVALUATIONS, mapper=None, progress=None):
+def search(
+    f: WeightObjective, theta0, max_evaluations: int = MAX_EVALUATIONS, mapper=None, progress=None, decrease=DECREASE
+):
     """`designs.weight_search.poll_search` of `f` from θ0 as the rows run it: poll steps down to `MIN_STEP`,
-    every weight within `WEIGHT_RANGE` of θ0's. Returns its `SearchResult`."""
+    every weight within `WEIGHT_RANGE` of θ0's, a point taken on a decrease of more than `decrease` h².
+    Returns its `SearchResult`."""
     box = math.log(WEIGHT_RANGE)
     return poll_search(
         f,
@@ -245,6 +259,7 @@ def search(f: WeightObjective, theta0, max_evaluations: int = MAX_EVALUATIONS, m
         mapper=mapper,
         progress=progress,
         bounds=(np.asarray(theta0) - box, np.asarray(theta0) + box),
+        decrease=decrease,
     )
 
 
@@ -287,6 +302,7 @@ def tune(case: CaseStudy, kind: str, executor=None, max_evaluations: int = MAX_E
             "runs": found.runs,
             "final_step": found.step,
             "min_step": MIN_STEP,
+            "decrease": DECREASE,
             "weight_range": WEIGHT_RANGE,
             "improvements": len(found.history) - 1,
             "start_value": found.history[0][2],
@@ -330,6 +346,37 @@ def tuned_weights(case: CaseStudy | str, known: models.Plant | None = None) -> d
     return out
 
 
+def monte_carlo_check(case: CaseStudy, kind: str, theta, samples: int = 200, seed: int = 0) -> list:
+    """The judged runs (`studies.judging.Judgement`) of the `kind` row with log-weights θ on the table's
+    Monte Carlo, one per sample.
+
+    Its scenario (the step on parameters uniform within ±rel, `studies.case.parameter_monte_carlo`), `samples`
+    rows drawn as the table draws them (`models.sample_params`, `seed`), each run by the study's
+    `studies.runner.simulate_scenario` and judged by `studies.judging.judge_run` against the case's own
+    specs, its physical limits included: fresh points the search never judged (it ran the box's corners).
+    """
+    plant = models.get(case.plant)
+    scenario = next(s for s in case.scenarios if s.monte_carlo)
+    rows = models.sample_params(plant, samples, rel=scenario.rel, seed=seed)
+    judge, control = WeightObjective(case, kind, ()), controller(case, kind, theta)
+    return [judge.run(case, control, scenario.name, row) for row in rows]
+
+
+def check_stored(case: CaseStudy, kinds, samples: int, folder: Path | None = None) -> list[str]:
+    """One line per stored `kinds` row of `case` (in `folder`, default the installed records): how many of
+    `samples` Monte Carlo samples meet every spec (`monte_carlo_check`) and the worst one's verdict."""
+    record = tuner.stored(case, store_name(case), folder) or {}
+    out = []
+    for kind in kinds:
+        if kind not in record:
+            out.append(f"  {LABELS[kind]}: no record stored")
+            continue
+        verdicts = [j.verdict for j in monte_carlo_check(case, kind, np.asarray(record[kind]["log_weights"]), samples)]
+        met = sum(v.ok for v in verdicts)
+        out.append(f"  {LABELS[kind]}: meets every spec on {met} of {samples} samples; {specs.combine(verdicts)}")
+    return out
+
+
 def summary(record: dict) -> str:
     """One line of a record: status, evaluations, score and the verdict."""
     s = record["search"]
@@ -365,13 +412,31 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="folder (default: tuned/ in the user cache)")
     parser.add_argument("--install", action="store_true", help=f"write into {tuner.STORE_DIR} instead")
     parser.add_argument("--force", action="store_true", help="write also when a search did not converge")
+    parser.add_argument(
+        "--check",
+        type=int,
+        default=None,
+        metavar="N",
+        help="instead of tuning: judge the installed rows (or those in --out) on N Monte Carlo samples",
+    )
     args = parser.parse_args(argv)
     unknown = [p for p in args.plants if p not in names]
     if unknown:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
-    if args.max_evaluations < 1 or (args.workers is not None and args.workers < 1):
-        parser.error("--max-evaluations and --workers must be >= 1")
+    if (
+        args.max_evaluations < 1
+        or (args.workers is not None and args.workers < 1)
+        or (args.check is not None and args.check < 1)
+    ):
+        parser.error("--max-evaluations, --workers and --check must be >= 1")
     folder = tuner.STORE_DIR if args.install else (args.out or models.compile.cache_directory() / "tuned")
+    if args.check is not None:
+        for name in args.plants:
+            case = cases.get(name)
+            print(f"{name}, {args.check} Monte Carlo samples:", flush=True)
+            kinds = [k for k in (args.kind or KINDS) if has_design(case, k)]
+            print("\n".join(check_stored(case, kinds, args.check, args.out)), flush=True)
+        return 0
     failed = []
     distributed_run = args.workers is not None or args.scheduler is not None
     with distributed.connect(args.scheduler, args.workers) as executor:

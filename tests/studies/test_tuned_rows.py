@@ -12,7 +12,7 @@ import models
 from designs.statespace_blocks import TrackingModel
 from designs.weight_search import poll_search
 from models.specs import MEETS, VIOLATES, Specs, Verdict, Violation
-from studies import cases, providers, tuned_rows
+from studies import cases, judging, providers, runner, tuned_rows
 
 STORED = [
     name for name in cases.names() if tuned_rows.tuner.stored(cases.get(name), tuned_rows.store_name(cases.get(name)))
@@ -28,10 +28,50 @@ def test_relative_excess_reads_the_worst_violation():
     assert tuned_rows.relative_excess(Verdict(VIOLATES, (Violation("x", math.inf, 1.0),))) == tuned_rows.DIVERGED_EXCESS
 
 
+def test_a_least_value_missed_counts_as_an_excess():
+    """A margin below its minimum (Violation.minimum) is a positive excess, (bound − value) / bound, not a
+    negative one that would let the point pass as feasible."""
+    margin = Violation("gain margin", 4.0, 6.0, "dB", minimum=True)
+    assert tuned_rows.relative_excess(Verdict(VIOLATES, (margin,))) == pytest.approx(2.0 / 6.0)
+    worst = tuned_rows._worst(Verdict(VIOLATES, (margin,)), "step", 1 / 3)
+    assert tuned_rows.infeasible_text(worst) == "infeasible for this structure: gain margin at best 4 dB < 6 dB (step)"
+
+
 def test_infeasible_text_names_the_spec_and_how_close_the_best_came():
     worst = {"scenario": "step", "spec": "overshoot", "value": 14.04, "bound": 10.0, "unit": "%"}
     assert tuned_rows.infeasible_text(worst) == "infeasible for this structure: overshoot at best 14 % > 10 % (step)"
     assert tuned_rows.infeasible_text(None) is None
+    limit = {"scenario": "steps", "spec": "leaves swing angle 1 by", "value": 0.0123, "bound": 0.0, "unit": "rad"}
+    text = "infeasible for this structure: leaves swing angle 1 by 0.0123 rad at best (steps)"
+    assert tuned_rows.infeasible_text(limit) == text
+
+
+def test_a_point_leaving_only_a_physical_limit_scores_as_violating():
+    """The crane's Bryson LQR meets every spec on the step; with its first swing limited to 0.8 of the largest
+    |θ₁| of that run (read from the simulated states), the objective scores it BARRIER + the excess
+    0.2 max |θ₁| (rad), and the table's judge_run finds that limit and nothing else."""
+    crane = cases.get("crane")
+    plant = models.get("crane")
+    theta = tuned_rows.start(crane, "lqr")
+    control = tuned_rows.controller(crane, "lqr", theta)
+    step = {s.name: s for s in crane.scenarios}["step"]
+    _, base = runner.tracked_equilibrium(plant, crane)
+    result = runner.simulate_scenario(plant, control, step, crane, runner.Options(), base, crane.substeps)
+    swing = float(np.max(np.abs(result.x[:, list(result.state_names).index("theta1")])))
+    assert judging.judge_run(crane, "step", result, plant.params, controller=control, plant=plant).verdict.ok
+    first = crane.state_limits[0]
+    assert first.state == "theta1" and first.relative_to is None
+    limited = dataclasses.replace(
+        crane,
+        state_limits=(dataclasses.replace(first, lower=-0.8 * swing, upper=0.8 * swing), *crane.state_limits[1:]),
+    )
+    table = judging.judge_run(limited, "step", result, plant.params, controller=control, plant=plant).verdict
+    assert [v.spec for v in table.violations] == [f"leaves {first.name} by"]
+    scored = tuned_rows.objective(limited, "lqr", runs=[("step", None)])(theta)
+    assert scored.value == pytest.approx(tuned_rows.BARRIER + 0.2 * swing, rel=1e-9)
+    assert scored.info["worst"]["spec"] == f"leaves {first.name} by"
+    # The case's own limits are the ones the searches judge: tightening them by the margin does not drop them.
+    assert tuned_rows.tightened(limited, tuned_rows.MARGIN).state_limits == limited.state_limits
 
 
 def test_early_rejection_is_a_lower_bound_of_the_complete_value():
@@ -147,8 +187,25 @@ def test_an_infeasible_record_labels_its_row(monkeypatch):
     assert label == "tuned LQR (infeasible for this structure: overshoot at best 14 % > 10 % (steps))"
 
 
+def test_the_monte_carlo_check_is_the_tables_monte_carlo():
+    """The check's samples and runs are the study's own: the runner's Monte Carlo (the LQR's as a batched map,
+    the MPC's run by run) gives each sample the same metrics and verdict."""
+    if "arm" not in STORED:
+        pytest.skip("no weights stored for the arm")
+    case = cases.get("arm")
+    table = runner.run_study(
+        case, runner.Options(scenarios=("mc",), mc=4, seed=0), providers=(tuned_rows.tuned_weights,)
+    ).samples
+    for kind in tuned_rows.KINDS:
+        judged = tuned_rows.monte_carlo_check(case, kind, np.asarray(tuned_rows.stored(case, kind)["log_weights"]), 4)
+        rows = table[table.controller == tuned_rows.LABELS[kind]]
+        np.testing.assert_allclose([j.metrics["itae"] for j in judged], rows.itae, rtol=1e-6)
+        np.testing.assert_allclose([j.metrics["energy"] for j in judged], rows.energy, rtol=1e-6)
+        assert [j.verdict.label for j in judged] == list(rows.verdict)
+
+
 def test_the_console_refuses_bad_arguments_before_work(capsys):
-    for argv in (["nowhere"], ["arm", "--max-evaluations", "0"], ["arm", "--workers", "0"]):
+    for argv in (["nowhere"], ["arm", "--max-evaluations", "0"], ["arm", "--workers", "0"], ["arm", "--check", "0"]):
         with pytest.raises(SystemExit):
             tuned_rows.main(argv)
     assert ">= 1" in capsys.readouterr().err
