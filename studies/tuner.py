@@ -287,7 +287,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         found = phase_one(problem, lbx, ubx, start, options)
         say(
             f"  phase one: IPOPT {found.status}, {found.iterations} iterations, largest excess {found.excess:.3g} "
-            f"({time.perf_counter() - started:.0f} s)"
+            f"({time.perf_counter() - started:.0f} s); gains {_listed(problem.block_at(found.decision).gains)}"
         )
     block, result, infeasible = setup.block, None, None
     if found is not None and found.infeasible:
@@ -495,7 +495,8 @@ def controllers(case: CaseStudy, known: models.Plant | None = None) -> dict:
 def _report_every(n: int):
     def report(iteration, objective, seconds):
         if iteration % n == 0:
-            print(f"    iteration {iteration:3d}: cost {objective:.6g} ({seconds:.0f} s)", flush=True)
+            # IPOPT's objective: the largest relative spec excess in the phase one, the worst sample's cost after
+            print(f"    iteration {iteration:3d}: objective {objective:.6g} ({seconds:.0f} s)", flush=True)
 
     return report
 
