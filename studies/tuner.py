@@ -12,7 +12,10 @@ where there are more than `MAX_CORNERS`, plus `N_SEEDED` seeded samples):
 
 * specs: the case's own (`CaseStudy.specs_for`, the table's `models.specs.Specs`) on
   every scenario and every sample, the step specs on each step of a series; the
-  state bounds are those of every sample at once; tuning enforces overshoot,
+  state bounds are those of every sample at once, the physical limits
+  (`CaseStudy.state_limits`: cart travel, beam length, swing, panel deflection)
+  each sample's own; the frequency fields (margins, bandwidth) are set by no
+  case, and a tuning problem refuses them (`designs.tuning.TuningProblem`); tuning enforces overshoot,
   settling, rise time and steady-state error with a margin (`MARGIN` times the
   bounds), so that the plants between the samples meet them too;
 * cost: per scenario, ITAE of the tracked coordinate plus control energy (weighted
@@ -172,7 +175,9 @@ def tuning_samples(case: CaseStudy) -> tuple[np.ndarray, str]:
 
 def case_specs(case: CaseStudy, params: np.ndarray) -> dict:
     """{scenario: Specs}: the case's specs of each of the `SCENARIOS`, with the state bounds of every row of
-    `params` (n, n_params) at once (the largest low, the smallest high)."""
+    `params` (n, n_params) at once (the largest low, the smallest high) and the case's physical limits
+    (`CaseStudy.state_limits`) as declared, a bound that is a parameter read by the tuning problem from each
+    sample's own row (as the table reads it from the plant it simulated)."""
     names = list(models.get(case.plant).params)
     out = {}
     for name in SCENARIOS:
@@ -181,7 +186,7 @@ def case_specs(case: CaseStudy, params: np.ndarray) -> dict:
             state: (max(s.state_bounds[state][0] for s in each), min(s.state_bounds[state][1] for s in each))
             for state in each[0].state_bounds
         }
-        out[name] = replace(each[0], state_bounds=bounds)
+        out[name] = replace(each[0].with_limits(case.state_limits), state_bounds=bounds)
     return out
 
 
@@ -282,7 +287,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         found = phase_one(problem, lbx, ubx, start, options)
         say(
             f"  phase one: IPOPT {found.status}, {found.iterations} iterations, largest excess {found.excess:.3g} "
-            f"({time.perf_counter() - started:.0f} s)"
+            f"({time.perf_counter() - started:.0f} s); gains {_listed(problem.block_at(found.decision).gains)}"
         )
     block, result, infeasible = setup.block, None, None
     if found is not None and found.infeasible:
@@ -370,6 +375,7 @@ def _spec_record(specs: Specs) -> dict:
         "max_ss_error_pct": specs.max_ss_error_pct,
         "settling_band_pct": specs.settling_band_pct,
         "state_bounds": {k: list(v) for k, v in specs.state_bounds.items()},
+        "state_limits": [limit.describe() for limit in specs.state_limits],
     }
 
 
@@ -489,7 +495,8 @@ def controllers(case: CaseStudy, known: models.Plant | None = None) -> dict:
 def _report_every(n: int):
     def report(iteration, objective, seconds):
         if iteration % n == 0:
-            print(f"    iteration {iteration:3d}: cost {objective:.6g} ({seconds:.0f} s)", flush=True)
+            # IPOPT's objective: the largest relative spec excess in the phase one, the worst sample's cost after
+            print(f"    iteration {iteration:3d}: objective {objective:.6g} ({seconds:.0f} s)", flush=True)
 
     return report
 

@@ -45,6 +45,7 @@ from .settings import (
     SLACK,
     STAGE_TOL_FACTOR,
     STOPPED,
+    TUNING_FLAGS,
     WARM_START,
     WATCH_MARGIN,
     converged,
@@ -244,7 +245,7 @@ class Continuation:
             with_recorder: dict[str, Any] = {name: o | {"iteration_callback": recorder} for name, o in options.items()}
             # Compiled once without a shell and cached (models.compile); CasADi's virtual machine when impossible.
             if self.options.jit:
-                return recorder, models.compile.jit_nlpsols("ipopt", nlp, with_recorder)
+                return recorder, models.compile.jit_nlpsols("ipopt", nlp, with_recorder, TUNING_FLAGS)
             return recorder, {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in with_recorder.items()}
 
         key = ("tuning", smooth, worst, cost_weight, plant_cost, self.options.jit, options)

@@ -12,6 +12,7 @@ import models
 from models.checks import as_vector
 
 from .excess import relative_excess
+from .iterations import IterationLog, IterationRecorder
 from .options import SolveOptions
 from .problem import TuningProblem
 from .settings import (
@@ -106,14 +107,17 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     settings: dict[str, Any] = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp: dict[str, Any] = {"x": ca.vertcat(z, s), "p": ca.vertcat(width, scaling), "f": s, "g": rows}
     variants = {"phase_one": settings, "phase_one_warm": settings | {"ipopt": ipopt | WARM_START}}
-    solvers = problem.cached(
-        ("phase one", smooth, options.jit, settings),
-        lambda: (
-            models.compile.jit_nlpsols("ipopt", nlp, variants, PHASE_ONE_FLAGS)
-            if options.jit
-            else {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in variants.items()}
-        ),
-    )
+
+    def make() -> tuple[IterationRecorder, dict[str, Any]]:
+        # The iterates go to `options.progress` (the recorder is no part of the compiled code).
+        recorder = IterationRecorder(n + 1, rows.numel(), width.numel() + n)
+        recorded = {name: o | {"iteration_callback": recorder} for name, o in variants.items()}
+        if options.jit:
+            return recorder, models.compile.jit_nlpsols("ipopt", nlp, recorded, PHASE_ONE_FLAGS)
+        return recorder, {name: ca.nlpsol(name, "ipopt", nlp, o) for name, o in recorded.items()}
+
+    recorder, solvers = problem.cached(("phase one", smooth, options.jit, settings), make)
+    recorder.log = IterationLog(options.progress)
 
     decision, worst = start, np.inf  # widths is never empty: the loop sets both
     at_start = problem.largest_excess(start)

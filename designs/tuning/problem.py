@@ -345,8 +345,15 @@ class TuningProblem:
 
     def _check_specs(self, sc: Scenario, specs: Specs, r, t, k, steps, where: str) -> None:
         """ValueError for a spec the run cannot judge: a step spec without a step, a time after the run's
-        end, a bound on a state the plant does not have."""
+        end, a bound or limit on a state the plant does not have, a limit whose bound is a decided parameter,
+        and a frequency field (margins, bandwidth: measures of a linearized loop, not of the run, which
+        these constraints do not impose)."""
         plant = self.plant
+        if specs.frequency_specs:
+            raise ValueError(
+                f"{', '.join(specs.frequency_specs)}{where}: the tuning constrains the runs, not the linearized "
+                "loop's margins or bandwidth; judge those on the tuned design (studies.judging.judge_run)"
+            )
         if specs.step_specs and not steps:
             reason = (
                 "it regulates (reference None)"
@@ -360,19 +367,29 @@ class TuningProblem:
             ("max_settling_time_s", specs.max_settling_time_s),
             ("max_rise_time_s", specs.max_rise_time_s),
         ):
-            span = max((t[b - 1] - t[a] for a, b, _, _ in steps), default=t[-1])
-            if when is not None and when > span:
-                late = span < t[-1] - t[0]
-                what = (
-                    f"longer than any step of the scenario{where} lasts ({span:g} s)"
-                    if late
-                    else (f"after the end of the scenario{where} ({t[-1]:g} s)")
+            # The table's rule (`models.specs.Specs.validate`): a time after the run's end is refused. A step
+            # shorter than the time is judged: the table needs its last sample settled (else its time is inf).
+            if when is not None and when > t[-1] - t[0]:
+                raise ValueError(
+                    f"{name} = {when:g} s is after the end of the scenario{where} ({t[-1]:g} s): "
+                    "the spec would constrain nothing"
                 )
-                raise ValueError(f"{name} = {when:g} s is {what}: the spec would constrain nothing")
         for what, table in (("state_bounds", specs.state_bounds), ("final_values", specs.final_values)):
             for name in table:
                 if name not in plant.state_names:
                     raise ValueError(f"{what}: {plant.name} has no state {name!r}; states are {plant.state_names}")
+        for limit in specs.state_limits:
+            missing = [name for name in limit.states if name not in plant.state_names]
+            if missing:
+                raise ValueError(
+                    f"state_limits {limit.name!r}: {plant.name} has no state {missing[0]!r}; states are "
+                    f"{plant.state_names}"
+                )
+            if limit.upper_parameter is not None and limit.upper_parameter in self.extra_params:
+                raise ValueError(
+                    f"state_limits {limit.name!r}: its bound is the parameter {limit.upper_parameter!r}, which "
+                    "this problem decides (extra_params): a limit that moves with the design is not supported"
+                )
 
     def _check_cost(self, sc: Scenario, cost: Cost, k, where: str) -> None:
         """ValueError for a criterion signal the run does not have."""
@@ -453,14 +470,14 @@ class TuningProblem:
                 states = ca.horzcat(ca.DM(run_data.x0), X)  # x_0 .. x_N
                 row.append(self._cost(run_data, states, U, p, self.width if smooth else None))
                 tags = [t for t in (run_data.label, f"sample {j}" if m > 1 else "") if t]
-                self._add_specs(constraints, run_data, X, f" ({', '.join(tags)})" if tags else "")
+                self._add_specs(constraints, run_data, X, f" ({', '.join(tags)})" if tags else "", j)
                 u_runs.append(U)
             rows.append(ca.horzcat(*row))
         g, lbg, ubg, names = constraints.stacked()
         return ca.vertcat(*rows), g, u_runs, lbg, ubg, names
 
-    def _add_specs(self, constraints: Constraints, run: ScenarioRun, X: ca.MX, tag: str) -> None:
-        """The specs of one run on one parameter sample, X (nx, N) its states x_1 .. x_N.
+    def _add_specs(self, constraints: Constraints, run: ScenarioRun, X: ca.MX, tag: str, sample: int) -> None:
+        """The specs of one run on parameter sample `sample`, X (nx, N) its states x_1 .. x_N.
 
         Each `models.specs.Specs` field becomes inequalities on the samples that imply the table's
         verdict for the same run (`models.metrics.step_metrics`, at the same sample times). The step
@@ -479,7 +496,10 @@ class TuningProblem:
         - steady-state error: |mean of y over the table's final window − r| <= max_ss_error_pct/100 ·
           |step|: the table's definition, exactly;
         - state bounds at every sample, and final values as the mean over the table's final window
-          (`models.metrics.final_values`): exactly the table's.
+          (`models.metrics.final_values`): exactly the table's;
+        - physical limits (`Specs.state_limits`) at every sample, on the limited quantity (a state, or the
+          difference of two), a bound read from a parameter taken from this sample's row: exactly the
+          table's (`models.state_limits.check_state_limits` on the plant the run simulated).
 
         `input_limit` holds by construction (a block clips its command at the actuator limit);
         `limit_cycle` is not a constraint (`max_spectral_abscissa` is checked at the solution).
@@ -499,6 +519,13 @@ class TuningProblem:
             lo, hi = state_bound(interval, name)
             text = f"|{name}| <= {hi:g}" if lo == -hi else f"{lo:g} <= {name} <= {hi:g}"
             constraints.add(f"{text}{tag}", X[names.index(name), :], lo, hi)
+        params = dict(zip(self.plant.params, self.samples[sample]))
+        for limit in sp.state_limits:
+            at = limit.at(params)
+            limited = X[names.index(at.state), :]
+            if at.relative_to is not None:
+                limited = limited - X[names.index(at.relative_to), :]
+            constraints.add(f"{at.describe()}{tag}", limited, at.lower, at.upper)
         for name, pair in sp.final_values.items():
             value, tol = final_value(pair, name)
             mean = ca.sum2(X[names.index(name), window]) / n_final

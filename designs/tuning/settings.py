@@ -72,6 +72,10 @@ WARM_START = {
 #: Compiler flags of the phase one's NLP (`models.compile.jit_nlpsols`): gcc at -O1 builds it in less than
 #: half the time of -O3 and the solves it runs are as fast (docs/guide.md's tuning section).
 PHASE_ONE_FLAGS = ("-O1", "-march=native")
+#: Compiler flags of the continuation's NLP (`Continuation.build`): as the phase one's, -O1. On the ball on
+#: beam's tuner problem gcc took 248 CPU-s at -O1 against 583 at -O3, and 40 IPOPT iterations 12.7 CPU-s
+#: against 10.0 (docs/notes/tuning.md): less in all below about 5,000 iterations.
+TUNING_FLAGS = ("-O1", "-march=native")
 #: Phase one stops improving once every spec holds with this relative margin (its lower bound on s).
 PHASE_ONE_MARGIN = 1e-3
 

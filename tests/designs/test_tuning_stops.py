@@ -176,10 +176,15 @@ def test_phase_one_uses_the_hessian_its_options_ask_for(hessian):
         substeps=2,
     )
     lbx, ubx = gain_bounds(problem, {"kp": (0.01, 100.0), "kd": (0.01, 100.0)})
-    phase_one(problem, lbx, ubx, problem.start(), SolveOptions(phase_hessian=hessian, widths=(1e-2,)))
-    (solvers,) = problem._solvers.values()
-    calls = solvers["phase_one"].stats().get("n_call_nlp_hess_l", 0)
+    reported = []
+    options = SolveOptions(phase_hessian=hessian, widths=(1e-2,), progress=lambda *args: reported.append(args))
+    found = phase_one(problem, lbx, ubx, problem.start(), options)
+    ((_, solvers),) = problem._solvers.values()
+    stats = solvers["phase_one"].stats()
+    calls = stats.get("n_call_nlp_hess_l", 0)
     assert (calls > 0) == (hessian == "exact"), calls
+    # Every iterate is reported to the progress callback, IPOPT's iteration 0 included (one solve here).
+    assert stats["iter_count"] == found.iterations and len(reported) == found.iterations + 1
 
 
 def test_a_phase_one_ending_farther_outside_the_exact_specs_than_its_start_returns_the_start_uncertified():

@@ -6,6 +6,8 @@ independently; the commands agree to 1e-12, the overshoot and steady-state error
 the table's metrics to 1e-12, and a spec the tuner finds met is met by the table's verdict.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,53 @@ def test_the_designs_cover_both_sides_of_the_specs():
         for design, block in _designs().items()
     }
     assert model_specs.MEETS in labels.values() and model_specs.VIOLATES in labels.values(), labels
+
+
+@pytest.mark.parametrize(
+    "plant_name,row",
+    [
+        ("satellite", None),  # the panel deflection φ − θ: a limit on the difference of two states
+        ("pendulum", None),  # the cart travel
+        ("ballbeam", 0),  # the beam length: a bound read from the parameter ell, on a sample where ell ≠ 0.5 m
+    ],
+)
+def test_the_tuners_physical_limit_rows_are_the_tables_departures_on_the_same_run(plant_name, row):
+    """The limit rows of the tuner's problem (`studies.tuner.case_specs`, each sample's own bound) carry the
+    limited quantity of the table's own run (`studies.runner.simulate_scenario`) to 1e-12, and the tuner
+    finds a limit left exactly where the table's verdict (`models.state_limits.check_state_limits` inside
+    `studies.judging.judge_run`) says the run leaves it, by the same excess: on the case's limits (which the
+    hand design keeps) and on the same limits with their lower bound raised into the run's range (left)."""
+    declared = studies.get(plant_name)
+    plant = models.get(plant_name)
+    params = plant.param_vector()[None, :] if row is None else tuner.samples(declared, 1, 5)
+    named = dict(zip(plant.params, params[0]))
+    block = tuner.hand_design(declared)
+    _, base = runner.tracked_equilibrium(plant, declared)
+    table = tuner.table_scenarios(declared)["step"]
+    options, substeps = runner.Options(), declared.substeps
+    result = runner.simulate_scenario(plant, block, table, declared, options, base, substeps, params[0])
+    ranges = {limit.name: limit.at(named).values(result.x, result.state_names) for limit in declared.state_limits}
+    raised = tuple(
+        dataclasses.replace(limit, lower=float(np.min(ranges[limit.name]) + np.ptp(ranges[limit.name]) / 2))
+        for limit in declared.state_limits
+    )
+    for case, left in ((declared, False), (dataclasses.replace(declared, state_limits=raised), True)):
+        specs = tuner.case_specs(case, params)["step"]
+        assert [limit.name for limit in specs.state_limits] == [limit.name for limit in case.state_limits]
+        (scenario,) = [s for s in tuner.scenarios(case, block, {"step": specs}) if s.name == "step"]
+        problem = TuningProblem(plant, block, scenario, cost=Cost("itae"), samples=params, substeps=case.substeps)
+        g = np.asarray(problem.evaluate(problem.start())[1]).ravel()
+        judged = judging.judge_run(case, "step", result, named)
+        rows = dict(problem.constraint_names)
+        missed = problem.violated_names(g, tol=0.0)
+        for limit in (limit.at(named) for limit in case.state_limits):
+            if plant_name == "ballbeam":
+                assert limit.upper == named["ell"] != 0.5
+            (label,) = [label for label in rows if label.startswith(limit.describe())]
+            values = ranges[limit.name]
+            np.testing.assert_allclose(g[rows[label]], values[1:], rtol=0, atol=1e-12)
+            departure = [v for v in judged.verdict.violations if v.spec == f"leaves {limit.name} by"]
+            assert (label in missed) == bool(departure) == left, (label, judged.verdict)
+            # The table reads x_0 too (the run's given initial state, which the tuning cannot move).
+            excess = max(float(np.max(values - limit.upper)), float(np.max(limit.lower - values)), 0.0)
+            assert (departure[0].value if departure else 0.0) == pytest.approx(excess, rel=1e-12, abs=1e-15)
