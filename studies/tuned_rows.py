@@ -12,8 +12,8 @@ The objective is lexicographic in one number: a point that misses a spec on some
 `BARRIER` plus its largest relative excess (the phase one: how far the structure is from the specs);
 a point that meets them all scores its cost, the mean over the runs of ITAE and control energy, each
 relative to the start's on that run, weighted 1 : `ENERGY_WEIGHT` (the start scores 1 when it is
-feasible). A search that converges with a violation left is the row's "infeasible for this structure:
-<spec> at best X > Y".
+feasible). A search that converges with a violation left gives the row the remark "infeasible for this
+structure: <spec> at best X > Y".
 
 ``python -m studies.tuned_rows PLANT`` tunes and writes ``<plant>_tuned_weights.json`` (both kinds in
 one record) into the user cache, or with ``--install`` beside the case files where `tuned_weights`
@@ -324,8 +324,9 @@ def stored(case: CaseStudy, kind: str) -> dict | None:
 def tuned_weights(case: CaseStudy | str, known: models.Plant | None = None) -> dict:
     """Provider of the "tuned LQR" and "tuned MPC" rows from the stored weights, designed on `known`.
 
-    A row whose stored search ended with a violation is labelled with it ("tuned LQR (infeasible for this
-    structure: ...)"). NotProvided when the case has neither design with stored weights; ValueError when
+    A row whose stored search ended with a violation carries it as its remark ("infeasible for this
+    structure: ...", the runner's ``controller.remark``).
+    NotProvided when the case has neither design with stored weights; ValueError when
     the case's own design (the search's start) has changed since the weights were stored.
     """
     case = cases.get(case) if isinstance(case, str) else case
@@ -339,8 +340,9 @@ def tuned_weights(case: CaseStudy | str, known: models.Plant | None = None) -> d
                 f"{case.plant}: the stored {LABELS[kind]} weights start from a different design; "
                 f"rerun `python -m studies.tuned_rows {case.plant}`"
             )
-        label = LABELS[kind] + ("" if record["feasible"] else f" ({infeasible_text(record['worst'])})")
-        out[label] = controller(case, kind, np.asarray(record["log_weights"]), known)
+        row = controller(case, kind, np.asarray(record["log_weights"]), known)
+        row.remark = None if record["feasible"] else infeasible_text(record["worst"])
+        out[LABELS[kind]] = row
     if not out:
         raise NotProvided(f"no tuned weights stored for {case.plant}; `python -m studies.tuned_rows {case.plant}`")
     return out

@@ -26,9 +26,10 @@ where there are more than `MAX_CORNERS`, plus `N_SEEDED` seeded samples):
 A hand design that misses the specs is first moved by a minimal-violation
 phase one (`designs.tuning.phase_one`); if that converges with the specs still
 missed, the structure cannot meet them near it, and the record says so with
-the phase one's numbers (`infeasible_text`): the row then reads "tuned
-(infeasible for this structure: overshoot at best 14 % > 10 %)", its gains the
-phase one's answer. Otherwise the smoothing continuation tunes from there; a
+the phase one's numbers (`infeasible_text`): the row "tuned" then carries it as
+its remark ("infeasible for this structure: overshoot at best 14 % > 10 %",
+first in every verdict detail of the row), its gains the phase one's answer.
+Otherwise the smoothing continuation tunes from there; a
 stage that makes the exact cost worse than the best point seen is stopped and
 its start kept (`designs.tuning.Continuation`).
 
@@ -464,14 +465,15 @@ def stored(case: CaseStudy, name: str | None = None, folder: Path | None = None)
     return json.loads(data.read_text(encoding="utf-8"))
 
 
-def label(record: dict) -> str:
-    """The row label of a stored record: "tuned", or "tuned (infeasible for this structure: ...)" when its
-    phase one proved the case's specs out of reach (`infeasible_text`)."""
-    return LABEL if not record.get("infeasible") else f"{LABEL} ({record['infeasible']})"
+def remark(record: dict) -> str | None:
+    """The tuned row's remark (the runner's ``controller.remark``): "infeasible for this structure: ..."
+    when the record's phase one proved the case's specs out of reach (`infeasible_text`), else None."""
+    return record.get("infeasible") or None
 
 
 def controllers(case: CaseStudy, known: models.Plant | None = None) -> dict:
-    """{label: block}: the hand design built from `known` with the stored tuned gains, labelled `label`.
+    """{"tuned": block}: the hand design built from `known` with the stored tuned gains; the block's
+    ``remark`` says when the record proved the specs out of reach (`remark`).
 
     Raises ValueError when no gains are stored for the case, or when the hand design
     built from `known` differs from the one the gains were tuned from (rerun
@@ -489,7 +491,9 @@ def controllers(case: CaseStudy, known: models.Plant | None = None) -> dict:
                 f"(gain {key} is now {now.tolist()}, was {value}); "
                 f"rerun `python -m studies.tuner {case.plant}`"
             )
-    return {label(record): block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})}
+    tuned = block.with_gains(**{k: np.asarray(v) for k, v in record["gains"].items()})
+    tuned.remark = remark(record)
+    return {LABEL: tuned}
 
 
 def _report_every(n: int):

@@ -176,15 +176,16 @@ def test_a_rise_time_below_the_actuators_bound_is_reported_infeasible():
     assert tuned_rows.infeasible_text(worst).startswith("infeasible for this structure: rise")
 
 
-def test_an_infeasible_record_labels_its_row(monkeypatch):
+def test_an_infeasible_record_is_its_rows_remark(monkeypatch):
     if "arm" not in STORED:
         pytest.skip("no weights stored for the arm")
     case = cases.get("arm")
     record = dict(tuned_rows.stored(case, "lqr"), feasible=False)
     record["worst"] = {"scenario": "steps", "spec": "overshoot", "value": 14.0, "bound": 10.0, "unit": "%"}
     monkeypatch.setattr(tuned_rows, "stored", lambda case, kind: record if kind == "lqr" else None)
-    (label,) = tuned_rows.tuned_weights(case)
-    assert label == "tuned LQR (infeasible for this structure: overshoot at best 14 % > 10 % (steps))"
+    ((label, row),) = tuned_rows.tuned_weights(case).items()
+    assert label == "tuned LQR"
+    assert row.remark == "infeasible for this structure: overshoot at best 14 % > 10 % (steps)"
 
 
 def test_the_monte_carlo_check_is_the_tables_monte_carlo():

@@ -40,19 +40,18 @@ def records():
 def test_the_tuned_row_meets_every_spec_of_its_case_or_says_it_cannot(name, records):
     """On the nominal plant (the table's rows) and on samples neither tuning nor validation used, every
     scenario the table judges meets the case's specs by the table's verdict, or the record carries the
-    phase one's certificate that this structure cannot, and the row's label says so."""
+    phase one's certificate that this structure cannot, and the row's remark says so."""
     record = records[name]
     assert record is not None and "provenance" in record, f"re-tune with python -m studies.tuner {name} --install"
     case = studies.get(name)
     ((label, tuned),) = tuner.controllers(case).items()
     for key, value in record["gains"].items():
         np.testing.assert_allclose(tuned.gains[key], value, rtol=0, atol=0)
-    if record["infeasible"]:
-        assert label == f"tuned ({record['infeasible']})" and record["infeasible"].startswith(
-            "infeasible for this structure: "
-        )
-        return
     assert label == tuner.LABEL
+    if record["infeasible"]:
+        assert tuned.remark == record["infeasible"] and tuned.remark.startswith("infeasible for this structure: ")
+        return
+    assert tuned.remark is None
     rows = np.vstack([models.get(name).param_vector()[None, :], tuner.samples(case, N_CHECK, CHECK_SEED)])
     verdicts = tuner.table_verdicts(case, tuned, rows)
     assert set(verdicts) == set(tuner.SCENARIOS) == {"step", "steps", "disturbance", "noise"}
@@ -182,7 +181,8 @@ def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_so
 
 
 def test_the_tuners_validation_judges_a_run_as_the_study_table_does():
-    """The tuner's table verdicts on the nominal plant are the study's own "tuned" rows' verdicts."""
+    """The tuner's table verdicts on the nominal plant are the study's own "tuned" rows' verdicts (whose
+    details start with the row's remark, when its record carries one)."""
     case = studies.get("arm")
     ((label, block),) = tuner.controllers(case).items()
     verdicts = tuner.table_verdicts(case, block, models.get("arm").param_vector()[None, :])
@@ -190,4 +190,8 @@ def test_the_tuners_validation_judges_a_run_as_the_study_table_does():
     rows = table[table.controller == label].set_index("scenario")
     for name in tuner.SCENARIOS:
         row = rows.loc[name]
-        assert verdicts[name] == (f"{row.verdict}: {row.verdict_detail}" if row.verdict_detail else row.verdict)
+        detail = row.verdict_detail
+        if block.remark:
+            assert detail.startswith(block.remark)
+            detail = detail[len(block.remark) :].removeprefix("; this run: ")
+        assert verdicts[name] == (f"{row.verdict}: {detail}" if detail else row.verdict)
