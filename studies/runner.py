@@ -483,6 +483,7 @@ class Simulation:
         self.truths: dict = {}
         self.seconds = {"simulate_s": 0.0, "monte_carlo_s": 0.0}
         self.loops: dict = {}
+        self.failures: dict = {}  # (label, status) -> (index in notes, scenarios)
 
     def run_all(self, designed: Mapping, scenarios: Sequence[TableScenario], progress=None) -> None:
         """Every controller of `designed` through every scenario, in that order; `progress(done, total,
@@ -495,6 +496,18 @@ class Simulation:
                 done += 1
                 if progress:
                     progress(done, total, f"{self.study.plant}: {label} / {scenario.name}")
+
+    def note_failure(self, label: str, scenario: str, status: str) -> None:
+        """Note "label / scenario: status", or add `scenario` to the note of the same label and status
+        ("tube MPC / step, steps: failed: ..."), so that a controller failing alike everywhere is one note."""
+        key = (label, status)
+        if key in self.failures:
+            index, names = self.failures[key]
+            names.append(scenario)
+            self.notes[index] = f"{label} / {', '.join(names)}: {status}"
+        else:
+            self.failures[key] = (len(self.notes), [scenario])
+            self.notes.append(f"{label} / {scenario}: {status}")
 
     def row(self, label: str, controller, truth: models.Plant, scenario: TableScenario) -> dict:
         """The table row of `controller` in `scenario` on `truth`: a failed row (noted) when an error
@@ -515,7 +528,7 @@ class Simulation:
             if self.options.strict:
                 raise
             row |= failed_row(err)
-            self.notes.append(f"{label} / {scenario.name}: {row['status']}")
+            self.note_failure(label, scenario.name, row["status"])
         remark = getattr(controller, "remark", "")
         if remark:
             row["verdict_detail"] = remarked(row.get("verdict_detail"), remark)

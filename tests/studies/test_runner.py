@@ -306,3 +306,32 @@ def test_a_controllers_remark_leads_the_verdict_detail_of_each_of_its_rows_and_t
     assert plain.table.remark.isna().all()
     lines = batch.not_ok_lines(result.table)
     assert lines.count(f"  remarked LQR: {lqr.remark}") == 1
+
+
+def test_a_controller_failing_alike_on_every_scenario_is_one_note_naming_them():
+    """A controller whose every row fails with the same status (a refused construction's stand-in) is
+    noted once, with the scenarios in order; a different failure of it is its own note."""
+
+    class Failing:
+        sample_period, measures, n_reference = 0.01, "state", 1
+        message = "no controller"
+
+        def initial_state(self, y0, r0=None):
+            raise RuntimeError(self.message)
+
+        def step(self, xc, y, r=None):
+            raise RuntimeError(self.message)
+
+    study = arm_study(providers=())
+    failing = Failing()
+    simulation = runner.Simulation(study, runner.Options(scenarios=("step", "steps")), models.get("arm"), None)
+    plant = models.get("arm")
+    for scenario in study.scenarios[:2]:
+        assert simulation.row("broken", failing, plant, scenario)["status"] == "failed: RuntimeError: no controller"
+    failing.message = "another failure"
+    simulation.row("broken", failing, plant, study.scenarios[2])
+    names = [s.name for s in study.scenarios[:3]]
+    assert simulation.notes == [
+        f"broken / {names[0]}, {names[1]}: failed: RuntimeError: no controller",
+        f"broken / {names[2]}: failed: RuntimeError: another failure",
+    ]
