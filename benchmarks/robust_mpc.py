@@ -29,7 +29,10 @@ the case's STATE_LIMITS, the swing angles ±0.2 rad).
 
 Costs are the runs' Σ (x − x_s)ᵀ Q (x − x_s) + R u² with the case's MPC weights, compared sample by
 sample (the median of the ratios). Per-step times are medians over one closed loop on the nominal
-truth; the Monte Carlo runs step the samples together (`models.simulate_closed_loop_many`).
+truth; the Monte Carlo runs each MPC's samples through its exported C closed loop
+(`models.exported_loop`, the studies' path, equal to the Python step's commands to 1e-9; two
+threads), or where it does not export (the tube MPC) through `models.simulate_closed_loop_many`
+(`<controller>_runs_by` says which).
 
 do-mpc: its multi-stage MPC (n_robust = 1, IPOPT) on the pendulum's tree problem (the same 4 corners,
 the case's Q and R, a terminal xᵀ P x, |F| ≤ 5 N, no state bounds), run in its own virtual
@@ -60,6 +63,7 @@ from _path import HERE as _HERE  # noqa: F401  (drops this folder from sys.path,
 
 import models
 import studies
+from models.exported_loop import simulate_exported_many
 from models.state_limits import StateLimit, check_state_limits, summarize_limit_violations
 from models.uncertainty import corner_params, sample_params
 from mpc import nonlinear_mpc, riccati_terminal_cost, scenario_tree_mpc
@@ -70,8 +74,11 @@ from mpc.tube import TubeOptions, ancillary_feedback, build_tube, disturbance_se
 from mpc.tube_mpc import TubeMPC, nominal_sets
 from studies.cases import crane as crane_case
 from studies.cases.pendulum import SWING_UP_TRAVEL
+from studies.exported_runs import exported_loop, wanted
 from studies.robust_rows import with_limits
 
+#: RK4 sub-steps of the truth per controller sample (models.simulate_closed_loop_many's default).
+SUBSTEPS = 10
 FOLDER = Path(__file__).resolve().parent
 DOMPC_PYTHON = FOLDER / ".venv-dompc" / "bin" / "python"
 #: The pendulum's limit here: the cart travel of the tube's region, ±0.5 m (the case's physical track is ±2.5 m,
@@ -173,7 +180,17 @@ def monte_carlo(name: str, case, controller, samples: int) -> dict:
     xs = plant.equilibrium(**{case.tracked: 0.0})[0]
     params = sample_params(plant, samples, seed=0)
     common = dict(x0=spec["start"], input_disturbance=case.input_disturbance)
-    if getattr(controller, "lockstep", False):
+    notes: list = []
+    loop = (
+        exported_loop(name, controller, plant, [(0.0, spec["duration"])], SUBSTEPS, notes)
+        if wanted("auto", controller)
+        else None
+    )
+    if loop is not None:
+        runs = simulate_exported_many(
+            plant, controller, loop, 0.0, spec["duration"], params, substeps=SUBSTEPS, threads=2, **common
+        )
+    elif getattr(controller, "lockstep", False):
         runs = models.simulate_closed_loop_many(plant, controller, 0.0, spec["duration"], params, **common)
     else:
         runs = (
@@ -189,6 +206,7 @@ def monte_carlo(name: str, case, controller, samples: int) -> dict:
         costs.append(float(np.einsum("ki,ij,kj->", e, Q, e) + R * np.sum(result.u**2)))
     alone = models.simulate_closed_loop(plant, controller, 0.0, spec["duration"], **common)
     return {
+        "runs_by": "exported C" if loop is not None else "Python" + "".join(f" ({n})" for n in notes),
         "violations": summarize_limit_violations(checks),
         "closest": closest,
         "costs": np.array(costs),
@@ -257,6 +275,7 @@ def run_plant(name: str, samples: int, save=lambda partial: None) -> dict:
     else:
         out["tube_violations"] = None
     for key, result in results.items():
+        out[f"{key}_runs_by"] = result["runs_by"]
         out[f"{key}_violations"] = result["violations"]
         out[f"{key}_closest_to_a_limit"] = result["closest"]
         out[f"{key}_step_median_ms"] = result["step_median_ms"]
