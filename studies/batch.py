@@ -117,13 +117,18 @@ def run_weights(case, scenarios=None, samples: int = 0, controllers=None) -> lis
     return weights
 
 
+#: Console lines of one remark at most (a refused construction names every constraint it lacks).
+REMARK_LINES = 2
+
+
 def not_ok_lines(table, width: int = 118) -> list:
     """Every row that is not ok or misses its specs, grouped: "  violates: PD, PID [all]; LQR [steps]".
 
     Grouped by verdict (or status, for a degraded row that meets its specs), then by the set of
     scenarios, so the list stays short while naming every (controller, scenario). A row that did not
     run as designed says so beside its verdict: "violates (degraded)". Then each controller's remark
-    (``controller.remark``, the table's remark column): "  tuned: infeasible for this structure: ...".
+    (``controller.remark``, the table's remark column): "  tuned: infeasible for this structure: ...",
+    in at most `REMARK_LINES` lines.
     """
     scenarios = list(dict.fromkeys(table.scenario))
     groups: dict = {}
@@ -152,7 +157,12 @@ def not_ok_lines(table, width: int = 118) -> list:
         for remark in dict.fromkeys(rows["remark"]):
             if remark:
                 lines += textwrap.wrap(
-                    f"{controller}: {remark}", width, initial_indent="  ", subsequent_indent="      "
+                    f"{controller}: {remark}",
+                    width,
+                    initial_indent="  ",
+                    subsequent_indent="      ",
+                    max_lines=REMARK_LINES,
+                    placeholder=" ... (whole: table.md)",
                 )
     return lines
 

@@ -158,7 +158,7 @@ class Refused:
 
     def refusal(self) -> ConstructionRefused:
         """The error its rows fail with."""
-        return ConstructionRefused(f"{self.name}: {self.reason}")
+        return ConstructionRefused(self.reason)
 
     def initial_state(self, y0, r0=None):
         """Raises `ConstructionRefused`: there is no controller to start."""

@@ -515,6 +515,7 @@ class Simulation:
         tick = time.perf_counter()
         python = not isinstance(controller, Block)
         row: dict = {"controller": label, "scenario": scenario.name, "kind": "python" if python else "block"}
+        remark = getattr(controller, "remark", None) or ""
         try:
             if scenario.monte_carlo:
                 row |= self.monte_carlo_row(label, controller, truth, scenario)
@@ -528,8 +529,8 @@ class Simulation:
             if self.options.strict:
                 raise
             row |= failed_row(err)
-            self.note_failure(label, scenario.name, row["status"])
-        remark = getattr(controller, "remark", "")
+            if not (str(err) and str(err) in remark):  # a remark that states the error explains the row
+                self.note_failure(label, scenario.name, row["status"])
         if remark:
             row["verdict_detail"] = remarked(row.get("verdict_detail"), remark)
             row["remark"] = remark

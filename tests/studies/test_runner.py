@@ -335,3 +335,17 @@ def test_a_controller_failing_alike_on_every_scenario_is_one_note_naming_them():
         f"broken / {names[0]}, {names[1]}: failed: RuntimeError: no controller",
         f"broken / {names[2]}: failed: RuntimeError: another failure",
     ]
+
+
+def test_a_long_remark_takes_at_most_its_lines_in_the_console_and_all_of_it_in_the_table():
+    """A refusal naming many constraints is cut in the console (`batch.REMARK_LINES`, ending on where
+    the whole text is), never in the table's remark column."""
+    remark = "refused at construction: " + "; ".join(f"state constraint 'x{i}' lacks at least {i}" for i in range(40))
+    table = pd.DataFrame(
+        [{"controller": "tube MPC", "scenario": "step", "verdict": specs.FAILED, "status": "failed", "remark": remark}]
+    )
+    lines = batch.not_ok_lines(table)
+    cut = [line for line in lines if line.lstrip().startswith("tube MPC:") or line.startswith("      ")]
+    assert len(cut) == batch.REMARK_LINES and cut[-1].endswith("(whole: table.md)")
+    assert all(len(line) <= 118 for line in lines)
+    assert table.remark[0] == remark
