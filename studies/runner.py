@@ -65,10 +65,10 @@ class Options:
     scenarios : names of the scenarios to run (default: all of the study's)
     mc : Monte Carlo samples of every controller (a Block's as one batched map, any other's one by
         one on the same samples); 0 skips the Monte Carlo
-    seed : seed of the parameter samples and of the measurement noise
-    threads : threads of the batched Monte Carlo map
+    seed : seed of the parameter samples and of the measurement noise;  threads : of the batched map
     jit : True, False or "auto" (compile the Monte Carlo map when it has >= JIT_THRESHOLD steps)
-    strict : raise on a provider or controller error instead of noting it
+    strict : raise on a provider or controller error instead of noting it (but for an error the
+        controller's remark states: a refused construction's row fails, and --strict exits 1 on it)
     quick : smaller defaults for plots and animations (the CLI also lowers mc)
     """
 
@@ -526,10 +526,11 @@ class Simulation:
         except Exception as err:
             if interrupts.is_interrupt(err):  # Ctrl-C, which CasADi may report as an error
                 raise KeyboardInterrupt from err
-            if self.options.strict:
+            explained = bool(str(err)) and str(err) in remark  # a refused construction's stand-in
+            if self.options.strict and not explained:
                 raise
             row |= failed_row(err)
-            if not (str(err) and str(err) in remark):  # a remark that states the error explains the row
+            if not explained:
                 self.note_failure(label, scenario.name, row["status"])
         if remark:
             row["verdict_detail"] = remarked(row.get("verdict_detail"), remark)

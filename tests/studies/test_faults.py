@@ -442,7 +442,8 @@ def test_a_provider_that_returns_no_dict_is_noted():
 def test_non_ok_rows_are_visible_in_the_console_summary_and_index_and_strict_exits_1(workdir):
     """A run with an MPC whose solver always fails and a controller that diverges, with --strict:
     every file is written (they are the truth), each non-ok row is named on the console, in
-    table.md, summary.md and index.html, and the exit status is 1."""
+    table.md, summary.md and index.html, and the exit status is 1. The arm's tube MPC, refused at
+    construction, is a failed row that --strict counts, not an error that stops the run."""
     done = cli(
         "arm",
         "--scenario",
@@ -469,7 +470,8 @@ def test_non_ok_rows_are_visible_in_the_console_summary_and_index_and_strict_exi
         for line in console
     ), done.stdout
     assert "  diverged: broken [all]" in console, done.stdout
-    assert "python -m studies: --strict: 2 row(s) not ok (listed above)" in console
+    assert "  failed: tube MPC [all]" in console, done.stdout
+    assert "python -m studies: --strict: 3 row(s) not ok (listed above)" in console
     out = workdir / "out"
     assert f"- **failing MPC / step**: {degraded}" in (out / "arm" / "table.md").read_text()
     assert re.search(rf"\| failing MPC \| step \| [^|]+ \| {degraded} \|", (out / "arm" / "table.md").read_text())
