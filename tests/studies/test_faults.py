@@ -123,10 +123,10 @@ def interrupted_run(
 ) -> tuple:
     """Start `python -m studies` on the arm and the UUV, wait until a nonlinear MPC run started, send
     `sent_signal` (SIGINT) `offset` seconds later. Returns (exit code, seconds to stop, stderr,
-    processes it started that are still running `grace` seconds after the signal). Three plants on
-    at most two jobs, so a plant still waits for a worker when the first MPC starts: with the MPC rows
-    in C, the arm and the UUV side by side once ended 0.4 s after their first MPC run started."""
-    plants = ["arm", "uuv", "satellite"]
+    processes it started that are still running `grace` seconds after the signal). The UUV follows
+    the arm even with one job, so the run is still going at the largest offset on a quiet machine
+    (the arm alone finished 1.45 s after its MPC started)."""
+    plants = ["arm", "uuv"]
     log = workdir / f"stderr-{tag}.txt"
     with open(log, "w") as stream:
         process = subprocess.Popen(
