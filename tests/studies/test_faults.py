@@ -152,6 +152,9 @@ def interrupted_run(
             env=subprocess_env(),
             stdout=subprocess.DEVNULL,
             stderr=stream,
+            # SIGHUP as a terminal delivers it, even when the tests run under nohup (which ignores it,
+            # and the command keeps an ignored SIGHUP ignored)
+            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_DFL),
         )
     try:
         deadline = time.monotonic() + 300
