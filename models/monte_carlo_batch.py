@@ -390,10 +390,10 @@ class MonteCarloPlan:
         """The samples start..stop-1 of the plan, whose arrays `out` holds, as a `MonteCarloResult`
         (its first sample first_sample + start of the whole sample set)."""
         x, xc, u, measured, diverged_at, y = out
-        states = output_states(self.plant)
-        if y is None and self.kernel is not None and states is not None:
-            y = x[:, :, states]
-        if measured is None:
+        y_off, measured_off = self.read_off_states()
+        if y_off:
+            y = x[:, :, output_states(self.plant)]
+        if measured_off:
             measured = (x if self.controller.measures == "state" else y)[:, :-1, :]
         return MonteCarloResult(
             plant=self.plant,

@@ -13,13 +13,11 @@ built, runs in Python, and the run's notes say why.
 
 from __future__ import annotations
 
-import shutil
-
 import numpy as np
 
 import models
 from models import Block
-from models.compile import CompilationError
+from models.compile import CompilationError, compiler
 from models.export import UnsupportedExport, c_identifiers
 from models.exported_loop import ExportedLoop, compile_loop
 from models.run_setup import RunSetup
@@ -28,11 +26,11 @@ from mpc.exporting import export_controller
 
 def wanted(jit, controller) -> bool:
     """Whether `controller`'s Monte Carlo should try its C: an MPC (a lockstep controller, not a Block)
-    with compiled code allowed (`jit` True, or "auto" where a C compiler is found)."""
+    with compiled code allowed (`jit` True, or "auto" where `models.compile.compiler` finds a C compiler)."""
     if isinstance(controller, Block) or not getattr(controller, "lockstep", False):
         return False
     if jit == "auto":
-        return (shutil.which("cc") or shutil.which("gcc")) is not None
+        return compiler() is not None
     return bool(jit)
 
 

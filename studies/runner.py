@@ -23,7 +23,6 @@ cannot meet the case's specs).
 from __future__ import annotations
 
 import math
-import shutil
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -34,6 +33,7 @@ import numpy as np
 import models
 import models.closed_loop
 from models import Block, checks, deferred, exported_loop, interrupts, metrics, specs
+from models.compile import compiler
 
 from . import distributed, exported_runs
 from .answers import collect
@@ -306,8 +306,7 @@ def use_jit(
         plant.step_function(controller.sample_period, substeps).n_instructions()
         + controller.casadi_step.n_instructions()
     )
-    compiler = shutil.which("cc") or shutil.which("gcc")
-    return samples * steps * instructions >= JIT_THRESHOLD and compiler is not None
+    return samples * steps * instructions >= JIT_THRESHOLD and compiler() is not None
 
 
 def _envelope(t: np.ndarray, reference: np.ndarray, tracked: list, inputs: list, samples: int) -> Envelope:
