@@ -83,6 +83,9 @@ NONFINITE_COMMAND = 16
 DAQP_ENTRY_POINTS = (
     "setup_daqp",
     "update_ldp",
+    "update_v",
+    "normalize_M",
+    "normalize_Rinv",
     "daqp_solve",
     "daqp_default_settings",
     "free_daqp_workspace",

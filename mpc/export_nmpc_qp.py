@@ -12,8 +12,14 @@ of N nd variables, is the one most samples need (docs/export.md).
 
 DAQP's workspace is set up once for the whole QP's sizes (``setup``, in
 ``name_init``); every restricted QP is written into the same arrays with its
-own sizes and DAQP's transformation (``update_ldp``) redone in place, as the
-Python path's `daqp.solve` sets one up from an empty working set.
+own sizes and DAQP's transformation redone in place, as the Python path's
+`daqp.solve` sets one up from an empty working set. The cubic part of that
+transformation (the Cholesky factor R of H, R⁻¹ and M = A R⁻¹) runs component
+by component of H's nonzero pattern (``ldp``): a scenario tree's condensed H
+is block diagonal by branch (its branches couple only through the shared
+moves' equality rows), so S branches cost S (n/S)³ instead of n³, with the
+same doubles as DAQP's ``update_ldp`` (tests/mpc/test_tree_export.py builds
+both; benchmarks/tree_qp.py times both).
 """
 
 from __future__ import annotations
@@ -74,6 +80,9 @@ FIELDS = """    double H[${P}_NQ * ${P}_NQ], A[${P}_NROWS > 0 ? ${P}_NROWS * ${P
     int freed[${P}_NSTATIC], at[${P}_NSTATIC], fixed[${P}_NSTATIC], free_list[${P}_NSTATIC], fresh[${P}_NSTATIC];
     int kept[${P}_NROWS > 0 ? ${P}_NROWS : 1], rows[${P}_NROWS > 0 ? ${P}_NROWS : 1];
     int row_at[${P}_NROWS > 0 ? ${P}_NROWS : 1], violated[${P}_NROWS > 0 ? ${P}_NROWS : 1];
+    /* H's components (ldp): parent (union-find), cursor, the variables by component (order), each one's
+     * place in it, and its component's range [begin, end) of order, at the component's root */
+    int parent[${P}_NQ], cursor[${P}_NQ], order[${P}_NQ], place[${P}_NQ], begin[${P}_NQ], end[${P}_NQ];
 """
 
 #: C of the QP: ``setup`` (DAQP's workspace at the whole QP's sizes), ``daqp_on`` (one QP in the
@@ -100,6 +109,103 @@ static int setup(${p}_state *m) {
     return setup_workspace(m);
 }
 
+/* The root of i's component (path halving). */
+static int root_of(int *parent, int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+}
+
+/* H's variables (n) by the connected components of its nonzero pattern: m->order lists every
+ * component's variables in ascending order, component after component; m->place[i] is i's index in
+ * it and [m->begin[r], m->end[r]) its component's range, r = m->parent[i] its root. 1 when H is
+ * diagonal by DAQP's test (no entry above the diagonal larger than 1e-12 in magnitude). */
+static int components(${p}_state *m, int n) {
+    const double *H = m->H;
+    int i, j, a, c, at, size, diagonal = 1;
+    for (i = 0; i < n; ++i) m->parent[i] = i;
+    for (i = 0; i < n; ++i)
+        for (j = i + 1; j < n; ++j) {
+            if (H[i * n + j] == 0.0) continue;
+            if (H[i * n + j] > 1e-12 || H[i * n + j] < -1e-12) diagonal = 0;
+            a = root_of(m->parent, i);
+            c = root_of(m->parent, j);
+            if (a != c) m->parent[a < c ? c : a] = a < c ? a : c;
+        }
+    for (i = 0; i < n; ++i) m->cursor[i] = 0;
+    for (i = 0; i < n; ++i) ++m->cursor[m->parent[i] = root_of(m->parent, i)];
+    for (i = 0, at = 0; i < n; ++i)
+        if (m->parent[i] == i) { size = m->cursor[i]; m->begin[i] = m->cursor[i] = at; m->end[i] = at += size; }
+    for (i = 0; i < n; ++i) { m->place[i] = m->cursor[m->parent[i]]++; m->order[m->place[i]] = i; }
+    return diagonal;
+}
+
+#ifdef DAQP_DENSE_LDP
+static int ldp(${p}_state *m, int n, int mr) {
+    (void) n;
+    (void) mr;
+    return update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace);
+}
+#else
+/* DAQP's transformation of the QP written for daqp_on (update_ldp with every part), with R (R'R = H +
+ * eps I), R^-1 and M = A R^-1 computed component by component: neither R nor R^-1 has an entry between
+ * two components of H (a scenario tree's branches; a free slack), and row a of M is 0 outside the
+ * components its row of A touches. Every other term is DAQP's own, in DAQP's order, so Rinv and M equal
+ * update_ldp's but for the sign of zeros, at the sum of the components' cubes instead of the cube of
+ * their sum. A diagonal H is DAQP's (its own path). 0, or DAQP's error. */
+static int ldp(${p}_state *m, int n, int mr) {
+    DAQPWorkspace *w = &m->workspace;
+    const double *H = m->H;
+    double *R, *Mq, value, r;
+    const double *Aq;
+    int i, j, k, a, q, c, t, at, hi, lo;
+#define AT(i, j) ((i) * n - (i) * ((i) - 1) / 2 + (j) - (i))
+    if (components(m, n)) return update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, w);
+    for (i = 0; i < n + mr; ++i) w->sense[i] = w->qp->sense[i];
+    if (w->RinvD != NULL && w->Rinv == NULL) { w->Rinv = w->RinvD; w->RinvD = NULL; }
+    R = w->Rinv;
+    for (i = 0; i < n * (n + 1) / 2; ++i) R[i] = 0.0;
+    for (i = 0; i < n; ++i) {  /* Cholesky, R's diagonal stored as its reciprocal */
+        lo = m->begin[m->parent[i]], at = m->place[i], hi = m->end[m->parent[i]];
+        r = H[i * n + i] + w->settings->eps_prox;
+        for (q = lo; q < at; ++q) { k = m->order[q]; r -= R[AT(k, i)] * R[AT(k, i)]; }
+        if (r <= 0) return EXIT_NONCONVEX;
+        r = sqrt(r);
+        for (c = at + 1; c < hi; ++c) {
+            j = m->order[c];
+            value = H[i * n + j];
+            for (q = lo; q < at; ++q) { k = m->order[q]; value -= R[AT(k, i)] * R[AT(k, j)]; }
+            R[AT(i, j)] = value / r;
+        }
+        R[AT(i, i)] = 1 / r;
+    }
+    for (k = 0; k < n; ++k) {  /* R^-1 in place, row k from the rows below it */
+        at = m->place[k], hi = m->end[m->parent[k]];
+        for (c = at + 1; c < hi; ++c) R[AT(k, m->order[c])] *= -R[AT(k, k)];
+        for (c = at + 1; c < hi; ++c) {
+            i = m->order[c];
+            R[AT(k, i)] *= R[AT(i, i)];
+            for (t = c + 1; t < hi; ++t) { j = m->order[t]; R[AT(k, j)] -= R[AT(i, j)] * R[AT(k, i)]; }
+        }
+    }
+    for (q = 0; q < mr; ++q) {  /* M = A R^-1, A's columns last to first as DAQP */
+        Aq = m->A + q * n, Mq = w->M + q * n;
+        for (c = 0; c < n; ++c) Mq[c] = 0.0;
+        for (a = n - 1; a >= 0; --a) {
+            if (Aq[a] == 0.0) continue;
+            Mq[a] = R[AT(a, a)] * Aq[a];
+            hi = m->end[m->parent[a]];
+            for (c = m->place[a] + 1; c < hi; ++c) { j = m->order[c]; Mq[j] += R[AT(a, j)] * Aq[a]; }
+        }
+    }
+#undef AT
+    reset_daqp_workspace(w);
+    normalize_M(w);
+    update_v(w->qp->f, w, UPDATE_Rinv);
+    normalize_Rinv(w);
+    return update_ldp(UPDATE_d, w);
+}
+#endif
+
 /* DAQP on the QP of n variables and mr rows written in m->H (n x n), m->f (n), m->A (mr x n, row-major)
  * and the bounds (the n simple bounds, then the rows'), from an empty working set with the equalities
  * in it (active and immutable, as CasADi's DAQP node marks them), as the Python path's daqp.solve:
@@ -112,7 +218,7 @@ static int daqp_on(${p}_state *m, int n, int mr) {
     m->problem.ms = m->workspace.ms = n;
     for (i = 0; i < n + mr; ++i) m->sense[i] = m->blower[i] == m->bupper[i] ? ACTIVE + IMMUTABLE : 0;
     reset_daqp_workspace(&m->workspace);
-    flag = update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace);
+    flag = ldp(m, n, mr);
     if (flag >= 0) flag = activate_constraints(&m->workspace);
     if (flag < 0) return flag;
     result.x = m->x;
