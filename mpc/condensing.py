@@ -158,7 +158,9 @@ def work_size(s: Structure) -> int:
 
 # Γ_k row-major (NX, NZ), its columns from NCOL(k) on zero and never read; HD row k*ND+i: the condensed
 # Hessian's row of Δd_k over z with the gradient in the constant's column; HS likewise for the static
-# controls (when COUPLED).
+# controls (when COUPLED). A row update whose multiplier is 0 is skipped (adding 0 × finite changes
+# nothing): a stacked plant's A_k, B_k and rows are block diagonal by branch (`mpc.scenario_tree`), so
+# a tree's Γ recursion and rows cost S times less.
 KERNEL = r"""
 #define NCOL(k) (NX + 1 + (k) * ND)
 #define NQV (N * NQ)
@@ -193,6 +195,7 @@ static void one(const double* L, double* D, double* w) {
             for (t = 0; t < NX; ++t) {
                 const double at = A[t * NX + r];
                 const double* in = G0 + t * NZ;
+                if (at == 0.0) continue;
                 for (c = 0; c < n0; ++c) out[c] += at * in[c];
             }
             out[NX] += a[r];
@@ -236,8 +239,10 @@ static void one(const double* L, double* D, double* w) {
                 const double bp = BP[i * NX + t], st = H[t * NV + di];
                 const double* g1 = G1 + t * NZ;
                 const double* g0 = G0 + t * NZ;
-                for (c = 0; c < n1; ++c) out[c] += bp * g1[c];
-                for (c = 0; c < n0; ++c) out[c] += st * g0[c];
+                if (bp != 0.0)
+                    for (c = 0; c < n1; ++c) out[c] += bp * g1[c];
+                if (st != 0.0)
+                    for (c = 0; c < n0; ++c) out[c] += st * g0[c];
                 gradient += st * g0[NX] + B[i * NX + t] * lam[t];
             }
             for (l = 0; l < ND; ++l) out[n0 + l] += H[(NX + DYN[l]) * NV + di];
@@ -251,6 +256,7 @@ static void one(const double* L, double* D, double* w) {
                 for (t = 0; t < NX; ++t) {
                     const double h = H[t * NV + si];
                     const double* g0 = G0 + t * NZ;
+                    if (h == 0.0) continue;
                     for (c = 0; c < n0; ++c) out[c] += h * g0[c];
                 }
                 for (l = 0; l < ND; ++l) out[n0 + l] += H[(NX + DYN[l]) * NV + si];
@@ -306,6 +312,7 @@ static void one(const double* L, double* D, double* w) {
         for (t = 0; t < NX; ++t) {
             const double j0 = J[t * R + rho];
             const double* g0 = G0 + t * NZ;
+            if (j0 == 0.0) continue;
             for (c = 0; c < n0; ++c) row[c] += j0 * g0[c];
         }
         if (kk < N) {
@@ -313,6 +320,7 @@ static void one(const double* L, double* D, double* w) {
             for (t = 0; t < NX; ++t) {
                 const double j1 = J[(NV + t) * R + rho];
                 const double* g1 = G0 + NX * NZ + t * NZ;
+                if (j1 == 0.0) continue;
                 for (c = 0; c < n1; ++c) row[c] += j1 * g1[c];
             }
             for (i = 0; i < ND; ++i) row[n0 + i] += J[(NX + DYN[i]) * R + rho];

@@ -132,3 +132,24 @@ def test_bad_input_is_refused_at_construction(arguments, message):
             input_weight=CASE.mpc.input_weight,
             **arguments,
         )
+
+
+def test_the_generated_condensing_of_the_stacked_plant_equals_casadis():
+    """`mpc.condensing`'s C, which skips the updates whose multiplier is 0 (the stacked plant's A_k, B_k and
+    rows are block diagonal by branch), against the CasADi expressions it replaces, entry by entry, on the
+    tree's problem with the cart-travel bound and a rate limit at random points."""
+    from mpc.rti import RealTimeIteration
+
+    controller = tree(horizon=12, soft_bounds=(TRAVEL,), rate_limit=1.0)
+    tr = controller.nlp.inner.transcription
+    reference, generated = (RealTimeIteration(tr, compiled=c) for c in (False, True))
+    assert generated.condensing is not None
+    rng = np.random.default_rng(4)
+    S, nx = len(BRANCHES), KNOWN.nx
+    for _ in range(3):
+        w = rng.normal(scale=0.2, size=tr.layout.size)
+        x_hat = np.tile(START, S) + rng.normal(scale=0.01, size=S * nx)
+        P = tr.parameter_values(x_hat)
+        ours, theirs = generated.prepare(w, P), reference.prepare(w, P)
+        same = ours == theirs
+        np.testing.assert_allclose(ours[~same], theirs[~same], rtol=1e-12, atol=1e-12 * np.abs(theirs[~same]).max())
