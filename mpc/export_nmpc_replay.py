@@ -116,6 +116,16 @@ def replay(
     models.compile.CompilationError
         When no compiler is found.
     """
+    program = build_replay(
+        exported, measurements, references, directory, flags=flags, count_allocations=count_allocations
+    )
+    return run_replay(program)
+
+
+def build_replay(
+    exported: ExportedC, measurements, references, directory, *, flags=mc.FLAGS, count_allocations=None
+) -> Path:
+    """The program of `replay`, compiled (its arguments as `replay`'s): its path, for `run_replay`."""
     y = np.asarray(measurements, dtype=float).reshape(-1, exported.n_measured)
     r = np.asarray(references, dtype=float).reshape(len(y), exported.n_reference)
     count = sys.platform == "linux" if count_allocations is None else bool(count_allocations)
@@ -138,9 +148,14 @@ def replay(
     if count:
         arguments += ["-DCOUNT_ALLOCATIONS", WRAP]
     subprocess.run(arguments, cwd=directory, check=True, capture_output=True, text=True)
-    lines = subprocess.run([str(directory / "replay")], check=True, capture_output=True, text=True).stdout.splitlines()
+    return directory / "replay"
+
+
+def run_replay(program: Path) -> Replay:
+    """Run a program of `build_replay` (again: each run starts from init) and read what it reports."""
+    lines = subprocess.run([str(program)], check=True, capture_output=True, text=True).stdout.splitlines()
     init_code, init_allocations, _, allocations, _ = (int(v) for v in lines[0].split())
-    rows = np.array([[float(v) for v in line.split()] for line in lines[1:]]).reshape(len(y), -1)
+    rows = np.array([[float(v) for v in line.split()] for line in lines[1:]]).reshape(len(lines) - 1, -1)
     return Replay(
         init_code=init_code,
         codes=rows[:, 0].astype(int),
