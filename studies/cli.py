@@ -267,9 +267,9 @@ def _list(plants, providers) -> str:
 def _plant_line(done: dict) -> str:
     """A plant's closing line: "arm: 12 controllers, 60 rows: 50 meet specs, 10 violate; best step ITAE: LQR".
 
-    The best is the lowest step ITAE among the rows that meet their specs (`StudyResult.best`); when none
-    does the line says so ("best step ITAE: none, no step row meets the specs"), never naming a row that
-    violates them."""
+    The best is the lowest step ITAE among the controllers whose every row meets its specs
+    (`StudyResult.best`); when none does the line says so ("best step ITAE: none, no step row meets the
+    specs"), never naming a controller that violates them in any scenario."""
     plural = {"meets specs": "meet specs", "violates": "violate"}
     counts = ", ".join(
         f"{n} {plural.get(label, label) if n > 1 else label}" for label, n in done["counts"].items() if n

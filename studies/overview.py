@@ -25,7 +25,7 @@ import numpy as np
 
 from models import deferred, specs
 
-from . import cases, style, templates
+from . import cases, judging, style, templates
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -67,12 +67,12 @@ def step_rows(table):
 
 
 def relative_itae(table) -> dict:
-    """controller -> step ITAE divided by the smallest finite step ITAE on that plant among the "ok" rows that
-    meet their specs (the best, 1×); NaN everywhere when no row meets them (no row is called best) and
-    where a row has no number."""
+    """controller -> step ITAE divided by the smallest finite step ITAE on that plant among the controllers
+    whose every row is "ok" and meets its specs (the best, 1×, `judging.meets_everywhere`); NaN everywhere
+    when none does (no row is called best) and where a row has no number."""
     rows = step_rows(table)
     itae = rows.itae.astype(float)
-    meets = (rows.verdict == specs.MEETS) & (rows.status == "ok") if "status" in rows else rows.verdict == specs.MEETS
+    meets = table.assign(meets=judging.meets_everywhere(table)).groupby("controller").meets.all().loc[rows.index]
     finite = itae[np.isfinite(itae) & (itae > 0) & meets]
     best = float(finite.min()) if len(finite) else math.nan
     return {

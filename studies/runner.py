@@ -38,7 +38,7 @@ from models.compile import compiler
 from . import distributed, exported_runs
 from .answers import collect
 from .case import SCENARIO_NAMES, CaseStudy, TableScenario
-from .judging import check_specs, judge_run, remarked, verdict_columns
+from .judging import check_specs, judge_run, meets_everywhere, remarked, verdict_columns
 from .judging import degraded_status as degraded_status
 from .judging import run_status as run_status
 from .judging import solver_counts as solver_counts
@@ -178,12 +178,12 @@ class StudyResult:
     trajectories: object = None
 
     def best(self, scenario: str = "step", meeting: bool = True) -> str | None:
-        """The controller with the lowest ITAE in `scenario` among rows of status "ok" that meet their
-        specs (verdict `models.specs.MEETS`); None when no row does. A violating or degraded row is never
-        the best. ``meeting=False`` drops the verdict condition (the lowest ITAE among "ok" rows)."""
+        """The controller with the lowest ITAE in `scenario` among those whose every row is "ok" and meets
+        its specs (`judging.meets_everywhere`); None when none does: a controller violating its specs in
+        any scenario, or degraded, is never the best. ``meeting=False``: the lowest ITAE among "ok" rows."""
         rows = self.table[(self.table.scenario == scenario) & (self.table.status == "ok")]
         if meeting:
-            rows = rows[rows.verdict == specs.MEETS]
+            rows = rows[meets_everywhere(self.table).loc[rows.index]]
         rows = rows[np.isfinite(rows.itae.astype(float))]
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
 

@@ -1,5 +1,6 @@
-""" "Best" is the lowest step ITAE among rows that meet their specs, on the console and on the heat map:
-a violating row with the lowest ITAE is never called best, and with no meeting row nothing is."""
+""" "Best" is the lowest step ITAE among controllers whose every row meets its specs, on the console and on the
+heat map: a violating row with the lowest ITAE is never called best, nor a controller that meets the step but
+violates its specs elsewhere, and with no meeting row nothing is."""
 
 import dataclasses
 import math
