@@ -30,13 +30,13 @@ import studies
 from models import compile as mc
 from mpc.export_nmpc import export_nonlinear_mpc
 from mpc.export_nmpc_replay import build_replay, run_replay
-from studies import robust_rows
+from studies import robust_rows, runner
 
 
 def measure(name: str, steps: int, repeat: int, folder: Path) -> dict:
     """Median CPU time per step (ms) of both builds on `name`'s tree, their ratio, the largest command difference."""
     plant, case = models.get(name), studies.get(name)
-    reference = float(plant.equilibrium()[0][plant.state_names.index(case.tracked)] + case.step)
+    reference = runner.tracked_equilibrium(plant, case)[1] + case.step
     tree = robust_rows.scenario_tree(case, case.known_plant(plant))[robust_rows.LABEL]
     exported = export_nonlinear_mpc(tree, f"tree_qp_{name}", [reference])
     run = models.simulate_closed_loop(

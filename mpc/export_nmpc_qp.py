@@ -109,6 +109,16 @@ static int setup(${p}_state *m) {
     return setup_workspace(m);
 }
 
+/* update_ldp's every part: DAQP's whole transformation of a new QP. */
+#define WHOLE_LDP (UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense)
+
+#ifdef DAQP_DENSE_LDP
+static int ldp(${p}_state *m, int n, int mr) {
+    (void) n;
+    (void) mr;
+    return update_ldp(WHOLE_LDP, &m->workspace);
+}
+#else
 /* The root of i's component (path halving). */
 static int root_of(int *parent, int i) {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
@@ -139,13 +149,6 @@ static int components(${p}_state *m, int n) {
     return diagonal;
 }
 
-#ifdef DAQP_DENSE_LDP
-static int ldp(${p}_state *m, int n, int mr) {
-    (void) n;
-    (void) mr;
-    return update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, &m->workspace);
-}
-#else
 /* DAQP's transformation of the QP written for daqp_on (update_ldp with every part), with R (R'R = H +
  * eps I), R^-1 and M = A R^-1 computed component by component: neither R nor R^-1 has an entry between
  * two components of H (a scenario tree's branches; a free slack), and row a of M is 0 outside the
@@ -159,7 +162,7 @@ static int ldp(${p}_state *m, int n, int mr) {
     const double *Aq;
     int i, j, k, a, q, c, t, at, hi, lo;
 #define AT(i, j) ((i) * n - (i) * ((i) - 1) / 2 + (j) - (i))
-    if (components(m, n)) return update_ldp(UPDATE_Rinv | UPDATE_M | UPDATE_v | UPDATE_d | UPDATE_sense, w);
+    if (components(m, n)) return update_ldp(WHOLE_LDP, w);
     for (i = 0; i < n + mr; ++i) w->sense[i] = w->qp->sense[i];
     if (w->RinvD != NULL && w->Rinv == NULL) { w->Rinv = w->RinvD; w->RinvD = NULL; }
     R = w->Rinv;

@@ -167,11 +167,11 @@ def judge_run(
 
 
 def meets_everywhere(table):
-    """Per row of a study table (a pandas DataFrame with controller, verdict and, if any, status): whether
-    its controller's every row is "ok" and meets its specs (`models.specs.MEETS`). What "best" asks of a
-    controller (console, summary, heat map): one that violates its specs in any scenario is never the
-    best of one."""
+    """controller -> whether its every row of a study table (a pandas DataFrame with controller, verdict and,
+    if any, status) is "ok" and meets its specs (`models.specs.MEETS`), as a boolean Series. What "best"
+    asks of a controller (console, summary, heat map): one that violates its specs in any scenario is
+    never the best of one."""
     good = table.verdict == specs.MEETS
     if "status" in table:
         good &= table.status == "ok"
-    return good.groupby(table.controller).transform("all").astype(bool)
+    return good.groupby(table.controller).all()

@@ -72,7 +72,7 @@ def relative_itae(table) -> dict:
     when none does (no row is called best) and where a row has no number."""
     rows = step_rows(table)
     itae = rows.itae.astype(float)
-    meets = table.assign(meets=judging.meets_everywhere(table)).groupby("controller").meets.all().loc[rows.index]
+    meets = judging.meets_everywhere(table).loc[rows.index]
     finite = itae[np.isfinite(itae) & (itae > 0) & meets]
     best = float(finite.min()) if len(finite) else math.nan
     return {

@@ -183,7 +183,7 @@ class StudyResult:
         any scenario, or degraded, is never the best. ``meeting=False``: the lowest ITAE among "ok" rows."""
         rows = self.table[(self.table.scenario == scenario) & (self.table.status == "ok")]
         if meeting:
-            rows = rows[meets_everywhere(self.table).loc[rows.index]]
+            rows = rows[meets_everywhere(self.table).loc[rows.controller].to_numpy()]
         rows = rows[np.isfinite(rows.itae.astype(float))]
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
 
