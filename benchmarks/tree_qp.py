@@ -76,6 +76,9 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=5, help="runs of each program, in turn")
     parser.add_argument("--json", type=Path, help="write the results here")
     args = parser.parse_args(argv)
+    for option in ("steps", "repeat"):
+        if getattr(args, option) < 1:
+            parser.error(f"--{option} must be at least 1, got {getattr(args, option)}")
     results: dict = {"load_average_before": os.getloadavg()}
     with tempfile.TemporaryDirectory() as folder:
         for name in args.plants:
