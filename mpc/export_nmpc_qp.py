@@ -83,6 +83,7 @@ FIELDS = """    double H[${P}_NQ * ${P}_NQ], A[${P}_NROWS > 0 ? ${P}_NROWS * ${P
     /* H's components (ldp): parent (union-find), cursor, the variables by component (order), each one's
      * place in it, and its component's range [begin, end) of order, at the component's root */
     int parent[${P}_NQ], cursor[${P}_NQ], order[${P}_NQ], place[${P}_NQ], begin[${P}_NQ], end[${P}_NQ];
+    double block[${P}_NQ * ${P}_NQ];  /* one component's R, then R^-1, dense and row-major (ldp) */
 """
 
 #: C of the QP: ``setup`` (DAQP's workspace at the whole QP's sizes), ``daqp_on`` (one QP in the
@@ -154,41 +155,48 @@ static int components(${p}_state *m, int n) {
  * two components of H (a scenario tree's branches; a free slack), and row a of M is 0 outside the
  * components its row of A touches. Every other term is DAQP's own, in DAQP's order, so Rinv and M equal
  * update_ldp's but for the sign of zeros, at the sum of the components' cubes instead of the cube of
- * their sum. A diagonal H is DAQP's (its own path). 0, or DAQP's error. */
+ * their sum. Each component's R is worked on as a dense block (m->block), its rows contiguous, so the
+ * inner loops run along rows (each entry's terms still summed in DAQP's order). A diagonal H is DAQP's
+ * (its own path). 0, or DAQP's error. */
 static int ldp(${p}_state *m, int n, int mr) {
     DAQPWorkspace *w = &m->workspace;
     const double *H = m->H;
-    double *R, *Mq, value, r;
-    const double *Aq;
-    int i, j, k, a, q, c, t, at, hi, lo;
+    double *R, *B = m->block, *Mq, r, coefficient;
+    const double *Aq, *Hi;
+    int i, j, a, b, p, c, q, t, lo, s;
 #define AT(i, j) ((i) * n - (i) * ((i) - 1) / 2 + (j) - (i))
     if (components(m, n)) return update_ldp(WHOLE_LDP, w);
     for (i = 0; i < n + mr; ++i) w->sense[i] = w->qp->sense[i];
     if (w->RinvD != NULL && w->Rinv == NULL) { w->Rinv = w->RinvD; w->RinvD = NULL; }
     R = w->Rinv;
     for (i = 0; i < n * (n + 1) / 2; ++i) R[i] = 0.0;
-    for (i = 0; i < n; ++i) {  /* Cholesky, R's diagonal stored as its reciprocal */
-        lo = m->begin[m->parent[i]], at = m->place[i], hi = m->end[m->parent[i]];
-        r = H[i * n + i] + w->settings->eps_prox;
-        for (q = lo; q < at; ++q) { k = m->order[q]; r -= R[AT(k, i)] * R[AT(k, i)]; }
-        if (r <= 0) return EXIT_NONCONVEX;
-        r = sqrt(r);
-        for (c = at + 1; c < hi; ++c) {
-            j = m->order[c];
-            value = H[i * n + j];
-            for (q = lo; q < at; ++q) { k = m->order[q]; value -= R[AT(k, i)] * R[AT(k, j)]; }
-            R[AT(i, j)] = value / r;
+    for (c = 0; c < n; ++c) {
+        if (m->parent[c] != c) continue;
+        lo = m->begin[c], s = m->end[c] - lo;
+        for (a = 0; a < s; ++a) {  /* Cholesky of the block, its diagonal stored as the reciprocal */
+            i = m->order[lo + a], Hi = H + i * n;
+            r = Hi[i] + w->settings->eps_prox;
+            for (p = 0; p < a; ++p) r -= B[p * s + a] * B[p * s + a];
+            if (r <= 0) return EXIT_NONCONVEX;
+            r = sqrt(r);
+            for (b = a + 1; b < s; ++b) B[a * s + b] = Hi[m->order[lo + b]];
+            for (p = 0; p < a; ++p) {
+                coefficient = B[p * s + a];
+                for (b = a + 1; b < s; ++b) B[a * s + b] -= coefficient * B[p * s + b];
+            }
+            for (b = a + 1; b < s; ++b) B[a * s + b] /= r;
+            B[a * s + a] = 1 / r;
         }
-        R[AT(i, i)] = 1 / r;
-    }
-    for (k = 0; k < n; ++k) {  /* R^-1 in place, row k from the rows below it */
-        at = m->place[k], hi = m->end[m->parent[k]];
-        for (c = at + 1; c < hi; ++c) R[AT(k, m->order[c])] *= -R[AT(k, k)];
-        for (c = at + 1; c < hi; ++c) {
-            i = m->order[c];
-            R[AT(k, i)] *= R[AT(i, i)];
-            for (t = c + 1; t < hi; ++t) { j = m->order[t]; R[AT(k, j)] -= R[AT(i, j)] * R[AT(k, i)]; }
+        for (a = 0; a < s; ++a) {  /* R^-1 in place, row a from the rows below it */
+            for (b = a + 1; b < s; ++b) B[a * s + b] *= -B[a * s + a];
+            for (b = a + 1; b < s; ++b) {
+                B[a * s + b] *= B[b * s + b];
+                coefficient = B[a * s + b];
+                for (t = b + 1; t < s; ++t) B[a * s + t] -= B[b * s + t] * coefficient;
+            }
         }
+        for (a = 0; a < s; ++a)
+            for (b = a, i = m->order[lo + a]; b < s; ++b) R[AT(i, m->order[lo + b])] = B[a * s + b];
     }
     for (q = 0; q < mr; ++q) {  /* M = A R^-1, A's columns last to first as DAQP */
         Aq = m->A + q * n, Mq = w->M + q * n;
@@ -196,8 +204,8 @@ static int ldp(${p}_state *m, int n, int mr) {
         for (a = n - 1; a >= 0; --a) {
             if (Aq[a] == 0.0) continue;
             Mq[a] = R[AT(a, a)] * Aq[a];
-            hi = m->end[m->parent[a]];
-            for (c = m->place[a] + 1; c < hi; ++c) { j = m->order[c]; Mq[j] += R[AT(a, j)] * Aq[a]; }
+            t = m->end[m->parent[a]];
+            for (c = m->place[a] + 1; c < t; ++c) { j = m->order[c]; Mq[j] += R[AT(a, j)] * Aq[a]; }
         }
     }
 #undef AT
