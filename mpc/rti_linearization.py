@@ -135,7 +135,7 @@ def check(transcription: Transcription) -> Checked:
 class Stages:
     """The linearization's Functions (see `stage_functions`).
 
-    functions : N interval Functions, then the end's
+    functions : N interval Functions, then the end's (a group's first made with CSE: the one evaluated)
     groups : lists of intervals whose Functions agree (evaluated together with `map`)
     rows : N + 1 lists, the rows of g (besides the gaps) each interval holds
     hessian : the sparsity of the objective's Hessian in w
@@ -190,13 +190,17 @@ def _indices(array) -> list[int]:
     return list(map(int, array))
 
 
-def interval_function(checked: Checked, k: int, rows: list[int], grad: ca.SX, hessian: ca.SX) -> ca.Function:
+def interval_function(
+    checked: Checked, k: int, rows: list[int], grad: ca.SX, hessian: ca.SX, *, cse: bool = True
+) -> ca.Function:
     """Interval k's Function (s_k, q_k, s_{k+1}, q_{k-1}, P) -> (a, A, B, I, g, J_g, grad, H).
 
     a = -(gap), A, B = -∂gap/∂(s_k, q_k), I = ∂gap/∂s_{k+1} (the identity for a shooting gap
     s_{k+1} - φ(s_k, q_k)), g = the interval's other `rows` and J_g their Jacobian in
     (s_k, q_k, s_{k+1}, q_{k-1}), grad and H the objective's gradient and Hessian in (s_k, q_k).
-    All in scaled decisions; grad and hessian are the whole objective's, in w.
+    All in scaled decisions; grad and hessian are the whole objective's, in w. `cse`: CasADi's common
+    subexpression elimination (the same values; most of the Function's making, and a smaller graph to
+    evaluate and generate).
     """
     tr, states, stage_q, nx = checked.transcription, checked.states, checked.stage_q, checked.nx
     w, P, g = tr.nlp["x"], tr.nlp["p"], tr.nlp["g"]
@@ -221,7 +225,7 @@ def interval_function(checked: Checked, k: int, rows: list[int], grad: ca.SX, he
         outputs,
         ["s", "q", "s_next", "q_prev", "P"],
         list(INTERVAL_OUTPUTS),
-        {"cse": True},
+        {"cse": cse},
     )
 
 
@@ -292,9 +296,14 @@ def stage_functions(checked: Checked) -> Stages:
     others = checked.others
     pattern = ca.jacobian(g[_indices(others)], w).sparsity() if len(others) else ca.Sparsity(0, 0)
     rows = assign_rows(pattern, others, checked.states, checked.stage_q, stage_of)
-    functions = [interval_function(checked, k, rows[k], grad, hessian) for k in range(N)]
+    # Grouped on Functions made without CSE (a fiftieth of the time on the crane's tree); only a group's
+    # first interval's Function is evaluated after, so only it is made again, with CSE.
+    functions = [interval_function(checked, k, rows[k], grad, hessian, cse=False) for k in range(N)]
     functions.append(end_function(checked, rows[N], grad, hessian))
-    return Stages(functions, group_intervals(functions, rows, checked.nx), rows, hessian.sparsity())
+    groups = group_intervals(functions, rows, checked.nx)
+    for group in groups:
+        functions[group[0]] = interval_function(checked, group[0], rows[group[0]], grad, hessian)
+    return Stages(functions, groups, rows, hessian.sparsity())
 
 
 def evaluate_stages(stages: Stages, wm: ca.MX, Pm: ca.MX, s_idx: list, q_idx: list) -> list[dict]:
