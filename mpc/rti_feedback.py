@@ -65,6 +65,13 @@ class Feedback:
     whole: ca.Function
 
 
+def _product(M: ca.MX, v: ca.MX) -> ca.MX:
+    """M v for a dense M stored row by row (M is the transpose of a column-major reshape, `DataLayout.unpack`),
+    written (vᵀ Mᵀ)ᵀ: CasADi then reads Mᵀ where it lies, along its columns, instead of copying M into column
+    order and striding across it; the same products summed in the same order, so the same doubles."""
+    return (v.T @ M.T).T
+
+
 def feedback_functions(layout: DataLayout, state_scale, first_state) -> Feedback:
     """The feedback's Functions on data laid out as `layout` says.
 
@@ -82,8 +89,8 @@ def feedback_functions(layout: DataLayout, state_scale, first_state) -> Feedback
     dv, lam_a, lam_x = ca.MX.sym("dv", nQ), ca.MX.sym("lam_a", m), ca.MX.sym("lam_x", nQ)
     dv_d, dv_s = dv[:nD], dv[nD:]
     H_dd, H_sd, H_ss, C_d, C_s = p["H_dd"], p["H_sd"], p["H_ss"], p["C_d"], p["C_s"]
-    H_dv = ca.vertcat(H_dd @ dv_d + H_sd.T @ dv_s, H_sd @ dv_d + H_ss @ dv_s)
-    C_dv = C_d @ dv_d + C_s @ dv_s
+    H_dv = ca.vertcat(_product(H_dd, dv_d) + H_sd.T @ dv_s, _product(H_sd, dv_d) + H_ss @ dv_s)
+    C_dv = _product(C_d, dv_d) + C_s @ dv_s
     stationarity = ca.mmax(ca.fabs(H_dv + h + ca.vertcat(C_d.T @ lam_a, C_s.T @ lam_a) + lam_x))
     violation = ca.mmax(ca.vertcat(0, lba - C_dv, C_dv - uba, p["lbv"] - dv, dv - p["ubv"]))
     d_of_q, s_of_q = dims.variable_order()
