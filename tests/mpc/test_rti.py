@@ -389,3 +389,28 @@ def test_generated_condensing_equals_casadis_where_a_slack_couples_with_the_stat
         ours, theirs = generated.prepare(w, P), reference.prepare(w, P)
         same = ours == theirs  # equal infinite bounds included
         np.testing.assert_allclose(ours[~same], theirs[~same], rtol=1e-12, atol=1e-12 * np.abs(theirs[~same]).max())
+
+
+def test_the_recovery_product_is_the_plain_product_to_the_bit():
+    """`rti_feedback._product` reads a row-major stored M along its columns: the same products summed in
+    the same order as M @ v, so the same doubles (compared exactly with NumPy's sum in that order), and no
+    transposing copy in the generated C."""
+    from mpc.rti_feedback import _product
+
+    rows, cols = 7, 5
+    stored = ca.MX.sym("stored", rows * cols)
+    M = ca.reshape(stored, cols, rows).T  # as DataLayout.unpack
+    v = ca.MX.sym("v", cols)
+    rng = np.random.default_rng(4)
+    values, x = rng.normal(size=rows * cols), rng.normal(size=cols)
+    ours = ca.Function("ours", [stored, v], [_product(M, v)])
+    plain = ca.Function("plain", [stored, v], [M @ v])
+    matrix = values.reshape(rows, cols)
+    expected = np.zeros(rows)
+    for k in range(cols):  # left to right, as CasADi's dense product sums
+        expected = expected + matrix[:, k] * x[k]
+    np.testing.assert_array_equal(np.asarray(ours(values, x), dtype=float).ravel(), expected)
+    np.testing.assert_array_equal(np.asarray(plain(values, x), dtype=float).ravel(), expected)
+    generated = ca.CodeGenerator("product.c")
+    generated.add(ours)
+    assert "rr[i+j*" not in generated.dump()
