@@ -163,7 +163,7 @@ static int ldp(${p}_state *m, int n, int mr) {
     const double *H = m->H;
     double *R, *B = m->block, *Mq, r, coefficient;
     const double *Aq, *Hi;
-    int i, j, a, b, p, c, q, t, lo, s;
+    int i, j, a, b, p, c, q, t, lo, hi, s;
 #define AT(i, j) ((i) * n - (i) * ((i) - 1) / 2 + (j) - (i))
     if (components(m, n)) return update_ldp(WHOLE_LDP, w);
     for (i = 0; i < n + mr; ++i) w->sense[i] = w->qp->sense[i];
@@ -204,8 +204,8 @@ static int ldp(${p}_state *m, int n, int mr) {
         for (a = n - 1; a >= 0; --a) {
             if (Aq[a] == 0.0) continue;
             Mq[a] = R[AT(a, a)] * Aq[a];
-            t = m->end[m->parent[a]];
-            for (c = m->place[a] + 1; c < t; ++c) { j = m->order[c]; Mq[j] += R[AT(a, j)] * Aq[a]; }
+            hi = m->end[m->parent[a]];
+            for (c = m->place[a] + 1; c < hi; ++c) { j = m->order[c]; Mq[j] += R[AT(a, j)] * Aq[a]; }
         }
     }
 #undef AT
