@@ -296,7 +296,7 @@ def stage_functions(checked: Checked) -> Stages:
     others = checked.others
     pattern = ca.jacobian(g[_indices(others)], w).sparsity() if len(others) else ca.Sparsity(0, 0)
     rows = assign_rows(pattern, others, checked.states, checked.stage_q, stage_of)
-    # Grouped on Functions made without CSE (a fiftieth of the time on the crane's tree); only a group's
+    # Grouped on Functions made without CSE (a small fraction of the time, docs/performance.md); only a group's
     # first interval's Function is evaluated after, so only it is made again, with CSE.
     functions = [interval_function(checked, k, rows[k], grad, hessian, cse=False) for k in range(N)]
     functions.append(end_function(checked, rows[N], grad, hessian))
