@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -53,6 +54,9 @@ from .simulate import DIVERGENCE_BOUND
 #: (figures: docs/performance.md). A block of samples is ``GROUPS`` vectors of ``LANES`` doubles, ``LANES``
 #: the machine's (8 with AVX-512, 4 with AVX, 2 else), as `MonteCarloKernel.block` says.
 GROUPS = 2
+
+#: Ranges of samples per thread in a kernel call: the threads take them in turn (`MonteCarloKernel.run`).
+PARTS_PER_THREAD = 8
 
 #: Functions the C library has vector variants of (glibc's libmvec on x86-64): declared
 #: ``omp declare simd`` so that the per-lane loops (`_lane_helper`) call them on vectors. Sine and cosine
@@ -706,17 +710,30 @@ class MonteCarloKernel:
             None if suspect is None else suspect.ctypes.data_as(ctypes.POINTER(ctypes.c_uint8)),
         ]
         blocks = -(-m // self.block)
-        parts = max(1, min(int(threads), blocks))
+        threads = max(1, min(int(threads), blocks))
+        # More ranges than threads, taken in turn by whichever thread is free: a thread slowed by other
+        # work on its core takes fewer (a sample's numbers do not depend on its range).
+        parts = min(blocks, PARTS_PER_THREAD * threads)
         edges = [self.block * (blocks * i // parts) for i in range(parts)] + [m]
 
         def call(i: int) -> None:
             fun(m, n, edges[i], min(edges[i + 1], m), *args)
 
-        if parts == 1:
-            call(0)
+        if threads == 1:
+            fun(m, n, 0, m, *args)
         else:
-            with ThreadPoolExecutor(parts) as pool:
-                list(pool.map(call, range(parts)))
+            list(_workers(threads).map(call, range(parts)))
+
+
+_pools: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _workers(threads: int) -> ThreadPoolExecutor:
+    """This process's pool of `threads` threads for kernel calls, made on first use and kept: starting
+    threads took about 1 ms each, a tenth of the benchmark's Monte Carlo when every call made its own.
+    Keyed by the process too, since a forked child has the pool but not its threads."""
+    key = (os.getpid(), threads)
+    return _pools.get(key) or _pools.setdefault(key, ThreadPoolExecutor(threads, thread_name_prefix="mc-kernel"))
 
 
 def kernel(plant: Plant, controller: Block, substeps: int) -> MonteCarloKernel:

@@ -81,6 +81,20 @@ def test_a_batch_of_n_is_n_batches_of_one_bit_for_bit_whatever_the_threads_and_c
     assert not np.allclose(whole.x[0], whole.x[1])  # the samples differ
 
 
+def test_ranges_taken_in_turn_by_two_threads_give_one_threads_bits(monkeypatch):
+    """Three blocks and five samples more, as a range per block taken in turn by two threads and as one
+    range on one thread: the same bits."""
+    pend = models.get("pendulum")
+    block = PendulumPI()
+    _require_kernel(pend, block)
+    samples = models.sample_params(pend, 3 * mc_kernel.kernel(pend, block, 2).block + 5, seed=5)
+    monkeypatch.setattr(mc_kernel, "PARTS_PER_THREAD", 2)
+    _, _, one = _pendulum_runs(samples, jit=True, threads=1)
+    _, _, two = _pendulum_runs(samples, jit=True, threads=2)
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(two, name), getattr(one, name), err_msg=name)
+
+
 def test_a_samples_numbers_are_the_same_in_every_lane_and_group():
     """Two blocks and three samples more of one parameter row, without noise: every lane of every group
     (and the padding of the last block) computes the same bits."""
