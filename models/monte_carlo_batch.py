@@ -15,12 +15,14 @@ drawn from the generator seeded with (seed, i).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
+from . import buffers
 from .block import Block
 from .checks import as_matrix, boolean, check_memory, format_bytes, integer
 from .closed_loop import ClosedLoopResult, batch_outputs, closed_loop_function, first_faults
@@ -101,6 +103,18 @@ class MonteCarloResult(Sequence):
             *(() if y is None else (y,)),
         ):
             arr.setflags(write=False)
+        self._shared = {
+            "t": self.t,
+            "r": self.r,
+            "d": self.d,
+            "step_time": self._step_time,
+            "status": None,
+            "input_limit": self.input_limit,
+            "state_names": self.state_names,
+            "output_names": self.output_names,
+            "input_names": self.input_names,
+            "controller": self.controller,
+        }
 
     @property
     def y(self) -> np.ndarray:
@@ -122,29 +136,30 @@ class MonteCarloResult(Sequence):
         if not -len(self) <= i < len(self):
             raise IndexError(f"sample {index} of a batch of {len(self)}")
         i %= len(self)
-        k = self.diverged_at[i]
-        return ClosedLoopResult(
-            t=self.t,
-            x=self.x[i],
-            y=self.y[i],
-            r=self.r,
-            u=self.u[i],
-            d=self.d,
-            measured=self.measured[i],
-            xc=self.xc[i],
-            step_time=self._step_time,
-            status=None,
-            input_limit=self.input_limit,
-            state_names=self.state_names,
-            output_names=self.output_names,
-            input_names=self.input_names,
-            controller=self.controller,
-            diverged_at=None if np.isnan(k) else float(k),
-            params=self.params[i],
-        )
+        views = (self.x[i], self.y[i], self.u[i], self.measured[i], self.xc[i], self.params[i])
+        return self._sample(*views, float(self.diverged_at[i]))
 
     def __iter__(self) -> Iterator[ClosedLoopResult]:
-        return (self[i] for i in range(len(self)))
+        views = zip(self.x, self.y, self.u, self.measured, self.xc, self.params, self.diverged_at.tolist())
+        return (self._sample(*sample) for sample in views)
+
+    def _sample(self, x, y, u, measured, xc, params, diverged_at: float) -> ClosedLoopResult:
+        """One sample's `ClosedLoopResult` from its views and its time of divergence (NaN: none)."""
+        run = object.__new__(ClosedLoopResult)
+        # Every field at once: the frozen dataclass's __init__ sets them one by one through
+        # object.__setattr__, which was half the time of reading a sample (tests/models/test_monte_carlo.py
+        # checks the fields against __init__'s).
+        run.__dict__.update(
+            self._shared,
+            x=x,
+            y=y,
+            u=u,
+            measured=measured,
+            xc=xc,
+            params=params,
+            diverged_at=None if math.isnan(diverged_at) else diverged_at,
+        )
+        return run
 
     def __repr__(self) -> str:
         diverged = int(np.sum(~np.isnan(self.diverged_at)))
@@ -272,13 +287,17 @@ class MonteCarloPlan:
         integer(setup.seed, "seed", minimum=0)  # each sample's noise is seeded with (seed, index)
         n, m, nc = setup.n_steps, samples.shape[0], controller.n_state
         nm = setup.n_measured
-        work = 8.0 * n * (3 * (plant.nx + nc) + 2 * plant.nu + (3 if setup.noisy else 2) * nm + controller.n_reference)
         compiled, engine = None, "CasADi map (jit=False)"
         if jit:
             try:
                 compiled, engine = kernel(plant, controller, setup.substeps), "C kernel"
             except KernelUnavailable as err:
                 engine = f"CasADi map (no C kernel: {err})"
+        if compiled:  # the kernel writes into the results; its working memory is the chunk's noise
+            work = 8.0 * (1 + (n * nm if setup.noisy else 0))
+        else:
+            per_step = 3 * (plant.nx + nc) + 2 * plant.nu + (3 if setup.noisy else 2) * nm + controller.n_reference
+            work = 8.0 * n * per_step
         if chunk_size is None:
             # The step budget bounds the cost of building a CasADi map; the kernel has none.
             by_steps = m if compiled else max(threads, MONTE_CARLO_CHUNK_STEPS // max(n, 1))
@@ -307,14 +326,16 @@ class MonteCarloPlan:
         None where they repeat x (`read_off_states`): the result reads them off x."""
         n, nm = self.setup.n_steps, self.setup.n_measured
         y_off, measured_off = self.read_off_states()
-        return (
-            np.empty((m, n + 1, self.plant.nx)),
-            np.empty((m, n + 1, self.controller.n_state)),
-            np.empty((m, n, self.plant.nu)),
-            None if measured_off else np.empty((m, n, nm)),
-            np.empty(m),
-            None if self.kernel is None or y_off else np.empty((m, n + 1, self.plant.ny)),
-        )
+        shapes = {
+            "x": (m, n + 1, self.plant.nx),
+            "xc": (m, n + 1, self.controller.n_state),
+            "u": (m, n, self.plant.nu),
+            "measured": None if measured_off else (m, n, nm),
+            "diverged_at": (m,),
+            "y": None if self.kernel is None or y_off else (m, n + 1, self.plant.ny),
+        }
+        arrays = iter(buffers.empty([shape for shape in shapes.values() if shape is not None]))
+        return tuple(None if shape is None else next(arrays) for shape in shapes.values())
 
     def read_off_states(self) -> tuple[bool, bool]:
         """(y, measured): whether the kernel's results hold them as views of x instead of copies: the
@@ -380,6 +401,9 @@ class MonteCarloPlan:
             y0 = np.broadcast_to(setup.x0, (c, plant.nx))
         if first_noise is not None:
             y0 = y0 + first_noise
+        if np.all(y0 == y0[0]):  # one call; np.unique would sort the rows first
+            xc0 = np.asarray(controller.initial_state(y0[0], setup.r[0]), dtype=float).ravel()
+            return np.broadcast_to(xc0, (c, controller.n_state)).copy()
         rows, inverse = np.unique(y0, axis=0, return_inverse=True)
         initial = np.array(
             [np.asarray(controller.initial_state(row, setup.r[0]), dtype=float).ravel() for row in rows]
