@@ -51,6 +51,7 @@ import json
 import platform
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
@@ -77,6 +78,8 @@ from designs.tuning import (
     solve,
 )
 from designs.tuning import gain_bounds as decision_bounds
+from designs.tuning.polish import Polished, polish
+from designs.weight_search import CONVERGED as POLL_CONVERGED
 from models import files
 from models import specs as specs_module
 from models.specs import Specs
@@ -95,6 +98,8 @@ ENERGY_SHARE = 0.1
 #: The step specs tuning enforces, as a fraction of the case's (the plants between the samples).
 MARGIN = 0.95
 GAIN_RANGE = 100.0
+#: Statuses of a tuning that ended on its test: IPOPT's convergence, or the poll search's (`designs.tuning.polish`).
+ENDED_ON_TEST = (*CONVERGED, POLL_CONVERGED)
 #: A re-tuning reproduces a stored record when its cost agrees to this, relative.
 REPRODUCED = 1e-6
 #: The specs' form on the smoothed stages: one soft maximum per spec and run. Pointwise, the arm's 6 samples
@@ -317,6 +322,14 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
             "feasible": result.feasible,
             "method": result.method,
         }
+    if not tuned["converged"] and not infeasible:
+        say(f"  not converged ({tuned['status']}): a poll search on the exact loop from there")
+        polished = polish(problem, lbx, ubx, decision, progress=_every(50, say))
+        decision, tuned = polished.decision, _polished(tuned, polished)
+        search = polished.search
+        say(f"  poll search: {search.status}, {search.evaluations} evaluations, cost {polished.objective:.6g}")
+        if polished.converged and not polished.feasible:
+            infeasible = infeasible_text(case, specs, worst_metrics(case, problem.block_at(decision), train))
     gains = problem.block_at(decision).gains
     record = {
         "plant": case.plant,
@@ -349,6 +362,34 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         "provenance": provenance(problem),
     }
     return record | {"validation": validate(case, record)}
+
+
+def _polished(tuned: dict, polished: Polished) -> dict:
+    """The tuning record `tuned` (IPOPT's, not converged) after `designs.tuning.polish` ran from its answer:
+    its decision's cost, the poll's status and whether it converged inside the specs."""
+    search = polished.search
+    return tuned | {
+        "cost": polished.objective,
+        "status": search.status,
+        "converged": polished.converged and polished.feasible,
+        "message": f"{tuned['message']}; then a poll search on the exact loop ({search.evaluations} evaluations, "
+        f"poll step {search.step:.3g}): {search.status}",
+        "feasible": polished.feasible,
+        "method": f"{tuned['method']}, then a poll search on the exact loop",
+        "polish": {"evaluations": search.evaluations, "step": search.step, "status": search.status},
+    }
+
+
+def _every(count: int, say) -> Callable[[int, float, float], None]:
+    """A poll search's progress callback that says where it is every `count` evaluations."""
+    last = [0]
+
+    def progress(evaluations: int, score: float, step: float) -> None:
+        if evaluations - last[0] >= count:
+            last[0] = evaluations
+            say(f"    {evaluations} evaluations: score {score:.6g}, poll step {step:.3g}")
+
+    return progress
 
 
 def provenance(problem: TuningProblem) -> dict:
@@ -606,8 +647,8 @@ def finished(record: dict) -> bool:
     outside them (the infeasibility certificate)."""
     t = record["tuning"]
     if record.get("infeasible"):
-        return t["status"] in CONVERGED
-    return t["status"] in CONVERGED and t["converged"]
+        return t["status"] in ENDED_ON_TEST
+    return t["status"] in ENDED_ON_TEST and t["converged"]
 
 
 def _report(case: CaseStudy, record: dict, before: dict | None, args, folder: Path) -> bool:
