@@ -21,7 +21,7 @@ PLANTS = studies.names()
 #: The cases whose stored records were tuned against the case's own specs on every table scenario. The
 #: others still hold records tuned against the hand design's figures on two scenarios: their re-tuning
 #: (``python -m studies.tuner NAME --install``) is left to do, and their tests fail until then.
-RETUNED: tuple[str, ...] = ("arm", "uuv")
+RETUNED: tuple[str, ...] = ("arm", "uuv", "ballbeam")
 CHECK_SEED, N_CHECK = 3, 2
 
 
@@ -56,8 +56,8 @@ def test_the_tuned_row_meets_every_spec_of_its_case_or_says_it_cannot(name, reco
     rows = np.vstack([models.get(name).param_vector()[None, :], tuner.samples(case, N_CHECK, CHECK_SEED)])
     verdicts = tuner.table_verdicts(case, tuned, rows)
     assert set(verdicts) == set(tuner.SCENARIOS) == {"step", "steps", "disturbance", "noise"}
-    for scenario_name, verdict in verdicts.items():
-        assert verdict == model_specs.MEETS, (scenario_name, verdict)
+    for scenario_name, verdict in verdicts.items():  # the samples combined as the Monte Carlo combines them
+        assert verdict == f"{model_specs.MEETS}: in all {len(rows)} samples", (scenario_name, verdict)
 
 
 @pytest.mark.parametrize("name", _cases())
