@@ -600,6 +600,13 @@ def main(argv=None) -> int:
         help="IPOPT's Hessian: L-BFGS (default) or CasADi's exact second derivatives (few gains, hard problems)",
     )
     parser.add_argument(
+        "--phase-hessian",
+        choices=HESSIANS,
+        default=TUNE_OPTIONS.phase_hessian,
+        help=f"the phase one's Hessian (default {TUNE_OPTIONS.phase_hessian}; exact where L-BFGS wanders, as on the "
+        "satellite's)",
+    )
+    parser.add_argument(
         "--out",
         type=Path,
         default=None,
@@ -631,7 +638,7 @@ def main(argv=None) -> int:
                 progress=_report_every(10),
                 widths=args.widths,
                 hessian=args.hessian,
-                phase_hessian=TUNE_OPTIONS.phase_hessian,
+                phase_hessian=args.phase_hessian,
             )
             record = tune_case(case, options, paths=args.paths, log=lambda text: print(text, flush=True))
         if not _report(case, record, before, args, folder):
