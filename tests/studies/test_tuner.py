@@ -126,6 +126,22 @@ def test_widths_option_refuses_bad_values(text, capsys):
     assert "widths must be" in capsys.readouterr().err
 
 
+def test_phase_hessian_option_refuses_other_values_and_reaches_the_solve_options(monkeypatch, tmp_path):
+    with pytest.raises(SystemExit) as stop:
+        tuner.main(["arm", "--phase-hessian", "bfgs"])
+    assert stop.value.code == 2
+    seen = []
+
+    def tune_case(case, options, paths, log):
+        seen.append(options.phase_hessian)
+        raise KeyboardInterrupt  # stop before any work
+
+    monkeypatch.setattr(tuner, "tune_case", tune_case)
+    with pytest.raises(KeyboardInterrupt):
+        tuner.main(["arm", "--phase-hessian", "exact", "--out", str(tmp_path)])
+    assert seen == ["exact"]
+
+
 def test_widths_option_reads_a_decreasing_list():
     assert tuner._widths("0.1,0.01,1e-3") == (0.1, 0.01, 1e-3)
 
