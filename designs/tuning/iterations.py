@@ -10,7 +10,8 @@ import numpy as np
 
 
 class IterationLog:
-    """The iterates of one `solve` call: (x, f, perf_counter) each, reported to `progress` as they come.
+    """The iterates of one `solve` call: (x, f, perf_counter) each, reported to `progress` as they come, and
+    beside them (`largest_g`) each iterate's largest constraint value (-inf without constraints).
 
     progress : optional callable(iteration, objective IPOPT saw, seconds since `started`)
     started : time.perf_counter() the seconds count from (default: now)
@@ -22,11 +23,14 @@ class IterationLog:
         self.progress = progress
         self.started = time.perf_counter() if started is None else started
         self.iterates: list[tuple[np.ndarray, float, float]] = []
+        self.largest_g: list[float] = []
         self.watch: Callable[[np.ndarray, float], bool] | None = None
 
-    def add(self, x: np.ndarray, value: float) -> bool:
-        """Record IPOPT's (scaled) decision `x` and the objective it saw there; True: stop IPOPT here."""
+    def add(self, x: np.ndarray, value: float, largest_g: float = -np.inf) -> bool:
+        """Record IPOPT's (scaled) decision `x`, the objective it saw there and its largest constraint value;
+        True: stop IPOPT here."""
         self.iterates.append((x, value, time.perf_counter()))
+        self.largest_g.append(largest_g)
         if self.progress is not None:
             self.progress(len(self.iterates) - 1, value, self.iterates[-1][2] - self.started)
         return bool(self.watch is not None and self.watch(x, value))
@@ -64,5 +68,7 @@ class IterationRecorder(ca.Callback):
 
     def eval(self, arg):
         # A nonzero return makes IPOPT stop with User_Requested_Stop.
-        stop = self.log is not None and self.log.add(np.asarray(arg[0]).ravel().copy(), float(arg[1]))
+        g = np.asarray(arg[2]).ravel()
+        largest = float(np.max(g)) if g.size else -np.inf
+        stop = self.log is not None and self.log.add(np.asarray(arg[0]).ravel().copy(), float(arg[1]), largest)
         return [1 if stop else 0]

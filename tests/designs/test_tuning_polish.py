@@ -7,8 +7,19 @@ import numpy as np
 import pytest
 
 import models
-from designs.tuning import AGREEMENT, Scenario, Specs, TuningProblem, gain_bounds
+from designs.tuning import (
+    AGREEMENT,
+    IterationLog,
+    Scenario,
+    SolveOptions,
+    Specs,
+    TuningProblem,
+    decision_scale,
+    gain_bounds,
+    phase_one,
+)
 from designs.tuning import polish as polishing
+from designs.tuning.phase_one import _better_logged
 from designs.tuning.polish import exact_merit, polish
 from tests.designs.test_tuning_stops import UMAX, SaturatedPD, _double_integrator
 
@@ -72,3 +83,28 @@ def test_out_of_reach_specs_end_at_least_as_far_out_as_physics_says():
     bound = 0.9 - UMAX * 1.0**2 / 2
     assert found.converged and not found.feasible
     assert found.excess >= bound - 1e-9
+
+
+def test_a_capped_phase_one_returns_the_point_it_passed_furthest_inside():
+    """Of a failed stage's logged iterates, the one of smallest smoothed excess (s plus its largest row) is
+    returned where the exact loop puts it further inside the specs than the last iterate, else the last."""
+    problem, lbx, ubx = _problem(Specs(max_overshoot_pct=5.0))
+    start = problem.start()
+    scale = decision_scale(start)
+    inside = np.array([0.5, 1.5])  # ζ ≈ 1: no overshoot
+    assert problem.largest_excess(inside) < 0 < problem.largest_excess(start)
+    log = IterationLog()
+    log.add(np.append(start / scale, -0.3), -0.3, 0.8)  # the smallest s, 0.8 below the rows: excess 0.5
+    log.add(np.append(inside / scale, -0.1), -0.1, 0.05)  # -0.05, the smallest
+    log.add(np.append(start / scale, 0.4), 0.4, 0.0)  # the last: 0.4
+    last = (start, problem.largest_excess(start))
+    decision, excess = _better_logged(problem, log, scale, lbx, ubx, last)
+    np.testing.assert_allclose(decision, inside, rtol=1e-15)
+    assert excess == problem.largest_excess(inside)
+    assert _better_logged(problem, log, scale, lbx, ubx, (inside, -np.inf)) == (inside, -np.inf)
+
+
+def test_a_capped_phase_one_returns_an_exactly_checked_point_no_worse_than_its_last():
+    problem, lbx, ubx = _problem(Specs(max_overshoot_pct=5.0))
+    found = phase_one(problem, lbx, ubx, problem.start(), SolveOptions(max_iter=3, widths=(1e-2,)))
+    assert not found.converged and found.excess == problem.largest_excess(found.decision)
