@@ -41,6 +41,9 @@ from models import checks, deferred
 
 from .ocp_codesign import solve_nested
 
+#: Held while a thread builds its solver (`solver` of the work's evaluations).
+_BUILDING = threading.Lock()
+
 qmc = deferred.module("scipy.stats.qmc")
 
 #: The sweep's default density: points per parameter for one or two parameters, points in all for more.
@@ -252,7 +255,11 @@ class OpenLoopWork:
         key = "fixed" if fixed else "free"
         if not hasattr(self._local, key):
             options = self.solver_options
-            setattr(self._local, key, self.ocp.solver(self.transcription, chosen_as_parameters=fixed, **options))
+            # Built one thread at a time: the solvers share the problem's CasADi expressions, whose reference
+            # counts are not atomic (two threads building at once crashed the Dask threads test).
+            with _BUILDING:
+                solver = self.ocp.solver(self.transcription, chosen_as_parameters=fixed, **options)
+            setattr(self._local, key, solver)
         return getattr(self._local, key)
 
     def at(self, values: tuple):
