@@ -32,8 +32,9 @@ from .plant import Plant
 from .run_setup import RunSetup
 
 #: Working memory, in bytes, of one chunk of a Monte Carlo batch (CasADi's
-#: output buffers and the noise of the chunk's samples). Results do not depend
-#: on the chunk size. Override by assignment.
+#: output buffers and the noise of the chunk's samples; with the C kernel, the
+#: chunk's results and noise, what `monte_carlo_chunks` holds at a time).
+#: Results do not depend on the chunk size. Override by assignment.
 MONTE_CARLO_CHUNK_BYTES = 64 * 2**20
 
 #: Samples x steps per chunk at most: building a chunk's map costs time superlinear in its size
@@ -293,8 +294,8 @@ class MonteCarloPlan:
                 compiled, engine = kernel(plant, controller, setup.substeps), "C kernel"
             except KernelUnavailable as err:
                 engine = f"CasADi map (no C kernel: {err})"
-        if compiled:  # the kernel writes into the results; its working memory is the chunk's noise
-            work = 8.0 * (1 + (n * nm if setup.noisy else 0))
+        if compiled:  # the kernel writes into the results: a chunk holds its results and its noise
+            work = _sample_bytes(plant, controller, setup) + (8.0 * n * nm if setup.noisy else 0.0)
         else:
             per_step = 3 * (plant.nx + nc) + 2 * plant.nu + (3 if setup.noisy else 2) * nm + controller.n_reference
             work = 8.0 * n * per_step
@@ -309,9 +310,7 @@ class MonteCarloPlan:
 
     def sample_bytes(self) -> float:
         """Bytes the results of one sample hold: x, xc, y over N+1 samples, u and measured over N."""
-        n, nm = self.setup.n_steps, self.setup.n_measured
-        plant = self.plant
-        return 8.0 * ((n + 1) * (plant.nx + self.controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
+        return _sample_bytes(self.plant, self.controller, self.setup)
 
     def chunks(self) -> Iterator[tuple[int, int]]:
         """(start, stop) of each chunk of samples, in order."""
@@ -434,6 +433,12 @@ class MonteCarloPlan:
             first_sample=self.first_sample + start,
             y=y,
         )
+
+
+def _sample_bytes(plant: Plant, controller: Block, setup: RunSetup) -> float:
+    """Bytes the results of one sample hold: x, xc, y over N+1 samples, u and measured over N."""
+    n, nm = setup.n_steps, setup.n_measured
+    return 8.0 * ((n + 1) * (plant.nx + controller.n_state + plant.ny) + n * (plant.nu + nm) + 1)
 
 
 def output_states(plant: Plant) -> slice | None:

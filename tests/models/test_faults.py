@@ -16,6 +16,8 @@ import models
 import models.checks
 import models.closed_loop
 import models.plant
+from models.monte_carlo_batch import MonteCarloPlan
+from models.run_setup import RunSetup
 from models.simulate import radau_matrices, simulate
 
 
@@ -214,6 +216,26 @@ def test_the_limit_is_an_overridable_constant(arm, monkeypatch):
         models.simulate_closed_loop(arm, block, 0.1, 1.0)
     monkeypatch.setattr(models.checks, "MEMORY_LIMIT_BYTES", 2**30)
     assert models.simulate_closed_loop(arm, block, 0.1, 1.0).x.shape == (101, 2)
+
+
+def test_the_kernels_default_chunks_hold_their_results_within_the_chunk_budget(arm, monkeypatch):
+    """With the C kernel a chunk's results are its memory: `monte_carlo_chunks` without a chunk size runs
+    what `monte_carlo` refuses (the crane's 60,000-step runs once asked for one 1.7 GiB chunk)."""
+    block = CountingBlock(10**9, n_measured=1)
+    samples = models.sample_params(arm, 10, seed=2)
+    setup = RunSetup.build(arm, block, 0.2, 1.0)
+    plan = MonteCarloPlan.build(arm, block, setup, samples, jit=True)
+    if plan.kernel is None:
+        pytest.skip(f"no C kernel here: {plan.engine}")
+    whole = models.monte_carlo(arm, block, 0.2, 1.0, samples, jit=True)
+    monkeypatch.setattr(models.monte_carlo_batch, "MONTE_CARLO_CHUNK_BYTES", int(3.5 * plan.sample_bytes()))
+    monkeypatch.setattr(models.checks, "MEMORY_LIMIT_BYTES", int(8 * plan.sample_bytes()))
+    with pytest.raises(models.ResourceLimitError, match="monte_carlo of 10 samples"):
+        models.monte_carlo(arm, block, 0.2, 1.0, samples, jit=True)
+    chunks = list(models.monte_carlo_chunks(arm, block, 0.2, 1.0, samples, jit=True))
+    assert [len(c) for c in chunks] == [3, 3, 3, 1]
+    for field in ("x", "u", "xc"):
+        np.testing.assert_array_equal(np.concatenate([getattr(c, field) for c in chunks]), getattr(whole, field))
 
 
 def test_monte_carlo_chunks_run_what_monte_carlo_refuses_with_the_same_numbers(arm, monkeypatch):
