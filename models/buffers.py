@@ -18,7 +18,7 @@ import numpy as np
 
 #: Bytes of free buffers kept for later requests; the oldest go first beyond it, and a larger buffer is
 #: never kept. ``models.buffers.KEPT_BYTES = 0`` keeps none (every request gets fresh memory).
-KEPT_BYTES = 512 * 2**20
+KEPT_BYTES = 256 * 2**20
 
 #: Bytes every array's start is a multiple of (a cache line).
 ALIGNMENT = 64
