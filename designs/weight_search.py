@@ -92,6 +92,19 @@ class _Bounded:
         return self.objective(*item)
 
 
+def reporter(every: int, say: Callable[[str], None]) -> Callable[[int, float, float], None]:
+    """A `poll_search` progress callback that says (``say(text)``) the evaluations, best score and poll step
+    once per `every` evaluations."""
+    said = [0]
+
+    def report(evaluations: int, value: float, step: float) -> None:
+        if evaluations >= said[0] + every:
+            said[0] = evaluations
+            say(f"    {evaluations:4d} evaluations: score {value:.6g}, poll step {step:.3g}")
+
+    return report
+
+
 def poll_search(
     objective: Callable[[np.ndarray, float], Evaluation],
     x0: Sequence[float] | np.ndarray,

@@ -36,7 +36,7 @@ import models
 import models.compile
 from designs import tuned_lqr, tuned_mpc
 from designs.statespace_blocks import TrackingModel
-from designs.weight_search import Evaluation, poll_search
+from designs.weight_search import Evaluation, poll_search, reporter
 from models import specs
 from mpc import linear_mpc
 
@@ -389,16 +389,8 @@ def summary(record: dict) -> str:
     )
 
 
-def _reporter(every: int = 20):
-    """A progress callback printing the search's state once per `every` evaluations."""
-    printed = [0]
-
-    def report(evaluations: int, value: float, step: float) -> None:
-        if evaluations >= printed[0] + every:
-            printed[0] = evaluations
-            print(f"    {evaluations:4d} evaluations: score {value:.6g}, poll step {step:.3g}", flush=True)
-
-    return report
+def _say(text: str) -> None:
+    print(text, flush=True)
 
 
 def main(argv=None) -> int:
@@ -447,7 +439,7 @@ def main(argv=None) -> int:
             kinds = [k for k in (args.kind or KINDS) if has_design(case, k)]
             print(f"tuning {name}: {', '.join(LABELS[k] for k in kinds) or 'nothing to tune'} ...", flush=True)
             chosen = executor if distributed_run else None
-            records = {k: tune(case, k, chosen, args.max_evaluations, _reporter()) for k in kinds}
+            records = {k: tune(case, k, chosen, args.max_evaluations, reporter(20, _say)) for k in kinds}
             for record in records.values():
                 print(summary(record), flush=True)
             converged = all(r["search"]["converged"] for r in records.values())

@@ -51,7 +51,6 @@ import json
 import platform
 import sys
 import time
-from collections.abc import Callable
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
@@ -80,6 +79,7 @@ from designs.tuning import (
 from designs.tuning import gain_bounds as decision_bounds
 from designs.tuning.polish import Polished, polish
 from designs.weight_search import CONVERGED as POLL_CONVERGED
+from designs.weight_search import reporter
 from models import files
 from models import specs as specs_module
 from models.specs import Specs
@@ -324,7 +324,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         }
     if not tuned["converged"] and not infeasible:
         say(f"  not converged ({tuned['status']}): a poll search on the exact loop from there")
-        polished = polish(problem, lbx, ubx, decision, progress=_every(50, say))
+        polished = polish(problem, lbx, ubx, decision, progress=reporter(50, say))
         decision, tuned = polished.decision, _polished(tuned, polished)
         search = polished.search
         say(f"  poll search: {search.status}, {search.evaluations} evaluations, cost {polished.objective:.6g}")
@@ -378,18 +378,6 @@ def _polished(tuned: dict, polished: Polished) -> dict:
         "method": f"{tuned['method']}, then a poll search on the exact loop",
         "polish": {"evaluations": search.evaluations, "step": search.step, "status": search.status},
     }
-
-
-def _every(count: int, say) -> Callable[[int, float, float], None]:
-    """A poll search's progress callback that says where it is every `count` evaluations."""
-    last = [0]
-
-    def progress(evaluations: int, score: float, step: float) -> None:
-        if evaluations - last[0] >= count:
-            last[0] = evaluations
-            say(f"    {evaluations} evaluations: score {score:.6g}, poll step {step:.3g}")
-
-    return progress
 
 
 def provenance(problem: TuningProblem) -> dict:

@@ -109,3 +109,11 @@ def test_a_poll_starts_with_the_direction_of_the_last_improvement():
     )
     np.testing.assert_array_equal(found.x, target)
     assert found.converged and found.evaluations == 22 and len(found.history) == 6
+
+
+def test_the_reporter_says_the_state_once_per_every_evaluations():
+    said = []
+    report = weight_search.reporter(20, said.append)
+    for evaluations, value in ((7, 3.0), (19, 2.0), (20, 1.5), (33, 1.25), (41, 1.0)):
+        report(evaluations, value, 0.5)
+    assert said == ["      20 evaluations: score 1.5, poll step 0.5", "      41 evaluations: score 1, poll step 0.5"]
