@@ -58,7 +58,7 @@ def _take(nbytes: int) -> np.ndarray:
         if fits:
             raw = min(fits, key=lambda b: b.nbytes)
             for i, b in enumerate(_free):
-                if b is raw:
+                if b is raw:  # by identity: a collection meanwhile may have given a buffer back and trimmed
                     return _free.pop(i)
     return np.empty(nbytes, dtype=np.uint8)
 

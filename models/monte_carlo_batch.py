@@ -148,7 +148,7 @@ class MonteCarloResult(Sequence):
         """One sample's `ClosedLoopResult` from its views and its time of divergence (NaN: none)."""
         run = object.__new__(ClosedLoopResult)
         # Every field at once: the frozen dataclass's __init__ sets them one by one through
-        # object.__setattr__, which was half the time of reading a sample (tests/models/test_monte_carlo.py
+        # object.__setattr__, which was half the time of reading a sample (tests/models/test_closed_loop.py
         # checks the fields against __init__'s).
         run.__dict__.update(
             self._shared,

@@ -1,14 +1,14 @@
 """The exact problem's end game: a poll search on the exact loop where the smoothed stages do not converge.
 
 The continuation's stages minimize smoothed specs. Where a spec jumps (a settling time moves by a sample
-when the last sample to leave the band changes), IPOPT's iterates can wander without meeting its test:
-the ball on beam's PID ran 733 iterations, and none of its stages converged, with L-BFGS or the exact
-Hessian. `polish` starts from the point the continuation kept and runs `designs.weight_search.poll_search`
-on the exact problem itself. The score of a decision is its exact objective relative to the start's where
-every exact spec holds (largest relative excess within `AGREEMENT`); otherwise it is `BARRIER` plus that
-excess, so the search first meets the specs (a phase one) and then lowers the cost. The coordinates are
-each entry's log-magnitude relative to the start, with its sign kept (the tuner's gain bounds keep it
-too): a poll step h changes one gain by the factor e^h.
+when the last sample to leave the band changes), IPOPT's iterates can wander without meeting its test,
+with L-BFGS or the exact Hessian (measured cases: docs/notes/tuning.md). `polish` starts from the point
+the continuation kept and runs `designs.weight_search.poll_search` on the exact problem itself. The score
+of a decision is its exact objective relative to the start's where every exact spec holds (largest
+relative excess within `AGREEMENT`); otherwise it is `BARRIER` plus that excess, so the search first meets
+the specs (a phase one) and then lowers the cost. The coordinates are each entry's log-magnitude relative
+to the start, with its sign kept (the tuner's gain bounds keep it too): a poll step h changes one gain by
+the factor e^h.
 
 It converges when no gain changed by a factor e^{±h} lowers the score by more than c h², with h below
 `MIN_STEP` (the poll's stationarity measure on the nonsmooth problem, the test a derivative-free method
@@ -62,10 +62,10 @@ class _Coordinates:
     """decision = sign × |start| × e^θ for the start's non-zero entries, decision = θ for its zeros."""
 
     def __init__(self, start: np.ndarray, lbx: np.ndarray, ubx: np.ndarray):
-        self.start = np.asarray(start, dtype=float)
-        self.logged = self.start != 0
-        magnitude = np.where(self.logged, np.abs(self.start), 1.0)
-        sign = np.sign(np.where(self.logged, self.start, 1.0))
+        start = np.asarray(start, dtype=float)
+        self.logged = start != 0
+        magnitude = np.where(self.logged, np.abs(start), 1.0)
+        sign = np.sign(np.where(self.logged, start, 1.0))
         self.scale = sign * magnitude
         # |decision| bounds on each entry's side of zero (a bound across zero does not bound its magnitude)
         low = np.where(sign > 0, lbx, -ubx) / magnitude
@@ -79,15 +79,6 @@ class _Coordinates:
 
     def theta(self, decision: np.ndarray) -> np.ndarray:
         return np.where(self.logged, np.log(np.asarray(decision, dtype=float) / self.scale), decision)
-
-
-def exact_merit(problem: TuningProblem, decision: np.ndarray) -> tuple[float, float]:
-    """(the exact objective, the exact specs' largest relative excess) at a decision, one evaluation."""
-    costs, g, _, _ = (np.asarray(v) for v in problem.evaluate(decision))
-    costs = costs.ravel()
-    objective = float(np.mean(costs)) if problem.robust == "mean" else float(np.max(costs))
-    excess = float(np.max(problem.excess(g.ravel()), initial=-np.inf))
-    return objective, excess
 
 
 def polish(
@@ -104,12 +95,12 @@ def polish(
     progress : `poll_search`'s, called as progress(evaluations, best score, poll step) after every poll
     """
     coordinates = _Coordinates(start, lbx, ubx)
-    reference, _ = exact_merit(problem, start)
+    reference, _ = problem.merit(start)
     if not (math.isfinite(reference) and reference > 0):
         reference = 1.0
 
     def score(theta: np.ndarray, bound: float) -> Evaluation:
-        objective, excess = exact_merit(problem, coordinates.decision(theta))
+        objective, excess = problem.merit(coordinates.decision(theta))
         if not math.isfinite(objective) or math.isnan(excess):
             return Evaluation(math.inf, info={"objective": objective, "excess": excess})
         value = objective / reference if excess <= AGREEMENT else BARRIER + excess

@@ -651,7 +651,7 @@ class TuningProblem:
         """
         costs, g, u, _ = (np.asarray(v) for v in self.evaluate(decision))
         costs = costs.ravel()
-        obj = float(np.mean(costs)) if self.robust == "mean" else float(np.max(costs))
+        obj = self._robust(costs)
         violations = self.violated(g.ravel())
         limit = self.plant.input_limit[:, None]
         if not np.all(np.abs(u) <= limit):
@@ -660,6 +660,16 @@ class TuningProblem:
                 f"(commanded up to {np.max(np.abs(u)):.4g})"
             )
         return obj, costs, violations
+
+    def _robust(self, costs: np.ndarray) -> float:
+        """The objective of the per-sample totals (M,): their mean or their worst, as `robust` says."""
+        return float(np.mean(costs)) if self.robust == "mean" else float(np.max(costs))
+
+    def merit(self, decision) -> tuple[float, float]:
+        """(the objective, the exact specs' largest relative excess) at a decision: `values` and
+        `largest_excess` from one evaluation of the exact loop."""
+        costs, g, _, _ = (np.asarray(v) for v in self.evaluate(decision))
+        return self._robust(costs.ravel()), float(np.max(self.excess(g.ravel()), initial=-np.inf))
 
     def scenario_values(self, decision) -> np.ndarray:
         """Unweighted cost of each scenario on each sample, (S, M), exact loop."""

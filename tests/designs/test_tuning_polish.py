@@ -20,7 +20,7 @@ from designs.tuning import (
 )
 from designs.tuning import polish as polishing
 from designs.tuning.phase_one import _better_logged
-from designs.tuning.polish import exact_merit, polish
+from designs.tuning.polish import polish
 from tests.designs.test_tuning_stops import UMAX, SaturatedPD, _double_integrator
 
 
@@ -37,7 +37,7 @@ def _problem(specs: Specs) -> tuple[TuningProblem, np.ndarray, np.ndarray]:
 
 
 def _score(problem, decision, reference):
-    objective, excess = exact_merit(problem, decision)
+    objective, excess = problem.merit(decision)
     return objective / reference if excess <= AGREEMENT else polishing.BARRIER + excess
 
 
@@ -51,10 +51,10 @@ def reachable():
 
 def test_from_outside_the_specs_it_meets_them_and_converges_on_its_mesh(reachable):
     problem, lbx, ubx, start, found = reachable
-    assert exact_merit(problem, start)[1] > 0.1  # the start misses the overshoot spec
+    assert problem.merit(start)[1] > 0.1  # the start misses the overshoot spec
     assert found.converged and found.feasible and found.excess <= AGREEMENT
     assert found.search.step < polishing.MIN_STEP
-    objective, excess = exact_merit(problem, found.decision)
+    objective, excess = problem.merit(found.decision)
     assert (objective, excess) == (found.objective, found.excess)
     assert np.all(found.decision >= lbx) and np.all(found.decision <= ubx)
     assert np.all(np.sign(found.decision) == np.sign(start))
@@ -64,7 +64,7 @@ def test_no_poll_point_around_the_answer_lowers_the_score_by_the_sufficient_decr
     """The poll's stationarity, evaluated here again: every gain × e^{±2h} (2h: the last poll step that found
     nothing) scores no better than the answer less c (2h)²."""
     problem, _, _, start, found = reachable
-    reference = exact_merit(problem, start)[0]
+    reference = problem.merit(start)[0]
     here = _score(problem, found.decision, reference)
     h = 2 * found.search.step
     for i in range(found.decision.size):
