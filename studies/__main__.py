@@ -11,6 +11,11 @@ def _exit_with(code: int) -> None:
 
     During shutdown the interpreter puts back SIGINT's default action, so a SIGINT then would end
     the process by the signal (-2) after its status was decided: SIGINT is ignored from here on.
+
+    CPython 3.11-3.12 also end a ``python -m`` program by SIGINT, whatever its SystemExit says, when
+    the last code run from a string (``exec``/``eval`` of source: dataclasses' and namedtuple's
+    generated methods, at an import) ended by a KeyboardInterrupt that was then caught: a flag of
+    the interpreter's, reset when the next string runs. One empty string run clears it.
     """
     while True:
         try:
@@ -18,6 +23,7 @@ def _exit_with(code: int) -> None:
             break
         except KeyboardInterrupt:  # one that arrived just before: the status already says interrupted or not
             continue
+    exec("pass", {})  # noqa: S102  (clears CPython's "unhandled KeyboardInterrupt" flag; see above)
     sys.exit(code)
 
 

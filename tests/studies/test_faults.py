@@ -211,6 +211,29 @@ def test_a_sigint_after_the_status_is_decided_does_not_change_it(tmp_path):
     assert "KeyboardInterrupt" not in done.stderr, done.stderr
 
 
+def test_an_interrupt_caught_inside_exec_does_not_end_the_command_by_sigint(tmp_path):
+    """A Ctrl-C that landed in code run from a string (an `exec` in an import, caught by the command)
+    leaves CPython's flag that ends a ``python -m`` program by SIGINT (-2); the status decided is the
+    process's all the same."""
+    (tmp_path / "interrupted_in_exec.py").write_text(
+        "from studies.__main__ import _exit_with\n"
+        "try:\n"
+        "    exec('raise KeyboardInterrupt', {})\n"
+        "except KeyboardInterrupt:\n"
+        "    pass\n"
+        "_exit_with(130)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "interrupted_in_exec"],
+        cwd=tmp_path,
+        env=subprocess_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 130, done.stderr
+
+
 @pytest.mark.slow
 def test_sigterm_with_two_jobs_ends_the_workers_and_writes_nothing(workdir):
     """SIGTERM (kill, a job scheduler) to the command while two worker processes run plants: it ends
