@@ -112,7 +112,10 @@ def c_array(name: str, values, kind: str = "double", storage: str = "static cons
     """The C definition ``storage kind name[n] = {...};`` of `values` (row-major), at least one entry."""
     arr = np.asarray(values).ravel()
     if kind == "double":
-        items = [c_number(v) for v in arr]
+        arr = arr.astype(float)
+        if not np.all(np.isfinite(arr)):
+            c_number(arr[~np.isfinite(arr)][0])  # raises, naming the value
+        items = list(map(repr, arr.tolist()))  # a finite float's repr has "." or "e": c_number's text
     else:
         items = [str(int(v)) for v in arr]
     items = items or ["0"]

@@ -169,13 +169,14 @@ def assign_rows(pattern: ca.Sparsity, others, states: np.ndarray, stage_q: np.nd
 
     if not len(others):
         return rows_by_stage
+    allowed_sets = [allowed(k) for k in range(N + 1)]
     rows_of, cols_of = pattern.get_triplet()
     touched: list[set] = [set() for _ in others]
     for r, c in zip(rows_of, cols_of):
         touched[r].add(int(c))
     for position, row in enumerate(others):
         columns = touched[position]
-        candidates = [k for k in range(N + 1) if columns <= allowed(k)]
+        candidates = [k for k in range(N + 1) if columns <= allowed_sets[k]]
         if not candidates:
             owners = sorted({int(stage_of[c]) for c in columns})
             raise ValueError(

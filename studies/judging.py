@@ -28,20 +28,31 @@ def solver_counts(records) -> tuple[int, int, int]:
     """(steps, steps whose solver did not succeed, steps that fell back) of per-step solver records.
 
     A record says success with "success" (bool) or, without it, with a "status" text naming success
-    (solved, optimal, succeeded); a fallback with "fallback" (bool).
+    (solved, optimal, succeeded); a fallback with "fallback" (bool). A run's steps share few distinct
+    record objects (`models.exported_loop.step_records`): each is read once.
     """
     steps = failed = fallback = 0
+    read: dict[int, tuple[int, int, int]] = {}  # id -> its counts; `records` keeps every id alive
     for record in records or ():
-        if not isinstance(record, Mapping):
-            continue
-        steps += 1
-        if "success" in record:
-            failed += not bool(record["success"])
-        elif "status" in record:
-            text = str(record["status"]).lower().replace(" ", "_")
-            failed += not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
-        fallback += bool(record.get("fallback", False))
+        counts = read.get(id(record))
+        if counts is None:
+            counts = read[id(record)] = _record_counts(record)
+        steps, failed, fallback = steps + counts[0], failed + counts[1], fallback + counts[2]
     return steps, failed, fallback
+
+
+def _record_counts(record) -> tuple[int, int, int]:
+    """(1, failed, fell back) of one step's record; (0, 0, 0) for what is not a record (a Mapping)."""
+    if not isinstance(record, Mapping):
+        return 0, 0, 0
+    if "success" in record:
+        failed = not bool(record["success"])
+    elif "status" in record:
+        text = str(record["status"]).lower().replace(" ", "_")
+        failed = not any(word in text for word in ("solved", "optimal", "succeeded", "success"))
+    else:
+        failed = False
+    return 1, int(failed), int(bool(record.get("fallback", False)))
 
 
 def degraded_status(steps: int, failed: int, fallback: int, what: str = "steps") -> str | None:
