@@ -13,7 +13,7 @@ import pytest
 
 import models
 from models import compile as mc
-from models.export import UnsupportedExport, c_identifiers, c_name, c_number, export_block
+from models.export import UnsupportedExport, c_array, c_identifiers, c_name, c_number, export_block
 
 
 @pytest.fixture(autouse=True)
@@ -220,3 +220,19 @@ def test_derived_c_identifiers_are_distinct_and_short_enough():
     assert derived[:4] == ["a_b", "a_b_2", "a_b_3", "a_b_4"]
     assert len(set(derived)) == len(derived) and all(c_name(d) == d for d in derived)
     assert derived[4] == "x" * 48 and derived[5] == "x" * 46 + "_2"
+
+
+def test_c_array_reads_back_every_double_bit_for_bit_and_refuses_non_finite_ones():
+    """c_array's numbers are c_number's text (one per entry, six a line) and parse back to the same bits:
+    integers, signed zeros, the largest and the smallest subnormal included; inf and nan are refused."""
+    rng = np.random.default_rng(3)
+    values = rng.standard_normal(600) * 10.0 ** rng.integers(-300, 300, 600)
+    values[:6] = [0.0, -0.0, 3.0, -7.0, np.finfo(float).max, 5e-324]
+    text = c_array("v", values)
+    body = text[text.index("{") + 1 : text.rindex("}")]
+    items = [item.strip() for item in body.split(",")]
+    assert items == [c_number(v) for v in values]
+    assert np.array_equal(np.array([float(item) for item in items]).view(np.int64), values.view(np.int64))
+    for bad in (np.inf, -np.inf, np.nan):
+        with pytest.raises(ValueError, match="non-finite"):
+            c_array("w", [1.0, bad])
