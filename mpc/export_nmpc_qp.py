@@ -84,6 +84,7 @@ FIELDS = """    double H[${P}_NQ * ${P}_NQ], A[${P}_NROWS > 0 ? ${P}_NROWS * ${P
      * place in it, and its component's range [begin, end) of order, at the component's root */
     int parent[${P}_NQ], cursor[${P}_NQ], order[${P}_NQ], place[${P}_NQ], begin[${P}_NQ], end[${P}_NQ];
     double block[${P}_NQ * ${P}_NQ];  /* one component's R, then R^-1, dense and row-major (ldp) */
+    double gathered[${P}_NQ], product[${P}_NQ];  /* a row of A and of M on one component's columns (ldp) */
 """
 
 #: C of the QP: ``setup`` (DAQP's workspace at the whole QP's sizes), ``daqp_on`` (one QP in the
@@ -161,9 +162,9 @@ static int components(${p}_state *m, int n) {
 static int ldp(${p}_state *m, int n, int mr) {
     DAQPWorkspace *w = &m->workspace;
     const double *H = m->H;
-    double *R, *B = m->block, *Mq, r, coefficient;
+    double *R, *B = m->block, *Mq, *gathered = m->gathered, *product = m->product, r, coefficient;
     const double *Aq, *Hi;
-    int i, j, a, b, p, c, q, t, lo, hi, s;
+    int i, a, b, p, c, q, t, lo, s;
 #define AT(i, j) ((i) * n - (i) * ((i) - 1) / 2 + (j) - (i))
     if (components(m, n)) return update_ldp(WHOLE_LDP, w);
     for (i = 0; i < n + mr; ++i) w->sense[i] = w->qp->sense[i];
@@ -197,15 +198,18 @@ static int ldp(${p}_state *m, int n, int mr) {
         }
         for (a = 0; a < s; ++a)
             for (b = a, i = m->order[lo + a]; b < s; ++b) R[AT(i, m->order[lo + b])] = B[a * s + b];
-    }
-    for (q = 0; q < mr; ++q) {  /* M = A R^-1, A's columns last to first as DAQP */
-        Aq = m->A + q * n, Mq = w->M + q * n;
-        for (c = 0; c < n; ++c) Mq[c] = 0.0;
-        for (a = n - 1; a >= 0; --a) {
-            if (Aq[a] == 0.0) continue;
-            Mq[a] = R[AT(a, a)] * Aq[a];
-            hi = m->end[m->parent[a]];
-            for (c = m->place[a] + 1; c < hi; ++c) { j = m->order[c]; Mq[j] += R[AT(a, j)] * Aq[a]; }
+        /* M = A R^-1 on the component's columns (every column is in one component): each row's entries
+         * gathered in the component's order, A's columns last to first as DAQP, the block's rows contiguous */
+        for (q = 0; q < mr; ++q) {
+            Aq = m->A + q * n, Mq = w->M + q * n;
+            for (a = 0; a < s; ++a) { gathered[a] = Aq[m->order[lo + a]]; product[a] = 0.0; }
+            for (a = s - 1; a >= 0; --a) {
+                if (gathered[a] == 0.0) continue;
+                coefficient = gathered[a];
+                product[a] = B[a * s + a] * coefficient;
+                for (b = a + 1; b < s; ++b) product[b] += B[a * s + b] * coefficient;
+            }
+            for (a = 0; a < s; ++a) Mq[m->order[lo + a]] = product[a];
         }
     }
 #undef AT
