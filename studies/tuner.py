@@ -352,6 +352,8 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
             "initial_cost": float(problem.values(start)[0]),
             "phase_one": None if found is None else {"status": found.status, "excess": found.excess},
             "tol": options.tol,
+            "max_iter": options.max_iter,
+            "phase_max_iter": options.phase_iterations,
             "widths": [float(w) for w in options.widths],
             "paths": paths,
             "hessian": options.hessian,
@@ -564,6 +566,12 @@ def main(argv=None) -> int:
         help=f"IPOPT iteration cap per solve (default {MAX_ITER}; a stop there is reported)",
     )
     parser.add_argument(
+        "--phase-max-iter",
+        type=int,
+        default=None,
+        help="the phase one's IPOPT iteration cap per solve (default: --max-iter)",
+    )
+    parser.add_argument(
         "--validate", action="store_true", help="re-validate the stored gains on the fresh samples, without tuning"
     )
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
@@ -609,6 +617,8 @@ def main(argv=None) -> int:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
     if args.max_iter < 1:
         parser.error(f"--max-iter must be >= 1, got {args.max_iter}")
+    if args.phase_max_iter is not None and args.phase_max_iter < 1:
+        parser.error(f"--phase-max-iter must be >= 1, got {args.phase_max_iter}")
     failed = []
     for name in args.plants:
         case = cases.get(name)
@@ -622,6 +632,7 @@ def main(argv=None) -> int:
             print(f"tuning {name} ...", flush=True)
             options = SolveOptions(
                 max_iter=args.max_iter,
+                phase_max_iter=args.phase_max_iter,
                 jit=not args.no_jit,
                 progress=_report_every(10),
                 widths=args.widths,

@@ -37,6 +37,8 @@ class SolveOptions:
         answer; off by default, since on a two-scenario, four-sample PID tuning it took half an hour
     phase_hessian : the phase one's Hessian (`phase_one`), as `hessian`; the case studies' tuner takes
         "limited-memory" (docs/guide.md's tuning section says why)
+    phase_max_iter : the phase one's IPOPT iterations per solve, >= 1; None: `max_iter` (a phase one
+        that needs many more iterations than the cost's stages, as the satellite's)
     until_feasible : with `phase`, stop at the first decision that meets the specs (a verdict on the
         specs, not a tuned cost: what an outer search over the plant needs, `size_actuator`)
     coarse_substeps : RK4 sub-steps per sample of a coarser problem whose continuation runs first and
@@ -56,6 +58,7 @@ class SolveOptions:
     ipopt_options: Mapping[str, Any] | None = None
     phase: bool = False
     phase_hessian: str = "exact"
+    phase_max_iter: int | None = None
     until_feasible: bool = False
     coarse_substeps: int | None = COARSE_SUBSTEPS
     relaxed: bool = False
@@ -65,6 +68,8 @@ class SolveOptions:
         normalized = object.__setattr__
         normalized(self, "max_iter", integer(self.max_iter, "max_iter", minimum=1))
         normalized(self, "tol", positive(self.tol, "tol"))
+        if self.phase_max_iter is not None:
+            normalized(self, "phase_max_iter", integer(self.phase_max_iter, "phase_max_iter", minimum=1))
         for name in ("hessian", "phase_hessian"):
             if getattr(self, name) not in HESSIANS:
                 raise ValueError(f"{name} must be 'limited-memory' or 'exact', got {getattr(self, name)!r}")
@@ -83,6 +88,11 @@ class SolveOptions:
             raise ValueError("until_feasible needs phase=True: the verdict comes from the phase one")
         if self.ipopt_options is not None and not isinstance(self.ipopt_options, Mapping):
             raise TypeError(f"ipopt_options must be a dict of IPOPT options, got {self.ipopt_options!r}")
+
+    @property
+    def phase_iterations(self) -> int:
+        """The phase one's IPOPT iterations per solve: `phase_max_iter`, else `max_iter`."""
+        return self.max_iter if self.phase_max_iter is None else self.phase_max_iter
 
     @property
     def smooth(self) -> bool:

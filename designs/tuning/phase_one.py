@@ -74,7 +74,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     Parameters
     ----------
     problem : TuningProblem;  lbx, ubx : decision bounds (n_decision,);  start : (n_decision,)
-    options : its method, widths, tol, max_iter, phase_hessian, jit and ipopt_options are used
+    options : its method, widths, tol, phase_iterations, phase_hessian, jit and ipopt_options are used
     """
     options = options or SolveOptions()
     lbx, ubx = np.asarray(lbx, dtype=float), np.asarray(ubx, dtype=float)
@@ -97,7 +97,7 @@ def phase_one(problem: TuningProblem, lbx, ubx, start, options: SolveOptions | N
     ipopt = (
         IPOPT_OPTIONS
         | {
-            "max_iter": int(options.max_iter),
+            "max_iter": options.phase_iterations,
             "tol": tol,
             "acceptable_tol": 100 * tol,
             "hessian_approximation": options.phase_hessian,

@@ -187,6 +187,26 @@ def test_phase_one_uses_the_hessian_its_options_ask_for(hessian):
     assert stats["iter_count"] == found.iterations and len(reported) == found.iterations + 1
 
 
+def test_the_phase_one_takes_its_own_iteration_cap_and_the_cost_stages_keep_theirs():
+    """`SolveOptions.phase_max_iter` caps each of the phase one's IPOPT solves (counted by IPOPT), and
+    without it the phase one takes `max_iter`."""
+    problem = TuningProblem(
+        models.Plant(_double_integrator),
+        SaturatedPD(),
+        Scenario(reference=1.0, duration=4.0, x0=[0.0, 0.0], tracked="s"),
+        specs=Specs(max_rise_time_s=0.05),  # out of reach: the phase one runs until a cap or its test
+        substeps=2,
+    )
+    lbx, ubx = gain_bounds(problem, {"kp": (0.01, 100.0), "kd": (0.01, 100.0)})
+    capped = phase_one(problem, lbx, ubx, problem.start(), SolveOptions(max_iter=50, phase_max_iter=2, widths=(1e-2,)))
+    assert capped.status == "Maximum_Iterations_Exceeded" and not capped.converged
+    assert capped.iterations == 2
+    assert SolveOptions(max_iter=7).phase_iterations == 7
+    assert SolveOptions(max_iter=7, phase_max_iter=3).phase_iterations == 3
+    with pytest.raises(ValueError, match="phase_max_iter"):
+        SolveOptions(phase_max_iter=0)
+
+
 def test_a_phase_one_ending_farther_outside_the_exact_specs_than_its_start_returns_the_start_uncertified():
     """When the exact loop says a stage's answer misses the specs by more than the start did (here made so
     by replacing the exact measure), the phase one keeps the start and claims no certificate."""

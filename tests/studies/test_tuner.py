@@ -142,6 +142,23 @@ def test_phase_hessian_option_refuses_other_values_and_reaches_the_solve_options
     assert seen == ["exact"]
 
 
+def test_phase_max_iter_option_refuses_non_positive_values_and_reaches_the_solve_options(monkeypatch, tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        tuner.main(["arm", "--phase-max-iter", "0"])
+    assert stop.value.code == 2 and "--phase-max-iter must be >= 1" in capsys.readouterr().err
+    seen = []
+
+    def tune_case(case, options, paths, log):
+        seen.append((options.max_iter, options.phase_iterations))
+        raise KeyboardInterrupt  # stop before any work
+
+    monkeypatch.setattr(tuner, "tune_case", tune_case)
+    for argv in (["--max-iter", "30", "--phase-max-iter", "600"], ["--max-iter", "30"]):
+        with pytest.raises(KeyboardInterrupt):
+            tuner.main(["arm", *argv, "--out", str(tmp_path)])
+    assert seen == [(30, 600), (30, 30)]
+
+
 def test_widths_option_reads_a_decreasing_list():
     assert tuner._widths("0.1,0.01,1e-3") == (0.1, 0.01, 1e-3)
 
