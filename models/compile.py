@@ -60,6 +60,7 @@ import casadi as ca
 import numpy as np
 
 from . import elf, interrupts
+from .dense_products import faster_products
 
 #: Libraries run on the machine that compiles them (the machine is part of the cache key),
 #: so -march=native is safe.
@@ -482,11 +483,12 @@ def load_library(
 
 
 def _generated(functions: list[ca.Function], prefix: str) -> str:
-    """C source of `functions` generated in memory (nothing is written to the working directory)."""
+    """C source of `functions` generated in memory (nothing is written to the working directory), its dense
+    products as `models.dense_products` writes them."""
     generator = ca.CodeGenerator(f"{prefix}.c", {"with_header": False})
     for fun in functions:
         generator.add(fun)
-    return generator.dump()
+    return faster_products(generator.dump())
 
 
 def jit(fun: ca.Function, flags=FLAGS) -> ca.Function:

@@ -33,6 +33,7 @@ import numpy as np
 
 from . import compile as compiling
 from .block import Block
+from .dense_products import faster_products
 from .files import write_text
 
 #: C keywords a controller name must not be.
@@ -125,7 +126,8 @@ def c_array(name: str, values, kind: str = "double", storage: str = "static cons
 
 
 def generated_code(functions: list[ca.Function], prefix: str) -> str:
-    """C of CasADi Functions (SX, no allocation), generated in memory with internal symbols `prefix`_*.
+    """C of CasADi Functions (SX, no allocation), generated in memory with internal symbols `prefix`_*, its
+    dense products as `models.dense_products` writes them.
 
     Raises
     ------
@@ -140,7 +142,7 @@ def generated_code(functions: list[ca.Function], prefix: str) -> str:
             raise UnsupportedExport(
                 f"CasADi cannot generate C for {fun.name()}: {str(err).strip().splitlines()[-1]}"
             ) from None
-    code = generator.dump()
+    code = faster_products(generator.dump())
     allocating = sorted({call for call in ("malloc(", "calloc(", "realloc(", "free(") if call in code})
     if allocating:
         raise UnsupportedExport(
