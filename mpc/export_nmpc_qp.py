@@ -80,6 +80,7 @@ FIELDS = """    double H[${P}_NQ * ${P}_NQ], A[${P}_NROWS > 0 ? ${P}_NROWS * ${P
     int freed[${P}_NSTATIC], at[${P}_NSTATIC], fixed[${P}_NSTATIC], free_list[${P}_NSTATIC], fresh[${P}_NSTATIC];
     int kept[${P}_NROWS > 0 ? ${P}_NROWS : 1], rows[${P}_NROWS > 0 ? ${P}_NROWS : 1];
     int row_at[${P}_NROWS > 0 ? ${P}_NROWS : 1], violated[${P}_NROWS > 0 ? ${P}_NROWS : 1];
+    int check[${P}_NROWS > 0 ? ${P}_NROWS : 1];  /* the left-out soft rows the sequence's test reads */
     /* H's components (ldp): parent (union-find), cursor, the variables by component (order), each one's
      * place in it, and its component's range [begin, end) of order, at the component's root */
     int parent[${P}_NQ], cursor[${P}_NQ], order[${P}_NQ], place[${P}_NQ], begin[${P}_NQ], end[${P}_NQ];
@@ -135,14 +136,16 @@ static int components(${p}_state *m, int n) {
     const double *H = m->H;
     int i, j, a, c, at, size, diagonal = 1;
     for (i = 0; i < n; ++i) m->parent[i] = i;
-    for (i = 0; i < n; ++i)
+    for (i = 0; i < n; ++i) {
+        a = root_of(m->parent, i);  /* i's root, kept through the row's unions (a root is its set's least) */
         for (j = i + 1; j < n; ++j) {
             if (H[i * n + j] == 0.0) continue;
             if (H[i * n + j] > 1e-12 || H[i * n + j] < -1e-12) diagonal = 0;
-            a = root_of(m->parent, i);
             c = root_of(m->parent, j);
-            if (a != c) m->parent[a < c ? c : a] = a < c ? a : c;
+            if (a < c) m->parent[c] = a;
+            else if (c < a) { m->parent[a] = c; a = c; }
         }
+    }
     for (i = 0; i < n; ++i) m->cursor[i] = 0;
     for (i = 0; i < n; ++i) ++m->cursor[m->parent[i] = root_of(m->parent, i)];
     for (i = 0, at = 0; i < n; ++i)
@@ -301,7 +304,7 @@ static int restricted(${p}_state *m, int k, int mr) {
 static int sequence(${p}_state *m, int near) {
     const double *D = m->data, *hv = D + AT_HESSIAN_VALUES, *Cd = D + AT_C_D, *cv = D + AT_ROW_VALUES;
     const double *lbv = D + AT_LBV, *ubv = D + AT_UBV;
-    int i, j, q, t, k, mr, n, n_fixed, n_freed = 0, soft_kept, flag, more;
+    int i, j, q, t, k, mr, n, n_fixed, n_freed = 0, soft_kept, flag, more, checked;
     double value;
     for (i = 0; i < NROWS; ++i)
         m->kept[i] = !SOFT_ROW[i] || (near && (m->lba[i] > -NEAR || m->uba[i] < NEAR));
@@ -339,13 +342,29 @@ static int sequence(${p}_state *m, int near) {
         /* the left-out soft rows' values at the answer */
         for (i = 0; i < NROWS; ++i) m->shift[i] = 0.0;
         for (t = 0; t < NCV; ++t) m->shift[C_ROW[t]] += cv[t] * m->sigma[C_COLUMN[t]];
-        for (i = 0; i < NROWS; ++i) {
+        for (i = 0, checked = 0; i < NROWS; ++i) {
             m->violated[i] = 0;
-            if (!SOFT_ROW[i] || m->kept[i]) continue;
-            value = 0.0;
-            for (j = 0; j < ND; ++j) value += Cd[i * ND + j] * m->x[j];
-            value += m->shift[i];
-            m->violated[i] = value < m->lba[i] - SEQUENCE_TOLERANCE || value > m->uba[i] + SEQUENCE_TOLERANCE;
+            if (SOFT_ROW[i] && !m->kept[i]) m->check[checked++] = i;
+        }
+        for (q = 0; q < checked; q += 4) {  /* four rows' sums at once, each in its own order */
+            double sums[4] = {0.0, 0.0, 0.0, 0.0};
+            const double *c0, *c1, *c2, *c3;
+            int count = checked - q < 4 ? checked - q : 4;
+            c0 = Cd + m->check[q] * ND;
+            c1 = Cd + m->check[q + (count > 1)] * ND;
+            c2 = Cd + m->check[q + (count > 2) * 2] * ND;
+            c3 = Cd + m->check[q + (count > 3) * 3] * ND;
+            for (j = 0; j < ND; ++j) {
+                sums[0] += c0[j] * m->x[j];
+                sums[1] += c1[j] * m->x[j];
+                sums[2] += c2[j] * m->x[j];
+                sums[3] += c3[j] * m->x[j];
+            }
+            for (t = 0; t < count; ++t) {
+                i = m->check[q + t];
+                value = sums[t] + m->shift[i];
+                m->violated[i] = value < m->lba[i] - SEQUENCE_TOLERANCE || value > m->uba[i] + SEQUENCE_TOLERANCE;
+            }
         }
         for (j = 0; j < NSL; ++j) m->fresh[j] = 0;
         for (q = 0; q < n_fixed; ++q) {
