@@ -11,12 +11,13 @@ the exported NMPC's QP residuals (``rti_recover``: H v, C v and Cᵀ λ) took
 `faster_products` replaces that helper in generated code by one that adds the
 same products to each entry of z in the same order (k ascending, from z's
 value), but keeps four entries' sums in registers at once where an entry is
-a dot product, and runs the other case (z += x y, x with more than one row)
-with k outside, along x's columns, which the compiler vectorizes. Compiled
-without floating-point contraction (ISO C, as the exported controllers'
-programs, or -ffp-contract=off) every result is CasADi's double, bit for
-bit; where GNU C fuses a multiply and an add, it may fuse them in one loop
-and not in the other, and an entry differs by that rounding. CasADi never passes a z that
+a dot product (xᵀ y, or x a single row: one loop serves both), and runs the
+other case (z += x y, x with more than one row) with k outside, along x's
+columns, which the compiler vectorizes. Compiled without floating-point
+contraction (ISO C, as the exported controllers' programs, or
+-ffp-contract=off) every result is CasADi's double, bit for bit; where GNU C
+fuses a multiply and an add, it may fuse them in one loop and not in the
+other, and an entry differs by that rounding. CasADi never passes a z that
 overlaps x or y (a multiplication works in place on its addend only).
 The replacement applies only where the helper is CasADi 3.8's, text for
 text; other code is returned unchanged (and slower).
@@ -48,51 +49,36 @@ CASADI = """void casadi_mtimes_dense(const casadi_real* x, casadi_int nrow_x, ca
 }
 """
 
-#: The same products, each entry of z summed in CasADi's order: dot products four entries at a time
-#: (tr, and x a single row), otherwise k outside and the entries of z's column inside.
+#: The same products, each entry of z summed in CasADi's order. Where an entry is a dot product (tr, or x a
+#: single row) four run at once: z_j += sum_k v[k] a_j[k], a_j = a + j len (tr: v = y's column i, a = x;
+#: x a row: v = x, a = y); otherwise k is outside and the entries of z's column inside.
 FASTER = """void casadi_mtimes_dense(const casadi_real* x, casadi_int nrow_x, casadi_int ncol_x,
     const casadi_real* y, casadi_int ncol_y, casadi_real* z, casadi_int tr) {
   /* codesign-control (models.dense_products): each entry summed in CasADi's order, four at a time */
   casadi_int i, j, k;
-  if (tr) {
-    for (i=0; i<ncol_y; ++i) {
-      const casadi_real* yi = y + i*nrow_x;
-      casadi_real* zi = z + i*ncol_x;
-      for (j=0; j+4<=ncol_x; j+=4) {
-        const casadi_real *x0 = x + j*nrow_x, *x1 = x0 + nrow_x, *x2 = x1 + nrow_x, *x3 = x2 + nrow_x;
+  if (tr || nrow_x == 1) {
+    const casadi_int len = tr ? nrow_x : ncol_x, count = tr ? ncol_x : ncol_y, columns = tr ? ncol_y : 1;
+    const casadi_real* a = tr ? x : y;
+    for (i=0; i<columns; ++i) {
+      const casadi_real* v = tr ? y + i*nrow_x : x;
+      casadi_real* zi = z + i*count;
+      for (j=0; j+4<=count; j+=4) {
+        const casadi_real *a0 = a + j*len, *a1 = a0 + len, *a2 = a1 + len, *a3 = a2 + len;
         casadi_real s0 = zi[j], s1 = zi[j+1], s2 = zi[j+2], s3 = zi[j+3];
-        for (k=0; k<nrow_x; ++k) {
-          s0 += x0[k] * yi[k];
-          s1 += x1[k] * yi[k];
-          s2 += x2[k] * yi[k];
-          s3 += x3[k] * yi[k];
+        for (k=0; k<len; ++k) {
+          s0 += a0[k] * v[k];
+          s1 += a1[k] * v[k];
+          s2 += a2[k] * v[k];
+          s3 += a3[k] * v[k];
         }
         zi[j] = s0; zi[j+1] = s1; zi[j+2] = s2; zi[j+3] = s3;
       }
-      for (; j<ncol_x; ++j) {
-        const casadi_real* xj = x + j*nrow_x;
+      for (; j<count; ++j) {
+        const casadi_real* aj = a + j*len;
         casadi_real s = zi[j];
-        for (k=0; k<nrow_x; ++k) s += xj[k] * yi[k];
+        for (k=0; k<len; ++k) s += aj[k] * v[k];
         zi[j] = s;
       }
-    }
-  } else if (nrow_x == 1) {
-    for (i=0; i+4<=ncol_y; i+=4) {
-      const casadi_real *y0 = y + i*ncol_x, *y1 = y0 + ncol_x, *y2 = y1 + ncol_x, *y3 = y2 + ncol_x;
-      casadi_real s0 = z[i], s1 = z[i+1], s2 = z[i+2], s3 = z[i+3];
-      for (k=0; k<ncol_x; ++k) {
-        s0 += x[k] * y0[k];
-        s1 += x[k] * y1[k];
-        s2 += x[k] * y2[k];
-        s3 += x[k] * y3[k];
-      }
-      z[i] = s0; z[i+1] = s1; z[i+2] = s2; z[i+3] = s3;
-    }
-    for (; i<ncol_y; ++i) {
-      const casadi_real* yi = y + i*ncol_x;
-      casadi_real s = z[i];
-      for (k=0; k<ncol_x; ++k) s += x[k] * yi[k];
-      z[i] = s;
     }
   } else {
     for (i=0; i<ncol_y; ++i) {

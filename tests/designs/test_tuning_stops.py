@@ -187,7 +187,7 @@ def test_phase_one_uses_the_hessian_its_options_ask_for(hessian):
     assert stats["iter_count"] == found.iterations and len(reported) == found.iterations + 1
 
 
-def test_the_phase_one_takes_its_own_iteration_cap_and_the_cost_stages_keep_theirs():
+def test_the_phase_one_takes_its_own_iteration_cap_or_else_max_iter():
     """`SolveOptions.phase_max_iter` caps each of the phase one's IPOPT solves (counted by IPOPT), and
     without it the phase one takes `max_iter`."""
     problem = TuningProblem(
