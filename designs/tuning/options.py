@@ -38,7 +38,7 @@ class SolveOptions:
     phase_hessian : the phase one's Hessian (`phase_one`), as `hessian`; the case studies' tuner takes
         "limited-memory" (docs/guide.md's tuning section says why)
     phase_max_iter : the phase one's IPOPT iterations per solve, >= 1; None: `max_iter` (a phase one
-        that needs many more iterations than the cost's stages, as the satellite's)
+        that needs many more iterations than the cost's stages)
     until_feasible : with `phase`, stop at the first decision that meets the specs (a verdict on the
         specs, not a tuned cost: what an outer search over the plant needs, `size_actuator`)
     coarse_substeps : RK4 sub-steps per sample of a coarser problem whose continuation runs first and
