@@ -35,7 +35,7 @@ from .compile import NumpyCall
 from .compile import jit as compile_jit
 from .mc_kernel import KernelUnavailable, closed_loop_step, kernel
 from .plant import Plant
-from .run_setup import RunSetup, check_sizes, doubles_per_step
+from .run_setup import RunSetup, Seed, check_sizes, doubles_per_step
 from .simulate import DIVERGENCE_BOUND, output_call
 from .smooth import smoothed
 
@@ -323,7 +323,7 @@ def simulate_closed_loop(
     substeps: int = 10,
     input_disturbance=0.0,
     noise_std=0.0,
-    seed: int | None = 0,
+    seed: Seed = 0,
     xc0=None,
     compiled: bool | None = None,
     allow_divergence: bool = False,

@@ -725,10 +725,18 @@ def simulate_scenario(
     substeps: int,
     params=None,
     loop=None,
+    noise_sample: int | None = None,
 ):
     """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed;
     the run as `scenario.run` describes it (`models.scenario.Scenario`); by `controller`'s exported C
-    closed loop `loop` (`models.exported_loop`) where given, the same run to 1e-9."""
+    closed loop `loop` (`models.exported_loop`) where given, the same run to 1e-9.
+
+    noise_sample : None for the table's own noise (drawn from `options.seed`); j for the draw of Monte
+        Carlo sample j (`models.run_setup.RunSetup.noise`), the one `designs.tuning` gives its parameter
+        sample j (not with `loop`)."""
+    if noise_sample is not None and loop is not None:
+        raise ValueError("noise_sample is for the simulated loop, not an exported one")
+    seed = options.seed if noise_sample is None else np.random.SeedSequence([options.seed, noise_sample])
     noise = (
         measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
         if scenario.noise
@@ -758,7 +766,7 @@ def simulate_scenario(
         substeps=substeps,
         input_disturbance=run.input_disturbance,
         noise_std=run.noise_std,
-        seed=options.seed,
+        seed=seed,
         allow_divergence=True,
     )
 

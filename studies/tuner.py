@@ -17,7 +17,8 @@ where there are more than `MAX_CORNERS`, plus `N_SEEDED` seeded samples):
   each sample's own; the frequency fields (margins, bandwidth) are set by no
   case, and a tuning problem refuses them (`designs.tuning.TuningProblem`); tuning enforces overshoot,
   settling, rise time and steady-state error with a margin (`MARGIN` times the
-  bounds), so that the plants between the samples meet them too;
+  bounds), so that the plants between the samples meet them too (``--margin``;
+  1 enforces the case's own bounds, the record stores which);
 * cost: per scenario, ITAE of the tracked coordinate plus control energy (weighted
   so that energy makes `ENERGY_SHARE` of the hand design's cost), summed over the
   scenarios; the worst sample's total is minimized (an epigraph);
@@ -26,7 +27,8 @@ where there are more than `MAX_CORNERS`, plus `N_SEEDED` seeded samples):
 A hand design that misses the specs is first moved by a minimal-violation
 phase one (`designs.tuning.phase_one`); if that converges with the specs still
 missed, the structure cannot meet them near it, and the record says so with
-the phase one's numbers (`infeasible_text`): the row "tuned" then carries it as
+the phase one's numbers (`infeasible_text`: the case's step specs missed, and the
+physical limits and state bounds left, with their excess): the row "tuned" then carries it as
 its remark ("infeasible for this structure: overshoot at best 14 % > 10 %",
 first in every verdict detail of the row), its gains the phase one's answer.
 Otherwise the smoothing continuation tunes from there; a
@@ -196,10 +198,19 @@ def case_specs(case: CaseStudy, params: np.ndarray) -> dict:
     return out
 
 
-def with_margin(specs: Specs) -> Specs:
-    """The specs tuning enforces: the step specs' bounds times `MARGIN` (the others as they are)."""
-    scaled: dict = {k: None if getattr(specs, k) is None else MARGIN * getattr(specs, k) for k in SPEC_WORDS}
+def with_margin(specs: Specs, margin: float = MARGIN) -> Specs:
+    """The specs tuning enforces: the step specs' bounds times `margin` (0 < margin <= 1; the others as
+    they are)."""
+    check_margin(margin)
+    scaled: dict = {k: None if getattr(specs, k) is None else margin * getattr(specs, k) for k in SPEC_WORDS}
     return replace(specs, **scaled)
+
+
+def check_margin(margin: float) -> float:
+    """`margin` when 0 < margin <= 1 (1: the case's own specs); ValueError otherwise."""
+    if not 0 < margin <= 1:
+        raise ValueError(f"the tuning margin must be in (0, 1] (1: the case's own specs), got {margin!r}")
+    return float(margin)
 
 
 def gain_bounds(block) -> dict:
@@ -224,16 +235,16 @@ def energy_weight(case: CaseStudy, block, params) -> float:
     return ENERGY_SHARE / (1 - ENERGY_SHARE) * itae / energy if energy > 0 else 0.0
 
 
-def tuning_setup(case: CaseStudy) -> tuple[TuningSetup, dict, str, np.ndarray]:
-    """(the tuner's setup of the case, its specs by scenario (the case's, without margin), how the samples
-    were chosen, the samples (n, n_params))."""
+def tuning_setup(case: CaseStudy, margin: float = MARGIN) -> tuple[TuningSetup, dict, str, np.ndarray]:
+    """(the tuner's setup of the case, enforcing its step specs times `margin` (`with_margin`); its specs by
+    scenario (the case's, without margin); how the samples were chosen; the samples (n, n_params))."""
     block = hand_design(case)
     train, chosen = tuning_samples(case)
     specs = case_specs(case, train)
     setup = TuningSetup(
         models.get(case.plant),
         block,
-        scenarios(case, block, {name: with_margin(s) for name, s in specs.items()}),
+        scenarios(case, block, {name: with_margin(s, margin) for name, s in specs.items()}),
         cost=Cost("itae", energy_weight=energy_weight(case, block, train)),
         samples=train,
         robust="worst",
@@ -246,17 +257,43 @@ def tuning_setup(case: CaseStudy) -> tuple[TuningSetup, dict, str, np.ndarray]:
 def worst_metrics(case: CaseStudy, block, params: np.ndarray) -> dict:
     """{scenario: {metric column: worst value}} of `block` over the rows of `params` in each of the
     `SCENARIOS`, each run measured by the table's rule (`studies.judging.judge_run`)."""
-    runs = _judged(case, block, params)
+    return _worst(_judged(case, block, params))
+
+
+def _worst(runs: dict) -> dict:
+    """`worst_metrics` of judged runs ({scenario: [Judgement]})."""
     return {
         name: {column: max(j.metrics[column] for j in judged) for _, column, _ in SPEC_WORDS.values()}
         for name, judged in runs.items()
     }
 
 
-def infeasible_text(case: CaseStudy, specs: dict, worst: dict) -> str | None:
+def departures(runs: dict) -> dict:
+    """{what is left ("leaves panel deflection by"): (largest excess, unit, scenario)} over judged runs
+    ({scenario: [studies.judging.Judgement]}): the physical limits and state bounds their verdicts find
+    left (a violation with bound 0 measures its excess), the largest over the samples and scenarios."""
+    out: dict = {}
+    for name, judged in runs.items():
+        for j in judged:
+            for v in j.verdict.violations:
+                if v.bound == 0 and not v.minimum and v.value > out.get(v.spec, (0.0,))[0]:
+                    out[v.spec] = (float(v.value), v.unit, name)
+    return out
+
+
+def certificate(case: CaseStudy, specs: dict, block, params: np.ndarray) -> str | None:
+    """`infeasible_text` of `block` on the tuning's rows `params` (n, n_params): the tuning's own runs
+    (row j's measurement noise is the tuning problem's draw for sample j), judged by the table's rule."""
+    runs = _judged(case, block, params, tuning_noise=True)
+    return infeasible_text(case, specs, _worst(runs), departures(runs))
+
+
+def infeasible_text(case: CaseStudy, specs: dict, worst: dict, left: dict | None = None) -> str | None:
     """The row's text "infeasible for this structure: overshoot at best 14 % > 10 %; ...": each step spec
     of `specs` ({scenario: Specs}) that the worst measured value (`worst_metrics`) misses, over the
-    scenarios; None when none is (a phase one that failed only the margin `MARGIN` adds)."""
+    scenarios, then each limit or bound `left` (`departures`) with its excess ("leaves panel deflection
+    by 0.0013 rad at best (disturbance)"); None when none is (a phase one that failed only the margin
+    `with_margin` adds)."""
     missed = []
     for field_name, (words, column, unit) in SPEC_WORDS.items():
         bound = max(
@@ -269,20 +306,25 @@ def infeasible_text(case: CaseStudy, specs: dict, worst: dict) -> str | None:
             value = 100 * value / abs(case.step)
         if value > bound:
             missed.append(f"{words} at best {value:.3g} {unit} > {bound:g} {unit}")
+    for spec, (excess, unit, scenario_name) in (left or {}).items():
+        missed.append(f"{spec} {excess:.3g}{f' {unit}' if unit else ''} at best ({scenario_name})")
     return "infeasible for this structure: " + "; ".join(missed) if missed else None
 
 
-def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str = PATHS_DEFAULT, log=None) -> dict:
+def tune_case(
+    case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str = PATHS_DEFAULT, log=None, margin: float = MARGIN
+) -> dict:
     """Tune the case's hand design against its specs, validate it; the record its stored-gains file keeps.
 
     options : how the tuning is solved (default `TUNE_OPTIONS`); its tol, widths, Hessian and jit are stored
         in the record
     paths : the specs' form on the smoothed stages (`designs.tuning.TuningSetup`), stored in the record
     log : optional callable(text) told what each step found as it ends
+    margin : the step specs' factor tuning enforces (`with_margin`), stored in the record
     """
     started = time.perf_counter()
     say = log or (lambda text: None)
-    setup, specs, chosen, train = tuning_setup(case)
+    setup, specs, chosen, train = tuning_setup(case, margin)
     setup = replace(setup, paths=paths)
     problem = setup.problem()
     lbx, ubx = decision_bounds(problem, setup.bounds)
@@ -297,7 +339,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         )
     block, result, infeasible = setup.block, None, None
     if found is not None and found.infeasible:
-        infeasible = infeasible_text(case, specs, worst_metrics(case, problem.block_at(found.decision), train))
+        infeasible = certificate(case, specs, problem.block_at(found.decision), train)
     if found is not None and (infeasible or not found.converged):
         decision = found.decision
         tuned = {"cost": float(problem.values(decision)[0]), "status": found.status, "converged": found.converged}
@@ -329,7 +371,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         search = polished.search
         say(f"  poll search: {search.status}, {search.evaluations} evaluations, cost {polished.objective:.6g}")
         if polished.converged and not polished.feasible:
-            infeasible = infeasible_text(case, specs, worst_metrics(case, problem.block_at(decision), train))
+            infeasible = certificate(case, specs, problem.block_at(decision), train)
     gains = problem.block_at(decision).gains
     record = {
         "plant": case.plant,
@@ -339,7 +381,7 @@ def tune_case(case: CaseStudy, options: SolveOptions = TUNE_OPTIONS, paths: str 
         "known": f"uncertain parameters +{100 * case.known_rel:g} % (models.perturbed)",
         "scenarios": {name: table.title for name, table in table_scenarios(case).items()},
         "cost": {"kind": "itae", "energy_weight": problem.cost.energy_weight, "robust": "worst"},
-        "tuning_margin": MARGIN,
+        "tuning_margin": margin,
         "gain_range": GAIN_RANGE,
         "specs": {name: _spec_record(s) for name, s in specs.items()},
         "infeasible": infeasible,
@@ -427,6 +469,9 @@ def reproduction(record: dict, stored_record: dict | None) -> tuple[bool, str]:
     reasons = [f"{key} differ" for key in ("samples", "enforced", "energy_weight") if then.get(key) != now.get(key)]
     if record.get("start_gains") != stored_record.get("start_gains"):
         reasons.append("the hand design differs")
+    then_margin, margin = stored_record.get("tuning_margin"), record.get("tuning_margin")
+    if then_margin != margin:
+        reasons.append(f"tuning margin {then_margin} -> {margin} (--margin)")
     reasons += [
         f"{name} {then.get('versions', {}).get(name)} -> {version}"
         for name, version in now.get("versions", {}).items()
@@ -454,20 +499,32 @@ def validate(case: CaseStudy, record: dict) -> dict:
     }
 
 
-def _judged(case: CaseStudy, block, params: np.ndarray) -> dict:
-    """{scenario: [studies.judging.Judgement per row of params]}: the table's own runs and rule."""
+def _judged(case: CaseStudy, block, params: np.ndarray, tuning_noise: bool = False) -> dict:
+    """{scenario: [studies.judging.Judgement per row of params]}: the table's own runs and rule; with
+    `tuning_noise`, row j's measurement noise is the one the tuning problem draws for its sample j
+    (`runner.simulate_scenario`'s noise_sample), so that the runs are the tuning's own."""
     plant = models.get(case.plant)
     _, base = runner.tracked_equilibrium(plant, case)
-    out = {}
+    options, out = runner.Options(), {}
     for name, table in table_scenarios(case).items():
         out[name] = [
             judging.judge_run(
                 case,
                 name,
-                runner.simulate_scenario(plant, block, table, case, runner.Options(), base, case.substeps, row),
+                runner.simulate_scenario(
+                    plant,
+                    block,
+                    table,
+                    case,
+                    options,
+                    base,
+                    case.substeps,
+                    row,
+                    noise_sample=j if tuning_noise else None,
+                ),
                 dict(zip(plant.params, row)),
             )
-            for row in params
+            for j, row in enumerate(params)
         ]
     return out
 
@@ -572,6 +629,13 @@ def main(argv=None) -> int:
         help="the phase one's IPOPT iteration cap per solve (default: --max-iter)",
     )
     parser.add_argument(
+        "--margin",
+        type=float,
+        default=MARGIN,
+        help=f"the step specs' factor tuning enforces (default {MARGIN:g}, for the plants between the samples; "
+        "1: the case's own specs)",
+    )
+    parser.add_argument(
         "--validate", action="store_true", help="re-validate the stored gains on the fresh samples, without tuning"
     )
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
@@ -619,6 +683,8 @@ def main(argv=None) -> int:
         parser.error(f"--max-iter must be >= 1, got {args.max_iter}")
     if args.phase_max_iter is not None and args.phase_max_iter < 1:
         parser.error(f"--phase-max-iter must be >= 1, got {args.phase_max_iter}")
+    if not 0 < args.margin <= 1:
+        parser.error(f"--margin must be in (0, 1] (1: the case's own specs), got {args.margin:g}")
     failed = []
     for name in args.plants:
         case = cases.get(name)
@@ -639,7 +705,9 @@ def main(argv=None) -> int:
                 hessian=args.hessian,
                 phase_hessian=args.phase_hessian,
             )
-            record = tune_case(case, options, paths=args.paths, log=lambda text: print(text, flush=True))
+            record = tune_case(
+                case, options, paths=args.paths, log=lambda text: print(text, flush=True), margin=args.margin
+            )
         if not _report(case, record, before, args, folder):
             failed.append(name)
     if failed:

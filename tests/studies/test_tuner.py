@@ -18,18 +18,7 @@ from models import specs as model_specs
 from studies import tuner
 
 PLANTS = studies.names()
-#: The cases whose stored records were tuned against the case's own specs on every table scenario. The
-#: others still hold records tuned against the hand design's figures on two scenarios: their re-tuning
-#: (``python -m studies.tuner NAME --install``) is left to do, and their tests fail until then.
-RETUNED: tuple[str, ...] = ("arm", "uuv", "ballbeam", "pendulum", "crane")
 CHECK_SEED, N_CHECK = 3, 2
-
-
-def _cases():
-    return [
-        name if name in RETUNED else pytest.param(name, marks=pytest.mark.xfail(strict=True, reason="not re-tuned"))
-        for name in PLANTS
-    ]
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +26,7 @@ def records():
     return {name: tuner.stored(studies.get(name)) for name in PLANTS}
 
 
-@pytest.mark.parametrize("name", _cases())
+@pytest.mark.parametrize("name", PLANTS)
 def test_the_tuned_row_meets_every_spec_of_its_case_or_says_it_cannot(name, records):
     """On the nominal plant (the table's rows) and on samples neither tuning nor validation used, every
     scenario the table judges meets the case's specs by the table's verdict, or the record carries the
@@ -60,7 +49,7 @@ def test_the_tuned_row_meets_every_spec_of_its_case_or_says_it_cannot(name, reco
         assert verdict == f"{model_specs.MEETS}: in all {len(rows)} samples", (scenario_name, verdict)
 
 
-@pytest.mark.parametrize("name", _cases())
+@pytest.mark.parametrize("name", PLANTS)
 def test_stored_record_ended_on_a_test_and_says_why_each_stage_ended(name, records):
     record = records[name]
     assert record is not None and "provenance" in record, f"re-tune with python -m studies.tuner {name} --install"
@@ -132,7 +121,7 @@ def test_phase_hessian_option_refuses_other_values_and_reaches_the_solve_options
     assert stop.value.code == 2
     seen = []
 
-    def tune_case(case, options, paths, log):
+    def tune_case(case, options, paths, log, margin):
         seen.append(options.phase_hessian)
         raise KeyboardInterrupt  # stop before any work
 
@@ -148,7 +137,7 @@ def test_phase_max_iter_option_refuses_non_positive_values_and_reaches_the_solve
     assert stop.value.code == 2 and "--phase-max-iter must be >= 1" in capsys.readouterr().err
     seen = []
 
-    def tune_case(case, options, paths, log):
+    def tune_case(case, options, paths, log, margin):
         seen.append((options.max_iter, options.phase_iterations))
         raise KeyboardInterrupt  # stop before any work
 
@@ -157,6 +146,32 @@ def test_phase_max_iter_option_refuses_non_positive_values_and_reaches_the_solve
         with pytest.raises(KeyboardInterrupt):
             tuner.main(["arm", *argv, "--out", str(tmp_path)])
     assert seen == [(30, 600), (30, 30)]
+
+
+def test_margin_option_refuses_values_outside_zero_to_one_and_reaches_the_tuning(monkeypatch, tmp_path, capsys):
+    for bad in ("0", "-0.5", "1.01", "nan"):
+        with pytest.raises(SystemExit) as stop:
+            tuner.main(["arm", "--margin", bad])
+        assert stop.value.code == 2 and "--margin must be in (0, 1]" in capsys.readouterr().err
+    seen = []
+
+    def tune_case(case, options, paths, log, margin):
+        seen.append(margin)
+        raise KeyboardInterrupt  # stop before any work
+
+    monkeypatch.setattr(tuner, "tune_case", tune_case)
+    for argv in (["--margin", "1"], []):
+        with pytest.raises(KeyboardInterrupt):
+            tuner.main(["arm", *argv, "--out", str(tmp_path)])
+    assert seen == [1.0, tuner.MARGIN]
+
+
+def test_a_margin_of_one_enforces_the_case_specs_and_others_are_refused():
+    specs = Specs(max_overshoot_pct=20.0, max_settling_time_s=4.0, max_rise_time_s=1.0, max_ss_error_pct=2.0)
+    assert tuner.with_margin(specs, 1.0) == specs
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="tuning margin must be in"):
+            tuner.with_margin(specs, bad)
 
 
 def test_widths_option_reads_a_decreasing_list():
@@ -182,6 +197,33 @@ def test_the_infeasibility_text_names_each_missed_spec_with_the_phase_ones_numbe
     assert tuner.infeasible_text(case, specs, worst) == "infeasible for this structure: overshoot at best 14.2 % > 10 %"
 
 
+def test_the_infeasibility_text_names_each_limit_left_with_its_largest_excess():
+    from types import SimpleNamespace
+
+    def judged(*violations):
+        return SimpleNamespace(verdict=model_specs.Verdict(model_specs.VIOLATES, violations, ""))
+
+    panel = "leaves panel deflection by"
+    runs = {
+        "step": [judged(model_specs.Violation(panel, 0.001, 0.0, "rad")), judged()],
+        "disturbance": [
+            judged(model_specs.Violation(panel, 0.003, 0.0, "rad"), model_specs.Violation("overshoot", 12.0, 10.0)),
+            judged(model_specs.Violation("θ leaves [-1, 1] by", 0.5, 0.0, "rad")),
+        ],
+    }
+    left = tuner.departures(runs)
+    assert left == {panel: (0.003, "rad", "disturbance"), "θ leaves [-1, 1] by": (0.5, "rad", "disturbance")}
+    case = studies.get("satellite")
+    specs = {name: Specs(max_overshoot_pct=10.0) for name in tuner.SCENARIOS}
+    met = {"overshoot_pct": 8.0, "settling_time_s": 1.0, "rise_time_s": 1.0, "ss_error": 0.0}
+    worst = {name: met for name in specs}
+    assert tuner.infeasible_text(case, specs, worst, left) == (
+        "infeasible for this structure: leaves panel deflection by 0.003 rad at best (disturbance); "
+        "θ leaves [-1, 1] by 0.5 rad at best (disturbance)"
+    )
+    assert tuner.infeasible_text(case, specs, worst, {}) is None
+
+
 def test_reproduction_says_why_a_cost_was_not_reproduced():
     record = {"tuning": {"cost": 2.0}, "start_gains": {"kp": 1.0}}
     record["provenance"] = {"samples": [[1.0]], "enforced": {}, "energy_weight": 0.5, "versions": {"casadi": "3.8"}}
@@ -196,6 +238,8 @@ def test_reproduction_says_why_a_cost_was_not_reproduced():
     other = old | {"provenance": record["provenance"] | {"energy_weight": 0.4, "versions": {"casadi": "3.6"}}}
     same, text = tuner.reproduction(record, other)
     assert not same and text.endswith("energy_weight differ, casadi 3.6 -> 3.8")
+    same, text = tuner.reproduction(record | {"tuning_margin": 0.95}, other | {"tuning_margin": 1.0})
+    assert not same and text.endswith("energy_weight differ, tuning margin 1.0 -> 0.95 (--margin), casadi 3.6 -> 3.8")
 
 
 def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_source_by_default(tmp_path, monkeypatch):
@@ -205,7 +249,7 @@ def test_a_record_is_written_only_when_converged_or_forced_and_never_into_the_so
     tuning = {"status": "Maximum_Iterations_Exceeded", "converged": False, "message": "cap", "iterations": 1}
     tuning |= {"wall_time_s": 0.0, "initial_cost": 1.0, "cost": 1.0}
     record = {"tuning": tuning, "validation": validation, "infeasible": None, "start_gains": {}}
-    monkeypatch.setattr(tuner, "tune_case", lambda case, options, paths, log: record)
+    monkeypatch.setattr(tuner, "tune_case", lambda case, options, paths, log, margin: record)
     monkeypatch.setenv("CODESIGN_CONTROL_CACHE", str(tmp_path / "cache"))
     before = (tuner.STORE_DIR / tuner.store_name(studies.get("arm"))).stat().st_mtime_ns
     assert tuner.main(["arm", "--out", str(tmp_path / "out")]) == 1

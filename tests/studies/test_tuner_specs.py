@@ -148,3 +148,31 @@ def test_the_tuners_physical_limit_rows_are_the_tables_departures_on_the_same_ru
             # The table reads x_0 too (the run's given initial state, which the tuning cannot move).
             excess = max(float(np.max(values - limit.upper)), float(np.max(limit.lower - values)), 0.0)
             assert (departure[0].value if departure else 0.0) == pytest.approx(excess, rel=1e-12, abs=1e-15)
+
+
+def test_the_certificates_runs_are_the_tunings_own_noise_draws_included():
+    """`studies.tuner.certificate` judges the tuning's runs: on each tuning sample j the table's run with the
+    tuning problem's noise draw for sample j (`noise_sample=j`) gives the tuning's commands to 1e-12. The
+    table's own draw is sample 0's, so on the other samples it gives other commands: the draws are what
+    is compared."""
+    plant = models.get(CASE.plant)
+    block = tuner.hand_design(CASE)
+    rows = tuner.samples(CASE, 3, 5)
+    (scenario,) = [s for s in tuner.scenarios(CASE, block) if s.name == "noise"]
+    problem = TuningProblem(plant, block, scenario, cost=Cost("itae"), samples=rows, substeps=CASE.substeps)
+    u = np.asarray(problem.evaluate(problem.start())[2])
+    _, base = runner.tracked_equilibrium(plant, CASE)
+    table = tuner.table_scenarios(CASE)["noise"]
+    n = u.shape[1] // len(rows)
+    for j, row in enumerate(rows):
+        own = runner.simulate_scenario(
+            plant, block, table, CASE, runner.Options(), base, CASE.substeps, row, noise_sample=j
+        )
+        np.testing.assert_allclose(u[:, j * n : (j + 1) * n].T, own.u, rtol=0, atol=1e-12)
+        tables = runner.simulate_scenario(plant, block, table, CASE, runner.Options(), base, CASE.substeps, row)
+        differs = np.max(np.abs(u[:, j * n : (j + 1) * n].T - tables.u))
+        assert differs == 0 if j == 0 else differs > 1e-6
+    with pytest.raises(ValueError, match="noise_sample is for the simulated loop"):
+        runner.simulate_scenario(
+            plant, block, table, CASE, runner.Options(), base, CASE.substeps, loop=object(), noise_sample=0
+        )
