@@ -194,7 +194,19 @@ def test_the_infeasibility_text_names_each_missed_spec_with_the_phase_ones_numbe
         name: {"overshoot_pct": 14.0, "settling_time_s": 1.5, "rise_time_s": 0.3, "ss_error": 0.0} for name in specs
     }
     worst["steps"]["overshoot_pct"] = 14.2
-    assert tuner.infeasible_text(case, specs, worst) == "infeasible for this structure: overshoot at best 14.2 % > 10 %"
+    assert tuner.infeasible_text(case, specs, worst) == (
+        "infeasible for this structure: overshoot at best 14.2 % > 10 % (steps)"
+    )
+    # each spec in the scenario it misses by the largest factor, against that scenario's own bound
+    specs["step"] = Specs(max_overshoot_pct=10.0, max_settling_time_s=1.0)
+    worst["step"]["settling_time_s"], worst["noise"]["settling_time_s"] = 1.2, 2.5
+    worst["disturbance"]["ss_error"] = 0.03 * abs(case.step)  # 3 % of the step, no spec to miss
+    assert tuner.infeasible_text(case, specs, worst) == (
+        "infeasible for this structure: overshoot at best 14.2 % > 10 % (steps); "
+        "settling time at best 2.5 s > 2 s (noise)"
+    )
+    specs["disturbance"] = Specs(max_ss_error_pct=2.0)
+    assert tuner.infeasible_text(case, specs, worst).endswith("; steady-state error at best 3 % > 2 % (disturbance)")
 
 
 def test_the_infeasibility_text_names_each_limit_left_with_its_largest_excess():
@@ -210,6 +222,7 @@ def test_the_infeasibility_text_names_each_limit_left_with_its_largest_excess():
             judged(model_specs.Violation(panel, 0.003, 0.0, "rad"), model_specs.Violation("overshoot", 12.0, 10.0)),
             judged(model_specs.Violation("θ leaves [-1, 1] by", 0.5, 0.0, "rad")),
         ],
+        "noise": [judged(model_specs.Violation("drifts", 0.1, 0.0, "rad/s"))],  # no spec of the tuning's
     }
     left = tuner.departures(runs)
     assert left == {panel: (0.003, "rad", "disturbance"), "θ leaves [-1, 1] by": (0.5, "rad", "disturbance")}
