@@ -506,6 +506,19 @@ def status_lines(table, escape=escape_markdown) -> list:
     return lines
 
 
+def _remarks(table, shown) -> dict:
+    """{controller: its remark} (the table's remark column, e.g. a tuned design's certificate that its
+    structure cannot meet the specs over the parameter box) of the controllers not in `shown`, whose
+    failing rows already say it first in their details."""
+    if "remark" not in table:
+        return {}
+    out: dict = {}
+    for controller, remark in zip(table.controller, table.remark):
+        if isinstance(remark, str) and remark and controller not in shown:
+            out.setdefault(controller, remark)
+    return out
+
+
 def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> str:
     """table.md: the caption, the verdict grid and what each row misses, how the rows ran, the metrics (angles
     in degrees), the Monte Carlo's worst case and spread, the linear loop analysis, the notes and run time.
@@ -544,6 +557,12 @@ def _study_markdown(result, notes: list, loop_rows: list, run_id: str = "") -> s
             )
             for r in failing
         ]
+        parts.append("")
+    shown = {r["controller"] for r in failing}
+    remarks = _remarks(result.table, shown)
+    if remarks:
+        parts += ["Remarks of the controllers whose rows above meet their specs:", ""]
+        parts += [f"- {plain.markdown_text(c)}: {plain.markdown_text(text)}" for c, text in remarks.items()]
         parts.append("")
     parts += [
         "## How the rows ran",

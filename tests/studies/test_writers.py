@@ -319,3 +319,17 @@ def test_the_run_record_holds_the_digest_of_every_file(arm_study, tmp_path):
         "arm",
         result.best("step"),
     )
+
+
+def test_table_md_says_the_remark_of_a_controller_whose_rows_meet_their_specs_once():
+    """A row that meets its specs lists no detail, so its controller's remark (a tuned design's certificate
+    about the whole parameter box) is said once under the grid; a failing controller's rows already say it
+    first in their details, and it is not repeated."""
+    table = pd.DataFrame(
+        {
+            "controller": ["tuned", "tuned", "PD", "PD", "LQR"],
+            "remark": ["certificate A", "certificate A", "refused B", "refused B", None],
+        }
+    )
+    assert writers._remarks(table, shown={"PD"}) == {"tuned": "certificate A"}
+    assert writers._remarks(table.drop(columns="remark"), shown=set()) == {}
