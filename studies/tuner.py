@@ -35,7 +35,8 @@ Otherwise the smoothing continuation tunes from there; a
 stage that makes the exact cost worse than the best point seen is stopped and
 its start kept (`designs.tuning.Continuation`).
 
-``python -m studies.tuner [case ...]`` tunes, validates the result with the
+``python -m studies.tuner [case ...]`` tunes (a setting not given on the command
+line is the stored record's, `run_settings`), validates the result with the
 table's own rule (`table_verdicts`, on the nominal plant and on `N_VALIDATION`
 fresh samples, seed `VALIDATION_SEED`), says whether it reproduced the stored
 record's cost (`REPRODUCED`, relative) and why not, and stores gains, costs,
@@ -56,6 +57,7 @@ import time
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -615,31 +617,84 @@ def _widths(text: str) -> tuple[float, ...]:
         ) from None
 
 
+#: The tuning settings a run takes from the stored record when the command line does not give them: the
+#: command-line option, the record's field (in "tuning", or the record's own) and the default without one.
+STORED_SETTINGS = {
+    "max_iter": ("--max-iter", ("tuning", "max_iter"), MAX_ITER),
+    "phase_max_iter": ("--phase-max-iter", ("tuning", "phase_max_iter"), None),
+    "margin": ("--margin", ("tuning_margin",), MARGIN),
+    "widths": ("--widths", ("tuning", "widths"), WIDTHS),
+    "paths": ("--paths", ("tuning", "paths"), PATHS_DEFAULT),
+    "hessian": ("--hessian", ("tuning", "hessian"), "limited-memory"),
+    "phase_hessian": ("--phase-hessian", ("tuning", "phase_hessian"), TUNE_OPTIONS.phase_hessian),
+}
+
+
+def run_settings(args: argparse.Namespace, record: dict | None) -> tuple[dict, list[str]]:
+    """({setting: value} of one tuning run, the options taken from the stored record): each of
+    `STORED_SETTINGS` from the command line where given, else from `record` (so that ``python -m
+    studies.tuner PLANT`` re-runs the stored record's tuning), else its default. Values read from a
+    record are checked as the command line checks them (ValueError)."""
+    chosen, from_record = {}, []
+    for key, (option, path, default) in STORED_SETTINGS.items():
+        value = getattr(args, key)
+        if value is None and record is not None:
+            stored_value: Any = record
+            for part in path:
+                stored_value = stored_value.get(part) if isinstance(stored_value, dict) else None
+            if key == "phase_max_iter" and stored_value == record.get("tuning", {}).get("max_iter"):
+                stored_value = None  # the record's phase one followed its --max-iter: so does this run's
+            if stored_value is not None:
+                value = tuple(float(w) for w in stored_value) if key == "widths" else stored_value
+                from_record.append(f"{option} {','.join(f'{w:g}' for w in value) if key == 'widths' else value}")
+        chosen[key] = default if value is None else value
+    check_settings(chosen)
+    return chosen, from_record
+
+
+def check_settings(chosen: dict) -> None:
+    """ValueError naming the first setting of a run (`run_settings`) that the command line would refuse."""
+    if int(chosen["max_iter"]) < 1:
+        raise ValueError(f"--max-iter must be >= 1, got {chosen['max_iter']}")
+    if chosen["phase_max_iter"] is not None and int(chosen["phase_max_iter"]) < 1:
+        raise ValueError(f"--phase-max-iter must be >= 1, got {chosen['phase_max_iter']}")
+    if not 0 < chosen["margin"] <= 1:
+        raise ValueError(f"--margin must be in (0, 1] (1: the case's own specs), got {chosen['margin']:g}")
+    check_widths(chosen["widths"])
+    if chosen["paths"] not in PATHS:
+        raise ValueError(f"--paths must be one of {', '.join(PATHS)}, got {chosen['paths']!r}")
+    for key in ("hessian", "phase_hessian"):
+        if chosen[key] not in HESSIANS:
+            raise ValueError(f"--{key.replace('_', '-')} must be one of {', '.join(HESSIANS)}, got {chosen[key]!r}")
+
+
 def main(argv=None) -> int:
     """``python -m studies.tuner``: tune (or re-validate) each case's gains and write its record when the tuning
     converged (or with ``--force``) into ``--out`` (default the user cache's tuned/; ``--install`` writes into
-    studies/cases, the records the study reads); 1 if one did not converge."""
+    studies/cases, the records the study reads); 1 if one did not converge. A setting not given takes the
+    stored record's (`run_settings`), so that a plain run reproduces it."""
     names = [n for n in cases.names() if cases.get(n).classical is not None]
+    stored_note = "; default: the stored record's, else "
     parser = argparse.ArgumentParser(prog="python -m studies.tuner", description=__doc__.split("\n")[0])
     parser.add_argument("plants", nargs="*", default=names, help=f"cases to tune (default all: {', '.join(names)})")
     parser.add_argument(
         "--max-iter",
         type=int,
-        default=MAX_ITER,
-        help=f"IPOPT iteration cap per solve (default {MAX_ITER}; a stop there is reported)",
+        default=None,
+        help=f"IPOPT iteration cap per solve (a stop there is reported{stored_note}{MAX_ITER})",
     )
     parser.add_argument(
         "--phase-max-iter",
         type=int,
         default=None,
-        help="the phase one's IPOPT iteration cap per solve (default: --max-iter)",
+        help=f"the phase one's IPOPT iteration cap per solve ({stored_note.lstrip('; ')}--max-iter)",
     )
     parser.add_argument(
         "--margin",
         type=float,
-        default=MARGIN,
-        help=f"the step specs' factor tuning enforces (default {MARGIN:g}, for the plants between the samples; "
-        "1: the case's own specs)",
+        default=None,
+        help=f"the step specs' factor tuning enforces (1: the case's own specs{stored_note}{MARGIN:g}, for the "
+        "plants between the samples)",
     )
     parser.add_argument(
         "--validate", action="store_true", help="re-validate the stored gains on the fresh samples, without tuning"
@@ -648,29 +703,29 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--widths",
         type=_widths,
-        default=WIDTHS,
-        help="the smoothing continuation's widths, comma-separated, strictly decreasing (default "
-        f"{','.join(f'{w:g}' for w in WIDTHS)}; a start far from the answer may need 0.1 first)",
+        default=None,
+        help="the smoothing continuation's widths, comma-separated, strictly decreasing (a start far from the "
+        f"answer may need 0.1 first{stored_note}{','.join(f'{w:g}' for w in WIDTHS)})",
     )
     parser.add_argument(
         "--paths",
         choices=PATHS,
-        default=PATHS_DEFAULT,
-        help="on the smoothed stages, each spec as one soft maximum per run (default) or one inequality per "
-        "sample (the exact specs judge every sample either way)",
+        default=None,
+        help="on the smoothed stages, each spec as one soft maximum per run or one inequality per sample (the "
+        f"exact specs judge every sample either way{stored_note}{PATHS_DEFAULT})",
     )
     parser.add_argument(
         "--hessian",
         choices=HESSIANS,
-        default="limited-memory",
-        help="IPOPT's Hessian: L-BFGS (default) or CasADi's exact second derivatives (few gains, hard problems)",
+        default=None,
+        help="IPOPT's Hessian: L-BFGS or CasADi's exact second derivatives (few gains, hard problems"
+        f"{stored_note}limited-memory)",
     )
     parser.add_argument(
         "--phase-hessian",
         choices=HESSIANS,
-        default=TUNE_OPTIONS.phase_hessian,
-        help=f"the phase one's Hessian (default {TUNE_OPTIONS.phase_hessian}; exact where L-BFGS wanders, as on the "
-        "satellite's)",
+        default=None,
+        help=f"the phase one's Hessian (exact where L-BFGS wanders{stored_note}{TUNE_OPTIONS.phase_hessian})",
     )
     parser.add_argument(
         "--out",
@@ -685,12 +740,13 @@ def main(argv=None) -> int:
     unknown = [p for p in args.plants if p not in names]
     if unknown:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
-    if args.max_iter < 1:
-        parser.error(f"--max-iter must be >= 1, got {args.max_iter}")
-    if args.phase_max_iter is not None and args.phase_max_iter < 1:
-        parser.error(f"--phase-max-iter must be >= 1, got {args.phase_max_iter}")
-    if not 0 < args.margin <= 1:
-        parser.error(f"--margin must be in (0, 1] (1: the case's own specs), got {args.margin:g}")
+    try:  # the command line's own values (a stored record's are checked per plant below)
+        check_settings(
+            {key: default for key, (_, _, default) in STORED_SETTINGS.items()}
+            | {key: value for key in STORED_SETTINGS if (value := getattr(args, key)) is not None}
+        )
+    except ValueError as err:
+        parser.error(str(err))
     failed = []
     for name in args.plants:
         case = cases.get(name)
@@ -702,17 +758,24 @@ def main(argv=None) -> int:
             record = before | {"validation": validate(case, before)}
         else:
             print(f"tuning {name} ...", flush=True)
+            chosen, from_record = run_settings(args, before)
+            if from_record:
+                print(f"  as the stored record: {' '.join(from_record)}", flush=True)
             options = SolveOptions(
-                max_iter=args.max_iter,
-                phase_max_iter=args.phase_max_iter,
+                max_iter=int(chosen["max_iter"]),
+                phase_max_iter=None if chosen["phase_max_iter"] is None else int(chosen["phase_max_iter"]),
                 jit=not args.no_jit,
                 progress=_report_every(10),
-                widths=args.widths,
-                hessian=args.hessian,
-                phase_hessian=args.phase_hessian,
+                widths=chosen["widths"],
+                hessian=chosen["hessian"],
+                phase_hessian=chosen["phase_hessian"],
             )
             record = tune_case(
-                case, options, paths=args.paths, log=lambda text: print(text, flush=True), margin=args.margin
+                case,
+                options,
+                paths=chosen["paths"],
+                log=lambda text: print(text, flush=True),
+                margin=float(chosen["margin"]),
             )
         if not _report(case, record, before, args, folder):
             failed.append(name)

@@ -5,6 +5,7 @@ verdict (`studies.runner.simulate_scenario`, `studies.judging.judge_run`), not b
 the tuner optimized.
 """
 
+import argparse
 import dataclasses
 
 import numpy as np
@@ -290,3 +291,54 @@ def test_the_tuners_validation_judges_a_run_as_the_study_table_does():
             assert detail.startswith(block.remark)
             detail = detail[len(block.remark) :].removeprefix("; this run: ")
         assert verdicts[name] == (f"{row.verdict}: {detail}" if detail else row.verdict)
+
+
+def _arguments(**given):
+    names = ("max_iter", "phase_max_iter", "margin", "widths", "paths", "hessian", "phase_hessian")
+    return argparse.Namespace(**{name: given.get(name) for name in names})
+
+
+def test_a_setting_not_given_is_the_stored_records_else_the_default():
+    record = {
+        "tuning_margin": 1.0,
+        "tuning": {"max_iter": 60, "phase_max_iter": 60, "widths": [0.1, 0.01], "paths": "pointwise"},
+    }
+    chosen, taken = tuner.run_settings(_arguments(), record)
+    assert chosen == {
+        "max_iter": 60,
+        "phase_max_iter": None,  # the record's phase one followed its --max-iter, as this run's does
+        "margin": 1.0,
+        "widths": (0.1, 0.01),
+        "paths": "pointwise",
+        "hessian": "limited-memory",
+        "phase_hessian": tuner.TUNE_OPTIONS.phase_hessian,
+    }
+    assert taken == ["--max-iter 60", "--margin 1.0", "--widths 0.1,0.01", "--paths pointwise"]
+    given, taken = tuner.run_settings(_arguments(max_iter=5, margin=0.9), record | {"tuning": {"phase_max_iter": 600}})
+    assert (given["max_iter"], given["phase_max_iter"], given["margin"]) == (5, 600, 0.9)
+    assert taken == ["--phase-max-iter 600"]
+    defaults, taken = tuner.run_settings(_arguments(), None)
+    assert (defaults["max_iter"], defaults["margin"], defaults["widths"], taken) == (
+        tuner.MAX_ITER,
+        tuner.MARGIN,
+        tuner.WIDTHS,
+        [],
+    )
+    with pytest.raises(ValueError, match="--margin must be in"):
+        tuner.run_settings(_arguments(), {"tuning_margin": 2.0})
+
+
+def test_a_plain_run_passes_the_stored_records_settings_to_the_tuning(monkeypatch, tmp_path, capsys):
+    seen = []
+
+    def tune_case(case, options, paths, log, margin):
+        seen.append((options.max_iter, options.phase_iterations, margin, paths))
+        raise KeyboardInterrupt  # stop before any work
+
+    record = {"tuning_margin": 1.0, "tuning": {"max_iter": 60, "phase_max_iter": 60, "paths": "aggregated"}}
+    monkeypatch.setattr(tuner, "stored", lambda case: record)
+    monkeypatch.setattr(tuner, "tune_case", tune_case)
+    with pytest.raises(KeyboardInterrupt):
+        tuner.main(["satellite", "--out", str(tmp_path)])
+    assert seen == [(60, 60, 1.0, "aggregated")]
+    assert "as the stored record: --max-iter 60 --margin 1.0 --paths aggregated" in capsys.readouterr().out
