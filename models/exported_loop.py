@@ -39,7 +39,7 @@ from .checks import as_matrix, integer
 from .closed_loop import ClosedLoopResult, batch_outputs, first_faults
 from .export import LOAD_FLAGS, ExportedC, generated_code
 from .plant import Plant
-from .run_setup import RunSetup
+from .run_setup import RunSetup, Seed
 from .simulate import DIVERGENCE_BOUND
 
 #: Samples per call of the C loop (the results do not depend on it). A Ctrl-C is seen between calls (the
@@ -317,7 +317,7 @@ def simulate_exported_many(
     substeps: int = 10,
     input_disturbance=0.0,
     noise_std=0.0,
-    seed: int | None = 0,
+    seed: Seed = 0,
     threads: int = 1,
     chunk: int = CHUNK_SAMPLES,
 ) -> Iterator[ClosedLoopResult]:

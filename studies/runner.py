@@ -729,19 +729,11 @@ def simulate_scenario(
 ):
     """One run of `scenario` on `plant` (parameters `params`, default its own): noise, disturbance, seed;
     the run as `scenario.run` describes it (`models.scenario.Scenario`); by `controller`'s exported C
-    closed loop `loop` (`models.exported_loop`) where given, the same run to 1e-9.
-
-    noise_sample : None for the table's own noise (drawn from `options.seed`); j for the draw of Monte
-        Carlo sample j (`models.run_setup.RunSetup.noise`), the one `designs.tuning` gives its parameter
-        sample j (not with `loop`)."""
-    if noise_sample is not None and loop is not None:
-        raise ValueError("noise_sample is for the simulated loop, not an exported one")
+    closed loop `loop` (`models.exported_loop`) where given, the same run to 1e-9. The noise is drawn from
+    `options.seed`, or with `noise_sample` j as Monte Carlo sample j's (`designs.tuning`'s sample j's)."""
     seed = options.seed if noise_sample is None else np.random.SeedSequence([options.seed, noise_sample])
-    noise = (
-        measurement_noise_std(plant, controller, scenario.noise, sigma=case.derivative_time_constant)
-        if scenario.noise
-        else 0.0
-    )
+    sigma = case.derivative_time_constant
+    noise = measurement_noise_std(plant, controller, scenario.noise, sigma=sigma) if scenario.noise else 0.0
     run = scenario.run(case, base, noise)
     if loop is not None:
         runs = exported_loop.simulate_exported_many(
@@ -754,7 +746,7 @@ def simulate_scenario(
             substeps=substeps,
             input_disturbance=run.input_disturbance,
             noise_std=run.noise_std,
-            seed=options.seed,
+            seed=seed,
         )
         return next(iter(runs))
     return models.simulate_closed_loop(

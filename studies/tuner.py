@@ -57,7 +57,6 @@ import time
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -76,7 +75,6 @@ from designs.tuning import (
     SolveOptions,
     TuningProblem,
     TuningSetup,
-    check_widths,
     phase_one,
     solve,
 )
@@ -91,6 +89,16 @@ from models.specs import Specs
 from . import cases, judging, runner
 from .case import CaseStudy
 from .homework import classical_design
+from .tuner_settings import (
+    MARGIN,
+    PATHS_DEFAULT,
+    STORED_SETTINGS,
+    TUNE_OPTIONS,
+    check_margin,
+    check_settings,
+    run_settings,
+    widths_option,
+)
 
 START = "PID"
 LABEL = "tuned"
@@ -99,20 +107,11 @@ SCENARIOS = ("step", "steps", "disturbance", "noise")
 MAX_CORNERS, N_TUNING, N_SEEDED, TUNING_SEED = 16, 8, 2, 1
 N_VALIDATION, VALIDATION_SEED = 20, 2
 ENERGY_SHARE = 0.1
-#: The step specs tuning enforces, as a fraction of the case's (the plants between the samples).
-MARGIN = 0.95
 GAIN_RANGE = 100.0
 #: Statuses of a tuning that ended on its test: IPOPT's convergence, or the poll search's (`designs.tuning.polish`).
 ENDED_ON_TEST = (*CONVERGED, POLL_CONVERGED)
 #: A re-tuning reproduces a stored record when its cost agrees to this, relative.
 REPRODUCED = 1e-6
-#: The specs' form on the smoothed stages: one soft maximum per spec and run. Pointwise, the arm's 6 samples
-#: of 4 runs make 22,122 inequalities on 3 gains (dense columns), and a stack sample of that phase one
-#: found IPOPT in MUMPS's dense kernels.
-PATHS_DEFAULT = "aggregated"
-#: How the stored gains are tuned: compiled, the phase one first where the hand design misses a spec, with
-#: L-BFGS (docs/guide.md's tuning section: with the exact Hessian the arm's failed).
-TUNE_OPTIONS = SolveOptions(jit=True, phase_hessian="limited-memory")
 #: Folder of the stored gains when writing them (beside the case files).
 STORE_DIR = Path(cases.__file__).resolve().parent
 #: What the infeasibility text calls each step spec, its metric column and unit.
@@ -206,13 +205,6 @@ def with_margin(specs: Specs, margin: float = MARGIN) -> Specs:
     check_margin(margin)
     scaled: dict = {k: None if getattr(specs, k) is None else margin * getattr(specs, k) for k in SPEC_WORDS}
     return replace(specs, **scaled)
-
-
-def check_margin(margin: float) -> float:
-    """`margin` when 0 < margin <= 1 (1: the case's own specs); ValueError otherwise."""
-    if not 0 < margin <= 1:
-        raise ValueError(f"the tuning margin must be in (0, 1] (1: the case's own specs), got {margin!r}")
-    return float(margin)
 
 
 def gain_bounds(block) -> dict:
@@ -607,67 +599,6 @@ def write(case: CaseStudy, record: dict, folder: Path = STORE_DIR, name: str | N
     return files.write_json(Path(folder) / (store_name(case) if name is None else name), record)
 
 
-def _widths(text: str) -> tuple[float, ...]:
-    """--widths: comma-separated numbers > 0, strictly decreasing (`designs.tuning.check_widths`)."""
-    try:
-        return check_widths([float(part) for part in text.split(",")])
-    except ValueError as err:  # a part that is not a number, or `check_widths`' refusal
-        raise argparse.ArgumentTypeError(
-            f"widths must be comma-separated numbers > 0, strictly decreasing, got {text!r} ({err})"
-        ) from None
-
-
-#: The tuning settings a run takes from the stored record when the command line does not give them: the
-#: command-line option, the record's field (in "tuning", or the record's own) and the default without one.
-STORED_SETTINGS = {
-    "max_iter": ("--max-iter", ("tuning", "max_iter"), MAX_ITER),
-    "phase_max_iter": ("--phase-max-iter", ("tuning", "phase_max_iter"), None),
-    "margin": ("--margin", ("tuning_margin",), MARGIN),
-    "widths": ("--widths", ("tuning", "widths"), WIDTHS),
-    "paths": ("--paths", ("tuning", "paths"), PATHS_DEFAULT),
-    "hessian": ("--hessian", ("tuning", "hessian"), "limited-memory"),
-    "phase_hessian": ("--phase-hessian", ("tuning", "phase_hessian"), TUNE_OPTIONS.phase_hessian),
-}
-
-
-def run_settings(args: argparse.Namespace, record: dict | None) -> tuple[dict, list[str]]:
-    """({setting: value} of one tuning run, the options taken from the stored record): each of
-    `STORED_SETTINGS` from the command line where given, else from `record` (so that ``python -m
-    studies.tuner PLANT`` re-runs the stored record's tuning), else its default. Values read from a
-    record are checked as the command line checks them (ValueError)."""
-    chosen, from_record = {}, []
-    for key, (option, path, default) in STORED_SETTINGS.items():
-        value = getattr(args, key)
-        if value is None and record is not None:
-            stored_value: Any = record
-            for part in path:
-                stored_value = stored_value.get(part) if isinstance(stored_value, dict) else None
-            if key == "phase_max_iter" and stored_value == record.get("tuning", {}).get("max_iter"):
-                stored_value = None  # the record's phase one followed its --max-iter: so does this run's
-            if stored_value is not None:
-                value = tuple(float(w) for w in stored_value) if key == "widths" else stored_value
-                from_record.append(f"{option} {','.join(f'{w:g}' for w in value) if key == 'widths' else value}")
-        chosen[key] = default if value is None else value
-    check_settings(chosen)
-    return chosen, from_record
-
-
-def check_settings(chosen: dict) -> None:
-    """ValueError naming the first setting of a run (`run_settings`) that the command line would refuse."""
-    if int(chosen["max_iter"]) < 1:
-        raise ValueError(f"--max-iter must be >= 1, got {chosen['max_iter']}")
-    if chosen["phase_max_iter"] is not None and int(chosen["phase_max_iter"]) < 1:
-        raise ValueError(f"--phase-max-iter must be >= 1, got {chosen['phase_max_iter']}")
-    if not 0 < chosen["margin"] <= 1:
-        raise ValueError(f"--margin must be in (0, 1] (1: the case's own specs), got {chosen['margin']:g}")
-    check_widths(chosen["widths"])
-    if chosen["paths"] not in PATHS:
-        raise ValueError(f"--paths must be one of {', '.join(PATHS)}, got {chosen['paths']!r}")
-    for key in ("hessian", "phase_hessian"):
-        if chosen[key] not in HESSIANS:
-            raise ValueError(f"--{key.replace('_', '-')} must be one of {', '.join(HESSIANS)}, got {chosen[key]!r}")
-
-
 def main(argv=None) -> int:
     """``python -m studies.tuner``: tune (or re-validate) each case's gains and write its record when the tuning
     converged (or with ``--force``) into ``--out`` (default the user cache's tuned/; ``--install`` writes into
@@ -702,7 +633,7 @@ def main(argv=None) -> int:
     parser.add_argument("--no-jit", action="store_true", help="evaluate with CasADi's virtual machine")
     parser.add_argument(
         "--widths",
-        type=_widths,
+        type=widths_option,
         default=None,
         help="the smoothing continuation's widths, comma-separated, strictly decreasing (a start far from the "
         f"answer may need 0.1 first{stored_note}{','.join(f'{w:g}' for w in WIDTHS)})",

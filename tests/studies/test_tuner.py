@@ -176,7 +176,7 @@ def test_a_margin_of_one_enforces_the_case_specs_and_others_are_refused():
 
 
 def test_widths_option_reads_a_decreasing_list():
-    assert tuner._widths("0.1,0.01,1e-3") == (0.1, 0.01, 1e-3)
+    assert tuner.widths_option("0.1,0.01,1e-3") == (0.1, 0.01, 1e-3)
 
 
 def test_tuning_enforces_the_step_specs_with_a_margin_and_the_rest_as_they_are():

@@ -172,7 +172,3 @@ def test_the_certificates_runs_are_the_tunings_own_noise_draws_included():
         tables = runner.simulate_scenario(plant, block, table, CASE, runner.Options(), base, CASE.substeps, row)
         differs = np.max(np.abs(u[:, j * n : (j + 1) * n].T - tables.u))
         assert differs == 0 if j == 0 else differs > 1e-6
-    with pytest.raises(ValueError, match="noise_sample is for the simulated loop"):
-        runner.simulate_scenario(
-            plant, block, table, CASE, runner.Options(), base, CASE.substeps, loop=object(), noise_sample=0
-        )
