@@ -347,13 +347,15 @@ class Specs:
 
 @dataclass(frozen=True)
 class Violation:
-    """One spec a run misses: its name, the measured value, the bound, and the excess over it."""
+    """One spec a run misses: its name, the measured value, the bound, and the excess over it. `left`: a
+    state bound or physical limit the run leaves (its value the excess, its bound 0)."""
 
     spec: str
     value: float
     bound: float
     unit: str = ""
     minimum: bool = False
+    left: bool = False
 
     @property
     def excess(self) -> float:
@@ -475,13 +477,15 @@ def check(
         if excess is None:
             raise ValueError(f"the specs bound {name!r}; pass its excursion (models.metrics.bound_excursions)")
         if excess > 0:
-            found.append(Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0, units.get(name, "")))
+            found.append(
+                Violation(f"{name} leaves [{low:g}, {high:g}] by", float(excess), 0.0, units.get(name, ""), left=True)
+            )
     for limit in specs.state_limits:
         excess = (departures or {}).get(limit.name)
         if excess is None:
             raise ValueError(f"the specs limit {limit.name!r}; pass its excess (state_limits.check_state_limits)")
         if excess > 0:
-            found.append(Violation(f"leaves {limit.name} by", float(excess), 0.0, limit.unit))
+            found.append(Violation(f"leaves {limit.name} by", float(excess), 0.0, limit.unit, left=True))
     for name in specs.frequency_specs:
         if frequency is None:
             break

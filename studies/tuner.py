@@ -265,15 +265,13 @@ def _worst(runs: dict) -> dict:
 def departures(runs: dict) -> dict:
     """{what is left ("leaves panel deflection by"): (largest excess, unit, scenario)} over judged runs
     ({scenario: [studies.judging.Judgement]}): the physical limits and state bounds their verdicts find
-    left (`models.specs.judge`'s "leaves ... by" violations, bound 0, their value the excess), the
-    largest over the samples and scenarios. Other verdicts the tuning does not constrain (a run that
-    drifts at its end) are no part of a certificate."""
+    left (`models.specs.Violation.left`), the largest excess over the samples and scenarios. Other
+    verdicts the tuning does not constrain (a run that drifts at its end) are no part of a certificate."""
     out: dict = {}
     for name, judged in runs.items():
         for j in judged:
             for v in j.verdict.violations:
-                left = v.bound == 0 and not v.minimum and v.spec.endswith(" by")
-                if left and v.value > out.get(v.spec, (0.0,))[0]:
+                if v.left and v.value > out.get(v.spec, (0.0,))[0]:
                     out[v.spec] = (float(v.value), v.unit, name)
     return out
 
@@ -671,7 +669,7 @@ def main(argv=None) -> int:
     unknown = [p for p in args.plants if p not in names]
     if unknown:
         parser.error(f"unknown plant {unknown}; valid: {', '.join(names)}")
-    try:  # the command line's own values (a stored record's are checked per plant below)
+    try:  # the command line's own values (a stored record's are checked per plant below, by run_settings)
         check_settings(
             {key: default for key, (_, _, default) in STORED_SETTINGS.items()}
             | {key: value for key in STORED_SETTINGS if (value := getattr(args, key)) is not None}
@@ -689,7 +687,10 @@ def main(argv=None) -> int:
             record = before | {"validation": validate(case, before)}
         else:
             print(f"tuning {name} ...", flush=True)
-            chosen, from_record = run_settings(args, before)
+            try:
+                chosen, from_record = run_settings(args, before)
+            except ValueError as err:
+                parser.error(f"the stored record of {name} ({store_name(case)}): {err}")
             if from_record:
                 print(f"  as the stored record: {' '.join(from_record)}", flush=True)
             options = SolveOptions(

@@ -20,10 +20,10 @@ PATHS_DEFAULT = "aggregated"
 TUNE_OPTIONS = SolveOptions(jit=True, phase_hessian="limited-memory")
 
 
-def check_margin(margin: float) -> float:
-    """`margin` when 0 < margin <= 1 (1: the case's own specs); ValueError otherwise."""
+def check_margin(margin: float, what: str = "the tuning margin") -> float:
+    """`margin` when 0 < margin <= 1 (1: the case's own specs); ValueError naming it `what` otherwise."""
     if not 0 < margin <= 1:
-        raise ValueError(f"the tuning margin must be in (0, 1] (1: the case's own specs), got {margin!r}")
+        raise ValueError(f"{what} must be in (0, 1] (1: the case's own specs), got {margin!r}")
     return float(margin)
 
 
@@ -78,8 +78,7 @@ def check_settings(chosen: dict) -> None:
         raise ValueError(f"--max-iter must be >= 1, got {chosen['max_iter']}")
     if chosen["phase_max_iter"] is not None and int(chosen["phase_max_iter"]) < 1:
         raise ValueError(f"--phase-max-iter must be >= 1, got {chosen['phase_max_iter']}")
-    if not 0 < chosen["margin"] <= 1:
-        raise ValueError(f"--margin must be in (0, 1] (1: the case's own specs), got {chosen['margin']:g}")
+    check_margin(chosen["margin"], "--margin")
     check_widths(chosen["widths"])
     if chosen["paths"] not in PATHS:
         raise ValueError(f"--paths must be one of {', '.join(PATHS)}, got {chosen['paths']!r}")

@@ -218,10 +218,13 @@ def test_the_infeasibility_text_names_each_limit_left_with_its_largest_excess():
 
     panel = "leaves panel deflection by"
     runs = {
-        "step": [judged(model_specs.Violation(panel, 0.001, 0.0, "rad")), judged()],
+        "step": [judged(model_specs.Violation(panel, 0.001, 0.0, "rad", left=True)), judged()],
         "disturbance": [
-            judged(model_specs.Violation(panel, 0.003, 0.0, "rad"), model_specs.Violation("overshoot", 12.0, 10.0)),
-            judged(model_specs.Violation("θ leaves [-1, 1] by", 0.5, 0.0, "rad")),
+            judged(
+                model_specs.Violation(panel, 0.003, 0.0, "rad", left=True),
+                model_specs.Violation("overshoot", 12.0, 10.0),
+            ),
+            judged(model_specs.Violation("θ leaves [-1, 1] by", 0.5, 0.0, "rad", left=True)),
         ],
         "noise": [judged(model_specs.Violation("drifts", 0.1, 0.0, "rad/s"))],  # no spec of the tuning's
     }
@@ -342,3 +345,8 @@ def test_a_plain_run_passes_the_stored_records_settings_to_the_tuning(monkeypatc
         tuner.main(["satellite", "--out", str(tmp_path)])
     assert seen == [(60, 60, 1.0, "aggregated")]
     assert "as the stored record: --max-iter 60 --margin 1.0 --paths aggregated" in capsys.readouterr().out
+    record["tuning_margin"] = 1.5  # a damaged record is refused naming it, before any work
+    with pytest.raises(SystemExit) as stop:
+        tuner.main(["satellite", "--out", str(tmp_path)])
+    assert stop.value.code == 2 and len(seen) == 1
+    assert "the stored record of satellite (satellite_tuned_gains.json): --margin must be in" in capsys.readouterr().err

@@ -145,6 +145,7 @@ def test_the_tuners_physical_limit_rows_are_the_tables_departures_on_the_same_ru
             np.testing.assert_allclose(g[rows[label]], values[1:], rtol=0, atol=1e-12)
             departure = [v for v in judged.verdict.violations if v.spec == f"leaves {limit.name} by"]
             assert (label in missed) == bool(departure) == left, (label, judged.verdict)
+            assert all(v.left for v in departure)  # what `studies.tuner.departures` reads
             # The table reads x_0 too (the run's given initial state, which the tuning cannot move).
             excess = max(float(np.max(values - limit.upper)), float(np.max(limit.lower - values)), 0.0)
             assert (departure[0].value if departure else 0.0) == pytest.approx(excess, rel=1e-12, abs=1e-15)
