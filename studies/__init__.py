@@ -57,6 +57,7 @@ def run_study(
     progress: Callable | None = None,
     run_id: str | None = None,
     executor=None,
+    without: str | Sequence[str] = (),
 ) -> StudyResult:
     """Run one study; with `out`, write its tables, answers, plots and animation into out/<plant>/.
 
@@ -79,6 +80,7 @@ def run_study(
     run_id : the id recorded in out/<plant>/run.json (default a new one)
     executor : a `dask.distributed.Client` (or a `studies.distributed` executor) to run the Monte Carlo
         of Block controllers on; default this process. The numbers do not depend on it.
+    without : labels of controllers to leave out (a label, or a list of them); each is noted
 
     Returns
     -------
@@ -96,7 +98,9 @@ def run_study(
     if out is not None and (not isinstance(out, (str, os.PathLike)) or not str(os.fspath(out)).strip()):
         raise ValueError(f"out must name a folder (or be None to write nothing), got {out!r}")
     study = name if isinstance(name, CaseStudy) else get(name)
-    options = Options(scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict, quick=quick)
+    options = Options(
+        scenarios=scenarios, mc=mc, seed=seed, threads=threads, jit=jit, strict=strict, quick=quick, without=without
+    )
     result = runner.run_study(
         study, options, providers=providers, controllers=controllers, progress=progress, executor=executor
     )

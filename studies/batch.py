@@ -179,6 +179,7 @@ def plant_report(result: StudyResult, answers: bool) -> dict:
         "rows": len(table),
         "timing": result.timing,
         "notes": list(result.notes),
+        "left_out": list(result.left_out),
         "best": result.best("step"),
         "counts": verdict_counts(table),
         "not_ok": not_ok_lines(table),

@@ -121,6 +121,14 @@ def parser() -> argparse.ArgumentParser:
         "everything in this process)",
     )
     p.add_argument(
+        "--without",
+        action="append",
+        default=[],
+        metavar="LABEL",
+        help='leave out the controller LABEL on every plant (repeat for more; e.g. --without "scenario-tree '
+        "NMPC\", most of a default run's time); each study notes it",
+    )
+    p.add_argument(
         "--workers",
         type=int,
         metavar="N",
@@ -226,10 +234,13 @@ class Progress:
 
 def progress_slots(plants, scenarios, settings: dict) -> dict:
     """plant -> (expected cost of each run it will make, of its files) (`studies.batch.plant_costs`): its
-    declared controllers through the scenarios it will run."""
+    declared controllers (but those left out, ``--without``) through the scenarios it will run."""
     slots = {}
+    without = settings.get("without") or ()
     for name in plants:
-        weights, after = batch.plant_costs(cases.get(name), scenarios, int(settings.get("mc") or 0))
+        case = cases.get(name)
+        labels = [label for label in case.controllers if label not in without]
+        weights, after = batch.plant_costs(case, scenarios, int(settings.get("mc") or 0), labels)
         slots[name] = (weights or [1.0], after)
     return slots
 
@@ -348,7 +359,7 @@ def _run_sweep(args, p: argparse.ArgumentParser, plants, settings: dict, chosen:
     print(
         f"{name}: sweep of {len(grid.values)} points, estimated {sweep.format_duration(estimate)} of runs", file=stream
     )
-    options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2)
+    options = runner.Options(seed=settings["seed"], strict=settings["strict"], threads=2, without=settings["without"])
     stop_on_signals()
     study = cases.get(name)
     progress = Progress({name: len(study.controllers)}, stream, disable=args.quiet)
@@ -424,6 +435,7 @@ def main(argv=None) -> int:
         "quick": args.quick,
         "strict": args.strict,
         "threads": max(1, 2 // jobs),
+        "without": tuple(args.without),
     }
     try:
         check_resources(plants, settings)
@@ -548,6 +560,9 @@ def _closing(args, finished: list, missing: list, total: str) -> int:
     lines.append(total)
     if missing:
         lines.append(f"python -m studies: ran without {len(missing)} missing provider(s): " + "; ".join(missing))
+    for label in args.without:
+        if not any(label in done["left_out"] for done in finished):
+            lines.append(f"python -m studies: --without {label!r} matched no controller of the plants run")
     not_ok = sum(done["not_ok_rows"] for done in finished)
     if args.strict and not_ok:
         lines.append(f"python -m studies: --strict: {not_ok} row(s) not ok (listed above)")

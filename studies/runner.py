@@ -38,12 +38,13 @@ from models.compile import compiler
 from . import distributed, exported_runs
 from .answers import collect
 from .case import SCENARIO_NAMES, CaseStudy, TableScenario
+from .designing import add_controllers, design_controllers, leave_out, without_labels
 from .judging import check_specs, judge_run, meets_everywhere, remarked, verdict_columns
 from .judging import degraded_status as degraded_status
 from .judging import run_status as run_status
 from .judging import solver_counts as solver_counts
 from .provider_calls import NotProvided as NotProvided  # raised by providers; callers catch it from here too
-from .provider_calls import call_all, name_of, resolve
+from .provider_calls import name_of, resolve
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -70,6 +71,7 @@ class Options:
     strict : raise on a provider or controller error instead of noting it (but for an error the
         controller's remark states: a refused construction's row fails, and --strict exits 1 on it)
     quick : smaller defaults for plots and animations (the CLI also lowers mc)
+    without : labels of controllers to leave out (each noted; a label no provider gives is noted too)
     """
 
     scenarios: Sequence[str] | None = None
@@ -79,6 +81,7 @@ class Options:
     jit: bool | str = "auto"
     strict: bool = False
     quick: bool = False
+    without: Sequence[str] = ()
 
     def __post_init__(self):
         """Check every field (TypeError or ValueError naming it); `scenarios` becomes a tuple."""
@@ -90,6 +93,7 @@ class Options:
             raise ValueError(f"jit must be True, False or 'auto', got {self.jit!r}")
         checks.boolean(self.strict, "strict")
         checks.boolean(self.quick, "quick")
+        object.__setattr__(self, "without", without_labels(self.without))
 
 
 def scenario_names(value, what: str = "scenarios") -> tuple | None:
@@ -159,6 +163,7 @@ class StudyResult:
     providers : the names (``module:function``) of the providers asked for controllers
     trajectories : the case's solved optimal trajectories (`studies.trajectories.CaseTrajectories`), when
         `studies.solve_trajectories` ran
+    left_out : the labels of `Options.without` that were provided here, and so left out
     """
 
     study: CaseStudy
@@ -176,6 +181,7 @@ class StudyResult:
     truths: dict = field(default_factory=dict)
     providers: tuple = ()
     trajectories: object = None
+    left_out: tuple = ()
 
     def best(self, scenario: str = "step", meeting: bool = True) -> str | None:
         """The controller with the lowest ITAE in `scenario` among those whose every row is "ok" and meets
@@ -186,60 +192,6 @@ class StudyResult:
             rows = rows[meets_everywhere(self.table).loc[rows.controller].to_numpy()]
         rows = rows[np.isfinite(rows.itae.astype(float))]
         return None if rows.empty else str(rows.loc[rows.itae.astype(float).idxmin(), "controller"])
-
-
-# ---------------------------------------------------------------------------- controllers
-def design_controllers(
-    study: CaseStudy, known: models.Plant, providers: Sequence | None = None, strict: bool = False
-) -> tuple[dict, list]:
-    """The study's controllers designed from `known`, in table order, and notes on what is missing.
-
-    Parameters
-    ----------
-    providers : replace the study's own (`CaseStudy.providers`): callables ``provider(case, known)``,
-        or ``module:function`` strings naming them (`studies.provider_calls.resolve`)
-
-    Returns
-    -------
-    {label: controller}: the study's declared labels first, in its order, then the others as provided;
-    notes: list of str
-    """
-    chosen = resolve(study.providers if providers is None else providers, strict=strict)
-    found, notes = call_all(chosen, study, known, strict=strict)
-    collected: dict = {}
-    for name, returned in found:
-        if not isinstance(returned, Mapping):
-            notes.append(f"{name}: returned {type(returned).__name__}, not a dict of controllers; skipped")
-            continue
-        for label, controller in returned.items():
-            if label in collected:
-                notes.append(f"{name}: controller {label!r} already provided; the first one is kept")
-            elif not isinstance(controller, models.Controller):
-                notes.append(f"{name}: {label!r} is a {type(controller).__name__}, not a controller; skipped")
-            elif controller.n_reference != 1:
-                notes.append(
-                    f"{name}: {label!r} takes {controller.n_reference} references; the studies "
-                    "command the tracked coordinate only; skipped"
-                )
-            else:
-                collected[str(label)] = controller
-    ordered = {label: collected[label] for label in study.controllers if label in collected}
-    ordered |= {label: c for label, c in collected.items() if label not in ordered}
-    missing = [label for label in study.controllers if label not in collected]
-    if missing and found:
-        notes.append("not provided yet: " + ", ".join(missing))
-    return ordered, notes
-
-
-def add_controllers(designed: dict, extra: Mapping) -> list:
-    """Add the caller's `extra` {label: controller} to `designed` (in place), replacing a provider's
-    controller of the same label; returns a note per label replaced."""
-    notes = []
-    for label, controller in extra.items():
-        if label in designed:
-            notes.append(f"controller {label!r} given twice; the provider's is replaced")
-        designed[label] = controller
-    return notes
 
 
 # ---------------------------------------------------------------------------- noise
@@ -399,6 +351,8 @@ def run_study(
     known = study.known_plant(plant)
     designed, notes = design_controllers(study, known, chosen, options.strict)
     notes += add_controllers(designed, controllers or {})
+    left_out, dropped = leave_out(designed, options.without)
+    notes += dropped
     timing = {"design_s": time.perf_counter() - started}
     if not designed:
         notes.append("no controllers: nothing to simulate")
@@ -425,6 +379,7 @@ def run_study(
         answers,
         simulation.truths,
         tuple(name_of(p) for p in (study.providers if chosen is None else chosen)),
+        left_out=tuple(left_out),
     )
 
 

@@ -29,6 +29,7 @@ from models.files import write_csv, write_text
 
 from . import batch, distributed, judging, plots, runner, style
 from .case import CaseStudy
+from .designing import leave_out
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -175,6 +176,7 @@ def run_sweep(
     samples = grid_params(plant, grid)
     designed, notes = runner.design_controllers(study, study.known_plant(plant), providers, options.strict)
     designed |= dict(controllers or {})
+    notes += leave_out(designed, options.without)[1]
     _, base = runner.tracked_equilibrium(plant, study)
     reference, duration = chosen.reference(study, base), chosen.duration(study)
     names = list(plant.params)

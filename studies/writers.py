@@ -461,6 +461,7 @@ def run_settings(result) -> dict:
         "jit": options.jit,
         "threads": options.threads,
         "providers": list(result.providers),
+        "without": list(options.without),
         "scenarios": [s.name for s in study.scenarios if options.scenarios is None or s.name in options.scenarios],
     }
 

@@ -28,7 +28,13 @@ def _table(verdicts):
 
 def _result(table):
     fields = {f.name: None for f in dataclasses.fields(runner.StudyResult) if f.name != "table"}
-    fields |= {"study": types.SimpleNamespace(plant="plant"), "controllers": {}, "notes": [], "timing": {}}
+    fields |= {
+        "study": types.SimpleNamespace(plant="plant"),
+        "controllers": {},
+        "notes": [],
+        "timing": {},
+        "left_out": (),
+    }
     return runner.StudyResult(table=table, **fields)
 
 

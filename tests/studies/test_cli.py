@@ -1,5 +1,6 @@
 """python -m studies as a user runs it: documented errors on bad arguments, a small run's files."""
 
+import json
 import subprocess
 import sys
 
@@ -75,6 +76,10 @@ def test_a_small_run_writes_the_files_and_ends_with_verdicts_and_paths(tmp_path)
         "--quick",
         "--provider",
         "example_providers:controllers",
+        "--without",
+        "tube MPC",
+        "--without",
+        "no such controller",
     )
     assert done.returncode == 0, done.stderr
     for name in (
@@ -100,8 +105,15 @@ def test_a_small_run_writes_the_files_and_ends_with_verdicts_and_paths(tmp_path)
     listed = " ".join(" ".join(lines[1:]).split())  # the console wraps long labels at its width
     for row in table[table.verdict != "meets specs"].itertuples():
         assert " ".join(row.controller.split()) in listed and f"{row.verdict}:" in listed
-    assert lines[-2].startswith(f"open {out / 'index.html'}") and lines[-1].startswith("total ")
+    assert lines[-3].startswith(f"open {out / 'index.html'}") and lines[-2].startswith("total ")
     assert len(lines) <= 40
+    # --without: the label left out has no rows, the run's record says so, and a label that matched no
+    # controller of any plant is the last line.
+    assert "tube MPC" not in set(table.controller) and "LQR" in set(table.controller)
+    record = json.loads((out / "uuv" / "run.json").read_text())
+    assert record["settings"]["without"] == ["tube MPC", "no such controller"]
+    assert "tube MPC: left out, as asked (without)" in record["notes"]
+    assert lines[-1] == "python -m studies: --without 'no such controller' matched no controller of the plants run"
 
 
 def test_answers_are_printed_when_asked(tmp_path):

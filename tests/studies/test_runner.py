@@ -351,3 +351,32 @@ def test_a_long_remark_takes_at_most_its_lines_in_the_console_and_all_of_it_in_t
     assert len(cut) == batch.REMARK_LINES and cut[-1].endswith("(whole: table.md)")
     assert all(len(line) <= 118 for line in lines)
     assert table.remark[0] == remark
+
+
+def test_controllers_asked_to_be_left_out_have_no_rows_and_the_others_are_unchanged():
+    """`Options.without` removes the labels it names after the providers answered, each with a note (and
+    a note for a label nobody provided); the rows kept are the same numbers as in a run without it."""
+    study = arm_study(providers=(EXAMPLE,))
+    plain = runner.run_study(study, STEP_ONLY)
+    options = runner.Options(scenarios=("step",), mc=0, without=["LQR fast", "no such", "LQR fast"])
+    assert options.without == ("LQR fast", "no such")
+    result = runner.run_study(study, options)
+    assert list(result.table.controller) == ["PD", "LQR", "linear MPC", "LQR slow"]
+    assert result.left_out == ("LQR fast",)
+    assert "LQR fast: left out, as asked (without)" in result.notes
+    assert "without 'no such': no controller of that label here" in result.notes
+    kept = plain.table[plain.table.controller != "LQR fast"].reset_index(drop=True)
+    pd.testing.assert_frame_equal(
+        result.table.drop(columns=["wall_s", "step_ms", "step_ms_max"], errors="ignore"),
+        kept.drop(columns=["wall_s", "step_ms", "step_ms_max"], errors="ignore"),
+    )
+
+
+@pytest.mark.parametrize(
+    "without,error,message",
+    [(5, TypeError, "without must be a controller label or a list of them"), ([""], ValueError, "empty")],
+)
+def test_without_is_checked_naming_it(without, error, message):
+    with pytest.raises(error, match=message):
+        runner.Options(without=without)
+    assert runner.Options(without="PD").without == ("PD",)
