@@ -31,6 +31,7 @@ from models import checks, deferred, files, interrupts
 
 from . import batch, cases, distributed, runner, sweep, writers
 from .case import SCENARIO_NAMES
+from .designing import without_labels
 from .provider_calls import ProviderNotFound, find, unavailable
 
 if TYPE_CHECKING:
@@ -437,6 +438,10 @@ def main(argv=None) -> int:
         "threads": max(1, 2 // jobs),
         "without": tuple(args.without),
     }
+    try:  # an empty label is refused here, before any work, as the run's Options would refuse it
+        without_labels(args.without, "--without")
+    except ValueError as err:
+        p.error(str(err))
     try:
         check_resources(plants, settings)
     except checks.ResourceLimitError as err:

@@ -72,21 +72,21 @@ def add_controllers(designed: dict, extra: Mapping) -> list:
     return notes
 
 
-def without_labels(value) -> tuple:
+def without_labels(value, what: str = "without") -> tuple:
     """`value` (a label, or a list or tuple of labels) as a tuple of distinct non-empty labels.
 
     Raises
     ------
     TypeError
-        For anything but a str or a list or tuple of str.
+        Naming `what`, for anything but a str or a list or tuple of str.
     ValueError
-        For an empty label.
+        Naming `what`, for an empty label.
     """
     labels = (value,) if isinstance(value, str) else value
     if not isinstance(labels, (list, tuple)) or not all(isinstance(label, str) for label in labels):
-        raise TypeError(f"without must be a controller label or a list of them, got {value!r}")
+        raise TypeError(f"{what} must be a controller label or a list of them, got {value!r}")
     if any(not label.strip() for label in labels):
-        raise ValueError(f"without names an empty controller label: {value!r}")
+        raise ValueError(f"{what} names an empty controller label: {value!r}")
     return tuple(dict.fromkeys(labels))
 
 

@@ -31,6 +31,7 @@ def run_cli(*args, timeout=300):
         (["arm", "--scenario", "step,ramp"], "unknown scenario 'ramp'; valid scenarios: step, steps, disturbance"),
         (["arm", "--provider", "nocolon"], "--provider needs MODULE:FUNCTION"),
         (["arm", "--jobs", "0"], "--jobs must be >= 1"),
+        (["arm", "--without", "PD", "--without", " "], "--without names an empty controller label: ['PD', ' ']"),
         (["arm", "--workers", "0"], "--workers must be >= 1"),
         (["arm", "--workers", "2", "--scheduler", "tcp://localhost:1"], "give --workers (a local Dask cluster) or"),
         (["arm", "pendulum", "--sweep", "m=1:2:3"], "--sweep runs one plant; name exactly one, got 2"),
