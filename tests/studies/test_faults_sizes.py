@@ -13,7 +13,7 @@ import pytest
 import models.checks
 import mpc
 import studies
-from studies import cli, sweep
+from studies import cli, runner, sweep
 
 #: The recorded rows of ``python -m studies arm --quick`` (s), which the estimates are calibrated on.
 RECORDED = Path(__file__).parent / "data" / "arm_quick_row_seconds.csv"
@@ -107,34 +107,40 @@ def test_the_time_limit_is_read_at_each_call(monkeypatch):
     assert sweep.check_time(case, grid, accept=True) == seconds
 
 
-def _linear_mpc_sweep_seconds(points: int) -> float:
-    """Wall time of `run_sweep` of the arm's linear MPC alone over `points` masses (its design excluded)."""
+def _linear_mpc_point_seconds(points: int, monkeypatch) -> list[float]:
+    """Wall time (s) of each point of `run_sweep` of the arm's linear MPC alone over `points` masses, in
+    the order they ran (the design and the sweep's fixed cost excluded)."""
     case = studies.get("arm")
     controller = mpc.linear_mpc(case.known_plant(models.get("arm")), case.mpc, tracked=case.tracked)
+    simulate, seconds = runner.simulate_scenario, []
+
+    def timed(*args, **kwargs):
+        started = time.perf_counter()
+        result = simulate(*args, **kwargs)
+        seconds.append(time.perf_counter() - started)
+        return result
+
+    monkeypatch.setattr(runner, "simulate_scenario", timed)
     grid = sweep.Grid("m", tuple(np.linspace(0.4, 0.6, points)))
-    started = time.perf_counter()
-    sweep.run_sweep(case, grid, providers=[], controllers={"linear MPC": controller})
-    return time.perf_counter() - started
+    table, _ = sweep.run_sweep(case, grid, providers=[], controllers={"linear MPC": controller})
+    assert len(table) == points
+    return seconds
 
 
-def test_the_estimate_scales_as_a_measured_sweep():
-    """The estimate grows with the points as measured sweeps do: the linear MPC's points run one by one, so
-    going from 8 to 32 points adds twice what going from 8 to 20 adds, in the estimate and in measured
-    sweeps (within 1.5). Differences, because a sweep also has a fixed cost the per-point estimate leaves
-    out; a ratio of them, because the machine's load scales every measured time; each count timed as the
-    best of two, so that a load spike does not count. And the estimate of one point is the recorded study's
-    step row of the linear MPC."""
+def test_the_estimate_scales_as_a_measured_sweep(monkeypatch):
+    """The estimate grows with the points as a sweep's work does: the linear MPC's points run one by one,
+    one whole run each, so the estimate is linear in the points (8 to 32 adds twice what 8 to 20 adds), a
+    sweep of 24 points makes 24 runs, and its last points cost what its first ones do (medians of eight
+    within 1.5, in one sweep, so that neither a load spike nor the machine's load between two sweeps
+    counts). And the estimate of one point is the recorded study's step row of the linear MPC."""
     case = studies.get("arm")
     counts = (8, 20, 32)
     estimate = {n: sweep.estimate_seconds(case, sweep.Grid("m", (0.5,) * n), "step", ["linear MPC"])[1] for n in counts}
-    _linear_mpc_sweep_seconds(2)  # the first run's imports and caches
-    measured = {n: min(_linear_mpc_sweep_seconds(n) for _ in range(2)) for n in counts}
-
-    def growth(seconds):
-        return (seconds[32] - seconds[8]) / (seconds[20] - seconds[8])
-
-    assert growth(estimate) == pytest.approx(2.0)
-    assert 1 / 1.5 <= growth(measured) / growth(estimate) <= 1.5, (estimate, measured)
+    assert (estimate[32] - estimate[8]) / (estimate[20] - estimate[8]) == pytest.approx(2.0)
+    seconds = _linear_mpc_point_seconds(24, monkeypatch)
+    assert len(seconds) == 24
+    first, last = np.median(seconds[:8]), np.median(seconds[-8:])
+    assert 1 / 1.5 <= last / first <= 1.5, seconds
     recorded = pd.read_csv(RECORDED)
     row = recorded[(recorded.controller == "linear MPC") & (recorded.scenario == "step")].wall_s.item()
     assert estimate[8] / 8 == pytest.approx(row, rel=0.5)
