@@ -52,6 +52,7 @@ def test_exported_scenario_tree_gives_the_python_commands_in_closed_loop(horizon
     assert np.ptp(runs[0].u) > 0.1 * plant.input_limit[0]  # the run moves
 
 
+@pytest.mark.slow  # about 25 s here: two C builds of the replay program
 def test_the_branchwise_transformation_gives_daqps_own(tmp_path):
     """The exported QP's transformation (R, R⁻¹ and M = A R⁻¹ branch by branch, `ldp`) against DAQP's own
     update_ldp on the whole matrices (the same C built with -DDAQP_DENSE_LDP): the tree's H has one
