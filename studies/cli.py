@@ -426,6 +426,10 @@ def main(argv=None) -> int:
     if args.list:
         print(_list(plants, args.provider))
         return 0
+    try:  # an empty label is refused here, before any work, as the run's Options would refuse it
+        args.without = without_labels(args.without, "--without")
+    except ValueError as err:
+        p.error(str(err))
     defaults = dict(QUICK if args.quick else FULL)
     dask = args.workers is not None or bool(args.scheduler)
     jobs = 1 if dask else min(args.jobs, len(plants))
@@ -436,12 +440,8 @@ def main(argv=None) -> int:
         "quick": args.quick,
         "strict": args.strict,
         "threads": max(1, 2 // jobs),
-        "without": tuple(args.without),
+        "without": args.without,
     }
-    try:  # an empty label is refused here, before any work, as the run's Options would refuse it
-        without_labels(args.without, "--without")
-    except ValueError as err:
-        p.error(str(err))
     try:
         check_resources(plants, settings)
     except checks.ResourceLimitError as err:

@@ -120,14 +120,13 @@ def test_the_estimate_scales_as_the_sweeps_runs():
 
     plant = models.get("arm")
     controller = mpc.linear_mpc(case.known_plant(plant), case.mpc, tracked=case.tracked)
-    runs = []
+    simulate, runs = runner.simulate_scenario, []
 
     def counted(*args, **kwargs):
         result = simulate(*args, **kwargs)
         runs.append((kwargs["params"], result.t[-1]))
         return result
 
-    simulate = runner.simulate_scenario
     grid = sweep.Grid("m", tuple(np.linspace(0.4, 0.6, 12)))
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(runner, "simulate_scenario", counted)
